@@ -1,0 +1,15 @@
+"""Vehicle models: continuous dynamics f(x, u), analytic Jacobians, discretization."""
+
+from .base import VehicleModel
+from .discretize import discrete_jacobians, discrete_step, rollout
+from .kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams
+
+__all__ = [
+    "VehicleModel",
+    "KinematicBicycle3",
+    "KinematicBicycle4",
+    "KinematicParams",
+    "discrete_step",
+    "discrete_jacobians",
+    "rollout",
+]

@@ -1,0 +1,32 @@
+"""The vehicle-model interface every model (kinematic, dynamic, ...) implements."""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+
+@runtime_checkable
+class VehicleModel(Protocol):
+    """Continuous-time vehicle model ``xdot = f(x, u)``.
+
+    Conventions: the first three states are always the pose ``x [m], y [m], yaw [rad]``
+    (world frame, x east, y north, yaw counter-clockwise) so paths, plots and the simulator
+    can read a pose from any model. Methods accept a single state ``(nx,)`` or a batch
+    ``(..., nx)`` with matching inputs ``(..., nu)``.
+    """
+
+    nx: int
+    nu: int
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+
+    def f(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """State derivative ``(..., nx)`` in SI units per second."""
+
+    def jacobians(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Analytic ``(df/dx (..., nx, nx), df/du (..., nx, nu))``."""
+
+    def speed(self, x: np.ndarray) -> np.ndarray:
+        """Speed of the reference point [m/s] for each state of a batch ``(...,)``."""

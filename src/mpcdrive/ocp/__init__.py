@@ -1,0 +1,6 @@
+"""Solver-independent MPC problem description and its sparse QP layout."""
+
+from .problem import MpcProblem
+from .qp import LtvQp, QpData
+
+__all__ = ["MpcProblem", "LtvQp", "QpData"]

@@ -1,0 +1,79 @@
+"""The path interface.
+
+Arc length ``s`` [m] is unbounded: on a closed path ``s`` keeps growing lap after lap and
+``heading(s)`` keeps turning (it is continuous in ``s``, never jumps by 2*pi); on an open path
+the geometry is extended along the end tangents beyond ``[0, length_m]``.
+Lateral error ``e_y`` [m] is positive to the left of the path direction.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..units import wrap_angle
+
+
+@dataclass(frozen=True)
+class Projection:
+    """Frenet coordinates of a pose: s [m], e_y [m] (left +), e_psi [rad] in (-pi, pi]."""
+
+    s_m: float
+    e_y_m: float
+    e_psi_rad: float
+
+
+class Path(ABC):
+    """A planar reference path parameterized by arc length."""
+
+    length_m: float
+    closed: bool
+
+    @abstractmethod
+    def position(self, s) -> np.ndarray:
+        """(..., 2) position [m] at arc length(s) ``s`` [m]."""
+
+    @abstractmethod
+    def heading(self, s) -> np.ndarray:
+        """Tangent heading [rad], continuous (unwrapped) in ``s``."""
+
+    @abstractmethod
+    def curvature(self, s) -> np.ndarray:
+        """Signed curvature kappa [1/m] (left turn positive)."""
+
+    @abstractmethod
+    def _project_xy(self, xy: np.ndarray, s_guess: float | None, window_m: float) -> tuple[float, float]:
+        """(s, e_y) of the nearest point; near ``s_guess`` when given."""
+
+    def project(self, xy, s_guess: float | None = None, window_m: float = 2.0) -> tuple[float, float]:
+        """Nearest point of the path to position ``xy`` (2,) [m].
+
+        With ``s_guess`` [m] only the stretch ``s_guess +- window_m`` is searched (so closed and
+        self-approaching paths do not jump to another branch) and the returned ``s`` is the
+        candidate closest to ``s_guess`` (laps counted on closed paths). Returns ``(s_m, e_y_m)``.
+        """
+        xy = np.asarray(xy, float)
+        if xy.shape != (2,) or not np.all(np.isfinite(xy)):
+            raise ValueError(f"position must be 2 finite numbers, got {xy!r}")
+        return self._project_xy(xy, s_guess, window_m)
+
+    def frenet(self, pose, s_guess: float | None = None, window_m: float = 2.0) -> Projection:
+        """(s, e_y, e_psi) of a pose ``(x m, y m, yaw rad)``."""
+        pose = np.asarray(pose, float)
+        s, e_y = self.project(pose[:2], s_guess, window_m)
+        e_psi = wrap_angle(pose[2] - float(self.heading(s)))
+        return Projection(float(s), float(e_y), float(e_psi))
+
+    def polyline(self, ds_m: float | None = None) -> np.ndarray:
+        """(M, 2) points along one traversal of the path, for plots [m]."""
+        n = max(2, int(np.ceil(self.length_m / (ds_m or self.length_m / 400))) + 1)
+        return self.position(np.linspace(0.0, self.length_m, n))
+
+    def _lap_shift(self, s_local: float, s_guess: float | None) -> float:
+        """On a closed path, add the multiple of the length that brings s near s_guess."""
+        if not self.closed or s_guess is None:
+            return s_local
+        L = self.length_m
+        return s_local + L * np.round((s_guess - s_local) / L)

@@ -1,0 +1,38 @@
+"""Straight-line path."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import Path
+
+
+class StraightPath(Path):
+    """Segment from ``start`` to ``end`` (2,) [m], extended along its direction beyond the ends."""
+
+    closed = False
+
+    def __init__(self, start, end):
+        self.start = np.asarray(start, float)
+        end = np.asarray(end, float)
+        d = end - self.start
+        self.length_m = float(np.hypot(*d))
+        if not np.isfinite(self.length_m) or self.length_m <= 0:
+            raise ValueError(f"a straight path needs two distinct finite points, got {start} and {end}")
+        self.t = d / self.length_m
+        self.n = np.array([-self.t[1], self.t[0]])
+        self._heading = float(np.arctan2(self.t[1], self.t[0]))
+
+    def position(self, s):
+        s = np.asarray(s, float)
+        return self.start + s[..., None] * self.t
+
+    def heading(self, s):
+        return np.full(np.shape(s), self._heading) if np.ndim(s) else self._heading
+
+    def curvature(self, s):
+        return np.zeros(np.shape(s)) if np.ndim(s) else 0.0
+
+    def _project_xy(self, xy, s_guess, window_m):
+        d = xy - self.start
+        return float(d @ self.t), float(d @ self.n)

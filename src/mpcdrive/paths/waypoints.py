@@ -1,0 +1,126 @@
+"""Waypoint paths: a smoothed cubic spline through points, tabulated densely by arc length."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.interpolate import splev, splprep
+
+from .base import Path
+
+
+class WaypointPath(Path):
+    """Path through waypoints ``points`` (M, 2) [m].
+
+    A parametric cubic spline (``smoothing`` is scipy's ``splprep`` smoothing factor, 0 =
+    interpolate) is re-parameterized by arc length and tabulated every ``ds_m`` metres; between
+    table points position, heading and curvature are interpolated linearly (position error
+    about kappa * ds^2 / 8). ``closed=True`` makes a periodic spline (the last point may repeat
+    the first).
+    """
+
+    def __init__(self, points, closed: bool = False, smoothing: float = 0.0, ds_m: float | None = None):
+        pts = np.asarray(points, float)
+        if pts.ndim != 2 or pts.shape[1] != 2:
+            raise ValueError(f"waypoints must have shape (M, 2), got {pts.shape}")
+        if not np.all(np.isfinite(pts)):
+            raise ValueError("waypoints contain non-finite values")
+        keep = np.r_[True, np.hypot(*np.diff(pts, axis=0).T) > 1e-9]
+        pts = pts[keep]
+        if closed and len(pts) > 2 and np.hypot(*(pts[0] - pts[-1])) < 1e-9:
+            pts = pts[:-1]
+        min_pts = 3 if closed else 2
+        if len(pts) < min_pts:
+            raise ValueError(f"a {'closed' if closed else 'open'} path needs at least {min_pts} distinct points, got {len(pts)}")
+        if smoothing < 0 or not np.isfinite(smoothing):
+            raise ValueError(f"smoothing must be >= 0, got {smoothing}")
+        self.closed = bool(closed)
+        self.waypoints = pts
+        if closed:
+            pts = np.vstack([pts, pts[:1]])
+        k = min(3, len(pts) - 1)
+        tck, _ = splprep(pts.T, s=smoothing, per=int(closed), k=k)
+        # arc length of the spline parameter u by dense chord sums
+        u_dense = np.linspace(0.0, 1.0, max(2000, 60 * len(pts)))
+        p_dense = np.array(splev(u_dense, tck)).T
+        s_dense = np.r_[0.0, np.cumsum(np.hypot(*np.diff(p_dense, axis=0).T))]
+        self.length_m = float(s_dense[-1])
+        if ds_m is None:
+            ds_m = float(np.clip(self.length_m / 20000.0, 0.002, 0.1))
+        n = max(3, int(math.ceil(self.length_m / ds_m)) + 1)
+        s_tab = np.linspace(0.0, self.length_m, n)
+        u_tab = np.interp(s_tab, s_dense, u_dense)
+        x, y = splev(u_tab, tck)
+        dx, dy = splev(u_tab, tck, der=1)
+        if k >= 2:
+            ddx, ddy = splev(u_tab, tck, der=2)
+        else:
+            ddx = ddy = np.zeros_like(dx)
+        self._s = s_tab
+        self._xy = np.column_stack([x, y])
+        self._h = np.unwrap(np.arctan2(dy, dx))
+        self._k = (dx * ddy - dy * ddx) / np.maximum(np.hypot(dx, dy) ** 3, 1e-12)
+        self._ds = s_tab[1] - s_tab[0]
+        # total heading change per lap (a multiple of 2*pi on a closed path)
+        self._lap_turn = 2.0 * math.pi * round((self._h[-1] - self._h[0]) / (2.0 * math.pi)) if closed else 0.0
+
+    # -- evaluation -----------------------------------------------------------------------
+    def _split(self, s):
+        s = np.asarray(s, float)
+        if self.closed:
+            laps = np.floor(s / self.length_m)
+            return s - laps * self.length_m, laps
+        return s, np.zeros_like(s)
+
+    def position(self, s):
+        s_loc, _ = self._split(s)
+        x = np.interp(s_loc, self._s, self._xy[:, 0])
+        y = np.interp(s_loc, self._s, self._xy[:, 1])
+        p = np.stack([x, y], axis=-1)
+        if not self.closed:
+            h0, h1 = self._h[0], self._h[-1]
+            before = np.minimum(s_loc, 0.0)[..., None]
+            after = np.maximum(s_loc - self.length_m, 0.0)[..., None]
+            p = p + before * np.array([math.cos(h0), math.sin(h0)]) + after * np.array([math.cos(h1), math.sin(h1)])
+        return p
+
+    def heading(self, s):
+        s_loc, laps = self._split(s)
+        h = np.interp(s_loc, self._s, self._h) + laps * self._lap_turn
+        return float(h) if np.ndim(h) == 0 else h
+
+    def curvature(self, s):
+        s_loc, _ = self._split(s)
+        k = np.interp(s_loc, self._s, self._k)
+        if not self.closed:
+            k = np.where((s_loc < 0) | (s_loc > self.length_m), 0.0, k)
+        return float(k) if np.ndim(k) == 0 else k
+
+    # -- projection -----------------------------------------------------------------------
+    def _project_xy(self, xy, s_guess, window_m):
+        m = len(self._s) - 1  # number of segments
+        if s_guess is None or 2 * window_m >= self.length_m:
+            idx = np.arange(m)
+        else:
+            s_loc = float(self._split(s_guess)[0])
+            i0 = int(math.floor((s_loc - window_m) / self._ds))
+            i1 = int(math.ceil((s_loc + window_m) / self._ds))
+            idx = np.arange(i0, i1 + 1)
+            idx = np.mod(idx, m) if self.closed else np.unique(np.clip(idx, 0, m - 1))
+        p0 = self._xy[idx]
+        d = self._xy[idx + 1] - p0
+        q = xy - p0
+        dd = np.einsum("ij,ij->i", d, d)
+        t_raw = np.einsum("ij,ij->i", q, d) / dd
+        t = np.clip(t_raw, 0.0, 1.0)
+        if not self.closed:  # the end segments extend along their tangents
+            t = np.where((idx == 0) & (t_raw < 0.0), t_raw, t)
+            t = np.where((idx == m - 1) & (t_raw > 1.0), t_raw, t)
+        r = q - t[:, None] * d
+        dist2 = np.einsum("ij,ij->i", r, r)
+        j = int(np.argmin(dist2))
+        seg = d[j] / math.sqrt(dd[j])
+        s_loc = self._s[idx[j]] + t[j] * math.sqrt(dd[j])
+        e_y = float(seg[0] * r[j, 1] - seg[1] * r[j, 0])
+        return float(self._lap_shift(s_loc, s_guess)), e_y

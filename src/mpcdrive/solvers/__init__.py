@@ -1,0 +1,5 @@
+"""QP backends that are set up once and updated in place each control step."""
+
+from .osqp_backend import OsqpBackend, OsqpSettings
+
+__all__ = ["OsqpBackend", "OsqpSettings"]

@@ -1,0 +1,103 @@
+"""OSQP backend: sparse QP set up once, then numbers updated in place and warm-started."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import osqp
+
+from ..ocp.qp import LtvQp
+from ..types import (
+    STATUS_FAILED,
+    STATUS_INACCURATE,
+    STATUS_INFEASIBLE,
+    STATUS_MAX_ITER,
+    STATUS_OK,
+    SolveResult,
+)
+
+_STATUS_WORDS = {
+    "solved": STATUS_OK,
+    "solved inaccurate": STATUS_INACCURATE,
+    "primal infeasible": STATUS_INFEASIBLE,
+    "primal infeasible inaccurate": STATUS_INFEASIBLE,
+    "dual infeasible": STATUS_INFEASIBLE,
+    "dual infeasible inaccurate": STATUS_INFEASIBLE,
+    "maximum iterations reached": STATUS_MAX_ITER,
+    "run time limit reached": STATUS_MAX_ITER,
+}
+
+
+@dataclass(frozen=True)
+class OsqpSettings:
+    """OSQP options used by mpcdrive (see OSQP's documentation for their meaning)."""
+
+    eps_abs: float = 1e-5
+    eps_rel: float = 1e-5
+    max_iter: int = 4000
+    polish: bool = True
+    adaptive_rho: bool = True
+    time_limit_s: float = 0.0  # 0 = none
+
+    def as_kwargs(self) -> dict:
+        return dict(
+            eps_abs=self.eps_abs,
+            eps_rel=self.eps_rel,
+            max_iter=self.max_iter,
+            polishing=self.polish,
+            adaptive_rho=self.adaptive_rho,
+            time_limit=self.time_limit_s,
+            warm_starting=True,
+            verbose=False,
+        )
+
+
+class OsqpBackend:
+    """Solve an :class:`LtvQp` with OSQP; ``setup`` happens once in the constructor."""
+
+    name = "osqp"
+
+    def __init__(self, qp: LtvQp, settings: OsqpSettings = OsqpSettings()):
+        self.qp = qp
+        self.settings = settings
+        self._solver = osqp.OSQP()
+        d = qp.data()
+        self._solver.setup(d.P, d.q, d.A, d.l, d.u, **settings.as_kwargs())
+        self._z0 = np.zeros(qp.n_var)
+
+    def solve(self, warm_X: np.ndarray | None = None, warm_U: np.ndarray | None = None) -> SolveResult:
+        """Push the QP's current numbers to OSQP and solve.
+
+        warm_X, warm_U : optional primal warm start (N+1, nx), (N, nu); otherwise OSQP starts
+        from its previous solution.
+        """
+        t0 = time.perf_counter()
+        qp = self.qp
+        try:
+            self._solver.update(q=qp.q, l=qp.l, u=qp.u, Ax=qp.A.data)
+        except Exception:  # OSQP rejects the data (e.g. non-finite numbers): a failed step
+            nan = float("nan")
+            return SolveResult(STATUS_FAILED, np.full((qp.N + 1, qp.nx), nan), np.full((qp.N, qp.nu), nan),
+                               nan, 0, time.perf_counter() - t0)
+        if warm_X is not None and warm_U is not None:
+            self._solver.warm_start(x=qp.pack(warm_X, warm_U, out=self._z0))
+        res = self._solver.solve(raise_error=False)
+        status = _STATUS_WORDS.get(res.info.status, STATUS_FAILED)
+        z = res.x
+        if z is None or not np.all(np.isfinite(z)):
+            status = STATUS_FAILED if status in (STATUS_OK, STATUS_INACCURATE) else status
+            X = np.full((qp.N + 1, qp.nx), np.nan)
+            U = np.full((qp.N, qp.nu), np.nan)
+        else:
+            X, U, _ = qp.unpack(z)
+            X, U = X.copy(), U.copy()
+        return SolveResult(
+            status=status,
+            X=X,
+            U=U,
+            cost=float(res.info.obj_val) if res.info.obj_val is not None else float("nan"),
+            iterations=int(res.info.iter),
+            solve_time_s=time.perf_counter() - t0,
+        )

@@ -1,0 +1,126 @@
+"""Typed results shared by the layers (numpy only).
+
+Every array carries its unit in the docstring; angles in radians, SI units throughout.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: solver status words used in logs and ``trajectory.csv``
+STATUS_OK = "ok"
+STATUS_INACCURATE = "inaccurate"
+STATUS_INFEASIBLE = "infeasible"
+STATUS_MAX_ITER = "max_iter"
+STATUS_FAILED = "failed"
+STATUS_BAD_STATE = "bad_state"
+
+
+@dataclass(frozen=True)
+class SolveResult:
+    """One solve of a finite-horizon problem.
+
+    status : solver status word (``ok`` when solved to tolerance)
+    X : (N+1, nx) predicted states; U : (N, nu) planned inputs
+    cost : objective value; iterations : solver iterations; solve_time_s : wall time [s]
+    """
+
+    status: str
+    X: np.ndarray
+    U: np.ndarray
+    cost: float
+    iterations: int
+    solve_time_s: float
+
+    @property
+    def ok(self) -> bool:
+        return self.status in (STATUS_OK, STATUS_INACCURATE)
+
+
+@dataclass(frozen=True)
+class WarmStart:
+    """What a controller needs from its previous step; returned by ``step`` and passed back.
+
+    s_m : arc length of the last projection [m]; u_prev : (nu,) last applied input;
+    X, U : (N+1, nx), (N, nu) last plan (None before the first solve).
+    """
+
+    s_m: float
+    u_prev: np.ndarray
+    X: np.ndarray | None = None
+    U: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class ControlOutput:
+    """Result of one controller step.
+
+    u : (nu,) command to apply [rad, m/s^2]; status : solver status word;
+    fallback : name of the fallback used ("" when the solve succeeded);
+    solve_time_s : wall time of the whole step [s]; s_m, e_y_m, e_psi_rad : path errors at the
+    measured state; X_pred : (N+1, nx) predicted states; refs : (N+1, nx) horizon references;
+    warm : state to pass to the next call.
+    """
+
+    u: np.ndarray
+    status: str
+    fallback: str
+    solve_time_s: float
+    s_m: float
+    e_y_m: float
+    e_psi_rad: float
+    X_pred: np.ndarray
+    refs: np.ndarray
+    warm: WarmStart
+
+
+@dataclass(frozen=True)
+class SimResult:
+    """Complete log of a closed-loop run; K control steps.
+
+    t_s : (K,) time [s]; x : (K, nx) true (plant) states when each command was computed;
+    u : (K, nu) applied inputs; x_final : (nx,) state after the last step;
+    s_m, e_y_m, e_psi_rad : (K,) path coordinates of the true state [m, m, rad];
+    yaw_rad : (K,) unwrapped yaw; v_mps : (K,) speed [m/s];
+    steer_rad, accel_mps2 : (K,) applied steering [rad] and acceleration [m/s^2] (0 if no input);
+    X_pred : (K, N+1, nx) predictions; refs : (K, N+1, nx) horizon references;
+    status : (K,) solver status words; fallback : (K,) fallback names ("" if none);
+    solve_time_s : (K,) controller step wall time [s];
+    path_xy : (M, 2) reference path polyline for plots [m];
+    lane_half_width_m : half lane width or None; state_names/input_names: labels.
+    """
+
+    t_s: np.ndarray
+    x: np.ndarray
+    u: np.ndarray
+    x_final: np.ndarray
+    s_m: np.ndarray
+    e_y_m: np.ndarray
+    e_psi_rad: np.ndarray
+    yaw_rad: np.ndarray
+    v_mps: np.ndarray
+    steer_rad: np.ndarray
+    accel_mps2: np.ndarray
+    X_pred: np.ndarray
+    refs: np.ndarray
+    status: tuple[str, ...]
+    fallback: tuple[str, ...]
+    solve_time_s: np.ndarray
+    path_xy: np.ndarray
+    dt_s: float
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+    lane_half_width_m: float | None = None
+    goal_reached: bool | None = None
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def steps(self) -> int:
+        return int(self.t_s.shape[0])
+
+    @property
+    def xy(self) -> np.ndarray:
+        """(K, 2) position [m]."""
+        return self.x[:, :2]
