@@ -30,3 +30,8 @@ class VehicleModel(Protocol):
 
     def speed(self, x: np.ndarray) -> np.ndarray:
         """Speed of the reference point [m/s] for each state of a batch ``(...,)``."""
+
+    def steady_state(self, kappa, v_mps=None) -> tuple[np.ndarray, np.ndarray]:
+        """Steady-state (steering angle [rad], slip angle [rad]) that keeps the reference point on
+        a path of curvature kappa [1/m] at speed v_mps [m/s]; the yaw then trails the path
+        heading by the slip angle."""

@@ -35,14 +35,15 @@ class KinematicParams:
         return self.lr_m / (self.lf_m + self.lr_m)
 
 
-def steer_for_curvature(kappa, params: KinematicParams) -> np.ndarray:
-    """Steady-state steering angle [rad] that drives the kinematic bicycle on curvature kappa [1/m].
+def steady_state_for_curvature(kappa, params: KinematicParams) -> tuple[np.ndarray, np.ndarray]:
+    """Steady-state (steering [rad], slip angle beta [rad]) that keeps the centre of gravity of
+    the kinematic bicycle on a path of curvature kappa [1/m].
 
-    From ``yaw_rate = v/lr sin(beta) = v kappa``: ``beta = asin(lr kappa)``,
-    ``delta = atan(tan(beta) / lq)``; curvatures beyond 1/lr are clipped.
+    The centre of gravity moves along ``yaw + beta``; from ``yaw_rate = v/lr sin(beta) = v kappa``:
+    ``beta = asin(lr kappa)``, ``delta = atan(tan(beta) / lq)``; |lr kappa| is clipped below 1.
     """
     beta = np.arcsin(np.clip(params.lr_m * np.asarray(kappa, float), -0.999, 0.999))
-    return np.arctan(np.tan(beta) / params.lq)
+    return np.arctan(np.tan(beta) / params.lq), beta
 
 
 def _beta_and_derivative(delta: np.ndarray, lq: float) -> tuple[np.ndarray, np.ndarray]:
@@ -101,9 +102,9 @@ class KinematicBicycle3:
         x = np.asarray(x, float)
         return np.full(x.shape[:-1], self.v_mps)
 
-    def steer_for_curvature(self, kappa, v_mps=None):
-        """Steady-state steering [rad] for curvature kappa [1/m] (speed-independent here)."""
-        return steer_for_curvature(kappa, self.params)
+    def steady_state(self, kappa, v_mps=None):
+        """(steering [rad], slip angle [rad]) on curvature kappa [1/m]; speed-independent here."""
+        return steady_state_for_curvature(kappa, self.params)
 
 
 class KinematicBicycle4:
@@ -155,6 +156,6 @@ class KinematicBicycle4:
     def speed(self, x):
         return np.asarray(x, float)[..., 3]
 
-    def steer_for_curvature(self, kappa, v_mps=None):
-        """Steady-state steering [rad] for curvature kappa [1/m] (speed-independent here)."""
-        return steer_for_curvature(kappa, self.params)
+    def steady_state(self, kappa, v_mps=None):
+        """(steering [rad], slip angle [rad]) on curvature kappa [1/m]; speed-independent here."""
+        return steady_state_for_curvature(kappa, self.params)

@@ -42,16 +42,18 @@ class OsqpSettings:
     time_limit_s: float = 0.0  # 0 = none
 
     def as_kwargs(self) -> dict:
-        return dict(
+        kw = dict(
             eps_abs=self.eps_abs,
             eps_rel=self.eps_rel,
             max_iter=self.max_iter,
             polishing=self.polish,
             adaptive_rho=self.adaptive_rho,
-            time_limit=self.time_limit_s,
             warm_starting=True,
             verbose=False,
         )
+        if self.time_limit_s > 0:
+            kw["time_limit"] = self.time_limit_s
+        return kw
 
 
 class OsqpBackend:

@@ -1,0 +1,172 @@
+"""Closed loop: a controller drives a plant model (possibly different from its own model)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..control.base import Controller
+from ..models.base import VehicleModel
+from ..models.discretize import Method, discrete_step
+from ..paths.base import Path
+from ..types import SimResult
+
+
+@dataclass(frozen=True)
+class Plant:
+    """The simulated vehicle: ``model`` integrated with ``method`` in ``substeps`` per control step."""
+
+    model: VehicleModel
+    method: Method = "rk4"
+    substeps: int = 1
+
+    def __post_init__(self):
+        if self.substeps < 1:
+            raise ValueError(f"plant substeps must be >= 1, got {self.substeps}")
+
+    def step(self, x: np.ndarray, u: np.ndarray, dt_s: float) -> np.ndarray:
+        h = dt_s / self.substeps
+        for _ in range(self.substeps):
+            x = discrete_step(self.model, x, u, h, self.method)
+        return x
+
+
+@dataclass(frozen=True)
+class Disturbance:
+    """Random additive noise (seeded).
+
+    distribution : ``uniform`` (each component in [low, high]) or ``normal`` (mean 0, std);
+    low/high/std : (nx,) per state component, in state units.
+    Used both for state disturbances (added to the plant state after each step) and for
+    measurement noise (added to the state the controller sees).
+    """
+
+    distribution: str = "normal"
+    low: np.ndarray | None = None
+    high: np.ndarray | None = None
+    std: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.distribution == "uniform":
+            if self.low is None or self.high is None:
+                raise ValueError("a uniform disturbance needs low and high")
+            if np.any(np.asarray(self.low) > np.asarray(self.high)):
+                raise ValueError("disturbance low exceeds high")
+        elif self.distribution == "normal":
+            if self.std is None or np.any(np.asarray(self.std) < 0):
+                raise ValueError("a normal disturbance needs std >= 0")
+        else:
+            raise ValueError(f"distribution must be 'uniform' or 'normal', got {self.distribution!r}")
+
+    def sample(self, rng: np.random.Generator, nx: int) -> np.ndarray:
+        if self.distribution == "uniform":
+            lo = np.broadcast_to(np.asarray(self.low, float), (nx,))
+            hi = np.broadcast_to(np.asarray(self.high, float), (nx,))
+            return rng.uniform(lo, hi)
+        return rng.normal(0.0, np.broadcast_to(np.asarray(self.std, float), (nx,)))
+
+
+def simulate(
+    controller: Controller,
+    plant: Plant,
+    path: Path,
+    x0,
+    dt_s: float,
+    steps: int,
+    *,
+    disturbance: Disturbance | None = None,
+    measurement_noise: Disturbance | None = None,
+    seed: int = 0,
+    stop_at_path_end: bool = True,
+    lane_half_width_m: float | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    meta: dict | None = None,
+) -> SimResult:
+    """Run ``steps`` control steps of ``dt_s`` seconds from ``x0`` (plant state).
+
+    The controller sees the plant state plus ``measurement_noise``; the plant state receives
+    ``disturbance`` after every step. On an open path the run ends when the vehicle passes the
+    path's end (``stop_at_path_end``), and ``goal_reached`` says whether it did.
+    ``progress(k, steps)`` is called every step when given.
+    """
+    if steps < 1:
+        raise ValueError(f"steps must be >= 1, got {steps}")
+    rng = np.random.default_rng(seed)
+    nx, nu, N = controller.nx, controller.nu, controller.N
+    model = plant.model
+    x = np.asarray(x0, float).copy()
+    if x.shape != (model.nx,):
+        raise ValueError(f"initial state must have shape ({model.nx},), got {x.shape}")
+    if not np.all(np.isfinite(x)):
+        raise ValueError(f"initial state is not finite: {x}")
+    if model.nx != nx:
+        raise ValueError("plant and controller must share the state layout (same nx)")
+    T = np.empty(steps)
+    Xs = np.empty((steps, nx))
+    Us = np.empty((steps, nu))
+    S = np.empty(steps)
+    EY = np.empty(steps)
+    EPSI = np.empty(steps)
+    XP = np.empty((steps, N + 1, nx))
+    RF = np.empty((steps, N + 1, nx))
+    ST = np.empty(steps)
+    status: list[str] = []
+    fallback: list[str] = []
+    warm = controller.initial_warm(x)
+    goal_reached = False if (stop_at_path_end and not path.closed) else None
+    k_end = steps
+    for k in range(steps):
+        meas = x if measurement_noise is None else x + measurement_noise.sample(rng, nx)
+        out = controller.step(meas, warm)
+        warm = out.warm
+        # Frenet coordinates of the true state (the controller's are of the measurement)
+        if measurement_noise is None:
+            s, ey, epsi = out.s_m, out.e_y_m, out.e_psi_rad
+        else:
+            fr = path.frenet(x[:3], out.s_m)
+            s, ey, epsi = fr.s_m, fr.e_y_m, fr.e_psi_rad
+        T[k], Xs[k], Us[k] = k * dt_s, x, out.u
+        S[k], EY[k], EPSI[k] = s, ey, epsi
+        XP[k], RF[k], ST[k] = out.X_pred, out.refs, out.solve_time_s
+        status.append(out.status)
+        fallback.append(out.fallback)
+        x = plant.step(x, out.u, dt_s)
+        if disturbance is not None:
+            x = x + disturbance.sample(rng, nx)
+        if progress is not None:
+            progress(k + 1, steps)
+        if goal_reached is not None and s >= path.length_m:
+            goal_reached = True
+            k_end = k + 1
+            break
+    sl = slice(0, k_end)
+    v = model.speed(Xs[sl])
+    steer = Us[sl, 0]
+    accel = Us[sl, list(model.input_names).index("accel")] if "accel" in model.input_names else np.zeros(k_end)
+    return SimResult(
+        t_s=T[sl].copy(),
+        x=Xs[sl].copy(),
+        u=Us[sl].copy(),
+        x_final=x,
+        s_m=S[sl].copy(),
+        e_y_m=EY[sl].copy(),
+        e_psi_rad=EPSI[sl].copy(),
+        yaw_rad=Xs[sl, 2].copy(),
+        v_mps=np.asarray(v, float),
+        steer_rad=steer.copy(),
+        accel_mps2=np.asarray(accel, float).copy(),
+        X_pred=XP[sl].copy(),
+        refs=RF[sl].copy(),
+        status=tuple(status),
+        fallback=tuple(fallback),
+        solve_time_s=ST[sl].copy(),
+        path_xy=path.polyline(),
+        dt_s=float(dt_s),
+        state_names=tuple(model.state_names),
+        input_names=tuple(model.input_names),
+        lane_half_width_m=lane_half_width_m,
+        goal_reached=goal_reached,
+        meta=dict(meta or {}),
+    )

@@ -1,0 +1,79 @@
+"""Run metrics (CONTRACT.md's metrics.json), computed from a SimResult only."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..types import STATUS_INACCURATE, STATUS_OK, SimResult
+
+
+@dataclass(frozen=True)
+class Footprint:
+    """Vehicle body as a rectangle ``length_m`` x ``width_m`` centred ``center_offset_m`` ahead of
+    the reference point (the state's x, y), aligned with the yaw."""
+
+    length_m: float = 0.50
+    width_m: float = 0.27
+    center_offset_m: float = 0.0
+
+    def corners(self) -> np.ndarray:
+        """(4, 2) corners in the body frame [m]."""
+        hl, hw, c = 0.5 * self.length_m, 0.5 * self.width_m, self.center_offset_m
+        return np.array([[c + hl, hw], [c + hl, -hw], [c - hl, -hw], [c - hl, hw]])
+
+
+def _lane_excess(result: SimResult, footprint: Footprint) -> float:
+    """Largest distance [m] by which a footprint corner left the lane (0 inside)."""
+    if result.lane_half_width_m is None:
+        return 0.0
+    h = result.yaw_rad - result.e_psi_rad  # path heading at each step
+    c = footprint.corners()
+    yaw = result.yaw_rad
+    # corner offsets in the world frame, then onto the path's left normal
+    dx = np.cos(yaw)[:, None] * c[:, 0] - np.sin(yaw)[:, None] * c[:, 1]
+    dy = np.sin(yaw)[:, None] * c[:, 0] + np.cos(yaw)[:, None] * c[:, 1]
+    lat = result.e_y_m[:, None] + (-np.sin(h)[:, None] * dx + np.cos(h)[:, None] * dy)
+    return float(max(0.0, np.max(np.abs(lat)) - result.lane_half_width_m))
+
+
+def _rms(a) -> float:
+    a = np.asarray(a, float)
+    return float(np.sqrt(np.mean(a * a))) if a.size else float("nan")
+
+
+def compute_metrics(result: SimResult, footprint: Footprint = Footprint()) -> dict:
+    """Metrics of one run; keys as in CONTRACT.md plus ``converged_*`` (second half of the run)
+    and ``steer_total_variation_rad`` (sum of |steering changes|, for the smoothing study)."""
+    K = result.steps
+    ey = result.e_y_m
+    half = ey[K // 2:]
+    steer = result.steer_rad
+    rate = np.diff(steer) / result.dt_s if K > 1 else np.zeros(0)
+    st = result.solve_time_s * 1e6
+    failures = sum(1 for s in result.status if s not in (STATUS_OK, STATUS_INACCURATE))
+    return {
+        "steps": int(K),
+        "duration_s": float(K * result.dt_s),
+        "rms_lateral_error_m": _rms(ey),
+        "max_abs_lateral_error_m": float(np.max(np.abs(ey))),
+        "final_lateral_error_m": float(abs(ey[-1])),
+        "converged_rms_lateral_error_m": _rms(half),
+        "converged_max_abs_lateral_error_m": float(np.max(np.abs(half))),
+        "rms_heading_error_rad": _rms(result.e_psi_rad),
+        "max_abs_steer_rad": float(np.max(np.abs(steer))),
+        "max_abs_steer_rate_rad_s": float(np.max(np.abs(rate))) if rate.size else 0.0,
+        "steer_total_variation_rad": float(np.sum(np.abs(np.diff(steer)))),
+        "min_obstacle_clearance_m": result.meta.get("min_obstacle_clearance_m"),
+        "collisions": int(result.meta.get("collisions", 0)),
+        "max_lane_excess_m": _lane_excess(result, footprint),
+        "solver_failures": int(failures),
+        "fallbacks": int(sum(1 for f in result.fallback if f)),
+        "solve_time_us": {
+            "p50": float(np.percentile(st, 50)),
+            "p99": float(np.percentile(st, 99)),
+            "max": float(np.max(st)),
+        },
+        "goal_reached": result.goal_reached,
+    }
