@@ -46,6 +46,12 @@ def steady_state_for_curvature(kappa, params: KinematicParams) -> tuple[np.ndarr
     return np.arctan(np.tan(beta) / params.lq), beta
 
 
+def _kinematic_rhs(yaw, v, delta, params: KinematicParams, ns):
+    """x', y', yaw' of the kinematic bicycle (eqs. 1-4, 8) with math functions from ``ns``."""
+    beta = ns.arctan(params.lq * ns.tan(delta))
+    return v * ns.cos(yaw + beta), v * ns.sin(yaw + beta), v / params.lr_m * ns.sin(beta)
+
+
 def _beta_and_derivative(delta: np.ndarray, lq: float) -> tuple[np.ndarray, np.ndarray]:
     """beta(delta) and d beta / d delta = lq / (cos^2 delta + lq^2 sin^2 delta) (eq. 11)."""
     beta = np.arctan(lq * np.tan(delta))
@@ -71,15 +77,15 @@ class KinematicBicycle3:
         self.v_mps = float(v_mps)
         self.params = params
 
+    def f_components(self, x, u, ns=np):
+        """The equations, on sequences of state / input components and the math namespace ``ns``
+        (numpy, or a symbolic one such as CasADi's): the single definition behind :meth:`f`."""
+        return _kinematic_rhs(x[2], self.v_mps, u[0], self.params, ns)
+
     def f(self, x, u):
         x = np.asarray(x, float)
         u = np.asarray(u, float)
-        beta, _ = _beta_and_derivative(u[..., 0], self.params.lq)
-        v = self.v_mps
-        ang = x[..., 2] + beta
-        return np.stack(
-            [v * np.cos(ang), v * np.sin(ang), v / self.params.lr_m * np.sin(beta)], axis=-1
-        )
+        return np.stack(self.f_components(np.moveaxis(x, -1, 0), np.moveaxis(u, -1, 0)), axis=-1)
 
     def jacobians(self, x, u):
         x = np.asarray(x, float)
@@ -121,16 +127,14 @@ class KinematicBicycle4:
     def __init__(self, params: KinematicParams = KinematicParams()):
         self.params = params
 
+    def f_components(self, x, u, ns=np):
+        """The equations on state / input components (see KinematicBicycle3.f_components)."""
+        return (*_kinematic_rhs(x[2], x[3], u[0], self.params, ns), u[1])
+
     def f(self, x, u):
         x = np.asarray(x, float)
         u = np.asarray(u, float)
-        beta, _ = _beta_and_derivative(u[..., 0], self.params.lq)
-        v = x[..., 3]
-        ang = x[..., 2] + beta
-        return np.stack(
-            [v * np.cos(ang), v * np.sin(ang), v / self.params.lr_m * np.sin(beta), u[..., 1]],
-            axis=-1,
-        )
+        return np.stack(self.f_components(np.moveaxis(x, -1, 0), np.moveaxis(u, -1, 0)), axis=-1)
 
     def jacobians(self, x, u):
         x = np.asarray(x, float)

@@ -1,0 +1,25 @@
+"""Figures of closed-loop runs (matplotlib, Agg canvas, no pyplot); read results, never solve."""
+
+from mpcdrive.plots.figures import (
+    plot_heading_deviation,
+    plot_lateral_deviation,
+    plot_overview,
+    plot_speed,
+    plot_steering,
+    plot_steering_comparison,
+    plot_trajectory,
+    speed_varies,
+    write_run_figures,
+)
+
+__all__ = [
+    "plot_heading_deviation",
+    "plot_lateral_deviation",
+    "plot_overview",
+    "plot_speed",
+    "plot_steering",
+    "plot_steering_comparison",
+    "plot_trajectory",
+    "speed_varies",
+    "write_run_figures",
+]

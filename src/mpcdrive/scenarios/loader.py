@@ -1,0 +1,80 @@
+"""Load and validate scenario files; built-in scenarios ship as YAML in ``builtin/``."""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+import yaml
+from pydantic import ValidationError
+
+from .schema import ScenarioSpec
+
+
+class ScenarioError(ValueError):
+    """Bad scenario input; ``str()`` is one line naming the file, field and problem."""
+
+    def __init__(self, source: str, field: str, problem: str):
+        self.source, self.field, self.problem = source, field, problem
+        super().__init__(f"{source}: {field}: {problem}" if field else f"{source}: {problem}")
+
+
+def _builtin_dir():
+    return resources.files(__package__) / "builtin"
+
+
+def builtin_ids() -> list[str]:
+    """Ids of the built-in scenarios, sorted."""
+    return sorted(p.name[:-5] for p in _builtin_dir().iterdir() if p.name.endswith(".yaml"))
+
+
+def _parse(text: str, source: str) -> ScenarioSpec:
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f"line {mark.line + 1}" if mark is not None else "YAML"
+        raise ScenarioError(source, where, f"not valid YAML ({getattr(e, 'problem', None) or e})") from None
+    if not isinstance(data, dict):
+        raise ScenarioError(source, "", "a scenario file must be a YAML mapping of keys to values")
+    try:
+        return ScenarioSpec.model_validate(data)
+    except ValidationError as e:
+        err = e.errors()[0]
+        loc = ".".join(str(p) for p in err["loc"] if not (isinstance(p, str) and p in ("straight", "circle", "waypoints")))
+        msg = err["msg"]
+        if err["type"] == "extra_forbidden":
+            msg = "unknown key"
+        elif err["type"] == "missing":
+            msg = "required key missing"
+        more = f" (and {len(e.errors()) - 1} more problem(s))" if len(e.errors()) > 1 else ""
+        raise ScenarioError(source, loc or "(top level)", msg + more) from None
+
+
+def load_scenario(name_or_path: str | Path) -> ScenarioSpec:
+    """A built-in scenario by id, or a YAML scenario file by path.
+
+    Raises :class:`ScenarioError` (one-line message: file, field, problem) on bad input.
+    """
+    name = str(name_or_path)
+    if name in builtin_ids():
+        path = _builtin_dir() / f"{name}.yaml"
+        return _parse(path.read_text(encoding="utf-8"), f"builtin:{name}")
+    p = Path(name)
+    if p.suffix.lower() not in (".yaml", ".yml"):
+        if not p.exists():
+            raise ScenarioError(name, "", f"no built-in scenario or file of this name (built-ins: {', '.join(builtin_ids())})")
+        raise ScenarioError(name, "", "unsupported file type (expected .yaml or .yml)")
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ScenarioError(name, "", "file not found") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ScenarioError(name, "", f"cannot read file ({e})") from None
+    return _parse(text, name)
+
+
+def dump_scenario(spec: ScenarioSpec) -> str:
+    """The fully resolved scenario (all defaults filled in) as YAML text."""
+    data = spec.model_dump(mode="json")
+    return yaml.safe_dump(data, sort_keys=False)
