@@ -205,13 +205,15 @@ def main() -> None:
     except KeyboardInterrupt:
         typer.echo("mpcdrive: interrupted; no partial output was kept", err=True)
         sys.exit(130)
-    except Exception as e:  # click usage errors carry their own exit code (2)
-        import click
-
-        if isinstance(e, click.exceptions.ClickException):
-            e.show()
-            sys.exit(e.exit_code)
-        if isinstance(e, click.exceptions.Abort):
+    except Exception as e:
+        fmt = getattr(e, "format_message", None)
+        code = getattr(e, "exit_code", None)
+        if callable(fmt) and isinstance(code, int):  # usage errors carry their own code (2)
+            ctx = getattr(e, "ctx", None)
+            where = ctx.command_path if ctx is not None else "mpcdrive"
+            typer.echo(f"{where}: {' '.join(fmt().split())}", err=True)
+            sys.exit(code)
+        if type(e).__name__ == "Abort":
             typer.echo("mpcdrive: aborted; no partial output was kept", err=True)
             sys.exit(130)
         typer.echo(f"mpcdrive: error: {type(e).__name__}: {e}", err=True)

@@ -17,7 +17,7 @@ from typing import Literal
 import numpy as np
 
 from ..models.base import VehicleModel
-from ..models.discretize import Method, discrete_jacobians, discrete_step, rollout
+from ..models.discretize import Method, discrete_step, discrete_step_and_jacobians, rollout
 from ..ocp.problem import MpcProblem
 from ..ocp.qp import LtvQp
 from ..paths.base import Path
@@ -159,9 +159,8 @@ class LtvMpc:
             Xbar[1:, 2] += TWO_PI * np.round((x[2] - warm.X[1, 2]) / TWO_PI)
             Ubar[:-1] = warm.U[1:]
             Ubar[-1] = warm.U[-1]
-        Ad, Bd = discrete_jacobians(model, Xbar, Ubar, dt, cfg.discretization)
-        c = discrete_step(model, Xbar, Ubar, dt, cfg.discretization)
-        c -= np.einsum("kij,kj->ki", Ad, Xbar) + np.einsum("kij,kj->ki", Bd, Ubar)
+        Fbar, Ad, Bd = discrete_step_and_jacobians(model, Xbar, Ubar, dt, cfg.discretization)
+        c = Fbar - np.einsum("kij,kj->ki", Ad, Xbar) - np.einsum("kij,kj->ki", Bd, Ubar)
         if self.qp.lane:
             yaw = refs[1:, 2]
             self._lane_n[:, 0] = -np.sin(yaw)
@@ -172,7 +171,7 @@ class LtvMpc:
         # primal warm start: the linearization trajectory, closed with its last prediction
         Xws = self._Xws
         Xws[:N] = Xbar
-        Xws[N] = discrete_step(model, Xbar[-1], Ubar[-1], dt, cfg.discretization)
+        Xws[N] = Fbar[-1]
         res = self.backend.solve(Xws, Ubar)
 
         if res.ok and np.all(np.isfinite(res.U[0])):

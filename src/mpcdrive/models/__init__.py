@@ -1,7 +1,7 @@
 """Vehicle models: continuous dynamics f(x, u), analytic Jacobians, discretization."""
 
 from .base import VehicleModel
-from .discretize import discrete_jacobians, discrete_step, rollout
+from .discretize import discrete_jacobians, discrete_step, discrete_step_and_jacobians, rollout
 from .kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams
 
 __all__ = [
@@ -11,5 +11,6 @@ __all__ = [
     "KinematicParams",
     "discrete_step",
     "discrete_jacobians",
+    "discrete_step_and_jacobians",
     "rollout",
 ]

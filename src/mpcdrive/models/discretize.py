@@ -36,16 +36,24 @@ def discrete_jacobians(
 
     For Euler these are the paper's eqs. 9-11: ``A = I + dt*df/dx``, ``B = dt*df/du``.
     """
+    _, Ad, Bd = discrete_step_and_jacobians(model, x, u, dt, method)
+    return Ad, Bd
+
+
+def discrete_step_and_jacobians(
+    model: VehicleModel, x, u, dt: float, method: Method = "rk4"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(F(x, u), dF/dx, dF/du) in one pass (the stages are shared)."""
     x = np.asarray(x, float)
     u = np.asarray(u, float)
     eye = np.eye(model.nx)
     Ac, Bc = model.jacobians(x, u)
+    k1 = model.f(x, u)
     if method == "euler":
-        return eye + dt * Ac, dt * Bc
+        return x + dt * k1, eye + dt * Ac, dt * Bc
     if method != "rk4":
         raise ValueError(f"unknown discretization method {method!r}; use 'euler' or 'rk4'")
     # stage derivatives d k_i / d x and d k_i / d u by the chain rule
-    k1 = model.f(x, u)
     J1x, J1u = Ac, Bc
     x2 = x + 0.5 * dt * k1
     A2, B2 = model.jacobians(x2, u)
@@ -61,9 +69,10 @@ def discrete_jacobians(
     A4, B4 = model.jacobians(x4, u)
     J4x = A4 @ (eye + dt * J3x)
     J4u = A4 @ (dt * J3u) + B4
+    k4 = model.f(x4, u)
     Ad = eye + dt / 6.0 * (J1x + 2.0 * J2x + 2.0 * J3x + J4x)
     Bd = dt / 6.0 * (J1u + 2.0 * J2u + 2.0 * J3u + J4u)
-    return Ad, Bd
+    return x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4), Ad, Bd
 
 
 def rollout(model: VehicleModel, x0, U, dt: float, method: Method = "rk4") -> np.ndarray:

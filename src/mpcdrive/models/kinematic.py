@@ -46,6 +46,11 @@ def steady_state_for_curvature(kappa, params: KinematicParams) -> tuple[np.ndarr
     return np.arctan(np.tan(beta) / params.lq), beta
 
 
+def _components(a: np.ndarray):
+    """State / input components of a single vector or a batch, as views."""
+    return a.T if a.ndim <= 2 else np.moveaxis(a, -1, 0)
+
+
 def _kinematic_rhs(yaw, v, delta, params: KinematicParams, ns):
     """x', y', yaw' of the kinematic bicycle (eqs. 1-4, 8) with math functions from ``ns``."""
     beta = ns.arctan(params.lq * ns.tan(delta))
@@ -85,7 +90,7 @@ class KinematicBicycle3:
     def f(self, x, u):
         x = np.asarray(x, float)
         u = np.asarray(u, float)
-        return np.stack(self.f_components(np.moveaxis(x, -1, 0), np.moveaxis(u, -1, 0)), axis=-1)
+        return np.stack(self.f_components(_components(x), _components(u)), axis=-1)
 
     def jacobians(self, x, u):
         x = np.asarray(x, float)
@@ -134,7 +139,7 @@ class KinematicBicycle4:
     def f(self, x, u):
         x = np.asarray(x, float)
         u = np.asarray(u, float)
-        return np.stack(self.f_components(np.moveaxis(x, -1, 0), np.moveaxis(u, -1, 0)), axis=-1)
+        return np.stack(self.f_components(_components(x), _components(u)), axis=-1)
 
     def jacobians(self, x, u):
         x = np.asarray(x, float)

@@ -135,6 +135,7 @@ def _table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list[str]:
 
 
 def _metrics_table(entries: Sequence[ReportEntry]) -> list[str]:
+    entries = [e for e in entries if e.metrics]  # figure-only entries have no row
     has_converged = any("converged_rms_lateral_error_m" in e.metrics for e in entries)
     has_obstacles = any(_num(e.metrics.get("min_obstacle_clearance_m")) is not None
                         for e in entries)

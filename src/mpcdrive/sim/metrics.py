@@ -45,12 +45,17 @@ def _rms(a) -> float:
 
 def compute_metrics(result: SimResult, footprint: Footprint = Footprint()) -> dict:
     """Metrics of one run; keys as in CONTRACT.md plus ``converged_*`` (second half of the run)
-    and ``steer_total_variation_rad`` (sum of |steering changes|, for the smoothing study)."""
+    and ``steer_total_variation_rad`` (sum of |steering changes|, for the smoothing study).
+
+    Steering rates include the first step's change from the initial steering angle
+    (``meta["initial_steer_rad"]``, 0 by default: the wheels start straight)."""
     K = result.steps
     ey = result.e_y_m
     half = ey[K // 2:]
     steer = result.steer_rad
-    rate = np.diff(steer) / result.dt_s if K > 1 else np.zeros(0)
+    # steering is 0 before the first step (the controller starts from u_prev = 0)
+    steer0 = np.r_[result.meta.get("initial_steer_rad", 0.0), steer]
+    rate = np.diff(steer0) / result.dt_s
     st = result.solve_time_s * 1e6
     failures = sum(1 for s in result.status if s not in (STATUS_OK, STATUS_INACCURATE))
     return {
@@ -63,8 +68,8 @@ def compute_metrics(result: SimResult, footprint: Footprint = Footprint()) -> di
         "converged_max_abs_lateral_error_m": float(np.max(np.abs(half))),
         "rms_heading_error_rad": _rms(result.e_psi_rad),
         "max_abs_steer_rad": float(np.max(np.abs(steer))),
-        "max_abs_steer_rate_rad_s": float(np.max(np.abs(rate))) if rate.size else 0.0,
-        "steer_total_variation_rad": float(np.sum(np.abs(np.diff(steer)))),
+        "max_abs_steer_rate_rad_s": float(np.max(np.abs(rate))),
+        "steer_total_variation_rad": float(np.sum(np.abs(np.diff(steer0)))),
         "min_obstacle_clearance_m": result.meta.get("min_obstacle_clearance_m"),
         "collisions": int(result.meta.get("collisions", 0)),
         "max_lane_excess_m": _lane_excess(result, footprint),

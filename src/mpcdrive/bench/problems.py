@@ -1,0 +1,54 @@
+"""The benchmark problems of PERF.md, defined once for every implementation."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..control.mpc import MpcConfig
+from ..models.kinematic import KinematicBicycle3, KinematicBicycle4
+from ..ocp.problem import MpcProblem
+from ..paths import CirclePath, Path, StraightPath
+
+
+@dataclass(frozen=True)
+class BenchProblem:
+    """A closed loop to time: model, path, problem, config and start state."""
+
+    name: str
+    description: str
+    model: object
+    path: Path
+    problem: MpcProblem
+    config: MpcConfig
+    x0: np.ndarray
+    dt_s: float = 0.01
+
+
+def p1() -> BenchProblem:
+    """P1: straight line, kinematic bicycle 3 states / 1 input, v = 1 m/s, N = 30, Q = I3, R = 1,
+    |delta| <= 60 deg (the paper's Experiment 2)."""
+    model = KinematicBicycle3(1.0)
+    steer = math.radians(60.0)
+    pb = MpcProblem(3, 1, 30, 0.01, Q=np.ones(3), R=1.0, u_min=-steer, u_max=steer)
+    return BenchProblem("P1", "straight line, 3 states / 1 input, N = 30", model,
+                        StraightPath([1.0, 0.0], [11.0, 0.0]), pb, MpcConfig(v_ref_mps=1.0),
+                        np.array([2.0, -2.0, math.pi / 2]))
+
+
+def p2() -> BenchProblem:
+    """P2: circle r = 1.5 m with speed, 4 states / 2 inputs, Q = diag(20, 20, 20, 30),
+    R = 0.01 I, N = 30, v in [0, 2] m/s (the paper's Experiment 4)."""
+    model = KinematicBicycle4()
+    steer = math.radians(60.0)
+    pb = MpcProblem(4, 2, 30, 0.01, Q=[20.0, 20.0, 20.0, 30.0], R=0.01,
+                    u_min=[-steer, -np.inf], u_max=[steer, np.inf],
+                    x_min=[-np.inf, -np.inf, -np.inf, 0.0], x_max=[np.inf, np.inf, np.inf, 2.0])
+    return BenchProblem("P2", "circle r = 1.5 m with speed, 4 states / 2 inputs, N = 30", model,
+                        CirclePath(radius_m=1.5), pb, MpcConfig(v_ref_mps=1.0),
+                        np.array([0.0, 1.6, math.pi, 1.0]))
+
+
+PROBLEMS = {"P1": p1, "P2": p2}

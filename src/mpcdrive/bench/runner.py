@@ -1,0 +1,76 @@
+"""Time closed loops step by step, the way a user calls a controller from Python."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from ..control.mpc import LtvMpc
+from ..sim.closed_loop import Plant
+from .problems import PROBLEMS, BenchProblem
+
+WARMUP_STEPS = 10
+
+
+def time_closed_loop(controller, prob: BenchProblem, steps: int) -> dict:
+    """Run ``steps`` steps of the closed loop, timing each ``controller.step`` call.
+
+    Returns p50/p99/max [us] over the steps after the warm-up, the step count, and the RMS
+    lateral error [m] (evidence that every implementation solved the same problem)."""
+    plant = Plant(prob.model)
+    x = prob.x0.copy()
+    warm = controller.initial_warm(x)
+    times = np.empty(steps)
+    ey = np.empty(steps)
+    failures = 0
+    for k in range(steps):
+        t0 = time.perf_counter()
+        out = controller.step(x, warm)
+        times[k] = time.perf_counter() - t0
+        warm = out.warm
+        ey[k] = out.e_y_m
+        failures += out.status not in ("ok", "inaccurate")
+        x = plant.step(x, out.u, prob.dt_s)
+    t = times[min(WARMUP_STEPS, steps - 1):] * 1e6
+    return {
+        "p50_us": float(np.percentile(t, 50)),
+        "p99_us": float(np.percentile(t, 99)),
+        "max_us": float(t.max()),
+        "steps": int(steps),
+        "rms_lateral_error_m": float(np.sqrt(np.mean(ey ** 2))),
+        "solver_failures": int(failures),
+    }
+
+
+def run_bench(names, baselines: bool = False, steps: int = 1000, baseline_steps: int = 200,
+              log: Callable[[str], None] = lambda m: None) -> dict:
+    """``{problem: {implementation: figures}}`` for the named problems (see CONTRACT.md)."""
+    out: dict[str, dict] = {}
+    for name in names:
+        prob = PROBLEMS[name]()
+        res: dict[str, dict] = {}
+        log(f"{name}: mpcdrive (LTV-MPC, OSQP), {steps} steps")
+        res["mpcdrive"] = time_closed_loop(LtvMpc(prob.model, prob.path, prob.problem, prob.config), prob, steps)
+        if baselines:
+            from .baselines import available_baselines
+
+            for bname, factory in available_baselines().items():
+                log(f"{name}: {bname}, {baseline_steps} steps")
+                res[bname] = time_closed_loop(factory(prob), prob, baseline_steps)
+                # the same closed loop with our controller over the same steps, for a like-for-like error
+            res["mpcdrive_same_steps"] = time_closed_loop(
+                LtvMpc(prob.model, prob.path, prob.problem, prob.config), prob, baseline_steps)
+        out[name] = res
+    return out
+
+
+def format_table(results: dict) -> str:
+    """A plain-text table of the bench results."""
+    lines = [f"{'problem':<8}{'implementation':<22}{'p50 [us]':>12}{'p99 [us]':>12}{'max [us]':>12}{'steps':>8}{'rms e_y [m]':>14}"]
+    for prob, impls in results.items():
+        for impl, r in impls.items():
+            lines.append(f"{prob:<8}{impl:<22}{r['p50_us']:>12.1f}{r['p99_us']:>12.1f}{r['max_us']:>12.1f}"
+                         f"{r['steps']:>8d}{r['rms_lateral_error_m']:>14.5f}")
+    return "\n".join(lines)

@@ -1,0 +1,127 @@
+"""The command line as CONTRACT.md describes it, run as a user would (subprocess)."""
+
+import csv
+import json
+import subprocess
+import sys
+
+import pytest
+
+REQUIRED_COLUMNS = ["t", "x", "y", "yaw", "v", "steer", "accel", "s", "e_y", "e_psi", "solve_time_us", "status"]
+REQUIRED_METRICS = [
+    "steps", "duration_s", "rms_lateral_error_m", "max_abs_lateral_error_m", "final_lateral_error_m",
+    "rms_heading_error_rad", "max_abs_steer_rad", "max_abs_steer_rate_rad_s", "min_obstacle_clearance_m",
+    "collisions", "max_lane_excess_m", "solver_failures", "fallbacks", "solve_time_us", "goal_reached",
+]
+
+
+def cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "mpcdrive.cli", *args], capture_output=True, text=True, cwd=cwd)
+
+
+def short_scenario(tmp_path, **extra):
+    text = (
+        "id: short\nduration_s: 0.3\n"
+        "path: {type: circle, radius_m: 1.5}\n"
+        "initial_state: {x_m: 1.5, y_m: 0.0, yaw_deg: 90}\n"
+        "road: {lane_width_m: 1.0}\n"
+        "controller: {horizon: 10, Q: [1, 1, 1], R: [1]}\n"
+    )
+    p = tmp_path / "short.yaml"
+    p.write_text(text)
+    return p
+
+
+def test_list_names_every_paper_experiment():
+    r = cli("list")
+    assert r.returncode == 0
+    ids = [line.split("\t")[0] for line in r.stdout.splitlines()]
+    for sid in ("paper-exp1", "paper-exp2", "paper-exp3", "paper-exp4", "paper-disturbance-v1",
+                "paper-disturbance-v4", "paper-smoothing"):
+        assert sid in ids
+
+
+def test_run_writes_the_contract_files(tmp_path):
+    out = tmp_path / "out"
+    r = cli("run", str(short_scenario(tmp_path)), "--out", str(out), "-q")
+    assert r.returncode == 0, r.stderr
+    with open(out / "trajectory.csv") as f:
+        rows = list(csv.reader(f))
+    assert rows[0][: len(REQUIRED_COLUMNS)] == REQUIRED_COLUMNS
+    assert len(rows) == 1 + 30
+    assert {row[REQUIRED_COLUMNS.index("status")] for row in rows[1:]} == {"ok"}
+    metrics = json.loads((out / "metrics.json").read_text())
+    for key in REQUIRED_METRICS:
+        assert key in metrics
+    assert set(metrics["solve_time_us"]) == {"p50", "p99", "max"}
+    assert metrics["steps"] == 30 and metrics["max_lane_excess_m"] == 0.0
+    assert (out / "scenario.yaml").read_text().startswith("id: short")
+    assert (out / "trajectory.png").stat().st_size > 1000
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["run", "no-such-scenario"], "no built-in scenario"),
+        (["run", "{bad}.yaml"], "file not found"),
+        (["run"], "Missing argument"),
+        (["bench", "--problem", "P9"], "unknown problem"),
+        (["reproduce", "--only", "paper-exp99"], "unknown experiment"),
+        (["run", "paper-exp1", "--bogus"], "No such option"),
+    ],
+)
+def test_bad_input_exits_2_with_one_line(tmp_path, args, words):
+    r = cli(*args, cwd=tmp_path)
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    assert words in r.stderr
+    assert not (tmp_path / "runs").exists()
+
+
+def test_bad_scenario_field_exits_2_naming_file_and_field(tmp_path):
+    p = tmp_path / "bad.yaml"
+    p.write_text("id: bad\nduration_s: 1\npath: {type: circle, radius_m: -1}\ncontroller: {Q: [1,1,1], R: [1]}\n")
+    r = cli("run", str(p), "--out", str(tmp_path / "o"))
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1
+    assert str(p) in lines[0] and "path.radius_m" in lines[0] and "greater than 0" in lines[0]
+    assert not (tmp_path / "o").exists()
+
+
+def test_existing_output_directory_is_not_overwritten(tmp_path):
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "keep.txt").write_text("mine")
+    r = cli("run", str(short_scenario(tmp_path)), "--out", str(out), "-q")
+    assert r.returncode == 2
+    assert (out / "keep.txt").read_text() == "mine"
+
+
+@pytest.mark.slow
+def test_reproduce_subset_writes_report(tmp_path):
+    out = tmp_path / "rep"
+    r = cli("reproduce", "--out", str(out), "--only", "paper-exp3", "--only", "paper-disturbance-v4", "-q")
+    assert r.returncode == 0, r.stderr
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert set(metrics) == {"paper-exp3", "paper-disturbance-v4"}
+    report = (out / "report.md").read_text()
+    assert "paper-exp3/trajectory.png" in report and "paper" in report
+    for sid in metrics:
+        assert (out / sid / "trajectory.csv").exists()
+
+
+def test_bench_json(tmp_path):
+    out = tmp_path / "b.json"
+    r = cli("bench", "--problem", "P1", "--steps", "40", "--json", str(out))
+    assert r.returncode == 0, r.stderr
+    data = json.loads(out.read_text())
+    rec = data["P1"]["mpcdrive"]
+    assert set(rec) >= {"p50_us", "p99_us", "max_us", "steps", "rms_lateral_error_m"}
+    assert rec["steps"] == 40 and rec["p50_us"] > 0
+
+
+def test_usage_errors_are_one_line(tmp_path):
+    r = cli("run", "paper-exp1", "--bogus", cwd=tmp_path)
+    assert r.returncode == 2
+    assert len(r.stderr.strip().splitlines()) == 1
