@@ -2,7 +2,7 @@
 
 import json
 import math
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +18,7 @@ STEER_BOUND = math.radians(60.0)
 pytestmark = pytest.mark.slow
 
 
-@lru_cache(maxsize=None)
+@cache
 def run(sid):
     exp = build_experiment(load_scenario(sid))
     result = run_experiment(exp)

@@ -160,6 +160,23 @@ def test_discrete_jacobians_batched(msu, dt, method, n):
 
 
 @SETTINGS
+@given(any_model_state_input, dt_s, st.sampled_from(["euler", "rk4"]))
+def test_discrete_step_and_jacobians_consistent(msu, dt, method):
+    """The one-pass (F, dF/dx, dF/du) helper, where present, agrees with the separate calls."""
+    from mpcdrive.models import discretize
+
+    fn = getattr(discretize, "discrete_step_and_jacobians", None)
+    if fn is None:  # pragma: no cover - older API
+        return
+    model, x, u = msu
+    F, Ad, Bd = fn(model, x, u, dt, method)
+    np.testing.assert_allclose(F, discrete_step(model, x, u, dt, method), rtol=1e-13, atol=1e-12)
+    Ad2, Bd2 = discrete_jacobians(model, x, u, dt, method)
+    np.testing.assert_allclose(Ad, Ad2, rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(Bd, Bd2, rtol=1e-13, atol=1e-13)
+
+
+@SETTINGS
 @given(model3_state_input(), dt_s)
 def test_euler_jacobians_are_the_papers_eqs_9_to_11(msu, Ts):
     """Literal transcription of the paper's eqs. 9-11 (3-state model, Euler)."""

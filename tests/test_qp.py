@@ -454,7 +454,7 @@ def test_backend_updates_match_fresh_solves():
     backend = OsqpBackend(qp, TIGHT)
     rng = np.random.default_rng(1)
     prev = None
-    for step in range(4):
+    for _step in range(4):
         dd = dict(d)
         dd["x0"] = d["x0"] + 0.05 * rng.normal(size=pb.nx)
         dd["Ad"] = d["Ad"] + 0.01 * rng.normal(size=d["Ad"].shape)

@@ -7,7 +7,14 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mpcdrive.scenarios import ScenarioError, ScenarioSpec, builtin_ids, build_experiment, dump_scenario, load_scenario
+from mpcdrive.scenarios import (
+    ScenarioError,
+    ScenarioSpec,
+    build_experiment,
+    builtin_ids,
+    dump_scenario,
+    load_scenario,
+)
 
 BASE = {
     "id": "t",

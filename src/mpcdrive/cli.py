@@ -8,7 +8,6 @@ import sys
 import time
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -109,7 +108,7 @@ def list_cmd() -> None:
 @app.command()
 def run(
     scenario: str = typer.Argument(..., help="built-in scenario id or a YAML scenario file"),
-    out: Optional[Path] = typer.Option(None, "--out", help="output directory (default runs/<id>-<timestamp>)"),
+    out: Path | None = typer.Option(None, "--out", help="output directory (default runs/<id>-<timestamp>)"),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
 ) -> None:
     """Run one scenario; write trajectory.csv, metrics.json, figures and the resolved scenario."""
@@ -125,8 +124,8 @@ def run(
 
 @app.command()
 def reproduce(
-    out: Optional[Path] = typer.Option(None, "--out", help="output directory (default runs/reproduce-<timestamp>)"),
-    only: Optional[list[str]] = typer.Option(None, "--only", help="run only these experiment ids"),
+    out: Path | None = typer.Option(None, "--out", help="output directory (default runs/reproduce-<timestamp>)"),
+    only: list[str] | None = typer.Option(None, "--only", help="run only these experiment ids"),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
 ) -> None:
     """Run every paper experiment; write DIR/<id>/, DIR/metrics.json and DIR/report.md."""
@@ -168,9 +167,9 @@ def reproduce(
 
 @app.command()
 def bench(
-    problem: Optional[list[str]] = typer.Option(None, "--problem", help="P1, P2 (repeatable; default all)"),
+    problem: list[str] | None = typer.Option(None, "--problem", help="P1, P2 (repeatable; default all)"),
     baselines: bool = typer.Option(False, "--baselines", help="also time the cvxpy rebuild and CasADi+IPOPT baselines"),
-    json_file: Optional[Path] = typer.Option(None, "--json", help="write the results as JSON"),
+    json_file: Path | None = typer.Option(None, "--json", help="write the results as JSON"),
     steps: int = typer.Option(1000, "--steps", min=20, help="closed-loop steps per problem"),
     baseline_steps: int = typer.Option(200, "--baseline-steps", min=20, help="closed-loop steps for the slow baselines"),
 ) -> None:

@@ -3,4 +3,4 @@
 from .problems import PROBLEMS, BenchProblem
 from .runner import format_table, run_bench
 
-__all__ = ["PROBLEMS", "BenchProblem", "run_bench", "format_table"]
+__all__ = ["PROBLEMS", "BenchProblem", "format_table", "run_bench"]

@@ -59,7 +59,7 @@ def run_bench(names, baselines: bool = False, steps: int = 1000, baseline_steps:
             for bname, factory in available_baselines().items():
                 log(f"{name}: {bname}, {baseline_steps} steps")
                 res[bname] = time_closed_loop(factory(prob), prob, baseline_steps)
-                # the same closed loop with our controller over the same steps, for a like-for-like error
+            # our controller over the baselines' step count, for a like-for-like tracking error
             res["mpcdrive_same_steps"] = time_closed_loop(
                 LtvMpc(prob.model, prob.path, prob.problem, prob.config), prob, baseline_steps)
         out[name] = res

@@ -17,17 +17,43 @@ from typing import Literal
 import numpy as np
 
 from ..models.base import VehicleModel
-from ..models.discretize import Method, discrete_step, discrete_step_and_jacobians, rollout
+from ..models.discretize import Method, discrete_step_and_jacobians, rollout
 from ..ocp.problem import MpcProblem
 from ..ocp.qp import LtvQp
 from ..paths.base import Path
 from ..paths.reference import HorizonMode, horizon_arc_lengths, horizon_states
 from ..solvers.osqp_backend import OsqpBackend, OsqpSettings
-from ..types import ControlOutput, WarmStart
+from ..types import ControlOutput, SolveResult, WarmStart
 from ..units import TWO_PI, wrap_angle
 
 FALLBACK_SHIFTED_PLAN = "shifted_plan"
 FALLBACK_HOLD = "hold_last"
+
+
+@dataclass(frozen=True)
+class StepData:
+    """What :meth:`LtvMpc.prepare` computes for one step (arrays in the model's units).
+
+    x : (nx,) measured state; s_m, e_y_m, e_psi_rad : its path coordinates; xref : (N+1, nx) and
+    uref : (N, nu) references; Xbar, Ubar : (N, nx), (N, nu) linearization points; Fbar : (N, nx)
+    the model's prediction from them; Ad, Bd, c : the affine model x+ = Ad x + Bd u + c;
+    lane_normal : (N, 2), lane_offset : (N,) the lane rows (used when the problem has a lane).
+    """
+
+    x: np.ndarray
+    s_m: float
+    e_y_m: float
+    e_psi_rad: float
+    xref: np.ndarray
+    uref: np.ndarray
+    Xbar: np.ndarray
+    Ubar: np.ndarray
+    Fbar: np.ndarray
+    Ad: np.ndarray
+    Bd: np.ndarray
+    c: np.ndarray
+    lane_normal: np.ndarray
+    lane_offset: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -128,8 +154,21 @@ class LtvMpc:
     def step(self, x, warm: WarmStart) -> ControlOutput:
         """Compute the command for measured state ``x`` (nx,) given the previous step's ``warm``."""
         t0 = time.perf_counter()
+        d = self.prepare(x, warm)
+        self.qp.update(d.x, d.Ad, d.Bd, d.c, d.xref, d.uref, warm.u_prev, d.lane_normal, d.lane_offset)
+        # primal warm start: the linearization trajectory, closed with its last prediction
+        Xws = self._Xws
+        Xws[: self.N] = d.Xbar
+        Xws[self.N] = d.Fbar[-1]
+        res = self.backend.solve(Xws, d.Ubar)
+        return self.finish(d, warm, res, t0)
+
+    def prepare(self, x, warm: WarmStart) -> StepData:
+        """Projection, horizon references and linearization for measured state ``x``: the part of
+        a step every solver of this problem shares. Arrays are views of work buffers, valid until
+        the next call."""
         x = self._check_state(x)
-        cfg, pb, model = self.config, self.problem, self.model
+        cfg, model = self.config, self.model
         N, dt = self.N, self.dt_s
         s0, e_y = self.path.project(x[:2], warm.s_m, cfg.projection_window_m)
         e_psi = wrap_angle(x[2] - float(self.path.heading(s0)))
@@ -166,31 +205,29 @@ class LtvMpc:
             self._lane_n[:, 0] = -np.sin(yaw)
             self._lane_n[:, 1] = np.cos(yaw)
             self._lane_b[:] = np.einsum("ki,ki->k", self._lane_n, refs[1:, :2])
-        self.qp.update(x, Ad, Bd, c, xref, uref, warm.u_prev, self._lane_n, self._lane_b)
+        return StepData(x, float(s0), float(e_y), float(e_psi), xref, uref, Xbar, Ubar, Fbar, Ad, Bd, c,
+                        self._lane_n, self._lane_b)
 
-        # primal warm start: the linearization trajectory, closed with its last prediction
-        Xws = self._Xws
-        Xws[:N] = Xbar
-        Xws[N] = Fbar[-1]
-        res = self.backend.solve(Xws, Ubar)
-
+    def finish(self, d: StepData, warm: WarmStart, res: SolveResult, t0: float) -> ControlOutput:
+        """Check the solve, pick the command (or fall back) and package the step's output."""
+        pb = self.problem
         if res.ok and np.all(np.isfinite(res.U[0])):
             u = np.clip(res.U[0], pb.u_min, pb.u_max)
             fallback = ""
-            new_warm = WarmStart(s_m=float(s0), u_prev=u, X=res.X, U=res.U)
+            new_warm = WarmStart(s_m=d.s_m, u_prev=u, X=res.X, U=res.U)
             X_pred = res.X
         else:
-            u, fallback, new_warm, X_pred = self._fallback(x, s0, warm)
+            u, fallback, new_warm, X_pred = self._fallback(d.x, d.s_m, warm)
         return ControlOutput(
             u=u,
             status=res.status,
             fallback=fallback,
             solve_time_s=time.perf_counter() - t0,
-            s_m=float(s0),
-            e_y_m=float(e_y),
-            e_psi_rad=float(e_psi),
+            s_m=d.s_m,
+            e_y_m=d.e_y_m,
+            e_psi_rad=d.e_psi_rad,
             X_pred=X_pred,
-            refs=xref.copy(),
+            refs=d.xref.copy(),
             warm=new_warm,
         )
 

@@ -5,12 +5,12 @@ from .discretize import discrete_jacobians, discrete_step, discrete_step_and_jac
 from .kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams
 
 __all__ = [
-    "VehicleModel",
     "KinematicBicycle3",
     "KinematicBicycle4",
     "KinematicParams",
-    "discrete_step",
+    "VehicleModel",
     "discrete_jacobians",
+    "discrete_step",
     "discrete_step_and_jacobians",
     "rollout",
 ]

@@ -3,4 +3,4 @@
 from .problem import MpcProblem
 from .qp import LtvQp, QpData
 
-__all__ = ["MpcProblem", "LtvQp", "QpData"]
+__all__ = ["LtvQp", "MpcProblem", "QpData"]

@@ -55,7 +55,7 @@ class LtvQp:
 
     # -- cost ---------------------------------------------------------------------------
     def _build_cost(self):
-        pb, N, nx, nu = self.problem, self.N, self.nx, self.nu
+        pb, N, nx = self.problem, self.N, self.nx
         blocks = [sp.csc_matrix((nx, nx))]  # x_0 is fixed by a constraint
         blocks += [sp.csc_matrix(2.0 * pb.Q)] * (N - 1) + [sp.csc_matrix(2.0 * pb.QN)]
         # inputs: R on each u_k, Rc on differences (u_0 - u_prev is handled in q)
@@ -87,7 +87,8 @@ class LtvQp:
         # initial state x_0 = x_meas
         self.r_init = r
         add(r + np.arange(nx), self.ix(0) + np.arange(nx), 1.0)
-        lo.append(np.zeros(nx)); hi.append(np.zeros(nx))
+        lo.append(np.zeros(nx))
+        hi.append(np.zeros(nx))
         r += nx
         # dynamics x_{k+1} - A_k x_k - B_k u_k = c_k ; A_k, B_k blocks are updatable slots
         self.r_dyn = r
@@ -105,7 +106,8 @@ class LtvQp:
             slot_B.append(nnz + np.arange(nx * nu))
             add(rk + iu_, self.iu(k) + ju_, -1.0)
             nnz += nx * nu
-        lo.append(np.zeros(N * nx)); hi.append(np.zeros(N * nx))
+        lo.append(np.zeros(N * nx))
+        hi.append(np.zeros(N * nx))
         r += N * nx
         self._slot_A = np.concatenate(slot_A)
         self._slot_B = np.concatenate(slot_B)
@@ -113,7 +115,8 @@ class LtvQp:
         self.r_ubound = r
         add(r + np.arange(N * nu), self.n_x + np.arange(N * nu), 1.0)
         nnz += N * nu
-        lo.append(np.tile(pb.u_min, N)); hi.append(np.tile(pb.u_max, N))
+        lo.append(np.tile(pb.u_min, N))
+        hi.append(np.tile(pb.u_max, N))
         r += N * nu
         # input rate: u_0 - u_prev and u_k - u_{k-1}
         self.r_rate = None
@@ -124,7 +127,8 @@ class LtvQp:
             add(r + nu + np.arange((N - 1) * nu), self.n_x + np.arange((N - 1) * nu), -1.0)
             nnz += (N - 1) * nu
             dmax = np.tile(pb.du_max_per_s * pb.dt_s, N)
-            lo.append(-dmax); hi.append(dmax.copy())
+            lo.append(-dmax)
+            hi.append(dmax.copy())
             r += N * nu
         # state bounds on bounded components, k = 1..N
         bs = pb.bounded_states
@@ -133,7 +137,8 @@ class LtvQp:
             for k in range(1, N + 1):
                 add(r + np.arange(bs.size), self.ix(k) + bs, 1.0)
                 nnz += bs.size
-                lo.append(pb.x_min[bs]); hi.append(pb.x_max[bs])
+                lo.append(pb.x_min[bs])
+                hi.append(pb.x_max[bs])
                 r += bs.size
         # lane: n_k . p_k - eps_k <= b_k + w ; n_k . p_k + eps_k >= b_k - w ; eps_k >= 0
         self.r_lane = None
@@ -150,11 +155,13 @@ class LtvQp:
                 add([rb], [self.ie(k)], 1.0)
                 nnz += 6
             self._slot_n = np.concatenate(slot_n)  # (N*4,) order: k, row(a,b), (nx, ny)
-            lo.append(np.zeros(2 * N)); hi.append(np.zeros(2 * N))
+            lo.append(np.zeros(2 * N))
+            hi.append(np.zeros(2 * N))
             r += 2 * N
             add(r + np.arange(N), self.ie(1) + np.arange(N), 1.0)
             nnz += N
-            lo.append(np.zeros(N)); hi.append(np.full(N, np.inf))
+            lo.append(np.zeros(N))
+            hi.append(np.full(N, np.inf))
             r += N
         self.n_con = r
         rows = np.concatenate(rows)

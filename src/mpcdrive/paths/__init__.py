@@ -7,10 +7,10 @@ from .straight import StraightPath
 from .waypoints import WaypointPath
 
 __all__ = [
+    "CirclePath",
     "Path",
     "Projection",
     "StraightPath",
-    "CirclePath",
     "WaypointPath",
     "horizon_arc_lengths",
     "horizon_states",

@@ -26,8 +26,8 @@ class WaypointPath(Path):
             raise ValueError(f"waypoints must have shape (M, 2), got {pts.shape}")
         if not np.all(np.isfinite(pts)):
             raise ValueError("waypoints contain non-finite values")
-        keep = np.r_[True, np.hypot(*np.diff(pts, axis=0).T) > 1e-9]
-        pts = pts[keep]
+        if len(pts):
+            pts = pts[np.r_[True, np.hypot(*np.diff(pts, axis=0).T) > 1e-9]]
         if closed and len(pts) > 2 and np.hypot(*(pts[0] - pts[-1])) < 1e-9:
             pts = pts[:-1]
         min_pts = 3 if closed else 2

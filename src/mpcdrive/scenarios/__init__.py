@@ -5,12 +5,12 @@ from .loader import ScenarioError, builtin_ids, dump_scenario, load_scenario
 from .schema import ScenarioSpec
 
 __all__ = [
-    "ScenarioSpec",
-    "ScenarioError",
-    "load_scenario",
-    "dump_scenario",
-    "builtin_ids",
     "Experiment",
+    "ScenarioError",
+    "ScenarioSpec",
     "build_experiment",
+    "builtin_ids",
+    "dump_scenario",
+    "load_scenario",
     "run_experiment",
 ]

@@ -7,7 +7,7 @@ rejected, every number must be finite.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal, Union
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
@@ -54,7 +54,7 @@ class WaypointsSpec(_Strict):
     smoothing: NonNeg = 0.0
 
 
-PathSpec = Annotated[Union[StraightSpec, CircleSpec, WaypointsSpec], Field(discriminator="type")]
+PathSpec = Annotated[StraightSpec | CircleSpec | WaypointsSpec, Field(discriminator="type")]
 
 
 class VehicleSpec(_Strict):

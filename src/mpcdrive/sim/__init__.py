@@ -3,4 +3,4 @@
 from .closed_loop import Disturbance, Plant, simulate
 from .metrics import Footprint, compute_metrics
 
-__all__ = ["Plant", "Disturbance", "simulate", "Footprint", "compute_metrics"]
+__all__ = ["Disturbance", "Footprint", "Plant", "compute_metrics", "simulate"]

@@ -1,0 +1,167 @@
+"""What people use today, on the same closed loop as mpcdrive (``mpcdrive bench --baselines``).
+
+* ``cvxpy_rebuild``: the PythonRobotics style -- the QP is written in cvxpy and rebuilt from
+  scratch every step (same references, linearization and constraints as mpcdrive's QP).
+* ``casadi_ipopt``: CasADi Opti + IPOPT on the nonlinear model (RK4 of the same equations),
+  the problem built once with parameters and warm-started each step.
+
+Both reuse :meth:`LtvMpc.prepare` so references and linearization are identical to ours and only
+the problem building and solving differ. Optional: needs the ``bench`` extra.
+"""
+
+from __future__ import annotations
+
+import time
+from types import SimpleNamespace
+
+import numpy as np
+
+from ..control.mpc import LtvMpc
+from ..types import STATUS_FAILED, STATUS_OK, SolveResult
+from .problems import BenchProblem
+
+
+class CvxpyRebuildMpc:
+    """LTV-MPC whose QP is rebuilt in cvxpy every step."""
+
+    def __init__(self, prob: BenchProblem):
+        import cvxpy as cp
+
+        self.cp = cp
+        self.core = LtvMpc(prob.model, prob.path, prob.problem, prob.config)
+        self.nx, self.nu, self.N = self.core.nx, self.core.nu, self.core.N
+
+    def initial_warm(self, x0):
+        return self.core.initial_warm(x0)
+
+    def step(self, x, warm):
+        cp = self.cp
+        t0 = time.perf_counter()
+        d = self.core.prepare(x, warm)
+        pb = self.core.problem
+        N, nx, nu = self.N, self.nx, self.nu
+        X = cp.Variable((N + 1, nx))
+        U = cp.Variable((N, nu))
+        cost = 0
+        cons = [X[0] == d.x]
+        for k in range(N):
+            cons.append(X[k + 1] == d.Ad[k] @ X[k] + d.Bd[k] @ U[k] + d.c[k])
+            cost += cp.quad_form(U[k] - d.uref[k], pb.R)
+            prev = warm.u_prev if k == 0 else U[k - 1]
+            if np.any(pb.Rc):
+                cost += cp.quad_form(U[k] - prev, pb.Rc)
+            W = pb.QN if k == N - 1 else pb.Q
+            cost += cp.quad_form(X[k + 1] - d.xref[k + 1], W)
+            for i in range(nu):
+                if np.isfinite(pb.u_min[i]):
+                    cons.append(U[k, i] >= pb.u_min[i])
+                if np.isfinite(pb.u_max[i]):
+                    cons.append(U[k, i] <= pb.u_max[i])
+            for i in pb.bounded_states:
+                if np.isfinite(pb.x_min[i]):
+                    cons.append(X[k + 1, i] >= pb.x_min[i])
+                if np.isfinite(pb.x_max[i]):
+                    cons.append(X[k + 1, i] <= pb.x_max[i])
+        prob = cp.Problem(cp.Minimize(cost), cons)
+        try:
+            prob.solve(solver=cp.CLARABEL)
+            ok = prob.status in ("optimal", "optimal_inaccurate") and U.value is not None
+        except cp.error.SolverError:
+            ok = False
+        res = SolveResult(STATUS_OK if ok else STATUS_FAILED,
+                          X.value if ok else np.full((N + 1, nx), np.nan),
+                          U.value if ok else np.full((N, nu), np.nan),
+                          float(prob.value) if ok else float("nan"), 0, time.perf_counter() - t0)
+        return self.core.finish(d, warm, res, t0)
+
+
+class CasadiIpoptMpc:
+    """Nonlinear MPC with CasADi Opti + IPOPT, built once, parameters updated each step."""
+
+    def __init__(self, prob: BenchProblem):
+        import casadi as ca
+
+        self.core = LtvMpc(prob.model, prob.path, prob.problem, prob.config)
+        core, pb = self.core, prob.problem
+        self.nx, self.nu, self.N = core.nx, core.nu, core.N
+        N, nx, nu, dt = self.N, self.nx, self.nu, pb.dt_s
+        ns = SimpleNamespace(cos=ca.cos, sin=ca.sin, tan=ca.tan, arctan=ca.atan)
+        xs, us = ca.SX.sym("x", nx), ca.SX.sym("u", nu)
+        f = ca.Function("f", [xs, us], [ca.vertcat(*prob.model.f_components([xs[i] for i in range(nx)],
+                                                                          [us[i] for i in range(nu)], ns))])
+        k1 = f(xs, us)
+        k2 = f(xs + dt / 2 * k1, us)
+        k3 = f(xs + dt / 2 * k2, us)
+        k4 = f(xs + dt * k3, us)
+        F = ca.Function("F", [xs, us], [xs + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)])
+        opti = ca.Opti()
+        X = opti.variable(nx, N + 1)
+        U = opti.variable(nu, N)
+        x0 = opti.parameter(nx)
+        xref = opti.parameter(nx, N + 1)
+        uref = opti.parameter(nu, N)
+        uprev = opti.parameter(nu)
+        cost = 0
+        opti.subject_to(X[:, 0] == x0)
+        for k in range(N):
+            opti.subject_to(X[:, k + 1] == F(X[:, k], U[:, k]))
+            du = U[:, k] - (uprev if k == 0 else U[:, k - 1])
+            eu = U[:, k] - uref[:, k]
+            ex = X[:, k + 1] - xref[:, k + 1]
+            W = pb.QN if k == N - 1 else pb.Q
+            cost += ca.mtimes([eu.T, pb.R, eu]) + ca.mtimes([du.T, pb.Rc, du]) + ca.mtimes([ex.T, W, ex])
+            for i in range(nu):
+                if np.isfinite(pb.u_min[i]):
+                    opti.subject_to(U[i, k] >= pb.u_min[i])
+                if np.isfinite(pb.u_max[i]):
+                    opti.subject_to(U[i, k] <= pb.u_max[i])
+            for i in pb.bounded_states:
+                if np.isfinite(pb.x_min[i]):
+                    opti.subject_to(X[i, k + 1] >= pb.x_min[i])
+                if np.isfinite(pb.x_max[i]):
+                    opti.subject_to(X[i, k + 1] <= pb.x_max[i])
+        opti.minimize(cost)
+        opti.solver("ipopt", {"print_time": False}, {"print_level": 0, "sb": "yes", "max_iter": 200})
+        self.opti, self.X, self.U, self.x0, self.xref, self.uref, self.uprev = opti, X, U, x0, xref, uref, uprev
+
+    def initial_warm(self, x0):
+        return self.core.initial_warm(x0)
+
+    def step(self, x, warm):
+        t0 = time.perf_counter()
+        d = self.core.prepare(x, warm)
+        opti = self.opti
+        opti.set_value(self.x0, d.x)
+        opti.set_value(self.xref, d.xref.T)
+        opti.set_value(self.uref, d.uref.T)
+        opti.set_value(self.uprev, warm.u_prev)
+        opti.set_initial(self.X, np.vstack([d.Xbar, d.Fbar[-1:]]).T)
+        opti.set_initial(self.U, d.Ubar.T)
+        try:
+            sol = opti.solve()
+            Xv = np.asarray(sol.value(self.X)).reshape(self.nx, -1).T
+            Uv = np.asarray(sol.value(self.U)).reshape(self.nu, -1).T
+            res = SolveResult(STATUS_OK, Xv, Uv, float(sol.value(opti.f)), 0, time.perf_counter() - t0)
+        except RuntimeError:
+            nan = float("nan")
+            res = SolveResult(STATUS_FAILED, np.full((self.N + 1, self.nx), nan), np.full((self.N, self.nu), nan),
+                              nan, 0, time.perf_counter() - t0)
+        return self.core.finish(d, warm, res, t0)
+
+
+def available_baselines() -> dict:
+    """Baseline factories whose packages are installed."""
+    out = {}
+    try:
+        import cvxpy  # noqa: F401
+
+        out["cvxpy_rebuild"] = CvxpyRebuildMpc
+    except ImportError:
+        pass
+    try:
+        import casadi  # noqa: F401
+
+        out["casadi_ipopt"] = CasadiIpoptMpc
+    except ImportError:
+        pass
+    return out
