@@ -228,14 +228,17 @@ def test_waypoint_path_passes_through_waypoints():
 # --------------------------------------------------------------------------------------
 # closed paths: laps
 # --------------------------------------------------------------------------------------
+WAVY_CW = WaypointPath(WAVY.waypoints[::-1], closed=True)  # the same loop driven clockwise
 CLOSED = [
     CirclePath(center=(1.0, -2.0), radius_m=1.5),
     CirclePath(center=(0.0, 0.0), radius_m=3.0, ccw=False, start_angle_rad=1.0),
     WAVY,
+    WAVY_CW,
 ]
+CLOSED_IDS = ["circle_ccw", "circle_cw", "wavy", "wavy_cw"]
 
 
-@pytest.mark.parametrize("path", CLOSED, ids=["circle_ccw", "circle_cw", "wavy"])
+@pytest.mark.parametrize("path", CLOSED, ids=CLOSED_IDS)
 @settings(max_examples=40, deadline=None)
 @given(st.floats(0.0, 1.0, **finite), st.integers(-3, 5), st.floats(-0.2, 0.2, **finite), st.floats(-0.3, 0.3, **finite))
 def test_closed_path_s_counts_laps(path, frac, k, ey, dguess):
@@ -253,7 +256,7 @@ def test_closed_path_s_counts_laps(path, frac, k, ey, dguess):
     assert float(path.heading(s + k * L)) == pytest.approx(float(path.heading(s)) + k * turn, abs=1e-6)
 
 
-@pytest.mark.parametrize("path", CLOSED, ids=["circle_ccw", "circle_cw", "wavy"])
+@pytest.mark.parametrize("path", CLOSED, ids=CLOSED_IDS)
 @pytest.mark.parametrize("k", [-2, -1, 0, 1, 2, 7])
 def test_closed_path_heading_continuous_across_lap_boundary(path, k):
     L = path.length_m
@@ -269,7 +272,7 @@ def test_closed_path_heading_continuous_across_lap_boundary(path, k):
     assert np.abs(np.diff(h)).max() < 0.05
 
 
-@pytest.mark.parametrize("path", CLOSED, ids=["circle_ccw", "circle_cw", "wavy"])
+@pytest.mark.parametrize("path", CLOSED, ids=CLOSED_IDS)
 def test_closed_path_frenet_has_no_two_pi_error(path):
     L = path.length_m
     for k in (0, 1, 3):

@@ -516,6 +516,24 @@ def test_mpc_problem_validation(change):
         MpcProblem(**{**BASE, **change})
 
 
+@pytest.mark.parametrize(
+    "R",
+    [
+        np.diag([1.0, 0.0]),
+        np.array([[1.0, 0.5], [0.5, 0.25]]),  # singular, all entries positive
+        np.array([[1.0, -1.0], [-1.0, 1.0]]),  # singular, negative off-diagonal
+    ],
+    ids=["diag", "full_positive", "full_negative"],
+)
+def test_mpc_problem_rejects_singular_input_weight_when_unbounded(R):
+    """'R + Rc must be positive definite when inputs are unbounded' whatever R's entries are."""
+    with pytest.raises(ValueError):
+        MpcProblem(nx=2, nu=2, N=5, dt_s=0.1, Q=np.eye(2), R=R)
+    # bounded inputs or a positive definite Rc make the same R acceptable
+    MpcProblem(nx=2, nu=2, N=5, dt_s=0.1, Q=np.eye(2), R=R, u_min=-1.0, u_max=1.0)
+    MpcProblem(nx=2, nu=2, N=5, dt_s=0.1, Q=np.eye(2), R=R, Rc=0.1)
+
+
 def test_mpc_problem_normalizes_inputs():
     pb = MpcProblem(nx=3, nu=2, N=4, dt_s=0.1, Q=2.0, R=[1.0, 3.0], u_min=-1.0, u_max=[1.0, 2.0],
                     x_max=[np.inf, 1.0, np.inf])

@@ -77,9 +77,15 @@ class OsqpBackend:
         """
         t0 = time.perf_counter()
         qp = self.qp
+        # non-finite problem data (NaN anywhere, inf outside the bounds) is a failed step, not a
+        # 4000-iteration OSQP run on garbage
+        finite = (np.isfinite(qp.q).all() and np.isfinite(qp.A.data).all()
+                  and not np.isnan(qp.l).any() and not np.isnan(qp.u).any())
         try:
+            if not finite:
+                raise ValueError("non-finite QP data")
             self._solver.update(q=qp.q, l=qp.l, u=qp.u, Ax=qp.A.data)
-        except Exception:  # OSQP rejects the data (e.g. non-finite numbers): a failed step
+        except Exception:  # OSQP rejects the data: a failed step
             nan = float("nan")
             return SolveResult(STATUS_FAILED, np.full((qp.N + 1, qp.nx), nan), np.full((qp.N, qp.nu), nan),
                                nan, 0, time.perf_counter() - t0)
