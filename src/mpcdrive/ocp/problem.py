@@ -48,7 +48,12 @@ class MpcProblem:
     Constraints: the (linearized) dynamics; ``u_min <= u_k <= u_max``;
     ``|u_k - u_{k-1}| <= du_max_per_s * dt_s``; ``x_min <= x_k <= x_max`` for k >= 1;
     and, when ``lane_half_width_m`` is set, the soft lane bound ``|e_y,k| <= lane_half_width_m + eps_k``
-    (eq. 53) with ``eps_k >= 0``.
+    (eq. 53) with ``eps_k >= 0`` -- per step the bounds may be narrowed (a corridor).
+
+    Obstacles: ``obstacle_rows`` half-plane rows per step ``a . (x_k, y_k, yaw_k) + sigma_k >= b``
+    with one slack ``sigma_k >= 0`` per step, penalized by ``obstacle_slack_weight`` (quadratic)
+    and ``obstacle_slack_weight_l1`` (linear); ``position_cost=True`` reserves per-step 2x2
+    (x, y) Hessian entries for non-convex obstacle costs approximated each step (SQP).
 
     Weights may be given as scalars, diagonals or full matrices; bounds as scalars or vectors
     (None or +-inf = unbounded). Units follow the model's states and inputs (SI, radians).
@@ -70,6 +75,10 @@ class MpcProblem:
     lane_half_width_m: float | None = None
     lane_slack_weight: float = 1e4
     lane_slack_weight_l1: float = 1e3
+    obstacle_rows: int = 0
+    obstacle_slack_weight: float = 1e6
+    obstacle_slack_weight_l1: float = 1e5
+    position_cost: bool = False
 
     def __post_init__(self):
         if int(self.N) != self.N or self.N < 1:
@@ -96,6 +105,12 @@ class MpcProblem:
             raise ValueError(f"lane_half_width_m must be positive, got {self.lane_half_width_m}")
         if self.lane_slack_weight < 0 or self.lane_slack_weight_l1 < 0:
             raise ValueError("lane slack weights must be >= 0")
+        if int(self.obstacle_rows) != self.obstacle_rows or self.obstacle_rows < 0:
+            raise ValueError(f"obstacle_rows must be a non-negative integer, got {self.obstacle_rows}")
+        if self.obstacle_slack_weight < 0 or self.obstacle_slack_weight_l1 < 0:
+            raise ValueError("obstacle slack weights must be >= 0")
+        if (self.obstacle_rows or self.position_cost) and nx < 3:
+            raise ValueError("obstacle terms need states x, y, yaw")
         if self.R.min() == 0 and np.linalg.eigvalsh(self.R + self.Rc).min() <= 0 and np.all(np.isinf(u_max)):
             raise ValueError("R + Rc must be positive definite when inputs are unbounded")
 

@@ -13,7 +13,7 @@ from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicPa
 from ..ocp.problem import MpcProblem
 from ..paths import CirclePath, Path, StraightPath, WaypointPath
 from ..sim.closed_loop import Disturbance, Plant, simulate
-from ..sim.metrics import Footprint
+from ..scene.footprint import Footprint
 from ..solvers.osqp_backend import OsqpSettings
 from ..types import SimResult
 from .schema import NoiseSpec, ScenarioSpec

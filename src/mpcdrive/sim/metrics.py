@@ -2,26 +2,10 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
+from ..scene.footprint import Footprint
 from ..types import STATUS_INACCURATE, STATUS_OK, SimResult
-
-
-@dataclass(frozen=True)
-class Footprint:
-    """Vehicle body as a rectangle ``length_m`` x ``width_m`` centred ``center_offset_m`` ahead of
-    the reference point (the state's x, y), aligned with the yaw."""
-
-    length_m: float = 0.50
-    width_m: float = 0.27
-    center_offset_m: float = 0.0
-
-    def corners(self) -> np.ndarray:
-        """(4, 2) corners in the body frame [m]."""
-        hl, hw, c = 0.5 * self.length_m, 0.5 * self.width_m, self.center_offset_m
-        return np.array([[c + hl, hw], [c + hl, -hw], [c - hl, -hw], [c - hl, hw]])
 
 
 def _lane_excess(result: SimResult, footprint: Footprint) -> float:

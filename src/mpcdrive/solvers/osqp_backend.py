@@ -84,7 +84,12 @@ class OsqpBackend:
         try:
             if not finite:
                 raise ValueError("non-finite QP data")
-            self._solver.update(q=qp.q, l=qp.l, u=qp.u, Ax=qp.A.data)
+            if qp.finalize_cost():
+                if not np.isfinite(qp.P.data).all():
+                    raise ValueError("non-finite QP cost")
+                self._solver.update(q=qp.q, l=qp.l, u=qp.u, Px=qp.P.data, Ax=qp.A.data)
+            else:
+                self._solver.update(q=qp.q, l=qp.l, u=qp.u, Ax=qp.A.data)
         except Exception:  # OSQP rejects the data: a failed step
             nan = float("nan")
             return SolveResult(STATUS_FAILED, np.full((qp.N + 1, qp.nx), nan), np.full((qp.N, qp.nu), nan),

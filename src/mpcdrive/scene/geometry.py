@@ -1,0 +1,63 @@
+"""Signed distances between world shapes (negative = penetration)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .obstacles import WorldCircle, WorldPolygon
+
+
+def point_polygon(p: np.ndarray, poly: np.ndarray) -> tuple[float, np.ndarray]:
+    """Signed distance [m] from point ``p`` (2,) to convex polygon ``poly`` (M, 2) ccw, and the
+    nearest boundary point."""
+    a = poly
+    b = np.roll(poly, -1, axis=0)
+    d = b - a
+    t = np.clip(np.einsum("ij,ij->i", p - a, d) / np.einsum("ij,ij->i", d, d), 0.0, 1.0)
+    q = a + t[:, None] * d
+    dist = np.hypot(*(p - q).T)
+    j = int(np.argmin(dist))
+    inside = np.all(d[:, 0] * (p[1] - a[:, 1]) - d[:, 1] * (p[0] - a[:, 0]) >= 0.0)
+    return (-float(dist[j]) if inside else float(dist[j])), q[j]
+
+
+def point_shape(p: np.ndarray, shape) -> tuple[float, np.ndarray]:
+    """Signed distance [m] from point p to a world shape, and the nearest boundary point."""
+    if isinstance(shape, WorldCircle):
+        v = p - shape.center
+        n = float(np.hypot(*v))
+        u = v / n if n > 1e-12 else np.array([1.0, 0.0])
+        return n - shape.radius_m, shape.center + shape.radius_m * u
+    return point_polygon(p, shape.points)
+
+
+def _sat_overlap(a: np.ndarray, b: np.ndarray) -> float:
+    """Smallest overlap along the edge normals of two convex polygons (> 0: they intersect)."""
+    best = np.inf
+    for poly in (a, b):
+        d = np.roll(poly, -1, axis=0) - poly
+        normals = np.column_stack([d[:, 1], -d[:, 0]])
+        normals /= np.hypot(normals[:, 0], normals[:, 1])[:, None]
+        pa = a @ normals.T
+        pb = b @ normals.T
+        overlap = np.minimum(pa.max(0), pb.max(0)) - np.maximum(pa.min(0), pb.min(0))
+        best = min(best, float(overlap.min()))
+    return best
+
+
+def _polygon_polygon(a: np.ndarray, b: np.ndarray) -> float:
+    ov = _sat_overlap(a, b)
+    if ov > 0:
+        return -ov
+    d1 = min(point_polygon(p, b)[0] for p in a)
+    d2 = min(point_polygon(p, a)[0] for p in b)
+    return float(min(d1, d2))
+
+
+def shape_distance(a: WorldPolygon, b) -> float:
+    """Signed distance [m] between a convex world polygon (e.g. the vehicle body) and a world
+    shape: the gap when apart, minus the penetration depth when they overlap."""
+    if isinstance(b, WorldCircle):
+        d, _ = point_polygon(b.center, a.points)
+        return d - b.radius_m
+    return _polygon_polygon(a.points, b.points)

@@ -1,0 +1,154 @@
+"""Obstacles: a shape in its own frame plus a motion giving its pose over time.
+
+Poses are ``(x m, y m, yaw rad)``; shapes are defined around the obstacle's reference point.
+Predictions over a horizon are the poses at ``t + k dt`` (constant velocity, or a given
+trajectory interpolated in time; static obstacles never move).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Circle:
+    """Disc of ``radius_m`` [m] around the reference point."""
+
+    radius_m: float
+
+    def __post_init__(self):
+        if not (math.isfinite(self.radius_m) and self.radius_m > 0):
+            raise ValueError(f"circle radius_m must be a positive finite number, got {self.radius_m}")
+
+    @property
+    def bounding_radius_m(self) -> float:
+        return self.radius_m
+
+
+@dataclass(frozen=True, eq=False)
+class Polygon:
+    """Convex polygon, vertices ``points`` (M, 2) [m] in the obstacle frame (any orientation;
+    stored counter-clockwise)."""
+
+    points: np.ndarray
+
+    def __post_init__(self):
+        p = np.asarray(self.points, float)
+        if p.ndim != 2 or p.shape[1] != 2 or len(p) < 3:
+            raise ValueError(f"a polygon needs at least 3 points of 2 coordinates, got shape {p.shape}")
+        if not np.all(np.isfinite(p)):
+            raise ValueError("polygon points must be finite")
+        area2 = float(np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1]))
+        if abs(area2) < 1e-12:
+            raise ValueError("polygon has zero area")
+        if area2 < 0:
+            p = p[::-1].copy()
+        e = np.roll(p, -1, axis=0) - p
+        cross = e[:, 0] * np.roll(e, -1, axis=0)[:, 1] - e[:, 1] * np.roll(e, -1, axis=0)[:, 0]
+        if np.any(cross < -1e-12):
+            raise ValueError("polygon must be convex (split non-convex obstacles into convex parts)")
+        object.__setattr__(self, "points", p)
+
+    @property
+    def bounding_radius_m(self) -> float:
+        return float(np.max(np.hypot(self.points[:, 0], self.points[:, 1])))
+
+
+def rectangle(length_m: float, width_m: float) -> Polygon:
+    """Rectangle centred on the reference point, length along the obstacle's x axis."""
+    if not (length_m > 0 and width_m > 0):
+        raise ValueError(f"rectangle length_m and width_m must be positive, got {length_m}, {width_m}")
+    hl, hw = 0.5 * length_m, 0.5 * width_m
+    return Polygon(np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]]))
+
+
+@dataclass(frozen=True)
+class Static:
+    """Never moves."""
+
+    def offset(self, t_s: float) -> tuple[float, float, float]:
+        return 0.0, 0.0, 0.0
+
+
+@dataclass(frozen=True)
+class ConstantVelocity:
+    """Moves at constant world-frame velocity ``(vx, vy)`` [m/s]."""
+
+    vx_mps: float
+    vy_mps: float
+
+    def offset(self, t_s: float) -> tuple[float, float, float]:
+        return self.vx_mps * t_s, self.vy_mps * t_s, 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class TrajectoryMotion:
+    """Follows a recorded trajectory: poses ``(x, y, yaw)`` at times ``t_s`` [s], relative to the
+    initial pose (linear interpolation; held before the first and after the last sample)."""
+
+    t_s: np.ndarray
+    dx_m: np.ndarray
+    dy_m: np.ndarray
+    dyaw_rad: np.ndarray
+
+    def __post_init__(self):
+        t = np.asarray(self.t_s, float)
+        if t.ndim != 1 or len(t) < 1 or np.any(np.diff(t) <= 0) or not np.all(np.isfinite(t)):
+            raise ValueError("trajectory times t_s must be finite and strictly increasing")
+        for name in ("dx_m", "dy_m", "dyaw_rad"):
+            a = np.asarray(getattr(self, name), float)
+            if a.shape != t.shape or not np.all(np.isfinite(a)):
+                raise ValueError(f"trajectory {name} must be finite with one value per time")
+            object.__setattr__(self, name, a)
+        object.__setattr__(self, "t_s", t)
+
+    def offset(self, t_s: float) -> tuple[float, float, float]:
+        return (float(np.interp(t_s, self.t_s, self.dx_m)), float(np.interp(t_s, self.t_s, self.dy_m)),
+                float(np.interp(t_s, self.t_s, self.dyaw_rad)))
+
+
+@dataclass(frozen=True)
+class WorldCircle:
+    center: np.ndarray
+    radius_m: float
+
+
+@dataclass(frozen=True)
+class WorldPolygon:
+    points: np.ndarray  # (M, 2) counter-clockwise
+
+
+@dataclass(frozen=True, eq=False)
+class Obstacle:
+    """An obstacle: ``shape`` placed at ``pose`` (x m, y m, yaw rad) at t = 0, moved by ``motion``."""
+
+    shape: Circle | Polygon
+    pose: tuple[float, float, float]
+    motion: Static | ConstantVelocity | TrajectoryMotion = field(default_factory=Static)
+    name: str = ""
+
+    def __post_init__(self):
+        pose = tuple(float(v) for v in self.pose)
+        if len(pose) != 3 or not all(math.isfinite(v) for v in pose):
+            raise ValueError(f"obstacle pose must be 3 finite numbers (x m, y m, yaw rad), got {self.pose}")
+        object.__setattr__(self, "pose", pose)
+
+    @property
+    def moving(self) -> bool:
+        return not isinstance(self.motion, Static)
+
+    def pose_at(self, t_s: float) -> tuple[float, float, float]:
+        dx, dy, dyaw = self.motion.offset(t_s)
+        return self.pose[0] + dx, self.pose[1] + dy, self.pose[2] + dyaw
+
+    def at(self, t_s: float) -> WorldCircle | WorldPolygon:
+        """The obstacle's shape in the world at time ``t_s`` [s]."""
+        x, y, yaw = self.pose_at(t_s)
+        if isinstance(self.shape, Circle):
+            return WorldCircle(np.array([x, y]), self.shape.radius_m)
+        c, s = math.cos(yaw), math.sin(yaw)
+        p = self.shape.points
+        return WorldPolygon(np.column_stack([x + c * p[:, 0] - s * p[:, 1], y + s * p[:, 0] + c * p[:, 1]]))
