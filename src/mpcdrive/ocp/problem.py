@@ -111,7 +111,8 @@ class MpcProblem:
             raise ValueError("obstacle slack weights must be >= 0")
         if (self.obstacle_rows or self.position_cost) and nx < 3:
             raise ValueError("obstacle terms need states x, y, yaw")
-        if self.R.min() == 0 and np.linalg.eigvalsh(self.R + self.Rc).min() <= 0 and np.all(np.isinf(u_max)):
+        unbounded = np.any(np.isinf(u_min) | np.isinf(u_max))
+        if unbounded and np.linalg.eigvalsh(self.R + self.Rc).min() <= 1e-12:
             raise ValueError("R + Rc must be positive definite when inputs are unbounded")
 
     @property
