@@ -44,13 +44,17 @@ class WarmStart:
     """What a controller needs from its previous step; returned by ``step`` and passed back.
 
     s_m : arc length of the last projection [m]; u_prev : (nu,) last applied input;
-    X, U : (N+1, nx), (N, nu) last plan (None before the first solve).
+    X, U : (N+1, nx), (N, nu) last plan (None before the first solve);
+    t_s : time of the next step [s] (moving obstacles are predicted from it);
+    sides : passing side chosen per obstacle index, ((index, +1 left / -1 right / 0 blocked), ...).
     """
 
     s_m: float
     u_prev: np.ndarray
     X: np.ndarray | None = None
     U: np.ndarray | None = None
+    t_s: float = 0.0
+    sides: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -61,7 +65,7 @@ class ControlOutput:
     fallback : name of the fallback used ("" when the solve succeeded);
     solve_time_s : wall time of the whole step [s]; s_m, e_y_m, e_psi_rad : path errors at the
     measured state; X_pred : (N+1, nx) predicted states; refs : (N+1, nx) horizon references;
-    warm : state to pass to the next call.
+    warm : state to pass to the next call; sqp_iterations : QPs solved this step.
     """
 
     u: np.ndarray
@@ -74,6 +78,7 @@ class ControlOutput:
     X_pred: np.ndarray
     refs: np.ndarray
     warm: WarmStart
+    sqp_iterations: int = 1
 
 
 @dataclass(frozen=True)
@@ -89,7 +94,8 @@ class SimResult:
     status : (K,) solver status words; fallback : (K,) fallback names ("" if none);
     solve_time_s : (K,) controller step wall time [s];
     path_xy : (M, 2) reference path polyline for plots [m];
-    lane_half_width_m : half lane width or None; state_names/input_names: labels.
+    lane_half_width_m : half lane width or None; state_names/input_names: labels;
+    clearance_m : (K,) smallest footprint-to-obstacle distance per step [m] (None without obstacles).
     """
 
     t_s: np.ndarray
@@ -115,6 +121,7 @@ class SimResult:
     lane_half_width_m: float | None = None
     goal_reached: bool | None = None
     meta: dict = field(default_factory=dict)
+    clearance_m: np.ndarray | None = None
 
     @property
     def steps(self) -> int:

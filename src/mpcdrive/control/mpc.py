@@ -11,16 +11,19 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
 
 from ..models.base import VehicleModel
 from ..models.discretize import Method, discrete_step_and_jacobians, rollout
+from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory
 from ..ocp.problem import MpcProblem
 from ..ocp.qp import LtvQp
 from ..paths.base import Path
+from ..scene.footprint import Footprint
+from ..scene.obstacles import Obstacle
 from ..paths.reference import HorizonMode, horizon_arc_lengths, horizon_states
 from ..solvers.osqp_backend import OsqpBackend, OsqpSettings
 from ..types import ControlOutput, SolveResult, WarmStart
@@ -37,7 +40,9 @@ class StepData:
     x : (nx,) measured state; s_m, e_y_m, e_psi_rad : its path coordinates; xref : (N+1, nx) and
     uref : (N, nu) references; Xbar, Ubar : (N, nx), (N, nu) linearization points; Fbar : (N, nx)
     the model's prediction from them; Ad, Bd, c : the affine model x+ = Ad x + Bd u + c;
-    lane_normal : (N, 2), lane_offset : (N,) the lane rows (used when the problem has a lane).
+    lane_normal : (N, 2), lane_offset : (N,) the lane rows (used when the problem has a lane);
+    Xlin : (N+1, nx) linearization trajectory; lane_lo/hi : (N,) corridor bounds [m];
+    rows_a/rows_b : obstacle half-planes; H, g : position cost model; sides : passing sides.
     """
 
     x: np.ndarray
@@ -54,6 +59,14 @@ class StepData:
     c: np.ndarray
     lane_normal: np.ndarray
     lane_offset: np.ndarray
+    Xlin: np.ndarray
+    lane_lo: np.ndarray | None = None
+    lane_hi: np.ndarray | None = None
+    rows_a: np.ndarray | None = None
+    rows_b: np.ndarray | None = None
+    H: np.ndarray | None = None
+    g: np.ndarray | None = None
+    sides: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -70,7 +83,11 @@ class MpcConfig:
         path curvature, so R does not fight the turn, and yaw reference = path heading minus the
         steady-state slip angle, since the centre of gravity moves along yaw + beta) or ``none``
         (the paper: ``u' R u`` and the path heading as yaw reference);
-    projection_window_m : half-width of the arc-length window searched around the last s [m].
+    projection_window_m : half-width of the arc-length window searched around the last s [m];
+    sqp_max_iterations : QPs per step: 1 is the real-time iteration (one QP on the model and
+        obstacle terms linearized along the shifted previous plan); more re-linearize at each new
+        solution until the inputs move less than ``sqp_tol`` [input units] or ``sqp_max_time_s``
+        of wall time is spent.
     """
 
     linearization: Literal["trajectory", "paper"] = "trajectory"
@@ -80,6 +97,9 @@ class MpcConfig:
     v_ref_mps: float | None = None
     feedforward: Literal["curvature", "none"] = "curvature"
     projection_window_m: float = 2.0
+    sqp_max_iterations: int = 1
+    sqp_tol: float = 1e-4
+    sqp_max_time_s: float = 0.05
 
     def __post_init__(self):
         if self.linearization not in ("trajectory", "paper"):
@@ -88,6 +108,8 @@ class MpcConfig:
             raise ValueError(f"discretization must be 'rk4' or 'euler', got {self.discretization!r}")
         if self.horizon not in ("arc_length", "paper"):
             raise ValueError(f"horizon must be 'arc_length' or 'paper', got {self.horizon!r}")
+        if self.sqp_max_iterations < 1:
+            raise ValueError(f"sqp_max_iterations must be >= 1, got {self.sqp_max_iterations}")
         if self.feedforward not in ("curvature", "none"):
             raise ValueError(f"feedforward must be 'curvature' or 'none', got {self.feedforward!r}")
 
@@ -108,6 +130,9 @@ class LtvMpc:
         problem: MpcProblem,
         config: MpcConfig = MpcConfig(),
         solver_settings: OsqpSettings = OsqpSettings(),
+        obstacles: tuple[Obstacle, ...] = (),
+        avoidance: AvoidanceConfig | None = None,
+        footprint: Footprint = Footprint(),
     ):
         if (problem.nx, problem.nu) != (model.nx, model.nu):
             raise ValueError(
@@ -122,6 +147,16 @@ class LtvMpc:
             self.v_ref_mps = float(model.speed(np.zeros(model.nx)))
         if not np.isfinite(self.v_ref_mps):
             raise ValueError(f"reference speed must be finite, got {self.v_ref_mps}")
+        self.avoidance = None
+        if obstacles:
+            avoidance = avoidance or AvoidanceConfig()
+            if avoidance.formulation == "corridor" and problem.lane_half_width_m is None:
+                raise ValueError("the corridor formulation needs a lane (lane_half_width_m / road.lane_width_m)")
+            problem = replace(problem, obstacle_rows=avoidance.rows_per_step(footprint),
+                              position_cost=avoidance.uses_cost)
+            self.problem = problem
+            self.avoidance = Avoidance(avoidance, list(obstacles), path, footprint, problem.N, problem.dt_s,
+                                       problem.lane_half_width_m)
         self.qp = LtvQp(problem)
         self.backend = OsqpBackend(self.qp, solver_settings)
         N, nx, nu = self.N, self.nx, self.nu
@@ -133,6 +168,14 @@ class LtvMpc:
         self._Xws = np.zeros((N + 1, nx))
         self._lane_n = np.zeros((N, 2))
         self._lane_b = np.zeros(N)
+        self._Xlin = np.zeros((N + 1, nx))
+        # the lane bounds the centre of gravity so that the body (half its width) stays inside
+        if problem.lane_half_width_m is not None:
+            lim = max(problem.lane_half_width_m - 0.5 * footprint.width_m, 0.0)
+            self._lane_lo = np.full(N, -lim)
+            self._lane_hi = np.full(N, lim)
+        else:
+            self._lane_lo = self._lane_hi = None
 
     # -- warm start ---------------------------------------------------------------------------
     def initial_warm(self, x0) -> WarmStart:
@@ -155,22 +198,41 @@ class LtvMpc:
         """Compute the command for measured state ``x`` (nx,) given the previous step's ``warm``."""
         t0 = time.perf_counter()
         d = self.prepare(x, warm)
-        self.qp.update(d.x, d.Ad, d.Bd, d.c, d.xref, d.uref, warm.u_prev, d.lane_normal, d.lane_offset)
-        # primal warm start: the linearization trajectory, closed with its last prediction
-        Xws = self._Xws
-        Xws[: self.N] = d.Xbar
-        Xws[self.N] = d.Fbar[-1]
-        res = self.backend.solve(Xws, d.Ubar)
-        return self.finish(d, warm, res, t0)
+        res = self._solve(d, warm)
+        it = 1
+        while (it < self.config.sqp_max_iterations and res.ok
+               and time.perf_counter() - t0 < self.config.sqp_max_time_s):
+            dU = float(np.max(np.abs(res.U - d.Ubar)))
+            if dU < self.config.sqp_tol:
+                break
+            d = self.prepare(x, warm, around=(res.X, res.U), s_m=d.s_m)
+            res = self._solve(d, warm)
+            it += 1
+        return self.finish(d, warm, res, t0, it)
 
-    def prepare(self, x, warm: WarmStart) -> StepData:
-        """Projection, horizon references and linearization for measured state ``x``: the part of
-        a step every solver of this problem shares. Arrays are views of work buffers, valid until
-        the next call."""
+    def _solve(self, d: StepData, warm: WarmStart) -> SolveResult:
+        qp = self.qp
+        qp.update(d.x, d.Ad, d.Bd, d.c, d.xref, d.uref, warm.u_prev, d.lane_normal, d.lane_offset,
+                  d.lane_lo, d.lane_hi)
+        if d.rows_a is not None:
+            qp.set_obstacle_rows(d.rows_a, d.rows_b)
+        if d.H is not None:
+            qp.add_position_cost(d.H, d.g)
+        # primal warm start: the linearization trajectory
+        return self.backend.solve(d.Xlin, d.Ubar)
+
+    def prepare(self, x, warm: WarmStart, around=None, s_m: float | None = None) -> StepData:
+        """Projection, horizon references, linearization and obstacle terms for measured state
+        ``x``: the part of a step every solver of this problem shares. ``around=(X, U)``
+        re-linearizes at a new iterate (SQP). Arrays are views of work buffers, valid until the
+        next call."""
         x = self._check_state(x)
         cfg, model = self.config, self.model
         N, dt = self.N, self.dt_s
-        s0, e_y = self.path.project(x[:2], warm.s_m, cfg.projection_window_m)
+        if s_m is None:
+            s0, e_y = self.path.project(x[:2], warm.s_m, cfg.projection_window_m)
+        else:
+            s0, e_y = self.path.project(x[:2], s_m, cfg.projection_window_m)
         e_psi = wrap_angle(x[2] - float(self.path.heading(s0)))
 
         # references over the horizon
@@ -186,7 +248,11 @@ class LtvMpc:
             xref[:, 2] -= slip_ss
         # linearization points
         Xbar, Ubar = self._Xbar, self._Ubar
-        if cfg.linearization == "paper":
+        if around is not None:
+            Xbar[0] = x
+            Xbar[1:] = around[0][1:N]
+            Ubar[:] = around[1]
+        elif cfg.linearization == "paper":
             Xbar[:] = x
             Ubar[:] = warm.u_prev
         elif warm.X is None or warm.U is None:
@@ -200,24 +266,48 @@ class LtvMpc:
             Ubar[-1] = warm.U[-1]
         Fbar, Ad, Bd = discrete_step_and_jacobians(model, Xbar, Ubar, dt, cfg.discretization)
         c = Fbar - np.einsum("kij,kj->ki", Ad, Xbar) - np.einsum("kij,kj->ki", Bd, Ubar)
+        Xlin = self._Xlin
+        Xlin[:N] = Xbar
+        Xlin[N] = Fbar[-1]
+        # lane normals at the (undetoured) centreline
         if self.qp.lane:
             yaw = refs[1:, 2]
             self._lane_n[:, 0] = -np.sin(yaw)
             self._lane_n[:, 1] = np.cos(yaw)
             self._lane_b[:] = np.einsum("ki,ki->k", self._lane_n, refs[1:, :2])
+        terms = None
+        sides = warm.sides
+        if self.avoidance is not None:
+            memory = AvoidanceMemory(dict(warm.sides))
+            terms = self.avoidance.terms(warm.t_s, x, Xlin, s_arr, memory)
+            sides = tuple(sorted(memory.sides.items()))
+            if terms.e_ref is not None and np.any(terms.e_ref):
+                # the paper's detour: shift the reference sideways, turn its heading with the slope
+                h = refs[:, 2]
+                xref[:, 0] -= np.sin(h) * terms.e_ref
+                xref[:, 1] += np.cos(h) * terms.e_ref
+                ds = np.maximum(np.diff(s_arr), 1e-9)
+                slope = np.diff(terms.e_ref) / ds
+                xref[1:, 2] += np.arctan(slope)
         return StepData(x, float(s0), float(e_y), float(e_psi), xref, uref, Xbar, Ubar, Fbar, Ad, Bd, c,
-                        self._lane_n, self._lane_b)
+                        self._lane_n, self._lane_b, Xlin,
+                        self._lane_lo if terms is None or terms.lane_lo is None else terms.lane_lo,
+                        self._lane_hi if terms is None or terms.lane_hi is None else terms.lane_hi,
+                        None if terms is None else terms.rows_a, None if terms is None else terms.rows_b,
+                        None if terms is None else terms.H, None if terms is None else terms.g, sides)
 
-    def finish(self, d: StepData, warm: WarmStart, res: SolveResult, t0: float) -> ControlOutput:
+    def finish(self, d: StepData, warm: WarmStart, res: SolveResult, t0: float, iterations: int = 1) -> ControlOutput:
         """Check the solve, pick the command (or fall back) and package the step's output."""
         pb = self.problem
+        t_next = warm.t_s + self.dt_s
         if res.ok and np.all(np.isfinite(res.U[0])):
             u = np.clip(res.U[0], pb.u_min, pb.u_max)
             fallback = ""
-            new_warm = WarmStart(s_m=d.s_m, u_prev=u, X=res.X, U=res.U)
+            new_warm = WarmStart(s_m=d.s_m, u_prev=u, X=res.X, U=res.U, t_s=t_next, sides=d.sides)
             X_pred = res.X
         else:
             u, fallback, new_warm, X_pred = self._fallback(d.x, d.s_m, warm)
+            new_warm = replace(new_warm, t_s=t_next, sides=d.sides)
         return ControlOutput(
             u=u,
             status=res.status,
@@ -229,6 +319,7 @@ class LtvMpc:
             X_pred=X_pred,
             refs=d.xref.copy(),
             warm=new_warm,
+            sqp_iterations=iterations,
         )
 
     def _fallback(self, x, s0, warm: WarmStart):

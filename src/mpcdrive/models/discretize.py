@@ -76,8 +76,12 @@ def discrete_step_and_jacobians(
 
 
 def rollout(model: VehicleModel, x0, U, dt: float, method: Method = "rk4") -> np.ndarray:
-    """States (N+1, nx) from ``x0`` under inputs ``U`` (N, nu)."""
-    U = np.atleast_2d(np.asarray(U, float))
+    """States (N+1, nx) from ``x0`` under inputs ``U`` (N, nu); a single-input model also takes (N,)."""
+    U = np.asarray(U, float)
+    if U.ndim == 1 and model.nu == 1:
+        U = U[:, None]
+    if U.ndim != 2 or U.shape[1] != model.nu:
+        raise ValueError(f"inputs must have shape (N, {model.nu}), got {U.shape}")
     X = np.empty((U.shape[0] + 1, model.nx))
     X[0] = x0
     for k in range(U.shape[0]):

@@ -76,8 +76,8 @@ class MpcProblem:
     lane_slack_weight: float = 1e4
     lane_slack_weight_l1: float = 1e3
     obstacle_rows: int = 0
-    obstacle_slack_weight: float = 1e6
-    obstacle_slack_weight_l1: float = 1e5
+    obstacle_slack_weight: float = 1e4
+    obstacle_slack_weight_l1: float = 1e3
     position_cost: bool = False
 
     def __post_init__(self):

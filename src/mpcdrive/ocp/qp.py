@@ -92,7 +92,7 @@ class LtvQp:
 
     # -- cost ---------------------------------------------------------------------------
     def _build_cost(self):
-        pb, N, nx, nu = self.problem, self.N, self.nx, self.nu
+        pb, N, nx = self.problem, self.N, self.nx
         pat = _Pattern()
         # states x_1..x_N: the full upper triangle of each block is a slot (non-convex costs add
         # (x, y) Hessians there); x_0 is fixed by a constraint and has no cost

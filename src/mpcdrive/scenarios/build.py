@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -13,10 +13,12 @@ from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicPa
 from ..ocp.problem import MpcProblem
 from ..paths import CirclePath, Path, StraightPath, WaypointPath
 from ..sim.closed_loop import Disturbance, Plant, simulate
+from ..ocp.avoidance import AvoidanceConfig
 from ..scene.footprint import Footprint
+from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Polygon, Static, TrajectoryMotion, rectangle
 from ..solvers.osqp_backend import OsqpSettings
 from ..types import SimResult
-from .schema import NoiseSpec, ScenarioSpec
+from .schema import AvoidanceSpec, NoiseSpec, ObstacleSpec, ScenarioSpec
 
 
 @dataclass(frozen=True)
@@ -32,6 +34,7 @@ class Experiment:
     footprint: Footprint
     disturbance: Disturbance | None
     measurement_noise: Disturbance | None
+    obstacles: tuple[Obstacle, ...] = ()
 
 
 def build_path(spec) -> Path:
@@ -40,6 +43,26 @@ def build_path(spec) -> Path:
     if spec.type == "circle":
         return CirclePath(spec.center, spec.radius_m, spec.ccw, math.radians(spec.start_angle_deg))
     return WaypointPath(spec.points, closed=spec.closed, smoothing=spec.smoothing)
+
+
+def build_obstacle(spec: ObstacleSpec) -> Obstacle:
+    """Core obstacle from its scenario entry."""
+    if spec.shape == "circle":
+        shape = Circle(spec.radius_m)
+    elif spec.shape == "rectangle":
+        shape = rectangle(spec.length_m, spec.width_m)
+    else:
+        shape = Polygon(np.array(spec.points, float))
+    yaw = math.radians(spec.yaw_deg)
+    if spec.trajectory is not None:
+        tr = spec.trajectory
+        pts = np.array(tr.points, float)
+        yaws = np.radians(tr.yaw_deg) if tr.yaw_deg is not None else np.full(len(pts), yaw)
+        x0, y0 = (spec.position if spec.position is not None else pts[0])
+        motion = TrajectoryMotion(np.array(tr.t_s), pts[:, 0] - x0, pts[:, 1] - y0, yaws - yaw)
+        return Obstacle(shape, (x0, y0, yaw), motion, spec.name)
+    motion = Static() if spec.velocity_mps is None else ConstantVelocity(*spec.velocity_mps)
+    return Obstacle(shape, (spec.position[0], spec.position[1], yaw), motion, spec.name)
 
 
 def _noise(spec: NoiseSpec | None) -> Disturbance | None:
@@ -103,7 +126,17 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         feedforward=c.feedforward,
     )
     path = build_path(spec.path)
-    controller = LtvMpc(model, path, problem, config, OsqpSettings(eps_abs=c.osqp_eps, eps_rel=c.osqp_eps, max_iter=c.osqp_max_iter))
+    obstacles = tuple(build_obstacle(o) for o in spec.obstacles)
+    footprint = Footprint(v.length_m, v.width_m, n_discs=v.footprint_discs)
+    av = spec.avoidance or AvoidanceSpec()
+    avoidance = AvoidanceConfig(av.formulation, av.margin_m, av.weight, av.epsilon_m2, tuple(av.sigma_m),
+                                av.influence_m, av.max_obstacles, av.detour, av.detour_ramp_m)
+    if obstacles:
+        config = replace(config, sqp_max_iterations=av.sqp_max_iterations, sqp_tol=av.sqp_tol,
+                         sqp_max_time_s=av.sqp_max_time_s)
+    controller = LtvMpc(model, path, problem, config,
+                        OsqpSettings(eps_abs=c.osqp_eps, eps_rel=c.osqp_eps, max_iter=c.osqp_max_iter),
+                        obstacles=obstacles, avoidance=avoidance, footprint=footprint)
     plant = Plant(model, spec.plant.integrator, spec.plant.substeps)
     return Experiment(
         spec=spec,
@@ -112,9 +145,10 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         plant=plant,
         x0=x0,
         steps=max(1, int(round(spec.duration_s / spec.dt_s))),
-        footprint=Footprint(v.length_m, v.width_m),
+        footprint=footprint,
         disturbance=_noise(spec.disturbance),
         measurement_noise=_noise(spec.measurement_noise),
+        obstacles=obstacles,
     )
 
 
@@ -136,4 +170,6 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
         lane_half_width_m=pb.lane_half_width_m,
         progress=progress,
         meta={"id": spec.id, "max_steer_rad": float(pb.u_max[0]), "description": spec.description},
+        obstacles=exp.obstacles,
+        footprint=exp.footprint,
     )

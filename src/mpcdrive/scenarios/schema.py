@@ -59,7 +59,8 @@ PathSpec = Annotated[StraightSpec | CircleSpec | WaypointsSpec, Field(discrimina
 
 class VehicleSpec(_Strict):
     """Vehicle model and geometry. ``kinematic3``: constant ``speed_mps``; ``kinematic4``: speed is a
-    state driven by acceleration."""
+    state driven by acceleration. The body is ``length_m`` x ``width_m``, covered by
+    ``footprint_discs`` discs for obstacle constraints."""
 
     model: Literal["kinematic3", "kinematic4"] = "kinematic3"
     lf_m: Positive = 0.17
@@ -67,6 +68,72 @@ class VehicleSpec(_Strict):
     speed_mps: Finite = 1.0
     length_m: Positive = 0.50
     width_m: Positive = 0.27
+    footprint_discs: int = Field(3, ge=1, le=10)
+
+
+class TrajectorySpec(_Strict):
+    """A recorded obstacle trajectory: world positions ``points`` [m] (and optional ``yaw_deg``)
+    at times ``t_s`` [s]."""
+
+    t_s: list[Finite] = Field(min_length=1)
+    points: list[Point]
+    yaw_deg: list[Finite] | None = None
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        if len(self.points) != len(self.t_s):
+            raise ValueError("points needs one entry per time in t_s")
+        if self.yaw_deg is not None and len(self.yaw_deg) != len(self.t_s):
+            raise ValueError("yaw_deg needs one entry per time in t_s")
+        if any(b <= a for a, b in zip(self.t_s, self.t_s[1:])):
+            raise ValueError("t_s must be strictly increasing")
+        return self
+
+
+class ObstacleSpec(_Strict):
+    """An obstacle: ``circle`` (radius_m), ``rectangle`` (length_m, width_m) or convex ``polygon``
+    (points in the obstacle frame) at ``position`` [m] with ``yaw_deg``; static, moving at
+    ``velocity_mps`` (vx, vy) or along a recorded ``trajectory``."""
+
+    shape: Literal["circle", "rectangle", "polygon"]
+    position: Point | None = None
+    yaw_deg: Finite = 0.0
+    radius_m: Positive | None = None
+    length_m: Positive | None = None
+    width_m: Positive | None = None
+    points: list[Point] | None = None
+    velocity_mps: Point | None = None
+    trajectory: TrajectorySpec | None = None
+    name: str = ""
+
+    @model_validator(mode="after")
+    def _complete(self):
+        need = {"circle": ("radius_m",), "rectangle": ("length_m", "width_m"), "polygon": ("points",)}[self.shape]
+        for key in need:
+            if getattr(self, key) is None:
+                raise ValueError(f"a {self.shape} obstacle needs {key}")
+        if self.velocity_mps is not None and self.trajectory is not None:
+            raise ValueError("give either velocity_mps or trajectory, not both")
+        if self.position is None and self.trajectory is None:
+            raise ValueError("an obstacle needs a position (or a trajectory)")
+        return self
+
+
+class AvoidanceSpec(_Strict):
+    """How obstacles enter the MPC (see mpcdrive.ocp.avoidance)."""
+
+    formulation: Literal["hard", "corridor", "potential", "gaussian"] = "hard"
+    margin_m: NonNeg = 0.1
+    weight: NonNeg = 10.0
+    epsilon_m2: Positive = 0.05
+    sigma_m: tuple[Positive, Positive] = (0.5, 0.5)
+    influence_m: Positive = 5.0
+    max_obstacles: int = Field(3, ge=1, le=50)
+    detour: Literal["none", "trapezoid"] = "none"
+    detour_ramp_m: Positive = 1.0
+    sqp_max_iterations: int = Field(1, ge=1, le=100)
+    sqp_tol: Positive = 1e-4
+    sqp_max_time_s: Positive = 0.05
 
 
 class InitialState(_Strict):
@@ -171,6 +238,8 @@ class ScenarioSpec(_Strict):
     plant: PlantSpec = PlantSpec()
     disturbance: NoiseSpec | None = None
     measurement_noise: NoiseSpec | None = None
+    obstacles: list[ObstacleSpec] = Field(default_factory=list)
+    avoidance: AvoidanceSpec | None = None
 
     @model_validator(mode="after")
     def _sizes(self):
@@ -185,6 +254,8 @@ class ScenarioSpec(_Strict):
                     v = getattr(spec, field)
                     if v is not None and len(v) != nx:
                         raise ValueError(f"{name}.{field} needs {nx} entries (one per state), got {len(v)}")
+        if self.avoidance is not None and self.avoidance.formulation == "corridor" and self.road is None:
+            raise ValueError("avoidance.formulation corridor needs a road (road.lane_width_m)")
         if self.duration_s / self.dt_s > 1_000_000:
             raise ValueError("duration_s / dt_s exceeds 1,000,000 steps")
         return self

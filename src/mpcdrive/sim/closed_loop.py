@@ -11,6 +11,9 @@ from ..control.base import Controller
 from ..models.base import VehicleModel
 from ..models.discretize import Method, discrete_step
 from ..paths.base import Path
+from ..scene.footprint import Footprint
+from ..scene.geometry import shape_distance
+from ..scene.obstacles import Circle, Obstacle
 from ..types import SimResult
 
 
@@ -83,13 +86,18 @@ def simulate(
     lane_half_width_m: float | None = None,
     progress: Callable[[int, int], None] | None = None,
     meta: dict | None = None,
+    obstacles: tuple[Obstacle, ...] = (),
+    footprint: Footprint = Footprint(),
 ) -> SimResult:
     """Run ``steps`` control steps of ``dt_s`` seconds from ``x0`` (plant state).
 
     The controller sees the plant state plus ``measurement_noise``; the plant state receives
     ``disturbance`` after every step. On an open path the run ends when the vehicle passes the
     path's end (``stop_at_path_end``), and ``goal_reached`` says whether it did.
-    ``progress(k, steps)`` is called every step when given.
+    ``progress(k, steps)`` is called every step when given. With ``obstacles`` the clearance
+    between the vehicle ``footprint`` and every obstacle is measured at each step
+    (``SimResult.clearance_m``; negative = overlap) and the obstacles' poses are logged in
+    ``meta["obstacles"]``.
     """
     if steps < 1:
         raise ValueError(f"steps must be >= 1, got {steps}")
@@ -142,6 +150,13 @@ def simulate(
             k_end = k + 1
             break
     sl = slice(0, k_end)
+    meta = dict(meta or {})
+    clearance = None
+    if obstacles:
+        clearance, meta["obstacles"] = _clearances(Xs[sl], T[sl], obstacles, footprint)
+        meta["min_obstacle_clearance_m"] = float(clearance.min())
+        hit = clearance < 0.0
+        meta["collisions"] = int(np.count_nonzero(hit[1:] & ~hit[:-1]) + (1 if hit[0] else 0))
     v = model.speed(Xs[sl])
     steer = Us[sl, 0]
     accel = Us[sl, list(model.input_names).index("accel")] if "accel" in model.input_names else np.zeros(k_end)
@@ -168,5 +183,26 @@ def simulate(
         input_names=tuple(model.input_names),
         lane_half_width_m=lane_half_width_m,
         goal_reached=goal_reached,
-        meta=dict(meta or {}),
+        meta=meta,
+        clearance_m=clearance,
     )
+
+
+def _clearances(X: np.ndarray, T: np.ndarray, obstacles, footprint: Footprint):
+    """(K,) smallest footprint-to-obstacle signed distance per step [m], and the obstacles'
+    logged shapes and poses (for reports)."""
+    K = len(T)
+    clear = np.full(K, np.inf)
+    logs = []
+    for ob in obstacles:
+        poses = np.array([ob.pose_at(t) for t in T])
+        for k in range(K):
+            d = shape_distance(footprint.polygon(*X[k, :3]), ob.at(T[k]))
+            clear[k] = min(clear[k], d)
+        entry = {"name": ob.name, "moving": ob.moving, "poses": poses.round(4).tolist()}
+        if isinstance(ob.shape, Circle):
+            entry.update(type="circle", radius_m=ob.shape.radius_m)
+        else:
+            entry.update(type="polygon", points=ob.shape.points.round(4).tolist())
+        logs.append(entry)
+    return clear, logs

@@ -1,0 +1,354 @@
+"""Obstacle avoidance terms of the MPC, rebuilt in numbers (never in structure) each step.
+
+Four formulations (the paper's Section V.C and its "safe driving envelope"):
+
+* ``hard`` -- the paper's brute-force keep-out constraint (eq. 54) made convex per predicted
+  step: for each footprint disc, a half-plane separating it from the obstacle, linearized at the
+  linearization trajectory. Next to an obstacle the half-plane is lateral (pass on the chosen
+  side); when no gap in the lane is wide enough it faces the car (stop behind it).
+* ``corridor`` -- a convex obstacle-free tube inside the lane: per predicted step, bounds on the
+  lateral offset that exclude every obstacle overlapping that stretch of road (plus a "stop
+  before it" half-plane when the lane is blocked).
+* ``potential`` -- the repulsive field of eq. 55, ``w / (|p - p_o|^2 + eps)``;
+* ``gaussian`` -- the Gaussian of eq. 56, ``w exp(-1/2 (p - p_o)' Sigma^-1 (p - p_o))`` (the
+  normalizing constant is folded into ``w``).
+The two costs are non-convex: each QP uses their second-order model at the linearization point
+with the Hessian projected onto the positive semidefinite cone (sequential quadratic
+programming). The passing side of each obstacle is chosen once, where the lane has more room,
+and kept from step to step (no dithering) unless that side closes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from ..paths.base import Path
+from ..scene.footprint import Footprint
+from ..scene.geometry import point_shape
+from ..scene.obstacles import Obstacle, WorldCircle
+
+Formulation = Literal["hard", "corridor", "potential", "gaussian"]
+SIDE_LEFT, SIDE_RIGHT, SIDE_BLOCKED = 1, -1, 0
+
+
+@dataclass(frozen=True)
+class AvoidanceConfig:
+    """How obstacles enter the MPC.
+
+    formulation : ``hard`` | ``corridor`` | ``potential`` | ``gaussian``;
+    margin_m : clearance kept between footprint and obstacle [m] (hard, corridor, side choice);
+    weight : cost weight w (potential, gaussian); epsilon_m2 : eps of eq. 55 [m^2];
+    sigma_m : (sx, sy) standard deviations of eq. 56 along / across the path [m];
+    influence_m : obstacles farther than this from the vehicle are ignored [m];
+    max_obstacles : obstacles considered per step (nearest first) -- fixes the QP size;
+    detour : ``none`` or ``trapezoid`` (the paper's detour reference around each obstacle);
+    detour_ramp_m : length of the trapezoid's ramps [m].
+    """
+
+    formulation: Formulation = "hard"
+    margin_m: float = 0.1
+    weight: float = 10.0
+    epsilon_m2: float = 0.05
+    sigma_m: tuple[float, float] = (0.5, 0.5)
+    influence_m: float = 5.0
+    max_obstacles: int = 3
+    detour: Literal["none", "trapezoid"] = "none"
+    detour_ramp_m: float = 1.0
+
+    def __post_init__(self):
+        if self.formulation not in ("hard", "corridor", "potential", "gaussian"):
+            raise ValueError(f"formulation must be hard, corridor, potential or gaussian, got {self.formulation!r}")
+        for name in ("margin_m", "weight", "epsilon_m2", "influence_m", "detour_ramp_m"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0, got {v}")
+        if self.epsilon_m2 <= 0 and self.formulation == "potential":
+            raise ValueError("epsilon_m2 must be > 0 for the potential field")
+        if len(self.sigma_m) != 2 or min(self.sigma_m) <= 0:
+            raise ValueError(f"sigma_m must be two positive numbers, got {self.sigma_m}")
+        if self.max_obstacles < 1:
+            raise ValueError("max_obstacles must be >= 1")
+        if self.detour not in ("none", "trapezoid"):
+            raise ValueError(f"detour must be 'none' or 'trapezoid', got {self.detour!r}")
+
+    @property
+    def uses_rows(self) -> bool:
+        return self.formulation in ("hard", "corridor")
+
+    @property
+    def uses_cost(self) -> bool:
+        return self.formulation in ("potential", "gaussian")
+
+    def rows_per_step(self, footprint: Footprint) -> int:
+        if self.formulation == "hard":
+            return self.max_obstacles * footprint.n_discs
+        if self.formulation == "corridor":
+            return self.max_obstacles  # stop-before half-planes of blocked obstacles
+        return 0
+
+
+@dataclass(frozen=True)
+class FrenetBox:
+    """An obstacle's extent along / across the path at one time: s in [s_lo, s_hi],
+    e_y in [e_lo, e_hi] [m]; ``s_ref`` the arc length of its reference point."""
+
+    s_ref: float
+    s_lo: float
+    s_hi: float
+    e_lo: float
+    e_hi: float
+
+
+def frenet_box(path: Path, shape, s_guess: float) -> FrenetBox:
+    """Frenet extent of a world shape near arc length ``s_guess``."""
+    if isinstance(shape, WorldCircle):
+        s, e = path.project(shape.center, s_guess, window_m=max(2.0, 2 * shape.radius_m))
+        r = shape.radius_m
+        return FrenetBox(s, s - r, s + r, e - r, e + r)
+    pts = shape.points
+    c = pts.mean(axis=0)
+    s, _ = path.project(c, s_guess, window_m=2.0 + float(np.ptp(pts)))
+    h = float(path.heading(s))
+    t = np.array([math.cos(h), math.sin(h)])
+    n = np.array([-t[1], t[0]])
+    d = pts - path.position(s)
+    along, across = d @ t, d @ n
+    return FrenetBox(s, s + along.min(), s + along.max(), across.min(), across.max())
+
+
+@dataclass
+class AvoidanceMemory:
+    """Passing-side decisions kept across steps: obstacle index -> SIDE_*."""
+
+    sides: dict[int, int] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class AvoidanceTerms:
+    """One step's obstacle terms for the QP.
+
+    rows_a : (N, M, 3), rows_b : (N, M) half-planes on (x_k, y_k, yaw_k) (b = -inf unused);
+    lane_lo, lane_hi : (N,) lateral bounds [m] (corridor; None = lane only);
+    H : (N, 2, 2), g : (N, 2) position cost model (None without cost);
+    e_ref : (N+1,) lateral offset of the detour reference [m] (None without detour);
+    sides : passing side per considered obstacle; nearest_clearance_m : smallest predicted
+    centre-to-obstacle distance (diagnostics)."""
+
+    rows_a: np.ndarray | None
+    rows_b: np.ndarray | None
+    lane_lo: np.ndarray | None
+    lane_hi: np.ndarray | None
+    H: np.ndarray | None
+    g: np.ndarray | None
+    e_ref: np.ndarray | None
+    sides: dict
+
+
+class Avoidance:
+    """Builds the obstacle terms of each step for one controller (sizes fixed at construction)."""
+
+    def __init__(self, config: AvoidanceConfig, obstacles: list[Obstacle], path: Path, footprint: Footprint,
+                 N: int, dt_s: float, lane_half_width_m: float | None):
+        self.config = config
+        self.obstacles = list(obstacles)
+        self.path = path
+        self.footprint = footprint
+        self.N, self.dt_s = N, dt_s
+        self.lane_half = lane_half_width_m
+        self.M = config.rows_per_step(footprint)
+        self.offsets = footprint.disc_offsets_m
+        self.r_disc = footprint.disc_radius_m
+        self.half_width = 0.5 * footprint.width_m
+        self.half_length = 0.5 * footprint.length_m
+        sx, sy = config.sigma_m
+        self._Sinv_local = np.diag([1.0 / sx**2, 1.0 / sy**2])
+        N1 = N + 1
+        self._a = np.zeros((N, max(self.M, 1), 3))
+        self._b = np.full((N, max(self.M, 1)), -np.inf)
+        self._lo = np.zeros(N)
+        self._hi = np.zeros(N)
+        self._H = np.zeros((N, 2, 2))
+        self._g = np.zeros((N, 2))
+        self._e_ref = np.zeros(N1)
+
+    # -- helpers ----------------------------------------------------------------------
+    def _relevant(self, t_s: float, xy: np.ndarray) -> list[int]:
+        """Indices of obstacles within the influence distance, nearest first (at most max_obstacles)."""
+        reach = self.config.influence_m
+        d = []
+        for j, ob in enumerate(self.obstacles):
+            ox, oy, _ = ob.pose_at(t_s)
+            dist = math.hypot(ox - xy[0], oy - xy[1]) - ob.shape.bounding_radius_m
+            if dist <= reach:
+                d.append((dist, j))
+        d.sort()
+        return [j for _, j in d[: self.config.max_obstacles]]
+
+    def _choose_side(self, j: int, box: FrenetBox, memory: AvoidanceMemory) -> int:
+        needed = self.half_width + self.config.margin_m
+        lane = self.lane_half if self.lane_half is not None else np.inf
+        room_left = lane - box.e_hi
+        room_right = lane + box.e_lo
+        prev = memory.sides.get(j)
+        if prev == SIDE_LEFT and room_left >= needed:
+            return SIDE_LEFT
+        if prev == SIDE_RIGHT and room_right >= needed:
+            return SIDE_RIGHT
+        if max(room_left, room_right) < needed:
+            return SIDE_BLOCKED
+        return SIDE_LEFT if room_left >= room_right else SIDE_RIGHT
+
+    # -- one step ---------------------------------------------------------------------
+    def terms(self, t_s: float, x: np.ndarray, Xlin: np.ndarray, s_arr: np.ndarray, memory: AvoidanceMemory) -> AvoidanceTerms:
+        """Obstacle terms for the horizon starting at time ``t_s`` [s].
+
+        x : (nx,) measured state; Xlin : (N+1, nx) linearization trajectory (row k for x_k);
+        s_arr : (N+1,) horizon reference arc lengths [m]; memory : passing sides, updated."""
+        cfg, N = self.config, self.N
+        rel = self._relevant(t_s, x[:2])
+        sides: dict[int, int] = {}
+        boxes: dict[int, list[FrenetBox]] = {}
+        for j in rel:
+            ob = self.obstacles[j]
+            bx = [frenet_box(self.path, ob.at(t_s + k * self.dt_s), s_arr[k]) for k in range(N + 1)]
+            boxes[j] = bx
+            sides[j] = self._choose_side(j, bx[0] if not ob.moving else min(bx, key=lambda b: abs(b.s_ref - s_arr[0])), memory)
+        memory.sides.update(sides)
+        rows_a = rows_b = lo = hi = H = g = e_ref = None
+        if cfg.detour == "trapezoid":
+            e_ref = self._detour(s_arr, boxes, sides)
+        if cfg.formulation == "hard":
+            rows_a, rows_b = self._hard_rows(t_s, Xlin, s_arr, rel, boxes, sides)
+        elif cfg.formulation == "corridor":
+            lo, hi, rows_a, rows_b = self._corridor(s_arr, rel, boxes, sides)
+        else:
+            H, g = self._cost(t_s, Xlin, rel, boxes)
+        return AvoidanceTerms(rows_a, rows_b, lo, hi, H, g, e_ref, sides)
+
+    def _hard_rows(self, t_s, Xlin, s_arr, rel, boxes, sides):
+        a, b = self._a, self._b
+        a[:] = 0.0
+        b[:] = -np.inf
+        lin = Xlin[1:, :3]
+        nd = len(self.offsets)
+        r_need = self.r_disc + self.config.margin_m
+        for k in range(1, self.N + 1):
+            xk, yk, psik = lin[k - 1]
+            c, s = math.cos(psik), math.sin(psik)
+            for slot, j in enumerate(rel):
+                box = boxes[j][k]
+                shape = self.obstacles[j].at(t_s + k * self.dt_s)
+                side = sides[j]
+                for i, o in enumerate(self.offsets):
+                    p = np.array([xk + o * c, yk + o * s])
+                    J = np.array([[1.0, 0.0, -o * s], [0.0, 1.0, o * c]])
+                    s_disc = s_arr[k] + o
+                    lateral = side != SIDE_BLOCKED and box.s_lo - r_need - self.half_length <= s_disc <= box.s_hi + r_need + self.half_length
+                    if lateral:
+                        h = float(self.path.heading(box.s_ref))
+                        n = side * np.array([-math.sin(h), math.cos(h)])
+                        e_edge = box.e_hi if side == SIDE_LEFT else box.e_lo
+                        q = self.path.position(box.s_ref) + np.array([-math.sin(h), math.cos(h)]) * e_edge
+                    else:
+                        dist, q = point_shape(p, shape)
+                        v = p - q
+                        nv = math.hypot(*v)
+                        if nv < 1e-9:
+                            continue
+                        n = v / nv if dist >= 0 else -v / nv
+                        if dist - self.r_disc > self.config.influence_m:
+                            continue
+                    row = slot * nd + i
+                    a[k - 1, row] = n @ J
+                    # n . (p + J (x - xbar)) >= n . q + r_need
+                    b[k - 1, row] = n @ q + r_need - n @ p + a[k - 1, row] @ lin[k - 1]
+        return a, b
+
+    def _corridor(self, s_arr, rel, boxes, sides):
+        lane = (self.lane_half if self.lane_half is not None else 1e3) - self.half_width
+        lo, hi = self._lo, self._hi
+        lo[:] = -lane
+        hi[:] = lane
+        a, b = self._a, self._b
+        a[:] = 0.0
+        b[:] = -np.inf
+        m = self.config.margin_m
+        for k in range(1, self.N + 1):
+            sk = s_arr[k]
+            for j in rel:
+                box = boxes[j][k]
+                if not (box.s_lo - m - self.half_length <= sk <= box.s_hi + m + self.half_length):
+                    continue
+                if sides[j] == SIDE_LEFT:
+                    lo[k - 1] = max(lo[k - 1], box.e_hi + m + self.half_width)
+                elif sides[j] == SIDE_RIGHT:
+                    hi[k - 1] = min(hi[k - 1], box.e_lo - m - self.half_width)
+            for slot, j in enumerate(rel):
+                box = boxes[j][k]
+                if sides[j] != SIDE_BLOCKED:
+                    continue
+                # stop before it: t . p <= t . p_path(s_lo) - margin - half length
+                h = float(self.path.heading(box.s_lo))
+                t = np.array([math.cos(h), math.sin(h)])
+                a[k - 1, slot, :2] = -t
+                b[k - 1, slot] = -(t @ self.path.position(box.s_lo)) + m + self.half_length
+        # keep the tube non-empty: if the bounds cross, centre them (the slack handles the rest)
+        bad = lo > hi
+        mid = 0.5 * (lo + hi)
+        lo[bad] = hi[bad] = mid[bad]
+        return lo, hi, a, b
+
+    def _cost(self, t_s, Xlin, rel, boxes):
+        cfg = self.config
+        H, g = self._H, self._g
+        H[:] = 0.0
+        g[:] = 0.0
+        lin = Xlin[1:, :2]
+        w = cfg.weight
+        Sinv_of = {}
+        for j in rel:  # Sigma aligned with the path at the obstacle (sx along, sy across)
+            h = float(self.path.heading(boxes[j][0].s_ref))
+            Rm = np.array([[math.cos(h), -math.sin(h)], [math.sin(h), math.cos(h)]])
+            Sinv_of[j] = Rm @ self._Sinv_local @ Rm.T
+        for k in range(1, self.N + 1):
+            p = lin[k - 1]
+            for j in rel:
+                ob = self.obstacles[j]
+                ox, oy, _ = ob.pose_at(t_s + k * self.dt_s)
+                d = p - np.array([ox, oy])
+                if cfg.formulation == "potential":
+                    den = d @ d + cfg.epsilon_m2
+                    grad = -2.0 * w * d / den**2
+                    hess = -2.0 * w / den**2 * np.eye(2) + 8.0 * w * np.outer(d, d) / den**3
+                else:
+                    Sinv = Sinv_of[j]
+                    val = w * math.exp(-0.5 * d @ Sinv @ d)
+                    grad = -val * (Sinv @ d)
+                    hess = val * (np.outer(Sinv @ d, Sinv @ d) - Sinv)
+                ev, V = np.linalg.eigh(hess)
+                hp = (V * np.maximum(ev, 0.0)) @ V.T
+                H[k - 1] += hp
+                g[k - 1] += grad - hp @ p
+        return H, g
+
+    def _detour(self, s_arr, boxes, sides):
+        """The paper's trapezoidal detour: the reference shifts sideways by the room each obstacle
+        needs, ramping over ``detour_ramp_m`` before and after it."""
+        e = self._e_ref
+        e[:] = 0.0
+        ramp = self.config.detour_ramp_m
+        for j, bx in boxes.items():
+            side = sides[j]
+            if side == SIDE_BLOCKED:
+                continue
+            box = bx[0]
+            shift = (box.e_hi + self.half_width + 2 * self.config.margin_m) if side == SIDE_LEFT else (box.e_lo - self.half_width - 2 * self.config.margin_m)
+            lo_s, hi_s = box.s_lo - self.half_length, box.s_hi + self.half_length
+            f = np.clip(np.minimum((s_arr - (lo_s - ramp)) / max(ramp, 1e-9), ((hi_s + ramp) - s_arr) / max(ramp, 1e-9)), 0.0, 1.0)
+            cand = shift * f
+            e[:] = np.where(np.abs(cand) > np.abs(e), cand, e)
+        return e
