@@ -119,6 +119,8 @@ class LtvMpc:
 
     model : the controller's prediction model (states start with x, y, yaw; a 4th state is the
     speed [m/s]); the QP is built once here and only updated in place in :meth:`step`.
+    obstacles / avoidance : the obstacles and how they enter the problem (see ocp.avoidance);
+    footprint : the vehicle body; lane_margin_m : extra room [m] kept between body and lane edge.
     """
 
     name = "ltv-mpc"
@@ -133,6 +135,7 @@ class LtvMpc:
         obstacles: tuple[Obstacle, ...] = (),
         avoidance: AvoidanceConfig | None = None,
         footprint: Footprint = Footprint(),
+        lane_margin_m: float = 0.05,
     ):
         if (problem.nx, problem.nu) != (model.nx, model.nu):
             raise ValueError(
@@ -156,7 +159,7 @@ class LtvMpc:
                               position_cost=avoidance.uses_cost)
             self.problem = problem
             self.avoidance = Avoidance(avoidance, list(obstacles), path, footprint, problem.N, problem.dt_s,
-                                       problem.lane_half_width_m)
+                                       problem.lane_half_width_m, lane_margin_m)
         self.qp = LtvQp(problem)
         self.backend = OsqpBackend(self.qp, solver_settings)
         N, nx, nu = self.N, self.nx, self.nu
@@ -169,9 +172,12 @@ class LtvMpc:
         self._lane_n = np.zeros((N, 2))
         self._lane_b = np.zeros(N)
         self._Xlin = np.zeros((N + 1, nx))
-        # the lane bounds the centre of gravity so that the body (half its width) stays inside
+        # the lane bounds the centre of gravity so that the body (half its width, plus a margin
+        # for the corners swinging out when the car is yawed) stays inside
+        if not (math.isfinite(lane_margin_m) and lane_margin_m >= 0):
+            raise ValueError(f"lane_margin_m must be >= 0, got {lane_margin_m}")
         if problem.lane_half_width_m is not None:
-            lim = max(problem.lane_half_width_m - 0.5 * footprint.width_m, 0.0)
+            lim = max(problem.lane_half_width_m - 0.5 * footprint.width_m - lane_margin_m, 0.0)
             self._lane_lo = np.full(N, -lim)
             self._lane_hi = np.full(N, lim)
         else:

@@ -152,13 +152,14 @@ class Avoidance:
     """Builds the obstacle terms of each step for one controller (sizes fixed at construction)."""
 
     def __init__(self, config: AvoidanceConfig, obstacles: list[Obstacle], path: Path, footprint: Footprint,
-                 N: int, dt_s: float, lane_half_width_m: float | None):
+                 N: int, dt_s: float, lane_half_width_m: float | None, lane_margin_m: float = 0.0):
         self.config = config
         self.obstacles = list(obstacles)
         self.path = path
         self.footprint = footprint
         self.N, self.dt_s = N, dt_s
         self.lane_half = lane_half_width_m
+        self.lane_margin = lane_margin_m
         self.M = config.rows_per_step(footprint)
         self.offsets = footprint.disc_offsets_m
         self.r_disc = footprint.disc_radius_m
@@ -189,7 +190,7 @@ class Avoidance:
         return [j for _, j in d[: self.config.max_obstacles]]
 
     def _choose_side(self, j: int, box: FrenetBox, memory: AvoidanceMemory) -> int:
-        needed = self.half_width + self.config.margin_m
+        needed = self.half_width + self.config.margin_m + self.lane_margin
         lane = self.lane_half if self.lane_half is not None else np.inf
         room_left = lane - box.e_hi
         room_right = lane + box.e_lo
@@ -269,7 +270,7 @@ class Avoidance:
         return a, b
 
     def _corridor(self, s_arr, rel, boxes, sides):
-        lane = (self.lane_half if self.lane_half is not None else 1e3) - self.half_width
+        lane = (self.lane_half if self.lane_half is not None else 1e3) - self.half_width - self.lane_margin
         lo, hi = self._lo, self._hi
         lo[:] = -lane
         hi[:] = lane
@@ -352,3 +353,17 @@ class Avoidance:
             cand = shift * f
             e[:] = np.where(np.abs(cand) > np.abs(e), cand, e)
         return e
+
+
+def obstacle_cost(config: AvoidanceConfig, dx: np.ndarray, dy: np.ndarray, heading_rad: float = 0.0) -> np.ndarray:
+    """The potential (eq. 55) or Gaussian (eq. 56) cost at offsets (dx, dy) [m] from an
+    obstacle's reference point, Sigma aligned with ``heading_rad``; for cost maps."""
+    if config.formulation == "potential":
+        return config.weight / (dx * dx + dy * dy + config.epsilon_m2)
+    if config.formulation != "gaussian":
+        raise ValueError(f"{config.formulation!r} has no cost map (it is a constraint)")
+    c, s = math.cos(heading_rad), math.sin(heading_rad)
+    a = c * dx + s * dy
+    b = -s * dx + c * dy
+    sx, sy = config.sigma_m
+    return config.weight * np.exp(-0.5 * ((a / sx) ** 2 + (b / sy) ** 2))

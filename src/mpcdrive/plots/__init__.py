@@ -1,6 +1,8 @@
 """Figures of closed-loop runs (matplotlib, Agg canvas, no pyplot); read results, never solve."""
 
 from mpcdrive.plots.figures import (
+    plot_clearance,
+    plot_cost_map,
     plot_heading_deviation,
     plot_lateral_deviation,
     plot_overview,
@@ -8,11 +10,14 @@ from mpcdrive.plots.figures import (
     plot_steering,
     plot_steering_comparison,
     plot_trajectory,
+    plot_trajectory_overlay,
     speed_varies,
     write_run_figures,
 )
 
 __all__ = [
+    "plot_clearance",
+    "plot_cost_map",
     "plot_heading_deviation",
     "plot_lateral_deviation",
     "plot_overview",
@@ -20,6 +25,7 @@ __all__ = [
     "plot_steering",
     "plot_steering_comparison",
     "plot_trajectory",
+    "plot_trajectory_overlay",
     "speed_varies",
     "write_run_figures",
 ]

@@ -34,6 +34,9 @@ __all__ = [
     "plot_steering",
     "plot_steering_comparison",
     "plot_trajectory",
+    "plot_clearance",
+    "plot_trajectory_overlay",
+    "plot_cost_map",
     "speed_varies",
     "write_run_figures",
 ]
@@ -134,6 +137,7 @@ def _draw_trajectory(ax, result: SimResult, title: str | None = None, horizons: 
             left, right = _lane_boundaries(path, float(result.lane_half_width_m))
             ax.plot(left[:, 0], left[:, 1], color="k", lw=1.0, ls="--", label="lane boundary")
             ax.plot(right[:, 0], right[:, 1], color="k", lw=1.0, ls="--")
+    _draw_obstacles(ax, result)
     ax.plot(xy[:, 0], xy[:, 1], color=_DRIVEN_COLOR, lw=1.5, label="driven trajectory", zorder=3)
     if xy.shape[0]:
         ax.plot(xy[0, 0], xy[0, 1], "o", color="tab:green", ms=7, label="start", zorder=4)
@@ -144,6 +148,40 @@ def _draw_trajectory(ax, result: SimResult, title: str | None = None, horizons: 
     ax.set_title(title if title is not None else _title("Trajectory", result))
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize="small")
+
+
+def _obstacle_outline(entry: Mapping, pose) -> np.ndarray:
+    """(M, 2) closed outline of a logged obstacle at pose (x, y, yaw)."""
+    x, y, yaw = pose
+    if entry.get("type") == "circle":
+        th = np.linspace(0.0, 2.0 * np.pi, 48)
+        r = float(entry["radius_m"])
+        return np.column_stack([x + r * np.cos(th), y + r * np.sin(th)])
+    p = np.asarray(entry["points"], dtype=float)
+    c, s = np.cos(yaw), np.sin(yaw)
+    w = np.column_stack([x + c * p[:, 0] - s * p[:, 1], y + s * p[:, 0] + c * p[:, 1]])
+    return np.vstack([w, w[:1]])
+
+
+def _draw_obstacles(ax, result: SimResult) -> None:
+    """Obstacles logged in ``result.meta["obstacles"]``: static ones filled, moving ones as
+    outlines at a few times (darker = later) with the path of their reference point."""
+    entries = result.meta.get("obstacles") or []
+    for i, entry in enumerate(entries):
+        poses = np.asarray(entry.get("poses", []), dtype=float)
+        if poses.ndim != 2 or not len(poses):
+            continue
+        label = "obstacle" if i == 0 else None
+        if not entry.get("moving"):
+            o = _obstacle_outline(entry, poses[0])
+            ax.fill(o[:, 0], o[:, 1], color="0.35", alpha=0.8, zorder=2.5, label=label)
+            continue
+        ks = np.unique(np.linspace(0, len(poses) - 1, 6).astype(int))
+        for j, k in enumerate(ks):
+            o = _obstacle_outline(entry, poses[k])
+            ax.plot(o[:, 0], o[:, 1], color="0.2", alpha=0.25 + 0.75 * j / max(len(ks) - 1, 1), lw=1.0,
+                    zorder=2.5, label=label if j == len(ks) - 1 else None)
+        ax.plot(poses[:, 0], poses[:, 1], color="0.4", lw=0.8, ls=":", zorder=2.4)
 
 
 def _draw_lateral(ax, result: SimResult, log_y: bool = False) -> None:
@@ -374,5 +412,72 @@ def write_run_figures(result: SimResult, out_dir: str | os.PathLike) -> list[Pat
     ]
     if _has_accel_input(result) or speed_varies(result):
         paths.append(plot_speed(result, out / "speed.png"))
+    if result.clearance_m is not None:
+        paths.append(plot_clearance(result, out / "clearance.png"))
     paths.append(plot_overview(result, out / "overview.png"))
     return paths
+
+
+def _make_clearance(result: SimResult) -> Figure:
+    fig, axes = _new_figure()
+    ax = axes[0, 0]
+    c = np.asarray(result.clearance_m, dtype=float)
+    ax.plot(_iterations(result), c, color=_DRIVEN_COLOR, lw=1.2, label="footprint-to-obstacle clearance")
+    ax.axhline(0.0, color="k", lw=1.0, ls="--", label="contact")
+    ax.set_xlabel(_ITER_LABEL)
+    ax.set_ylabel("clearance [m]")
+    ax.set_title(_title("Obstacle clearance", result))
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize="small")
+    return fig
+
+
+def plot_clearance(result: SimResult, path: str | os.PathLike) -> Path:
+    """Smallest footprint-to-obstacle distance [m] over iterations (negative = overlap)."""
+    return _save(_make_clearance(result), path)
+
+
+def _make_trajectory_overlay(results: Mapping[str, SimResult], title: str | None = None) -> Figure:
+    fig, axes = _new_figure(size=(8.0, 4.5))
+    ax = axes[0, 0]
+    first = next(iter(results.values()))
+    path = np.asarray(first.path_xy, dtype=float)
+    ax.plot(path[:, 0], path[:, 1], color=_REF_COLOR, lw=1.2, label="reference path")
+    if first.lane_half_width_m is not None and len(path) >= 2:
+        left, right = _lane_boundaries(path, float(first.lane_half_width_m))
+        ax.plot(left[:, 0], left[:, 1], color="k", lw=1.0, ls="--", label="lane boundary")
+        ax.plot(right[:, 0], right[:, 1], color="k", lw=1.0, ls="--")
+    _draw_obstacles(ax, first)
+    for name, r in results.items():
+        ax.plot(r.xy[:, 0], r.xy[:, 1], lw=1.4, label=name)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(title or "Trajectories")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize="small")
+    return fig
+
+
+def plot_trajectory_overlay(results: Mapping[str, SimResult], path: str | os.PathLike,
+                            title: str | None = None) -> Path:
+    """Several runs on the same road overlaid (obstacles and lane from the first)."""
+    return _save(_make_trajectory_overlay(results, title), path)
+
+
+def _make_cost_map(X: np.ndarray, Y: np.ndarray, C: np.ndarray, title: str) -> Figure:
+    fig, axes = _new_figure(size=(7.0, 4.5))
+    ax = axes[0, 0]
+    cs = ax.contourf(X, Y, C, levels=30, cmap="viridis")
+    fig.colorbar(cs, ax=ax, label="obstacle cost [-]")
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(title)
+    return fig
+
+
+def plot_cost_map(X: np.ndarray, Y: np.ndarray, C: np.ndarray, path: str | os.PathLike,
+                  title: str = "Obstacle cost map") -> Path:
+    """Filled contours of an obstacle cost evaluated on a grid (the paper's Fig. 14)."""
+    return _save(_make_cost_map(X, Y, C, title), path)

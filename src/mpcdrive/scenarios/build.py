@@ -136,7 +136,8 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
                          sqp_max_time_s=av.sqp_max_time_s)
     controller = LtvMpc(model, path, problem, config,
                         OsqpSettings(eps_abs=c.osqp_eps, eps_rel=c.osqp_eps, max_iter=c.osqp_max_iter),
-                        obstacles=obstacles, avoidance=avoidance, footprint=footprint)
+                        obstacles=obstacles, avoidance=avoidance, footprint=footprint,
+                        lane_margin_m=spec.road.margin_m if spec.road is not None else 0.0)
     plant = Plant(model, spec.plant.integrator, spec.plant.substeps)
     return Experiment(
         spec=spec,

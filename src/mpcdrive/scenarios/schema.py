@@ -146,9 +146,10 @@ class InitialState(_Strict):
 
 
 class RoadSpec(_Strict):
-    """A lane centred on the reference path."""
+    """A lane centred on the reference path; the controller keeps the body ``margin_m`` inside it."""
 
     lane_width_m: Positive
+    margin_m: NonNeg = 0.05
 
 
 class ControllerSpec(_Strict):
