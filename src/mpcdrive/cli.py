@@ -129,10 +129,10 @@ def reproduce(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
 ) -> None:
     """Run every paper experiment; write DIR/<id>/, DIR/metrics.json and DIR/report.md."""
-    from .experiments import PAPER_EXPERIMENTS, PAPER_VALUES, STEERING_COMPARISONS
+    from .experiments import PAPER_EXPERIMENTS, PAPER_VALUES, STEERING_COMPARISONS, TRAJECTORY_OVERLAYS
     from .io import write_json
     from .io.atomic import atomic_output_dir
-    from .plots import plot_steering_comparison
+    from .plots import plot_steering_comparison, plot_trajectory_overlay
     from .report import ReportEntry, write_reproduce_report
 
     ids = list(PAPER_EXPERIMENTS)
@@ -160,9 +160,37 @@ def reproduce(
                                                title=f"Steering: {a} vs {b}")
                 entries.append(ReportEntry(f"{name} comparison", f"steering of {a} and {b} overlaid",
                                            {}, [Path(fig).name]))
+        for name, ids_ in TRAJECTORY_OVERLAYS.items():
+            have = {i: results[i] for i in ids_ if i in results}
+            if len(have) >= 2:
+                fig = plot_trajectory_overlay(have, tmp / f"trajectories_{name}.png",
+                                              title=f"Trajectories: {', '.join(have)}")
+                entries.append(ReportEntry(f"{name} trajectories", "trajectories overlaid", {}, [Path(fig).name]))
+        if "paper-exp5-gaussian" in results:
+            fig = _gaussian_cost_map(specs, tmp / "gaussian_cost_map.png")
+            entries.append(ReportEntry("Gaussian cost map", "the Gaussian obstacle cost of paper-exp5-gaussian "
+                                       "(the paper's Fig. 14)", {}, [Path(fig).name]))
         write_json(tmp / "metrics.json", all_metrics)
         write_reproduce_report(tmp, entries, PAPER_VALUES)
     typer.echo(f"{len(specs)} experiments in {time.perf_counter() - t0:.1f} s; report: {out_dir / 'report.md'}")
+
+
+def _gaussian_cost_map(specs, path: Path):
+    """The paper's Fig. 14: the Gaussian obstacle cost around paper-exp5-gaussian's obstacle."""
+    import numpy as np
+
+    from .ocp.avoidance import obstacle_cost
+    from .plots import plot_cost_map
+    from .scenarios import build_experiment
+
+    spec = next(s for s in specs if s.id == "paper-exp5-gaussian")
+    exp = build_experiment(spec)
+    cfg = exp.controller.avoidance.config
+    ob = exp.obstacles[0]
+    ox, oy, _ = ob.pose
+    X, Y = np.meshgrid(np.linspace(ox - 2, ox + 2, 161), np.linspace(oy - 1.5, oy + 1.5, 121))
+    C = obstacle_cost(cfg, X - ox, Y - oy, float(exp.path.heading(exp.path.project([ox, oy])[0])))
+    return plot_cost_map(X, Y, C, path, title=f"Gaussian cost map, sigma = {cfg.sigma_m} m, w = {cfg.weight}")
 
 
 @app.command()

@@ -14,7 +14,21 @@ PAPER_EXPERIMENTS: tuple[str, ...] = (
     "paper-disturbance-v1",
     "paper-disturbance-v4",
     "paper-smoothing",
+    "paper-exp5-hard",
+    "paper-exp5-potential",
+    "paper-exp5-gaussian",
+    "paper-exp5-corridor",
 )
+
+#: obstacle scenarios beyond the paper, run with every formulation by ``compare-avoidance``
+AVOIDANCE_SCENARIOS: tuple[str, ...] = (
+    "paper-exp5-hard",
+    "obstacle-slalom",
+    "obstacle-overtake",
+    "obstacle-crossing",
+    "obstacle-blocked",
+)
+FORMULATIONS: tuple[str, ...] = ("hard", "corridor", "potential", "gaussian")
 
 #: per experiment: (quantity, what the paper shows, metrics key of ours)
 PAPER_VALUES: dict[str, list[tuple[str, str, str]]] = {
@@ -39,6 +53,19 @@ PAPER_VALUES: dict[str, list[tuple[str, str, str]]] = {
     "paper-disturbance-v4": [
         ("max |lateral error| [m]", "below 4.5e-4, tracked accurately (Figs. 10, 23)", "max_abs_lateral_error_m"),
     ],
+    "paper-exp5-hard": [
+        ("min clearance [m]", "obstacle avoided, no clearance figure given (Fig. 13)", "min_obstacle_clearance_m"),
+        ("max |steering| [rad]", "harsh steering near the obstacle, up to about 50 deg, 0.87 (Fig. 21)", "max_abs_steer_rad"),
+    ],
+    "paper-exp5-potential": [
+        ("min clearance [m]", "could not be implemented in YALMIP", "min_obstacle_clearance_m"),
+    ],
+    "paper-exp5-gaussian": [
+        ("min clearance [m]", "could not be implemented in YALMIP (cost map only, Fig. 14)", "min_obstacle_clearance_m"),
+    ],
+    "paper-exp5-corridor": [
+        ("min clearance [m]", "future work ('safe driving envelopes')", "min_obstacle_clearance_m"),
+    ],
     "paper-smoothing": [
         ("max |steering| [rad]", "smoother steering than without Rc (Fig. 12)", "max_abs_steer_rad"),
         ("steering total variation [rad]", "reduced (Fig. 12)", "steer_total_variation_rad"),
@@ -48,4 +75,9 @@ PAPER_VALUES: dict[str, list[tuple[str, str, str]]] = {
 #: pairs of runs whose steering traces are overlaid in the report (the paper's Fig. 12)
 STEERING_COMPARISONS: dict[str, tuple[str, str]] = {
     "smoothing": ("paper-exp2", "paper-smoothing"),
+}
+
+#: runs whose trajectories are overlaid in the report
+TRAJECTORY_OVERLAYS: dict[str, tuple[str, ...]] = {
+    "exp5": ("paper-exp5-hard", "paper-exp5-corridor", "paper-exp5-potential", "paper-exp5-gaussian"),
 }

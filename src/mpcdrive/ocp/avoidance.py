@@ -28,8 +28,8 @@ import numpy as np
 
 from ..paths.base import Path
 from ..scene.footprint import Footprint
-from ..scene.geometry import point_shape
-from ..scene.obstacles import Obstacle, WorldCircle
+from ..scene.geometry import point_shape, points_polygon
+from ..scene.obstacles import Circle, Obstacle, WorldCircle
 
 Formulation = Literal["hard", "corridor", "potential", "gaussian"]
 SIDE_LEFT, SIDE_RIGHT, SIDE_BLOCKED = 1, -1, 0
@@ -204,69 +204,100 @@ class Avoidance:
         return SIDE_LEFT if room_left >= room_right else SIDE_RIGHT
 
     # -- one step ---------------------------------------------------------------------
+    def _track(self, j: int, t_s: float, s_arr: np.ndarray):
+        """Obstacle j over the horizon: Frenet boxes (N+1) and centres (N+1, 2); a static
+        obstacle is projected once."""
+        ob = self.obstacles[j]
+        times = t_s + self.dt_s * np.arange(self.N + 1)
+        centers = np.array([ob.pose_at(t)[:2] for t in times])
+        if ob.moving:
+            boxes = [frenet_box(self.path, ob.at(t), s_arr[k]) for k, t in enumerate(times)]
+        else:
+            boxes = [frenet_box(self.path, ob.at(t_s), s_arr[0])] * (self.N + 1)
+        return boxes, centers, times
+
     def terms(self, t_s: float, x: np.ndarray, Xlin: np.ndarray, s_arr: np.ndarray, memory: AvoidanceMemory) -> AvoidanceTerms:
         """Obstacle terms for the horizon starting at time ``t_s`` [s].
 
         x : (nx,) measured state; Xlin : (N+1, nx) linearization trajectory (row k for x_k);
         s_arr : (N+1,) horizon reference arc lengths [m]; memory : passing sides, updated."""
-        cfg, N = self.config, self.N
+        cfg = self.config
         rel = self._relevant(t_s, x[:2])
         sides: dict[int, int] = {}
         boxes: dict[int, list[FrenetBox]] = {}
+        centers: dict[int, np.ndarray] = {}
+        times = None
         for j in rel:
-            ob = self.obstacles[j]
-            bx = [frenet_box(self.path, ob.at(t_s + k * self.dt_s), s_arr[k]) for k in range(N + 1)]
-            boxes[j] = bx
-            sides[j] = self._choose_side(j, bx[0] if not ob.moving else min(bx, key=lambda b: abs(b.s_ref - s_arr[0])), memory)
+            boxes[j], centers[j], times = self._track(j, t_s, s_arr)
+            bx = boxes[j]
+            ref_box = bx[0] if not self.obstacles[j].moving else min(bx, key=lambda b: abs(b.s_ref - s_arr[0]))
+            sides[j] = self._choose_side(j, ref_box, memory)
         memory.sides.update(sides)
         rows_a = rows_b = lo = hi = H = g = e_ref = None
         if cfg.detour == "trapezoid":
             e_ref = self._detour(s_arr, boxes, sides)
         if cfg.formulation == "hard":
-            rows_a, rows_b = self._hard_rows(t_s, Xlin, s_arr, rel, boxes, sides)
+            rows_a, rows_b = self._hard_rows(Xlin, s_arr, rel, boxes, centers, times, sides)
         elif cfg.formulation == "corridor":
             lo, hi, rows_a, rows_b = self._corridor(s_arr, rel, boxes, sides)
         else:
-            H, g = self._cost(t_s, Xlin, rel, boxes)
+            H, g = self._cost(Xlin, rel, boxes, centers)
         return AvoidanceTerms(rows_a, rows_b, lo, hi, H, g, e_ref, sides)
 
-    def _hard_rows(self, t_s, Xlin, s_arr, rel, boxes, sides):
+    def _nearest(self, P: np.ndarray, j: int, centers: np.ndarray, times) -> tuple[np.ndarray, np.ndarray]:
+        """Signed distances (K,) and nearest boundary points (K, 2) of points P (K, 2) to obstacle
+        j at the matching horizon times (rows 1..N)."""
+        ob = self.obstacles[j]
+        if isinstance(ob.shape, Circle):
+            C = centers[1:]
+            v = P - C
+            n = np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-12)
+            return n - ob.shape.radius_m, C + ob.shape.radius_m * v / n[:, None]
+        if not ob.moving:
+            return points_polygon(P, ob.at(times[0]).points)
+        out = [point_shape(P[k], ob.at(times[k + 1])) for k in range(len(P))]
+        return np.array([d for d, _ in out]), np.array([q for _, q in out])
+
+    def _hard_rows(self, Xlin, s_arr, rel, boxes, centers, times, sides):
         a, b = self._a, self._b
         a[:] = 0.0
         b[:] = -np.inf
         lin = Xlin[1:, :3]
+        c, s = np.cos(lin[:, 2]), np.sin(lin[:, 2])
         nd = len(self.offsets)
         r_need = self.r_disc + self.config.margin_m
-        for k in range(1, self.N + 1):
-            xk, yk, psik = lin[k - 1]
-            c, s = math.cos(psik), math.sin(psik)
-            for slot, j in enumerate(rel):
-                box = boxes[j][k]
-                shape = self.obstacles[j].at(t_s + k * self.dt_s)
-                side = sides[j]
-                for i, o in enumerate(self.offsets):
-                    p = np.array([xk + o * c, yk + o * s])
-                    J = np.array([[1.0, 0.0, -o * s], [0.0, 1.0, o * c]])
-                    s_disc = s_arr[k] + o
-                    lateral = side != SIDE_BLOCKED and box.s_lo - r_need - self.half_length <= s_disc <= box.s_hi + r_need + self.half_length
-                    if lateral:
-                        h = float(self.path.heading(box.s_ref))
-                        n = side * np.array([-math.sin(h), math.cos(h)])
-                        e_edge = box.e_hi if side == SIDE_LEFT else box.e_lo
-                        q = self.path.position(box.s_ref) + np.array([-math.sin(h), math.cos(h)]) * e_edge
-                    else:
-                        dist, q = point_shape(p, shape)
-                        v = p - q
-                        nv = math.hypot(*v)
-                        if nv < 1e-9:
-                            continue
-                        n = v / nv if dist >= 0 else -v / nv
-                        if dist - self.r_disc > self.config.influence_m:
-                            continue
-                    row = slot * nd + i
-                    a[k - 1, row] = n @ J
-                    # n . (p + J (x - xbar)) >= n . q + r_need
-                    b[k - 1, row] = n @ q + r_need - n @ p + a[k - 1, row] @ lin[k - 1]
+        reach = r_need + self.half_length
+        for slot, j in enumerate(rel):
+            side = sides[j]
+            bx = boxes[j][1:]
+            s_lo = np.array([bb.s_lo for bb in bx])
+            s_hi = np.array([bb.s_hi for bb in bx])
+            s_ref = np.array([bb.s_ref for bb in bx])
+            e_edge = np.array([bb.e_hi if side == SIDE_LEFT else bb.e_lo for bb in bx])
+            h = np.asarray(self.path.heading(s_ref), float)
+            nl = np.column_stack([-np.sin(h), np.cos(h)])  # path left normal at the obstacle
+            q_lat = self.path.position(s_ref) + nl * e_edge[:, None]
+            for i, o in enumerate(self.offsets):
+                P = lin[:, :2] + o * np.column_stack([c, s])
+                dist, q = self._nearest(P, j, centers[j], times)
+                v = P - q
+                nv = np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-12)
+                n = v / nv[:, None] * np.where(dist >= 0, 1.0, -1.0)[:, None]
+                active = dist - self.r_disc <= self.config.influence_m
+                s_disc = s_arr[1:] + o
+                lateral = (side != SIDE_BLOCKED) & (s_lo - reach <= s_disc) & (s_disc <= s_hi + reach)
+                n = np.where(lateral[:, None], side * nl, n)
+                q = np.where(lateral[:, None], q_lat, q)
+                active |= lateral
+                row = slot * nd + i
+                # n . (p + J (x - xbar)) >= n . q + r_need, J = d p / d (x, y, yaw)
+                ay = o * (-n[:, 0] * s + n[:, 1] * c)
+                a[:, row, 0] = np.where(active, n[:, 0], 0.0)
+                a[:, row, 1] = np.where(active, n[:, 1], 0.0)
+                a[:, row, 2] = np.where(active, ay, 0.0)
+                rhs = (np.einsum("ki,ki->k", n, q) + r_need - np.einsum("ki,ki->k", n, P)
+                       + n[:, 0] * lin[:, 0] + n[:, 1] * lin[:, 1] + ay * lin[:, 2])
+                b[:, row] = np.where(active, rhs, -np.inf)
         return a, b
 
     def _corridor(self, s_arr, rel, boxes, sides):
@@ -303,37 +334,31 @@ class Avoidance:
         lo[bad] = hi[bad] = mid[bad]
         return lo, hi, a, b
 
-    def _cost(self, t_s, Xlin, rel, boxes):
+    def _cost(self, Xlin, rel, boxes, centers):
         cfg = self.config
         H, g = self._H, self._g
         H[:] = 0.0
         g[:] = 0.0
-        lin = Xlin[1:, :2]
+        p = Xlin[1:, :2]
         w = cfg.weight
-        Sinv_of = {}
-        for j in rel:  # Sigma aligned with the path at the obstacle (sx along, sy across)
-            h = float(self.path.heading(boxes[j][0].s_ref))
-            Rm = np.array([[math.cos(h), -math.sin(h)], [math.sin(h), math.cos(h)]])
-            Sinv_of[j] = Rm @ self._Sinv_local @ Rm.T
-        for k in range(1, self.N + 1):
-            p = lin[k - 1]
-            for j in rel:
-                ob = self.obstacles[j]
-                ox, oy, _ = ob.pose_at(t_s + k * self.dt_s)
-                d = p - np.array([ox, oy])
-                if cfg.formulation == "potential":
-                    den = d @ d + cfg.epsilon_m2
-                    grad = -2.0 * w * d / den**2
-                    hess = -2.0 * w / den**2 * np.eye(2) + 8.0 * w * np.outer(d, d) / den**3
-                else:
-                    Sinv = Sinv_of[j]
-                    val = w * math.exp(-0.5 * d @ Sinv @ d)
-                    grad = -val * (Sinv @ d)
-                    hess = val * (np.outer(Sinv @ d, Sinv @ d) - Sinv)
-                ev, V = np.linalg.eigh(hess)
-                hp = (V * np.maximum(ev, 0.0)) @ V.T
-                H[k - 1] += hp
-                g[k - 1] += grad - hp @ p
+        for j in rel:
+            d = p - centers[j][1:]
+            if cfg.formulation == "potential":
+                den = np.einsum("ki,ki->k", d, d) + cfg.epsilon_m2
+                grad = -2.0 * w * d / den[:, None] ** 2
+                hess = (-2.0 * w / den**2)[:, None, None] * np.eye(2) + 8.0 * w * np.einsum("ki,kj->kij", d, d) / den[:, None, None] ** 3
+            else:  # Sigma aligned with the path at the obstacle (sx along, sy across)
+                hd = float(self.path.heading(boxes[j][0].s_ref))
+                Rm = np.array([[math.cos(hd), -math.sin(hd)], [math.sin(hd), math.cos(hd)]])
+                Sinv = Rm @ self._Sinv_local @ Rm.T
+                Sd = d @ Sinv
+                val = w * np.exp(-0.5 * np.einsum("ki,ki->k", d, Sd))
+                grad = -val[:, None] * Sd
+                hess = val[:, None, None] * (np.einsum("ki,kj->kij", Sd, Sd) - Sinv)
+            ev, V = np.linalg.eigh(hess)
+            hp = np.einsum("kij,kj,klj->kil", V, np.maximum(ev, 0.0), V)
+            H += hp
+            g += grad - np.einsum("kij,kj->ki", hp, p)
         return H, g
 
     def _detour(self, s_arr, boxes, sides):

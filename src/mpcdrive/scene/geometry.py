@@ -21,6 +21,22 @@ def point_polygon(p: np.ndarray, poly: np.ndarray) -> tuple[float, np.ndarray]:
     return (-float(dist[j]) if inside else float(dist[j])), q[j]
 
 
+def points_polygon(P: np.ndarray, poly: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vectorized :func:`point_polygon` for points P (K, 2): distances (K,), nearest points (K, 2)."""
+    a = poly[None, :, :]
+    d = (np.roll(poly, -1, axis=0) - poly)[None, :, :]
+    rel = P[:, None, :] - a
+    t = np.clip(np.einsum("kmi,kmi->km", rel, np.broadcast_to(d, rel.shape)) / np.einsum("mi,mi->m", d[0], d[0]), 0.0, 1.0)
+    q = a + t[..., None] * d
+    diff = P[:, None, :] - q
+    dist = np.hypot(diff[..., 0], diff[..., 1])
+    j = np.argmin(dist, axis=1)
+    k = np.arange(len(P))
+    cross = d[..., 0] * rel[..., 1] - d[..., 1] * rel[..., 0]
+    inside = np.all(cross >= 0.0, axis=1)
+    return np.where(inside, -dist[k, j], dist[k, j]), q[k, j]
+
+
 def point_shape(p: np.ndarray, shape) -> tuple[float, np.ndarray]:
     """Signed distance [m] from point p to a world shape, and the nearest boundary point."""
     if isinstance(shape, WorldCircle):
