@@ -3,7 +3,9 @@
 * ``cvxpy_rebuild``: the PythonRobotics style -- the QP is written in cvxpy and rebuilt from
   scratch every step (same references, linearization and constraints as mpcdrive's QP).
 * ``casadi_ipopt``: CasADi Opti + IPOPT on the nonlinear model (RK4 of the same equations),
-  the problem built once with parameters and warm-started each step.
+  the problem built once with parameters and warm-started each step; with a Gaussian or
+  potential obstacle cost and a lane, the same non-convex cost and the same soft lane bound, so
+  it is also the reference NLP the SQP is checked against.
 
 Both reuse :meth:`LtvMpc.prepare` so references and linearization are identical to ours and only
 the problem building and solving differ. Optional: needs the ``bench`` extra.
@@ -16,7 +18,6 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ..control.mpc import LtvMpc
 from ..types import STATUS_FAILED, STATUS_OK, SolveResult
 from .problems import BenchProblem
 
@@ -28,7 +29,7 @@ class CvxpyRebuildMpc:
         import cvxpy as cp
 
         self.cp = cp
-        self.core = LtvMpc(prob.model, prob.path, prob.problem, prob.config)
+        self.core = prob.controller()
         self.nx, self.nu, self.N = self.core.nx, self.core.nu, self.core.N
 
     def initial_warm(self, x0):
@@ -81,8 +82,8 @@ class CasadiIpoptMpc:
     def __init__(self, prob: BenchProblem):
         import casadi as ca
 
-        self.core = LtvMpc(prob.model, prob.path, prob.problem, prob.config)
-        core, pb = self.core, prob.problem
+        self.core = prob.controller()
+        core, pb = self.core, self.core.problem
         self.nx, self.nu, self.N = core.nx, core.nu, core.N
         N, nx, nu, dt = self.N, self.nx, self.nu, pb.dt_s
         ns = SimpleNamespace(cos=ca.cos, sin=ca.sin, tan=ca.tan, arctan=ca.atan)
@@ -120,8 +121,36 @@ class CasadiIpoptMpc:
                     opti.subject_to(X[i, k + 1] >= pb.x_min[i])
                 if np.isfinite(pb.x_max[i]):
                     opti.subject_to(X[i, k + 1] <= pb.x_max[i])
+        # soft lane bound on the centre of gravity, as in the QP: n_k . (p_k - c_k) in [lo, hi] +- eps
+        self.lane_n = self.lane_b = None
+        if core.qp.lane:
+            eps = opti.variable(N)
+            self.lane_n = opti.parameter(2, N)
+            self.lane_b = opti.parameter(N)
+            opti.subject_to(eps >= 0)
+            for k in range(N):
+                e = ca.dot(self.lane_n[:, k], X[:2, k + 1]) - self.lane_b[k]
+                opti.subject_to(e <= core._lane_hi[k] + eps[k])
+                opti.subject_to(e >= core._lane_lo[k] - eps[k])
+                cost += pb.lane_slack_weight * eps[k] ** 2 + pb.lane_slack_weight_l1 * eps[k]
+        # non-convex obstacle cost on the predicted centre of gravity
+        self.obs_c = []
+        av = core.avoidance
+        if av is not None and av.config.uses_cost:
+            w = av.config.weight
+            for ob in av.obstacles:
+                c = opti.parameter(2, N)
+                self.obs_c.append((ob, c))
+                h = float(core.path.heading(core.path.project(np.array(ob.pose[:2]))[0]))
+                Sinv = av.sigma_inv(h)
+                for k in range(N):
+                    d = X[:2, k + 1] - c[:, k]
+                    if av.config.formulation == "gaussian":
+                        cost += w * ca.exp(-0.5 * ca.mtimes([d.T, Sinv, d]))
+                    else:
+                        cost += w / (ca.dot(d, d) + av.config.epsilon_m2)
         opti.minimize(cost)
-        opti.solver("ipopt", {"print_time": False}, {"print_level": 0, "sb": "yes", "max_iter": 200})
+        opti.solver("ipopt", {"print_time": False}, {"print_level": 0, "sb": "yes", "max_iter": 500})
         self.opti, self.X, self.U, self.x0, self.xref, self.uref, self.uprev = opti, X, U, x0, xref, uref, uprev
 
     def initial_warm(self, x0):
@@ -135,13 +164,19 @@ class CasadiIpoptMpc:
         opti.set_value(self.xref, d.xref.T)
         opti.set_value(self.uref, d.uref.T)
         opti.set_value(self.uprev, warm.u_prev)
+        if self.lane_n is not None:
+            opti.set_value(self.lane_n, d.lane_normal.T)
+            opti.set_value(self.lane_b, d.lane_offset)
+        for ob, c in self.obs_c:
+            opti.set_value(c, np.array([ob.pose_at(warm.t_s + (k + 1) * self.core.dt_s)[:2] for k in range(self.N)]).T)
         opti.set_initial(self.X, np.vstack([d.Xbar, d.Fbar[-1:]]).T)
         opti.set_initial(self.U, d.Ubar.T)
         try:
             sol = opti.solve()
             Xv = np.asarray(sol.value(self.X)).reshape(self.nx, -1).T
             Uv = np.asarray(sol.value(self.U)).reshape(self.nu, -1).T
-            res = SolveResult(STATUS_OK, Xv, Uv, float(sol.value(opti.f)), 0, time.perf_counter() - t0)
+            res = SolveResult(STATUS_OK, Xv, Uv, float(sol.value(opti.f)),
+                              int(sol.stats()["iter_count"]), time.perf_counter() - t0)
         except RuntimeError:
             nan = float("nan")
             res = SolveResult(STATUS_FAILED, np.full((self.N + 1, self.nx), nan), np.full((self.N, self.nu), nan),
@@ -149,13 +184,15 @@ class CasadiIpoptMpc:
         return self.core.finish(d, warm, res, t0)
 
 
-def available_baselines() -> dict:
-    """Baseline factories whose packages are installed."""
+def available_baselines(prob: BenchProblem | None = None) -> dict:
+    """Baseline factories whose packages are installed (the cvxpy rebuild only for problems
+    without obstacles: it is the convex LTV QP)."""
     out = {}
     try:
         import cvxpy  # noqa: F401
 
-        out["cvxpy_rebuild"] = CvxpyRebuildMpc
+        if prob is None or not prob.obstacles:
+            out["cvxpy_rebuild"] = CvxpyRebuildMpc
     except ImportError:
         pass
     try:

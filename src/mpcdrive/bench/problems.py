@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..control.mpc import MpcConfig
+from ..control.mpc import LtvMpc, MpcConfig
+from ..ocp.avoidance import AvoidanceConfig
+from ..scene import Circle, Footprint, Obstacle
 from ..models.kinematic import KinematicBicycle3, KinematicBicycle4
 from ..ocp.problem import MpcProblem
 from ..paths import CirclePath, Path, StraightPath
@@ -25,6 +27,15 @@ class BenchProblem:
     config: MpcConfig
     x0: np.ndarray
     dt_s: float = 0.01
+    obstacles: tuple = ()
+    avoidance: AvoidanceConfig | None = None
+    footprint: Footprint = Footprint()
+
+    def controller(self, **config_changes) -> LtvMpc:
+        """mpcdrive's controller for this problem (config fields may be overridden)."""
+        cfg = replace(self.config, **config_changes) if config_changes else self.config
+        return LtvMpc(self.model, self.path, self.problem, cfg, obstacles=self.obstacles,
+                      avoidance=self.avoidance, footprint=self.footprint)
 
 
 def p1() -> BenchProblem:
@@ -51,4 +62,17 @@ def p2() -> BenchProblem:
                         np.array([0.0, 1.6, math.pi, 1.0]))
 
 
-PROBLEMS = {"P1": p1, "P2": p2}
+def p3() -> BenchProblem:
+    """P3: P1 plus a static obstacle (r = 0.25 m) on the path at x = 5 m with the Gaussian cost
+    of eq. 56 (sigma = 0.5 m, weight 10) and lane bounds |y| <= 1.75 m; the non-convex cost is
+    kept (sequential QP), not linearized away."""
+    base = p1()
+    pb = replace(base.problem, lane_half_width_m=1.75)
+    obstacle = Obstacle(Circle(0.25), (5.0, 0.0, 0.0), name="cone")
+    av = AvoidanceConfig("gaussian", weight=10.0, sigma_m=(0.5, 0.5))
+    return BenchProblem("P3", "P1 + obstacle with Gaussian cost, lane |y| <= 1.75 m", base.model,
+                        StraightPath([1.0, 0.0], [11.0, 0.0]), pb, base.config, base.x0,
+                        obstacles=(obstacle,), avoidance=av)
+
+
+PROBLEMS = {"P1": p1, "P2": p2, "P3": p3}

@@ -7,8 +7,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..control.mpc import LtvMpc
 from ..sim.closed_loop import Plant
+from ..scene.geometry import shape_distance
 from .problems import PROBLEMS, BenchProblem
 
 WARMUP_STEPS = 10
@@ -25,6 +25,7 @@ def time_closed_loop(controller, prob: BenchProblem, steps: int) -> dict:
     times = np.empty(steps)
     ey = np.empty(steps)
     failures = 0
+    min_clear = None
     for k in range(steps):
         t0 = time.perf_counter()
         out = controller.step(x, warm)
@@ -32,6 +33,9 @@ def time_closed_loop(controller, prob: BenchProblem, steps: int) -> dict:
         warm = out.warm
         ey[k] = out.e_y_m
         failures += out.status not in ("ok", "inaccurate")
+        for ob in prob.obstacles:
+            d = shape_distance(prob.footprint.polygon(*x[:3]), ob.at(k * prob.dt_s))
+            min_clear = d if min_clear is None else min(min_clear, d)
         x = plant.step(x, out.u, prob.dt_s)
     t = times[min(WARMUP_STEPS, steps - 1):] * 1e6
     return {
@@ -41,6 +45,7 @@ def time_closed_loop(controller, prob: BenchProblem, steps: int) -> dict:
         "steps": int(steps),
         "rms_lateral_error_m": float(np.sqrt(np.mean(ey ** 2))),
         "solver_failures": int(failures),
+        "min_obstacle_clearance_m": min_clear,
     }
 
 
@@ -52,16 +57,19 @@ def run_bench(names, baselines: bool = False, steps: int = 1000, baseline_steps:
         prob = PROBLEMS[name]()
         res: dict[str, dict] = {}
         log(f"{name}: mpcdrive (LTV-MPC, OSQP), {steps} steps")
-        res["mpcdrive"] = time_closed_loop(LtvMpc(prob.model, prob.path, prob.problem, prob.config), prob, steps)
+        res["mpcdrive"] = time_closed_loop(prob.controller(), prob, steps)
+        if prob.avoidance is not None and prob.avoidance.uses_cost:
+            log(f"{name}: mpcdrive, SQP to convergence (<= 20 QPs, 2 ms cap), {steps} steps")
+            res["mpcdrive_sqp_converged"] = time_closed_loop(
+                prob.controller(sqp_max_iterations=20, sqp_tol=1e-4, sqp_max_time_s=0.002), prob, steps)
         if baselines:
             from .baselines import available_baselines
 
-            for bname, factory in available_baselines().items():
+            for bname, factory in available_baselines(prob).items():
                 log(f"{name}: {bname}, {baseline_steps} steps")
                 res[bname] = time_closed_loop(factory(prob), prob, baseline_steps)
             # our controller over the baselines' step count, for a like-for-like tracking error
-            res["mpcdrive_same_steps"] = time_closed_loop(
-                LtvMpc(prob.model, prob.path, prob.problem, prob.config), prob, baseline_steps)
+            res["mpcdrive_same_steps"] = time_closed_loop(prob.controller(), prob, baseline_steps)
         out[name] = res
     return out
 

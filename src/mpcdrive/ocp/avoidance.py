@@ -244,6 +244,11 @@ class Avoidance:
             H, g = self._cost(Xlin, rel, boxes, centers)
         return AvoidanceTerms(rows_a, rows_b, lo, hi, H, g, e_ref, sides)
 
+    def sigma_inv(self, heading_rad: float) -> np.ndarray:
+        """Sigma^-1 of eq. 56 in the world frame, sx along and sy across the path heading."""
+        Rm = np.array([[math.cos(heading_rad), -math.sin(heading_rad)], [math.sin(heading_rad), math.cos(heading_rad)]])
+        return Rm @ self._Sinv_local @ Rm.T
+
     def _nearest(self, P: np.ndarray, j: int, centers: np.ndarray, times) -> tuple[np.ndarray, np.ndarray]:
         """Signed distances (K,) and nearest boundary points (K, 2) of points P (K, 2) to obstacle
         j at the matching horizon times (rows 1..N)."""
@@ -347,10 +352,8 @@ class Avoidance:
                 den = np.einsum("ki,ki->k", d, d) + cfg.epsilon_m2
                 grad = -2.0 * w * d / den[:, None] ** 2
                 hess = (-2.0 * w / den**2)[:, None, None] * np.eye(2) + 8.0 * w * np.einsum("ki,kj->kij", d, d) / den[:, None, None] ** 3
-            else:  # Sigma aligned with the path at the obstacle (sx along, sy across)
-                hd = float(self.path.heading(boxes[j][0].s_ref))
-                Rm = np.array([[math.cos(hd), -math.sin(hd)], [math.sin(hd), math.cos(hd)]])
-                Sinv = Rm @ self._Sinv_local @ Rm.T
+            else:
+                Sinv = self.sigma_inv(float(self.path.heading(boxes[j][0].s_ref)))
                 Sd = d @ Sinv
                 val = w * np.exp(-0.5 * np.einsum("ki,ki->k", d, Sd))
                 grad = -val[:, None] * Sd
