@@ -125,3 +125,18 @@ def test_usage_errors_are_one_line(tmp_path):
     r = cli("run", "paper-exp1", "--bogus", cwd=tmp_path)
     assert r.returncode == 2
     assert len(r.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_compare_avoidance_table(tmp_path):
+    out = tmp_path / "cmp"
+    r = cli("compare-avoidance", "--out", str(out), "--scenario", "paper-exp5-hard",
+            "--formulation", "hard", "--formulation", "gaussian", "-q")
+    assert r.returncode == 0, r.stderr
+    text = (out / "avoidance.md").read_text()
+    assert "| `paper-exp5-hard` | hard |" in text and "| `paper-exp5-hard` | gaussian |" in text
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["paper-exp5-hard"]["hard"]["collisions"] == 0
+    assert (out / "cost_map_gaussian.png").exists() and (out / "paper-exp5-hard.png").exists()
+    bad = cli("compare-avoidance", "--formulation", "magnets")
+    assert bad.returncode == 2 and "unknown magnets" in bad.stderr

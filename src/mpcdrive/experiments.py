@@ -30,6 +30,14 @@ AVOIDANCE_SCENARIOS: tuple[str, ...] = (
 )
 FORMULATIONS: tuple[str, ...] = ("hard", "corridor", "potential", "gaussian")
 
+#: per formulation, the avoidance settings used by ``compare-avoidance`` (the paper-exp5 tuning)
+FORMULATION_TUNING: dict[str, dict] = {
+    "hard": {"formulation": "hard"},
+    "corridor": {"formulation": "corridor"},
+    "potential": {"formulation": "potential", "weight": 1.0, "epsilon_m2": 0.05},
+    "gaussian": {"formulation": "gaussian", "weight": 3.0, "sigma_m": [0.4, 0.4]},
+}
+
 #: per experiment: (quantity, what the paper shows, metrics key of ours)
 PAPER_VALUES: dict[str, list[tuple[str, str, str]]] = {
     "paper-exp1": [
