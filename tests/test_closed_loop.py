@@ -29,7 +29,11 @@ def run(sid):
 def test_paper_experiment_within_stored_tolerances(sid):
     result, m = run(sid)
     for key, bound in TOL[sid].items():
-        assert m[key[: -len("_max")]] <= bound, f"{sid}: {key[:-4]} = {m[key[:-4]]} > {bound}"
+        name = key[:-4]
+        if key.endswith("_max"):
+            assert m[name] <= bound, f"{sid}: {name} = {m[name]} > {bound}"
+        else:
+            assert key.endswith("_min") and m[name] >= bound, f"{sid}: {name} = {m[name]} < {bound}"
     assert np.all(np.abs(result.steer_rad) <= STEER_BOUND + 1e-9)
     assert all(np.isfinite(result.u).ravel())
     assert m["steps"] == len(result.t_s)
