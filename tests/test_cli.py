@@ -57,6 +57,9 @@ def test_run_writes_the_contract_files(tmp_path):
     assert metrics["steps"] == 30 and metrics["max_lane_excess_m"] == 0.0
     assert (out / "scenario.yaml").read_text().startswith("id: short")
     assert (out / "trajectory.png").stat().st_size > 1000
+    page = (out / "report.html").read_text(encoding="utf-8")  # the interactive report
+    assert page.startswith("<!DOCTYPE html>") and '"steps":30' in page and '"left":[[' in page
+    assert page.count("data:image/png;base64,") == len(list(out.glob("*.png")))
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
@@ -109,6 +112,10 @@ def test_reproduce_subset_writes_report(tmp_path):
     assert "paper-exp3/trajectory.png" in report and "paper" in report
     for sid in metrics:
         assert (out / sid / "trajectory.csv").exists()
+        assert (out / sid / "report.html").exists()
+    page = (out / "report.html").read_text(encoding="utf-8")  # one page, every experiment
+    assert '<select id="experiment">' in page
+    assert all(f'<option value="{sid}">' in page for sid in metrics)
 
 
 def test_bench_json(tmp_path):

@@ -64,10 +64,12 @@ def _load(name: str):
 
 
 def _run_into(spec, out_dir: Path, show_progress: bool):
-    """Run one scenario and write its files into ``out_dir``; returns (result, metrics, figures)."""
+    """Run one scenario and write its files into ``out_dir`` (with the interactive
+    ``report.html``); returns (result, metrics, figures, footprint)."""
     from .io import write_json, write_trajectory_csv
     from .io.atomic import atomic_write_text
     from .plots import write_run_figures
+    from .report import write_run_html
     from .scenarios import build_experiment, dump_scenario, run_experiment
     from .sim import compute_metrics
 
@@ -83,7 +85,9 @@ def _run_into(spec, out_dir: Path, show_progress: bool):
     write_json(out_dir / "metrics.json", metrics)
     atomic_write_text(out_dir / "scenario.yaml", dump_scenario(spec))
     figures = write_run_figures(result, out_dir)
-    return result, metrics, figures
+    write_run_html(out_dir, result, metrics, figures, exp.footprint, run_id=spec.id,
+                   description=spec.description)
+    return result, metrics, figures, exp.footprint
 
 
 def _default_out(stem: str) -> Path:
@@ -112,13 +116,14 @@ def run(
     out: Path | None = typer.Option(None, "--out", help="output directory (default runs/<id>-<timestamp>)"),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
 ) -> None:
-    """Run one scenario; write trajectory.csv, metrics.json, figures and the resolved scenario."""
+    """Run one scenario; write trajectory.csv, metrics.json, figures, the resolved scenario and
+    report.html (an interactive replay)."""
     from .io.atomic import atomic_output_dir
 
     spec = _load(scenario)
     out_dir = out or _default_out(spec.id)
     with atomic_output_dir(out_dir) as tmp:
-        _, metrics, _ = _run_into(spec, tmp, not quiet)
+        _, metrics, _, _ = _run_into(spec, tmp, not quiet)
     typer.echo(_summary_line(spec.id, metrics))
     typer.echo(f"wrote {out_dir}")
 
@@ -129,12 +134,13 @@ def reproduce(
     only: list[str] | None = typer.Option(None, "--only", help="run only these experiment ids"),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
 ) -> None:
-    """Run every paper experiment; write DIR/<id>/, DIR/metrics.json and DIR/report.md."""
+    """Run every paper experiment; write DIR/<id>/, DIR/metrics.json, DIR/report.md and
+    DIR/report.html (every experiment's replay, metrics and figures in one page)."""
     from .experiments import PAPER_EXPERIMENTS, PAPER_VALUES, STEERING_COMPARISONS, TRAJECTORY_OVERLAYS
     from .io import write_json
     from .io.atomic import atomic_output_dir
     from .plots import plot_steering_comparison, plot_trajectory_overlay
-    from .report import ReportEntry, write_reproduce_report
+    from .report import HtmlRun, ReportEntry, write_reproduce_html, write_reproduce_report
 
     ids = list(PAPER_EXPERIMENTS)
     if only:
@@ -144,16 +150,18 @@ def reproduce(
         ids = [i for i in ids if i in only]
     specs = [_load(i) for i in ids]
     out_dir = out or _default_out("reproduce")
-    all_metrics, entries, results = {}, [], {}
+    all_metrics, entries, results, html_runs = {}, [], {}, []
     t0 = time.perf_counter()
     with atomic_output_dir(out_dir) as tmp:
         for n, spec in enumerate(specs, 1):
             typer.echo(f"[{n}/{len(specs)}] {spec.id}", err=True)
-            result, metrics, figures = _run_into(spec, tmp / spec.id, not quiet)
+            result, metrics, figures, footprint = _run_into(spec, tmp / spec.id, not quiet)
             results[spec.id] = result
             all_metrics[spec.id] = metrics
             entries.append(ReportEntry(spec.id, spec.description, metrics,
                                        [f"{spec.id}/{Path(f).name}" for f in figures]))
+            html_runs.append(HtmlRun(spec.id, spec.description, metrics, entries[-1].figures,
+                                     result, footprint))
             typer.echo("  " + _summary_line(spec.id, metrics), err=True)
         for name, (a, b) in STEERING_COMPARISONS.items():
             if a in results and b in results:
@@ -161,19 +169,24 @@ def reproduce(
                                                title=f"Steering: {a} vs {b}")
                 entries.append(ReportEntry(f"{name} comparison", f"steering of {a} and {b} overlaid",
                                            {}, [Path(fig).name]))
+                html_runs.append(HtmlRun(entries[-1].id, entries[-1].description, {}, entries[-1].figures))
         for name, ids_ in TRAJECTORY_OVERLAYS.items():
             have = {i: results[i] for i in ids_ if i in results}
             if len(have) >= 2:
                 fig = plot_trajectory_overlay(have, tmp / f"trajectories_{name}.png",
                                               title=f"Trajectories: {', '.join(have)}")
                 entries.append(ReportEntry(f"{name} trajectories", "trajectories overlaid", {}, [Path(fig).name]))
+                html_runs.append(HtmlRun(entries[-1].id, entries[-1].description, {}, entries[-1].figures))
         if "paper-exp5-gaussian" in results:
             fig = _gaussian_cost_map(specs, tmp / "gaussian_cost_map.png")
             entries.append(ReportEntry("Gaussian cost map", "the Gaussian obstacle cost of paper-exp5-gaussian "
                                        "(the paper's Fig. 14)", {}, [Path(fig).name]))
+            html_runs.append(HtmlRun(entries[-1].id, entries[-1].description, {}, entries[-1].figures))
         write_json(tmp / "metrics.json", all_metrics)
         write_reproduce_report(tmp, entries, PAPER_VALUES)
-    typer.echo(f"{len(specs)} experiments in {time.perf_counter() - t0:.1f} s; report: {out_dir / 'report.md'}")
+        write_reproduce_html(tmp, html_runs, PAPER_VALUES)
+    typer.echo(f"{len(specs)} experiments in {time.perf_counter() - t0:.1f} s; report: "
+               f"{out_dir / 'report.md'}, {out_dir / 'report.html'}")
 
 
 @app.command("compare-avoidance")
@@ -212,7 +225,7 @@ def compare_avoidance(
                 data["id"] = f"{sp.id}--{f}"
                 spec = ScenarioSpec.model_validate(data)
                 typer.echo(f"{sp.id} / {f}", err=True)
-                result, m, _ = _run_into(spec, tmp / sp.id / f, not quiet)
+                result, m, _, _ = _run_into(spec, tmp / sp.id / f, not quiet)
                 runs[f] = result
                 table.setdefault(sp.id, {})[f] = m
                 st = m["solve_time_us"]

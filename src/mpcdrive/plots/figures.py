@@ -150,38 +150,40 @@ def _draw_trajectory(ax, result: SimResult, title: str | None = None, horizons: 
     ax.legend(loc="best", fontsize="small")
 
 
-def _obstacle_outline(entry: Mapping, pose) -> np.ndarray:
-    """(M, 2) closed outline of a logged obstacle at pose (x, y, yaw)."""
-    x, y, yaw = pose
+def _obstacle_outlines(entry: Mapping) -> list[np.ndarray]:
+    """Closed outlines (M, 2) of a logged obstacle, one per logged time (one if static):
+    ``{"type": "circle", "center": [x, y] | (T, 2), "radius_m": r}`` or
+    ``{"type": "polygon", "points": (P, 2) | (T, P, 2)}``."""
     if entry.get("type") == "circle":
+        c = np.atleast_2d(np.asarray(entry["center"], dtype=float))
         th = np.linspace(0.0, 2.0 * np.pi, 48)
         r = float(entry["radius_m"])
-        return np.column_stack([x + r * np.cos(th), y + r * np.sin(th)])
-    p = np.asarray(entry["points"], dtype=float)
-    c, s = np.cos(yaw), np.sin(yaw)
-    w = np.column_stack([x + c * p[:, 0] - s * p[:, 1], y + s * p[:, 0] + c * p[:, 1]])
-    return np.vstack([w, w[:1]])
+        return [np.column_stack([x + r * np.cos(th), y + r * np.sin(th)]) for x, y in c]
+    p = np.asarray(entry.get("points", []), dtype=float)
+    if p.ndim == 2:
+        p = p[None]
+    return [np.vstack([q, q[:1]]) for q in p]
 
 
 def _draw_obstacles(ax, result: SimResult) -> None:
     """Obstacles logged in ``result.meta["obstacles"]``: static ones filled, moving ones as
-    outlines at a few times (darker = later) with the path of their reference point."""
-    entries = result.meta.get("obstacles") or []
-    for i, entry in enumerate(entries):
-        poses = np.asarray(entry.get("poses", []), dtype=float)
-        if poses.ndim != 2 or not len(poses):
+    outlines at a few times (darker = later) with the path of their centre."""
+    for i, entry in enumerate(result.meta.get("obstacles") or []):
+        outlines = _obstacle_outlines(entry)
+        if not outlines:
             continue
         label = "obstacle" if i == 0 else None
-        if not entry.get("moving"):
-            o = _obstacle_outline(entry, poses[0])
+        if len(outlines) == 1:
+            o = outlines[0]
             ax.fill(o[:, 0], o[:, 1], color="0.35", alpha=0.8, zorder=2.5, label=label)
             continue
-        ks = np.unique(np.linspace(0, len(poses) - 1, 6).astype(int))
+        ks = np.unique(np.linspace(0, len(outlines) - 1, 6).astype(int))
         for j, k in enumerate(ks):
-            o = _obstacle_outline(entry, poses[k])
+            o = outlines[k]
             ax.plot(o[:, 0], o[:, 1], color="0.2", alpha=0.25 + 0.75 * j / max(len(ks) - 1, 1), lw=1.0,
                     zorder=2.5, label=label if j == len(ks) - 1 else None)
-        ax.plot(poses[:, 0], poses[:, 1], color="0.4", lw=0.8, ls=":", zorder=2.4)
+        centres = np.array([o[:-1].mean(axis=0) for o in outlines])
+        ax.plot(centres[:, 0], centres[:, 1], color="0.4", lw=0.8, ls=":", zorder=2.4)
 
 
 def _draw_lateral(ax, result: SimResult, log_y: bool = False) -> None:

@@ -134,8 +134,10 @@ def _table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list[str]:
     return lines
 
 
-def _metrics_table(entries: Sequence[ReportEntry]) -> list[str]:
-    entries = [e for e in entries if e.metrics]  # figure-only entries have no row
+def metrics_summary(entries: Sequence[ReportEntry]) -> tuple[list[str], list[list[str]]]:
+    """Header and rows (experiment id first, then formatted values) of the summary table;
+    shared by the Markdown and HTML reports. Figure-only entries have no row."""
+    entries = [e for e in entries if e.metrics]
     has_converged = any("converged_rms_lateral_error_m" in e.metrics for e in entries)
     has_obstacles = any(_num(e.metrics.get("min_obstacle_clearance_m")) is not None
                         for e in entries)
@@ -164,8 +166,13 @@ def _metrics_table(entries: Sequence[ReportEntry]) -> list[str]:
         ("solve p99 [µs]", lambda m: _fmt_us(_lookup(m, "solve_time_us.p99"))),
     ]
     header = ["experiment"] + [c[0] for c in columns]
-    rows = [[f"`{e.id}`"] + [f(e.metrics) for _, f in columns] for e in entries]
-    return _table(header, rows)
+    rows = [[e.id] + [f(e.metrics) for _, f in columns] for e in entries]
+    return header, rows
+
+
+def _metrics_table(entries: Sequence[ReportEntry]) -> list[str]:
+    header, rows = metrics_summary(entries)
+    return _table(header, [[f"`{r[0]}`"] + r[1:] for r in rows])
 
 
 def _ours(metrics: Mapping | None, source) -> str:
@@ -181,16 +188,25 @@ def _ours(metrics: Mapping | None, source) -> str:
     return _fmt(value)
 
 
-def _paper_table(entries: Sequence[ReportEntry],
-                 paper_values: Mapping[str, Sequence[PaperValue]]) -> list[str]:
+def paper_comparison(entries: Sequence[ReportEntry],
+                     paper_values: Mapping[str, Sequence[PaperValue]]
+                     ) -> tuple[list[str], list[list[str]]]:
+    """Header and rows (experiment id, quantity, paper value, ours) of the ours-vs-paper table;
+    ids without an entry read "not run"."""
     by_id = {e.id: e.metrics for e in entries}
     order = [e.id for e in entries if e.id in paper_values]
     order += [i for i in paper_values if i not in by_id]
     rows = []
     for exp_id in order:
         for quantity, paper_text, source in paper_values[exp_id]:
-            rows.append([f"`{exp_id}`", quantity, paper_text, _ours(by_id.get(exp_id), source)])
-    return _table(["experiment", "quantity", "paper", "ours"], rows)
+            rows.append([exp_id, quantity, paper_text, _ours(by_id.get(exp_id), source)])
+    return ["experiment", "quantity", "paper", "ours"], rows
+
+
+def _paper_table(entries: Sequence[ReportEntry],
+                 paper_values: Mapping[str, Sequence[PaperValue]]) -> list[str]:
+    header, rows = paper_comparison(entries, paper_values)
+    return _table(header, [[f"`{r[0]}`"] + r[1:] for r in rows])
 
 
 def _image_link(fig: str) -> str:

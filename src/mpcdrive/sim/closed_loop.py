@@ -199,10 +199,13 @@ def _clearances(X: np.ndarray, T: np.ndarray, obstacles, footprint: Footprint):
         for k in range(K):
             d = shape_distance(footprint.polygon(*X[k, :3]), ob.at(T[k]))
             clear[k] = min(clear[k], d)
-        entry = {"name": ob.name, "moving": ob.moving, "poses": poses.round(4).tolist()}
+        entry = {"name": ob.name, "moving": ob.moving}
         if isinstance(ob.shape, Circle):
-            entry.update(type="circle", radius_m=ob.shape.radius_m)
+            centers = poses[:, :2].round(4)
+            entry.update(type="circle", radius_m=ob.shape.radius_m,
+                         center=centers.tolist() if ob.moving else centers[0].tolist())
         else:
-            entry.update(type="polygon", points=ob.shape.points.round(4).tolist())
+            world = np.array([ob.at(t).points for t in (T if ob.moving else T[:1])]).round(4)
+            entry.update(type="polygon", points=world.tolist() if ob.moving else world[0].tolist())
         logs.append(entry)
     return clear, logs

@@ -1,0 +1,444 @@
+"""Drive highway-env's racetrack (``racetrack-v0``) with mpcdrive's LTV-MPC.
+
+Optional extra ``highway`` (``pip install mpcdrive[highway]``: highway-env, gymnasium). Nothing
+here imports highway-env at module import; the functions take a created environment.
+
+What the adapter does:
+
+* **Road -> path.** The centreline of the lane the ego vehicle is on is sampled from the
+  environment's road network (``lane.position(longitudinal, 0)`` of each ``StraightLane`` /
+  ``CircularLane``), following the successor lanes with the same lane id until the track closes,
+  and fitted with a (lightly smoothed) :class:`~mpcdrive.paths.WaypointPath`. The racetrack's
+  lane pieces overlap or leave small gaps where they join (up to about 1 m); the end of a piece
+  that lies past the start line of the next one is dropped before the fit.
+* **Vehicle -> model.** highway-env's kinematic ``Vehicle`` is a bicycle with the reference
+  point at the centre, ``lf = lr = LENGTH / 2``, steering ``delta`` and acceleration held over
+  the policy period and integrated with Euler steps at the simulation frequency:
+  :class:`~mpcdrive.models.KinematicBicycle4` with those lengths (or
+  :class:`~mpcdrive.models.KinematicBicycle3` at the current speed when the action has no
+  longitudinal part).
+* **Units.** ``ContinuousAction`` maps each action component linearly from [-1, 1] to its
+  range: steering to ``steering_range`` [rad], acceleration to ``acceleration_range``
+  [m/s^2]; :class:`ActionScaling` converts our radians and m/s^2 into that normalized action
+  (order ``[acceleration, steering]`` when both are controlled) and the MPC's input bounds are
+  exactly those ranges, so a command is never clipped by the environment.
+
+TODO(obstacles): other vehicles are not avoided yet -- the controller has no obstacle terms.
+:func:`racetrack_config` therefore sets ``other_vehicles: 0``, and :class:`HighwayEnvMpcDriver`
+refuses an environment with other vehicles on the road. Once obstacles exist, pass the other
+vehicles (position, heading, LENGTH x WIDTH rectangles, predicted at constant speed over the
+horizon) to the controller here.
+
+Example::
+
+    import gymnasium as gym
+    env = gym.make("racetrack-v0", config=racetrack_config())
+    env.reset(seed=0)
+    drive = drive_env(env, HighwayEnvMpcDriver(env), steps=300)
+    print(drive.result.e_y_m.max(), drive.on_road.all())
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..control.mpc import LtvMpc, MpcConfig
+from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams
+from ..ocp.problem import MpcProblem
+from ..paths.waypoints import WaypointPath
+from ..sim.metrics import Footprint
+from ..types import ControlOutput, SimResult
+
+__all__ = [
+    "ActionScaling",
+    "DriverSettings",
+    "HighwayDrive",
+    "HighwayEnvMpcDriver",
+    "drive_env",
+    "lane_centerline",
+    "lane_sequence",
+    "racetrack_config",
+]
+
+#: highway-env's ContinuousAction defaults (used when the env config names no range)
+DEFAULT_STEERING_RANGE_RAD = (-math.pi / 4, math.pi / 4)
+DEFAULT_ACCELERATION_RANGE_MPS2 = (-5.0, 5.0)
+
+
+def racetrack_config(*, longitudinal: bool = True,
+                     steering_range_rad: tuple[float, float] = DEFAULT_STEERING_RANGE_RAD,
+                     acceleration_range_mps2: tuple[float, float] = DEFAULT_ACCELERATION_RANGE_MPS2,
+                     policy_frequency_hz: int = 5, simulation_frequency_hz: int = 15,
+                     duration_s: float = 300.0) -> dict:
+    """Configuration for ``gym.make("racetrack-v0", config=...)``: continuous steering (and
+    acceleration when ``longitudinal``), a cheap kinematics observation (the driver reads the
+    vehicle state itself) and no other vehicles (see the module's TODO).
+
+    ``simulation_frequency_hz`` must be a multiple of ``policy_frequency_hz`` (the environment
+    repeats the action ``simulation / policy`` times)."""
+    for name, rng in (("steering_range_rad", steering_range_rad),
+                      ("acceleration_range_mps2", acceleration_range_mps2)):
+        lo, hi = (float(v) for v in rng)
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise ValueError(f"{name} must be two finite numbers, low < high, got {rng}")
+    if int(policy_frequency_hz) != policy_frequency_hz or policy_frequency_hz < 1:
+        raise ValueError(f"policy_frequency_hz must be a positive integer, got {policy_frequency_hz}")
+    if (int(simulation_frequency_hz) != simulation_frequency_hz
+            or simulation_frequency_hz % policy_frequency_hz):
+        raise ValueError(f"simulation_frequency_hz must be a multiple of policy_frequency_hz "
+                         f"({policy_frequency_hz}), got {simulation_frequency_hz}")
+    if not (math.isfinite(duration_s) and duration_s > 0):
+        raise ValueError(f"duration_s must be positive, got {duration_s}")
+    return {
+        "observation": {"type": "Kinematics"},
+        "action": {
+            "type": "ContinuousAction",
+            "longitudinal": bool(longitudinal),
+            "lateral": True,
+            "steering_range": [float(v) for v in steering_range_rad],
+            "acceleration_range": [float(v) for v in acceleration_range_mps2],
+        },
+        "other_vehicles": 0,  # TODO(obstacles): the controller cannot avoid them yet
+        "policy_frequency": int(policy_frequency_hz),
+        "simulation_frequency": int(simulation_frequency_hz),
+        "duration": float(duration_s),
+    }
+
+
+# --------------------------------------------------------------------------- road -> path
+def lane_sequence(network, start_index) -> tuple[list, bool]:
+    """Lane indices ``(from, to, id)`` followed from ``start_index`` through the road network,
+    keeping the lane id where the next road has it (else the nearest lane of the next road);
+    returns (indices, closed): closed when the sequence comes back to the start."""
+    graph = network.graph
+    try:
+        network.get_lane(start_index)
+    except (KeyError, IndexError, TypeError):
+        raise ValueError(f"lane index {start_index!r} is not in the road network") from None
+    seq, cur = [tuple(start_index)], tuple(start_index)
+    n_lanes = sum(len(lanes) for to in graph.values() for lanes in to.values())
+    for _ in range(n_lanes):
+        _, to, lane_id = cur
+        nexts = graph.get(to, {})
+        if not nexts:
+            return seq, False
+        end = network.get_lane(cur).position(network.get_lane(cur).length, 0.0)
+        best = None
+        for nxt_to, lanes in nexts.items():
+            ids = [lane_id] if lane_id < len(lanes) else range(len(lanes))
+            for j in ids:
+                d = float(np.hypot(*(np.asarray(lanes[j].position(0.0, 0.0)) - end)))
+                if best is None or d < best[0]:
+                    best = (d, (to, nxt_to, j))
+        cur = best[1]
+        if cur == seq[0]:
+            return seq, True
+        if cur in seq:
+            raise ValueError(f"the lanes from {start_index!r} run into a loop that does not "
+                             f"return to the start (at {cur!r})")
+        seq.append(cur)
+    raise ValueError(f"could not follow the lanes from {start_index!r}")
+
+
+def lane_centerline(network, lane_index, *, ds_m: float = 1.0, smoothing_m: float = 0.02
+                    ) -> tuple[WaypointPath, float]:
+    """The centreline of the lane ``lane_index`` and its successors as a path, and the lane
+    half width [m] (the narrowest along the way).
+
+    ds_m : sampling step along each lane [m]; smoothing_m : allowed RMS distance [m] between
+    the fitted spline and the samples (0 interpolates; the default irons out the few-decimetre
+    steps where the racetrack's pieces join without moving the line noticeably).
+    """
+    if not (math.isfinite(ds_m) and ds_m > 0):
+        raise ValueError(f"ds_m must be positive, got {ds_m}")
+    if not (math.isfinite(smoothing_m) and smoothing_m >= 0):
+        raise ValueError(f"smoothing_m must be >= 0, got {smoothing_m}")
+    seq, closed = lane_sequence(network, lane_index)
+    lanes = [network.get_lane(ix) for ix in seq]
+    pts, widths = [], []
+    for n, lane in enumerate(lanes):
+        length = float(lane.length)
+        s = np.arange(0.0, length, ds_m)
+        if not closed and n == len(lanes) - 1:
+            s = np.r_[s, length]
+        P = np.array([lane.position(si, 0.0) for si in s], dtype=float).reshape(-1, 2)
+        widths += [float(lane.width_at(si)) for si in (0.0, 0.5 * length, length)]
+        if closed or n + 1 < len(lanes):
+            nxt = lanes[(n + 1) % len(lanes)]
+            start = np.asarray(nxt.position(0.0, 0.0), dtype=float)
+            h = float(nxt.heading_at(0.0))
+            along = (P - start) @ np.array([math.cos(h), math.sin(h)])
+            # near the end only: points at or past the next piece's start line overlap it
+            near_end = s > length - min(5.0, 0.5 * length)
+            P = P[~(near_end & (along > -0.25 * ds_m))]
+        pts.append(P)
+    P = np.vstack(pts)
+    path = WaypointPath(P, closed=closed, smoothing=len(P) * smoothing_m ** 2)
+    return path, 0.5 * min(widths)
+
+
+# --------------------------------------------------------------------------- actions
+@dataclass(frozen=True)
+class ActionScaling:
+    """highway-env's ContinuousAction mapping between [-1, 1] and physical inputs.
+
+    steering_range_rad : (low, high) [rad]; acceleration_range_mps2 : (low, high) [m/s^2], or
+    None when the action has no longitudinal part (then the action is ``[steering]``, else
+    ``[acceleration, steering]``).
+    """
+
+    steering_range_rad: tuple[float, float] = DEFAULT_STEERING_RANGE_RAD
+    acceleration_range_mps2: tuple[float, float] | None = DEFAULT_ACCELERATION_RANGE_MPS2
+
+    def __post_init__(self):
+        for name in ("steering_range_rad", "acceleration_range_mps2"):
+            rng = getattr(self, name)
+            if rng is None and name == "acceleration_range_mps2":
+                continue
+            lo, hi = (float(v) for v in rng)
+            if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+                raise ValueError(f"{name} must be two finite numbers, low < high, got {rng}")
+            object.__setattr__(self, name, (lo, hi))
+
+    @classmethod
+    def from_env(cls, env) -> ActionScaling:
+        """The scaling of a created environment's ContinuousAction (lateral control required)."""
+        at = env.unwrapped.action_type
+        if type(at).__name__ != "ContinuousAction":
+            raise ValueError(f"action.type must be ContinuousAction, got {type(at).__name__}")
+        if not at.lateral:
+            raise ValueError("action.lateral must be true: the driver steers")
+        return cls(tuple(at.steering_range),
+                   tuple(at.acceleration_range) if at.longitudinal else None)
+
+    @property
+    def longitudinal(self) -> bool:
+        return self.acceleration_range_mps2 is not None
+
+    @staticmethod
+    def _to_unit(value: float, rng: tuple[float, float]) -> float:
+        lo, hi = rng
+        return float(np.clip(2.0 * (value - lo) / (hi - lo) - 1.0, -1.0, 1.0))
+
+    @staticmethod
+    def _from_unit(a: float, rng: tuple[float, float]) -> float:
+        lo, hi = rng
+        return float(lo + (float(np.clip(a, -1.0, 1.0)) + 1.0) * 0.5 * (hi - lo))
+
+    def to_action(self, steer_rad: float, accel_mps2: float = 0.0) -> np.ndarray:
+        """Normalized action (float32, in [-1, 1]) for steering [rad] and acceleration [m/s^2]."""
+        if not (math.isfinite(steer_rad) and math.isfinite(accel_mps2)):
+            raise ValueError(f"steer_rad and accel_mps2 must be finite, got {steer_rad}, {accel_mps2}")
+        st = self._to_unit(steer_rad, self.steering_range_rad)
+        if self.acceleration_range_mps2 is None:
+            return np.array([st], dtype=np.float32)
+        return np.array([self._to_unit(accel_mps2, self.acceleration_range_mps2), st], dtype=np.float32)
+
+    def from_action(self, action) -> tuple[float, float]:
+        """(steering [rad], acceleration [m/s^2]) that the environment applies for ``action``."""
+        a = np.asarray(action, dtype=float).reshape(-1)
+        n = 2 if self.longitudinal else 1
+        if a.shape != (n,):
+            raise ValueError(f"action must have {n} component(s), got shape {a.shape}")
+        if not self.longitudinal:
+            return self._from_unit(a[0], self.steering_range_rad), 0.0
+        return (self._from_unit(a[1], self.steering_range_rad),
+                self._from_unit(a[0], self.acceleration_range_mps2))
+
+
+# --------------------------------------------------------------------------- driver
+@dataclass(frozen=True)
+class DriverSettings:
+    """Tuning of the racetrack MPC (SI units, radians).
+
+    horizon : N steps of the policy period; v_ref_mps : reference speed [m/s] (with
+    longitudinal control; otherwise the vehicle keeps its speed); Q : state weights
+    (x, y, yaw[, v]); R : input weights (steer[, accel]); Rc : input-change weights;
+    max_steer_rate_rad_s : steering rate bound [rad/s] (None: unbounded);
+    speed_limits_mps : (low, high) speed bounds [m/s]; lane_margin_m : distance kept between
+    the vehicle's side and the lane edge by the soft lane bound [m];
+    centerline_ds_m / centerline_smoothing_m : see :func:`lane_centerline`.
+    """
+
+    horizon: int = 15
+    v_ref_mps: float = 10.0
+    Q: tuple[float, ...] = (1.0, 1.0, 2.0, 0.5)
+    R: tuple[float, ...] = (1.0, 0.05)
+    Rc: tuple[float, ...] = (20.0, 0.05)
+    max_steer_rate_rad_s: float | None = 1.0
+    speed_limits_mps: tuple[float, float] = (0.0, 20.0)
+    lane_margin_m: float = 0.0
+    centerline_ds_m: float = 1.0
+    centerline_smoothing_m: float = 0.02
+
+    def __post_init__(self):
+        if int(self.horizon) != self.horizon or self.horizon < 1:
+            raise ValueError(f"horizon must be a positive integer, got {self.horizon}")
+        if not (math.isfinite(self.v_ref_mps) and self.v_ref_mps > 0):
+            raise ValueError(f"v_ref_mps must be positive, got {self.v_ref_mps}")
+        if self.max_steer_rate_rad_s is not None and not self.max_steer_rate_rad_s > 0:
+            raise ValueError(f"max_steer_rate_rad_s must be positive, got {self.max_steer_rate_rad_s}")
+        if not (math.isfinite(self.lane_margin_m) and self.lane_margin_m >= 0):
+            raise ValueError(f"lane_margin_m must be >= 0, got {self.lane_margin_m}")
+
+
+def _vehicle_state(vehicle, nx: int) -> np.ndarray:
+    x = [float(vehicle.position[0]), float(vehicle.position[1]), float(vehicle.heading)]
+    if nx == 4:
+        x.append(float(vehicle.speed))
+    return np.array(x)
+
+
+class HighwayEnvMpcDriver:
+    """LTV-MPC driver of a created (and reset) highway-env environment's ego vehicle.
+
+    Built once per episode (after ``env.reset``): path from the ego's lane, model from the
+    vehicle's length, QP from the action ranges. :meth:`act` reads the vehicle state
+    (position [m], heading [rad], speed [m/s]) and returns the normalized action and the
+    controller's output. The controller's period is the policy period ``1 / policy_frequency``.
+    """
+
+    def __init__(self, env, settings: DriverSettings = DriverSettings()):
+        u = env.unwrapped
+        vehicle = getattr(u, "vehicle", None)
+        if vehicle is None:
+            raise ValueError("the environment has no ego vehicle: call env.reset() first")
+        cfg = u.config
+        if cfg["action"].get("dynamical", False):
+            raise ValueError("action.dynamical must be false: the driver models highway-env's "
+                             "kinematic Vehicle, not the dynamical BicycleVehicle")
+        others = [v for v in u.road.vehicles if v is not vehicle] + list(getattr(u.road, "objects", []))
+        if others:
+            # TODO(obstacles): hand them to the controller once it has obstacle terms
+            raise ValueError(f"{len(others)} other vehicle(s)/object(s) on the road: obstacle "
+                             "avoidance is not supported yet; set other_vehicles: 0")
+        self.env = env
+        self.settings = settings
+        self.scaling = ActionScaling.from_env(env)
+        self.dt_s = 1.0 / float(cfg["policy_frequency"])
+        self.lane_index = tuple(vehicle.lane_index)
+        self.path, self.lane_half_width_m = lane_centerline(
+            u.road.network, self.lane_index, ds_m=settings.centerline_ds_m,
+            smoothing_m=settings.centerline_smoothing_m)
+        length_m, width_m = float(vehicle.LENGTH), float(vehicle.WIDTH)
+        self.footprint = Footprint(length_m, width_m)
+        params = KinematicParams(0.5 * length_m, 0.5 * length_m)
+        st_lo, st_hi = self.scaling.steering_range_rad
+        rate = settings.max_steer_rate_rad_s if settings.max_steer_rate_rad_s is not None else np.inf
+        s = settings
+        if self.scaling.longitudinal:
+            self.model = KinematicBicycle4(params)
+            a_lo, a_hi = self.scaling.acceleration_range_mps2
+            u_min, u_max, du = [st_lo, a_lo], [st_hi, a_hi], [rate, np.inf]
+            x_min = [-np.inf] * 3 + [s.speed_limits_mps[0]]
+            x_max = [np.inf] * 3 + [s.speed_limits_mps[1]]
+            v_ref, nq, nr = s.v_ref_mps, 4, 2
+        else:
+            self.model = KinematicBicycle3(float(vehicle.speed), params)
+            u_min, u_max, du = [st_lo], [st_hi], [rate]
+            x_min = x_max = None
+            v_ref, nq, nr = float(vehicle.speed), 3, 1
+        if len(s.Q) < nq or len(s.R) < nr or len(s.Rc) < nr:
+            raise ValueError(f"settings need Q with {nq} and R, Rc with {nr} entries")
+        half = self.lane_half_width_m - 0.5 * width_m - s.lane_margin_m
+        if half <= 0:
+            raise ValueError(f"lane half width {self.lane_half_width_m} m leaves no room for the "
+                             f"vehicle ({width_m} m wide) with a margin of {s.lane_margin_m} m")
+        problem = MpcProblem(
+            nx=self.model.nx, nu=self.model.nu, N=int(s.horizon), dt_s=self.dt_s,
+            Q=np.array(s.Q[:nq]), R=np.array(s.R[:nr]), Rc=np.array(s.Rc[:nr]),
+            u_min=np.array(u_min), u_max=np.array(u_max), du_max_per_s=np.array(du),
+            x_min=x_min, x_max=x_max, lane_half_width_m=half,
+        )
+        # the projection window must cover the distance driven per step, and more
+        window = max(2.0, 3.0 * max(v_ref, float(vehicle.speed)) * self.dt_s)
+        config = MpcConfig(v_ref_mps=v_ref, projection_window_m=window)
+        self.controller = LtvMpc(self.model, self.path, problem, config)
+        self.warm = self.controller.initial_warm(self.state())
+
+    def state(self) -> np.ndarray:
+        """(nx,) ego state [x m, y m, yaw rad(, v m/s)] read from the environment."""
+        return _vehicle_state(self.env.unwrapped.vehicle, self.model.nx)
+
+    def act(self) -> tuple[np.ndarray, ControlOutput]:
+        """One control step: (normalized action for ``env.step``, controller output)."""
+        out = self.controller.step(self.state(), self.warm)
+        self.warm = out.warm
+        steer = float(out.u[0])
+        accel = float(out.u[1]) if self.model.nu > 1 else 0.0
+        return self.scaling.to_action(steer, accel), out
+
+
+@dataclass(frozen=True)
+class HighwayDrive:
+    """An episode driven by :class:`HighwayEnvMpcDriver`.
+
+    result : the log as a :class:`SimResult` (states as read from the environment, inputs as
+    applied after the action's scaling); on_road : (K,) the environment's ``vehicle.on_road``
+    after each step; crashed : the vehicle crashed; terminated / truncated : how the episode
+    ended (both False when ``steps`` ran out first); rewards : (K,) per-step rewards;
+    footprint : the vehicle body.
+    """
+
+    result: SimResult
+    on_road: np.ndarray
+    crashed: bool
+    terminated: bool
+    truncated: bool
+    rewards: np.ndarray
+    footprint: Footprint
+
+
+def drive_env(env, driver: HighwayEnvMpcDriver, steps: int) -> HighwayDrive:
+    """Run up to ``steps`` policy steps (fewer if the episode ends) and log them."""
+    if int(steps) != steps or steps < 1:
+        raise ValueError(f"steps must be a positive integer, got {steps}")
+    u = env.unwrapped
+    model, path = driver.model, driver.path
+    N, nx = driver.controller.N, model.nx
+    T, X, U, S, EY, EPSI, XP, RF, ST = [], [], [], [], [], [], [], [], []
+    status, fallback, on_road, rewards = [], [], [], []
+    terminated = truncated = False
+    for k in range(int(steps)):
+        x = driver.state()
+        action, out = driver.act()
+        steer, accel = driver.scaling.from_action(action)
+        T.append(k * driver.dt_s)
+        X.append(x)
+        U.append([steer, accel][: model.nu])
+        S.append(out.s_m)
+        EY.append(out.e_y_m)
+        EPSI.append(out.e_psi_rad)
+        XP.append(out.X_pred)
+        RF.append(out.refs)
+        ST.append(out.solve_time_s)
+        status.append(out.status)
+        fallback.append(out.fallback)
+        _, reward, terminated, truncated, _ = env.step(action)
+        rewards.append(float(reward))
+        on_road.append(bool(u.vehicle.on_road))
+        if terminated or truncated:
+            break
+    Xa = np.array(X)
+    Ua = np.array(U, dtype=float).reshape(len(X), model.nu)
+    result = SimResult(
+        t_s=np.array(T), x=Xa, u=Ua, x_final=driver.state(), s_m=np.array(S),
+        e_y_m=np.array(EY), e_psi_rad=np.array(EPSI), yaw_rad=Xa[:, 2].copy(),
+        v_mps=np.asarray(model.speed(Xa), dtype=float).copy() if nx == 4
+        else np.full(len(Xa), float(model.v_mps)),
+        steer_rad=Ua[:, 0].copy(),
+        accel_mps2=Ua[:, 1].copy() if model.nu > 1 else np.zeros(len(Xa)),
+        X_pred=np.array(XP).reshape(len(X), N + 1, nx), refs=np.array(RF).reshape(len(X), N + 1, nx),
+        status=tuple(status), fallback=tuple(fallback), solve_time_s=np.array(ST),
+        path_xy=path.polyline(), dt_s=driver.dt_s, state_names=tuple(model.state_names),
+        input_names=tuple(model.input_names), lane_half_width_m=driver.lane_half_width_m,
+        goal_reached=None,
+        meta={"id": "highway-env-racetrack", "description": "highway-env racetrack driven by LTV-MPC",
+              "max_steer_rad": float(driver.scaling.steering_range_rad[1]),
+              "lane_index": list(driver.lane_index), "on_road_steps": int(sum(on_road))},
+    )
+    return HighwayDrive(result, np.array(on_road, dtype=bool), bool(u.vehicle.crashed),
+                        bool(terminated), bool(truncated), np.array(rewards), driver.footprint)
