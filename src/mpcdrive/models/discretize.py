@@ -15,9 +15,23 @@ from .base import VehicleModel
 Method = Literal["euler", "rk4"]
 
 
-def discrete_step(model: VehicleModel, x, u, dt: float, method: Method = "rk4") -> np.ndarray:
-    """x_{k+1} = F(x_k, u_k) over ``dt`` [s] (zero-order hold on u); batches allowed."""
+def _check_substeps(substeps: int) -> int:
+    if int(substeps) != substeps or substeps < 1:
+        raise ValueError(f"substeps must be a positive integer, got {substeps}")
+    return int(substeps)
+
+
+def discrete_step(model: VehicleModel, x, u, dt: float, method: Method = "rk4", substeps: int = 1) -> np.ndarray:
+    """x_{k+1} = F(x_k, u_k) over ``dt`` [s] (zero-order hold on u); batches allowed.
+
+    substeps : the step is taken as this many equal steps of ``dt / substeps`` (for stiff models
+    such as the dynamic bicycle at low speed)."""
     x = np.asarray(x, float)
+    if _check_substeps(substeps) > 1:
+        h = dt / substeps
+        for _ in range(substeps):
+            x = discrete_step(model, x, u, h, method)
+        return x
     if method == "euler":
         return x + dt * model.f(x, u)
     if method == "rk4":
@@ -30,22 +44,31 @@ def discrete_step(model: VehicleModel, x, u, dt: float, method: Method = "rk4") 
 
 
 def discrete_jacobians(
-    model: VehicleModel, x, u, dt: float, method: Method = "rk4"
+    model: VehicleModel, x, u, dt: float, method: Method = "rk4", substeps: int = 1
 ) -> tuple[np.ndarray, np.ndarray]:
     """Jacobians (dF/dx (..., nx, nx), dF/du (..., nx, nu)) of :func:`discrete_step`.
 
     For Euler these are the paper's eqs. 9-11: ``A = I + dt*df/dx``, ``B = dt*df/du``.
     """
-    _, Ad, Bd = discrete_step_and_jacobians(model, x, u, dt, method)
+    _, Ad, Bd = discrete_step_and_jacobians(model, x, u, dt, method, substeps)
     return Ad, Bd
 
 
 def discrete_step_and_jacobians(
-    model: VehicleModel, x, u, dt: float, method: Method = "rk4"
+    model: VehicleModel, x, u, dt: float, method: Method = "rk4", substeps: int = 1
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(F(x, u), dF/dx, dF/du) in one pass (the stages are shared)."""
+    """(F(x, u), dF/dx, dF/du) in one pass (the stages are shared); with ``substeps`` > 1 the
+    Jacobians of the composed substeps are chained (A = A_n ... A_1, B accumulated)."""
     x = np.asarray(x, float)
     u = np.asarray(u, float)
+    if _check_substeps(substeps) > 1:
+        h = dt / substeps
+        x, Ad, Bd = discrete_step_and_jacobians(model, x, u, h, method)
+        for _ in range(substeps - 1):
+            x, Ai, Bi = discrete_step_and_jacobians(model, x, u, h, method)
+            Ad = Ai @ Ad
+            Bd = Ai @ Bd + Bi
+        return x, Ad, Bd
     eye = np.eye(model.nx)
     Ac, Bc = model.jacobians(x, u)
     k1 = model.f(x, u)
@@ -75,11 +98,11 @@ def discrete_step_and_jacobians(
     return x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4), Ad, Bd
 
 
-def rollout(model: VehicleModel, x0, U, dt: float, method: Method = "rk4") -> np.ndarray:
+def rollout(model: VehicleModel, x0, U, dt: float, method: Method = "rk4", substeps: int = 1) -> np.ndarray:
     """States (N+1, nx) from ``x0`` under inputs ``U`` (N, nu)."""
     U = np.atleast_2d(np.asarray(U, float))
     X = np.empty((U.shape[0] + 1, model.nx))
     X[0] = x0
     for k in range(U.shape[0]):
-        X[k + 1] = discrete_step(model, X[k], U[k], dt, method)
+        X[k + 1] = discrete_step(model, X[k], U[k], dt, method, substeps)
     return X
