@@ -23,6 +23,7 @@ from ..ocp.qp import LtvQp
 from ..paths.base import Path
 from ..paths.reference import HorizonMode, horizon_arc_lengths, horizon_states
 from ..solvers.osqp_backend import OsqpBackend, OsqpSettings
+from ..solvers.projected_gradient import ProjectedGradientBackend, ProjectedGradientSettings
 from ..types import ControlOutput, SolveResult, WarmStart
 from ..units import TWO_PI, wrap_angle
 
@@ -62,15 +63,22 @@ class MpcConfig:
 
     linearization : ``trajectory`` (along the previous plan, shifted) or ``paper`` (at the
         current state and previous input, frozen over the horizon, eqs. 9-12);
-    discretization : ``rk4`` or ``euler`` (the paper) for the prediction model;
+    discretization : ``rk4``, ``euler`` (the paper) or ``exp`` (linearize, then discretize exactly:
+        stable for stiff models such as the dynamic bicycle) for the prediction model;
     horizon : ``arc_length`` (references spaced by the distance driven at the reference speed) or
         ``paper`` (fixed ``horizon_step_m`` per step, the authors' code);
     v_ref_mps : reference speed [m/s] (the model's constant speed for 3-state models when None);
+    speed_profile : reference speed along the path instead of a constant: any object with
+        ``speed(s_m) -> v_mps`` (e.g. :class:`~mpcdrive.paths.SpeedProfile`); each horizon step
+        then gets the profile's speed at its arc length, and a model with an ``accel`` input gets
+        the profile's acceleration as input reference;
     feedforward : ``curvature`` (steering reference = the model's steady-state steering on the
         path curvature, so R does not fight the turn, and yaw reference = path heading minus the
         steady-state slip angle, since the centre of gravity moves along yaw + beta) or ``none``
         (the paper: ``u' R u`` and the path heading as yaw reference);
-    projection_window_m : half-width of the arc-length window searched around the last s [m].
+    projection_window_m : half-width of the arc-length window searched around the last s [m];
+    prediction_substeps : integration substeps per control step in the prediction model (stiff
+        models such as the dynamic bicycle need them at long steps).
     """
 
     linearization: Literal["trajectory", "paper"] = "trajectory"
@@ -80,23 +88,31 @@ class MpcConfig:
     v_ref_mps: float | None = None
     feedforward: Literal["curvature", "none"] = "curvature"
     projection_window_m: float = 2.0
+    speed_profile: object | None = None
+    prediction_substeps: int = 1
 
     def __post_init__(self):
         if self.linearization not in ("trajectory", "paper"):
             raise ValueError(f"linearization must be 'trajectory' or 'paper', got {self.linearization!r}")
-        if self.discretization not in ("rk4", "euler"):
-            raise ValueError(f"discretization must be 'rk4' or 'euler', got {self.discretization!r}")
+        if self.discretization not in ("rk4", "euler", "exp"):
+            raise ValueError(f"discretization must be 'rk4', 'euler' or 'exp', got {self.discretization!r}")
         if self.horizon not in ("arc_length", "paper"):
             raise ValueError(f"horizon must be 'arc_length' or 'paper', got {self.horizon!r}")
         if self.feedforward not in ("curvature", "none"):
             raise ValueError(f"feedforward must be 'curvature' or 'none', got {self.feedforward!r}")
+        if self.speed_profile is not None and not callable(getattr(self.speed_profile, "speed", None)):
+            raise ValueError("speed_profile must have a speed(s_m) method")
+        if int(self.prediction_substeps) != self.prediction_substeps or self.prediction_substeps < 1:
+            raise ValueError(f"prediction_substeps must be a positive integer, got {self.prediction_substeps}")
 
 
 class LtvMpc:
-    """Tracking LTV-MPC of ``model`` along ``path`` solving ``problem`` with OSQP.
+    """Tracking LTV-MPC of ``model`` along ``path`` solving ``problem`` with OSQP (or, given
+    :class:`~mpcdrive.solvers.ProjectedGradientSettings`, the paper's projected gradient descent).
 
-    model : the controller's prediction model (states start with x, y, yaw; a 4th state is the
-    speed [m/s]); the QP is built once here and only updated in place in :meth:`step`.
+    model : the controller's prediction model (states start with x, y, yaw; its ``reference``
+    method gives the reference state of a path point at a speed); the QP is built once here and
+    only updated in place in :meth:`step`.
     """
 
     name = "ltv-mpc"
@@ -107,7 +123,7 @@ class LtvMpc:
         path: Path,
         problem: MpcProblem,
         config: MpcConfig = MpcConfig(),
-        solver_settings: OsqpSettings = OsqpSettings(),
+        solver_settings: OsqpSettings | ProjectedGradientSettings = OsqpSettings(),
     ):
         if (problem.nx, problem.nu) != (model.nx, model.nu):
             raise ValueError(
@@ -118,12 +134,18 @@ class LtvMpc:
         self.dt_s = problem.dt_s
         if config.v_ref_mps is not None:
             self.v_ref_mps = float(config.v_ref_mps)
+        elif config.speed_profile is not None:
+            self.v_ref_mps = float(config.speed_profile.speed(0.0))
         else:
             self.v_ref_mps = float(model.speed(np.zeros(model.nx)))
         if not np.isfinite(self.v_ref_mps):
             raise ValueError(f"reference speed must be finite, got {self.v_ref_mps}")
         self.qp = LtvQp(problem)
-        self.backend = OsqpBackend(self.qp, solver_settings)
+        if isinstance(solver_settings, ProjectedGradientSettings):
+            self.backend = ProjectedGradientBackend(self.qp, solver_settings)
+        else:
+            self.backend = OsqpBackend(self.qp, solver_settings)
+        self._accel_index = list(model.input_names).index("accel") if "accel" in model.input_names else None
         N, nx, nu = self.N, self.nx, self.nu
         # per-step work buffers
         self._xref = np.zeros((N + 1, nx))
@@ -174,16 +196,14 @@ class LtvMpc:
         e_psi = wrap_angle(x[2] - float(self.path.heading(s0)))
 
         # references over the horizon
-        s_arr = horizon_arc_lengths(s0, N, cfg.horizon, dt, self.v_ref_mps, cfg.horizon_step_m)
+        s_arr, v_arr = self._horizon(s0)
         refs = horizon_states(self.path, s_arr, x[2])
         xref, uref = self._xref, self._uref
-        xref[:, :3] = refs[:, :3]
-        if self.nx >= 4:
-            xref[:, 3] = self.v_ref_mps
-        if cfg.feedforward == "curvature":
-            steer_ss, slip_ss = model.steady_state(refs[:, 3], self.v_ref_mps)
-            uref[:, 0] = steer_ss[:N]
-            xref[:, 2] -= slip_ss
+        xr, ur = model.reference(refs[:, :3], refs[:, 3], v_arr, cfg.feedforward == "curvature")
+        xref[:] = xr
+        uref[:] = ur[:N]
+        if cfg.speed_profile is not None and self._accel_index is not None:
+            uref[:, self._accel_index] += np.diff(v_arr) / dt
         # linearization points
         Xbar, Ubar = self._Xbar, self._Ubar
         if cfg.linearization == "paper":
@@ -191,14 +211,15 @@ class LtvMpc:
             Ubar[:] = warm.u_prev
         elif warm.X is None or warm.U is None:
             Ubar[:] = uref
-            Xbar[:] = rollout(model, x, Ubar, dt, cfg.discretization)[:-1]
+            Xbar[:] = rollout(model, x, Ubar, dt, cfg.discretization, cfg.prediction_substeps)[:-1]
         else:
             Xbar[0] = x
             Xbar[1:] = warm.X[2:]
             Xbar[1:, 2] += TWO_PI * np.round((x[2] - warm.X[1, 2]) / TWO_PI)
             Ubar[:-1] = warm.U[1:]
             Ubar[-1] = warm.U[-1]
-        Fbar, Ad, Bd = discrete_step_and_jacobians(model, Xbar, Ubar, dt, cfg.discretization)
+        Fbar, Ad, Bd = discrete_step_and_jacobians(model, Xbar, Ubar, dt, cfg.discretization,
+                                                   cfg.prediction_substeps)
         c = Fbar - np.einsum("kij,kj->ki", Ad, Xbar) - np.einsum("kij,kj->ki", Bd, Ubar)
         if self.qp.lane:
             yaw = refs[1:, 2]
@@ -207,6 +228,21 @@ class LtvMpc:
             self._lane_b[:] = np.einsum("ki,ki->k", self._lane_n, refs[1:, :2])
         return StepData(x, float(s0), float(e_y), float(e_psi), xref, uref, Xbar, Ubar, Fbar, Ad, Bd, c,
                         self._lane_n, self._lane_b)
+
+    def _horizon(self, s0: float) -> tuple[np.ndarray, np.ndarray]:
+        """(N+1,) arc lengths [m] and reference speeds [m/s] of the horizon references. With a
+        speed profile the arc lengths follow the profile (trapezoidal in the speed, two fixed-point
+        passes) and each step gets the profile's speed there."""
+        cfg, N, dt = self.config, self.N, self.dt_s
+        prof = cfg.speed_profile
+        if prof is None:
+            s_arr = horizon_arc_lengths(s0, N, cfg.horizon, dt, self.v_ref_mps, cfg.horizon_step_m)
+            return s_arr, np.full(N + 1, self.v_ref_mps)
+        v = np.full(N + 1, float(prof.speed(s0)))
+        for _ in range(2):
+            s_arr = horizon_arc_lengths(s0, N, cfg.horizon, dt, 0.5 * (v[1:] + v[:-1]), cfg.horizon_step_m)
+            v = np.asarray(prof.speed(s_arr), float)
+        return s_arr, v
 
     def finish(self, d: StepData, warm: WarmStart, res: SolveResult, t0: float) -> ControlOutput:
         """Check the solve, pick the command (or fall back) and package the step's output."""

@@ -37,6 +37,7 @@ time constant ``kinematic_relax_s``. Below ``v_blend_low_mps`` the model *is* th
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -169,9 +170,17 @@ def _pacejka_inverse(y, B, C, E):
         dg = 1.0 - E * (1.0 - 1.0 / (1.0 + z * z))
         step = g / dg
         z = z - step
-        if np.all(np.abs(step) < 1e-14):
+        if np.max(np.abs(step), initial=0.0) < 1e-13:
             break
     return z / B
+
+
+class _ScalarMath:
+    """The math namespace of :meth:`DynamicBicycle.f_components` for plain floats (a single state
+    evaluates ~20x faster with ``math`` than with numpy's per-call overhead)."""
+
+    sin, cos, tan, arctan = staticmethod(math.sin), staticmethod(math.cos), staticmethod(math.tan), staticmethod(math.atan)
+    fmax, fmin = staticmethod(max), staticmethod(min)
 
 
 def _smoothstep(vx, lo, hi, ns):
@@ -255,6 +264,8 @@ class DynamicBicycle:
     def f(self, x, u):
         x = np.asarray(x, float)
         u = np.asarray(u, float)
+        if x.ndim == 1 and u.ndim == 1:  # a single state: plain floats are much faster
+            return np.array(self.f_components(x.tolist(), u.tolist(), _ScalarMath))
         return np.stack(self.f_components(_components(x), _components(u)), axis=-1)
 
     # -- analytic Jacobians ---------------------------------------------------------------------
@@ -272,6 +283,11 @@ class DynamicBicycle:
     def jacobians(self, x, u):
         """Analytic (df/dx (..., 6, 6), df/du (..., 6, 2)); exact derivatives of :meth:`f` wherever
         it is differentiable (the max at ``vx = v_blend_low / 2`` and the blend corners are kinks)."""
+        _, A, B = self.f_and_jacobians(x, u)
+        return A, B
+
+    def f_and_jacobians(self, x, u):
+        """(f (..., 6), df/dx (..., 6, 6), df/du (..., 6, 2)) in one pass (shared intermediates)."""
         x = np.asarray(x, float)
         u = np.asarray(u, float)
         p = self.params
@@ -376,7 +392,14 @@ class DynamicBicycle:
             A[..., row, 5] = D[2]
             B[..., row, 0] = D[3]
             B[..., row, 1] = D[4]
-        return A, B
+        f = np.empty(shape + (6,))
+        f[..., 0] = vx * c - vy_p * s
+        f[..., 1] = vx * s + vy_p * c
+        f[..., 2] = w * r + W * r_k
+        f[..., 3] = w * dvx_d + W * a
+        f[..., 4] = w * dvy_d + W * dvy_k
+        f[..., 5] = w * dr_d + W * dr_k
+        return f, A, B
 
     # -- helpers ----------------------------------------------------------------------------
     def speed(self, x):
@@ -416,7 +439,8 @@ class DynamicBicycle:
         beta = np.zeros_like(kappa)
         delta = L * kappa
         a = np.zeros_like(kappa)
-        for _ in range(12):  # fixed point: cos(beta), cos(delta) and the load transfer are near 1
+        for _ in range(30):  # fixed point: cos(beta), cos(delta) and the load transfer are near 1
+            prev_delta, prev_beta = delta, beta
             vx = np.maximum(v * np.cos(beta), self._v_eps)
             vy = v * np.sin(beta)
             ay = r * vx  # body-frame lateral force / m in steady state
@@ -434,6 +458,8 @@ class DynamicBicycle:
             qf = (vy + lf * r) / vx
             delta = af + gf_of(qf)
             a = Fyf * np.sin(delta) / m - r * vy
+            if max(np.max(np.abs(delta - prev_delta), initial=0.0), np.max(np.abs(beta - prev_beta), initial=0.0)) < 1e-10:
+                break
         # kinematic steady state and the blend
         beta_k = np.arcsin(np.clip(lr * kappa, -0.999, 0.999))
         delta_k = np.arctan(np.tan(beta_k) / p.lq)

@@ -83,13 +83,16 @@ def simulate(
     lane_half_width_m: float | None = None,
     progress: Callable[[int, int], None] | None = None,
     meta: dict | None = None,
+    laps: float | None = None,
 ) -> SimResult:
     """Run ``steps`` control steps of ``dt_s`` seconds from ``x0`` (plant state).
 
     The controller sees the plant state plus ``measurement_noise``; the plant state receives
     ``disturbance`` after every step. On an open path the run ends when the vehicle passes the
     path's end (``stop_at_path_end``), and ``goal_reached`` says whether it did.
-    ``progress(k, steps)`` is called every step when given.
+    ``progress(k, steps)`` is called every step when given. On a closed path, ``laps`` ends the
+    run once the vehicle has driven that many laps from its start (``goal_reached`` says whether
+    it did within ``steps``).
     """
     if steps < 1:
         raise ValueError(f"steps must be >= 1, got {steps}")
@@ -116,6 +119,12 @@ def simulate(
     fallback: list[str] = []
     warm = controller.initial_warm(x)
     goal_reached = False if (stop_at_path_end and not path.closed) else None
+    s_goal = None
+    if laps is not None and path.closed:
+        if not laps > 0:
+            raise ValueError(f"laps must be positive, got {laps}")
+        s_goal = warm.s_m + laps * path.length_m
+        goal_reached = False
     k_end = steps
     for k in range(steps):
         meas = x if measurement_noise is None else x + measurement_noise.sample(rng, nx)
@@ -137,7 +146,7 @@ def simulate(
             x = x + disturbance.sample(rng, nx)
         if progress is not None:
             progress(k + 1, steps)
-        if goal_reached is not None and s >= path.length_m:
+        if goal_reached is not None and s >= (path.length_m if s_goal is None else s_goal):
             goal_reached = True
             k_end = k + 1
             break
