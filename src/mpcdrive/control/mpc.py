@@ -248,7 +248,9 @@ class LtvMpc:
         """Check the solve, pick the command (or fall back) and package the step's output."""
         pb = self.problem
         if res.ok and np.all(np.isfinite(res.U[0])):
-            u = np.clip(res.U[0], pb.u_min, pb.u_max)
+            # the solver meets bounds to its tolerance only: the command meets them exactly
+            rate = pb.du_max_per_s * pb.dt_s
+            u = np.clip(np.clip(res.U[0], warm.u_prev - rate, warm.u_prev + rate), pb.u_min, pb.u_max)
             fallback = ""
             new_warm = WarmStart(s_m=d.s_m, u_prev=u, X=res.X, U=res.U)
             X_pred = res.X
