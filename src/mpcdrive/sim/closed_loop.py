@@ -12,15 +12,20 @@ from ..models.base import VehicleModel
 from ..models.discretize import Method, discrete_step
 from ..paths.base import Path
 from ..types import SimResult
+from .actuator import ActuatorState, SteeringActuator
 
 
 @dataclass(frozen=True)
 class Plant:
-    """The simulated vehicle: ``model`` integrated with ``method`` in ``substeps`` per control step."""
+    """The simulated vehicle: ``model`` integrated with ``method`` in ``substeps`` per control step.
+
+    actuator : optional steering actuator (dead time, first-order lag) between the command and
+    the wheels (input 0); None applies commands instantly."""
 
     model: VehicleModel
     method: Method = "rk4"
     substeps: int = 1
+    actuator: SteeringActuator | None = None
 
     def __post_init__(self):
         if self.substeps < 1:
@@ -31,6 +36,17 @@ class Plant:
         for _ in range(self.substeps):
             x = discrete_step(self.model, x, u, h, self.method)
         return x
+
+    def step_actuated(self, x: np.ndarray, u: np.ndarray, dt_s: float, act: ActuatorState,
+                      t_s: float) -> tuple[np.ndarray, ActuatorState]:
+        """One control step from time ``t_s`` with the steering passed through the actuator, whose
+        state ``act`` already holds the command ``u[0]``; returns (state, actuator state)."""
+        h = dt_s / self.substeps
+        ui = np.array(u, dtype=float)
+        for i in range(self.substeps):
+            ui[0], act = self.actuator.advance(act, t_s + i * h, h)
+            x = discrete_step(self.model, x, ui, h, self.method)
+        return x, act
 
 
 @dataclass(frozen=True)
@@ -126,6 +142,7 @@ def simulate(
         s_goal = warm.s_m + laps * path.length_m
         goal_reached = False
     k_end = steps
+    act = None if plant.actuator is None else plant.actuator.start(0.0)  # wheels start straight
     for k in range(steps):
         meas = x if measurement_noise is None else x + measurement_noise.sample(rng, nx)
         out = controller.step(meas, warm)
@@ -141,7 +158,11 @@ def simulate(
         XP[k], RF[k], ST[k] = out.X_pred, out.refs, out.solve_time_s
         status.append(out.status)
         fallback.append(out.fallback)
-        x = plant.step(x, out.u, dt_s)
+        if act is None:
+            x = plant.step(x, out.u, dt_s)
+        else:
+            act = act.issue(k * dt_s, float(out.u[0]))
+            x, act = plant.step_actuated(x, out.u, dt_s, act, k * dt_s)
         if disturbance is not None:
             x = x + disturbance.sample(rng, nx)
         if progress is not None:
