@@ -90,7 +90,8 @@ class _GeometricTracker:
             a_ff = (v_ahead - v_ref) / self.dt_s
             u[self._accel] = float(np.clip(a_ff + self.k_v * (v_ref - v), lim.accel_min_mps2, lim.accel_max_mps2))
         pose = np.array([[*self.path.position(s0), float(self.path.heading(s0))]])
-        xr, _ = self.model.reference(pose, np.array([float(self.path.curvature(s0))]), np.array([v_ref]), True)
+        # the path point as the logged reference (no steady-state solve: it is for the log only)
+        xr, _ = self.model.reference(pose, np.array([float(self.path.curvature(s0))]), np.array([v_ref]), False)
         return ControlOutput(u=u, status=STATUS_OK, fallback="", solve_time_s=time.perf_counter() - t0,
                              s_m=float(s0), e_y_m=float(e_y), e_psi_rad=float(e_psi), X_pred=x[None, :].copy(),
                              refs=xr, warm=WarmStart(s_m=float(s0), u_prev=u.copy()))

@@ -164,13 +164,17 @@ def _pacejka_and_slope(alpha, B, C, E):
 def _pacejka_inverse(y, B, C, E):
     """Slip alpha [rad] with normalized force y in (-1, 1) on the rising branch of the curve."""
     psi = np.tan(np.arcsin(y) / C)
-    z = psi.copy()
-    for _ in range(30):  # Newton on z - E (z - atan z) = psi (monotone for E < 1)
+    if E == 0:
+        return psi / B
+    z = psi
+    # Newton on z - E (z - atan z) = psi (monotone for E < 1); quadratic convergence from z = psi,
+    # whose error is O(E): three steps reach machine precision for |E| < 0.1
+    for i in range(30):
         g = z - E * (z - np.arctan(z)) - psi
         dg = 1.0 - E * (1.0 - 1.0 / (1.0 + z * z))
         step = g / dg
         z = z - step
-        if np.max(np.abs(step), initial=0.0) < 1e-13:
+        if i >= 2 and (abs(E) < 0.1 or np.max(np.abs(step), initial=0.0) < 1e-13):
             break
     return z / B
 
@@ -436,30 +440,46 @@ class DynamicBicycle:
         v = np.broadcast_to(np.asarray(v_mps, float), kappa.shape).astype(float)
         m, L, lf, lr = p.mass_kg, p.wheelbase_m, p.lf_m, p.lr_m
         r = v * kappa
-        beta = np.zeros_like(kappa)
-        delta = L * kappa
-        a = np.zeros_like(kappa)
-        for _ in range(30):  # fixed point: cos(beta), cos(delta) and the load transfer are near 1
-            prev_delta, prev_beta = delta, beta
-            vx = np.maximum(v * np.cos(beta), self._v_eps)
-            vy = v * np.sin(beta)
-            ay = r * vx  # body-frame lateral force / m in steady state
+        gf_of = (lambda q: q) if self.tire == "linear" else np.arctan
+        qr_of = (lambda al: -al) if self.tire == "linear" else (lambda al: np.tan(-al))
+
+        def solve_given_accel(a, beta, delta):
+            """Slip and steering for a given drive acceleration (which sets the axle loads);
+            returns the acceleration they require, beta and delta."""
             Fzf = m * (p.g_mps2 * lr - a * p.h_cg_m) / L
             Fzr = m * (p.g_mps2 * lf + a * p.h_cg_m) / L
-            Fyr = m * ay * lf / L
-            Fyf = m * ay * lr / (L * np.cos(delta))
-            ar = self._inverse_tire(Fyr / Fzr, "r")
-            af = self._inverse_tire(Fyf / Fzf, "f")
-            if self.tire == "linear":
-                qr, gf_of = -ar, (lambda q: q)
-            else:
-                qr, gf_of = np.tan(-ar), np.arctan
-            beta = np.arctan2(qr * vx + lr * r, vx)  # tan(beta) = vy / vx with vy = vx qr + lr r
-            qf = (vy + lf * r) / vx
-            delta = af + gf_of(qf)
-            a = Fyf * np.sin(delta) / m - r * vy
-            if max(np.max(np.abs(delta - prev_delta), initial=0.0), np.max(np.abs(beta - prev_beta), initial=0.0)) < 1e-10:
+            for _ in range(2):  # beta: rear axle force m ay lf / L, weakly dependent on beta via vx
+                vx = np.maximum(v * np.cos(beta), self._v_eps)
+                ar = self._inverse_tire(m * r * vx * lf / (L * Fzr), "r")
+                beta = np.arctan2(qr_of(ar) * vx + lr * r, vx)  # tan(beta) = vy / vx, vy = vx qr + lr r
+            vx = np.maximum(v * np.cos(beta), self._v_eps)
+            vy = v * np.sin(beta)
+            gf = gf_of((vy + lf * r) / vx)
+            n0 = m * r * vx * lr / (L * Fzf)  # front Fy / Fz needed at cos(delta) = 1
+            for _ in range(3):  # Newton on delta - alpha_f(n0 / cos(delta)) - gf = 0
+                n = n0 / np.cos(delta)
+                af = self._inverse_tire(n, "f")
+                _, slope = self._tire(af, "f")
+                dg = 1.0 - n * np.tan(delta) / np.maximum(slope, 1e-9)
+                delta = delta - (delta - af - gf) / np.where(np.abs(dg) > 0.1, dg, 1.0)
+            return n0 / np.cos(delta) * Fzf * np.sin(delta) / m - r * vy, beta, delta
+
+        # the load transfer couples the acceleration back: secant iteration on a = G(a)
+        beta = np.zeros_like(kappa)
+        delta = L * kappa
+        a0 = np.zeros_like(kappa)
+        g0, beta, delta = solve_given_accel(a0, beta, delta)
+        a1 = g0
+        for _ in range(12):
+            g1, beta, delta = solve_given_accel(a1, beta, delta)
+            res0, res1 = g0 - a0, g1 - a1
+            if np.max(np.abs(res1), initial=0.0) < 1e-8:  # m/s^2: steering then exact to ~1e-10 rad
                 break
+            den = res1 - res0
+            ok = np.abs(den) > 1e-14
+            a_next = np.where(ok, a1 - res1 * (a1 - a0) / np.where(ok, den, 1.0), g1)
+            a0, g0, a1 = a1, g1, a_next
+        a = a1
         # kinematic steady state and the blend
         beta_k = np.arcsin(np.clip(lr * kappa, -0.999, 0.999))
         delta_k = np.arctan(np.tan(beta_k) / p.lq)

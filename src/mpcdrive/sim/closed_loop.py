@@ -100,6 +100,7 @@ def simulate(
     progress: Callable[[int, int], None] | None = None,
     meta: dict | None = None,
     laps: float | None = None,
+    abort_lateral_error_m: float | None = None,
 ) -> SimResult:
     """Run ``steps`` control steps of ``dt_s`` seconds from ``x0`` (plant state).
 
@@ -108,7 +109,9 @@ def simulate(
     path's end (``stop_at_path_end``), and ``goal_reached`` says whether it did.
     ``progress(k, steps)`` is called every step when given. On a closed path, ``laps`` ends the
     run once the vehicle has driven that many laps from its start (``goal_reached`` says whether
-    it did within ``steps``).
+    it did within ``steps``). ``abort_lateral_error_m`` ends the run early when the lateral error
+    exceeds it (the car left the road; ``goal_reached`` is then False and
+    ``meta["aborted_off_path"]`` True).
     """
     if steps < 1:
         raise ValueError(f"steps must be >= 1, got {steps}")
@@ -143,6 +146,7 @@ def simulate(
         goal_reached = False
     k_end = steps
     act = None if plant.actuator is None else plant.actuator.start(0.0)  # wheels start straight
+    aborted = False
     for k in range(steps):
         meas = x if measurement_noise is None else x + measurement_noise.sample(rng, nx)
         out = controller.step(meas, warm)
@@ -169,6 +173,11 @@ def simulate(
             progress(k + 1, steps)
         if goal_reached is not None and s >= (path.length_m if s_goal is None else s_goal):
             goal_reached = True
+            k_end = k + 1
+            break
+        if abort_lateral_error_m is not None and abs(ey) > abort_lateral_error_m:
+            aborted = True
+            goal_reached = False
             k_end = k + 1
             break
     sl = slice(0, k_end)
@@ -198,5 +207,5 @@ def simulate(
         input_names=tuple(model.input_names),
         lane_half_width_m=lane_half_width_m,
         goal_reached=goal_reached,
-        meta=dict(meta or {}),
+        meta={**(meta or {}), **({"aborted_off_path": True} if aborted else {})},
     )
