@@ -231,13 +231,17 @@ class LtvMpc:
 
     def _horizon(self, s0: float) -> tuple[np.ndarray, np.ndarray]:
         """(N+1,) arc lengths [m] and reference speeds [m/s] of the horizon references. With a
-        speed profile the arc lengths follow the profile (trapezoidal in the speed, two fixed-point
-        passes) and each step gets the profile's speed there."""
+        speed profile the references move along the path as the profile does in time (exactly, via
+        its ``arc_length_after``; else trapezoidal in the speed, two fixed-point passes) and each
+        step gets the profile's speed there."""
         cfg, N, dt = self.config, self.N, self.dt_s
         prof = cfg.speed_profile
         if prof is None:
             s_arr = horizon_arc_lengths(s0, N, cfg.horizon, dt, self.v_ref_mps, cfg.horizon_step_m)
             return s_arr, np.full(N + 1, self.v_ref_mps)
+        if cfg.horizon == "arc_length" and callable(getattr(prof, "arc_length_after", None)):
+            s_arr = np.asarray(prof.arc_length_after(s0, dt * np.arange(N + 1)), float)
+            return s_arr, np.asarray(prof.speed(s_arr), float)
         v = np.full(N + 1, float(prof.speed(s0)))
         for _ in range(2):
             s_arr = horizon_arc_lengths(s0, N, cfg.horizon, dt, 0.5 * (v[1:] + v[:-1]), cfg.horizon_step_m)

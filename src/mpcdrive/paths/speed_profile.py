@@ -33,6 +33,10 @@ class ConstantSpeed:
         """Reference speed [m/s] at arc length(s) s_m [m]."""
         return np.full(np.shape(s_m), self.v_mps) if np.ndim(s_m) else self.v_mps
 
+    def arc_length_after(self, s0_m: float, t_s) -> np.ndarray:
+        """Arc length [m] reached from ``s0_m`` after time(s) ``t_s`` [s] at this speed."""
+        return s0_m + self.v_mps * np.asarray(t_s, float)
+
 
 class SpeedProfile:
     """Speed profile of ``path``.
@@ -104,6 +108,13 @@ class SpeedProfile:
         self.v_limit_mps = np.minimum(self.v_max_mps,
                                       np.sqrt(self.lateral_accel_max_mps2 / np.maximum(kappa, 1e-12)))
         self.v_mps = self._passes(v_start_mps, v_end_mps)
+        # time along the grid: v^2 is linear in s on each segment (constant acceleration), so a
+        # segment takes exactly 2 ds / (v_i + v_{i+1}); a segment between two stops takes forever
+        v = np.r_[self.v_mps, self.v_mps[0]] if self.closed else self.v_mps
+        vs = v[1:] + v[:-1]
+        seg_t = np.where(vs > 0, 2.0 * self.ds_m / np.maximum(vs, 1e-300), np.inf)
+        self._t_grid = np.r_[0.0, np.cumsum(seg_t)]
+        self._s_grid = np.r_[self.s_m, self.length_m] if self.closed else self.s_m
 
     # -- construction -----------------------------------------------------------------------
     def _long_limit(self, a_max: float, v: float, kappa: float) -> float:
@@ -159,6 +170,49 @@ class SpeedProfile:
         else:
             v = np.interp(s, self.s_m, self.v_mps)
         return float(v) if v.ndim == 0 else v
+
+    def time_at(self, s_m) -> np.ndarray:
+        """Time [s] the profile takes from its start to arc length(s) ``s_m`` [m] (counting laps on a
+        closed path; ``inf`` beyond a stop)."""
+        s = np.asarray(s_m, float)
+        if self.closed:
+            laps = np.floor(s / self.length_m)
+            return laps * self._t_grid[-1] + np.interp(s - laps * self.length_m, self._s_grid, self._t_grid)
+        return np.interp(s, self._s_grid, self._t_grid)
+
+    def arc_length_after(self, s0_m: float, t_s) -> np.ndarray:
+        """Arc length [m] the profile reaches from ``s0_m`` after time(s) ``t_s`` [s] (>= 0): exact
+        for the constant acceleration between grid points, so a car at rest at ``s0`` with a profile
+        rising from 0 gets references moving off as it should (a fixed point on the speed would
+        stay put). On an open path the arc length stops at a stop, and continues past the end at
+        the end speed."""
+        t = self.time_at(s0_m) + np.asarray(t_s, float)
+        if self.closed:
+            T = self._t_grid[-1]
+            laps = np.floor(t / T)
+            tt = t - laps * T
+            s_loc = self._s_at_time(tt)
+            return laps * self.length_m + s_loc
+        return self._s_at_time(t)
+
+    def _s_at_time(self, t):
+        tg, sg = self._t_grid, self._s_grid
+        finite = np.isfinite(tg)
+        i = np.clip(np.searchsorted(tg, t, side="right") - 1, 0, len(tg) - 2)
+        # within segment i: constant acceleration from v_i
+        v = np.r_[self.v_mps, self.v_mps[0]] if self.closed else self.v_mps
+        vi, vj = v[i], v[i + 1]
+        a = (vj * vj - vi * vi) / (2.0 * self.ds_m)
+        tau = np.clip(t - tg[i], 0.0, tg[i + 1] - tg[i])  # inf for a segment between two stops
+        ds = np.where(np.isfinite(tau), vi * tau + 0.5 * a * tau * tau, 0.0)
+        ds = np.where(np.isfinite(tg[i + 1]) & (t >= tg[i + 1]), self.ds_m, ds)
+        s = sg[i] + np.clip(ds, 0.0, self.ds_m)
+        if self.closed:
+            return s
+        s = np.minimum(s, sg[finite][-1])
+        if np.isfinite(tg[-1]) and v[-1] > 0:  # beyond the end of an open path: on at the end speed
+            s = np.where(t > tg[-1], sg[-1] + v[-1] * (t - tg[-1]), s)
+        return s
 
     def longitudinal_accel(self) -> np.ndarray:
         """(M-1,) or (M,) on a closed path: the acceleration (v_{i+1}^2 - v_i^2) / (2 ds) [m/s^2]
