@@ -43,7 +43,8 @@ class StudyRun:
 
     summary keys: ``finished`` (lap / road completed), ``lap_time_s`` (None if not), ``rms_e_y_m``,
     ``max_abs_e_y_m``, ``road_excess_m`` (footprint beyond the road edge, 0 inside),
-    ``max_abs_lateral_accel_mps2``, ``solver_failures``, ``step_p50_us``.
+    ``max_abs_lateral_accel_mps2`` (None when the run did not finish), ``solver_failures``,
+    ``step_p50_us``.
     """
 
     label: str
@@ -65,7 +66,9 @@ def _summary(result: SimResult, exp) -> dict:
         "rms_e_y_m": m["rms_lateral_error_m"],
         "max_abs_e_y_m": m["max_abs_lateral_error_m"],
         "road_excess_m": excess,
-        "max_abs_lateral_accel_mps2": float(np.max(np.abs(inner))) if inner.size else 0.0,
+        # after leaving the road the car spins: its accelerations say nothing about the controller
+        "max_abs_lateral_accel_mps2": (float(np.max(np.abs(inner))) if inner.size else 0.0)
+        if result.goal_reached else None,
         "solver_failures": m["solver_failures"],
         "step_p50_us": m["solve_time_us"]["p50"],
     }
@@ -201,8 +204,9 @@ def delay_study(track: str = "raceway", lateral_fraction: float = 0.7, dead_time
 def format_summary(s: dict) -> str:
     """One line of a run's figures of merit."""
     lap = "did not finish" if not s["finished"] else f"time {s['lap_time_s']:.2f} s"
+    ay = s["max_abs_lateral_accel_mps2"]
     return (f"{lap}, RMS e_y {s['rms_e_y_m']:.4f} m, max |e_y| {s['max_abs_e_y_m']:.3f} m, road excess "
-            f"{s['road_excess_m']:.3f} m, max |a_y| {s['max_abs_lateral_accel_mps2']:.2f} m/s^2")
+            f"{s['road_excess_m']:.3f} m" + ("" if ay is None else f", max |a_y| {ay:.2f} m/s^2"))
 
 
 _COLUMNS = [("finished", "finished"), ("lap / road time [s]", "lap_time_s"), ("RMS e_y [m]", "rms_e_y_m"),
