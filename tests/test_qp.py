@@ -13,7 +13,7 @@ import cvxpy as cp
 import numpy as np
 import pytest
 import scipy.linalg as sla
-from hypothesis import given, settings
+from hypothesis import given, reject, settings
 from hypothesis import strategies as st
 
 from mpcdrive.models import KinematicBicycle3, KinematicBicycle4, discrete_jacobians, discrete_step
@@ -332,7 +332,10 @@ def compare_with_cvxpy(pb, d, tol=1e-4):
 @given(st.integers(0, 2**32 - 1), st.booleans(), st.booleans(), st.booleans(), st.booleans())
 def test_qp_matches_cvxpy_generic(seed, lane, rate, xbounds, rc):
     pb, d = make_instance(seed, kind="generic", lane=lane, rate=rate, xbounds=xbounds, rc=rc)
-    compare_with_cvxpy(pb, d)
+    try:
+        compare_with_cvxpy(pb, d)
+    except cp.error.SolverError:  # the *reference* solver failed numerically (seen: seed 1047862)
+        reject()
 
 
 @settings(max_examples=15, deadline=None)

@@ -302,6 +302,44 @@ def bench(
         typer.echo(f"wrote {json_file}")
 
 
+@app.command("compare-models")
+def compare_models_cmd(
+    out: Path | None = typer.Option(None, "--out", help="output directory (default runs/compare-models-<timestamp>)"),
+    track: list[str] | None = typer.Option(None, "--track", help="packaged track (repeatable; default all)"),
+    lateral_fraction: float = typer.Option(0.8, "--lateral-fraction", min=0.05, max=1.0,
+                                           help="speed profile's lateral acceleration as a fraction of mu g"),
+    robustness: bool = typer.Option(True, "--robustness/--no-robustness",
+                                    help="also run the parameter-mismatch and steering-delay studies"),
+) -> None:
+    """Dynamic- vs kinematic-model MPC vs pure pursuit / Stanley on the Pacejka dynamic plant at high
+    lateral acceleration (plus parameter mismatch and steering delay); writes report.md, study.json
+    and figures."""
+    from .io.atomic import atomic_output_dir
+    from .scenarios.tracks import packaged_track_names
+    from .studies import compare_models, delay_study, mismatch_study, write_study
+
+    tracks = list(track or ["raceway", "hairpins"])
+    unknown = [t for t in tracks if t not in packaged_track_names()]
+    if unknown:
+        raise BadInput(f"--track: unknown track(s) {', '.join(unknown)} (packaged: {', '.join(packaged_track_names())})")
+    out_dir = out or _default_out("compare-models")
+    log = lambda msg: typer.echo(msg, err=True)  # noqa: E731
+    t0 = time.perf_counter()
+    sections = {f"Controllers on the Pacejka dynamic plant at {lateral_fraction:g} mu g":
+                compare_models(tracks, lateral_fraction, log=log)}
+    if robustness:
+        sections[f"Parameter mismatch (dynamic MPC, {tracks[0]}, {lateral_fraction:g} mu g)"] = \
+            mismatch_study(tracks[0], lateral_fraction, log=log)
+        sections[f"Steering delay (dynamic MPC, {tracks[0]}, 0.7 mu g, 0.05 s lag)"] = delay_study(tracks[0], log=log)
+    intro = ("F1TENTH car (F1TENTH gym parameters) on the Pacejka dynamic bicycle plant, speed profile limited "
+             "by curvature and friction, 0.05 s control period. Road excess: how far the footprint left the "
+             "road (0 = stayed on it). Produced by `mpcdrive compare-models`.")
+    with atomic_output_dir(out_dir) as tmp:
+        write_study(tmp, sections, intro)
+    typer.echo(f"{sum(len(r) for r in sections.values())} runs in {time.perf_counter() - t0:.1f} s; "
+               f"report: {out_dir / 'report.md'}")
+
+
 def main() -> None:
     """Console-script entry point with the exit codes of CONTRACT.md."""
     try:

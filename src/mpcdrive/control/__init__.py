@@ -1,6 +1,19 @@
-"""Controllers: the Controller protocol and LTV-MPC on the sparse QP."""
+"""Controllers: the Controller protocol, LTV-MPC on the sparse QP, baselines and wrappers."""
 
+from .adapters import StateAdapter
 from .base import Controller
+from .baselines import BaselineLimits, PurePursuit, Stanley
+from .delay import DelayCompensator, DelayWarmStart
 from .mpc import LtvMpc, MpcConfig
 
-__all__ = ["Controller", "LtvMpc", "MpcConfig"]
+__all__ = [
+    "BaselineLimits",
+    "Controller",
+    "DelayCompensator",
+    "DelayWarmStart",
+    "LtvMpc",
+    "MpcConfig",
+    "PurePursuit",
+    "StateAdapter",
+    "Stanley",
+]

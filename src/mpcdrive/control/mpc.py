@@ -26,6 +26,7 @@ from ..scene.footprint import Footprint
 from ..scene.obstacles import Obstacle
 from ..paths.reference import HorizonMode, horizon_arc_lengths, horizon_states
 from ..solvers.osqp_backend import OsqpBackend, OsqpSettings
+from ..solvers.projected_gradient import ProjectedGradientBackend, ProjectedGradientSettings
 from ..types import ControlOutput, SolveResult, WarmStart
 from ..units import TWO_PI, wrap_angle
 
@@ -75,10 +76,15 @@ class MpcConfig:
 
     linearization : ``trajectory`` (along the previous plan, shifted) or ``paper`` (at the
         current state and previous input, frozen over the horizon, eqs. 9-12);
-    discretization : ``rk4`` or ``euler`` (the paper) for the prediction model;
+    discretization : ``rk4``, ``euler`` (the paper) or ``exp`` (linearize, then discretize exactly:
+        stable for stiff models such as the dynamic bicycle) for the prediction model;
     horizon : ``arc_length`` (references spaced by the distance driven at the reference speed) or
         ``paper`` (fixed ``horizon_step_m`` per step, the authors' code);
     v_ref_mps : reference speed [m/s] (the model's constant speed for 3-state models when None);
+    speed_profile : reference speed along the path instead of a constant: any object with
+        ``speed(s_m) -> v_mps`` (e.g. :class:`~mpcdrive.paths.SpeedProfile`); each horizon step
+        then gets the profile's speed at its arc length, and a model with an ``accel`` input gets
+        the profile's acceleration as input reference;
     feedforward : ``curvature`` (steering reference = the model's steady-state steering on the
         path curvature, so R does not fight the turn, and yaw reference = path heading minus the
         steady-state slip angle, since the centre of gravity moves along yaw + beta) or ``none``
@@ -88,6 +94,8 @@ class MpcConfig:
         obstacle terms linearized along the shifted previous plan); more re-linearize at each new
         solution until the inputs move less than ``sqp_tol`` [input units] or ``sqp_max_time_s``
         of wall time is spent.
+    prediction_substeps : integration substeps per control step in the prediction model (stiff
+        models such as the dynamic bicycle need them at long steps).
     """
 
     linearization: Literal["trajectory", "paper"] = "trajectory"
@@ -100,25 +108,33 @@ class MpcConfig:
     sqp_max_iterations: int = 1
     sqp_tol: float = 1e-4
     sqp_max_time_s: float = 0.05
+    speed_profile: object | None = None
+    prediction_substeps: int = 1
 
     def __post_init__(self):
         if self.linearization not in ("trajectory", "paper"):
             raise ValueError(f"linearization must be 'trajectory' or 'paper', got {self.linearization!r}")
-        if self.discretization not in ("rk4", "euler"):
-            raise ValueError(f"discretization must be 'rk4' or 'euler', got {self.discretization!r}")
+        if self.discretization not in ("rk4", "euler", "exp"):
+            raise ValueError(f"discretization must be 'rk4', 'euler' or 'exp', got {self.discretization!r}")
         if self.horizon not in ("arc_length", "paper"):
             raise ValueError(f"horizon must be 'arc_length' or 'paper', got {self.horizon!r}")
         if self.sqp_max_iterations < 1:
             raise ValueError(f"sqp_max_iterations must be >= 1, got {self.sqp_max_iterations}")
         if self.feedforward not in ("curvature", "none"):
             raise ValueError(f"feedforward must be 'curvature' or 'none', got {self.feedforward!r}")
+        if self.speed_profile is not None and not callable(getattr(self.speed_profile, "speed", None)):
+            raise ValueError("speed_profile must have a speed(s_m) method")
+        if int(self.prediction_substeps) != self.prediction_substeps or self.prediction_substeps < 1:
+            raise ValueError(f"prediction_substeps must be a positive integer, got {self.prediction_substeps}")
 
 
 class LtvMpc:
-    """Tracking LTV-MPC of ``model`` along ``path`` solving ``problem`` with OSQP.
+    """Tracking LTV-MPC of ``model`` along ``path`` solving ``problem`` with OSQP (or, given
+    :class:`~mpcdrive.solvers.ProjectedGradientSettings`, the paper's projected gradient descent).
 
-    model : the controller's prediction model (states start with x, y, yaw; a 4th state is the
-    speed [m/s]); the QP is built once here and only updated in place in :meth:`step`.
+    model : the controller's prediction model (states start with x, y, yaw; its ``reference``
+    method gives the reference state of a path point at a speed); the QP is built once here and
+    only updated in place in :meth:`step`.
     obstacles / avoidance : the obstacles and how they enter the problem (see ocp.avoidance);
     footprint : the vehicle body; lane_margin_m : extra room [m] kept between body and lane edge.
     """
@@ -131,7 +147,7 @@ class LtvMpc:
         path: Path,
         problem: MpcProblem,
         config: MpcConfig = MpcConfig(),
-        solver_settings: OsqpSettings = OsqpSettings(),
+        solver_settings: OsqpSettings | ProjectedGradientSettings = OsqpSettings(),
         obstacles: tuple[Obstacle, ...] = (),
         avoidance: AvoidanceConfig | None = None,
         footprint: Footprint = Footprint(),
@@ -146,6 +162,8 @@ class LtvMpc:
         self.dt_s = problem.dt_s
         if config.v_ref_mps is not None:
             self.v_ref_mps = float(config.v_ref_mps)
+        elif config.speed_profile is not None:
+            self.v_ref_mps = float(config.speed_profile.speed(0.0))
         else:
             self.v_ref_mps = float(model.speed(np.zeros(model.nx)))
         if not np.isfinite(self.v_ref_mps):
@@ -161,7 +179,11 @@ class LtvMpc:
             self.avoidance = Avoidance(avoidance, list(obstacles), path, footprint, problem.N, problem.dt_s,
                                        problem.lane_half_width_m, lane_margin_m)
         self.qp = LtvQp(problem)
-        self.backend = OsqpBackend(self.qp, solver_settings)
+        if isinstance(solver_settings, ProjectedGradientSettings):
+            self.backend = ProjectedGradientBackend(self.qp, solver_settings)
+        else:
+            self.backend = OsqpBackend(self.qp, solver_settings)
+        self._accel_index = list(model.input_names).index("accel") if "accel" in model.input_names else None
         N, nx, nu = self.N, self.nx, self.nu
         # per-step work buffers
         self._xref = np.zeros((N + 1, nx))
@@ -242,16 +264,14 @@ class LtvMpc:
         e_psi = wrap_angle(x[2] - float(self.path.heading(s0)))
 
         # references over the horizon
-        s_arr = horizon_arc_lengths(s0, N, cfg.horizon, dt, self.v_ref_mps, cfg.horizon_step_m)
+        s_arr, v_arr = self._horizon(s0)
         refs = horizon_states(self.path, s_arr, x[2])
         xref, uref = self._xref, self._uref
-        xref[:, :3] = refs[:, :3]
-        if self.nx >= 4:
-            xref[:, 3] = self.v_ref_mps
-        if cfg.feedforward == "curvature":
-            steer_ss, slip_ss = model.steady_state(refs[:, 3], self.v_ref_mps)
-            uref[:, 0] = steer_ss[:N]
-            xref[:, 2] -= slip_ss
+        xr, ur = model.reference(refs[:, :3], refs[:, 3], v_arr, cfg.feedforward == "curvature")
+        xref[:] = xr
+        uref[:] = ur[:N]
+        if cfg.speed_profile is not None and self._accel_index is not None:
+            uref[:, self._accel_index] += np.diff(v_arr) / dt
         # linearization points
         Xbar, Ubar = self._Xbar, self._Ubar
         if around is not None:
@@ -263,14 +283,15 @@ class LtvMpc:
             Ubar[:] = warm.u_prev
         elif warm.X is None or warm.U is None:
             Ubar[:] = uref
-            Xbar[:] = rollout(model, x, Ubar, dt, cfg.discretization)[:-1]
+            Xbar[:] = rollout(model, x, Ubar, dt, cfg.discretization, cfg.prediction_substeps)[:-1]
         else:
             Xbar[0] = x
             Xbar[1:] = warm.X[2:]
             Xbar[1:, 2] += TWO_PI * np.round((x[2] - warm.X[1, 2]) / TWO_PI)
             Ubar[:-1] = warm.U[1:]
             Ubar[-1] = warm.U[-1]
-        Fbar, Ad, Bd = discrete_step_and_jacobians(model, Xbar, Ubar, dt, cfg.discretization)
+        Fbar, Ad, Bd = discrete_step_and_jacobians(model, Xbar, Ubar, dt, cfg.discretization,
+                                                   cfg.prediction_substeps)
         c = Fbar - np.einsum("kij,kj->ki", Ad, Xbar) - np.einsum("kij,kj->ki", Bd, Ubar)
         Xlin = self._Xlin
         Xlin[:N] = Xbar
@@ -302,12 +323,33 @@ class LtvMpc:
                         None if terms is None else terms.rows_a, None if terms is None else terms.rows_b,
                         None if terms is None else terms.H, None if terms is None else terms.g, sides)
 
+    def _horizon(self, s0: float) -> tuple[np.ndarray, np.ndarray]:
+        """(N+1,) arc lengths [m] and reference speeds [m/s] of the horizon references. With a
+        speed profile the references move along the path as the profile does in time (exactly, via
+        its ``arc_length_after``; else trapezoidal in the speed, two fixed-point passes) and each
+        step gets the profile's speed there."""
+        cfg, N, dt = self.config, self.N, self.dt_s
+        prof = cfg.speed_profile
+        if prof is None:
+            s_arr = horizon_arc_lengths(s0, N, cfg.horizon, dt, self.v_ref_mps, cfg.horizon_step_m)
+            return s_arr, np.full(N + 1, self.v_ref_mps)
+        if cfg.horizon == "arc_length" and callable(getattr(prof, "arc_length_after", None)):
+            s_arr = np.asarray(prof.arc_length_after(s0, dt * np.arange(N + 1)), float)
+            return s_arr, np.asarray(prof.speed(s_arr), float)
+        v = np.full(N + 1, float(prof.speed(s0)))
+        for _ in range(2):
+            s_arr = horizon_arc_lengths(s0, N, cfg.horizon, dt, 0.5 * (v[1:] + v[:-1]), cfg.horizon_step_m)
+            v = np.asarray(prof.speed(s_arr), float)
+        return s_arr, v
+
     def finish(self, d: StepData, warm: WarmStart, res: SolveResult, t0: float, iterations: int = 1) -> ControlOutput:
         """Check the solve, pick the command (or fall back) and package the step's output."""
         pb = self.problem
         t_next = warm.t_s + self.dt_s
         if res.ok and np.all(np.isfinite(res.U[0])):
-            u = np.clip(res.U[0], pb.u_min, pb.u_max)
+            # the solver meets bounds to its tolerance only: the command meets them exactly
+            rate = pb.du_max_per_s * pb.dt_s
+            u = np.clip(np.clip(res.U[0], warm.u_prev - rate, warm.u_prev + rate), pb.u_min, pb.u_max)
             fallback = ""
             new_warm = WarmStart(s_m=d.s_m, u_prev=u, X=res.X, U=res.U, t_s=t_next, sides=d.sides)
             X_pred = res.X

@@ -46,6 +46,20 @@ def steady_state_for_curvature(kappa, params: KinematicParams) -> tuple[np.ndarr
     return np.arctan(np.tan(beta) / params.lq), beta
 
 
+def _kinematic_reference(pose, kappa, params: KinematicParams, feedforward: bool, nu: int):
+    """Pose references (yaw = heading - steady-state slip with ``feedforward``) and inputs
+    (steady-state steering with ``feedforward``, zero otherwise) for path points."""
+    pose = np.asarray(pose, float)
+    kappa = np.asarray(kappa, float)
+    xref = pose.copy()
+    uref = np.zeros(kappa.shape + (nu,))
+    if feedforward:
+        steer, beta = steady_state_for_curvature(kappa, params)
+        xref[..., 2] -= beta
+        uref[..., 0] = steer
+    return xref, uref
+
+
 def _components(a: np.ndarray):
     """State / input components of a single vector or a batch, as views."""
     return a.T if a.ndim <= 2 else np.moveaxis(a, -1, 0)
@@ -117,6 +131,11 @@ class KinematicBicycle3:
         """(steering [rad], slip angle [rad]) on curvature kappa [1/m]; speed-independent here."""
         return steady_state_for_curvature(kappa, self.params)
 
+    def reference(self, pose, kappa, v_mps=None, feedforward: bool = True):
+        """Reference states (K, 3) and inputs (K, 1) for path points ``pose`` (K, 3) [x m, y m,
+        heading rad] of curvature ``kappa`` (K,) [1/m] (the speed is the model's own)."""
+        return _kinematic_reference(pose, kappa, self.params, feedforward, 1)
+
 
 class KinematicBicycle4:
     """Kinematic bicycle with speed as a state.
@@ -168,3 +187,12 @@ class KinematicBicycle4:
     def steady_state(self, kappa, v_mps=None):
         """(steering [rad], slip angle [rad]) on curvature kappa [1/m]; speed-independent here."""
         return steady_state_for_curvature(kappa, self.params)
+
+    def reference(self, pose, kappa, v_mps, feedforward: bool = True):
+        """Reference states (K, 4) and inputs (K, 2) for path points ``pose`` (K, 3) [x m, y m,
+        heading rad] of curvature ``kappa`` (K,) [1/m] driven at ``v_mps`` (K,) [m/s]."""
+        xp, uref = _kinematic_reference(pose, kappa, self.params, feedforward, 2)
+        xref = np.empty(xp.shape[:-1] + (4,))
+        xref[..., :3] = xp
+        xref[..., 3] = v_mps
+        return xref, uref

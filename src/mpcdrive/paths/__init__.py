@@ -3,11 +3,19 @@
 from .base import Path, Projection
 from .circle import CirclePath
 from .reference import horizon_arc_lengths, horizon_states
+from .speed_profile import ConstantSpeed, SpeedProfile
 from .straight import StraightPath
+from .tracks import Track, load_track_csv, track_from_text, write_track_csv
 from .waypoints import WaypointPath
 
 __all__ = [
     "CirclePath",
+    "ConstantSpeed",
+    "SpeedProfile",
+    "Track",
+    "load_track_csv",
+    "track_from_text",
+    "write_track_csv",
     "Path",
     "Projection",
     "StraightPath",

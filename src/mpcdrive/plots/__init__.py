@@ -14,11 +14,15 @@ from mpcdrive.plots.figures import (
     speed_varies,
     write_run_figures,
 )
+from mpcdrive.plots.laps import plot_lateral_acceleration, plot_speed_map, plot_tracking_comparison
 
 __all__ = [
     "plot_clearance",
     "plot_cost_map",
     "plot_heading_deviation",
+    "plot_lateral_acceleration",
+    "plot_speed_map",
+    "plot_tracking_comparison",
     "plot_lateral_deviation",
     "plot_overview",
     "plot_speed",

@@ -283,6 +283,10 @@ def _make_speed(result: SimResult) -> Figure:
             and refs.shape[1] > 0 and refs.shape[2] > names.index("v"):
         ax.plot(k, refs[:, 0, names.index("v")], color=_REF_COLOR, ls="--", lw=1.0,
                 label="reference speed")
+    elif {"vx", "vy"} <= set(names) and refs is not None and np.ndim(refs) == 3 \
+            and refs.shape[0] == result.steps and refs.shape[1] > 0 and refs.shape[2] == len(names):
+        ref_v = np.hypot(refs[:, 0, names.index("vx")], refs[:, 0, names.index("vy")])
+        ax.plot(k, ref_v, color=_REF_COLOR, ls="--", lw=1.0, label="reference speed")
     ax.set_ylabel("speed v [m/s]")
     ax.set_title(_title("Speed", result))
     ax.grid(True, alpha=0.3)
@@ -401,9 +405,12 @@ def write_run_figures(result: SimResult, out_dir: str | os.PathLike) -> list[Pat
     """Write every figure of one run into ``out_dir`` (created if needed); return their paths.
 
     Files: ``trajectory.png``, ``lateral_deviation.png``, ``heading_deviation.png``,
-    ``steering.png``, ``speed.png`` (only when the model has an ``accel`` input or the speed
-    varies) and ``overview.png``.
+    ``steering.png``, ``speed.png``, ``speed_map.png`` (trajectory coloured by speed) and
+    ``lateral_acceleration.png`` (the last three only when the model has an ``accel`` input or the
+    speed varies) and ``overview.png``.
     """
+    from mpcdrive.plots.laps import plot_lateral_acceleration, plot_speed_map
+
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = [
@@ -414,6 +421,8 @@ def write_run_figures(result: SimResult, out_dir: str | os.PathLike) -> list[Pat
     ]
     if _has_accel_input(result) or speed_varies(result):
         paths.append(plot_speed(result, out / "speed.png"))
+        paths.append(plot_speed_map(result, out / "speed_map.png"))
+        paths.append(plot_lateral_acceleration(result, out / "lateral_acceleration.png"))
     if result.clearance_m is not None:
         paths.append(plot_clearance(result, out / "clearance.png"))
     paths.append(plot_overview(result, out / "overview.png"))

@@ -8,15 +8,23 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..control.adapters import StateAdapter
+from ..control.base import Controller
+from ..control.delay import DelayCompensator
 from ..control.mpc import LtvMpc, MpcConfig
+from ..models.dynamic import DynamicBicycle, DynamicParams
 from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams
 from ..ocp.problem import MpcProblem
 from ..paths import CirclePath, Path, StraightPath, WaypointPath
+from ..paths.speed_profile import SpeedProfile
+from ..paths.tracks import Track, load_track_csv, track_from_text
+from ..sim.actuator import SteeringActuator
 from ..sim.closed_loop import Disturbance, Plant, simulate
 from ..ocp.avoidance import AvoidanceConfig
 from ..scene.footprint import Footprint
 from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Polygon, Static, TrajectoryMotion, rectangle
 from ..solvers.osqp_backend import OsqpSettings
+from ..solvers.projected_gradient import ProjectedGradientSettings
 from ..types import SimResult
 from .schema import AvoidanceSpec, NoiseSpec, ObstacleSpec, ScenarioSpec
 
@@ -27,7 +35,7 @@ class Experiment:
 
     spec: ScenarioSpec
     path: Path
-    controller: LtvMpc
+    controller: Controller
     plant: Plant
     x0: np.ndarray
     steps: int
@@ -35,6 +43,20 @@ class Experiment:
     disturbance: Disturbance | None
     measurement_noise: Disturbance | None
     obstacles: tuple[Obstacle, ...] = ()
+    mpc: LtvMpc | None = None
+    track: Track | None = None
+    speed_profile: SpeedProfile | None = None
+    road_half_width_m: float | None = None
+
+
+def load_track(spec) -> Track:
+    """The track of a ``csv`` path spec: a packaged track name or a file path."""
+    from .tracks import packaged_track_names, packaged_track_text
+
+    if spec.file in packaged_track_names():
+        return track_from_text(packaged_track_text(spec.file), f"track {spec.file}", closed=spec.closed,
+                               smoothing=spec.smoothing, name=spec.file)
+    return load_track_csv(spec.file, closed=spec.closed, smoothing=spec.smoothing)
 
 
 def build_path(spec) -> Path:
@@ -42,6 +64,8 @@ def build_path(spec) -> Path:
         return StraightPath(spec.start, spec.end)
     if spec.type == "circle":
         return CirclePath(spec.center, spec.radius_m, spec.ccw, math.radians(spec.start_angle_deg))
+    if spec.type == "csv":
+        return load_track(spec).path
     return WaypointPath(spec.points, closed=spec.closed, smoothing=spec.smoothing)
 
 
@@ -63,6 +87,34 @@ def build_obstacle(spec: ObstacleSpec) -> Obstacle:
         return Obstacle(shape, (x0, y0, yaw), motion, spec.name)
     motion = Static() if spec.velocity_mps is None else ConstantVelocity(*spec.velocity_mps)
     return Obstacle(shape, (spec.position[0], spec.position[1], yaw), motion, spec.name)
+def dynamic_params(v, scale=None) -> DynamicParams:
+    """Dynamic-bicycle parameters of a vehicle spec, optionally scaled (plant.param_scale)."""
+    p = DynamicParams(
+        lf_m=v.lf_m, lr_m=v.lr_m, mass_kg=v.mass_kg, yaw_inertia_kgm2=v.yaw_inertia_kgm2, friction=v.friction,
+        cs_front_per_rad=v.cs_front_per_rad, cs_rear_per_rad=v.cs_rear_per_rad, h_cg_m=v.h_cg_m,
+        pacejka_c=v.pacejka_c, pacejka_e=v.pacejka_e, v_blend_low_mps=v.v_blend_low_mps,
+        v_blend_high_mps=v.v_blend_high_mps)
+    if scale is not None:
+        p = p.scaled(mass_kg=scale.mass, yaw_inertia_kgm2=scale.yaw_inertia, friction=scale.friction,
+                     cs_front_per_rad=scale.cornering_stiffness_front, cs_rear_per_rad=scale.cornering_stiffness_rear)
+    return p
+
+
+def build_model(name: str, v, scale=None):
+    """The vehicle model called ``name`` with the parameters of vehicle spec ``v``."""
+    if name == "kinematic3":
+        return KinematicBicycle3(v.speed_mps, KinematicParams(v.lf_m, v.lr_m))
+    if name == "kinematic4":
+        return KinematicBicycle4(KinematicParams(v.lf_m, v.lr_m))
+    return DynamicBicycle(dynamic_params(v, scale), tire="linear" if name == "dynamic_linear" else "pacejka")
+
+
+def build_speed_profile(spec, path: Path, friction: float) -> SpeedProfile:
+    """The speed profile of a ``controller.speed_profile`` spec along ``path``."""
+    a_lat = spec.lateral_accel_max_mps2 or spec.lateral_accel_fraction * friction * 9.81
+    return SpeedProfile(path, a_lat, spec.accel_max_mps2, spec.decel_max_mps2, spec.v_max_mps,
+                        v_start_mps=spec.v_start_mps, v_end_mps=spec.v_end_mps,
+                        curvature_window_m=spec.curvature_window_m, friction_circle=spec.friction_circle)
 
 
 def _noise(spec: NoiseSpec | None) -> Disturbance | None:
@@ -79,26 +131,37 @@ def _noise(spec: NoiseSpec | None) -> Disturbance | None:
 def build_experiment(spec: ScenarioSpec) -> Experiment:
     """Models, path, QP (built once), controller and plant of a scenario."""
     v = spec.vehicle
-    params = KinematicParams(v.lf_m, v.lr_m)
     c = spec.controller
     steer = math.radians(c.max_steer_deg)
     rate = None if c.max_steer_rate_deg_s is None else math.radians(c.max_steer_rate_deg_s)
+    model = build_model(v.model, v)
+    track = load_track(spec.path) if spec.path.type == "csv" else None
+    path = track.path if track is not None else build_path(spec.path)
+    profile = None if c.speed_profile is None else build_speed_profile(c.speed_profile, path, v.friction)
+    init = spec.initial_state
+    pose = [init.x_m, init.y_m, math.radians(init.yaw_deg)]
     if v.model == "kinematic3":
-        model = KinematicBicycle3(v.speed_mps, params)
         u_min, u_max, du = [-steer], [steer], [rate if rate else np.inf]
         x_min = x_max = None
-        x0 = np.array([spec.initial_state.x_m, spec.initial_state.y_m, math.radians(spec.initial_state.yaw_deg)])
         v_ref = v.speed_mps
     else:
-        model = KinematicBicycle4(params)
         a_lo, a_hi = c.accel_limits_mps2 or (-np.inf, np.inf)
         u_min, u_max, du = [-steer, a_lo], [steer, a_hi], [rate if rate else np.inf, np.inf]
         v_ref = c.reference_speed_mps if c.reference_speed_mps is not None else v.speed_mps
         s_lo, s_hi = c.speed_limits_mps or (-np.inf, np.inf)
-        x_min, x_max = [-np.inf] * 3 + [s_lo], [np.inf] * 3 + [s_hi]
-        v0 = spec.initial_state.v_mps if spec.initial_state.v_mps is not None else v_ref
-        x0 = np.array([spec.initial_state.x_m, spec.initial_state.y_m, math.radians(spec.initial_state.yaw_deg), v0])
-    lane_half = None if spec.road is None else spec.road.lane_width_m / 2.0
+        nx = model.nx
+        x_min, x_max = [-np.inf] * nx, [np.inf] * nx
+        x_min[3], x_max[3] = s_lo, s_hi
+    if profile is not None and c.reference_speed_mps is None:
+        v_ref = None  # the profile gives the reference speed
+    # road: a lane from the scenario, else the track's narrowest half width minus half the car
+    lane_half = road_half = None
+    if spec.road is not None:
+        lane_half = road_half = spec.road.lane_width_m / 2.0
+    elif track is not None and track.has_widths:
+        road_half = track.min_half_width_m
+        # the controller keeps the body (half the car's width) inside this bound itself
+        lane_half = road_half if road_half > 0.5 * v.width_m else None
     problem = MpcProblem(
         nx=model.nx,
         nu=model.nu,
@@ -124,21 +187,49 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         horizon_step_m=c.horizon_step_m,
         v_ref_mps=v_ref,
         feedforward=c.feedforward,
+        speed_profile=profile,
+        prediction_substeps=c.prediction_substeps,
     )
-    path = build_path(spec.path)
-    obstacles = tuple(build_obstacle(o) for o in spec.obstacles)
+    if c.solver == "projected_gradient":
+        settings = ProjectedGradientSettings(max_iter=c.pg_max_iter, tol=c.pg_tol, accelerated=c.pg_accelerated)
+    else:
+        settings = OsqpSettings(eps_abs=c.osqp_eps, eps_rel=c.osqp_eps, max_iter=c.osqp_max_iter)
     footprint = Footprint(v.length_m, v.width_m, n_discs=v.footprint_discs)
+    obstacles = tuple(build_obstacle(o) for o in spec.obstacles)
     av = spec.avoidance or AvoidanceSpec()
     avoidance = AvoidanceConfig(av.formulation, av.margin_m, av.weight, av.epsilon_m2, tuple(av.sigma_m),
                                 av.influence_m, av.max_obstacles, av.detour, av.detour_ramp_m)
     if obstacles:
         config = replace(config, sqp_max_iterations=av.sqp_max_iterations, sqp_tol=av.sqp_tol,
                          sqp_max_time_s=av.sqp_max_time_s)
-    controller = LtvMpc(model, path, problem, config,
-                        OsqpSettings(eps_abs=c.osqp_eps, eps_rel=c.osqp_eps, max_iter=c.osqp_max_iter),
-                        obstacles=obstacles, avoidance=avoidance, footprint=footprint,
-                        lane_margin_m=spec.road.margin_m if spec.road is not None else 0.0)
-    plant = Plant(model, spec.plant.integrator, spec.plant.substeps)
+    mpc = LtvMpc(model, path, problem, config, settings, obstacles=obstacles, avoidance=avoidance,
+                 footprint=footprint, lane_margin_m=spec.road.margin_m if spec.road is not None else 0.0)
+    # the plant: same or another model, parameters scaled, steering through an actuator
+    pl = spec.plant
+    plant_model = model if (pl.model == "same" and pl.param_scale is None) else build_model(spec.plant_model, v, pl.param_scale)
+    actuator = None
+    if pl.steering_actuator is not None:
+        actuator = SteeringActuator(pl.steering_actuator.time_constant_s, pl.steering_actuator.dead_time_s)
+    controller: Controller = mpc
+    if c.delay_compensation:
+        controller = DelayCompensator(mpc, model, actuator, spec.dt_s, path, substeps=pl.substeps)
+    if tuple(plant_model.state_names) != tuple(model.state_names):
+        controller = StateAdapter(controller, model, plant_model)
+    plant = Plant(plant_model, pl.integrator, pl.substeps, actuator)
+    # initial plant state: the pose, the given speed (else the reference / profile speed)
+    if init.v_mps is not None:
+        v0 = init.v_mps
+    elif profile is not None:
+        v0 = float(profile.speed(path.project(np.array(pose[:2]))[0]))
+    else:
+        v0 = v_ref
+    names = plant_model.state_names
+    x0 = np.zeros(plant_model.nx)
+    x0[:3] = pose
+    if "v" in names:
+        x0[names.index("v")] = v0
+    if "vx" in names:
+        x0[names.index("vx")] = v0
     return Experiment(
         spec=spec,
         path=path,
@@ -150,13 +241,18 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         disturbance=_noise(spec.disturbance),
         measurement_noise=_noise(spec.measurement_noise),
         obstacles=obstacles,
+        mpc=mpc,
+        track=track,
+        speed_profile=profile,
+        road_half_width_m=road_half,
     )
 
 
 def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None = None) -> SimResult:
     """Closed-loop run of a built experiment."""
     spec = exp.spec
-    pb = exp.controller.problem
+    pb = (exp.mpc or exp.controller).problem
+    half = exp.road_half_width_m if exp.road_half_width_m is not None else pb.lane_half_width_m
     return simulate(
         exp.controller,
         exp.plant,
@@ -168,9 +264,12 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
         measurement_noise=exp.measurement_noise,
         seed=spec.seed,
         stop_at_path_end=spec.stop_at_path_end,
-        lane_half_width_m=pb.lane_half_width_m,
+        lane_half_width_m=half,
         progress=progress,
         meta={"id": spec.id, "max_steer_rad": float(pb.u_max[0]), "description": spec.description},
         obstacles=exp.obstacles,
         footprint=exp.footprint,
+        laps=spec.laps,
+        # on a track, a car more than 1 m beyond the road edge has left it for good
+        abort_lateral_error_m=None if exp.track is None or half is None else half + 1.0,
     )

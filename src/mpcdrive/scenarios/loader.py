@@ -41,7 +41,7 @@ def _parse(text: str, source: str) -> ScenarioSpec:
         return ScenarioSpec.model_validate(data)
     except ValidationError as e:
         err = e.errors()[0]
-        loc = ".".join(str(p) for p in err["loc"] if not (isinstance(p, str) and p in ("straight", "circle", "waypoints")))
+        loc = ".".join(str(p) for p in err["loc"] if not (isinstance(p, str) and p in ("straight", "circle", "waypoints", "csv")))
         msg = err["msg"]
         if err["type"] == "extra_forbidden":
             msg = "unknown key"
@@ -51,15 +51,40 @@ def _parse(text: str, source: str) -> ScenarioSpec:
         raise ScenarioError(source, loc or "(top level)", msg + more) from None
 
 
+def _resolve_track_file(spec: ScenarioSpec, source: str, base_dir: Path | None) -> ScenarioSpec:
+    """A CSV path's ``file``: a packaged track name stays as it is; a path is made absolute
+    (relative to the scenario file's folder) and must exist."""
+    if spec.path.type != "csv":
+        return spec
+    from .tracks import packaged_track_names
+
+    f = spec.path.file
+    if f in packaged_track_names():
+        return spec
+    p = Path(f)
+    if not p.is_absolute():
+        if base_dir is None:
+            raise ScenarioError(source, "path.file",
+                                f"no packaged track {f!r} (packaged: {', '.join(packaged_track_names())})")
+        p = (base_dir / p).resolve()
+    if not p.is_file():
+        raise ScenarioError(source, "path.file", f"track file not found: {p} (packaged tracks: "
+                            f"{', '.join(packaged_track_names())})")
+    return spec.model_copy(update={"path": spec.path.model_copy(update={"file": str(p)})})
+
+
 def load_scenario(name_or_path: str | Path) -> ScenarioSpec:
     """A built-in scenario by id, or a YAML scenario file by path.
 
-    Raises :class:`ScenarioError` (one-line message: file, field, problem) on bad input.
+    A CSV track ``path.file`` is a packaged track name or a path relative to the scenario file;
+    the returned spec holds it as an absolute path. Raises :class:`ScenarioError` (one-line
+    message: file, field, problem) on bad input.
     """
     name = str(name_or_path)
     if name in builtin_ids():
         path = _builtin_dir() / f"{name}.yaml"
-        return _parse(path.read_text(encoding="utf-8"), f"builtin:{name}")
+        source = f"builtin:{name}"
+        return _resolve_track_file(_parse(path.read_text(encoding="utf-8"), source), source, None)
     p = Path(name)
     if p.suffix.lower() not in (".yaml", ".yml"):
         if not p.exists():
@@ -71,7 +96,7 @@ def load_scenario(name_or_path: str | Path) -> ScenarioSpec:
         raise ScenarioError(name, "", "file not found") from None
     except (OSError, UnicodeDecodeError) as e:
         raise ScenarioError(name, "", f"cannot read file ({e})") from None
-    return _parse(text, name)
+    return _resolve_track_file(_parse(text, name), name, p.resolve().parent)
 
 
 def dump_scenario(spec: ScenarioSpec) -> str:

@@ -11,6 +11,8 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from ..models.presets import PRESETS
+
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNeg = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -54,21 +56,77 @@ class WaypointsSpec(_Strict):
     smoothing: NonNeg = 0.0
 
 
-PathSpec = Annotated[StraightSpec | CircleSpec | WaypointsSpec, Field(discriminator="type")]
+class CsvPathSpec(_Strict):
+    """Track from a CSV waypoint file (columns x_m, y_m and optionally w_tr_right_m, w_tr_left_m):
+    ``file`` is a packaged track name (``raceway``, ``hairpins``) or a path, relative to the
+    scenario file; ``closed``: None decides from the data; ``smoothing``: spline smoothing factor."""
+
+    type: Literal["csv"]
+    file: str = Field(min_length=1)
+    closed: bool | None = None
+    smoothing: NonNeg = 0.0
+
+
+PathSpec = Annotated[StraightSpec | CircleSpec | WaypointsSpec | CsvPathSpec, Field(discriminator="type")]
+
+ModelName = Literal["kinematic3", "kinematic4", "dynamic_linear", "dynamic_pacejka"]
+PresetName = Literal[tuple(PRESETS)]  # type: ignore[valid-type]
+_PRESET_KEYS = ("lf_m", "lr_m", "mass_kg", "yaw_inertia_kgm2", "friction", "cs_front_per_rad", "cs_rear_per_rad",
+                "h_cg_m", "pacejka_c", "pacejka_e", "length_m", "width_m")
+
+
+def model_size(model: str) -> tuple[int, int]:
+    """(nx, nu) of a model name."""
+    return {"kinematic3": (3, 1), "kinematic4": (4, 2)}.get(model, (6, 2))
 
 
 class VehicleSpec(_Strict):
-    """Vehicle model and geometry. ``kinematic3``: constant ``speed_mps``; ``kinematic4``: speed is a
-    state driven by acceleration. The body is ``length_m`` x ``width_m``, covered by
-    ``footprint_discs`` discs for obstacle constraints."""
+    """Vehicle model (the controller's) and parameters. ``kinematic3``: constant ``speed_mps``;
+    ``kinematic4``: speed is a state driven by acceleration; ``dynamic_linear`` /
+    ``dynamic_pacejka``: dynamic bicycle (x, y, yaw, vx, vy, r) with linear / magic-formula tires.
 
-    model: Literal["kinematic3", "kinematic4"] = "kinematic3"
+    ``preset`` (``f1tenth``, ``commonroad_ford_escort``, ``commonroad_bmw_320i``,
+    ``commonroad_vw_vanagon``) fills every parameter not given explicitly. The dynamic parameters
+    (mass, yaw inertia, friction, cornering stiffness coefficients C_S per rad, CoG height, magic
+    formula C and E, speeds of the kinematic-to-dynamic blend) default to the F1TENTH car's."""
+
+    model: ModelName = "kinematic3"
+    preset: PresetName | None = None
     lf_m: Positive = 0.17
     lr_m: Positive = 0.16
     speed_mps: Finite = 1.0
     length_m: Positive = 0.50
     width_m: Positive = 0.27
     footprint_discs: int = Field(3, ge=1, le=10)
+    mass_kg: Positive = 3.74
+    yaw_inertia_kgm2: Positive = 0.04712
+    friction: Positive = 1.0489
+    cs_front_per_rad: Positive = 4.718
+    cs_rear_per_rad: Positive = 5.4562
+    h_cg_m: NonNeg = 0.074
+    pacejka_c: Annotated[float, Field(gt=0, lt=2, allow_inf_nan=False)] = 1.3507
+    pacejka_e: Annotated[float, Field(lt=1, allow_inf_nan=False)] = -0.0074722
+    v_blend_low_mps: Positive = 0.5
+    v_blend_high_mps: Positive = 1.0
+
+    @model_validator(mode="before")
+    @classmethod
+    def _fill_from_preset(cls, data):
+        if isinstance(data, dict) and isinstance(data.get("preset"), str) and data["preset"] in PRESETS:
+            pre = PRESETS[data["preset"]]
+            p = pre.params
+            values = {"lf_m": p.lf_m, "lr_m": p.lr_m, "mass_kg": p.mass_kg, "yaw_inertia_kgm2": p.yaw_inertia_kgm2,
+                      "friction": p.friction, "cs_front_per_rad": p.cs_front_per_rad,
+                      "cs_rear_per_rad": p.cs_rear_per_rad, "h_cg_m": p.h_cg_m, "pacejka_c": p.pacejka_c,
+                      "pacejka_e": p.pacejka_e, "length_m": pre.length_m, "width_m": pre.width_m}
+            data = {**{k: values[k] for k in _PRESET_KEYS}, **data}
+        return data
+
+    @model_validator(mode="after")
+    def _blend_order(self):
+        if self.v_blend_low_mps >= self.v_blend_high_mps:
+            raise ValueError("v_blend_low_mps must be below v_blend_high_mps")
+        return self
 
 
 class TrajectorySpec(_Strict):
@@ -152,8 +210,30 @@ class RoadSpec(_Strict):
     margin_m: NonNeg = 0.05
 
 
+class SpeedProfileSpec(_Strict):
+    """Reference speed along the path limited by curvature and friction and by acceleration and
+    braking (the car slows before bends): lateral acceleration <= ``lateral_accel_fraction`` *
+    friction * g (or ``lateral_accel_max_mps2`` when given), forward / braking acceleration <=
+    ``accel_max_mps2`` / ``decel_max_mps2`` (shared with the lateral one on the friction circle),
+    speed <= ``v_max_mps``; ``v_start_mps`` / ``v_end_mps`` pin the ends of an open path."""
+
+    lateral_accel_fraction: Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)] = 0.8
+    lateral_accel_max_mps2: Positive | None = None
+    accel_max_mps2: Positive = 4.0
+    decel_max_mps2: Positive = 4.0
+    v_max_mps: Positive = 8.0
+    v_start_mps: NonNeg | None = None
+    v_end_mps: NonNeg | None = None
+    curvature_window_m: NonNeg = 0.3
+    friction_circle: bool = True
+
+
 class ControllerSpec(_Strict):
-    """LTV-MPC settings; weights are diagonals in the model's state / input order."""
+    """LTV-MPC settings; weights are diagonals in the model's state / input order.
+
+    ``speed_profile`` replaces the constant reference speed; ``solver``: ``osqp`` or the paper's
+    ``projected_gradient`` (input bounds only; ``pg_*`` settings); ``delay_compensation``: predict the
+    state over the plant's steering dead time before solving (needs ``plant.steering_actuator``)."""
 
     horizon: int = Field(30, ge=1, le=1000)
     Q: list[NonNeg]
@@ -166,7 +246,8 @@ class ControllerSpec(_Strict):
     speed_limits_mps: tuple[Finite, Finite] | None = None
     reference_speed_mps: Finite | None = None
     linearization: Literal["trajectory", "paper"] = "trajectory"
-    discretization: Literal["rk4", "euler"] = "rk4"
+    discretization: Literal["rk4", "euler", "exp"] = "rk4"
+    prediction_substeps: int = Field(1, ge=1, le=100)
     horizon_reference: Literal["arc_length", "paper"] = "arc_length"
     horizon_step_m: Positive = 0.025
     feedforward: Literal["curvature", "none"] = "curvature"
@@ -174,6 +255,12 @@ class ControllerSpec(_Strict):
     lane_slack_weight_l1: NonNeg = 1e3
     osqp_eps: Positive = 1e-5
     osqp_max_iter: int = Field(4000, ge=1)
+    speed_profile: SpeedProfileSpec | None = None
+    solver: Literal["osqp", "projected_gradient"] = "osqp"
+    pg_max_iter: int = Field(2000, ge=1)
+    pg_tol: Positive = 1e-6
+    pg_accelerated: bool = True
+    delay_compensation: bool = False
 
     @field_validator("max_steer_deg")
     @classmethod
@@ -190,12 +277,34 @@ class ControllerSpec(_Strict):
         return v
 
 
-class PlantSpec(_Strict):
-    """The simulated vehicle: ``same`` model as the controller, integrated with ``integrator``."""
+class ParamScaleSpec(_Strict):
+    """Factors by which the plant's parameters differ from the vehicle's (the controller's belief):
+    1.2 = the true car has 20 % more. Dynamic plants only."""
 
-    model: Literal["same"] = "same"
+    mass: Positive = 1.0
+    yaw_inertia: Positive = 1.0
+    cornering_stiffness_front: Positive = 1.0
+    cornering_stiffness_rear: Positive = 1.0
+    friction: Positive = 1.0
+
+
+class ActuatorSpec(_Strict):
+    """Steering actuator of the plant: dead time, then a first-order lag (both in seconds)."""
+
+    time_constant_s: NonNeg = 0.0
+    dead_time_s: NonNeg = 0.0
+
+
+class PlantSpec(_Strict):
+    """The simulated vehicle: ``same`` model as the controller or another one (model mismatch),
+    parameters scaled by ``param_scale``, integrated with ``integrator`` in ``substeps`` per control
+    step, steering through ``steering_actuator``."""
+
+    model: Literal["same", "kinematic4", "dynamic_linear", "dynamic_pacejka"] = "same"
     integrator: Literal["rk4", "euler"] = "rk4"
     substeps: int = Field(1, ge=1, le=100)
+    param_scale: ParamScaleSpec | None = None
+    steering_actuator: ActuatorSpec | None = None
 
 
 class NoiseSpec(_Strict):
@@ -241,20 +350,36 @@ class ScenarioSpec(_Strict):
     measurement_noise: NoiseSpec | None = None
     obstacles: list[ObstacleSpec] = Field(default_factory=list)
     avoidance: AvoidanceSpec | None = None
+    laps: Positive | None = None
+
+    @property
+    def plant_model(self) -> str:
+        """The plant's model name (``same`` resolved)."""
+        return self.vehicle.model if self.plant.model == "same" else self.plant.model
 
     @model_validator(mode="after")
     def _sizes(self):
-        nx, nu = (3, 1) if self.vehicle.model == "kinematic3" else (4, 2)
+        nx, nu = model_size(self.vehicle.model)
         c = self.controller
         for name, w, n in (("Q", c.Q, nx), ("QN", c.QN, nx), ("R", c.R, nu), ("Rc", c.Rc, nu)):
             if w is not None and len(w) != n:
                 raise ValueError(f"controller.{name} needs {n} entries for {self.vehicle.model}, got {len(w)}")
+        plant_nx, plant_nu = model_size(self.plant_model)
+        if plant_nu != nu:
+            raise ValueError(f"plant.model {self.plant_model} has inputs of size {plant_nu} but the controller's "
+                             f"{self.vehicle.model} has {nu}; use a model with steering and acceleration")
+        if self.plant.param_scale is not None and not self.plant_model.startswith("dynamic"):
+            raise ValueError("plant.param_scale needs a dynamic plant model")
+        if c.delay_compensation and self.plant.steering_actuator is None:
+            raise ValueError("controller.delay_compensation needs plant.steering_actuator (the delay to compensate)")
         for name, spec in (("disturbance", self.disturbance), ("measurement_noise", self.measurement_noise)):
             if spec is not None:
                 for field in ("low", "high", "std"):
                     v = getattr(spec, field)
-                    if v is not None and len(v) != nx:
-                        raise ValueError(f"{name}.{field} needs {nx} entries (one per state), got {len(v)}")
+                    if v is not None and len(v) != plant_nx:
+                        raise ValueError(f"{name}.{field} needs {plant_nx} entries (one per plant state), got {len(v)}")
+        if self.laps is not None and self.path.type in ("straight",):
+            raise ValueError("laps needs a closed path")
         if self.avoidance is not None and self.avoidance.formulation == "corridor" and self.road is None:
             raise ValueError("avoidance.formulation corridor needs a road (road.lane_width_m)")
         if self.duration_s / self.dt_s > 1_000_000:

@@ -1,6 +1,7 @@
 """Closed-loop simulation: plant, disturbances, measurement noise, full log, metrics."""
 
+from .actuator import ActuatorState, SteeringActuator
 from .closed_loop import Disturbance, Plant, simulate
 from .metrics import Footprint, compute_metrics
 
-__all__ = ["Disturbance", "Footprint", "Plant", "compute_metrics", "simulate"]
+__all__ = ["ActuatorState", "SteeringActuator", "Disturbance", "Footprint", "Plant", "compute_metrics", "simulate"]

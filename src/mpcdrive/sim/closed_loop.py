@@ -15,15 +15,20 @@ from ..scene.footprint import Footprint
 from ..scene.geometry import shape_distance
 from ..scene.obstacles import Circle, Obstacle
 from ..types import SimResult
+from .actuator import ActuatorState, SteeringActuator
 
 
 @dataclass(frozen=True)
 class Plant:
-    """The simulated vehicle: ``model`` integrated with ``method`` in ``substeps`` per control step."""
+    """The simulated vehicle: ``model`` integrated with ``method`` in ``substeps`` per control step.
+
+    actuator : optional steering actuator (dead time, first-order lag) between the command and
+    the wheels (input 0); None applies commands instantly."""
 
     model: VehicleModel
     method: Method = "rk4"
     substeps: int = 1
+    actuator: SteeringActuator | None = None
 
     def __post_init__(self):
         if self.substeps < 1:
@@ -34,6 +39,17 @@ class Plant:
         for _ in range(self.substeps):
             x = discrete_step(self.model, x, u, h, self.method)
         return x
+
+    def step_actuated(self, x: np.ndarray, u: np.ndarray, dt_s: float, act: ActuatorState,
+                      t_s: float) -> tuple[np.ndarray, ActuatorState]:
+        """One control step from time ``t_s`` with the steering passed through the actuator, whose
+        state ``act`` already holds the command ``u[0]``; returns (state, actuator state)."""
+        h = dt_s / self.substeps
+        ui = np.array(u, dtype=float)
+        for i in range(self.substeps):
+            ui[0], act = self.actuator.advance(act, t_s + i * h, h)
+            x = discrete_step(self.model, x, ui, h, self.method)
+        return x, act
 
 
 @dataclass(frozen=True)
@@ -88,6 +104,8 @@ def simulate(
     meta: dict | None = None,
     obstacles: tuple[Obstacle, ...] = (),
     footprint: Footprint = Footprint(),
+    laps: float | None = None,
+    abort_lateral_error_m: float | None = None,
 ) -> SimResult:
     """Run ``steps`` control steps of ``dt_s`` seconds from ``x0`` (plant state).
 
@@ -98,6 +116,11 @@ def simulate(
     between the vehicle ``footprint`` and every obstacle is measured at each step
     (``SimResult.clearance_m``; negative = overlap) and the obstacles' poses are logged in
     ``meta["obstacles"]``.
+    On a closed path, ``laps`` ends the
+    run once the vehicle has driven that many laps from its start (``goal_reached`` says whether
+    it did within ``steps``). ``abort_lateral_error_m`` ends the run early when the lateral error
+    exceeds it (the car left the road; ``goal_reached`` is then False and
+    ``meta["aborted_off_path"]`` True).
     """
     if steps < 1:
         raise ValueError(f"steps must be >= 1, got {steps}")
@@ -124,7 +147,15 @@ def simulate(
     fallback: list[str] = []
     warm = controller.initial_warm(x)
     goal_reached = False if (stop_at_path_end and not path.closed) else None
+    s_goal = None
+    if laps is not None and path.closed:
+        if not laps > 0:
+            raise ValueError(f"laps must be positive, got {laps}")
+        s_goal = warm.s_m + laps * path.length_m
+        goal_reached = False
     k_end = steps
+    act = None if plant.actuator is None else plant.actuator.start(0.0)  # wheels start straight
+    aborted = False
     for k in range(steps):
         meas = x if measurement_noise is None else x + measurement_noise.sample(rng, nx)
         out = controller.step(meas, warm)
@@ -140,13 +171,22 @@ def simulate(
         XP[k], RF[k], ST[k] = out.X_pred, out.refs, out.solve_time_s
         status.append(out.status)
         fallback.append(out.fallback)
-        x = plant.step(x, out.u, dt_s)
+        if act is None:
+            x = plant.step(x, out.u, dt_s)
+        else:
+            act = act.issue(k * dt_s, float(out.u[0]))
+            x, act = plant.step_actuated(x, out.u, dt_s, act, k * dt_s)
         if disturbance is not None:
             x = x + disturbance.sample(rng, nx)
         if progress is not None:
             progress(k + 1, steps)
-        if goal_reached is not None and s >= path.length_m:
+        if goal_reached is not None and s >= (path.length_m if s_goal is None else s_goal):
             goal_reached = True
+            k_end = k + 1
+            break
+        if abort_lateral_error_m is not None and abs(ey) > abort_lateral_error_m:
+            aborted = True
+            goal_reached = False
             k_end = k + 1
             break
     sl = slice(0, k_end)
@@ -183,7 +223,7 @@ def simulate(
         input_names=tuple(model.input_names),
         lane_half_width_m=lane_half_width_m,
         goal_reached=goal_reached,
-        meta=meta,
+        meta={**meta, **({"aborted_off_path": True} if aborted else {})},
         clearance_m=clearance,
     )
 

@@ -1,0 +1,107 @@
+"""Published vehicle parameter sets for the dynamic bicycle.
+
+* ``f1tenth``: the 1:10 F1TENTH car as the F1TENTH gym simulator ships it (mass 3.74 kg, yaw
+  inertia 0.04712 kg m^2, lf 0.15875 m, lr 0.17145 m, friction 1.0489, cornering stiffness
+  coefficients C_Sf 4.718 / C_Sr 5.4562 per rad, CoG height 0.074 m, steering +-0.4189 rad at up to
+  3.2 rad/s, acceleration up to 9.51 m/s^2, 0.58 m x 0.31 m).
+* ``commonroad_ford_escort``, ``commonroad_bmw_320i``, ``commonroad_vw_vanagon``: the CommonRoad
+  vehicle parameter sets 1, 2 and 3 (values in US units converted with 1 lbf = 4.4482216152605 N,
+  1 ft = 0.3048 m as CommonRoad does). Their single-track model uses friction = p_dy1 = 1.0489,
+  C_Sf = C_Sr = -p_ky1 / p_dy1 = 21.92 / 1.0489 per rad and the sprung-mass CoG height h_s.
+
+Every preset uses the CommonRoad lateral magic-formula shape factors (C = p_cy1 = 1.3507,
+E = p_ey1 = -0.0074722) for the Pacejka tire, with B = C_S / C.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .dynamic import DynamicParams
+
+_LBF = 4.4482216152605  # N
+_FT = 0.3048  # m
+_SLUG = _LBF / _FT  # kg per lb s^2 / ft
+_SLUG_FT2 = _LBF * _FT  # kg m^2 per lb ft s^2
+_CR_MU = 1.0489
+_CR_CS = 21.92 / 1.0489
+
+
+@dataclass(frozen=True)
+class VehiclePreset:
+    """A named vehicle: dynamic parameters plus actuator limits and body size (SI units).
+
+    max_steer_rad [rad], max_steer_rate_rad_s [rad/s], max_accel_mps2 [m/s^2] (absolute),
+    length_m, width_m [m]; source: where the numbers come from.
+    """
+
+    name: str
+    description: str
+    params: DynamicParams
+    max_steer_rad: float
+    max_steer_rate_rad_s: float
+    max_accel_mps2: float
+    length_m: float
+    width_m: float
+    source: str
+
+    @property
+    def min_turning_radius_m(self) -> float:
+        """Kinematic turning radius of the rear axle at full lock, L / tan(max_steer) [m]."""
+        return self.params.wheelbase_m / math.tan(self.max_steer_rad)
+
+
+def _commonroad(num, name, description, m_slug, a_ft, b_ft, iz_slugft2, hs_ft, steer, length, width):
+    return VehiclePreset(
+        name=name,
+        description=description,
+        params=DynamicParams(
+            lf_m=a_ft * _FT,
+            lr_m=b_ft * _FT,
+            mass_kg=m_slug * _SLUG,
+            yaw_inertia_kgm2=iz_slugft2 * _SLUG_FT2,
+            friction=_CR_MU,
+            cs_front_per_rad=_CR_CS,
+            cs_rear_per_rad=_CR_CS,
+            h_cg_m=hs_ft * _FT,
+        ),
+        max_steer_rad=steer,
+        max_steer_rate_rad_s=0.4,
+        max_accel_mps2=11.5,
+        length_m=length,
+        width_m=width,
+        source=f"CommonRoad vehicle models, parameters_vehicle{num}",
+    )
+
+
+PRESETS: dict[str, VehiclePreset] = {
+    "f1tenth": VehiclePreset(
+        name="f1tenth",
+        description="1:10 F1TENTH race car (F1TENTH gym defaults)",
+        params=DynamicParams(),
+        max_steer_rad=0.4189,
+        max_steer_rate_rad_s=3.2,
+        max_accel_mps2=9.51,
+        length_m=0.58,
+        width_m=0.31,
+        source="F1TENTH gym default vehicle parameters",
+    ),
+    "commonroad_ford_escort": _commonroad(
+        1, "commonroad_ford_escort", "Ford Escort (CommonRoad vehicle id 1)",
+        84.0, 2.9, 4.95, 1135.0, 1.95, 0.910, 4.298, 1.674),
+    "commonroad_bmw_320i": _commonroad(
+        2, "commonroad_bmw_320i", "BMW 320i (CommonRoad vehicle id 2)",
+        74.91452, 3.793293, 4.667707, 1321.416, 2.01355, 1.066, 4.508, 1.610),
+    "commonroad_vw_vanagon": _commonroad(
+        3, "commonroad_vw_vanagon", "VW Vanagon (CommonRoad vehicle id 3)",
+        101.3367, 3.775563, 4.334437, 1824.078, 2.639405, 1.023, 4.569, 1.844),
+}
+
+
+def get_preset(name: str) -> VehiclePreset:
+    """The preset called ``name``; ValueError listing the known names otherwise."""
+    try:
+        return PRESETS[name]
+    except KeyError:
+        raise ValueError(f"unknown vehicle preset {name!r} (known: {', '.join(PRESETS)})") from None
