@@ -44,13 +44,16 @@ class WarmStart:
     """What a controller needs from its previous step; returned by ``step`` and passed back.
 
     s_m : arc length of the last projection [m]; u_prev : (nu,) last applied input;
-    X, U : (N+1, nx), (N, nu) last plan (None before the first solve).
+    X, U : (N+1, nx), (N, nu) last plan (None before the first solve);
+    plan_age : steps since that plan was solved (0 = solved this step; a fallback that shifts the
+    plan adds one).
     """
 
     s_m: float
     u_prev: np.ndarray
     X: np.ndarray | None = None
     U: np.ndarray | None = None
+    plan_age: int = 0
 
 
 @dataclass(frozen=True)

@@ -25,9 +25,7 @@ from ..paths.reference import HorizonMode, horizon_arc_lengths, horizon_states
 from ..solvers.osqp_backend import OsqpBackend, OsqpSettings
 from ..types import ControlOutput, SolveResult, WarmStart
 from ..units import TWO_PI, wrap_angle
-
-FALLBACK_SHIFTED_PLAN = "shifted_plan"
-FALLBACK_HOLD = "hold_last"
+from .fallback import FALLBACK_HOLD, FALLBACK_SHIFTED_PLAN, FallbackConfig, FallbackLadder  # noqa: F401
 
 
 @dataclass(frozen=True)
@@ -70,7 +68,8 @@ class MpcConfig:
         path curvature, so R does not fight the turn, and yaw reference = path heading minus the
         steady-state slip angle, since the centre of gravity moves along yaw + beta) or ``none``
         (the paper: ``u' R u`` and the path heading as yaw reference);
-    projection_window_m : half-width of the arc-length window searched around the last s [m].
+    projection_window_m : half-width of the arc-length window searched around the last s [m];
+    fallback : what to do, in order, when a solve fails (:class:`~mpcdrive.control.fallback.FallbackConfig`).
     """
 
     linearization: Literal["trajectory", "paper"] = "trajectory"
@@ -80,6 +79,7 @@ class MpcConfig:
     v_ref_mps: float | None = None
     feedforward: Literal["curvature", "none"] = "curvature"
     projection_window_m: float = 2.0
+    fallback: FallbackConfig = FallbackConfig()
 
     def __post_init__(self):
         if self.linearization not in ("trajectory", "paper"):
@@ -90,6 +90,14 @@ class MpcConfig:
             raise ValueError(f"horizon must be 'arc_length' or 'paper', got {self.horizon!r}")
         if self.feedforward not in ("curvature", "none"):
             raise ValueError(f"feedforward must be 'curvature' or 'none', got {self.feedforward!r}")
+        for name in ("horizon_step_m", "projection_window_m"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a positive finite number, got {v!r}")
+        if self.v_ref_mps is not None and not (isinstance(self.v_ref_mps, (int, float)) and math.isfinite(self.v_ref_mps)):
+            raise ValueError(f"v_ref_mps must be a finite number, got {self.v_ref_mps!r}")
+        if not isinstance(self.fallback, FallbackConfig):
+            raise ValueError(f"fallback must be a FallbackConfig, got {type(self.fallback).__name__}")
 
 
 class LtvMpc:
@@ -133,6 +141,7 @@ class LtvMpc:
         self._Xws = np.zeros((N + 1, nx))
         self._lane_n = np.zeros((N, 2))
         self._lane_b = np.zeros(N)
+        self.fallback = FallbackLadder(self, config.fallback)
 
     # -- warm start ---------------------------------------------------------------------------
     def initial_warm(self, x0) -> WarmStart:
@@ -149,6 +158,14 @@ class LtvMpc:
         if bad:
             raise ValueError(f"state field(s) {', '.join(bad)} not finite: {dict(zip(self.model.state_names, x.tolist()))}")
         return x
+
+    def _check_warm(self, warm: WarmStart) -> np.ndarray:
+        u_prev = np.asarray(warm.u_prev, dtype=float)
+        if u_prev.shape != (self.nu,) or not np.all(np.isfinite(u_prev)):
+            raise ValueError(f"warm.u_prev must be {self.nu} finite numbers {self.model.input_names}, got {warm.u_prev!r}")
+        if not math.isfinite(warm.s_m):
+            raise ValueError(f"warm.s_m must be finite, got {warm.s_m!r}")
+        return u_prev
 
     # -- one control step -----------------------------------------------------------------------
     def step(self, x, warm: WarmStart) -> ControlOutput:
@@ -168,6 +185,7 @@ class LtvMpc:
         a step every solver of this problem shares. Arrays are views of work buffers, valid until
         the next call."""
         x = self._check_state(x)
+        self._check_warm(warm)
         cfg, model = self.config, self.model
         N, dt = self.N, self.dt_s
         s0, e_y = self.path.project(x[:2], warm.s_m, cfg.projection_window_m)
@@ -217,7 +235,7 @@ class LtvMpc:
             new_warm = WarmStart(s_m=d.s_m, u_prev=u, X=res.X, U=res.U)
             X_pred = res.X
         else:
-            u, fallback, new_warm, X_pred = self._fallback(d.x, d.s_m, warm)
+            u, fallback, new_warm, X_pred = self.fallback.run(d, warm)
         return ControlOutput(
             u=u,
             status=res.status,
@@ -230,19 +248,3 @@ class LtvMpc:
             refs=d.xref.copy(),
             warm=new_warm,
         )
-
-    def _fallback(self, x, s0, warm: WarmStart):
-        """Deliberate fallback when the QP did not solve: the previous plan shifted by one step,
-        or (no plan) the last applied input; either is kept within the input and rate bounds."""
-        pb = self.problem
-        rate = pb.du_max_per_s * pb.dt_s
-        if warm.U is not None and warm.X is not None and warm.U.shape[0] > 1:
-            U = np.vstack([warm.U[1:], warm.U[-1:]])
-            X = np.vstack([warm.X[1:], warm.X[-1:]])
-            u_raw, name = U[0], FALLBACK_SHIFTED_PLAN
-        else:
-            U = X = None
-            u_raw, name = warm.u_prev, FALLBACK_HOLD
-        u = np.clip(np.clip(u_raw, warm.u_prev - rate, warm.u_prev + rate), pb.u_min, pb.u_max)
-        X_pred = X if X is not None else np.repeat(x[None, :], self.N + 1, axis=0)
-        return u, name, WarmStart(s_m=float(s0), u_prev=u, X=X, U=U), X_pred

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..control.fallback import FallbackConfig
 from ..control.mpc import LtvMpc, MpcConfig
 from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams
 from ..ocp.problem import MpcProblem
@@ -60,14 +61,19 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
     c = spec.controller
     steer = math.radians(c.max_steer_deg)
     rate = None if c.max_steer_rate_deg_s is None else math.radians(c.max_steer_rate_deg_s)
+    pl = spec.plant
+    plant_params = KinematicParams(pl.lf_m if pl.lf_m is not None else v.lf_m,
+                                   pl.lr_m if pl.lr_m is not None else v.lr_m)
     if v.model == "kinematic3":
         model = KinematicBicycle3(v.speed_mps, params)
+        plant_model = KinematicBicycle3(pl.speed_mps if pl.speed_mps is not None else v.speed_mps, plant_params)
         u_min, u_max, du = [-steer], [steer], [rate if rate else np.inf]
         x_min = x_max = None
         x0 = np.array([spec.initial_state.x_m, spec.initial_state.y_m, math.radians(spec.initial_state.yaw_deg)])
         v_ref = v.speed_mps
     else:
         model = KinematicBicycle4(params)
+        plant_model = KinematicBicycle4(plant_params)
         a_lo, a_hi = c.accel_limits_mps2 or (-np.inf, np.inf)
         u_min, u_max, du = [-steer, a_lo], [steer, a_hi], [rate if rate else np.inf, np.inf]
         v_ref = c.reference_speed_mps if c.reference_speed_mps is not None else v.speed_mps
@@ -101,10 +107,11 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         horizon_step_m=c.horizon_step_m,
         v_ref_mps=v_ref,
         feedforward=c.feedforward,
+        fallback=FallbackConfig(tuple(c.fallback), c.brake_decel_mps2, c.brake_steering, c.relax_slack_factor),
     )
     path = build_path(spec.path)
     controller = LtvMpc(model, path, problem, config, OsqpSettings(eps_abs=c.osqp_eps, eps_rel=c.osqp_eps, max_iter=c.osqp_max_iter))
-    plant = Plant(model, spec.plant.integrator, spec.plant.substeps)
+    plant = Plant(plant_model, spec.plant.integrator, spec.plant.substeps)
     return Experiment(
         spec=spec,
         path=path,

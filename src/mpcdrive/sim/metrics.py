@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..control.fallback import FALLBACK_KINDS
 from ..types import STATUS_INACCURATE, STATUS_OK, SimResult
 
 
@@ -44,8 +45,10 @@ def _rms(a) -> float:
 
 
 def compute_metrics(result: SimResult, footprint: Footprint = Footprint()) -> dict:
-    """Metrics of one run; keys as in CONTRACT.md plus ``converged_*`` (second half of the run)
-    and ``steer_total_variation_rad`` (sum of |steering changes|, for the smoothing study).
+    """Metrics of one run; keys as in CONTRACT.md plus ``converged_*`` (second half of the run),
+    ``steer_total_variation_rad`` (sum of |steering changes|, for the smoothing study),
+    ``fallback_counts`` (steps per fallback rung, every rung listed) and ``termination`` (why the
+    run ended: ``completed``, ``goal_reached`` or ``diverged``).
 
     Steering rates include the first step's change from the initial steering angle
     (``meta["initial_steer_rad"]``, 0 by default: the wheels start straight)."""
@@ -75,10 +78,20 @@ def compute_metrics(result: SimResult, footprint: Footprint = Footprint()) -> di
         "max_lane_excess_m": _lane_excess(result, footprint),
         "solver_failures": int(failures),
         "fallbacks": int(sum(1 for f in result.fallback if f)),
+        "fallback_counts": _fallback_counts(result.fallback),
         "solve_time_us": {
             "p50": float(np.percentile(st, 50)),
             "p99": float(np.percentile(st, 99)),
             "max": float(np.max(st)),
         },
         "goal_reached": result.goal_reached,
+        "termination": result.meta.get("termination", "completed"),
     }
+
+
+def _fallback_counts(fallback) -> dict[str, int]:
+    counts = {k: 0 for k in FALLBACK_KINDS}
+    for f in fallback:
+        if f:
+            counts[f] = counts.get(f, 0) + 1
+    return counts
