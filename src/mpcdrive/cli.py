@@ -85,6 +85,25 @@ def _run_into(spec, out_dir: Path, show_progress: bool):
     return result, metrics, figures
 
 
+class OutputAbandoned(Exception):
+    """A command failed part-way; its output directory was not created (exit code 1)."""
+
+
+@contextmanager
+def _output_dir(out_dir: Path):
+    """:func:`atomic_output_dir` that, when the block fails, says no partial output was kept."""
+    from .io.atomic import atomic_output_dir
+
+    with atomic_output_dir(out_dir) as tmp:
+        try:
+            yield tmp
+        except (BadInput, KeyboardInterrupt, OutputAbandoned):
+            raise
+        except Exception as e:
+            msg = " ".join(str(e).split())
+            raise OutputAbandoned(f"{type(e).__name__}: {msg}; no partial output was kept ({out_dir} not written)") from e
+
+
 def _default_out(stem: str) -> Path:
     return Path("runs") / f"{stem}-{time.strftime('%Y%m%d-%H%M%S')}"
 
@@ -112,11 +131,9 @@ def run(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
 ) -> None:
     """Run one scenario; write trajectory.csv, metrics.json, figures and the resolved scenario."""
-    from .io.atomic import atomic_output_dir
-
     spec = _load(scenario)
     out_dir = out or _default_out(spec.id)
-    with atomic_output_dir(out_dir) as tmp:
+    with _output_dir(out_dir) as tmp:
         _, metrics, _ = _run_into(spec, tmp, not quiet)
     typer.echo(_summary_line(spec.id, metrics))
     typer.echo(f"wrote {out_dir}")
@@ -131,7 +148,6 @@ def reproduce(
     """Run every paper experiment; write DIR/<id>/, DIR/metrics.json and DIR/report.md."""
     from .experiments import PAPER_EXPERIMENTS, PAPER_VALUES, STEERING_COMPARISONS
     from .io import write_json
-    from .io.atomic import atomic_output_dir
     from .plots import plot_steering_comparison
     from .report import ReportEntry, write_reproduce_report
 
@@ -145,7 +161,7 @@ def reproduce(
     out_dir = out or _default_out("reproduce")
     all_metrics, entries, results = {}, [], {}
     t0 = time.perf_counter()
-    with atomic_output_dir(out_dir) as tmp:
+    with _output_dir(out_dir) as tmp:
         for n, spec in enumerate(specs, 1):
             typer.echo(f"[{n}/{len(specs)}] {spec.id}", err=True)
             result, metrics, figures = _run_into(spec, tmp / spec.id, not quiet)
@@ -189,8 +205,84 @@ def bench(
         typer.echo(f"wrote {json_file}")
 
 
+@app.command()
+def sweep(
+    scenario: str = typer.Argument(..., help="built-in scenario id or a YAML scenario file"),
+    runs: int = typer.Option(100, "--runs", min=1, help="number of runs"),
+    seed: int = typer.Option(0, "--seed", min=0, help="seed of the whole sweep (each run gets its own from it)"),
+    vary: list[str] | None = typer.Option(
+        None, "--vary", help="NAME=DISTRIBUTION (repeatable): uniform(a,b), normal(mu,sigma), offset_uniform, "
+        "offset_normal, scale_uniform, scale_normal, choice(v1,...); NAME a dotted path such as initial_state.y_m"),
+    set_: list[str] | None = typer.Option(None, "--set", help="NAME=VALUE fixed for every run (repeatable), e.g. road.lane_width_m=0.8"),
+    out: Path | None = typer.Option(None, "--out", help="output directory (default runs/sweep-<id>-<timestamp>)"),
+    workers: int | None = typer.Option(None, "--workers", min=1, help="local processes (default: all cores)"),
+    backend: str = typer.Option("local", "--backend", help="local (process pool) or ray"),
+    address: str | None = typer.Option(None, "--address", help="Ray cluster address (default: a new local Ray)"),
+    max_final_error: float = typer.Option(0.1, "--max-final-error", help="largest final |lateral error| of a successful run [m]"),
+    max_lane_excess: float = typer.Option(0.0, "--max-lane-excess", help="largest lane excess of a successful run [m]"),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
+) -> None:
+    """Monte Carlo sweep: run SCENARIO many times with varied values; write runs.csv, summary.json/md, histograms."""
+    from .sweep import SuccessCriteria, SweepError, plan_sweep, run_sweep, write_sweep_outputs
+
+    spec = _load(scenario)
+    try:
+        criteria = SuccessCriteria(max_final_error, max_lane_excess)
+        plan = plan_sweep(spec, runs, seed, vary or [], set_ or [], criteria, source=scenario)
+        if backend not in ("local", "ray"):
+            raise SweepError(f"--backend must be 'local' or 'ray', got {backend!r}")
+        if backend == "ray":
+            import importlib.util
+
+            if importlib.util.find_spec("ray") is None:
+                raise SweepError("--backend ray: Ray is not installed (pip install 'mpcdrive[ray]')")
+    except SweepError as e:
+        raise BadInput(str(e)) from None
+    out_dir = out or _default_out(f"sweep-{spec.id}")
+    t0 = time.perf_counter()
+    with _output_dir(out_dir) as tmp, _sweep_progress(not quiet, runs) as cb:
+        try:
+            rows = run_sweep(plan, backend, workers, address, progress=cb)
+        except SweepError as e:
+            raise BadInput(str(e)) from None
+        s = write_sweep_outputs(plan, rows, tmp, backend)
+    fb = s["fallbacks"]
+    typer.echo(
+        f"{spec.id}: {s['successes']}/{s['runs']} runs successful, {s['collisions']['runs']} with collisions, "
+        f"{fb['runs_with']} with fallbacks ({fb['total']} steps), {time.perf_counter() - t0:.1f} s"
+    )
+    typer.echo(f"wrote {out_dir}")
+
+
+@contextmanager
+def _sweep_progress(enabled: bool, total: int):
+    """A progress bar over runs on stderr, counting failures (a no-op when disabled)."""
+    if not enabled:
+        yield None
+        return
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("runs"),
+                  TextColumn("{task.fields[failed]} failed"), TimeRemainingColumn(), transient=True,
+                  console=_stderr_console()) as prog:
+        task = prog.add_task("sweep", total=total, failed=0)
+        failed = [0]
+
+        def cb(done: int, n: int, row: dict) -> None:
+            failed[0] += 0 if row.get("success") else 1
+            prog.update(task, completed=done, failed=failed[0])
+
+        yield cb
+
+
 def main() -> None:
     """Console-script entry point with the exit codes of CONTRACT.md."""
+    import signal
+
+    def _terminated(signum, frame):  # SIGTERM cleans up like Ctrl-C: no partial output is kept
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, _terminated)
     try:
         app(standalone_mode=False)
     except BadInput as e:
@@ -199,6 +291,9 @@ def main() -> None:
     except FileExistsError as e:
         typer.echo(f"mpcdrive: --out: {e}", err=True)
         sys.exit(2)
+    except OutputAbandoned as e:
+        typer.echo(f"mpcdrive: error: {e}", err=True)
+        sys.exit(1)
     except typer.Exit as e:
         sys.exit(e.exit_code)
     except KeyboardInterrupt:
