@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from importlib import resources
 from pathlib import Path
 
@@ -34,7 +35,8 @@ class _DuplicateKey(Exception):
 
 
 class _StrictLoader(yaml.SafeLoader):
-    """Safe YAML loader that refuses a key given twice in one mapping (PyYAML keeps the last)."""
+    """Safe YAML loader that refuses a key given twice in one mapping (PyYAML keeps the last) and
+    reads ``1e-5`` as a number, as YAML 1.2 does (PyYAML's YAML 1.1 wants ``1.0e-5``)."""
 
     def construct_mapping(self, node, deep=False):
         seen = set()
@@ -51,6 +53,22 @@ class _StrictLoader(yaml.SafeLoader):
             except TypeError:
                 pass
         return super().construct_mapping(node, deep=deep)
+
+
+_StrictLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
+
+
+def read_yaml(text: str):
+    """Parse YAML text as scenario files are parsed (``1e-5`` is a number; duplicate keys raise
+    ``ValueError``)."""
+    try:
+        return yaml.load(text, Loader=_StrictLoader)
+    except _DuplicateKey as e:
+        raise ValueError(f"line {e.line}: duplicate key {e.key!r}") from None
 
 
 def _parse(text: str, source: str) -> ScenarioSpec:

@@ -74,7 +74,7 @@ class WaypointsSpec(_Strict):
             pts = pts[:-1]
         need = 3 if self.closed else 2
         if len(pts) < need:
-            raise ValueError(f"a {'closed' if self.closed else 'open'} path needs at least {need} distinct "
+            raise ValueError(f"{'a closed' if self.closed else 'an open'} path needs at least {need} distinct "
                              f"points, got {len(pts)}")
         return self
 

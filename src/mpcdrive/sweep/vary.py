@@ -211,9 +211,11 @@ def parse_set(text: str, data: dict) -> Setting:
     name, raw = _split_assignment("--set", text)
     keys = _keys(name)
     get_value(data, keys, "--set", name)  # the path must exist (or lie under an unset section)
+    from ..scenarios.loader import read_yaml
+
     try:
-        value = yaml.safe_load(raw) if raw else None
-    except yaml.YAMLError:
+        value = read_yaml(raw) if raw else None
+    except (yaml.YAMLError, ValueError):
         raise SweepError(f"--set {name}: value {raw!r} is not valid YAML") from None
     return Setting(name, keys, value)
 
