@@ -141,6 +141,7 @@ class LtvMpc:
         self._Xws = np.zeros((N + 1, nx))
         self._lane_n = np.zeros((N, 2))
         self._lane_b = np.zeros(N)
+        self._du_step = problem.du_max_per_s * problem.dt_s  # (nu,) largest input change per step
         self.fallback = FallbackLadder(self, config.fallback)
 
     # -- warm start ---------------------------------------------------------------------------
@@ -230,7 +231,9 @@ class LtvMpc:
         """Check the solve, pick the command (or fall back) and package the step's output."""
         pb = self.problem
         if res.ok and np.all(np.isfinite(res.U[0])):
-            u = np.clip(res.U[0], pb.u_min, pb.u_max)
+            # exactly within the bounds, whatever the solver's tolerance
+            u_prev = warm.u_prev
+            u = np.clip(np.clip(res.U[0], u_prev - self._du_step, u_prev + self._du_step), pb.u_min, pb.u_max)
             fallback = ""
             new_warm = WarmStart(s_m=d.s_m, u_prev=u, X=res.X, U=res.U)
             X_pred = res.X

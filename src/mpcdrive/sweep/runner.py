@@ -129,7 +129,10 @@ def plan_sweep(
     criteria: SuccessCriteria = SuccessCriteria(),
     source: str | None = None,
 ) -> SweepPlan:
-    """The runs of a sweep of ``spec``; :class:`SweepError` (one line) for bad options."""
+    """The runs of a sweep of ``spec``; :class:`SweepError` (one line) for bad options.
+
+    ``set_`` (``NAME=VALUE``) are applied first, then ``vary`` (``NAME=DISTRIBUTION``) on top, so a
+    relative distribution may scale or offset a value that ``--set`` gave."""
     if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
         raise SweepError(f"--runs must be an integer >= 1, got {runs!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -148,9 +151,6 @@ def plan_sweep(
     dup = [n for i, n in enumerate(names) if n in names[:i]]
     if dup:
         raise SweepError(f"--vary {dup[0]}: given twice")
-    clash = [s.name for s in settings if s.name in names]
-    if clash:
-        raise SweepError(f"--vary {clash[0]}: also given with --set")
     # each option on its own at its centre value must give a valid scenario
     for var in variations:
         nominal = var.dist.nominal(_base_value(base_data, var))
