@@ -284,7 +284,11 @@ def main() -> None:
 
     signal.signal(signal.SIGTERM, _terminated)
     try:
-        app(standalone_mode=False)
+        rc = app(standalone_mode=False)
+        if rc == 130:  # typer turns Ctrl-C into a returned exit code 130 in this mode
+            raise KeyboardInterrupt
+        if isinstance(rc, int) and not isinstance(rc, bool) and rc:
+            sys.exit(rc)
     except BadInput as e:
         typer.echo(f"mpcdrive: {e}", err=True)
         sys.exit(2)

@@ -9,10 +9,12 @@ deterministic, so every column but the timings is identical between backends for
 
 from __future__ import annotations
 
+import contextlib
 import math
 import multiprocessing
 import os
 import signal
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -248,29 +250,57 @@ def _mp_context():
     return multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
 
 
+@contextlib.contextmanager
+def _signals_deferred():
+    """Hold Ctrl-C (SIGINT) and SIGTERM back until the block ends, then raise KeyboardInterrupt
+    if one came. Only the Python-level handlers change (the signal mask is left alone, so child
+    processes started in the block receive signals as usual)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    got = []
+    sigs = [signal.SIGINT] + ([signal.SIGTERM] if hasattr(signal, "SIGTERM") else [])
+    old = {s: signal.signal(s, lambda signum, frame: got.append(signum)) for s in sigs}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    if got:
+        raise KeyboardInterrupt
+
+
 def _run_local(tasks, workers: int, progress: Progress | None) -> list[dict]:
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
     if workers == 1 or len(tasks) == 1:
         return _run_inline(tasks, progress)
+    before = set(multiprocessing.active_children())
     ex = ProcessPoolExecutor(max_workers=workers, mp_context=_mp_context(), initializer=_ignore_sigint)
     rows: list[dict] = []
     try:
-        pending = {ex.submit(run_task, t) for t in tasks}
+        with _signals_deferred():  # workers start inside submit(): never leave one half-started
+            pending = {ex.submit(run_task, t) for t in tasks}
         while pending:
             done, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
             for f in done:
                 rows.append(f.result())
                 if progress is not None:
                     progress(len(rows), len(tasks), rows[-1])
-    except BaseException:
-        ex.shutdown(wait=False, cancel_futures=True)
+    except BaseException:  # Ctrl-C or an error: stop the workers now, not after their runs
         terminate = getattr(ex, "terminate_workers", None)  # Python >= 3.14
         if terminate is not None:
             terminate()
         else:
-            for p in list((getattr(ex, "_processes", None) or {}).values()):
+            # the pool's workers, including one whose start Ctrl-C interrupted before the pool
+            # registered it
+            procs = set((getattr(ex, "_processes", None) or {}).values())
+            procs |= set(multiprocessing.active_children()) - before
+            ex.shutdown(wait=False, cancel_futures=True)
+            for p in procs:
                 p.terminate()
+            for p in procs:
+                p.join(timeout=5)
         raise
     ex.shutdown(wait=True)
     return rows
