@@ -62,7 +62,7 @@ def _load(name: str):
         raise BadInput(str(e)) from None
 
 
-def _run_into(spec, out_dir: Path, show_progress: bool):
+def _run_into(spec, out_dir: Path, show_progress: bool, source: str | None = None):
     """Run one scenario and write its files into ``out_dir``; returns (result, metrics, figures)."""
     from .io import write_json, write_trajectory_csv
     from .io.atomic import atomic_write_text
@@ -73,7 +73,7 @@ def _run_into(spec, out_dir: Path, show_progress: bool):
     try:
         exp = build_experiment(spec)
     except ValueError as e:
-        raise BadInput(f"{spec.id}: {e}") from None
+        raise BadInput(f"{source or spec.id}: {e}") from None
     with _progress(show_progress, spec.id, exp.steps) as cb:
         result = run_experiment(exp, progress=cb)
     metrics = compute_metrics(result, exp.footprint)
@@ -134,7 +134,7 @@ def run(
     spec = _load(scenario)
     out_dir = out or _default_out(spec.id)
     with _output_dir(out_dir) as tmp:
-        _, metrics, _ = _run_into(spec, tmp, not quiet)
+        _, metrics, _ = _run_into(spec, tmp, not quiet, source=scenario)
     typer.echo(_summary_line(spec.id, metrics))
     typer.echo(f"wrote {out_dir}")
 

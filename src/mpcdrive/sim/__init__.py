@@ -1,6 +1,6 @@
 """Closed-loop simulation: plant, disturbances, measurement noise, full log, metrics."""
 
 from .closed_loop import Disturbance, Plant, simulate
-from .metrics import Footprint, compute_metrics
+from .metrics import Footprint, compute_metrics, lane_excess_per_step
 
-__all__ = ["Disturbance", "Footprint", "Plant", "compute_metrics", "simulate"]
+__all__ = ["Disturbance", "Footprint", "Plant", "compute_metrics", "lane_excess_per_step", "simulate"]

@@ -25,10 +25,11 @@ class Footprint:
         return np.array([[c + hl, hw], [c + hl, -hw], [c - hl, -hw], [c - hl, hw]])
 
 
-def _lane_excess(result: SimResult, footprint: Footprint) -> float:
-    """Largest distance [m] by which a footprint corner left the lane (0 inside)."""
+def lane_excess_per_step(result: SimResult, footprint: Footprint = Footprint()) -> np.ndarray | None:
+    """(K,) distance [m] by which a footprint corner was outside the lane at each step (0 inside);
+    None without a lane."""
     if result.lane_half_width_m is None:
-        return 0.0
+        return None
     h = result.yaw_rad - result.e_psi_rad  # path heading at each step
     c = footprint.corners()
     yaw = result.yaw_rad
@@ -36,7 +37,13 @@ def _lane_excess(result: SimResult, footprint: Footprint) -> float:
     dx = np.cos(yaw)[:, None] * c[:, 0] - np.sin(yaw)[:, None] * c[:, 1]
     dy = np.sin(yaw)[:, None] * c[:, 0] + np.cos(yaw)[:, None] * c[:, 1]
     lat = result.e_y_m[:, None] + (-np.sin(h)[:, None] * dx + np.cos(h)[:, None] * dy)
-    return float(max(0.0, np.max(np.abs(lat)) - result.lane_half_width_m))
+    return np.maximum(0.0, np.max(np.abs(lat), axis=1) - result.lane_half_width_m)
+
+
+def _lane_excess(result: SimResult, footprint: Footprint) -> float:
+    """Largest distance [m] by which a footprint corner left the lane (0 inside)."""
+    e = lane_excess_per_step(result, footprint)
+    return 0.0 if e is None or e.size == 0 else float(np.max(e))
 
 
 def _rms(a) -> float:

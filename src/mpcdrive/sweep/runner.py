@@ -39,7 +39,7 @@ METRIC_COLUMNS: tuple[str, ...] = (
     "success", "failure_reason", "termination", "steps", "duration_s",
     "rms_lateral_error_m", "max_abs_lateral_error_m", "final_lateral_error_m", "rms_heading_error_rad",
     "max_abs_steer_rad", "max_abs_steer_rate_rad_s", "min_obstacle_clearance_m", "collisions",
-    "max_lane_excess_m", "goal_reached", "solver_failures", "fallbacks",
+    "max_lane_excess_m", "max_lane_excess_t_s", "lane_excess_at_start_m", "goal_reached", "solver_failures", "fallbacks",
     "fallbacks_relax", "fallbacks_shifted_plan", "fallbacks_brake", "fallbacks_hold_last",
     "solve_time_p50_us", "solve_time_p99_us", "solve_time_max_us", "wall_s",
 )
@@ -70,7 +70,12 @@ class SuccessCriteria:
         if m["collisions"]:
             why.append(f"{m['collisions']} collision(s)")
         if m["max_lane_excess_m"] > self.max_lane_excess_m:
-            why.append(f"left the lane by {m['max_lane_excess_m']:.3g} m")
+            msg = f"left the lane by {m['max_lane_excess_m']:.3g} m"
+            if m.get("max_lane_excess_t_s") is not None:
+                msg += f" at t = {m['max_lane_excess_t_s']:.2f} s"
+            if m.get("lane_excess_at_start_m"):
+                msg += f" (already {m['lane_excess_at_start_m']:.3g} m outside at the start)"
+            why.append(msg)
         if m["goal_reached"] is False:
             why.append("goal not reached")
         fe = m["final_lateral_error_m"]
@@ -204,11 +209,16 @@ def run_task(task: RunTask) -> dict:
         return row
     try:
         from ..scenarios import build_experiment, run_experiment
-        from ..sim import compute_metrics
+        from ..sim import compute_metrics, lane_excess_per_step
 
         spec = ScenarioSpec.model_validate(task.scenario)
         exp = build_experiment(spec)
-        m = compute_metrics(run_experiment(exp), exp.footprint)
+        result = run_experiment(exp)
+        m = compute_metrics(result, exp.footprint)
+        excess = lane_excess_per_step(result, exp.footprint)
+        if excess is not None and excess.size:
+            m["max_lane_excess_t_s"] = float(result.t_s[int(np.argmax(excess))])
+            m["lane_excess_at_start_m"] = float(excess[0])
     except Exception as e:  # a run's error is its result; the sweep goes on
         msg = " ".join(str(e).split())
         row.update(success=False, failure_reason=f"error: {type(e).__name__}: {msg}", termination="error",

@@ -47,7 +47,7 @@ def _category(reason: str) -> list[str]:
         elif "collision" in part:
             out.append("collision")
         elif part.startswith("left the lane"):
-            out.append("left the lane")
+            out.append("left the lane, already outside at the start" if "already" in part else "left the lane")
         elif part.startswith("final |lateral error|"):
             out.append("final lateral error too large")
         elif part:
