@@ -79,7 +79,7 @@ def scenarios(draw):
     return data
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=scenarios())
 def test_no_exception_escapes_and_commands_stay_within_bounds(data):
     try:

@@ -171,3 +171,21 @@ def test_ray_backend_gives_the_same_rows_as_the_local_pool():
     assert got == [1, 2, 3, 4]
     assert comparable(remote) == comparable(local)
     assert all(math.isfinite(r["rms_lateral_error_m"]) for r in remote)
+
+
+def test_sweep_figures_have_labelled_axes_with_units_and_data():
+    from mpcdrive.plots.sweep import make_sweep_histograms, make_sweep_varied
+
+    rows = [{"run_id": i, "success": i % 3 != 0, "rms_lateral_error_m": 0.01 * i, "final_lateral_error_m": 0.001 * i,
+             "max_abs_steer_rad": 0.5, "max_lane_excess_m": 0.0, "fallbacks": i % 2, "solve_time_p99_us": 300.0 + i,
+             "initial_state.y_m": 0.1 * i - 0.5} for i in range(10)]
+    rows.append({"run_id": 10, "success": False, "rms_lateral_error_m": None})  # a run that did not run
+    fig = make_sweep_histograms(rows, lane=False)
+    axes = [a for a in fig.axes if a.get_visible()]
+    assert len(axes) == 5 and all("[" in a.get_xlabel() for a in axes)
+    assert all(len(a.patches) > 0 for a in axes)
+    assert "11 runs, 6 successful" in fig._suptitle.get_text()
+    fig = make_sweep_varied(rows, ["initial_state.y_m"])
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == "initial_state.y_m" and ax.get_ylabel() == "RMS lateral error [m]"
+    assert sorted(len(line.get_xdata()) for line in ax.get_lines()) == [4, 6]
