@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mpcdrive.control import LtvMpc, MpcConfig
+from mpcdrive.control import FallbackConfig, LtvMpc, MpcConfig
 from mpcdrive.models import KinematicBicycle3, KinematicBicycle4
 from mpcdrive.ocp import MpcProblem
 from mpcdrive.paths import CirclePath, StraightPath
@@ -56,10 +56,19 @@ def test_infeasible_problem_falls_back_deliberately_and_is_counted():
     pb = MpcProblem(4, 2, 10, 0.01, Q=[1, 1, 1, 1], R=0.1, u_min=[-STEER, -0.1], u_max=[STEER, 0.1],
                     x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [1.0])
     path = StraightPath([0, 0], [50, 0])
+    # the default ladder: the relaxed problem (no hard speed bounds) solves every step
     c = LtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0))
     r = simulate(c, Plant(model), path, [0, 0.2, 0, 3.0], 0.01, 30)
     m = compute_metrics(r)
     assert set(r.status) == {"infeasible"}
+    assert m["solver_failures"] == 30 and m["fallbacks"] == 30
+    assert set(r.fallback) == {"relax"} and m["fallback_counts"]["relax"] == 30
+    assert np.all(np.isfinite(r.u)) and np.all(np.abs(r.u[:, 1]) <= 0.1 + 1e-9)
+    assert np.all(np.diff(r.v_mps) < 0)  # slowing towards the limit at the largest braking allowed
+    # the paper-era ladder: no plan to shift, so the last input is held
+    c = LtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0, fallback=FallbackConfig(("shifted_plan", "hold_last"))))
+    r = simulate(c, Plant(model), path, [0, 0.2, 0, 3.0], 0.01, 30)
+    m = compute_metrics(r)
     assert m["solver_failures"] == 30 and m["fallbacks"] == 30
     assert set(r.fallback) == {"hold_last"}
     assert np.all(np.isfinite(r.u))
@@ -69,7 +78,7 @@ def test_shifted_plan_fallback_after_a_good_solve():
     model = KinematicBicycle3(1.0)
     path = StraightPath([0, 0], [10, 0])
     pb = MpcProblem(3, 1, 10, 0.01, Q=np.ones(3), R=1.0, u_min=-STEER, u_max=STEER)
-    c = LtvMpc(model, path, pb)
+    c = LtvMpc(model, path, pb, MpcConfig(fallback=FallbackConfig(("shifted_plan", "brake"))))
     x = np.array([0.0, 0.3, 0.0])
     out = c.step(x, c.initial_warm(x))
     assert out.status == "ok" and out.fallback == ""

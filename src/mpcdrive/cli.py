@@ -63,7 +63,7 @@ def _load(name: str):
         raise BadInput(str(e)) from None
 
 
-def _run_into(spec, out_dir: Path, show_progress: bool):
+def _run_into(spec, out_dir: Path, show_progress: bool, source: str | None = None):
     """Run one scenario and write its files into ``out_dir`` (with the interactive
     ``report.html``); returns (result, metrics, figures, footprint)."""
     from .io import write_json, write_trajectory_csv
@@ -76,7 +76,7 @@ def _run_into(spec, out_dir: Path, show_progress: bool):
     try:
         exp = build_experiment(spec)
     except ValueError as e:
-        raise BadInput(f"{spec.id}: {e}") from None
+        raise BadInput(f"{source or spec.id}: {e}") from None
     with _progress(show_progress, spec.id, exp.steps) as cb:
         result = run_experiment(exp, progress=cb)
     metrics = compute_metrics(result, exp.footprint)
@@ -88,6 +88,25 @@ def _run_into(spec, out_dir: Path, show_progress: bool):
     write_run_html(out_dir, result, metrics, figures, exp.footprint, run_id=spec.id,
                    description=spec.description)
     return result, metrics, figures, exp.footprint
+
+
+class OutputAbandoned(Exception):
+    """A command failed part-way; its output directory was not created (exit code 1)."""
+
+
+@contextmanager
+def _output_dir(out_dir: Path):
+    """:func:`atomic_output_dir` that, when the block fails, says no partial output was kept."""
+    from .io.atomic import atomic_output_dir
+
+    with atomic_output_dir(out_dir) as tmp:
+        try:
+            yield tmp
+        except (BadInput, KeyboardInterrupt, OutputAbandoned):
+            raise
+        except Exception as e:
+            msg = " ".join(str(e).split())
+            raise OutputAbandoned(f"{type(e).__name__}: {msg}; no partial output was kept ({out_dir} not written)") from e
 
 
 def _default_out(stem: str) -> Path:
@@ -118,12 +137,10 @@ def run(
 ) -> None:
     """Run one scenario; write trajectory.csv, metrics.json, figures, the resolved scenario and
     report.html (an interactive replay)."""
-    from .io.atomic import atomic_output_dir
-
     spec = _load(scenario)
     out_dir = out or _default_out(spec.id)
-    with atomic_output_dir(out_dir) as tmp:
-        _, metrics, _, _ = _run_into(spec, tmp, not quiet)
+    with _output_dir(out_dir) as tmp:
+        _, metrics, _, _ = _run_into(spec, tmp, not quiet, source=scenario)
     typer.echo(_summary_line(spec.id, metrics))
     typer.echo(f"wrote {out_dir}")
 
@@ -138,7 +155,6 @@ def reproduce(
     DIR/report.html (every experiment's replay, metrics and figures in one page)."""
     from .experiments import PAPER_EXPERIMENTS, PAPER_VALUES, STEERING_COMPARISONS, TRAJECTORY_OVERLAYS
     from .io import write_json
-    from .io.atomic import atomic_output_dir
     from .plots import plot_steering_comparison, plot_trajectory_overlay
     from .report import HtmlRun, ReportEntry, write_reproduce_html, write_reproduce_report
 
@@ -152,7 +168,7 @@ def reproduce(
     out_dir = out or _default_out("reproduce")
     all_metrics, entries, results, html_runs = {}, [], {}, []
     t0 = time.perf_counter()
-    with atomic_output_dir(out_dir) as tmp:
+    with _output_dir(out_dir) as tmp:
         for n, spec in enumerate(specs, 1):
             typer.echo(f"[{n}/{len(specs)}] {spec.id}", err=True)
             result, metrics, figures, footprint = _run_into(spec, tmp / spec.id, not quiet)
@@ -200,7 +216,7 @@ def compare_avoidance(
     clearance, lane excess, steering, tracking error, solve time), overlaid trajectories and cost maps."""
     from .experiments import AVOIDANCE_SCENARIOS, FORMULATION_TUNING, FORMULATIONS
     from .io import write_json
-    from .io.atomic import atomic_output_dir, atomic_write_text
+    from .io.atomic import atomic_write_text
     from .ocp.avoidance import AvoidanceConfig, obstacle_cost
     from .plots import plot_cost_map, plot_trajectory_overlay
     from .scenarios import ScenarioSpec
@@ -216,7 +232,7 @@ def compare_avoidance(
             raise BadInput(f"--scenario: {sp.id} has no obstacles")
     out_dir = out or _default_out("avoidance")
     rows, table = [], {}
-    with atomic_output_dir(out_dir) as tmp:
+    with _output_dir(out_dir) as tmp:
         for sp in specs:
             runs = {}
             for f in forms:
@@ -314,7 +330,6 @@ def compare_models_cmd(
     """Dynamic- vs kinematic-model MPC vs pure pursuit / Stanley on the Pacejka dynamic plant at high
     lateral acceleration (plus parameter mismatch and steering delay); writes report.md, study.json
     and figures."""
-    from .io.atomic import atomic_output_dir
     from .scenarios.tracks import packaged_track_names
     from .studies import compare_models, delay_study, mismatch_study, write_study
 
@@ -334,22 +349,105 @@ def compare_models_cmd(
     intro = ("F1TENTH car (F1TENTH gym parameters) on the Pacejka dynamic bicycle plant, speed profile limited "
              "by curvature and friction, 0.05 s control period. Road excess: how far the footprint left the "
              "road (0 = stayed on it). Produced by `mpcdrive compare-models`.")
-    with atomic_output_dir(out_dir) as tmp:
+    with _output_dir(out_dir) as tmp:
         write_study(tmp, sections, intro)
     typer.echo(f"{sum(len(r) for r in sections.values())} runs in {time.perf_counter() - t0:.1f} s; "
                f"report: {out_dir / 'report.md'}")
 
 
+@app.command()
+def sweep(
+    scenario: str = typer.Argument(..., help="built-in scenario id or a YAML scenario file"),
+    runs: int = typer.Option(100, "--runs", min=1, help="number of runs"),
+    seed: int = typer.Option(0, "--seed", min=0, help="seed of the whole sweep (each run gets its own from it)"),
+    vary: list[str] | None = typer.Option(
+        None, "--vary", help="NAME=DISTRIBUTION (repeatable): uniform(a,b), normal(mu,sigma), offset_uniform, "
+        "offset_normal, scale_uniform, scale_normal, choice(v1,...); NAME a dotted path such as initial_state.y_m"),
+    set_: list[str] | None = typer.Option(None, "--set", help="NAME=VALUE fixed for every run (repeatable), e.g. road.lane_width_m=0.8"),
+    out: Path | None = typer.Option(None, "--out", help="output directory (default runs/sweep-<id>-<timestamp>)"),
+    workers: int | None = typer.Option(None, "--workers", min=1, help="local processes (default: all cores)"),
+    backend: str = typer.Option("local", "--backend", help="local (process pool) or ray"),
+    address: str | None = typer.Option(None, "--address", help="Ray cluster address (default: a new local Ray)"),
+    max_final_error: float = typer.Option(0.1, "--max-final-error", help="largest final |lateral error| of a successful run [m]"),
+    max_lane_excess: float = typer.Option(0.0, "--max-lane-excess", help="largest lane excess of a successful run [m]"),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
+) -> None:
+    """Monte Carlo sweep: run SCENARIO many times with varied values; write runs.csv, summary.json/md, histograms."""
+    from .sweep import SuccessCriteria, SweepError, plan_sweep, run_sweep, write_sweep_outputs
+
+    spec = _load(scenario)
+    try:
+        criteria = SuccessCriteria(max_final_error, max_lane_excess)
+        plan = plan_sweep(spec, runs, seed, vary or [], set_ or [], criteria, source=scenario)
+        if backend not in ("local", "ray"):
+            raise SweepError(f"--backend must be 'local' or 'ray', got {backend!r}")
+        if backend == "ray":
+            import importlib.util
+
+            if importlib.util.find_spec("ray") is None:
+                raise SweepError("--backend ray: Ray is not installed (pip install 'mpcdrive[ray]')")
+    except SweepError as e:
+        raise BadInput(str(e)) from None
+    out_dir = out or _default_out(f"sweep-{spec.id}")
+    t0 = time.perf_counter()
+    with _output_dir(out_dir) as tmp, _sweep_progress(not quiet, runs) as cb:
+        try:
+            rows = run_sweep(plan, backend, workers, address, progress=cb)
+        except SweepError as e:
+            raise BadInput(str(e)) from None
+        s = write_sweep_outputs(plan, rows, tmp, backend)
+    fb = s["fallbacks"]
+    typer.echo(
+        f"{spec.id}: {s['successes']}/{s['runs']} runs successful, {s['collisions']['runs']} with collisions, "
+        f"{fb['runs_with']} with fallbacks ({fb['total']} steps), {time.perf_counter() - t0:.1f} s"
+    )
+    typer.echo(f"wrote {out_dir}")
+
+
+@contextmanager
+def _sweep_progress(enabled: bool, total: int):
+    """A progress bar over runs on stderr, counting failures (a no-op when disabled)."""
+    if not enabled:
+        yield None
+        return
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("runs"),
+                  TextColumn("{task.fields[failed]} failed"), TimeRemainingColumn(), transient=True,
+                  console=_stderr_console()) as prog:
+        task = prog.add_task("sweep", total=total, failed=0)
+        failed = [0]
+
+        def cb(done: int, n: int, row: dict) -> None:
+            failed[0] += 0 if row.get("success") else 1
+            prog.update(task, completed=done, failed=failed[0])
+
+        yield cb
+
+
 def main() -> None:
     """Console-script entry point with the exit codes of CONTRACT.md."""
+    import signal
+
+    def _terminated(signum, frame):  # SIGTERM cleans up like Ctrl-C: no partial output is kept
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, _terminated)
     try:
-        app(standalone_mode=False)
+        rc = app(standalone_mode=False)
+        if rc == 130:  # typer turns Ctrl-C into a returned exit code 130 in this mode
+            raise KeyboardInterrupt
+        if isinstance(rc, int) and not isinstance(rc, bool) and rc:
+            sys.exit(rc)
     except BadInput as e:
         typer.echo(f"mpcdrive: {e}", err=True)
         sys.exit(2)
     except FileExistsError as e:
         typer.echo(f"mpcdrive: --out: {e}", err=True)
         sys.exit(2)
+    except OutputAbandoned as e:
+        typer.echo(f"mpcdrive: error: {e}", err=True)
+        sys.exit(1)
     except typer.Exit as e:
         sys.exit(e.exit_code)
     except KeyboardInterrupt:

@@ -47,6 +47,8 @@ class WarmStart:
     X, U : (N+1, nx), (N, nu) last plan (None before the first solve);
     t_s : time of the next step [s] (moving obstacles are predicted from it);
     sides : passing side chosen per obstacle index, ((index, +1 left / -1 right / 0 blocked), ...).
+    plan_age : steps since that plan was solved (0 = solved this step; a fallback that shifts the
+    plan adds one).
     """
 
     s_m: float
@@ -55,6 +57,7 @@ class WarmStart:
     U: np.ndarray | None = None
     t_s: float = 0.0
     sides: tuple = ()
+    plan_age: int = 0
 
 
 @dataclass(frozen=True)

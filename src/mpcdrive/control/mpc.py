@@ -29,9 +29,7 @@ from ..solvers.osqp_backend import OsqpBackend, OsqpSettings
 from ..solvers.projected_gradient import ProjectedGradientBackend, ProjectedGradientSettings
 from ..types import ControlOutput, SolveResult, WarmStart
 from ..units import TWO_PI, wrap_angle
-
-FALLBACK_SHIFTED_PLAN = "shifted_plan"
-FALLBACK_HOLD = "hold_last"
+from .fallback import FALLBACK_HOLD, FALLBACK_SHIFTED_PLAN, FallbackConfig, FallbackLadder  # noqa: F401
 
 
 @dataclass(frozen=True)
@@ -96,6 +94,7 @@ class MpcConfig:
         of wall time is spent.
     prediction_substeps : integration substeps per control step in the prediction model (stiff
         models such as the dynamic bicycle need them at long steps).
+    fallback : what to do, in order, when a solve fails (:class:`~mpcdrive.control.fallback.FallbackConfig`).
     """
 
     linearization: Literal["trajectory", "paper"] = "trajectory"
@@ -110,6 +109,7 @@ class MpcConfig:
     sqp_max_time_s: float = 0.05
     speed_profile: object | None = None
     prediction_substeps: int = 1
+    fallback: FallbackConfig = FallbackConfig()
 
     def __post_init__(self):
         if self.linearization not in ("trajectory", "paper"):
@@ -126,6 +126,14 @@ class MpcConfig:
             raise ValueError("speed_profile must have a speed(s_m) method")
         if int(self.prediction_substeps) != self.prediction_substeps or self.prediction_substeps < 1:
             raise ValueError(f"prediction_substeps must be a positive integer, got {self.prediction_substeps}")
+        for name in ("horizon_step_m", "projection_window_m"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a positive finite number, got {v!r}")
+        if self.v_ref_mps is not None and not (isinstance(self.v_ref_mps, (int, float)) and math.isfinite(self.v_ref_mps)):
+            raise ValueError(f"v_ref_mps must be a finite number, got {self.v_ref_mps!r}")
+        if not isinstance(self.fallback, FallbackConfig):
+            raise ValueError(f"fallback must be a FallbackConfig, got {type(self.fallback).__name__}")
 
 
 class LtvMpc:
@@ -204,6 +212,8 @@ class LtvMpc:
             self._lane_hi = np.full(N, lim)
         else:
             self._lane_lo = self._lane_hi = None
+        self._du_step = problem.du_max_per_s * problem.dt_s  # (nu,) largest input change per step
+        self.fallback = FallbackLadder(self, config.fallback)
 
     # -- warm start ---------------------------------------------------------------------------
     def initial_warm(self, x0) -> WarmStart:
@@ -220,6 +230,14 @@ class LtvMpc:
         if bad:
             raise ValueError(f"state field(s) {', '.join(bad)} not finite: {dict(zip(self.model.state_names, x.tolist()))}")
         return x
+
+    def _check_warm(self, warm: WarmStart) -> np.ndarray:
+        u_prev = np.asarray(warm.u_prev, dtype=float)
+        if u_prev.shape != (self.nu,) or not np.all(np.isfinite(u_prev)):
+            raise ValueError(f"warm.u_prev must be {self.nu} finite numbers {self.model.input_names}, got {warm.u_prev!r}")
+        if not math.isfinite(warm.s_m):
+            raise ValueError(f"warm.s_m must be finite, got {warm.s_m!r}")
+        return u_prev
 
     # -- one control step -----------------------------------------------------------------------
     def step(self, x, warm: WarmStart) -> ControlOutput:
@@ -255,6 +273,7 @@ class LtvMpc:
         re-linearizes at a new iterate (SQP). Arrays are views of work buffers, valid until the
         next call."""
         x = self._check_state(x)
+        self._check_warm(warm)
         cfg, model = self.config, self.model
         N, dt = self.N, self.dt_s
         if s_m is None:
@@ -347,14 +366,14 @@ class LtvMpc:
         pb = self.problem
         t_next = warm.t_s + self.dt_s
         if res.ok and np.all(np.isfinite(res.U[0])):
-            # the solver meets bounds to its tolerance only: the command meets them exactly
-            rate = pb.du_max_per_s * pb.dt_s
-            u = np.clip(np.clip(res.U[0], warm.u_prev - rate, warm.u_prev + rate), pb.u_min, pb.u_max)
+            # exactly within the bounds, whatever the solver's tolerance
+            u_prev = warm.u_prev
+            u = np.clip(np.clip(res.U[0], u_prev - self._du_step, u_prev + self._du_step), pb.u_min, pb.u_max)
             fallback = ""
             new_warm = WarmStart(s_m=d.s_m, u_prev=u, X=res.X, U=res.U, t_s=t_next, sides=d.sides)
             X_pred = res.X
         else:
-            u, fallback, new_warm, X_pred = self._fallback(d.x, d.s_m, warm)
+            u, fallback, new_warm, X_pred = self.fallback.run(d, warm)
             new_warm = replace(new_warm, t_s=t_next, sides=d.sides)
         return ControlOutput(
             u=u,
@@ -369,19 +388,3 @@ class LtvMpc:
             warm=new_warm,
             sqp_iterations=iterations,
         )
-
-    def _fallback(self, x, s0, warm: WarmStart):
-        """Deliberate fallback when the QP did not solve: the previous plan shifted by one step,
-        or (no plan) the last applied input; either is kept within the input and rate bounds."""
-        pb = self.problem
-        rate = pb.du_max_per_s * pb.dt_s
-        if warm.U is not None and warm.X is not None and warm.U.shape[0] > 1:
-            U = np.vstack([warm.U[1:], warm.U[-1:]])
-            X = np.vstack([warm.X[1:], warm.X[-1:]])
-            u_raw, name = U[0], FALLBACK_SHIFTED_PLAN
-        else:
-            U = X = None
-            u_raw, name = warm.u_prev, FALLBACK_HOLD
-        u = np.clip(np.clip(u_raw, warm.u_prev - rate, warm.u_prev + rate), pb.u_min, pb.u_max)
-        X_pred = X if X is not None else np.repeat(x[None, :], self.N + 1, axis=0)
-        return u, name, WarmStart(s_m=float(s0), u_prev=u, X=X, U=U), X_pred

@@ -31,6 +31,8 @@ def _as_bounds(lo, hi, n: int, name: str) -> tuple[np.ndarray, np.ndarray]:
     hi = np.broadcast_to(np.asarray(np.inf if hi is None else hi, float), (n,)).copy()
     if np.any(np.isnan(lo)) or np.any(np.isnan(hi)):
         raise ValueError(f"{name} bounds contain NaN")
+    if np.any(lo == np.inf) or np.any(hi == -np.inf):
+        raise ValueError(f"{name} bounds are impossible (lower bound +inf or upper bound -inf): {lo}, {hi}")
     if np.any(lo > hi):
         raise ValueError(f"{name} lower bound exceeds upper bound: {lo} > {hi}")
     return lo, hi
@@ -81,6 +83,12 @@ class MpcProblem:
     position_cost: bool = False
 
     def __post_init__(self):
+        for name in ("nx", "nu"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        if isinstance(self.N, bool) or not isinstance(self.N, (int, float, np.integer, np.floating)) or not np.isfinite(self.N):
+            raise ValueError(f"horizon N must be a positive integer, got {self.N!r}")
         if int(self.N) != self.N or self.N < 1:
             raise ValueError(f"horizon N must be a positive integer, got {self.N}")
         if not (np.isfinite(self.dt_s) and self.dt_s > 0):
@@ -103,17 +111,22 @@ class MpcProblem:
         object.__setattr__(self, "x_max", x_max)
         if self.lane_half_width_m is not None and not (np.isfinite(self.lane_half_width_m) and self.lane_half_width_m > 0):
             raise ValueError(f"lane_half_width_m must be positive, got {self.lane_half_width_m}")
-        if self.lane_slack_weight < 0 or self.lane_slack_weight_l1 < 0:
-            raise ValueError("lane slack weights must be >= 0")
+        for name in ("lane_slack_weight", "lane_slack_weight_l1"):
+            w = getattr(self, name)
+            if not (np.isfinite(w) and w >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0, got {w!r}")
+        unbounded = np.isinf(u_min) & np.isinf(u_max)
+        if np.any(unbounded):
+            # every input without bounds needs a positive definite weight on it
+            W = (self.R + self.Rc)[np.ix_(unbounded, unbounded)]
+            if np.linalg.eigvalsh(W).min() <= 1e-12 * max(1.0, float(np.abs(W).max())):
+                raise ValueError("R + Rc must be positive definite on the inputs without bounds")
         if int(self.obstacle_rows) != self.obstacle_rows or self.obstacle_rows < 0:
             raise ValueError(f"obstacle_rows must be a non-negative integer, got {self.obstacle_rows}")
         if self.obstacle_slack_weight < 0 or self.obstacle_slack_weight_l1 < 0:
             raise ValueError("obstacle slack weights must be >= 0")
         if (self.obstacle_rows or self.position_cost) and nx < 3:
             raise ValueError("obstacle terms need states x, y, yaw")
-        unbounded = np.any(np.isinf(u_min) | np.isinf(u_max))
-        if unbounded and np.linalg.eigvalsh(self.R + self.Rc).min() <= 1e-12:
-            raise ValueError("R + Rc must be positive definite when inputs are unbounded")
 
     @property
     def has_rate_limit(self) -> bool:

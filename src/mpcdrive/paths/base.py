@@ -57,6 +57,10 @@ class Path(ABC):
         xy = np.asarray(xy, float)
         if xy.shape != (2,) or not np.all(np.isfinite(xy)):
             raise ValueError(f"position must be 2 finite numbers, got {xy!r}")
+        if s_guess is not None and not np.isfinite(s_guess):
+            raise ValueError(f"s_guess must be finite or None, got {s_guess!r}")
+        if not (np.isfinite(window_m) and window_m > 0):
+            raise ValueError(f"window_m must be a positive finite number, got {window_m!r}")
         return self._project_xy(xy, s_guess, window_m)
 
     def frenet(self, pose, s_guess: float | None = None, window_m: float = 2.0) -> Projection:

@@ -21,7 +21,12 @@ class CirclePath(Path):
     def __init__(self, center=(0.0, 0.0), radius_m: float = 1.5, ccw: bool = True, start_angle_rad: float = 0.0):
         if not (np.isfinite(radius_m) and radius_m > 0):
             raise ValueError(f"radius_m must be a positive finite number, got {radius_m}")
-        self.center = np.asarray(center, float)
+        c = np.asarray(center, float)
+        if c.shape != (2,) or not np.all(np.isfinite(c)):
+            raise ValueError(f"center must be 2 finite numbers [x m, y m], got {center!r}")
+        if not np.isfinite(start_angle_rad):
+            raise ValueError(f"start_angle_rad must be finite, got {start_angle_rad!r}")
+        self.center = c
         self.radius_m = float(radius_m)
         self.sign = 1.0 if ccw else -1.0
         self.start_angle_rad = float(start_angle_rad)

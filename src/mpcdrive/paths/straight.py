@@ -15,6 +15,8 @@ class StraightPath(Path):
     def __init__(self, start, end):
         self.start = np.asarray(start, float)
         end = np.asarray(end, float)
+        if self.start.shape != (2,) or end.shape != (2,):
+            raise ValueError(f"start and end must be points [x m, y m], got {start!r} and {end!r}")
         d = end - self.start
         self.length_m = float(np.hypot(*d))
         if not np.isfinite(self.length_m) or self.length_m <= 0:

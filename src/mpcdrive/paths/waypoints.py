@@ -32,9 +32,11 @@ class WaypointPath(Path):
             pts = pts[:-1]
         min_pts = 3 if closed else 2
         if len(pts) < min_pts:
-            raise ValueError(f"a {'closed' if closed else 'open'} path needs at least {min_pts} distinct points, got {len(pts)}")
-        if smoothing < 0 or not np.isfinite(smoothing):
+            raise ValueError(f"{'a closed' if closed else 'an open'} path needs at least {min_pts} distinct points, got {len(pts)}")
+        if not np.isfinite(smoothing) or smoothing < 0:
             raise ValueError(f"smoothing must be >= 0, got {smoothing}")
+        if ds_m is not None and not (np.isfinite(ds_m) and ds_m > 0):
+            raise ValueError(f"ds_m must be a positive finite number, got {ds_m}")
         self.closed = bool(closed)
         self.waypoints = pts
         if closed:

@@ -1,7 +1,7 @@
 """Scenario files (YAML, validated by pydantic) and the built-in experiments."""
 
 from .build import Experiment, build_experiment, run_experiment
-from .loader import ScenarioError, builtin_ids, dump_scenario, load_scenario
+from .loader import ScenarioError, builtin_ids, dump_scenario, load_scenario, validate_scenario_data
 from .schema import ScenarioSpec
 
 __all__ = [
@@ -13,4 +13,5 @@ __all__ = [
     "dump_scenario",
     "load_scenario",
     "run_experiment",
+    "validate_scenario_data",
 ]

@@ -11,6 +11,7 @@ import numpy as np
 from ..control.adapters import StateAdapter
 from ..control.base import Controller
 from ..control.delay import DelayCompensator
+from ..control.fallback import FallbackConfig
 from ..control.mpc import LtvMpc, MpcConfig
 from ..models.dynamic import DynamicBicycle, DynamicParams
 from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams
@@ -189,6 +190,7 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         feedforward=c.feedforward,
         speed_profile=profile,
         prediction_substeps=c.prediction_substeps,
+        fallback=FallbackConfig(tuple(c.fallback), c.brake_decel_mps2, c.brake_steering, c.relax_slack_factor),
     )
     if c.solver == "projected_gradient":
         settings = ProjectedGradientSettings(max_iter=c.pg_max_iter, tol=c.pg_tol, accelerated=c.pg_accelerated)
@@ -206,7 +208,11 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
                  footprint=footprint, lane_margin_m=spec.road.margin_m if spec.road is not None else 0.0)
     # the plant: same or another model, parameters scaled, steering through an actuator
     pl = spec.plant
-    plant_model = model if (pl.model == "same" and pl.param_scale is None) else build_model(spec.plant_model, v, pl.param_scale)
+    # the true vehicle: the controller's unless the plant names other parameters (a model error)
+    errors = {k: val for k, val in (("lf_m", pl.lf_m), ("lr_m", pl.lr_m), ("speed_mps", pl.speed_mps)) if val is not None}
+    plant_v = v.model_copy(update=errors) if errors else v
+    same = pl.model == "same" and pl.param_scale is None and not errors
+    plant_model = model if same else build_model(spec.plant_model, plant_v, pl.param_scale)
     actuator = None
     if pl.steering_actuator is not None:
         actuator = SteeringActuator(pl.steering_actuator.time_constant_s, pl.steering_actuator.dead_time_s)

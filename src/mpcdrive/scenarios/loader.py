@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from importlib import resources
 from pathlib import Path
 
@@ -28,13 +29,63 @@ def builtin_ids() -> list[str]:
     return sorted(p.name[:-5] for p in _builtin_dir().iterdir() if p.name.endswith(".yaml"))
 
 
+class _DuplicateKey(Exception):
+    def __init__(self, key, line: int):
+        self.key, self.line = key, line
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """Safe YAML loader that refuses a key given twice in one mapping (PyYAML keeps the last) and
+    reads ``1e-5`` as a number, as YAML 1.2 does (PyYAML's YAML 1.1 wants ``1.0e-5``)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            try:
+                dup = key in seen
+            except TypeError:  # unhashable key: let PyYAML report it
+                dup = False
+            if dup:
+                raise _DuplicateKey(key, key_node.start_mark.line + 1)
+            try:
+                seen.add(key)
+            except TypeError:
+                pass
+        return super().construct_mapping(node, deep=deep)
+
+
+_StrictLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
+
+
+def read_yaml(text: str):
+    """Parse YAML text as scenario files are parsed (``1e-5`` is a number; duplicate keys raise
+    ``ValueError``)."""
+    try:
+        return yaml.load(text, Loader=_StrictLoader)
+    except _DuplicateKey as e:
+        raise ValueError(f"line {e.line}: duplicate key {e.key!r}") from None
+
+
 def _parse(text: str, source: str) -> ScenarioSpec:
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_StrictLoader)
+    except _DuplicateKey as e:
+        raise ScenarioError(source, f"line {e.line}", f"duplicate key {e.key!r} (each key may appear once)") from None
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f"line {mark.line + 1}" if mark is not None else "YAML"
         raise ScenarioError(source, where, f"not valid YAML ({getattr(e, 'problem', None) or e})") from None
+    return validate_scenario_data(data, source)
+
+
+def validate_scenario_data(data, source: str) -> ScenarioSpec:
+    """Validate a scenario given as plain data (a dict as read from YAML); ``source`` names it in
+    the one-line :class:`ScenarioError` raised for bad input."""
     if not isinstance(data, dict):
         raise ScenarioError(source, "", "a scenario file must be a YAML mapping of keys to values")
     try:
@@ -42,7 +93,7 @@ def _parse(text: str, source: str) -> ScenarioSpec:
     except ValidationError as e:
         err = e.errors()[0]
         loc = ".".join(str(p) for p in err["loc"] if not (isinstance(p, str) and p in ("straight", "circle", "waypoints", "csv")))
-        msg = err["msg"]
+        msg = err["msg"].removeprefix("Value error, ")
         if err["type"] == "extra_forbidden":
             msg = "unknown key"
         elif err["type"] == "missing":

@@ -1,7 +1,9 @@
 """Scenario files: YAML validated by pydantic.
 
 SI units unless the key names another unit (``yaw_deg``, ``max_steer_deg``). Unknown keys are
-rejected, every number must be finite.
+rejected, every number must be finite and a number (not a quoted string or a boolean), integers
+must be integers, and values outside anything sensible (an initial position kilometres from the
+path, a lane narrower than the car) are rejected with the reason.
 """
 
 from __future__ import annotations
@@ -12,11 +14,22 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from ..models.presets import PRESETS
+from ..control.fallback import DEFAULT_LADDER, check_ladder
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-NonNeg = Annotated[float, Field(ge=0, allow_inf_nan=False)]
-Point = tuple[Finite, Finite]
+Finite = Annotated[float, Field(strict=True, allow_inf_nan=False)]
+Positive = Annotated[float, Field(strict=True, gt=0, allow_inf_nan=False)]
+NonNeg = Annotated[float, Field(strict=True, ge=0, allow_inf_nan=False)]
+#: a coordinate [m]; beyond a thousand kilometres float64 loses the millimetres
+Coord = Annotated[float, Field(strict=True, ge=-1e6, le=1e6, allow_inf_nan=False)]
+#: a vehicle dimension [m]
+Length = Annotated[float, Field(strict=True, gt=0, le=100, allow_inf_nan=False)]
+#: a speed [m/s] (360 km/h at most)
+Speed = Annotated[float, Field(strict=True, ge=-100, le=100, allow_inf_nan=False)]
+Int = Annotated[int, Field(strict=True)]
+Point = tuple[Coord, Coord]
+#: largest distance [m] between the initial position and the path
+MAX_INITIAL_DISTANCE_M = 1000.0
+FallbackName = Literal["relax", "shifted_plan", "brake", "hold_last"]
 
 
 class _Strict(BaseModel):
@@ -55,6 +68,17 @@ class WaypointsSpec(_Strict):
     closed: bool = False
     smoothing: NonNeg = 0.0
 
+    @model_validator(mode="after")
+    def _distinct(self):
+        pts = [p for i, p in enumerate(self.points) if i == 0 or math.dist(p, self.points[i - 1]) > 1e-9]
+        if self.closed and len(pts) > 2 and math.dist(pts[0], pts[-1]) <= 1e-9:
+            pts = pts[:-1]
+        need = 3 if self.closed else 2
+        if len(pts) < need:
+            raise ValueError(f"{'a closed' if self.closed else 'an open'} path needs at least {need} distinct "
+                             f"points, got {len(pts)}")
+        return self
+
 
 class CsvPathSpec(_Strict):
     """Track from a CSV waypoint file (columns x_m, y_m and optionally w_tr_right_m, w_tr_left_m):
@@ -92,12 +116,12 @@ class VehicleSpec(_Strict):
 
     model: ModelName = "kinematic3"
     preset: PresetName | None = None
-    lf_m: Positive = 0.17
-    lr_m: Positive = 0.16
-    speed_mps: Finite = 1.0
-    length_m: Positive = 0.50
-    width_m: Positive = 0.27
-    footprint_discs: int = Field(3, ge=1, le=10)
+    lf_m: Length = 0.17
+    lr_m: Length = 0.16
+    speed_mps: Annotated[Speed, Field(gt=0)] = 1.0
+    length_m: Length = 0.50
+    width_m: Length = 0.27
+    footprint_discs: Int = Field(3, ge=1, le=10)
     mass_kg: Positive = 3.74
     yaw_inertia_kgm2: Positive = 0.04712
     friction: Positive = 1.0489
@@ -197,10 +221,10 @@ class AvoidanceSpec(_Strict):
 class InitialState(_Strict):
     """Initial pose and speed."""
 
-    x_m: Finite = 0.0
-    y_m: Finite = 0.0
-    yaw_deg: Finite = 0.0
-    v_mps: NonNeg | None = None
+    x_m: Coord = 0.0
+    y_m: Coord = 0.0
+    yaw_deg: Annotated[float, Field(strict=True, ge=-3600, le=3600, allow_inf_nan=False)] = 0.0
+    v_mps: Annotated[Speed, Field(ge=0)] | None = None
 
 
 class RoadSpec(_Strict):
@@ -235,7 +259,7 @@ class ControllerSpec(_Strict):
     ``projected_gradient`` (input bounds only; ``pg_*`` settings); ``delay_compensation``: predict the
     state over the plant's steering dead time before solving (needs ``plant.steering_actuator``)."""
 
-    horizon: int = Field(30, ge=1, le=1000)
+    horizon: Int = Field(30, ge=1, le=1000)
     Q: list[NonNeg]
     R: list[NonNeg]
     QN: list[NonNeg] | None = None
@@ -244,7 +268,7 @@ class ControllerSpec(_Strict):
     max_steer_rate_deg_s: Positive | None = None
     accel_limits_mps2: tuple[Finite, Finite] | None = None
     speed_limits_mps: tuple[Finite, Finite] | None = None
-    reference_speed_mps: Finite | None = None
+    reference_speed_mps: Speed | None = None
     linearization: Literal["trajectory", "paper"] = "trajectory"
     discretization: Literal["rk4", "euler", "exp"] = "rk4"
     prediction_substeps: int = Field(1, ge=1, le=100)
@@ -261,6 +285,17 @@ class ControllerSpec(_Strict):
     pg_tol: Positive = 1e-6
     pg_accelerated: bool = True
     delay_compensation: bool = False
+    osqp_max_iter: Int = Field(4000, ge=1)
+    fallback: list[FallbackName] = Field(default_factory=lambda: list(DEFAULT_LADDER))
+    brake_decel_mps2: Positive = 1.0
+    brake_steering: Literal["hold", "straighten"] = "hold"
+    relax_slack_factor: Annotated[float, Field(strict=True, ge=1, allow_inf_nan=False)] = 100.0
+
+    @field_validator("fallback")
+    @classmethod
+    def _ladder(cls, v):
+        check_ladder(v)
+        return v
 
     @field_validator("max_steer_deg")
     @classmethod
@@ -274,6 +309,20 @@ class ControllerSpec(_Strict):
     def _ordered(cls, v):
         if v is not None and v[0] > v[1]:
             raise ValueError(f"lower limit {v[0]} exceeds upper limit {v[1]}")
+        return v
+
+    @field_validator("accel_limits_mps2")
+    @classmethod
+    def _accel_holds_speed(cls, v):
+        if v is not None and not (v[0] <= 0 <= v[1]):
+            raise ValueError(f"limits [{v[0]}, {v[1]}] must include 0 (else the speed can never be held)")
+        return v
+
+    @field_validator("speed_limits_mps")
+    @classmethod
+    def _can_drive(cls, v):
+        if v is not None and v[1] <= 0:
+            raise ValueError(f"upper limit {v[1]} must be positive (the car must be able to drive forward)")
         return v
 
 
@@ -305,6 +354,9 @@ class PlantSpec(_Strict):
     substeps: int = Field(1, ge=1, le=100)
     param_scale: ParamScaleSpec | None = None
     steering_actuator: ActuatorSpec | None = None
+    lf_m: Length | None = None
+    lr_m: Length | None = None
+    speed_mps: Annotated[Speed, Field(gt=0)] | None = None
 
 
 class NoiseSpec(_Strict):
@@ -338,7 +390,7 @@ class ScenarioSpec(_Strict):
     description: str = ""
     dt_s: Positive = 0.01
     duration_s: Positive
-    seed: int = 0
+    seed: Int = Field(0, ge=0, lt=2**63)
     stop_at_path_end: bool = True
     vehicle: VehicleSpec = VehicleSpec()
     path: PathSpec
@@ -384,4 +436,37 @@ class ScenarioSpec(_Strict):
             raise ValueError("avoidance.formulation corridor needs a road (road.lane_width_m)")
         if self.duration_s / self.dt_s > 1_000_000:
             raise ValueError("duration_s / dt_s exceeds 1,000,000 steps")
+        if self.vehicle.model != "kinematic3" and self.plant.speed_mps is not None:
+            raise ValueError("plant.speed_mps is only for the constant-speed model kinematic3 "
+                             f"({self.vehicle.model} has the speed as a state)")
+        if self.duration_s < self.dt_s:
+            raise ValueError(f"duration_s {self.duration_s} is shorter than one step dt_s {self.dt_s}")
+        if self.road is not None and self.road.lane_width_m <= self.vehicle.width_m:
+            raise ValueError(f"road.lane_width_m {self.road.lane_width_m} m is not wider than the car "
+                             f"(vehicle.width_m {self.vehicle.width_m} m)")
+        d = _distance_to_path(self.path, (self.initial_state.x_m, self.initial_state.y_m))
+        if d > MAX_INITIAL_DISTANCE_M:
+            raise ValueError(f"initial_state: position ({self.initial_state.x_m}, {self.initial_state.y_m}) is "
+                             f"{d:.4g} m from the path (more than {MAX_INITIAL_DISTANCE_M:g} m): check the "
+                             "coordinates and their units")
         return self
+
+
+def _segment_distance(p, a, b) -> float:
+    ax, ay = a
+    dx, dy = b[0] - ax, b[1] - ay
+    dd = dx * dx + dy * dy
+    t = 0.0 if dd == 0 else max(0.0, min(1.0, ((p[0] - ax) * dx + (p[1] - ay) * dy) / dd))
+    return math.hypot(p[0] - ax - t * dx, p[1] - ay - t * dy)
+
+
+def _distance_to_path(path, p) -> float:
+    """Distance [m] from point ``p`` to the path (to the waypoint polygon for waypoint paths)."""
+    if path.type == "straight":
+        return _segment_distance(p, path.start, path.end)
+    if path.type == "circle":
+        return abs(math.dist(p, path.center) - path.radius_m)
+    if not hasattr(path, "points"):  # a track file: checked when it is loaded
+        return 0.0
+    pts = list(path.points) + ([path.points[0]] if path.closed else [])
+    return min(_segment_distance(p, a, b) for a, b in zip(pts[:-1], pts[1:]))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+import numbers
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -31,8 +33,12 @@ class Plant:
     actuator: SteeringActuator | None = None
 
     def __post_init__(self):
-        if self.substeps < 1:
-            raise ValueError(f"plant substeps must be >= 1, got {self.substeps}")
+        if not isinstance(self.model, VehicleModel):
+            raise ValueError(f"plant model must be a vehicle model (f, jacobians, speed, ...), got {type(self.model).__name__}")
+        if self.method not in ("rk4", "euler"):
+            raise ValueError(f"plant method must be 'rk4' or 'euler', got {self.method!r}")
+        if isinstance(self.substeps, bool) or not isinstance(self.substeps, numbers.Integral) or self.substeps < 1:
+            raise ValueError(f"plant substeps must be an integer >= 1, got {self.substeps!r}")
 
     def step(self, x: np.ndarray, u: np.ndarray, dt_s: float) -> np.ndarray:
         h = dt_s / self.substeps
@@ -71,13 +77,25 @@ class Disturbance:
         if self.distribution == "uniform":
             if self.low is None or self.high is None:
                 raise ValueError("a uniform disturbance needs low and high")
-            if np.any(np.asarray(self.low) > np.asarray(self.high)):
+            for name in ("low", "high"):
+                _finite_array(getattr(self, name), f"disturbance {name}")
+            if np.any(np.asarray(self.low, float) > np.asarray(self.high, float)):
                 raise ValueError("disturbance low exceeds high")
         elif self.distribution == "normal":
-            if self.std is None or np.any(np.asarray(self.std) < 0):
+            if self.std is None:
                 raise ValueError("a normal disturbance needs std >= 0")
+            std = _finite_array(self.std, "disturbance std")
+            if np.any(std < 0):
+                raise ValueError(f"disturbance std must be >= 0, got {self.std}")
         else:
             raise ValueError(f"distribution must be 'uniform' or 'normal', got {self.distribution!r}")
+
+    def check(self, nx: int, name: str = "disturbance") -> None:
+        """ValueError unless every parameter is a scalar or has one entry per state (``nx``)."""
+        for field in ("low", "high", "std"):
+            v = getattr(self, field)
+            if v is not None and np.ndim(v) and np.shape(v) != (nx,):
+                raise ValueError(f"{name}.{field} needs {nx} entries (one per state), got shape {np.shape(v)}")
 
     def sample(self, rng: np.random.Generator, nx: int) -> np.ndarray:
         if self.distribution == "uniform":
@@ -85,6 +103,29 @@ class Disturbance:
             hi = np.broadcast_to(np.asarray(self.high, float), (nx,))
             return rng.uniform(lo, hi)
         return rng.normal(0.0, np.broadcast_to(np.asarray(self.std, float), (nx,)))
+
+
+def _finite_array(v, name: str) -> np.ndarray:
+    try:
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be numbers, got {v!r}") from None
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} must be finite, got {v!r}")
+    return a
+
+
+def _check_run_args(dt_s, steps, seed, lane_half_width_m) -> None:
+    if isinstance(dt_s, bool) or not isinstance(dt_s, numbers.Real) or not (math.isfinite(dt_s) and dt_s > 0):
+        raise ValueError(f"dt_s must be a positive finite number, got {dt_s!r}")
+    if isinstance(steps, bool) or not isinstance(steps, numbers.Integral) or steps < 1:
+        raise ValueError(f"steps must be an integer >= 1, got {steps!r}")
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
+        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+    if lane_half_width_m is not None and not (
+        isinstance(lane_half_width_m, numbers.Real) and math.isfinite(lane_half_width_m) and lane_half_width_m > 0
+    ):
+        raise ValueError(f"lane_half_width_m must be a positive finite number or None, got {lane_half_width_m!r}")
 
 
 def simulate(
@@ -121,19 +162,35 @@ def simulate(
     it did within ``steps``). ``abort_lateral_error_m`` ends the run early when the lateral error
     exceeds it (the car left the road; ``goal_reached`` is then False and
     ``meta["aborted_off_path"]`` True).
+
+    Invalid arguments raise ValueError naming the argument. A plant state that stops being finite
+    ends the run early (``meta["termination"] = "diverged"``, the last finite state as
+    ``x_final``); otherwise ``termination`` is ``goal_reached`` or ``completed``.
     """
-    if steps < 1:
-        raise ValueError(f"steps must be >= 1, got {steps}")
+    _check_run_args(dt_s, steps, seed, lane_half_width_m)
+    if not isinstance(plant, Plant):
+        raise ValueError(f"plant must be a Plant, got {type(plant).__name__}")
+    if not isinstance(path, Path):
+        raise ValueError(f"path must be a Path, got {type(path).__name__}")
     rng = np.random.default_rng(seed)
     nx, nu, N = controller.nx, controller.nu, controller.N
     model = plant.model
-    x = np.asarray(x0, float).copy()
+    try:
+        x = np.array(x0, dtype=float).reshape(-1) if np.ndim(x0) <= 1 else np.asarray(x0, float)
+    except (TypeError, ValueError):
+        raise ValueError(f"initial state x0 must be {model.nx} numbers {model.state_names}, got {x0!r}") from None
     if x.shape != (model.nx,):
-        raise ValueError(f"initial state must have shape ({model.nx},), got {x.shape}")
-    if not np.all(np.isfinite(x)):
-        raise ValueError(f"initial state is not finite: {x}")
+        raise ValueError(f"initial state x0 must have shape ({model.nx},) {model.state_names}, got {x.shape}")
+    bad = [n for n, v in zip(model.state_names, x) if not math.isfinite(v)]
+    if bad:
+        raise ValueError(f"initial state x0 field(s) {', '.join(bad)} not finite: {dict(zip(model.state_names, x.tolist()))}")
     if model.nx != nx:
         raise ValueError("plant and controller must share the state layout (same nx)")
+    for name, noise in (("disturbance", disturbance), ("measurement_noise", measurement_noise)):
+        if noise is not None:
+            if not isinstance(noise, Disturbance):
+                raise ValueError(f"{name} must be a Disturbance or None, got {type(noise).__name__}")
+            noise.check(nx, name)
     T = np.empty(steps)
     Xs = np.empty((steps, nx))
     Us = np.empty((steps, nu))
@@ -156,6 +213,7 @@ def simulate(
     k_end = steps
     act = None if plant.actuator is None else plant.actuator.start(0.0)  # wheels start straight
     aborted = False
+    termination = "completed"
     for k in range(steps):
         meas = x if measurement_noise is None else x + measurement_noise.sample(rng, nx)
         out = controller.step(meas, warm)
@@ -172,16 +230,22 @@ def simulate(
         status.append(out.status)
         fallback.append(out.fallback)
         if act is None:
-            x = plant.step(x, out.u, dt_s)
+            x_next = plant.step(x, out.u, dt_s)
         else:
             act = act.issue(k * dt_s, float(out.u[0]))
-            x, act = plant.step_actuated(x, out.u, dt_s, act, k * dt_s)
+            x_next, act = plant.step_actuated(x, out.u, dt_s, act, k * dt_s)
         if disturbance is not None:
-            x = x + disturbance.sample(rng, nx)
+            x_next = x_next + disturbance.sample(rng, nx)
         if progress is not None:
             progress(k + 1, steps)
+        if not np.all(np.isfinite(x_next)):
+            termination = "diverged"
+            k_end = k + 1
+            break
+        x = x_next
         if goal_reached is not None and s >= (path.length_m if s_goal is None else s_goal):
             goal_reached = True
+            termination = "goal_reached"
             k_end = k + 1
             break
         if abort_lateral_error_m is not None and abs(ey) > abort_lateral_error_m:
@@ -223,7 +287,7 @@ def simulate(
         input_names=tuple(model.input_names),
         lane_half_width_m=lane_half_width_m,
         goal_reached=goal_reached,
-        meta={**meta, **({"aborted_off_path": True} if aborted else {})},
+        meta={**meta, "termination": termination, **({"aborted_off_path": True} if aborted else {})},
         clearance_m=clearance,
     )
 

@@ -4,14 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..control.fallback import FALLBACK_KINDS
 from ..scene.footprint import Footprint
 from ..types import STATUS_INACCURATE, STATUS_OK, SimResult
 
 
-def _lane_excess(result: SimResult, footprint: Footprint) -> float:
-    """Largest distance [m] by which a footprint corner left the lane (0 inside)."""
+def lane_excess_per_step(result: SimResult, footprint: Footprint = Footprint()) -> np.ndarray | None:
+    """(K,) distance [m] by which a footprint corner was outside the lane at each step (0 inside);
+    None without a lane."""
     if result.lane_half_width_m is None:
-        return 0.0
+        return None
     h = result.yaw_rad - result.e_psi_rad  # path heading at each step
     c = footprint.corners()
     yaw = result.yaw_rad
@@ -19,7 +21,13 @@ def _lane_excess(result: SimResult, footprint: Footprint) -> float:
     dx = np.cos(yaw)[:, None] * c[:, 0] - np.sin(yaw)[:, None] * c[:, 1]
     dy = np.sin(yaw)[:, None] * c[:, 0] + np.cos(yaw)[:, None] * c[:, 1]
     lat = result.e_y_m[:, None] + (-np.sin(h)[:, None] * dx + np.cos(h)[:, None] * dy)
-    return float(max(0.0, np.max(np.abs(lat)) - result.lane_half_width_m))
+    return np.maximum(0.0, np.max(np.abs(lat), axis=1) - result.lane_half_width_m)
+
+
+def _lane_excess(result: SimResult, footprint: Footprint) -> float:
+    """Largest distance [m] by which a footprint corner left the lane (0 inside)."""
+    e = lane_excess_per_step(result, footprint)
+    return 0.0 if e is None or e.size == 0 else float(np.max(e))
 
 
 def _rms(a) -> float:
@@ -28,8 +36,10 @@ def _rms(a) -> float:
 
 
 def compute_metrics(result: SimResult, footprint: Footprint = Footprint()) -> dict:
-    """Metrics of one run; keys as in CONTRACT.md plus ``converged_*`` (second half of the run)
-    and ``steer_total_variation_rad`` (sum of |steering changes|, for the smoothing study).
+    """Metrics of one run; keys as in CONTRACT.md plus ``converged_*`` (second half of the run),
+    ``steer_total_variation_rad`` (sum of |steering changes|, for the smoothing study),
+    ``fallback_counts`` (steps per fallback rung, every rung listed) and ``termination`` (why the
+    run ended: ``completed``, ``goal_reached`` or ``diverged``).
 
     Steering rates include the first step's change from the initial steering angle
     (``meta["initial_steer_rad"]``, 0 by default: the wheels start straight)."""
@@ -59,10 +69,20 @@ def compute_metrics(result: SimResult, footprint: Footprint = Footprint()) -> di
         "max_lane_excess_m": _lane_excess(result, footprint),
         "solver_failures": int(failures),
         "fallbacks": int(sum(1 for f in result.fallback if f)),
+        "fallback_counts": _fallback_counts(result.fallback),
         "solve_time_us": {
             "p50": float(np.percentile(st, 50)),
             "p99": float(np.percentile(st, 99)),
             "max": float(np.max(st)),
         },
         "goal_reached": result.goal_reached,
+        "termination": result.meta.get("termination", "completed"),
     }
+
+
+def _fallback_counts(fallback) -> dict[str, int]:
+    counts = {k: 0 for k in FALLBACK_KINDS}
+    for f in fallback:
+        if f:
+            counts[f] = counts.get(f, 0) + 1
+    return counts

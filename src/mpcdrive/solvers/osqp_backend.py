@@ -41,6 +41,18 @@ class OsqpSettings:
     adaptive_rho: bool = True
     time_limit_s: float = 0.0  # 0 = none
 
+    def __post_init__(self):
+        for name in ("eps_abs", "eps_rel"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
+                raise ValueError(f"OSQP {name} must be a finite number >= 0, got {v!r}")
+        if self.eps_abs == 0 and self.eps_rel == 0:
+            raise ValueError("OSQP eps_abs and eps_rel cannot both be 0")
+        if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, (int, np.integer)) or self.max_iter < 1:
+            raise ValueError(f"OSQP max_iter must be an integer >= 1, got {self.max_iter!r}")
+        if not (isinstance(self.time_limit_s, (int, float)) and np.isfinite(self.time_limit_s) and self.time_limit_s >= 0):
+            raise ValueError(f"OSQP time_limit_s must be a finite number >= 0 (0 = none), got {self.time_limit_s!r}")
+
     def as_kwargs(self) -> dict:
         kw = dict(
             eps_abs=self.eps_abs,

@@ -1,0 +1,223 @@
+"""The fallback ladder: what the tracking MPC does, explicitly and in order, when a solve fails.
+
+A ladder is a sequence of rungs tried one after the other until one yields a command:
+
+* ``relax``: re-solve the same step on a second QP (built once, next to the main one) whose
+  constraints are relaxed: no input-rate limits, no hard state bounds (speed limits), the lane's
+  slack ``relax_slack_factor`` times cheaper, and a looser solver tolerance with twice the
+  iterations. Fails when that solve fails too.
+* ``shifted_plan``: the previous plan shifted by one step. Fails when there is no plan, or when
+  the plan has already been shifted ``N - 1`` times (nothing of it is left).
+* ``brake``: controlled braking. Models with a speed state ``v`` and an ``accel`` input
+  decelerate at ``brake_decel_mps2`` (never past standstill, never into reverse) with the
+  steering held (``brake_steering="hold"``) or brought back to straight at the steering-rate
+  limit (``"straighten"``); constant-speed models hold the last steering angle. Always succeeds.
+* ``hold_last``: the last applied input. Always succeeds.
+
+Whatever the rung, the command is clipped to the input bounds and to the rate limit from the
+previous input, and it is never NaN. The rung used is logged per step (``ControlOutput.fallback``,
+the ``fallback`` column of ``trajectory.csv``) and counted in the metrics. A ladder must end with
+a rung that always succeeds (``brake`` or ``hold_last``), and only there.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from ..ocp.problem import MpcProblem
+from ..ocp.qp import LtvQp
+from ..solvers.osqp_backend import OsqpBackend, OsqpSettings
+from ..types import SolveResult, WarmStart
+
+FALLBACK_RELAX = "relax"
+FALLBACK_SHIFTED_PLAN = "shifted_plan"
+FALLBACK_BRAKE = "brake"
+FALLBACK_HOLD = "hold_last"
+#: every rung, in the order a report lists them
+FALLBACK_KINDS: tuple[str, ...] = (FALLBACK_RELAX, FALLBACK_SHIFTED_PLAN, FALLBACK_BRAKE, FALLBACK_HOLD)
+#: rungs that always yield a command
+TERMINAL_FALLBACKS: tuple[str, ...] = (FALLBACK_BRAKE, FALLBACK_HOLD)
+DEFAULT_LADDER: tuple[str, ...] = (FALLBACK_RELAX, FALLBACK_SHIFTED_PLAN, FALLBACK_BRAKE)
+
+
+def check_ladder(ladder) -> tuple[str, ...]:
+    """The ladder as a tuple, or ValueError naming what is wrong with it."""
+    if isinstance(ladder, str):
+        raise ValueError(f"fallback must be a list of rungs, got the string {ladder!r}")
+    steps = tuple(ladder)
+    if not steps:
+        raise ValueError(f"fallback ladder is empty; end it with one of {', '.join(TERMINAL_FALLBACKS)}")
+    unknown = [s for s in steps if s not in FALLBACK_KINDS]
+    if unknown:
+        raise ValueError(f"unknown fallback {unknown[0]!r} (known: {', '.join(FALLBACK_KINDS)})")
+    dup = [s for i, s in enumerate(steps) if s in steps[:i]]
+    if dup:
+        raise ValueError(f"fallback {dup[0]!r} appears twice in the ladder")
+    if steps[-1] not in TERMINAL_FALLBACKS:
+        raise ValueError(
+            f"fallback ladder must end with {' or '.join(TERMINAL_FALLBACKS)} (a rung that always yields "
+            f"a command), got {list(steps)}"
+        )
+    early = [s for s in steps[:-1] if s in TERMINAL_FALLBACKS]
+    if early:
+        raise ValueError(f"fallback {early[0]!r} always succeeds, so it must be the last rung, got {list(steps)}")
+    return steps
+
+
+@dataclass(frozen=True)
+class FallbackConfig:
+    """The fallback ladder of a tracking MPC (see the module docstring).
+
+    ladder : rungs in order; brake_decel_mps2 : braking deceleration [m/s^2] (> 0);
+    brake_steering : ``hold`` or ``straighten``; relax_slack_factor : how many times cheaper the
+    lane slack is in the relaxed problem (>= 1).
+    """
+
+    ladder: tuple[str, ...] = DEFAULT_LADDER
+    brake_decel_mps2: float = 1.0
+    brake_steering: Literal["hold", "straighten"] = "hold"
+    relax_slack_factor: float = 100.0
+
+    def __post_init__(self):
+        object.__setattr__(self, "ladder", check_ladder(self.ladder))
+        if not (isinstance(self.brake_decel_mps2, (int, float)) and math.isfinite(self.brake_decel_mps2)
+                and self.brake_decel_mps2 > 0):
+            raise ValueError(f"brake_decel_mps2 must be a positive finite number, got {self.brake_decel_mps2!r}")
+        if self.brake_steering not in ("hold", "straighten"):
+            raise ValueError(f"brake_steering must be 'hold' or 'straighten', got {self.brake_steering!r}")
+        if not (isinstance(self.relax_slack_factor, (int, float)) and math.isfinite(self.relax_slack_factor)
+                and self.relax_slack_factor >= 1):
+            raise ValueError(f"relax_slack_factor must be a finite number >= 1, got {self.relax_slack_factor!r}")
+
+
+def relaxed_problem(pb: MpcProblem, slack_factor: float) -> MpcProblem:
+    """``pb`` without rate limits and hard state bounds, with a ``slack_factor`` times cheaper lane slack."""
+    return dataclasses.replace(
+        pb,
+        du_max_per_s=None,
+        x_min=None,
+        x_max=None,
+        lane_slack_weight=pb.lane_slack_weight / slack_factor,
+        lane_slack_weight_l1=pb.lane_slack_weight_l1 / slack_factor,
+    )
+
+
+def relaxed_settings(s) -> OsqpSettings:
+    """Looser tolerance (10x, at least 1e-4) and twice the iterations (OSQP's defaults relaxed when
+    the controller uses another solver)."""
+    if not isinstance(s, OsqpSettings):
+        s = OsqpSettings()
+    return dataclasses.replace(
+        s, eps_abs=max(10 * s.eps_abs, 1e-4), eps_rel=max(10 * s.eps_rel, 1e-4), max_iter=2 * s.max_iter
+    )
+
+
+class FallbackLadder:
+    """Runs a :class:`FallbackConfig` ladder for one controller (the relaxed QP is built once here).
+
+    ``controller`` provides ``model``, ``problem``, ``N``, ``dt_s``, ``config.discretization`` and,
+    for ``relax``, ``backend.settings``.
+    """
+
+    def __init__(self, controller, config: FallbackConfig):
+        self.ctrl = controller
+        self.config = config
+        pb = controller.problem
+        model = controller.model
+        self._rate = pb.du_max_per_s * pb.dt_s  # (nu,) largest change per step
+        names_x, names_u = tuple(model.state_names), tuple(model.input_names)
+        self._iv = names_x.index("v") if "v" in names_x else None
+        self._ia = names_u.index("accel") if "accel" in names_u else None
+        self._is = names_u.index("steer") if "steer" in names_u else None
+        self.relax_qp = self.relax_backend = None
+        if FALLBACK_RELAX in config.ladder:
+            self.relax_qp = LtvQp(relaxed_problem(pb, config.relax_slack_factor))
+            self.relax_backend = OsqpBackend(self.relax_qp, relaxed_settings(controller.backend.settings))
+
+    # -- helpers --------------------------------------------------------------------------------
+    def _bound(self, u_raw: np.ndarray, u_prev: np.ndarray) -> np.ndarray:
+        """Clip to the rate limit from ``u_prev`` and to the input bounds; NaN -> previous input."""
+        pb = self.ctrl.problem
+        u = np.where(np.isfinite(u_raw), u_raw, u_prev)
+        u = np.clip(u, u_prev - self._rate, u_prev + self._rate)
+        return np.clip(u, pb.u_min, pb.u_max)
+
+    def _brake_input(self, x: np.ndarray, u_prev: np.ndarray) -> np.ndarray:
+        dt = self.ctrl.dt_s
+        u = u_prev.astype(float).copy()
+        if self._iv is not None and self._ia is not None:
+            v = float(x[self._iv])
+            a = min(self.config.brake_decel_mps2, abs(v) / dt)  # stop at standstill, not beyond
+            u[self._ia] = -math.copysign(a, v) if v != 0.0 else 0.0
+        if self._is is not None and self.config.brake_steering == "straighten":
+            u[self._is] = 0.0  # reached at the rate limit by _bound
+        return self._bound(u, u_prev)
+
+    # -- rungs ----------------------------------------------------------------------------------
+    def _relax(self, d, warm: WarmStart):
+        qp, be = self.relax_qp, self.relax_backend
+        qp.update(d.x, d.Ad, d.Bd, d.c, d.xref, d.uref, warm.u_prev, d.lane_normal, d.lane_offset,
+                  d.lane_lo, d.lane_hi)
+        # obstacles stay in the relaxed problem (their slacks keep it feasible)
+        if d.rows_a is not None and qp.n_obs_rows:
+            qp.set_obstacle_rows(d.rows_a, d.rows_b)
+        if d.H is not None and qp.problem.position_cost:
+            qp.add_position_cost(d.H, d.g)
+        Xws = np.vstack([d.Xbar, d.Fbar[-1:]])
+        res: SolveResult = be.solve(Xws, d.Ubar)
+        if not (res.ok and np.all(np.isfinite(res.U)) and np.all(np.isfinite(res.X))):
+            return None
+        u = self._bound(res.U[0], warm.u_prev)
+        return u, WarmStart(s_m=d.s_m, u_prev=u, X=res.X, U=res.U), res.X
+
+    def _shifted_plan(self, d, warm: WarmStart):
+        if warm.U is None or warm.X is None or warm.U.shape[0] < 2 or warm.plan_age >= self.ctrl.N - 1:
+            return None
+        U = np.vstack([warm.U[1:], warm.U[-1:]])
+        X = np.vstack([warm.X[1:], warm.X[-1:]])
+        u = self._bound(U[0], warm.u_prev)
+        return u, WarmStart(s_m=d.s_m, u_prev=u, X=X, U=U, plan_age=warm.plan_age + 1), X
+
+    def _brake(self, d, warm: WarmStart):
+        from ..models.discretize import discrete_step
+
+        c = self.ctrl
+        N = c.N
+        U = np.empty((N, c.nu))
+        X = np.empty((N + 1, c.nx))
+        X[0] = d.x
+        u_prev = warm.u_prev
+        for k in range(N):  # the braking plan, for the log and the next step's warm start
+            U[k] = u_prev = self._brake_input(X[k], u_prev)
+            X[k + 1] = discrete_step(c.model, X[k], U[k], c.dt_s, c.config.discretization)
+        if not np.all(np.isfinite(X)):
+            X = np.repeat(d.x[None, :], N + 1, axis=0)
+        return U[0].copy(), WarmStart(s_m=d.s_m, u_prev=U[0].copy(), X=X, U=U), X
+
+    def _hold_last(self, d, warm: WarmStart):
+        u = self._bound(warm.u_prev, warm.u_prev)
+        X = np.repeat(d.x[None, :], self.ctrl.N + 1, axis=0)
+        return u, WarmStart(s_m=d.s_m, u_prev=u), X
+
+    # -- the ladder -----------------------------------------------------------------------------
+    def run(self, d, warm: WarmStart) -> tuple[np.ndarray, str, WarmStart, np.ndarray]:
+        """(command (nu,), rung name, next warm start, predicted states (N+1, nx)) for step data
+        ``d`` (:class:`~mpcdrive.control.mpc.StepData`) after a failed solve."""
+        rungs = {
+            FALLBACK_RELAX: self._relax,
+            FALLBACK_SHIFTED_PLAN: self._shifted_plan,
+            FALLBACK_BRAKE: self._brake,
+            FALLBACK_HOLD: self._hold_last,
+        }
+        for name in self.config.ladder:
+            got = rungs[name](d, warm)
+            if got is not None:
+                u, new_warm, X_pred = got
+                if np.all(np.isfinite(u)):
+                    return u, name, new_warm, X_pred
+        raise RuntimeError("internal error: the fallback ladder yielded no finite command")  # pragma: no cover

@@ -1,0 +1,378 @@
+"""Monte Carlo sweeps: plan the runs, run them on a local process pool or a Ray cluster, collect rows.
+
+The plan is made in the calling process and does not depend on the backend or the number of
+workers: run ``i`` draws its varied values and its scenario seed from child ``i`` of
+``numpy.random.SeedSequence(seed)``, its scenario is validated there (a run whose values make an
+invalid scenario is reported, not dispatched), and workers only simulate. The simulation is
+deterministic, so every column but the timings is identical between backends for the same seed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import multiprocessing
+import os
+import signal
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..scenarios import ScenarioError, ScenarioSpec, validate_scenario_data
+from .vary import Setting, SweepError, Variation, apply, parse_set, parse_vary
+
+__all__ = [
+    "METRIC_COLUMNS",
+    "RunTask",
+    "SuccessCriteria",
+    "SweepPlan",
+    "plan_sweep",
+    "run_sweep",
+    "run_task",
+]
+
+#: metric columns of the results table, in order (after run_id, seed and the varied values)
+METRIC_COLUMNS: tuple[str, ...] = (
+    "success", "failure_reason", "termination", "steps", "duration_s",
+    "rms_lateral_error_m", "max_abs_lateral_error_m", "final_lateral_error_m", "rms_heading_error_rad",
+    "max_abs_steer_rad", "max_abs_steer_rate_rad_s", "min_obstacle_clearance_m", "collisions",
+    "max_lane_excess_m", "max_lane_excess_t_s", "lane_excess_at_start_m", "goal_reached", "solver_failures", "fallbacks",
+    "fallbacks_relax", "fallbacks_shifted_plan", "fallbacks_brake", "fallbacks_hold_last",
+    "solve_time_p50_us", "solve_time_p99_us", "solve_time_max_us", "wall_s",
+)
+#: columns that depend on the machine (left out when comparing backends)
+TIMING_COLUMNS: tuple[str, ...] = ("solve_time_p50_us", "solve_time_p99_us", "solve_time_max_us", "wall_s")
+
+
+@dataclass(frozen=True)
+class SuccessCriteria:
+    """When a run counts as a success: it ran to the end (no error, no divergence), had no
+    collision, its footprint left the lane by at most ``max_lane_excess_m`` [m], it reached the
+    goal of an open path, and its final |lateral error| is at most ``max_final_lateral_error_m`` [m]."""
+
+    max_final_lateral_error_m: float = 0.1
+    max_lane_excess_m: float = 0.0
+
+    def __post_init__(self):
+        for name in ("max_final_lateral_error_m", "max_lane_excess_m"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise SweepError(f"{name} must be a finite number >= 0, got {v!r}")
+
+    def judge(self, m: dict) -> list[str]:
+        """Reasons the run with metrics ``m`` failed (empty: success)."""
+        why = []
+        if m.get("termination") == "diverged":
+            why.append("plant state diverged (not finite)")
+        if m["collisions"]:
+            why.append(f"{m['collisions']} collision(s)")
+        if m["max_lane_excess_m"] > self.max_lane_excess_m:
+            msg = f"left the lane by {m['max_lane_excess_m']:.3g} m"
+            if m.get("max_lane_excess_t_s") is not None:
+                msg += f" at t = {m['max_lane_excess_t_s']:.2f} s"
+            if m.get("lane_excess_at_start_m"):
+                msg += f" (already {m['lane_excess_at_start_m']:.3g} m outside at the start)"
+            why.append(msg)
+        if m["goal_reached"] is False:
+            why.append("goal not reached")
+        fe = m["final_lateral_error_m"]
+        if not (isinstance(fe, float) and math.isfinite(fe)):
+            why.append("final lateral error not finite")
+        elif fe > self.max_final_lateral_error_m:
+            why.append(f"final |lateral error| {fe:.3g} m > {self.max_final_lateral_error_m:g} m")
+        return why
+
+
+@dataclass(frozen=True)
+class RunTask:
+    """One run: its id, seed, varied values and the validated scenario as plain data (picklable)."""
+
+    run_id: int
+    seed: int
+    values: dict
+    scenario: dict | None
+    invalid: str = ""
+    criteria: SuccessCriteria = SuccessCriteria()
+
+
+@dataclass(frozen=True)
+class SweepPlan:
+    """Every run of a sweep, made before any runs (see the module docstring)."""
+
+    base: ScenarioSpec
+    source: str
+    seed: int
+    variations: tuple[Variation, ...]
+    settings: tuple[Setting, ...]
+    criteria: SuccessCriteria
+    tasks: tuple[RunTask, ...] = field(repr=False)
+
+    @property
+    def varied_names(self) -> list[str]:
+        return [v.name for v in self.variations]
+
+
+def _materialize_plant(data: dict) -> None:
+    """Write the true vehicle's parameters (``plant``) explicitly from ``vehicle`` where unset, so
+    that varying ``vehicle.*`` alone makes a model error (the controller's model is wrong) and
+    ``plant.*`` alone a different true vehicle."""
+    plant, veh = data["plant"], data["vehicle"]
+    for k in ("lf_m", "lr_m"):
+        if plant.get(k) is None:
+            plant[k] = veh[k]
+    if veh["model"] == "kinematic3" and plant.get("speed_mps") is None:
+        plant["speed_mps"] = veh["speed_mps"]
+
+
+def plan_sweep(
+    spec: ScenarioSpec,
+    runs: int,
+    seed: int,
+    vary: Sequence[str] = (),
+    set_: Sequence[str] = (),
+    criteria: SuccessCriteria = SuccessCriteria(),
+    source: str | None = None,
+) -> SweepPlan:
+    """The runs of a sweep of ``spec``; :class:`SweepError` (one line) for bad options.
+
+    ``set_`` (``NAME=VALUE``) are applied first, then ``vary`` (``NAME=DISTRIBUTION``) on top, so a
+    relative distribution may scale or offset a value that ``--set`` gave."""
+    if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
+        raise SweepError(f"--runs must be an integer >= 1, got {runs!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise SweepError(f"--seed must be an integer >= 0, got {seed!r}")
+    source = source or spec.id
+    data = spec.model_dump(mode="json")
+    _materialize_plant(data)
+    settings = tuple(parse_set(s, data) for s in set_)
+    base_data = apply(data, settings, {})
+    try:
+        base = validate_scenario_data(base_data, f"{source} with --set")
+    except ScenarioError as e:
+        raise SweepError(f"--set: the scenario is not valid with these settings: {e}") from None
+    variations = tuple(parse_vary(v, base_data) for v in vary)
+    names = [v.name for v in variations]
+    dup = [n for i, n in enumerate(names) if n in names[:i]]
+    if dup:
+        raise SweepError(f"--vary {dup[0]}: given twice")
+    # each option on its own at its centre value must give a valid scenario
+    for var in variations:
+        nominal = var.dist.nominal(_base_value(base_data, var))
+        trial = apply(base_data, (), {var: int(round(nominal)) if var.integer else nominal})
+        try:
+            validate_scenario_data(trial, "")
+        except ScenarioError as e:
+            raise SweepError(f"--vary {var}: gives an invalid scenario at its centre value "
+                             f"{nominal:g}: {e.field}: {e.problem}") from None
+    tasks = []
+    for i, child in enumerate(np.random.SeedSequence(seed).spawn(runs)):
+        rng = np.random.default_rng(child)
+        run_seed = int(child.generate_state(1, dtype=np.uint32)[0])
+        values = {var: var.value(rng, base_data) for var in variations}
+        data_i = apply(base_data, (), values)
+        data_i["seed"] = run_seed
+        data_i["id"] = f"{base.id}-run{i:04d}"
+        plain = {v.name: x for v, x in values.items()}
+        try:
+            ok = validate_scenario_data(data_i, f"run {i}")
+            tasks.append(RunTask(i, run_seed, plain, ok.model_dump(mode="json"), "", criteria))
+        except ScenarioError as e:
+            tasks.append(RunTask(i, run_seed, plain, None, f"invalid scenario: {e.field}: {e.problem}", criteria))
+    return SweepPlan(base, source, seed, variations, settings, criteria, tuple(tasks))
+
+
+def _base_value(data: dict, var: Variation):
+    from .vary import get_value
+
+    return get_value(data, var.keys, "--vary", var.name)
+
+
+# -- the worker ------------------------------------------------------------------------------------
+def _row(task: RunTask) -> dict:
+    row = {"run_id": task.run_id, "seed": task.seed, **task.values}
+    row.update({c: None for c in METRIC_COLUMNS})
+    return row
+
+
+def run_task(task: RunTask) -> dict:
+    """Simulate one run and return its row of the results table; never raises.
+
+    A top-level function, so process pools using ``spawn`` or ``forkserver`` and Ray can ship it
+    by reference."""
+    t0 = time.perf_counter()
+    row = _row(task)
+    if task.scenario is None:
+        row.update(success=False, failure_reason=task.invalid, termination="invalid", wall_s=0.0)
+        return row
+    try:
+        from ..scenarios import build_experiment, run_experiment
+        from ..sim import compute_metrics, lane_excess_per_step
+
+        spec = ScenarioSpec.model_validate(task.scenario)
+        exp = build_experiment(spec)
+        result = run_experiment(exp)
+        m = compute_metrics(result, exp.footprint)
+        excess = lane_excess_per_step(result, exp.footprint)
+        if excess is not None and excess.size:
+            m["max_lane_excess_t_s"] = float(result.t_s[int(np.argmax(excess))])
+            m["lane_excess_at_start_m"] = float(excess[0])
+    except Exception as e:  # a run's error is its result; the sweep goes on
+        msg = " ".join(str(e).split())
+        row.update(success=False, failure_reason=f"error: {type(e).__name__}: {msg}", termination="error",
+                   wall_s=time.perf_counter() - t0)
+        return row
+    fc = m["fallback_counts"]
+    st = m["solve_time_us"]
+    row.update({k: m[k] for k in METRIC_COLUMNS if k in m})
+    row.update(
+        fallbacks_relax=fc.get("relax", 0), fallbacks_shifted_plan=fc.get("shifted_plan", 0),
+        fallbacks_brake=fc.get("brake", 0), fallbacks_hold_last=fc.get("hold_last", 0),
+        solve_time_p50_us=st["p50"], solve_time_p99_us=st["p99"], solve_time_max_us=st["max"],
+    )
+    why = task.criteria.judge(m)
+    row.update(success=not why, failure_reason="; ".join(why), wall_s=time.perf_counter() - t0)
+    return row
+
+
+def _ignore_sigint() -> None:
+    """Pool workers leave Ctrl-C to the parent, which cancels the sweep and stops them."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+# -- backends -----------------------------------------------------------------------------------------
+Progress = Callable[[int, int, dict], None]
+
+
+def _run_inline(tasks, progress: Progress | None) -> list[dict]:
+    rows = []
+    for t in tasks:
+        rows.append(run_task(t))
+        if progress is not None:
+            progress(len(rows), len(tasks), rows[-1])
+    return rows
+
+
+def _mp_context():
+    methods = multiprocessing.get_all_start_methods()
+    return multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
+
+
+@contextlib.contextmanager
+def _signals_deferred():
+    """Hold Ctrl-C (SIGINT) and SIGTERM back until the block ends, then raise KeyboardInterrupt
+    if one came. Only the Python-level handlers change (the signal mask is left alone, so child
+    processes started in the block receive signals as usual)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    got = []
+    sigs = [signal.SIGINT] + ([signal.SIGTERM] if hasattr(signal, "SIGTERM") else [])
+    old = {s: signal.signal(s, lambda signum, frame: got.append(signum)) for s in sigs}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    if got:
+        raise KeyboardInterrupt
+
+
+def _run_local(tasks, workers: int, progress: Progress | None) -> list[dict]:
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    if workers == 1 or len(tasks) == 1:
+        return _run_inline(tasks, progress)
+    before = set(multiprocessing.active_children())
+    ex = ProcessPoolExecutor(max_workers=workers, mp_context=_mp_context(), initializer=_ignore_sigint)
+    rows: list[dict] = []
+    try:
+        with _signals_deferred():  # workers start inside submit(): never leave one half-started
+            pending = {ex.submit(run_task, t) for t in tasks}
+        while pending:
+            done, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+            for f in done:
+                rows.append(f.result())
+                if progress is not None:
+                    progress(len(rows), len(tasks), rows[-1])
+    except BaseException:  # Ctrl-C or an error: stop the workers now, not after their runs
+        terminate = getattr(ex, "terminate_workers", None)  # Python >= 3.14
+        if terminate is not None:
+            terminate()
+        else:
+            # the pool's workers, including one whose start Ctrl-C interrupted before the pool
+            # registered it
+            procs = set((getattr(ex, "_processes", None) or {}).values())
+            procs |= set(multiprocessing.active_children()) - before
+            ex.shutdown(wait=False, cancel_futures=True)
+            for p in procs:
+                p.terminate()
+            for p in procs:
+                p.join(timeout=5)
+        raise
+    ex.shutdown(wait=True)
+    return rows
+
+
+def _run_ray(tasks, address: str | None, progress: Progress | None) -> list[dict]:
+    try:
+        import ray
+    except ImportError:
+        raise SweepError("--backend ray: Ray is not installed (pip install 'mpcdrive[ray]')") from None
+    started = False
+    if not ray.is_initialized():
+        kwargs = {"address": address} if address else {"include_dashboard": False}
+        ray.init(**kwargs, logging_level="ERROR", log_to_driver=False)
+        started = True
+    try:
+        remote = ray.remote(num_cpus=1, max_retries=0)(run_task)
+        cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
+        queue = list(tasks)
+        pending, rows = [], []
+        try:
+            while queue or pending:
+                while queue and len(pending) < 4 * cpus:  # bounded number of tasks in flight
+                    pending.append(remote.remote(queue.pop(0)))
+                done, pending = ray.wait(pending, num_returns=1, timeout=0.5)
+                for ref in done:
+                    rows.append(ray.get(ref))
+                    if progress is not None:
+                        progress(len(rows), len(tasks), rows[-1])
+        except BaseException:
+            for ref in pending:
+                ray.cancel(ref, force=True)
+            raise
+        return rows
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def run_sweep(
+    plan: SweepPlan,
+    backend: str = "local",
+    workers: int | None = None,
+    address: str | None = None,
+    progress: Progress | None = None,
+) -> list[dict]:
+    """Run every task of ``plan``; rows sorted by run id.
+
+    backend : ``local`` (a process pool of ``workers`` processes, all cores by default; 1 runs in
+    this process) or ``ray`` (tasks on the Ray cluster at ``address``, a new local one when None;
+    the cluster's nodes need mpcdrive installed). ``progress(done, total, row)`` after each run."""
+    if backend not in ("local", "ray"):
+        raise SweepError(f"--backend must be 'local' or 'ray', got {backend!r}")
+    if address is not None and backend != "ray":
+        raise SweepError("--address is only for --backend ray")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise SweepError(f"--workers must be an integer >= 1, got {workers!r}")
+    if backend == "ray" and workers is not None:
+        raise SweepError("--workers is only for --backend local (Ray uses the cluster's CPUs)")
+    tasks = list(plan.tasks)
+    if backend == "ray":
+        rows = _run_ray(tasks, address, progress)
+    else:
+        rows = _run_local(tasks, workers or os.cpu_count() or 1, progress)
+    return sorted(rows, key=lambda r: r["run_id"])

@@ -1,0 +1,109 @@
+"""No lost or half-written output: a run, a reproduce or a sweep that is interrupted (Ctrl-C,
+SIGTERM) or fails part-way leaves either its complete output directory or nothing, and says so."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+import mpcdrive.scenarios
+from mpcdrive.cli import main
+
+LONG = (
+    "id: long\nduration_s: 600.0\n"
+    "path: {type: circle, radius_m: 1.5}\n"
+    "initial_state: {x_m: 1.5, y_m: 0.0, yaw_deg: 90}\n"
+    "controller: {horizon: 10, Q: [1, 1, 1], R: [1]}\n"
+)
+
+
+def _start(tmp_path, *args):
+    scen = tmp_path / "long.yaml"
+    scen.write_text(LONG)
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    # a shell's background job ignores SIGINT and children inherit that: restore the default, as
+    # in a terminal, so that Python turns SIGINT into KeyboardInterrupt
+    return subprocess.Popen([sys.executable, "-m", "mpcdrive.cli", *[str(scen) if a == "SCEN" else a for a in args]],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+
+
+def _wait_for_temp_dir(tmp_path, proc, timeout_s=60.0):
+    """Wait until the command has created its temporary output directory (it is running)."""
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout_s:
+        if [p for p in tmp_path.iterdir() if p.name.startswith(".out.")]:
+            time.sleep(1.0)  # well inside the simulation
+            return
+        if proc.poll() is not None:
+            pytest.fail(f"the command ended early: {proc.communicate()}")
+        time.sleep(0.1)
+    proc.kill()
+    pytest.fail("the command never started its output")
+
+
+@pytest.mark.parametrize(
+    "args, sig",
+    [
+        (["run", "SCEN", "-q"], signal.SIGINT),
+        (["run", "SCEN"], signal.SIGTERM),  # with the progress bar on
+        (["sweep", "SCEN", "--runs", "4", "--workers", "2", "-q"], signal.SIGINT),
+    ],
+    ids=["run-sigint", "run-sigterm", "sweep-sigint"],
+)
+def test_interrupted_command_leaves_no_output_and_says_so(tmp_path, args, sig):
+    out = tmp_path / "out"
+    proc = _start(tmp_path, *args, "--out", str(out))
+    _wait_for_temp_dir(tmp_path, proc)
+    proc.send_signal(sig)
+    try:
+        _, err = proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        pytest.fail("the command did not stop after the signal")
+    assert proc.returncode == 130, err
+    assert "interrupted; no partial output was kept" in err
+    assert "Traceback" not in err
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["long.yaml"]  # no temporary directory left
+
+
+def _fail_after(n_steps):
+    """run_experiment whose simulation raises after ``n_steps`` steps."""
+    real = mpcdrive.scenarios.run_experiment
+
+    def run(exp, progress=None):
+        def boom(k, total):
+            if k >= n_steps:
+                raise RuntimeError("simulated crash mid-run")
+        return real(exp, progress=boom)
+    return run
+
+
+@pytest.mark.parametrize("args", [["run", "paper-exp3"], ["reproduce", "--only", "paper-exp3", "--only", "paper-exp4"]],
+                         ids=["run", "reproduce"])
+def test_exception_mid_run_leaves_no_output_and_says_so(tmp_path, capsys, monkeypatch, args):
+    calls = []
+    failing = _fail_after(50)
+
+    def second_fails(exp, progress=None):  # reproduce: the first experiment completes, the second fails
+        calls.append(exp.spec.id)
+        if args[0] == "reproduce" and len(calls) == 1:
+            return mpcdrive.scenarios.build.run_experiment(exp, progress)
+        return failing(exp, progress)
+
+    monkeypatch.setattr(mpcdrive.scenarios, "run_experiment", second_fails)
+    out = tmp_path / "out"
+    monkeypatch.setattr(sys, "argv", ["mpcdrive", *args, "--out", str(out), "-q"])
+    with pytest.raises(SystemExit) as ex:
+        main()
+    assert ex.value.code == 1
+    err = capsys.readouterr().err
+    last = err.splitlines()[-1]  # (reproduce logs its progress above)
+    assert last.startswith("mpcdrive: error: RuntimeError: simulated crash mid-run; no partial output was kept")
+    assert sum(1 for line in err.splitlines() if line.startswith("mpcdrive:")) == 1
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+    assert len(calls) == (2 if args[0] == "reproduce" else 1)
