@@ -96,7 +96,8 @@ class MpcProblem:
             raise ValueError(f"lane_half_width_m must be positive, got {self.lane_half_width_m}")
         if self.lane_slack_weight < 0 or self.lane_slack_weight_l1 < 0:
             raise ValueError("lane slack weights must be >= 0")
-        if self.R.min() == 0 and np.linalg.eigvalsh(self.R + self.Rc).min() <= 0 and np.all(np.isinf(u_max)):
+        RRc = self.R + self.Rc
+        if np.linalg.eigvalsh(RRc).min() <= 1e-12 * max(1.0, float(np.abs(RRc).max())) and np.all(np.isinf(u_max)):
             raise ValueError("R + Rc must be positive definite when inputs are unbounded")
 
     @property

@@ -8,7 +8,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..control.mpc import LtvMpc, MpcConfig
+from ..control.base import Controller
+from ..control.factory import make_mpc
+from ..control.mpc import MpcConfig
 from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams
 from ..ocp.problem import MpcProblem
 from ..paths import CirclePath, Path, StraightPath, WaypointPath
@@ -25,7 +27,7 @@ class Experiment:
 
     spec: ScenarioSpec
     path: Path
-    controller: LtvMpc
+    controller: Controller
     plant: Plant
     x0: np.ndarray
     steps: int
@@ -103,7 +105,8 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         feedforward=c.feedforward,
     )
     path = build_path(spec.path)
-    controller = LtvMpc(model, path, problem, config, OsqpSettings(eps_abs=c.osqp_eps, eps_rel=c.osqp_eps, max_iter=c.osqp_max_iter))
+    controller = make_mpc(model, path, problem, config, c.backend,
+                          OsqpSettings(eps_abs=c.osqp_eps, eps_rel=c.osqp_eps, max_iter=c.osqp_max_iter))
     plant = Plant(model, spec.plant.integrator, spec.plant.substeps)
     return Experiment(
         spec=spec,
@@ -135,5 +138,6 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
         stop_at_path_end=spec.stop_at_path_end,
         lane_half_width_m=pb.lane_half_width_m,
         progress=progress,
-        meta={"id": spec.id, "max_steer_rad": float(pb.u_max[0]), "description": spec.description},
+        meta={"id": spec.id, "max_steer_rad": float(pb.u_max[0]), "description": spec.description,
+              "backend": getattr(exp.controller, "backend", "")},
     )

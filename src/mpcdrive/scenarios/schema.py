@@ -85,7 +85,10 @@ class RoadSpec(_Strict):
 
 
 class ControllerSpec(_Strict):
-    """LTV-MPC settings; weights are diagonals in the model's state / input order."""
+    """LTV-MPC settings; weights are diagonals in the model's state / input order.
+
+    ``backend``: ``fast`` (the whole step compiled; falls back to ``osqp`` with a warning for a
+    problem it does not cover) or ``osqp`` (the sparse QP solved by OSQP, the reference)."""
 
     horizon: int = Field(30, ge=1, le=1000)
     Q: list[NonNeg]
@@ -106,6 +109,7 @@ class ControllerSpec(_Strict):
     lane_slack_weight_l1: NonNeg = 1e3
     osqp_eps: Positive = 1e-5
     osqp_max_iter: int = Field(4000, ge=1)
+    backend: Literal["osqp", "fast"] = "fast"
 
     @field_validator("max_steer_deg")
     @classmethod

@@ -1,0 +1,45 @@
+"""Pick the LTV-MPC implementation for a problem: the compiled fast path where it covers the
+problem, else the OSQP reference, saying so."""
+
+from __future__ import annotations
+
+import warnings
+from typing import Literal
+
+from ..ocp.problem import MpcProblem
+from ..paths.base import Path
+from ..solvers.osqp_backend import OsqpSettings
+from .mpc import LtvMpc, MpcConfig
+
+Backend = Literal["osqp", "fast"]
+BACKENDS: tuple[str, ...] = ("osqp", "fast")
+DEFAULT_BACKEND: Backend = "fast"
+
+
+class FastPathUnavailable(UserWarning):
+    """The fast backend was asked for but does not cover the problem; OSQP is used instead."""
+
+
+def make_mpc(model, path: Path, problem: MpcProblem, config: MpcConfig = MpcConfig(),
+             backend: Backend = DEFAULT_BACKEND, osqp_settings: OsqpSettings = OsqpSettings(),
+             fast_settings=None):
+    """An LTV-MPC controller solving ``problem`` with ``backend``.
+
+    ``osqp``: :class:`~mpcdrive.control.mpc.LtvMpc` (sparse QP updated in place, OSQP), the
+    reference. ``fast``: :class:`~mpcdrive.control.fast.FastLtvMpc` (the whole step compiled);
+    when it does not cover the problem (see ``fast_unsupported_reason``) the OSQP controller is
+    returned and a :class:`FastPathUnavailable` warning names the reason -- no constraint or
+    setting is ever dropped. The returned controller's ``backend`` attribute tells which one runs.
+    """
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+    if backend == "fast":
+        from .fast import FastLtvMpc, FastSettings, fast_unsupported_reason
+
+        settings = fast_settings if fast_settings is not None else FastSettings()
+        reason = fast_unsupported_reason(model, path, problem, config, settings)
+        if reason is None:
+            return FastLtvMpc(model, path, problem, config, settings)
+        warnings.warn(f"fast backend not used: {reason}; using the OSQP controller", FastPathUnavailable,
+                      stacklevel=2)
+    return LtvMpc(model, path, problem, config, osqp_settings)
