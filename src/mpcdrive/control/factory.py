@@ -29,7 +29,7 @@ def make_mpc(model, path: Path, problem: MpcProblem, config: MpcConfig = MpcConf
     reference. ``fast``: :class:`~mpcdrive.control.fast.FastLtvMpc` (the whole step compiled);
     when it does not cover the problem (see ``fast_unsupported_reason``) the OSQP controller is
     returned and a :class:`FastPathUnavailable` warning names the reason -- no constraint or
-    setting is ever dropped. The returned controller's ``backend`` attribute tells which one runs.
+    setting is ever dropped. The returned controller's ``backend_name`` tells which one runs.
     """
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")

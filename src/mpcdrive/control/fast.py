@@ -454,7 +454,7 @@ class FastLtvMpc:
     """
 
     name = "ltv-mpc-fast"
-    backend = "fast"
+    backend_name = "fast"
 
     def __init__(self, model, path: Path, problem: MpcProblem, config: MpcConfig = MpcConfig(),
                  settings: FastSettings = FastSettings()):

@@ -100,7 +100,7 @@ class LtvMpc:
     """
 
     name = "ltv-mpc"
-    backend = "osqp"
+    backend_name = "osqp"
 
     def __init__(
         self,

@@ -139,5 +139,5 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
         lane_half_width_m=pb.lane_half_width_m,
         progress=progress,
         meta={"id": spec.id, "max_steer_rad": float(pb.u_max[0]), "description": spec.description,
-              "backend": getattr(exp.controller, "backend", "")},
+              "backend": getattr(exp.controller, "backend_name", "")},
     )
