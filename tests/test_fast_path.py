@@ -115,9 +115,11 @@ def test_fast_matches_osqp_with_every_supported_constraint(case):
     wf, wr = fast.initial_warm(x), ref.initial_warm(x)
     for k in range(60):
         of, orf = fast.step(x, wf), ref.step(x, wr)
-        assert of.status == "ok" and orf.status == "ok", (k, of.status, orf.status)
-        assert np.abs(of.u - orf.u).max() <= 1e-5, (k, of.u, orf.u)
-        np.testing.assert_allclose(of.X_pred, orf.X_pred, atol=1e-5)
+        assert of.status == "ok" and orf.status in ("ok", "inaccurate"), (k, of.status, orf.status)
+        # OSQP's own accuracy: 1e-9 when it converges, looser when it stops 'inaccurate'
+        tol = 1e-5 if orf.status == "ok" else COMMAND_TOL_RAD
+        assert np.abs(of.u - orf.u).max() <= tol, (k, of.u, orf.u, orf.status)
+        np.testing.assert_allclose(of.X_pred, orf.X_pred, atol=tol)
         np.testing.assert_allclose(of.refs, orf.refs, atol=1e-9)
         assert (of.s_m, of.e_y_m, of.e_psi_rad) == pytest.approx((orf.s_m, orf.e_y_m, orf.e_psi_rad), abs=1e-9)
         wf, wr = of.warm, orf.warm

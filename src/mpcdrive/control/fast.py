@@ -51,7 +51,15 @@ _BAD_STATE = 4
 
 # integer parameters (ip)
 _I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH, _I_LIN, _I_METHOD, _I_HORIZON, _I_FF, _I_LANE, \
-    _I_MCONST, _I_RATE0, _I_MAXITER, _I_GAMMA, _I_NZ = range(15)
+    _I_MCONST, _I_RATE0, _I_MAXITER, _I_GAMMA, _I_NZ, _I_RICCATI, _I_MQ = range(17)
+_NIP = 17
+# the float arrays of a controller, all views of one buffer (one argument to the compiled step:
+# passing arrays one by one costs about 0.1 us each in the call)
+(_W_FP, _W_MP, _W_BND, _W_GEO, _W_WQ, _W_RM, _W_RC, _W_TABS, _W_TABXY, _W_TABH, _W_TABK, _W_C, _W_B,
+ _W_REFS, _W_XREF, _W_UREF, _W_XBAR, _W_UBAR, _W_F, _W_A, _W_BD, _W_CD, _W_LANEN, _W_LANEB, _W_XF, _W_P,
+ _W_LAM, _W_VB, _W_S, _W_T2, _W_GAM, _W_H, _W_G, _W_Z, _W_L, _W_J, _W_RQ, _W_D, _W_ZDIR, _W_R, _W_UQ,
+ _W_SQ, _W_ROWN, _W_LAMQ, _W_DW, _W_KG, _W_KF, _W_PA, _W_MG, _W_GG, _W_QV) = range(51)
+_NW = 51
 # float parameters (fp)
 _F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_LANEW, _F_SLACK2, _F_SLACK1, _F_TOL = range(8)
 # info outputs
@@ -144,13 +152,186 @@ def _constant_rows(problem: MpcProblem, nz: int):
 
 
 @njit(cache=True)
-def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, ip, fp, mp, bnd, Wq, Rm, Rc,
-                  geo, tab_s, tab_xy, tab_h, tab_k, C, b, ws, active, isact, out, info):
+def _riccati(N, nx, nu, A, B, c, xref, uref, Wq, Rm, x, P, p, K, kf, PA, M, G, q, z):
+    """Unconstrained minimizer of the tracking cost (no Rc, no slack) by the backward Riccati
+    recursion ``V_k(x) = x'P_k x + 2 p_k'x + const``, ``u_k = K_k x_k + kf_k``: O(N) work.
+
+    Scratch: PA (nx, nx), M (nu, nx), G (nu, nu), q (nx,). Writes z[:N nu] = U of the minimizer
+    (rolled out from x) and uses p[1:] for the rolled-out states. Returns False if some
+    ``R + B'PB`` is not numerically positive definite."""
+    for i in range(nx):
+        t = 0.0
+        for j in range(nx):
+            P[N, i, j] = Wq[N - 1, i, j]
+            t -= Wq[N - 1, i, j] * xref[N, j]
+        p[N, i] = t
+    for k in range(N - 1, -1, -1):
+        # q = P c + p ; PA = P A ; M = B'PA ; G = R + B'PB ; h = B'q - R ur (in kf[k])
+        for i in range(nx):
+            t = p[k + 1, i]
+            for j in range(nx):
+                t += P[k + 1, i, j] * c[k, j]
+            q[i] = t
+        for i in range(nx):
+            for j in range(nx):
+                t = 0.0
+                for l in range(nx):
+                    t += P[k + 1, i, l] * A[k, l, j]
+                PA[i, j] = t
+        for a in range(nu):
+            for j in range(nx):
+                t = 0.0
+                for l in range(nx):
+                    t += B[k, l, a] * PA[l, j]
+                M[a, j] = t
+            for e in range(nu):
+                t = Rm[a, e]
+                for l in range(nx):
+                    pb = 0.0
+                    for m_ in range(nx):
+                        pb += P[k + 1, l, m_] * B[k, m_, e]
+                    t += B[k, l, a] * pb
+                G[a, e] = t
+            t = 0.0
+            for l in range(nx):
+                t += B[k, l, a] * q[l]
+            for e in range(nu):
+                t -= Rm[a, e] * uref[k, e]
+            kf[k, a] = t
+        # G = L L' (in place, lower); K = -G^{-1} M ; kf = -G^{-1} h
+        for j in range(nu):
+            t = G[j, j]
+            for l in range(j):
+                t -= G[j, l] * G[j, l]
+            if not (t > 1e-14 * max(1.0, abs(G[j, j]))):
+                return False
+            G[j, j] = math.sqrt(t)
+            for i in range(j + 1, nu):
+                t = G[i, j]
+                for l in range(j):
+                    t -= G[i, l] * G[j, l]
+                G[i, j] = t / G[j, j]
+        for col in range(nx + 1):
+            for a in range(nu):
+                q_a = M[a, col] if col < nx else kf[k, a]
+                for l in range(a):
+                    q_a -= G[a, l] * (K[k, l, col] if col < nx else kf[k, l])
+                if col < nx:
+                    K[k, a, col] = q_a / G[a, a]
+                else:
+                    kf[k, a] = q_a / G[a, a]
+            for a in range(nu - 1, -1, -1):
+                t = K[k, a, col] if col < nx else kf[k, a]
+                for l in range(a + 1, nu):
+                    t -= G[l, a] * (K[k, l, col] if col < nx else kf[k, l])
+                if col < nx:
+                    K[k, a, col] = t / G[a, a]
+                else:
+                    kf[k, a] = t / G[a, a]
+        for a in range(nu):
+            for col in range(nx):
+                K[k, a, col] = -K[k, a, col]
+            kf[k, a] = -kf[k, a]
+        if k >= 1:
+            # P_k = W_k + A'PA + M'K ; p_k = -W_k r_k + A'q + M'kf
+            for i in range(nx):
+                t = 0.0
+                for j in range(nx):
+                    t -= Wq[k - 1, i, j] * xref[k, j]
+                for l in range(nx):
+                    t += A[k, l, i] * q[l]
+                for a in range(nu):
+                    t += M[a, i] * kf[k, a]
+                p[k, i] = t
+                for j in range(nx):
+                    t = Wq[k - 1, i, j]
+                    for l in range(nx):
+                        t += A[k, l, i] * PA[l, j]
+                    for a in range(nu):
+                        t += M[a, i] * K[k, a, j]
+                    P[k, i, j] = t
+    # roll out u_k = K_k x_k + kf_k from x (states staged in p[k + 1])
+    for k in range(N):
+        for a in range(nu):
+            t = kf[k, a]
+            for j in range(nx):
+                t += K[k, a, j] * (x[j] if k == 0 else p[k, j])
+            z[k * nu + a] = t
+        for i in range(nx):
+            t = c[k, i]
+            for j in range(nx):
+                t += A[k, i, j] * (x[j] if k == 0 else p[k, j])
+            for a in range(nu):
+                t += B[k, i, a] * z[k * nu + a]
+            q[i] = t
+        for i in range(nx):
+            p[k + 1, i] = q[i]
+    return True
+
+
+@njit(cache=True)
+def _plan_feasible(N, nx, nu, z, Xr, u_prev, u_min, u_max, dmax, x_min, x_max, tol):
+    """Whether inputs z (N nu) and states Xr[1..N] satisfy the input, rate and state bounds
+    within tol (NaN never does)."""
+    for k in range(N):
+        for a in range(nu):
+            u = z[k * nu + a]
+            if not (u >= u_min[a] - tol and u <= u_max[a] + tol):
+                return False
+            prev = u_prev[a] if k == 0 else z[(k - 1) * nu + a]
+            if not (abs(u - prev) <= dmax[a] + tol):
+                return False
+        for i in range(nx):
+            v = Xr[k + 1, i]
+            if not (v >= x_min[i] - tol and v <= x_max[i] + tol):
+                return False
+    return True
+
+
+@njit(cache=True, inline="always")
+def _v1(w, fo, i):
+    return w[fo[i]:fo[i + 1]]
+
+
+@njit(cache=True, inline="always")
+def _v2(w, fo, fs, i):
+    return w[fo[i]:fo[i + 1]].reshape((fs[3 * i], fs[3 * i + 1]))
+
+
+@njit(cache=True, inline="always")
+def _v3(w, fo, fs, i):
+    return w[fo[i]:fo[i + 1]].reshape((fs[3 * i], fs[3 * i + 1], fs[3 * i + 2]))
+
+
+@njit(cache=True)
+def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, wbuf, ibuf, out, info):
     """One control step; returns a status code (0 ok, 1 infeasible, 2 max_iter, 3 failed,
     4 non-finite state). Writes ``out = [u (nu), X ((N+1) nx), U (N nu), xref ((N+1) nx)]`` and
-    ``info = [s, e_y, e_psi, iterations]``."""
-    (refs, xref, uref, Xbar, Ubar, F, A, B, c, lane_n, lane_b, xf, P, lam, Vb, S, T2, Gam,
-     H, g, z, L, J, Rq, d, zdir, r, uq, sq, rown, lamq, dw) = ws
+    ``info = [s, e_y, e_psi, iterations]``. ``wbuf`` holds every float array (constants and
+    work), ``ibuf`` the integer parameters, the layout of ``wbuf`` and the active-set work."""
+    ip = ibuf[:_NIP]
+    fo = ibuf[_NIP:_NIP + _NW + 1]
+    fs = ibuf[_NIP + _NW + 1:_NIP + 4 * _NW + 1]
+    a0 = _NIP + 4 * _NW + 1
+    active = ibuf[a0:a0 + ip[_I_NZ]]
+    isact = ibuf[a0 + ip[_I_NZ]:a0 + ip[_I_NZ] + ip[_I_MQ]]
+    fp, mp, bnd, geo = _v1(wbuf, fo, _W_FP), _v1(wbuf, fo, _W_MP), _v1(wbuf, fo, _W_BND), _v1(wbuf, fo, _W_GEO)
+    Wq, Rm, Rc = _v3(wbuf, fo, fs, _W_WQ), _v2(wbuf, fo, fs, _W_RM), _v2(wbuf, fo, fs, _W_RC)
+    tab_s, tab_xy = _v1(wbuf, fo, _W_TABS), _v2(wbuf, fo, fs, _W_TABXY)
+    tab_h, tab_k = _v1(wbuf, fo, _W_TABH), _v1(wbuf, fo, _W_TABK)
+    C, b = _v2(wbuf, fo, fs, _W_C), _v1(wbuf, fo, _W_B)
+    refs, xref, uref = _v2(wbuf, fo, fs, _W_REFS), _v2(wbuf, fo, fs, _W_XREF), _v2(wbuf, fo, fs, _W_UREF)
+    Xbar, Ubar, F = _v2(wbuf, fo, fs, _W_XBAR), _v2(wbuf, fo, fs, _W_UBAR), _v2(wbuf, fo, fs, _W_F)
+    A, B, c = _v3(wbuf, fo, fs, _W_A), _v3(wbuf, fo, fs, _W_BD), _v2(wbuf, fo, fs, _W_CD)
+    lane_n, lane_b = _v2(wbuf, fo, fs, _W_LANEN), _v1(wbuf, fo, _W_LANEB)
+    xf, P, lam = _v2(wbuf, fo, fs, _W_XF), _v3(wbuf, fo, fs, _W_P), _v2(wbuf, fo, fs, _W_LAM)
+    Vb, S, T2, Gam = _v3(wbuf, fo, fs, _W_VB), _v3(wbuf, fo, fs, _W_S), _v2(wbuf, fo, fs, _W_T2), _v3(wbuf, fo, fs, _W_GAM)
+    H, g, z = _v2(wbuf, fo, fs, _W_H), _v1(wbuf, fo, _W_G), _v1(wbuf, fo, _W_Z)
+    L, J, Rq = _v2(wbuf, fo, fs, _W_L), _v2(wbuf, fo, fs, _W_J), _v2(wbuf, fo, fs, _W_RQ)
+    d, zdir, r, uq = _v1(wbuf, fo, _W_D), _v1(wbuf, fo, _W_ZDIR), _v1(wbuf, fo, _W_R), _v1(wbuf, fo, _W_UQ)
+    sq, rown, lamq = _v1(wbuf, fo, _W_SQ), _v1(wbuf, fo, _W_ROWN), _v1(wbuf, fo, _W_LAMQ)
+    dw, Kg, kf = _v3(wbuf, fo, fs, _W_DW), _v3(wbuf, fo, fs, _W_KG), _v2(wbuf, fo, fs, _W_KF)
+    PA, Mg, Gg, qv = _v2(wbuf, fo, fs, _W_PA), _v2(wbuf, fo, fs, _W_MG), _v2(wbuf, fo, fs, _W_GG), _v1(wbuf, fo, _W_QV)
     mkind, nx, nu, N = ip[_I_MODEL], ip[_I_NX], ip[_I_NU], ip[_I_N]
     pkind, lin, meth, hmode, ff, lane = ip[_I_PATH], ip[_I_LIN], ip[_I_METHOD], ip[_I_HORIZON], ip[_I_FF], ip[_I_LANE]
     nz = ip[_I_NZ]
@@ -255,6 +436,14 @@ def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, ip, fp, mp, bnd, Wq, Rm,
             lane_n[k, 0] = -math.sin(yaw)
             lane_n[k, 1] = math.cos(yaw)
             lane_b[k] = lane_n[k, 0] * refs[k + 1, 0] + lane_n[k, 1] * refs[k + 1, 1]
+
+    # -- no Rc, no lane: try the unconstrained minimizer (Riccati, O(N)); if it satisfies every
+    # bound it is the QP's solution ---------------------------------------------------------------
+    if ip[_I_RICCATI] == 1:
+        if _riccati(N, nx, nu, A, B, c, xref, uref, Wq, Rm, x, P, lam, Kg, kf, PA, Mg, Gg, qv, z):
+            if _plan_feasible(N, nx, nu, z, lam, u_prev, u_min, u_max, dmax, x_min, x_max, fp[_F_TOL]):
+                _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out)
+                return 0
 
     # -- condensing: x_k = xf_k + sum_j G_kj u_j ----------------------------------------------
     for i in range(nx):
@@ -422,6 +611,14 @@ def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, ip, fp, mp, bnd, Wq, Rm,
     info[_O_ITER] = iters
     if code != 0:
         return code
+    _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out)
+    return 0
+
+
+@njit(cache=True)
+def _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out):
+    """out = [u (nu) = U_0 clipped to the input bounds, X ((N+1) nx) rolled out through the
+    linearized model, U (N nu), xref ((N+1) nx)]."""
     oX = nu
     oU = oX + (N + 1) * nx
     oR = oU + N * nu
@@ -435,14 +632,13 @@ def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, ip, fp, mp, bnd, Wq, Rm,
             for a in range(nu):
                 t += B[k, i, a] * z[k * nu + a]
             out[oX + (k + 1) * nx + i] = t
-    for j in range(nzu):
+    for j in range(N * nu):
         out[oU + j] = z[j]
     for k in range(N + 1):
         for i in range(nx):
             out[oR + k * nx + i] = xref[k, i]
     for a in range(nu):
         out[a] = min(max(z[a], u_min[a]), u_max[a])
-    return 0
 
 
 class FastLtvMpc:
@@ -477,13 +673,14 @@ class FastLtvMpc:
         nz = N * nu + (N if lane else 0)
         rows, rhs, r_rate0, n_var = _constant_rows(problem, nz)
         m_max = len(rows) + n_var
-        self._C = np.zeros((max(m_max, 1), nz))
-        self._b = np.zeros(max(m_max, 1))
+        mq = max(m_max, 1)
+        C = np.zeros((mq, nz))
+        b_ = np.zeros(mq)
         if rows:
-            self._C[: len(rows)] = np.array(rows)
-            self._b[: len(rows)] = rhs
+            C[: len(rows)] = np.array(rows)
+            b_[: len(rows)] = rhs
         need_gamma = n_var > 0
-        ip = np.zeros(15, dtype=np.int64)
+        ip = np.zeros(_NIP, dtype=np.int64)
         ip[[_I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH]] = [kind, nx, nu, N, pa.kind]
         ip[_I_LIN] = 1 if config.linearization == "paper" else 0
         ip[_I_METHOD] = METHOD_RK4 if config.discretization == "rk4" else METHOD_EULER
@@ -495,57 +692,44 @@ class FastLtvMpc:
         ip[_I_MAXITER] = settings.max_iter
         ip[_I_GAMMA] = int(need_gamma)
         ip[_I_NZ] = nz
+        ip[_I_RICCATI] = int(not lane and not np.any(problem.Rc))
+        ip[_I_MQ] = mq
         fp = np.zeros(8)
         fp[_F_DT], fp[_F_VREF] = problem.dt_s, self.v_ref_mps
         fp[_F_HSTEP], fp[_F_WINDOW] = config.horizon_step_m, config.projection_window_m
         fp[_F_LANEW] = problem.lane_half_width_m if lane else 0.0
         fp[_F_SLACK2], fp[_F_SLACK1] = problem.lane_slack_weight, problem.lane_slack_weight_l1
         fp[_F_TOL] = settings.feasibility_tol
-        self._ip, self._fp, self._mp = ip, fp, mp
-        self._bnd = np.concatenate([problem.u_min, problem.u_max, problem.du_max_per_s * problem.dt_s,
-                                    problem.x_min, problem.x_max])
-        self._Wq = np.ascontiguousarray(np.stack([problem.Q] * (N - 1) + [problem.QN]))
-        self._R = np.ascontiguousarray(problem.R)
-        self._Rc = np.ascontiguousarray(problem.Rc)
-        self._path = (pa.geo, pa.tab_s, pa.tab_xy, pa.tab_h, pa.tab_k)
-        mq = max(m_max, 1)
+        bnd = np.concatenate([problem.u_min, problem.u_max, problem.du_max_per_s * problem.dt_s,
+                              problem.x_min, problem.x_max])
         nw = max(nx, nu)
-        self._ws = (
-            np.zeros((N + 1, 4)),  # refs
-            np.zeros((N + 1, nx)),  # xref
-            np.zeros((N, nu)),  # uref
-            np.zeros((N, nx)),  # Xbar
-            np.zeros((N, nu)),  # Ubar
-            np.zeros((N, nx)),  # F
-            np.zeros((N, nx, nx)),  # A
-            np.zeros((N, nx, nu)),  # B
-            np.zeros((N, nx)),  # c
-            np.zeros((N, 2)),  # lane normals
-            np.zeros(N),  # lane offsets
-            np.zeros((N + 1, nx)),  # free response
-            np.zeros((N + 1, nx, nx)),  # P
-            np.zeros((N + 1, nx)),  # adjoint
-            np.zeros((N, nx, nu)),  # V_j = P_{j+1} B_j
-            np.zeros((2, nx, N * nu)),  # T_i. (two buffers)
-            np.zeros((nx, nw)),  # T2
-            np.zeros((N, nx, N * nu) if need_gamma else (1, 1, 1)),  # Gamma
-            np.zeros((nz, nz)),  # H
-            np.zeros(nz),  # g
-            np.zeros(nz),  # z
-            np.zeros((nz, nz)),  # L
-            np.zeros((nz, nz)),  # J
-            np.zeros((nz, nz)),  # R of the active set
-            np.zeros(nz),  # d
-            np.zeros(nz),  # zdir
-            np.zeros(nz),  # r
-            np.zeros(nz),  # u (active multipliers)
-            np.zeros(mq),  # s
-            np.zeros(mq),  # row norms
-            np.zeros(mq),  # multipliers
-            np.zeros((7, nw, nw)),  # discretization work
-        )
-        self._active = np.zeros(nz, dtype=np.int64)
-        self._isact = np.zeros(mq, dtype=np.int64)
+        arrays = {  # initial values, or the shape of a work array
+            _W_FP: fp, _W_MP: mp, _W_BND: bnd, _W_GEO: pa.geo,
+            _W_WQ: np.stack([problem.Q] * (N - 1) + [problem.QN]), _W_RM: problem.R, _W_RC: problem.Rc,
+            _W_TABS: pa.tab_s, _W_TABXY: pa.tab_xy, _W_TABH: pa.tab_h, _W_TABK: pa.tab_k, _W_C: C, _W_B: b_,
+            _W_REFS: (N + 1, 4), _W_XREF: (N + 1, nx), _W_UREF: (N, nu), _W_XBAR: (N, nx), _W_UBAR: (N, nu),
+            _W_F: (N, nx), _W_A: (N, nx, nx), _W_BD: (N, nx, nu), _W_CD: (N, nx), _W_LANEN: (N, 2),
+            _W_LANEB: (N,), _W_XF: (N + 1, nx), _W_P: (N + 1, nx, nx), _W_LAM: (N + 1, nx),
+            _W_VB: (N, nx, nu), _W_S: (2, nx, N * nu), _W_T2: (nx, nw),
+            _W_GAM: (N, nx, N * nu) if need_gamma else (1, 1, 1),
+            _W_H: (nz, nz), _W_G: (nz,), _W_Z: (nz,), _W_L: (nz, nz), _W_J: (nz, nz), _W_RQ: (nz, nz),
+            _W_D: (nz,), _W_ZDIR: (nz,), _W_R: (nz,), _W_UQ: (nz,), _W_SQ: (mq,), _W_ROWN: (mq,),
+            _W_LAMQ: (mq,), _W_DW: (7, nw, nw), _W_KG: (N, nu, nx), _W_KF: (N, nu), _W_PA: (nx, nx),
+            _W_MG: (nu, nx), _W_GG: (nu, nu), _W_QV: (nx,),
+        }
+        shapes = [np.shape(arrays[i]) if isinstance(arrays[i], np.ndarray) else arrays[i] for i in range(_NW)]
+        sizes = [int(np.prod(sh)) for sh in shapes]
+        fo = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        fs = np.ones((_NW, 3), dtype=np.int64)
+        for i, sh in enumerate(shapes):
+            fs[i, : len(sh)] = sh
+        self._wbuf = np.zeros(int(fo[-1]))
+        #: named views of the buffer (constants and work arrays), for inspection
+        self._w = {i: self._wbuf[fo[i]:fo[i + 1]].reshape(shapes[i]) for i in range(_NW)}
+        for i, v in arrays.items():
+            if isinstance(v, np.ndarray):
+                self._w[i][...] = v
+        self._ibuf = np.concatenate([ip, fo, fs.ravel(), np.zeros(nz + mq, dtype=np.int64)])
         self._info = np.zeros(4)
         self._noX = np.zeros((N + 1, nx))
         self._noU = np.zeros((N, nu))
@@ -594,9 +778,7 @@ class FastLtvMpc:
         else:
             X, U = self._noX, self._noU
         out = np.empty(self._out_size)
-        code = _control_step(x, float(warm.s_m), u_prev, X, U, has_plan, self._ip, self._fp, self._mp,
-                             self._bnd, self._Wq, self._R, self._Rc, *self._path, self._C, self._b,
-                             self._ws, self._active, self._isact, out, self._info)
+        code = _control_step(x, float(warm.s_m), u_prev, X, U, has_plan, self._wbuf, self._ibuf, out, self._info)
         info = self._info
         N, nx, nu = self.N, self.nx, self.nu
         if code == 0:
@@ -609,7 +791,7 @@ class FastLtvMpc:
         if code == _BAD_STATE:
             self._check_state(x)  # raises, naming the field
         status = STATUS_WORDS[code]
-        refs = self._ws[1].copy()
+        refs = self._w[_W_XREF].copy()
         u, name, new_warm, X_pred = plan_fallback(self.problem, x, float(info[0]), warm)
         return ControlOutput(u, status, name, time.perf_counter() - t0, float(info[0]), float(info[1]),
                              float(info[2]), X_pred, refs, new_warm)

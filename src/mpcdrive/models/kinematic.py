@@ -60,15 +60,18 @@ def _components(a: np.ndarray):
 
 def slip_terms(delta, lq, ns):
     """(beta, sin beta, cos beta): slip angle beta [rad] at the centre of gravity for steering
-    delta [rad] (eq. 8), with its sine and cosine (shared by the equations below)."""
-    beta = ns.arctan(lq * ns.tan(delta))
-    return beta, ns.sin(beta), ns.cos(beta)
+    delta [rad], |delta| < pi/2 (eq. 8: tan beta = lq tan delta), with its sine and cosine
+    (shared by the equations below; sin and cos from tan beta, no further trigonometry)."""
+    w = lq * ns.tan(delta)
+    r = 1.0 / ns.sqrt(1.0 + w * w)
+    return ns.arctan(w), w * r, r
 
 
 def slip_angle_derivative(delta, lq, ns):
-    """d beta / d delta = lq / (cos^2 delta + lq^2 sin^2 delta) (eq. 11)."""
-    s, c = ns.sin(delta), ns.cos(delta)
-    return lq / (c * c + lq * lq * s * s)
+    """d beta / d delta = lq (1 + tan^2 delta) / (1 + lq^2 tan^2 delta) (eq. 11, divided through
+    by cos^2 delta), |delta| < pi/2."""
+    t = ns.tan(delta)
+    return lq * (1.0 + t * t) / (1.0 + lq * lq * t * t)
 
 
 def kinematic_rhs_at_slip(yaw, v, slip, lr_m, ns):
