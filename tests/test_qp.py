@@ -210,7 +210,11 @@ def solve_cvxpy(pb: MpcProblem, x0, Ad, Bd, c, xref, uref, u_prev, lane_normal=N
             cons += [e_y <= w + eps[k - 1], e_y >= -w - eps[k - 1]]
         cost += pb.lane_slack_weight * cp.sum_squares(eps) + pb.lane_slack_weight_l1 * cp.sum(eps)
     prob = cp.Problem(cp.Minimize(cost), cons)
-    prob.solve(solver=cp.CLARABEL, tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10, max_iter=500)
+    try:
+        prob.solve(solver=cp.CLARABEL, tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10, max_iter=500)
+    except cp.error.SolverError:  # Clarabel can fail on a badly scaled instance: the same problem
+        # through cvxpy's own canonicalization into OSQP, polished, as the reference
+        prob.solve(solver=cp.OSQP, eps_abs=1e-10, eps_rel=1e-10, max_iter=200000, polish=True)
     assert prob.status == cp.OPTIMAL, prob.status
     return X.value, U.value, (None if eps is None else eps.value), prob.value
 

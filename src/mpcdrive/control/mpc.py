@@ -19,7 +19,6 @@ import numpy as np
 from ..models.base import VehicleModel
 from ..models.discretize import Method, discrete_step_and_jacobians, rollout
 from ..ocp.problem import MpcProblem
-from ..ocp.qp import LtvQp
 from ..paths.base import Path
 from ..paths.reference import HorizonMode, horizon_arc_lengths, horizon_states
 from ..solvers.osqp_backend import OsqpBackend, OsqpSettings
@@ -123,6 +122,8 @@ class LtvMpc:
             self.v_ref_mps = float(model.speed(np.zeros(model.nx)))
         if not np.isfinite(self.v_ref_mps):
             raise ValueError(f"reference speed must be finite, got {self.v_ref_mps}")
+        from ..ocp.qp import LtvQp  # scipy.sparse: imported when an OSQP controller is built
+
         self.qp = LtvQp(problem)
         self.backend = OsqpBackend(self.qp, solver_settings)
         N, nx, nu = self.N, self.nx, self.nu

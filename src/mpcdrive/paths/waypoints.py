@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.interpolate import splev, splprep
 
 from .base import Path
 
@@ -35,6 +34,7 @@ class WaypointPath(Path):
             raise ValueError(f"a {'closed' if closed else 'open'} path needs at least {min_pts} distinct points, got {len(pts)}")
         if smoothing < 0 or not np.isfinite(smoothing):
             raise ValueError(f"smoothing must be >= 0, got {smoothing}")
+        from scipy.interpolate import splev, splprep  # here: scipy.interpolate takes ~0.5 s to import
         self.closed = bool(closed)
         self.waypoints = pts
         if closed:
