@@ -333,3 +333,28 @@ def test_a_second_process_loads_the_compiled_step_from_the_cache():
                           env={**__import__("os").environ, "PYTHONPATH": src})
     stats = json.loads(proc.stdout.strip().splitlines()[-1])
     assert stats == {"hits": 1, "misses": 0}, stats
+
+
+def test_stale_cache_files_are_dropped_when_a_dependency_changes(tmp_path):
+    """numba watches only a function's own file; the controller's cache must also follow the
+    files whose code it inlines."""
+    from mpcdrive._jitcache import drop_stale_cache
+
+    dep = tmp_path / "dep.py"
+    dep.write_text("a = 1\n")
+    cache = tmp_path / "cache"
+    cache.mkdir()
+
+    def fake_cache():
+        for name in ("fast._control_step-1.py311.nbi", "fast._control_step-1.py311.1.nbc", "other.f-1.py311.nbi"):
+            (cache / name).write_text("x")
+
+    fake_cache()
+    assert drop_stale_cache(cache, "fast", [dep])  # no fingerprint yet: dropped
+    assert sorted(p.name for p in cache.iterdir()) == ["fast.deps-sha1", "other.f-1.py311.nbi"]
+    fake_cache()
+    assert not drop_stale_cache(cache, "fast", [dep])  # unchanged: kept
+    assert (cache / "fast._control_step-1.py311.nbi").exists()
+    dep.write_text("a = 2\n")
+    assert drop_stale_cache(cache, "fast", [dep])  # changed: dropped
+    assert not (cache / "fast._control_step-1.py311.nbi").exists() and (cache / "other.f-1.py311.nbi").exists()

@@ -641,6 +641,15 @@ def _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out):
         out[a] = min(max(z[a], u_min[a]), u_max[a])
 
 
+# numba caches _control_step keyed to this file only; it inlines code from these
+from .. import _jitcache  # noqa: E402
+from ..models import compiled as _models_compiled, kinematic as _kinematic  # noqa: E402
+from ..paths import compiled as _paths_compiled  # noqa: E402
+from ..solvers import dense_qp as _dense_qp  # noqa: E402
+
+_jitcache.refresh(_control_step, [m.__file__ for m in (_kinematic, _models_compiled, _paths_compiled, _dense_qp)])
+
+
 class FastLtvMpc:
     """Tracking LTV-MPC of ``model`` along ``path``, every step compiled (see the module text).
 

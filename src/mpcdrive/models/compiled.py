@@ -230,3 +230,14 @@ def rollout_into(kind, mp, nx, X, U, n, dt, method, w):
 def model_steady_state(kind, mp, kappa):
     """(steering [rad], slip angle [rad]) on curvature kappa [1/m]."""
     return _ss(kappa, mp[0], mp[1], np)
+
+
+def _refresh_cache():
+    from .. import _jitcache
+    from . import kinematic
+
+    # functions here inline the equations of kinematic.py; numba only watches this file
+    _jitcache.refresh(discrete_step_jacobians, [kinematic.__file__])
+
+
+_refresh_cache()
