@@ -175,6 +175,9 @@ def test_dense_qp_reports_infeasible_and_not_positive_definite():
     c = np.array([1.0, 2.0, -1.0])
     r = solver.solve(H, g, np.vstack([c, -c]), np.array([5.0, -4.0]))  # c'z >= 5 and c'z <= 4
     assert r.status == "infeasible" and not np.isfinite(r.objective)
+    zero = np.zeros((1, 3))
+    assert solver.solve(H, g, zero, np.array([1e-3])).status == "infeasible"  # 0 >= 1e-3
+    assert solver.solve(H, g, zero, np.array([-1.0])).status == "ok"  # 0 >= -1 always holds
     assert solver.solve(np.diag([1.0, 0.0, 1.0]), g).status == "failed"
     assert solver.solve(H, np.array([1.0, np.nan, 0.0])).status == "failed"
     with pytest.raises(ValueError, match="exceeds"):

@@ -123,6 +123,8 @@ def gi_solve(H, g, C, b, m, n, z, lam, active, isact, L, J, R, d, zdir, r, u, s,
         rownorm[i] = math.sqrt(t)
         if not (math.isfinite(t) and math.isfinite(b[i])):
             return QP_FAILED, 0
+        if t == 0.0 and b[i] > tol:  # 0 >= b[i] fails whatever z is
+            return QP_INFEASIBLE, 0
     have_j = False
     q = 0
     it = 0
