@@ -375,8 +375,10 @@ def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, wbuf, ibuf, out, info):
         for a in range(nu):
             uref[k, a] = 0.0
     if ff == 1:
+        steer, slip = 0.0, 0.0
         for k in range(N + 1):
-            steer, slip = model_steady_state(mkind, mp, refs[k, 3])
+            if k == 0 or refs[k, 3] != refs[k - 1, 3]:  # same curvature, same steady state
+                steer, slip = model_steady_state(mkind, mp, refs[k, 3])
             if k < N:
                 uref[k, 0] = steer
             xref[k, 2] -= slip
