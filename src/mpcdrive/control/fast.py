@@ -748,6 +748,18 @@ class FastLtvMpc:
         self._o_U = nu + (N + 1) * nx
         self._o_R = self._o_U + N * nu
         self._out_size = self._o_R + (N + 1) * nx
+        self._warm_up()
+
+    def _warm_up(self) -> None:
+        """One discarded step at the path start, so that loading (or, on a first run, compiling)
+        the machine code happens while building, not in the first control step."""
+        x = np.zeros(self.nx)
+        x[:2] = self.path.position(0.0)
+        x[2] = float(self.path.heading(0.0))
+        if self.nx >= 4:
+            x[3] = self.v_ref_mps
+        _control_step(x, 0.0, np.zeros(self.nu), self._noX, self._noU, False, self._wbuf, self._ibuf,
+                      np.empty(self._out_size), self._info)
 
     # -- warm start ---------------------------------------------------------------------------
     def initial_warm(self, x0) -> WarmStart:
