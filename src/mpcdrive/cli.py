@@ -301,6 +301,8 @@ def bench(
     json_file: Path | None = typer.Option(None, "--json", help="write the results as JSON"),
     steps: int = typer.Option(1000, "--steps", min=20, help="closed-loop steps per problem"),
     baseline_steps: int = typer.Option(200, "--baseline-steps", min=20, help="closed-loop steps for the slow baselines"),
+    report: Path | None = typer.Option(None, "--report", help="also measure per-step time against the horizon "
+                                       "(P1, N = 10..100), cold start and memory; write DIR/bench.md, a figure and JSON"),
 ) -> None:
     """Per-step latency of the PERF.md benchmark problems (median, p99, max; warm-up excluded)."""
     from .bench import PROBLEMS, format_table, run_bench
@@ -310,12 +312,40 @@ def bench(
     unknown = [p for p in names if p not in PROBLEMS]
     if unknown:
         raise BadInput(f"--problem: unknown problem(s) {', '.join(unknown)} (known: {', '.join(PROBLEMS)})")
-    results = run_bench(names, baselines=baselines, steps=steps, baseline_steps=baseline_steps,
-                        log=lambda msg: typer.echo(msg, err=True))
+    if report is not None and report.exists():
+        raise BadInput(f"--report: {report} already exists")
+    log = lambda msg: typer.echo(msg, err=True)  # noqa: E731
+    results = run_bench(names, baselines=baselines, steps=steps, baseline_steps=baseline_steps, log=log)
     typer.echo(format_table(results))
     if json_file is not None:
         write_json(json_file, results)
         typer.echo(f"wrote {json_file}")
+    if report is not None:
+        _bench_report(report, results, log)
+
+
+def _bench_report(out_dir: Path, results: dict, log) -> None:
+    from .bench.extras import cold_start, horizon_sweep, step_allocations
+    from .control.factory import BACKENDS
+    from .io import write_json
+    from .io.atomic import atomic_output_dir
+    from .plots.bench import plot_horizon_scaling
+    from .report.bench import write_bench_report
+
+    sweep = horizon_sweep(log=log)
+    cold, alloc = {}, {}
+    for b in BACKENDS:
+        log(f"cold start and memory: {b}")
+        cold[b] = cold_start(b)
+        alloc[b] = step_allocations(b)
+    note = ("Timings on a shared machine vary from run to run: compare ratios measured in one run, and "
+            "the medians of repeated runs.")
+    with atomic_output_dir(out_dir) as tmp:
+        plot_horizon_scaling(sweep, tmp / "horizon.png")
+        write_json(tmp / "bench.json", {"latency": results, "horizon_sweep_P1": sweep, "cold_start": cold,
+                                        "allocations": alloc})
+        write_bench_report(tmp, results, sweep, cold, alloc, figure="horizon.png", note=note)
+    typer.echo(f"wrote {out_dir / 'bench.md'}")
 
 
 @app.command("compare-models")

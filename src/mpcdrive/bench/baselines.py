@@ -86,7 +86,7 @@ class CasadiIpoptMpc:
         core, pb = self.core, self.core.problem
         self.nx, self.nu, self.N = core.nx, core.nu, core.N
         N, nx, nu, dt = self.N, self.nx, self.nu, pb.dt_s
-        ns = SimpleNamespace(cos=ca.cos, sin=ca.sin, tan=ca.tan, arctan=ca.atan)
+        ns = SimpleNamespace(cos=ca.cos, sin=ca.sin, tan=ca.tan, arctan=ca.atan, sqrt=ca.sqrt)
         xs, us = ca.SX.sym("x", nx), ca.SX.sym("u", nu)
         f = ca.Function("f", [xs, us], [ca.vertcat(*prob.model.f_components([xs[i] for i in range(nx)],
                                                                           [us[i] for i in range(nu)], ns))])

@@ -38,13 +38,13 @@ class BenchProblem:
                       avoidance=self.avoidance, footprint=self.footprint)
 
 
-def p1() -> BenchProblem:
+def p1(N: int = 30) -> BenchProblem:
     """P1: straight line, kinematic bicycle 3 states / 1 input, v = 1 m/s, N = 30, Q = I3, R = 1,
-    |delta| <= 60 deg (the paper's Experiment 2)."""
+    |delta| <= 60 deg (the paper's Experiment 2); ``N`` other than 30 for the horizon sweep."""
     model = KinematicBicycle3(1.0)
     steer = math.radians(60.0)
-    pb = MpcProblem(3, 1, 30, 0.01, Q=np.ones(3), R=1.0, u_min=-steer, u_max=steer)
-    return BenchProblem("P1", "straight line, 3 states / 1 input, N = 30", model,
+    pb = MpcProblem(3, 1, N, 0.01, Q=np.ones(3), R=1.0, u_min=-steer, u_max=steer)
+    return BenchProblem("P1" if N == 30 else f"P1-N{N}", f"straight line, 3 states / 1 input, N = {N}", model,
                         StraightPath([1.0, 0.0], [11.0, 0.0]), pb, MpcConfig(v_ref_mps=1.0),
                         np.array([2.0, -2.0, math.pi / 2]))
 

@@ -7,11 +7,14 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..control.factory import BACKENDS, DEFAULT_BACKEND, make_mpc
 from ..sim.closed_loop import Plant
 from ..scene.geometry import shape_distance
 from .problems import PROBLEMS, BenchProblem
 
 WARMUP_STEPS = 10
+#: the backend whose figures the plain ``mpcdrive`` entry repeats: the compiled fast path
+BENCH_HEADLINE = "fast"
 
 
 def time_closed_loop(controller, prob: BenchProblem, steps: int) -> dict:
@@ -49,15 +52,29 @@ def time_closed_loop(controller, prob: BenchProblem, steps: int) -> dict:
     }
 
 
+def make_controller(prob: BenchProblem, backend: str = DEFAULT_BACKEND):
+    """mpcdrive's controller of a bench problem with ``backend`` (``osqp`` or ``fast``)."""
+    return make_mpc(prob.model, prob.path, prob.problem, prob.config, backend, obstacles=prob.obstacles,
+                    avoidance=prob.avoidance, footprint=prob.footprint)
+
+
 def run_bench(names, baselines: bool = False, steps: int = 1000, baseline_steps: int = 200,
               log: Callable[[str], None] = lambda m: None) -> dict:
-    """``{problem: {implementation: figures}}`` for the named problems (see CONTRACT.md)."""
+    """``{problem: {implementation: figures}}`` for the named problems (see CONTRACT.md).
+
+    Implementations: ``mpcdrive_<backend>`` for each controller backend, ``mpcdrive`` (the
+    figures of the default backend, named in its ``backend`` field) and, with ``baselines``,
+    the installed baselines plus ``mpcdrive_same_steps`` (the default backend over the
+    baselines' step count). Every entry is timed on the same closed loop in this process."""
     out: dict[str, dict] = {}
     for name in names:
         prob = PROBLEMS[name]()
         res: dict[str, dict] = {}
-        log(f"{name}: mpcdrive (LTV-MPC, OSQP), {steps} steps")
-        res["mpcdrive"] = time_closed_loop(prob.controller(), prob, steps)
+        for backend in BACKENDS:
+            log(f"{name}: mpcdrive ({backend} backend), {steps} steps")
+            ctrl = make_controller(prob, backend)
+            res[f"mpcdrive_{backend}"] = {**time_closed_loop(ctrl, prob, steps), "backend": ctrl.backend_name}
+        res = {"mpcdrive": dict(res[f"mpcdrive_{BENCH_HEADLINE}"]), **res}
         if prob.avoidance is not None and prob.avoidance.uses_cost:
             log(f"{name}: mpcdrive, SQP to convergence (<= 20 QPs, 2 ms cap), {steps} steps")
             res["mpcdrive_sqp_converged"] = time_closed_loop(
@@ -69,7 +86,7 @@ def run_bench(names, baselines: bool = False, steps: int = 1000, baseline_steps:
                 log(f"{name}: {bname}, {baseline_steps} steps")
                 res[bname] = time_closed_loop(factory(prob), prob, baseline_steps)
             # our controller over the baselines' step count, for a like-for-like tracking error
-            res["mpcdrive_same_steps"] = time_closed_loop(prob.controller(), prob, baseline_steps)
+            res["mpcdrive_same_steps"] = time_closed_loop(make_controller(prob), prob, baseline_steps)
         out[name] = res
     return out
 

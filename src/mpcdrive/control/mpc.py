@@ -20,7 +20,6 @@ from ..models.base import VehicleModel
 from ..models.discretize import Method, discrete_step_and_jacobians, rollout
 from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory
 from ..ocp.problem import MpcProblem
-from ..ocp.qp import LtvQp
 from ..paths.base import Path
 from ..scene.footprint import Footprint
 from ..scene.obstacles import Obstacle
@@ -148,6 +147,7 @@ class LtvMpc:
     """
 
     name = "ltv-mpc"
+    backend_name = "osqp"
 
     def __init__(
         self,
@@ -176,6 +176,8 @@ class LtvMpc:
             self.v_ref_mps = float(model.speed(np.zeros(model.nx)))
         if not np.isfinite(self.v_ref_mps):
             raise ValueError(f"reference speed must be finite, got {self.v_ref_mps}")
+        from ..ocp.qp import LtvQp  # scipy.sparse: imported when an OSQP controller is built
+
         self.avoidance = None
         if obstacles:
             avoidance = avoidance or AvoidanceConfig()
@@ -388,3 +390,22 @@ class LtvMpc:
             warm=new_warm,
             sqp_iterations=iterations,
         )
+
+
+def plan_fallback(problem: MpcProblem, x, s0: float, warm: WarmStart):
+    """Deliberate fallback when the QP did not solve: the previous plan shifted by one step,
+    or (no plan) the last applied input; either is kept within the input and rate bounds.
+
+    Returns ``(u (nu,), fallback name, WarmStart for the next step, X_pred (N+1, nx))``."""
+    pb = problem
+    rate = pb.du_max_per_s * pb.dt_s
+    if warm.U is not None and warm.X is not None and warm.U.shape[0] > 1:
+        U = np.vstack([warm.U[1:], warm.U[-1:]])
+        X = np.vstack([warm.X[1:], warm.X[-1:]])
+        u_raw, name = U[0], FALLBACK_SHIFTED_PLAN
+    else:
+        U = X = None
+        u_raw, name = warm.u_prev, FALLBACK_HOLD
+    u = np.clip(np.clip(u_raw, warm.u_prev - rate, warm.u_prev + rate), pb.u_min, pb.u_max)
+    X_pred = X if X is not None else np.repeat(np.asarray(x, float)[None, :], pb.N + 1, axis=0)
+    return u, name, WarmStart(s_m=float(s0), u_prev=u, X=X, U=U), X_pred

@@ -35,6 +35,14 @@ class KinematicParams:
         return self.lr_m / (self.lf_m + self.lr_m)
 
 
+def steady_state_equations(kappa, lq, lr_m, ns):
+    """Steady-state (steering [rad], slip angle beta [rad]) on curvature kappa [1/m] with math
+    functions from ``ns`` (numpy, or numba when compiled): the single definition used by
+    :func:`steady_state_for_curvature` and the compiled controller."""
+    beta = ns.arcsin(ns.minimum(ns.maximum(lr_m * kappa, -0.999), 0.999))
+    return ns.arctan(ns.tan(beta) / lq), beta
+
+
 def steady_state_for_curvature(kappa, params: KinematicParams) -> tuple[np.ndarray, np.ndarray]:
     """Steady-state (steering [rad], slip angle beta [rad]) that keeps the centre of gravity of
     the kinematic bicycle on a path of curvature kappa [1/m].
@@ -42,8 +50,7 @@ def steady_state_for_curvature(kappa, params: KinematicParams) -> tuple[np.ndarr
     The centre of gravity moves along ``yaw + beta``; from ``yaw_rate = v/lr sin(beta) = v kappa``:
     ``beta = asin(lr kappa)``, ``delta = atan(tan(beta) / lq)``; |lr kappa| is clipped below 1.
     """
-    beta = np.arcsin(np.clip(params.lr_m * np.asarray(kappa, float), -0.999, 0.999))
-    return np.arctan(np.tan(beta) / params.lq), beta
+    return steady_state_equations(np.asarray(kappa, float), params.lq, params.lr_m, np)
 
 
 def _kinematic_reference(pose, kappa, params: KinematicParams, feedforward: bool, nu: int):
@@ -65,18 +72,50 @@ def _components(a: np.ndarray):
     return a.T if a.ndim <= 2 else np.moveaxis(a, -1, 0)
 
 
-def _kinematic_rhs(yaw, v, delta, params: KinematicParams, ns):
-    """x', y', yaw' of the kinematic bicycle (eqs. 1-4, 8) with math functions from ``ns``."""
-    beta = ns.arctan(params.lq * ns.tan(delta))
-    return v * ns.cos(yaw + beta), v * ns.sin(yaw + beta), v / params.lr_m * ns.sin(beta)
+def slip_terms(delta, lq, ns):
+    """(beta, sin beta, cos beta): slip angle beta [rad] at the centre of gravity for steering
+    delta [rad], |delta| < pi/2 (eq. 8: tan beta = lq tan delta), with its sine and cosine
+    (shared by the equations below; sin and cos from tan beta, no further trigonometry)."""
+    w = lq * ns.tan(delta)
+    r = 1.0 / ns.sqrt(1.0 + w * w)
+    return ns.arctan(w), w * r, r
 
 
-def _beta_and_derivative(delta: np.ndarray, lq: float) -> tuple[np.ndarray, np.ndarray]:
-    """beta(delta) and d beta / d delta = lq / (cos^2 delta + lq^2 sin^2 delta) (eq. 11)."""
-    beta = np.arctan(lq * np.tan(delta))
-    s, c = np.sin(delta), np.cos(delta)
-    dbeta = lq / (c * c + lq * lq * s * s)
-    return beta, dbeta
+def slip_angle_derivative(delta, lq, ns):
+    """d beta / d delta = lq (1 + tan^2 delta) / (1 + lq^2 tan^2 delta) (eq. 11, divided through
+    by cos^2 delta), |delta| < pi/2."""
+    t = ns.tan(delta)
+    return lq * (1.0 + t * t) / (1.0 + lq * lq * t * t)
+
+
+def kinematic_rhs_at_slip(yaw, v, slip, lr_m, ns):
+    """x', y', yaw' (eqs. 1-4) given ``slip = slip_terms(delta, ...)``."""
+    beta, sin_beta, _ = slip
+    return v * ns.cos(yaw + beta), v * ns.sin(yaw + beta), v / lr_m * sin_beta
+
+
+def kinematic_partials_at_slip(yaw, v, slip, dbeta, lr_m, ns):
+    """The non-zero partial derivatives of :func:`kinematic_rhs_at_slip` (eqs. 9-12), chained
+    through beta(delta): ``(dx'/dyaw, dy'/dyaw, dx'/dv, dy'/dv, dyaw'/dv, dx'/ddelta,
+    dy'/ddelta, dyaw'/ddelta)``; dbeta = d beta / d delta."""
+    beta, sin_beta, cos_beta = slip
+    sa, ca = ns.sin(yaw + beta), ns.cos(yaw + beta)
+    return (-v * sa, v * ca, ca, sa, sin_beta / lr_m,
+            -v * sa * dbeta, v * ca * dbeta, v / lr_m * cos_beta * dbeta)
+
+
+def kinematic_rhs(yaw, v, delta, lq, lr_m, ns):
+    """x', y', yaw' of the kinematic bicycle (eqs. 1-4, 8) with math functions from ``ns``
+    (numpy, CasADi, or numba: these functions are also compiled as they stand by the fast path).
+
+    yaw [rad], v [m/s], delta [rad]; lq = lr / (lf + lr); lr_m [m]."""
+    return kinematic_rhs_at_slip(yaw, v, slip_terms(delta, lq, ns), lr_m, ns)
+
+
+def kinematic_jacobian_entries(yaw, v, delta, lq, lr_m, ns):
+    """:func:`kinematic_partials_at_slip` at steering delta [rad]."""
+    return kinematic_partials_at_slip(yaw, v, slip_terms(delta, lq, ns), slip_angle_derivative(delta, lq, ns),
+                                      lr_m, ns)
 
 
 class KinematicBicycle3:
@@ -99,7 +138,7 @@ class KinematicBicycle3:
     def f_components(self, x, u, ns=np):
         """The equations, on sequences of state / input components and the math namespace ``ns``
         (numpy, or a symbolic one such as CasADi's): the single definition behind :meth:`f`."""
-        return _kinematic_rhs(x[2], self.v_mps, u[0], self.params, ns)
+        return kinematic_rhs(x[2], self.v_mps, u[0], self.params.lq, self.params.lr_m, ns)
 
     def f(self, x, u):
         x = np.asarray(x, float)
@@ -109,18 +148,16 @@ class KinematicBicycle3:
     def jacobians(self, x, u):
         x = np.asarray(x, float)
         u = np.asarray(u, float)
-        beta, dbeta = _beta_and_derivative(u[..., 0], self.params.lq)
         v = self.v_mps
-        ang = x[..., 2] + beta
-        sa, ca = np.sin(ang), np.cos(ang)
+        j = kinematic_jacobian_entries(x[..., 2], v, u[..., 0], self.params.lq, self.params.lr_m, np)
         shape = x.shape[:-1]
         A = np.zeros(shape + (3, 3))
-        A[..., 0, 2] = -v * sa
-        A[..., 1, 2] = v * ca
+        A[..., 0, 2] = j[0]
+        A[..., 1, 2] = j[1]
         B = np.zeros(shape + (3, 1))
-        B[..., 0, 0] = -v * sa * dbeta
-        B[..., 1, 0] = v * ca * dbeta
-        B[..., 2, 0] = v / self.params.lr_m * np.cos(beta) * dbeta
+        B[..., 0, 0] = j[5]
+        B[..., 1, 0] = j[6]
+        B[..., 2, 0] = j[7]
         return A, B
 
     def speed(self, x):
@@ -153,7 +190,7 @@ class KinematicBicycle4:
 
     def f_components(self, x, u, ns=np):
         """The equations on state / input components (see KinematicBicycle3.f_components)."""
-        return (*_kinematic_rhs(x[2], x[3], u[0], self.params, ns), u[1])
+        return (*kinematic_rhs(x[2], x[3], u[0], self.params.lq, self.params.lr_m, ns), u[1])
 
     def f(self, x, u):
         x = np.asarray(x, float)
@@ -163,21 +200,18 @@ class KinematicBicycle4:
     def jacobians(self, x, u):
         x = np.asarray(x, float)
         u = np.asarray(u, float)
-        beta, dbeta = _beta_and_derivative(u[..., 0], self.params.lq)
-        v = x[..., 3]
-        ang = x[..., 2] + beta
-        sa, ca = np.sin(ang), np.cos(ang)
+        j = kinematic_jacobian_entries(x[..., 2], x[..., 3], u[..., 0], self.params.lq, self.params.lr_m, np)
         shape = x.shape[:-1]
         A = np.zeros(shape + (4, 4))
-        A[..., 0, 2] = -v * sa
-        A[..., 0, 3] = ca
-        A[..., 1, 2] = v * ca
-        A[..., 1, 3] = sa
-        A[..., 2, 3] = np.sin(beta) / self.params.lr_m
+        A[..., 0, 2] = j[0]
+        A[..., 1, 2] = j[1]
+        A[..., 0, 3] = j[2]
+        A[..., 1, 3] = j[3]
+        A[..., 2, 3] = j[4]
         B = np.zeros(shape + (4, 2))
-        B[..., 0, 0] = -v * sa * dbeta
-        B[..., 1, 0] = v * ca * dbeta
-        B[..., 2, 0] = v / self.params.lr_m * np.cos(beta) * dbeta
+        B[..., 0, 0] = j[5]
+        B[..., 1, 0] = j[6]
+        B[..., 2, 0] = j[7]
         B[..., 3, 1] = 1.0
         return A, B
 

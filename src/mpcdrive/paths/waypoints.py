@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.interpolate import splev, splprep
 
 from .base import Path
 
@@ -37,6 +36,7 @@ class WaypointPath(Path):
             raise ValueError(f"smoothing must be >= 0, got {smoothing}")
         if ds_m is not None and not (np.isfinite(ds_m) and ds_m > 0):
             raise ValueError(f"ds_m must be a positive finite number, got {ds_m}")
+        from scipy.interpolate import splev, splprep  # here: scipy.interpolate takes ~0.5 s to import
         self.closed = bool(closed)
         self.waypoints = pts
         if closed:

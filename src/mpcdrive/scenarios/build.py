@@ -14,6 +14,7 @@ from ..control.delay import DelayCompensator
 from ..control.fallback import FallbackConfig
 from ..control.mpc import LtvMpc, MpcConfig
 from ..models.dynamic import DynamicBicycle, DynamicParams
+from ..control.factory import make_mpc
 from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams
 from ..ocp.problem import MpcProblem
 from ..paths import CirclePath, Path, StraightPath, WaypointPath
@@ -204,8 +205,13 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
     if obstacles:
         config = replace(config, sqp_max_iterations=av.sqp_max_iterations, sqp_tol=av.sqp_tol,
                          sqp_max_time_s=av.sqp_max_time_s)
-    mpc = LtvMpc(model, path, problem, config, settings, obstacles=obstacles, avoidance=avoidance,
-                 footprint=footprint, lane_margin_m=spec.road.margin_m if spec.road is not None else 0.0)
+    lane_margin = spec.road.margin_m if spec.road is not None else 0.0
+    if c.backend == "fast" and c.solver == "osqp":
+        mpc = make_mpc(model, path, problem, config, "fast", settings, obstacles=obstacles, avoidance=avoidance,
+                       footprint=footprint, lane_margin_m=lane_margin)
+    else:
+        mpc = LtvMpc(model, path, problem, config, settings, obstacles=obstacles, avoidance=avoidance,
+                     footprint=footprint, lane_margin_m=lane_margin)
     # the plant: same or another model, parameters scaled, steering through an actuator
     pl = spec.plant
     # the true vehicle: the controller's unless the plant names other parameters (a model error)
@@ -272,7 +278,8 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
         stop_at_path_end=spec.stop_at_path_end,
         lane_half_width_m=half,
         progress=progress,
-        meta={"id": spec.id, "max_steer_rad": float(pb.u_max[0]), "description": spec.description},
+        meta={"id": spec.id, "max_steer_rad": float(pb.u_max[0]), "description": spec.description,
+              "backend": getattr(exp.mpc, "backend_name", "")},
         obstacles=exp.obstacles,
         footprint=exp.footprint,
         laps=spec.laps,

@@ -255,6 +255,9 @@ class SpeedProfileSpec(_Strict):
 class ControllerSpec(_Strict):
     """LTV-MPC settings; weights are diagonals in the model's state / input order.
 
+    ``backend``: ``osqp`` (the sparse QP solved by OSQP, the reference) or ``fast`` (the whole step
+    compiled; falls back to ``osqp`` with a warning for a problem it does not cover).
+
     ``speed_profile`` replaces the constant reference speed; ``solver``: ``osqp`` or the paper's
     ``projected_gradient`` (input bounds only; ``pg_*`` settings); ``delay_compensation``: predict the
     state over the plant's steering dead time before solving (needs ``plant.steering_actuator``)."""
@@ -296,6 +299,7 @@ class ControllerSpec(_Strict):
     def _ladder(cls, v):
         check_ladder(v)
         return v
+    backend: Literal["osqp", "fast"] = "osqp"
 
     @field_validator("max_steer_deg")
     @classmethod

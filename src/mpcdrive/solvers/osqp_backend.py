@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import osqp
 
-from ..ocp.qp import LtvQp
 from ..types import (
     STATUS_FAILED,
     STATUS_INACCURATE,
@@ -17,6 +16,9 @@ from ..types import (
     STATUS_OK,
     SolveResult,
 )
+
+if TYPE_CHECKING:
+    from ..ocp.qp import LtvQp
 
 _STATUS_WORDS = {
     "solved": STATUS_OK,
@@ -76,6 +78,8 @@ class OsqpBackend:
     def __init__(self, qp: LtvQp, settings: OsqpSettings = OsqpSettings()):
         self.qp = qp
         self.settings = settings
+        import osqp  # here, not at module import: start-up time of processes that never use OSQP
+
         self._solver = osqp.OSQP()
         d = qp.data()
         self._solver.setup(d.P, d.q, d.A, d.l, d.u, **settings.as_kwargs())

@@ -1,0 +1,51 @@
+"""Keep numba's on-disk cache honest about dependencies.
+
+numba invalidates a cached function when *its own* source file changes, not when a function it
+calls or inlines (in another file) changes. The compiled controller inlines the model equations,
+the path geometry and the QP solver from other modules, so after an edit of one of those a stale
+cache would silently keep the old machine code. :func:`drop_stale_cache` fingerprints the
+dependency sources and deletes the module's cache files when the fingerprint changed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Iterable
+from pathlib import Path
+
+
+def drop_stale_cache(cache_dir: str | Path, stem: str, dependencies: Iterable[str | Path]) -> bool:
+    """Delete ``cache_dir/<stem>.*.nbi|nbc`` unless the SHA-1 of the ``dependencies``' contents
+    matches the one recorded at the last call; record it. Returns True when files were dropped
+    (or no fingerprint was recorded yet). Never raises for an unwritable cache directory."""
+    h = hashlib.sha1()
+    for p in sorted(str(d) for d in dependencies):
+        h.update(p.encode())
+        h.update(Path(p).read_bytes())
+    digest = h.hexdigest()
+    cache_dir = Path(cache_dir)
+    stamp = cache_dir / f"{stem}.deps-sha1"
+    try:
+        if stamp.read_text() == digest:
+            return False
+    except OSError:
+        pass
+    try:
+        for f in list(cache_dir.glob(f"{stem}.*.nbi")) + list(cache_dir.glob(f"{stem}.*.nbc")):
+            f.unlink(missing_ok=True)
+        cache_dir.mkdir(parents=True, exist_ok=True)
+        stamp.write_text(digest)
+    except OSError:
+        pass
+    return True
+
+
+def refresh(dispatcher, dependencies: Iterable[str | Path]) -> None:
+    """:func:`drop_stale_cache` for the module of a numba ``dispatcher`` (cache=True), located
+    through numba's cache object; does nothing if this numba keeps it elsewhere."""
+    try:
+        cache_dir = dispatcher._cache._cache_path
+        stem = Path(dispatcher.py_func.__code__.co_filename).stem
+    except AttributeError:
+        return
+    drop_stale_cache(cache_dir, stem, [*dependencies, dispatcher.py_func.__code__.co_filename])

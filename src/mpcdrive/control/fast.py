@@ -1,0 +1,820 @@
+"""The compiled LTV-MPC step: the whole of :class:`~mpcdrive.control.mpc.LtvMpc`'s step behind
+one Python call.
+
+:class:`FastLtvMpc` solves the same problem as ``LtvMpc`` (same projection, horizon
+references with curvature feedforward and slip-corrected yaw, linearization along the shifted
+previous plan or the paper's frozen point, Euler / RK4 Jacobians, cost, input / rate / state
+bounds, soft lane bound with slack, fallbacks) but runs every step in one numba-compiled
+function that works in buffers allocated at construction. The QP is condensed onto the inputs
+(and lane slacks): the states are eliminated with the linearized dynamics, the Hessian is built
+by a backward recursion ``P_k = W_k + A_k' P_{k+1} A_k`` (O(N^2) blocks), and the dense QP is
+solved by the dual active-set method of :mod:`mpcdrive.solvers.dense_qp`, which is exact (no
+tolerance on optimality; feasibility to 1e-9) and costs a single Cholesky factorization when no
+constraint is active.
+
+Compiled functions use numba's on-disk cache, so only the first process on a machine compiles
+(tens of seconds); later processes load the machine code.
+
+Problems the compiled step does not cover (see :func:`fast_unsupported_reason`) are refused
+here with a ValueError naming the reason; :func:`mpcdrive.control.factory.make_mpc` then uses
+the OSQP controller and says so.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ..models.compiled import (
+    METHOD_EULER,
+    METHOD_RK4,
+    discrete_step_jacobians,
+    model_code,
+    model_steady_state,
+    rollout_into,
+)
+from ..ocp.problem import MpcProblem
+from ..paths.base import Path
+from ..paths.compiled import path_arrays, path_eval, path_project, wrap_angle
+from ..solvers.dense_qp import STATUS_WORDS, gi_solve
+from ..types import ControlOutput, WarmStart
+from .mpc import MpcConfig, plan_fallback
+
+_TWO_PI = 2.0 * math.pi
+
+#: status code of a non-finite measured state (raised as ValueError by :meth:`FastLtvMpc.step`)
+_BAD_STATE = 4
+
+# integer parameters (ip)
+_I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH, _I_LIN, _I_METHOD, _I_HORIZON, _I_FF, _I_LANE, \
+    _I_MCONST, _I_RATE0, _I_MAXITER, _I_GAMMA, _I_NZ, _I_RICCATI, _I_MQ = range(17)
+_NIP = 17
+# the float arrays of a controller, all views of one buffer (one argument to the compiled step:
+# passing arrays one by one costs about 0.1 us each in the call)
+(_W_FP, _W_MP, _W_BND, _W_GEO, _W_WQ, _W_RM, _W_RC, _W_TABS, _W_TABXY, _W_TABH, _W_TABK, _W_C, _W_B,
+ _W_REFS, _W_XREF, _W_UREF, _W_XBAR, _W_UBAR, _W_F, _W_A, _W_BD, _W_CD, _W_LANEN, _W_LANEB, _W_XF, _W_P,
+ _W_LAM, _W_VB, _W_S, _W_T2, _W_GAM, _W_H, _W_G, _W_Z, _W_L, _W_J, _W_RQ, _W_D, _W_ZDIR, _W_R, _W_UQ,
+ _W_SQ, _W_ROWN, _W_LAMQ, _W_DW, _W_KG, _W_KF, _W_PA, _W_MG, _W_GG, _W_QV) = range(51)
+_NW = 51
+# float parameters (fp)
+_F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_LANEW, _F_SLACK2, _F_SLACK1, _F_TOL = range(8)
+# info outputs
+_O_S, _O_EY, _O_EPSI, _O_ITER = range(4)
+
+
+@dataclass(frozen=True)
+class FastSettings:
+    """Settings of the compiled QP solve.
+
+    max_iter : cap on active-set changes per step (status ``max_iter`` beyond it);
+    feasibility_tol : accepted violation of a constraint row, scaled by the row's norm;
+    max_variables : the largest condensed QP (N * nu + lane slacks) the fast path accepts.
+    """
+
+    max_iter: int = 500
+    feasibility_tol: float = 1e-9
+    max_variables: int = 400
+
+    def __post_init__(self):
+        if self.max_iter < 1:
+            raise ValueError(f"max_iter must be >= 1, got {self.max_iter}")
+        if not (self.feasibility_tol > 0 and math.isfinite(self.feasibility_tol)):
+            raise ValueError(f"feasibility_tol must be positive, got {self.feasibility_tol}")
+        if self.max_variables < 1:
+            raise ValueError(f"max_variables must be >= 1, got {self.max_variables}")
+
+
+def fast_unsupported_reason(model, path: Path, problem: MpcProblem, config: MpcConfig = MpcConfig(),
+                            settings: FastSettings = FastSettings()) -> str | None:
+    """Why the compiled step cannot solve this problem exactly as ``LtvMpc`` would, or None."""
+    if model_code(model) is None:
+        return f"model {type(model).__name__} has no compiled form"
+    if path_arrays(path) is None:
+        return f"path {type(path).__name__} has no compiled form"
+    if (problem.nx, problem.nu) != (model.nx, model.nu):
+        return f"problem is sized nx={problem.nx}, nu={problem.nu} but the model has nx={model.nx}, nu={model.nu}"
+    if np.linalg.eigvalsh(problem.R + problem.Rc).min() <= 1e-12 * max(1.0, float(np.abs(problem.R).max())):
+        return "R + Rc is not positive definite (the condensed QP needs a strictly convex cost in the inputs)"
+    lane = problem.lane_half_width_m is not None
+    if lane and problem.lane_slack_weight <= 0:
+        return "lane_slack_weight is 0 (the slack needs a quadratic weight)"
+    nz = problem.N * problem.nu + (problem.N if lane else 0)
+    if nz > settings.max_variables:
+        return f"the condensed QP has {nz} variables, more than max_variables={settings.max_variables}"
+    return None
+
+
+def _constant_rows(problem: MpcProblem, nz: int):
+    """Rows of ``C z >= b`` that do not change between steps (input bounds, input rates, slack
+    signs), the row of the first u_0 rate row (its b follows u_prev), and how many rows the
+    step adds (state bounds, lane)."""
+    N, nu = problem.N, problem.nu
+    rows, rhs = [], []
+
+    def unit(j, sign=1.0):
+        r = np.zeros(nz)
+        r[j] = sign
+        return r
+
+    for k in range(N):
+        for i in range(nu):
+            if np.isfinite(problem.u_min[i]):
+                rows.append(unit(k * nu + i))
+                rhs.append(problem.u_min[i])
+            if np.isfinite(problem.u_max[i]):
+                rows.append(unit(k * nu + i, -1.0))
+                rhs.append(-problem.u_max[i])
+    r_rate0 = len(rows)
+    dmax = problem.du_max_per_s * problem.dt_s
+    for i in range(nu):  # |u_0 - u_prev| <= d: b written each step
+        if np.isfinite(dmax[i]):
+            rows += [unit(i), unit(i, -1.0)]
+            rhs += [0.0, 0.0]
+    for k in range(1, N):
+        for i in range(nu):
+            if np.isfinite(dmax[i]):
+                r = np.zeros(nz)
+                r[k * nu + i], r[(k - 1) * nu + i] = 1.0, -1.0
+                rows += [r, -r]
+                rhs += [-dmax[i], -dmax[i]]
+    lane = problem.lane_half_width_m is not None
+    if lane:
+        for k in range(N):
+            rows.append(unit(N * nu + k))
+            rhs.append(0.0)
+    n_state = N * int(np.isfinite(problem.x_min).sum() + np.isfinite(problem.x_max).sum())
+    n_var = n_state + (2 * N if lane else 0)
+    return rows, rhs, r_rate0, n_var
+
+
+@njit(cache=True)
+def _riccati(N, nx, nu, A, B, c, xref, uref, Wq, Rm, x, P, p, K, kf, PA, M, G, q, z):
+    """Unconstrained minimizer of the tracking cost (no Rc, no slack) by the backward Riccati
+    recursion ``V_k(x) = x'P_k x + 2 p_k'x + const``, ``u_k = K_k x_k + kf_k``: O(N) work.
+
+    Scratch: PA (nx, nx), M (nu, nx), G (nu, nu), q (nx,). Writes z[:N nu] = U of the minimizer
+    (rolled out from x) and uses p[1:] for the rolled-out states. Returns False if some
+    ``R + B'PB`` is not numerically positive definite."""
+    for i in range(nx):
+        t = 0.0
+        for j in range(nx):
+            P[N, i, j] = Wq[N - 1, i, j]
+            t -= Wq[N - 1, i, j] * xref[N, j]
+        p[N, i] = t
+    for k in range(N - 1, -1, -1):
+        # q = P c + p ; PA = P A ; M = B'PA ; G = R + B'PB ; h = B'q - R ur (in kf[k])
+        for i in range(nx):
+            t = p[k + 1, i]
+            for j in range(nx):
+                t += P[k + 1, i, j] * c[k, j]
+            q[i] = t
+        for i in range(nx):
+            for j in range(nx):
+                t = 0.0
+                for l in range(nx):
+                    t += P[k + 1, i, l] * A[k, l, j]
+                PA[i, j] = t
+        for a in range(nu):
+            for j in range(nx):
+                t = 0.0
+                for l in range(nx):
+                    t += B[k, l, a] * PA[l, j]
+                M[a, j] = t
+            for e in range(nu):
+                t = Rm[a, e]
+                for l in range(nx):
+                    pb = 0.0
+                    for m_ in range(nx):
+                        pb += P[k + 1, l, m_] * B[k, m_, e]
+                    t += B[k, l, a] * pb
+                G[a, e] = t
+            t = 0.0
+            for l in range(nx):
+                t += B[k, l, a] * q[l]
+            for e in range(nu):
+                t -= Rm[a, e] * uref[k, e]
+            kf[k, a] = t
+        # G = L L' (in place, lower); K = -G^{-1} M ; kf = -G^{-1} h
+        for j in range(nu):
+            t = G[j, j]
+            for l in range(j):
+                t -= G[j, l] * G[j, l]
+            if not (t > 1e-14 * max(1.0, abs(G[j, j]))):
+                return False
+            G[j, j] = math.sqrt(t)
+            for i in range(j + 1, nu):
+                t = G[i, j]
+                for l in range(j):
+                    t -= G[i, l] * G[j, l]
+                G[i, j] = t / G[j, j]
+        for col in range(nx + 1):
+            for a in range(nu):
+                q_a = M[a, col] if col < nx else kf[k, a]
+                for l in range(a):
+                    q_a -= G[a, l] * (K[k, l, col] if col < nx else kf[k, l])
+                if col < nx:
+                    K[k, a, col] = q_a / G[a, a]
+                else:
+                    kf[k, a] = q_a / G[a, a]
+            for a in range(nu - 1, -1, -1):
+                t = K[k, a, col] if col < nx else kf[k, a]
+                for l in range(a + 1, nu):
+                    t -= G[l, a] * (K[k, l, col] if col < nx else kf[k, l])
+                if col < nx:
+                    K[k, a, col] = t / G[a, a]
+                else:
+                    kf[k, a] = t / G[a, a]
+        for a in range(nu):
+            for col in range(nx):
+                K[k, a, col] = -K[k, a, col]
+            kf[k, a] = -kf[k, a]
+        if k >= 1:
+            # P_k = W_k + A'PA + M'K ; p_k = -W_k r_k + A'q + M'kf
+            for i in range(nx):
+                t = 0.0
+                for j in range(nx):
+                    t -= Wq[k - 1, i, j] * xref[k, j]
+                for l in range(nx):
+                    t += A[k, l, i] * q[l]
+                for a in range(nu):
+                    t += M[a, i] * kf[k, a]
+                p[k, i] = t
+                for j in range(nx):
+                    t = Wq[k - 1, i, j]
+                    for l in range(nx):
+                        t += A[k, l, i] * PA[l, j]
+                    for a in range(nu):
+                        t += M[a, i] * K[k, a, j]
+                    P[k, i, j] = t
+    # roll out u_k = K_k x_k + kf_k from x (states staged in p[k + 1])
+    for k in range(N):
+        for a in range(nu):
+            t = kf[k, a]
+            for j in range(nx):
+                t += K[k, a, j] * (x[j] if k == 0 else p[k, j])
+            z[k * nu + a] = t
+        for i in range(nx):
+            t = c[k, i]
+            for j in range(nx):
+                t += A[k, i, j] * (x[j] if k == 0 else p[k, j])
+            for a in range(nu):
+                t += B[k, i, a] * z[k * nu + a]
+            q[i] = t
+        for i in range(nx):
+            p[k + 1, i] = q[i]
+    return True
+
+
+@njit(cache=True)
+def _plan_feasible(N, nx, nu, z, Xr, u_prev, u_min, u_max, dmax, x_min, x_max, tol):
+    """Whether inputs z (N nu) and states Xr[1..N] satisfy the input, rate and state bounds
+    within tol (NaN never does)."""
+    for k in range(N):
+        for a in range(nu):
+            u = z[k * nu + a]
+            if not (u >= u_min[a] - tol and u <= u_max[a] + tol):
+                return False
+            prev = u_prev[a] if k == 0 else z[(k - 1) * nu + a]
+            if not (abs(u - prev) <= dmax[a] + tol):
+                return False
+        for i in range(nx):
+            v = Xr[k + 1, i]
+            if not (v >= x_min[i] - tol and v <= x_max[i] + tol):
+                return False
+    return True
+
+
+@njit(cache=True, inline="always")
+def _v1(w, fo, i):
+    return w[fo[i]:fo[i + 1]]
+
+
+@njit(cache=True, inline="always")
+def _v2(w, fo, fs, i):
+    return w[fo[i]:fo[i + 1]].reshape((fs[3 * i], fs[3 * i + 1]))
+
+
+@njit(cache=True, inline="always")
+def _v3(w, fo, fs, i):
+    return w[fo[i]:fo[i + 1]].reshape((fs[3 * i], fs[3 * i + 1], fs[3 * i + 2]))
+
+
+@njit(cache=True)
+def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, wbuf, ibuf, out, info):
+    """One control step; returns a status code (0 ok, 1 infeasible, 2 max_iter, 3 failed,
+    4 non-finite state). Writes ``out = [u (nu), X ((N+1) nx), U (N nu), xref ((N+1) nx)]`` and
+    ``info = [s, e_y, e_psi, iterations]``. ``wbuf`` holds every float array (constants and
+    work), ``ibuf`` the integer parameters, the layout of ``wbuf`` and the active-set work."""
+    ip = ibuf[:_NIP]
+    fo = ibuf[_NIP:_NIP + _NW + 1]
+    fs = ibuf[_NIP + _NW + 1:_NIP + 4 * _NW + 1]
+    a0 = _NIP + 4 * _NW + 1
+    active = ibuf[a0:a0 + ip[_I_NZ]]
+    isact = ibuf[a0 + ip[_I_NZ]:a0 + ip[_I_NZ] + ip[_I_MQ]]
+    fp, mp, bnd, geo = _v1(wbuf, fo, _W_FP), _v1(wbuf, fo, _W_MP), _v1(wbuf, fo, _W_BND), _v1(wbuf, fo, _W_GEO)
+    Wq, Rm, Rc = _v3(wbuf, fo, fs, _W_WQ), _v2(wbuf, fo, fs, _W_RM), _v2(wbuf, fo, fs, _W_RC)
+    tab_s, tab_xy = _v1(wbuf, fo, _W_TABS), _v2(wbuf, fo, fs, _W_TABXY)
+    tab_h, tab_k = _v1(wbuf, fo, _W_TABH), _v1(wbuf, fo, _W_TABK)
+    C, b = _v2(wbuf, fo, fs, _W_C), _v1(wbuf, fo, _W_B)
+    refs, xref, uref = _v2(wbuf, fo, fs, _W_REFS), _v2(wbuf, fo, fs, _W_XREF), _v2(wbuf, fo, fs, _W_UREF)
+    Xbar, Ubar, F = _v2(wbuf, fo, fs, _W_XBAR), _v2(wbuf, fo, fs, _W_UBAR), _v2(wbuf, fo, fs, _W_F)
+    A, B, c = _v3(wbuf, fo, fs, _W_A), _v3(wbuf, fo, fs, _W_BD), _v2(wbuf, fo, fs, _W_CD)
+    lane_n, lane_b = _v2(wbuf, fo, fs, _W_LANEN), _v1(wbuf, fo, _W_LANEB)
+    xf, P, lam = _v2(wbuf, fo, fs, _W_XF), _v3(wbuf, fo, fs, _W_P), _v2(wbuf, fo, fs, _W_LAM)
+    Vb, S, T2, Gam = _v3(wbuf, fo, fs, _W_VB), _v3(wbuf, fo, fs, _W_S), _v2(wbuf, fo, fs, _W_T2), _v3(wbuf, fo, fs, _W_GAM)
+    H, g, z = _v2(wbuf, fo, fs, _W_H), _v1(wbuf, fo, _W_G), _v1(wbuf, fo, _W_Z)
+    L, J, Rq = _v2(wbuf, fo, fs, _W_L), _v2(wbuf, fo, fs, _W_J), _v2(wbuf, fo, fs, _W_RQ)
+    d, zdir, r, uq = _v1(wbuf, fo, _W_D), _v1(wbuf, fo, _W_ZDIR), _v1(wbuf, fo, _W_R), _v1(wbuf, fo, _W_UQ)
+    sq, rown, lamq = _v1(wbuf, fo, _W_SQ), _v1(wbuf, fo, _W_ROWN), _v1(wbuf, fo, _W_LAMQ)
+    dw, Kg, kf = _v3(wbuf, fo, fs, _W_DW), _v3(wbuf, fo, fs, _W_KG), _v2(wbuf, fo, fs, _W_KF)
+    PA, Mg, Gg, qv = _v2(wbuf, fo, fs, _W_PA), _v2(wbuf, fo, fs, _W_MG), _v2(wbuf, fo, fs, _W_GG), _v1(wbuf, fo, _W_QV)
+    mkind, nx, nu, N = ip[_I_MODEL], ip[_I_NX], ip[_I_NU], ip[_I_N]
+    pkind, lin, meth, hmode, ff, lane = ip[_I_PATH], ip[_I_LIN], ip[_I_METHOD], ip[_I_HORIZON], ip[_I_FF], ip[_I_LANE]
+    nz = ip[_I_NZ]
+    nzu = N * nu
+    dt, v_ref = fp[_F_DT], fp[_F_VREF]
+    u_min = bnd[0:nu]
+    u_max = bnd[nu:2 * nu]
+    dmax = bnd[2 * nu:3 * nu]
+    x_min = bnd[3 * nu:3 * nu + nx]
+    x_max = bnd[3 * nu + nx:3 * nu + 2 * nx]
+    for i in range(nx):
+        if not math.isfinite(x[i]):
+            return _BAD_STATE
+
+    # -- projection and horizon references -------------------------------------------------
+    s0, e_y = path_project(pkind, geo, tab_s, tab_xy, s_guess, fp[_F_WINDOW], x[0], x[1])
+    h0 = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s0)[2]
+    info[_O_S] = s0
+    info[_O_EY] = e_y
+    info[_O_EPSI] = wrap_angle(x[2] - h0)
+    info[_O_ITER] = 0.0
+    acc = 0.0
+    vdt = abs(v_ref) * dt
+    for k in range(N + 1):
+        sk = s0 + fp[_F_HSTEP] * k if hmode == 1 else s0 + acc
+        acc += vdt
+        px, py, hk, kap = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, sk)
+        refs[k, 0] = px
+        refs[k, 1] = py
+        refs[k, 2] = hk
+        refs[k, 3] = kap
+    shift = _TWO_PI * np.rint((x[2] - refs[0, 2]) / _TWO_PI)
+    for k in range(N + 1):
+        refs[k, 2] += shift
+        xref[k, 0] = refs[k, 0]
+        xref[k, 1] = refs[k, 1]
+        xref[k, 2] = refs[k, 2]
+        if nx >= 4:
+            xref[k, 3] = v_ref
+    for k in range(N):
+        for a in range(nu):
+            uref[k, a] = 0.0
+    if ff == 1:
+        steer, slip = 0.0, 0.0
+        for k in range(N + 1):
+            if k == 0 or refs[k, 3] != refs[k - 1, 3]:  # same curvature, same steady state
+                steer, slip = model_steady_state(mkind, mp, refs[k, 3])
+            if k < N:
+                uref[k, 0] = steer
+            xref[k, 2] -= slip
+
+    # -- linearization points and discrete model ---------------------------------------------
+    if lin == 1:
+        for k in range(N):
+            for i in range(nx):
+                Xbar[k, i] = x[i]
+            for a in range(nu):
+                Ubar[k, a] = u_prev[a]
+    elif has_plan:
+        sh = _TWO_PI * np.rint((x[2] - Xw[1, 2]) / _TWO_PI)
+        for i in range(nx):
+            Xbar[0, i] = x[i]
+        for k in range(1, N):
+            for i in range(nx):
+                Xbar[k, i] = Xw[k + 1, i]
+            Xbar[k, 2] += sh
+        for k in range(N):
+            for a in range(nu):
+                Ubar[k, a] = Uw[min(k + 1, N - 1), a]
+    else:
+        for k in range(N):
+            for a in range(nu):
+                Ubar[k, a] = uref[k, a]
+        for i in range(nx):
+            Xbar[0, i] = x[i]
+        rollout_into(mkind, mp, nx, Xbar, Ubar, N - 1, dt, meth, dw[0])
+    kmax = 1 if lin == 1 else N
+    for k in range(kmax):
+        discrete_step_jacobians(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
+    for k in range(kmax, N):
+        for i in range(nx):
+            F[k, i] = F[0, i]
+            for j in range(nx):
+                A[k, i, j] = A[0, i, j]
+            for a in range(nu):
+                B[k, i, a] = B[0, i, a]
+    finite = True
+    for k in range(N):
+        for i in range(nx):
+            t = F[k, i]
+            for j in range(nx):
+                t -= A[k, i, j] * Xbar[k, j]
+            for j in range(nu):
+                t -= B[k, i, j] * Ubar[k, j]
+            c[k, i] = t
+            finite = finite and math.isfinite(t) and math.isfinite(xref[k + 1, i])
+        for j in range(nu):
+            finite = finite and math.isfinite(uref[k, j])
+    if not finite:
+        return 3
+    if lane == 1:
+        for k in range(N):
+            yaw = refs[k + 1, 2]
+            lane_n[k, 0] = -math.sin(yaw)
+            lane_n[k, 1] = math.cos(yaw)
+            lane_b[k] = lane_n[k, 0] * refs[k + 1, 0] + lane_n[k, 1] * refs[k + 1, 1]
+
+    # -- no Rc, no lane: try the unconstrained minimizer (Riccati, O(N)); if it satisfies every
+    # bound it is the QP's solution ---------------------------------------------------------------
+    if ip[_I_RICCATI] == 1:
+        if _riccati(N, nx, nu, A, B, c, xref, uref, Wq, Rm, x, P, lam, Kg, kf, PA, Mg, Gg, qv, z):
+            if _plan_feasible(N, nx, nu, z, lam, u_prev, u_min, u_max, dmax, x_min, x_max, fp[_F_TOL]):
+                _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out)
+                return 0
+
+    # -- condensing: x_k = xf_k + sum_j G_kj u_j ----------------------------------------------
+    for i in range(nx):
+        xf[0, i] = x[i]
+    for k in range(N):
+        for i in range(nx):
+            t = c[k, i]
+            for j in range(nx):
+                t += A[k, i, j] * xf[k, j]
+            xf[k + 1, i] = t
+    # P_N = W_N ; P_k = W_k + A_k' P_{k+1} A_k ; lam_k = W_k e_k + A_k' lam_{k+1}
+    for i in range(nx):
+        for j in range(nx):
+            P[N, i, j] = Wq[N - 1, i, j]
+    for i in range(nx):
+        t = 0.0
+        for j in range(nx):
+            t += Wq[N - 1, i, j] * (xf[N, j] - xref[N, j])
+        lam[N, i] = t
+    for k in range(N - 1, 0, -1):
+        for i in range(nx):
+            for j in range(nx):
+                t = 0.0
+                for l in range(nx):
+                    t += P[k + 1, i, l] * A[k, l, j]
+                T2[i, j] = t  # P_{k+1} A_k (T2 is nx x max(nx, nu))
+        for i in range(nx):
+            for j in range(nx):
+                t = Wq[k - 1, i, j]
+                for l in range(nx):
+                    t += A[k, l, i] * T2[l, j]
+                P[k, i, j] = t
+        for i in range(nx):
+            t = 0.0
+            for j in range(nx):
+                t += Wq[k - 1, i, j] * (xf[k, j] - xref[k, j]) + A[k, j, i] * lam[k + 1, j]
+            lam[k, i] = t
+    # gradient
+    for k in range(N):
+        for a in range(nu):
+            t = 0.0
+            for i in range(nx):
+                t += B[k, i, a] * lam[k + 1, i]
+            for e in range(nu):
+                t -= Rm[a, e] * uref[k, e]
+            g[k * nu + a] = 2.0 * t
+    for a in range(nu):
+        t = 0.0
+        for e in range(nu):
+            t += Rc[a, e] * u_prev[e]
+        g[a] -= 2.0 * t
+    # Hessian blocks: H_jj = 2 (B_j' V_j + R + Rc terms) with V_j = P_{j+1} B_j, and for i < j
+    # H_ij = 2 B_i' T_ij, T_ij = A_{i+1}' T_{i+1,j}, T_{j-1,j} = A_j' V_j: all T_i. side by side
+    # in S (nx, N nu) so the products run along long rows
+    for j in range(N):
+        for i in range(nx):
+            for a in range(nu):
+                t = 0.0
+                for l in range(nx):
+                    t += P[j + 1, i, l] * B[j, l, a]
+                Vb[j, i, a] = t
+        rcw = 2.0 if j < N - 1 else 1.0
+        for a in range(nu):
+            for e in range(nu):
+                t = 0.0
+                for l in range(nx):
+                    t += B[j, l, a] * Vb[j, l, e]
+                H[j * nu + a, j * nu + e] = 2.0 * (t + Rm[a, e] + rcw * Rc[a, e])
+    cur = 0
+    for i in range(N - 2, -1, -1):
+        c0 = (i + 1) * nu
+        nxt = 1 - cur
+        for l in range(nx):
+            for a in range(nu):
+                S[cur, l, c0 + a] = Vb[i + 1, l, a]
+        for l in range(nx):
+            for cc in range(c0, nzu):
+                S[nxt, l, cc] = 0.0
+            for m_ in range(nx):
+                am = A[i + 1, m_, l]
+                if am != 0.0:
+                    for cc in range(c0, nzu):
+                        S[nxt, l, cc] += am * S[cur, m_, cc]
+        for a in range(nu):
+            row = i * nu + a
+            for cc in range(c0, nzu):
+                H[row, cc] = 0.0
+            for e in range(nu):
+                H[row, c0 + e] = -2.0 * Rc[a, e]
+            for l in range(nx):
+                bl = 2.0 * B[i, l, a]
+                if bl != 0.0:
+                    for cc in range(c0, nzu):
+                        H[row, cc] += bl * S[nxt, l, cc]
+            for cc in range(c0, nzu):
+                H[cc, row] = H[row, cc]
+        cur = nxt
+    if lane == 1:
+        for k in range(N):
+            for jj in range(nz):
+                H[nzu + k, jj] = 0.0
+                H[jj, nzu + k] = 0.0
+            H[nzu + k, nzu + k] = 2.0 * fp[_F_SLACK2]
+            g[nzu + k] = fp[_F_SLACK1]
+
+    # -- constraint rows that change each step -------------------------------------------------
+    r0 = ip[_I_RATE0]
+    for a in range(nu):
+        if math.isfinite(dmax[a]):
+            b[r0] = u_prev[a] - dmax[a]
+            b[r0 + 1] = -u_prev[a] - dmax[a]
+            r0 += 2
+    m = ip[_I_MCONST]
+    if ip[_I_GAMMA] == 1:
+        # Gam[k] = d x_{k+1} / d z: Gam[k] = A_k Gam[k-1] in the first k blocks, B_k in block k,
+        # zero after it (never written)
+        for k in range(N):
+            for i in range(nx):
+                for cc in range(k * nu):
+                    Gam[k, i, cc] = 0.0
+                for l in range(nx):
+                    al = A[k, i, l]
+                    if al != 0.0:
+                        for cc in range(k * nu):
+                            Gam[k, i, cc] += al * Gam[k - 1, l, cc]
+                for a in range(nu):
+                    Gam[k, i, k * nu + a] = B[k, i, a]
+        for k in range(1, N + 1):
+            for i in range(nx):
+                if math.isfinite(x_min[i]):
+                    for jj in range(nzu):
+                        C[m, jj] = Gam[k - 1, i, jj]
+                    for jj in range(nzu, nz):
+                        C[m, jj] = 0.0
+                    b[m] = x_min[i] - xf[k, i]
+                    m += 1
+                if math.isfinite(x_max[i]):
+                    for jj in range(nzu):
+                        C[m, jj] = -Gam[k - 1, i, jj]
+                    for jj in range(nzu, nz):
+                        C[m, jj] = 0.0
+                    b[m] = xf[k, i] - x_max[i]
+                    m += 1
+        if lane == 1:
+            w = fp[_F_LANEW]
+            for k in range(1, N + 1):
+                n0, n1 = lane_n[k - 1, 0], lane_n[k - 1, 1]
+                nxf = n0 * xf[k, 0] + n1 * xf[k, 1]
+                for jj in range(nzu):
+                    gp = n0 * Gam[k - 1, 0, jj] + n1 * Gam[k - 1, 1, jj]
+                    C[m, jj] = -gp
+                    C[m + 1, jj] = gp
+                for jj in range(nzu, nz):
+                    C[m, jj] = 0.0
+                    C[m + 1, jj] = 0.0
+                C[m, nzu + k - 1] = 1.0
+                C[m + 1, nzu + k - 1] = 1.0
+                b[m] = nxf - lane_b[k - 1] - w
+                b[m + 1] = lane_b[k - 1] - w - nxf
+                m += 2
+
+    # -- solve, then the plan and the command --------------------------------------------------
+    code, iters = gi_solve(H, g, C, b, m, nz, z, lamq, active, isact, L, J, Rq, d, zdir, r, uq,
+                           sq, rown, ip[_I_MAXITER], fp[_F_TOL])
+    info[_O_ITER] = iters
+    if code != 0:
+        return code
+    _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out)
+    return 0
+
+
+@njit(cache=True)
+def _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out):
+    """out = [u (nu) = U_0 clipped to the input bounds, X ((N+1) nx) rolled out through the
+    linearized model, U (N nu), xref ((N+1) nx)]."""
+    oX = nu
+    oU = oX + (N + 1) * nx
+    oR = oU + N * nu
+    for i in range(nx):
+        out[oX + i] = x[i]
+    for k in range(N):
+        for i in range(nx):
+            t = c[k, i]
+            for j in range(nx):
+                t += A[k, i, j] * out[oX + k * nx + j]
+            for a in range(nu):
+                t += B[k, i, a] * z[k * nu + a]
+            out[oX + (k + 1) * nx + i] = t
+    for j in range(N * nu):
+        out[oU + j] = z[j]
+    for k in range(N + 1):
+        for i in range(nx):
+            out[oR + k * nx + i] = xref[k, i]
+    for a in range(nu):
+        out[a] = min(max(z[a], u_min[a]), u_max[a])
+
+
+# numba caches _control_step keyed to this file only; it inlines code from these
+from .. import _jitcache  # noqa: E402
+from ..models import compiled as _models_compiled, kinematic as _kinematic  # noqa: E402
+from ..paths import compiled as _paths_compiled  # noqa: E402
+from ..solvers import dense_qp as _dense_qp  # noqa: E402
+
+_jitcache.refresh(_control_step, [m.__file__ for m in (_kinematic, _models_compiled, _paths_compiled, _dense_qp)])
+
+
+class FastLtvMpc:
+    """Tracking LTV-MPC of ``model`` along ``path``, every step compiled (see the module text).
+
+    Same interface and results as :class:`~mpcdrive.control.mpc.LtvMpc`; statuses ``ok``,
+    ``infeasible``, ``max_iter``, ``failed``; fallbacks as ``LtvMpc`` (shifted previous plan,
+    else the last command), named in ``ControlOutput.fallback``.
+    """
+
+    name = "ltv-mpc-fast"
+    backend_name = "fast"
+
+    def __init__(self, model, path: Path, problem: MpcProblem, config: MpcConfig = MpcConfig(),
+                 settings: FastSettings = FastSettings()):
+        reason = fast_unsupported_reason(model, path, problem, config, settings)
+        if reason is not None:
+            raise ValueError(f"the fast backend cannot solve this problem: {reason}")
+        self.model, self.path, self.problem, self.config, self.settings = model, path, problem, config, settings
+        nx, nu, N = model.nx, model.nu, problem.N
+        self.nx, self.nu, self.N = nx, nu, N
+        self.dt_s = problem.dt_s
+        if config.v_ref_mps is not None:
+            self.v_ref_mps = float(config.v_ref_mps)
+        else:
+            self.v_ref_mps = float(model.speed(np.zeros(nx)))
+        if not np.isfinite(self.v_ref_mps):
+            raise ValueError(f"reference speed must be finite, got {self.v_ref_mps}")
+        kind, mp = model_code(model)
+        pa = path_arrays(path)
+        lane = problem.lane_half_width_m is not None
+        nz = N * nu + (N if lane else 0)
+        rows, rhs, r_rate0, n_var = _constant_rows(problem, nz)
+        m_max = len(rows) + n_var
+        mq = max(m_max, 1)
+        C = np.zeros((mq, nz))
+        b_ = np.zeros(mq)
+        if rows:
+            C[: len(rows)] = np.array(rows)
+            b_[: len(rows)] = rhs
+        need_gamma = n_var > 0
+        ip = np.zeros(_NIP, dtype=np.int64)
+        ip[[_I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH]] = [kind, nx, nu, N, pa.kind]
+        ip[_I_LIN] = 1 if config.linearization == "paper" else 0
+        ip[_I_METHOD] = METHOD_RK4 if config.discretization == "rk4" else METHOD_EULER
+        ip[_I_HORIZON] = 1 if config.horizon == "paper" else 0
+        ip[_I_FF] = 1 if config.feedforward == "curvature" else 0
+        ip[_I_LANE] = int(lane)
+        ip[_I_MCONST] = len(rows)
+        ip[_I_RATE0] = r_rate0
+        ip[_I_MAXITER] = settings.max_iter
+        ip[_I_GAMMA] = int(need_gamma)
+        ip[_I_NZ] = nz
+        ip[_I_RICCATI] = int(not lane and not np.any(problem.Rc))
+        ip[_I_MQ] = mq
+        fp = np.zeros(8)
+        fp[_F_DT], fp[_F_VREF] = problem.dt_s, self.v_ref_mps
+        fp[_F_HSTEP], fp[_F_WINDOW] = config.horizon_step_m, config.projection_window_m
+        fp[_F_LANEW] = problem.lane_half_width_m if lane else 0.0
+        fp[_F_SLACK2], fp[_F_SLACK1] = problem.lane_slack_weight, problem.lane_slack_weight_l1
+        fp[_F_TOL] = settings.feasibility_tol
+        bnd = np.concatenate([problem.u_min, problem.u_max, problem.du_max_per_s * problem.dt_s,
+                              problem.x_min, problem.x_max])
+        nw = max(nx, nu)
+        arrays = {  # initial values, or the shape of a work array
+            _W_FP: fp, _W_MP: mp, _W_BND: bnd, _W_GEO: pa.geo,
+            _W_WQ: np.stack([problem.Q] * (N - 1) + [problem.QN]), _W_RM: problem.R, _W_RC: problem.Rc,
+            _W_TABS: pa.tab_s, _W_TABXY: pa.tab_xy, _W_TABH: pa.tab_h, _W_TABK: pa.tab_k, _W_C: C, _W_B: b_,
+            _W_REFS: (N + 1, 4), _W_XREF: (N + 1, nx), _W_UREF: (N, nu), _W_XBAR: (N, nx), _W_UBAR: (N, nu),
+            _W_F: (N, nx), _W_A: (N, nx, nx), _W_BD: (N, nx, nu), _W_CD: (N, nx), _W_LANEN: (N, 2),
+            _W_LANEB: (N,), _W_XF: (N + 1, nx), _W_P: (N + 1, nx, nx), _W_LAM: (N + 1, nx),
+            _W_VB: (N, nx, nu), _W_S: (2, nx, N * nu), _W_T2: (nx, nw),
+            _W_GAM: (N, nx, N * nu) if need_gamma else (1, 1, 1),
+            _W_H: (nz, nz), _W_G: (nz,), _W_Z: (nz,), _W_L: (nz, nz), _W_J: (nz, nz), _W_RQ: (nz, nz),
+            _W_D: (nz,), _W_ZDIR: (nz,), _W_R: (nz,), _W_UQ: (nz,), _W_SQ: (mq,), _W_ROWN: (mq,),
+            _W_LAMQ: (mq,), _W_DW: (7, nw, nw), _W_KG: (N, nu, nx), _W_KF: (N, nu), _W_PA: (nx, nx),
+            _W_MG: (nu, nx), _W_GG: (nu, nu), _W_QV: (nx,),
+        }
+        shapes = [np.shape(arrays[i]) if isinstance(arrays[i], np.ndarray) else arrays[i] for i in range(_NW)]
+        sizes = [int(np.prod(sh)) for sh in shapes]
+        fo = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        fs = np.ones((_NW, 3), dtype=np.int64)
+        for i, sh in enumerate(shapes):
+            fs[i, : len(sh)] = sh
+        self._wbuf = np.zeros(int(fo[-1]))
+        #: named views of the buffer (constants and work arrays), for inspection
+        self._w = {i: self._wbuf[fo[i]:fo[i + 1]].reshape(shapes[i]) for i in range(_NW)}
+        for i, v in arrays.items():
+            if isinstance(v, np.ndarray):
+                self._w[i][...] = v
+        self._ibuf = np.concatenate([ip, fo, fs.ravel(), np.zeros(nz + mq, dtype=np.int64)])
+        self._info = np.zeros(4)
+        self._noX = np.zeros((N + 1, nx))
+        self._noU = np.zeros((N, nu))
+        self._o_X = nu
+        self._o_U = nu + (N + 1) * nx
+        self._o_R = self._o_U + N * nu
+        self._out_size = self._o_R + (N + 1) * nx
+        self._warm_up()
+
+    def _warm_up(self) -> None:
+        """One discarded step at the path start, so that loading (or, on a first run, compiling)
+        the machine code happens while building, not in the first control step."""
+        x = np.zeros(self.nx)
+        x[:2] = self.path.position(0.0)
+        x[2] = float(self.path.heading(0.0))
+        if self.nx >= 4:
+            x[3] = self.v_ref_mps
+        _control_step(x, 0.0, np.zeros(self.nu), self._noX, self._noU, False, self._wbuf, self._ibuf,
+                      np.empty(self._out_size), self._info)
+
+    # -- warm start ---------------------------------------------------------------------------
+    def initial_warm(self, x0) -> WarmStart:
+        """Warm start of the first step: a global projection of x0, zero previous input."""
+        x0 = self._check_state(x0)
+        s0, _ = self.path.project(x0[:2])
+        return WarmStart(s_m=float(s0), u_prev=np.zeros(self.nu))
+
+    def _check_state(self, x) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        if x.shape != (self.nx,):
+            raise ValueError(f"state must have shape ({self.nx},) {self.model.state_names}, got {x.shape}")
+        bad = [n for n, v in zip(self.model.state_names, x) if not math.isfinite(v)]
+        if bad:
+            raise ValueError(f"state field(s) {', '.join(bad)} not finite: {dict(zip(self.model.state_names, x.tolist()))}")
+        return x
+
+    # -- one control step -----------------------------------------------------------------------
+    def step(self, x, warm: WarmStart) -> ControlOutput:
+        """Compute the command for measured state ``x`` (nx,) given the previous step's ``warm``."""
+        t0 = time.perf_counter()
+        if type(x) is not np.ndarray or x.dtype != np.float64 or not x.flags.c_contiguous:
+            x = np.ascontiguousarray(x, dtype=float)
+        if x.shape != (self.nx,):
+            self._check_state(x)
+        u_prev = warm.u_prev
+        if type(u_prev) is not np.ndarray or u_prev.dtype != np.float64 or u_prev.shape != (self.nu,):
+            u_prev = np.ascontiguousarray(u_prev, dtype=float)
+            if u_prev.shape != (self.nu,):
+                raise ValueError(f"warm.u_prev must have shape ({self.nu},), got {u_prev.shape}")
+        X, U = warm.X, warm.U
+        has_plan = X is not None and U is not None
+        if has_plan:
+            if X.shape != (self.N + 1, self.nx) or U.shape != (self.N, self.nu):
+                raise ValueError(f"warm plan must be X ({self.N + 1}, {self.nx}) and U ({self.N}, {self.nu}), "
+                                 f"got {X.shape} and {U.shape}")
+            if X.dtype != np.float64 or U.dtype != np.float64 or not (X.flags.c_contiguous and U.flags.c_contiguous):
+                X, U = np.ascontiguousarray(X, dtype=float), np.ascontiguousarray(U, dtype=float)
+        else:
+            X, U = self._noX, self._noU
+        out = np.empty(self._out_size)
+        code = _control_step(x, float(warm.s_m), u_prev, X, U, has_plan, self._wbuf, self._ibuf, out, self._info)
+        info = self._info
+        N, nx, nu = self.N, self.nx, self.nu
+        if code == 0:
+            u = out[:nu]
+            X_pred = out[self._o_X:self._o_U].reshape(N + 1, nx)
+            U_plan = out[self._o_U:self._o_R].reshape(N, nu)
+            refs = out[self._o_R:].reshape(N + 1, nx)
+            return ControlOutput(u, "ok", "", time.perf_counter() - t0, info[0], info[1], info[2],
+                                 X_pred, refs, WarmStart(info[0], u, X_pred, U_plan))
+        if code == _BAD_STATE:
+            self._check_state(x)  # raises, naming the field
+        status = STATUS_WORDS[code]
+        refs = self._w[_W_XREF].copy()
+        u, name, new_warm, X_pred = plan_fallback(self.problem, x, float(info[0]), warm)
+        return ControlOutput(u, status, name, time.perf_counter() - t0, float(info[0]), float(info[1]),
+                             float(info[2]), X_pred, refs, new_warm)

@@ -1,0 +1,318 @@
+"""Dense strictly convex QP with inequality constraints, solved by a compiled dual active-set
+method (Goldfarb & Idnani, 1983).
+
+    minimize 1/2 z' H z + g' z   subject to   C z >= b   (row by row)
+
+``H`` must be symmetric positive definite (the condensed MPC Hessian is). The method starts
+at the unconstrained minimum ``-H^{-1} g`` and adds the most violated constraint one at a
+time, dropping constraints whose multiplier would turn negative; every iterate is optimal for
+the constraints added so far, so an MPC step whose constraints are all inactive costs one
+Cholesky factorization and two triangular solves. Factorizations are kept in the orthogonal
+form ``J = L^{-T} Q``, ``J' N_A = [R; 0]`` and updated with Givens rotations (O(n^2) per
+change of the active set).
+
+Everything here is compiled with numba (``cache=True``: a new process loads the machine code
+from the cache instead of recompiling) and works in caller-provided buffers: nothing is
+allocated per solve. :class:`DenseQpSolver` wraps the kernel for use from Python (tests,
+experiments); the controller calls :func:`gi_solve` from its own compiled step.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+#: status codes of :func:`gi_solve` (mapped to the status words of ``mpcdrive.types``)
+QP_OK = 0
+QP_INFEASIBLE = 1
+QP_MAX_ITER = 2
+QP_FAILED = 3  # H not positive definite, or non-finite data
+
+STATUS_WORDS = ("ok", "infeasible", "max_iter", "failed")
+
+# reassociation lets LLVM vectorize the dot products; no 'nnan' / 'ninf', so non-finite data is
+# still detected
+_FM = {"reassoc", "contract"}
+
+
+@njit(cache=True, fastmath=_FM)
+def cholesky_lower(H, L, n) -> bool:
+    """L (lower triangle of the n x n leading block) with H = L L'; False if H is not
+    numerically positive definite. Only the lower triangle of H is read."""
+    for j in range(n):
+        s = H[j, j]
+        for k in range(j):
+            s -= L[j, k] * L[j, k]
+        if not (s > 1e-14 * max(1.0, abs(H[j, j]))):
+            return False
+        d = math.sqrt(s)
+        L[j, j] = d
+        inv = 1.0 / d
+        for i in range(j + 1, n):
+            t = H[i, j]
+            for k in range(j):
+                t -= L[i, k] * L[j, k]
+            L[i, j] = t * inv
+    return True
+
+
+@njit(cache=True, fastmath=_FM)
+def _unconstrained(L, g, z, n):
+    """z = -H^{-1} g from the Cholesky factor L (forward then backward substitution)."""
+    for i in range(n):
+        t = -g[i]
+        for k in range(i):
+            t -= L[i, k] * z[k]
+        z[i] = t / L[i, i]
+    for i in range(n - 1, -1, -1):
+        t = z[i]
+        for k in range(i + 1, n):
+            t -= L[k, i] * z[k]
+        z[i] = t / L[i, i]
+
+
+@njit(cache=True, fastmath=_FM)
+def _inverse_transpose(L, J, n):
+    """J = L^{-T} (upper triangular), column by column of L^{-1}."""
+    for j in range(n):
+        for i in range(n):
+            J[j, i] = 0.0
+        # column j of L^{-1}: solve L y = e_j; y_i = 0 for i < j
+        J[j, j] = 1.0 / L[j, j]
+        for i in range(j + 1, n):
+            t = 0.0
+            for k in range(j, i):
+                t -= L[i, k] * J[j, k]
+            J[j, i] = t / L[i, i]
+    # J currently holds (L^{-1})' row-major as J[j, i] = (L^{-1})[i, j]: that is L^{-T}[j, i]
+
+
+@njit(cache=True, fastmath=_FM)
+def _givens(a, b):
+    h = math.hypot(a, b)
+    if h == 0.0:
+        return 1.0, 0.0, 0.0
+    return a / h, b / h, h
+
+
+@njit(cache=True, fastmath=_FM)
+def gi_solve(H, g, C, b, m, n, z, lam, active, isact, L, J, R, d, zdir, r, u, s, rownorm, max_iter, tol):
+    """Solve ``min 1/2 z'Hz + g'z  s.t.  C[:m, :n] z >= b[:m]``; returns (status, iterations).
+
+    H : (>=n, >=n) SPD (lower triangle read); g : (n,); C : (>=m, >=n); b : (m,).
+    Outputs: z : (n,) the solution; lam : (m,) multipliers (>= 0, zero for inactive rows);
+    active : (n,) int, indices of the active rows (first ``q`` entries, q = number active).
+    Work buffers: L, J, R (n x n), d, zdir, r, u (n,), s, rownorm (m,), isact (m,) int.
+    tol : feasibility tolerance on the violation of a row scaled by its norm.
+    """
+    if not cholesky_lower(H, L, n):
+        return QP_FAILED, 0
+    for i in range(n):
+        if not math.isfinite(g[i]):
+            return QP_FAILED, 0
+    _unconstrained(L, g, z, n)
+    for i in range(m):
+        lam[i] = 0.0
+        isact[i] = 0
+        t = 0.0
+        for j in range(n):
+            t += C[i, j] * C[i, j]
+        rownorm[i] = math.sqrt(t)
+        if not (math.isfinite(t) and math.isfinite(b[i])):
+            return QP_FAILED, 0
+        if t == 0.0 and b[i] > tol:  # 0 >= b[i] fails whatever z is
+            return QP_INFEASIBLE, 0
+    have_j = False
+    q = 0
+    it = 0
+    while True:
+        # -- step 1: the most violated constraint (scaled by its row norm) --------------------
+        p = -1
+        worst = -tol
+        for i in range(m):
+            if rownorm[i] == 0.0 or isact[i] != 0:
+                continue
+            t = -b[i]
+            for j in range(n):
+                t += C[i, j] * z[j]
+            s[i] = t
+            v = t / rownorm[i]
+            if v < worst:
+                worst = v
+                p = i
+        if p < 0:
+            break
+        if not have_j:
+            _inverse_transpose(L, J, n)
+            have_j = True
+        up = 0.0  # multiplier of the constraint being added
+        sp = s[p]
+        # -- step 2: move towards satisfying row p ----------------------------------------------
+        while True:
+            it += 1
+            if it > max_iter:
+                for k in range(q):
+                    lam[active[k]] = u[k]
+                return QP_MAX_ITER, it - 1
+            # d = J' n_p
+            dd = 0.0
+            for j in range(n):
+                t = 0.0
+                for i in range(n):
+                    t += J[i, j] * C[p, i]
+                d[j] = t
+                dd += t * t
+            # primal direction zdir = J2 d2, dual direction r = R^{-1} d1
+            d2 = 0.0
+            for j in range(q, n):
+                d2 += d[j] * d[j]
+            for i in range(n):
+                t = 0.0
+                for j in range(q, n):
+                    t += J[i, j] * d[j]
+                zdir[i] = t
+            for k in range(q - 1, -1, -1):
+                t = d[k]
+                for l in range(k + 1, q):
+                    t -= R[k, l] * r[l]
+                r[k] = t / R[k, k]
+            # step lengths: t1 (keep multipliers >= 0), t2 (make row p active)
+            t1 = math.inf
+            kdrop = -1
+            for k in range(q):
+                if r[k] > 0.0:
+                    ratio = u[k] / r[k]
+                    if ratio < t1:
+                        t1 = ratio
+                        kdrop = k
+            if d2 <= 1e-14 * dd:
+                t2 = math.inf
+            else:
+                t2 = -sp / d2
+            tstep = min(t1, t2)
+            if tstep == math.inf:
+                for k in range(q):
+                    lam[active[k]] = u[k]
+                return QP_INFEASIBLE, it
+            if t2 < math.inf:
+                for i in range(n):
+                    z[i] += tstep * zdir[i]
+            for k in range(q):
+                u[k] -= tstep * r[k]
+            up += tstep
+            if t2 <= t1:
+                # full step: add p to the active set; rotate d[q:] onto d[q]
+                for j in range(n - 1, q, -1):
+                    c_, s_, h = _givens(d[j - 1], d[j])
+                    if h == 0.0:
+                        continue
+                    d[j - 1] = h
+                    d[j] = 0.0
+                    for i in range(n):
+                        a_ = J[i, j - 1]
+                        b_ = J[i, j]
+                        J[i, j - 1] = c_ * a_ + s_ * b_
+                        J[i, j] = -s_ * a_ + c_ * b_
+                for k in range(q + 1):
+                    R[k, q] = d[k]
+                active[q] = p
+                isact[p] = 1
+                u[q] = up
+                q += 1
+                break
+            # partial step: drop active constraint kdrop, then retry row p
+            isact[active[kdrop]] = 0
+            for l in range(kdrop, q - 1):
+                for k in range(q):
+                    R[k, l] = R[k, l + 1]
+                u[l] = u[l + 1]
+                active[l] = active[l + 1]
+            q -= 1
+            for j in range(kdrop, q):
+                c_, s_, h = _givens(R[j, j], R[j + 1, j])
+                if h == 0.0:
+                    continue
+                for l in range(j, q):
+                    a_ = R[j, l]
+                    b_ = R[j + 1, l]
+                    R[j, l] = c_ * a_ + s_ * b_
+                    R[j + 1, l] = -s_ * a_ + c_ * b_
+                R[j + 1, j] = 0.0
+                for i in range(n):
+                    a_ = J[i, j]
+                    b_ = J[i, j + 1]
+                    J[i, j] = c_ * a_ + s_ * b_
+                    J[i, j + 1] = -s_ * a_ + c_ * b_
+            t = -b[p]
+            for j in range(n):
+                t += C[p, j] * z[j]
+            sp = t
+    for k in range(q):
+        lam[active[k]] = u[k]
+    for i in range(n):
+        if not math.isfinite(z[i]):
+            return QP_FAILED, it
+    return QP_OK, it
+
+
+@dataclass(frozen=True)
+class DenseQpResult:
+    """Solution of a dense QP: status word, z (n,), multipliers lam (m,) of ``C z >= b``,
+    objective ``1/2 z'Hz + g'z``, iterations (changes of the active set)."""
+
+    status: str
+    z: np.ndarray
+    lam: np.ndarray
+    objective: float
+    iterations: int
+
+
+class DenseQpSolver:
+    """Python entry to :func:`gi_solve` for QPs of at most ``n_max`` variables and ``m_max``
+    constraints (buffers allocated once here)."""
+
+    def __init__(self, n_max: int, m_max: int, max_iter: int | None = None, tol: float = 1e-9):
+        if n_max < 1 or m_max < 0:
+            raise ValueError(f"n_max must be >= 1 and m_max >= 0, got {n_max}, {m_max}")
+        self.n_max, self.m_max = int(n_max), int(m_max)
+        self.max_iter = int(max_iter if max_iter is not None else 10 * (n_max + m_max) + 10)
+        self.tol = float(tol)
+        n, m = self.n_max, max(self.m_max, 1)
+        self._L = np.zeros((n, n))
+        self._J = np.zeros((n, n))
+        self._R = np.zeros((n, n))
+        self._vec = np.zeros((4, n))
+        self._s = np.zeros(m)
+        self._norm = np.zeros(m)
+        self._active = np.zeros(n, dtype=np.int64)
+        self._isact = np.zeros(m, dtype=np.int64)
+
+    def solve(self, H, g, C=None, b=None) -> DenseQpResult:
+        """Solve ``min 1/2 z'Hz + g'z  s.t.  C z >= b``."""
+        H = np.ascontiguousarray(H, dtype=float)
+        g = np.ascontiguousarray(g, dtype=float)
+        n = g.shape[0]
+        if H.shape != (n, n):
+            raise ValueError(f"H must be {n}x{n}, got {H.shape}")
+        if C is None:
+            C, b = np.zeros((0, n)), np.zeros(0)
+        C = np.ascontiguousarray(C, dtype=float)
+        b = np.ascontiguousarray(b, dtype=float)
+        m = b.shape[0]
+        if C.shape != (m, n):
+            raise ValueError(f"C must be {m}x{n}, got {C.shape}")
+        if n > self.n_max or m > self.m_max:
+            raise ValueError(f"QP of {n} variables / {m} rows exceeds the solver's {self.n_max} / {self.m_max}")
+        if C.shape[0] == 0:
+            C = np.zeros((1, n))
+            b = np.zeros(1)
+        z = np.zeros(n)
+        lam = np.zeros(max(m, 1))
+        v = self._vec
+        code, it = gi_solve(H, g, C, b, m, n, z, lam, self._active, self._isact, self._L, self._J, self._R,
+                            v[0], v[1], v[2], v[3], self._s, self._norm, self.max_iter, self.tol)
+        obj = float(0.5 * z @ H @ z + g @ z) if code == QP_OK else float("nan")
+        return DenseQpResult(STATUS_WORDS[code], z, lam[:m].copy(), obj, int(it))

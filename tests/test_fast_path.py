@@ -1,0 +1,383 @@
+"""The compiled fast path against the OSQP reference: same commands, same closed loops, exact
+QP solutions, statuses and fallbacks, and a compile cache that a new process reuses.
+
+Tolerances (named here, used below):
+* COMMAND_TOL_RAD: |u_fast - u_osqp| per step when both controllers see the same measured states
+  (the first 200 steps of every built-in scenario, and random states of problems with every
+  supported constraint). OSQP solves to 1e-5 (polished), the active-set solver exactly.
+* Closed-loop metrics of a whole run: RMS lateral error within METRIC_TOL_M + 1 %, max |steer|
+  within COMMAND_TOL_RAD, the same failure and fallback counts.
+"""
+
+import json
+import math
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mpcdrive.control import FastPathUnavailable, LtvMpc, MpcConfig, make_mpc
+from mpcdrive.control.fast import FastLtvMpc, FastSettings, fast_unsupported_reason
+from mpcdrive.models import KinematicBicycle3, KinematicBicycle4, KinematicParams
+from mpcdrive.models.discretize import discrete_step, discrete_step_and_jacobians
+from mpcdrive.ocp import MpcProblem
+from mpcdrive.paths import CirclePath, StraightPath, WaypointPath
+from mpcdrive.scenarios import build_experiment, builtin_ids, load_scenario, run_experiment
+from mpcdrive.sim import Plant, compute_metrics, simulate
+from mpcdrive.solvers.dense_qp import DenseQpSolver
+from mpcdrive.solvers.osqp_backend import OsqpSettings
+from mpcdrive.control.fallback import FallbackConfig
+from mpcdrive.scene import Footprint
+from mpcdrive.types import WarmStart
+
+COMMAND_TOL_RAD = 1e-4
+METRIC_TOL_M = 1e-3
+STEER = math.radians(60)
+TIGHT = OsqpSettings(eps_abs=1e-9, eps_rel=1e-9, max_iter=50000)
+
+
+def _with_backend(spec, backend):
+    return spec.model_copy(update={"controller": spec.controller.model_copy(update={"backend": backend})})
+
+
+# ------------------------------------------------------------------------------ built-in scenarios
+#: built-in scenarios the fast path covers (kinematic models, no obstacles, no speed profile);
+#: the others run on the OSQP controller (see test_unsupported_scenarios_fall_back_to_osqp)
+FAST_SCENARIOS = ["paper-exp1", "paper-exp2", "paper-exp3", "paper-exp4", "paper-disturbance-v1",
+                  "paper-disturbance-v4", "paper-smoothing"]
+
+
+def test_unsupported_scenarios_fall_back_to_osqp():
+    for sid in ("paper-exp5-hard", "track-raceway"):
+        with pytest.warns(UserWarning, match="fast backend not used"):
+            exp = build_experiment(_with_backend(load_scenario(sid), "fast"))
+        assert exp.mpc.backend_name == "osqp"
+    assert set(FAST_SCENARIOS) <= set(builtin_ids())
+
+
+@pytest.fixture(scope="module", params=FAST_SCENARIOS)
+def builtin_pair(request):
+    spec = load_scenario(request.param)
+    ref = build_experiment(_with_backend(spec, "osqp"))
+    fast = build_experiment(_with_backend(spec, "fast"))
+    assert isinstance(fast.controller, FastLtvMpc), "every built-in scenario must run on the fast path"
+    assert isinstance(ref.controller, LtvMpc)
+    return request.param, ref, fast, run_experiment(ref)
+
+
+def test_fast_commands_match_osqp_on_the_reference_states(builtin_pair):
+    """Fed the states of the OSQP closed loop, the fast controller gives the same commands."""
+    sid, _, fast, ref_result = builtin_pair
+    ctrl = fast.controller
+    warm = ctrl.initial_warm(ref_result.x[0])
+    n = min(200, ref_result.steps)
+    du = np.empty(n)
+    for k in range(n):
+        out = ctrl.step(ref_result.x[k], warm)
+        assert out.status == "ok", (sid, k, out.status)
+        du[k] = np.abs(out.u - ref_result.u[k]).max()
+        warm = out.warm
+    assert du.max() <= COMMAND_TOL_RAD, f"{sid}: max |du| {du.max():.2e} at step {du.argmax()}"
+
+
+def test_fast_closed_loop_metrics_match_osqp(builtin_pair):
+    sid, ref, fast, ref_result = builtin_pair
+    fast_result = run_experiment(fast)
+    m_ref = compute_metrics(ref_result, ref.footprint)
+    m_fast = compute_metrics(fast_result, fast.footprint)
+    assert m_fast["steps"] == m_ref["steps"]
+    assert abs(m_fast["rms_lateral_error_m"] - m_ref["rms_lateral_error_m"]) <= METRIC_TOL_M + 0.01 * m_ref["rms_lateral_error_m"]
+    assert abs(m_fast["max_abs_steer_rad"] - m_ref["max_abs_steer_rad"]) <= COMMAND_TOL_RAD
+    assert (m_fast["solver_failures"], m_fast["fallbacks"]) == (m_ref["solver_failures"], m_ref["fallbacks"])
+    assert fast_result.meta["backend"] == "fast" and ref_result.meta["backend"] == "osqp"
+
+
+# ------------------------------------------------------------------- every supported feature
+def _feature_cases():
+    wp = WaypointPath([[0, 0], [3, 1], [6, -1], [9, 0.5], [12, 0]], smoothing=0.0)
+    loop = WaypointPath([[0, 0], [4, 0], [5, 3], [2, 5], [-1, 3]], closed=True)
+    m3, m4 = KinematicBicycle3(1.5, KinematicParams(0.2, 0.14)), KinematicBicycle4()
+    p4 = dict(Q=[5, 5, 10, 2], R=[0.1, 0.05], u_min=[-STEER, -2.0], u_max=[STEER, 1.5],
+              x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [1.4])
+    return {
+        "rate+Rc+lane, waypoints, rk4": (m3, wp, MpcProblem(3, 1, 15, 0.02, Q=[1, 4, 1], R=0.5, Rc=2.0,
+                                         u_min=-STEER, u_max=STEER, du_max_per_s=math.radians(120),
+                                         lane_half_width_m=0.15), MpcConfig(), np.array([0.5, 0.4, 0.3])),
+        "lane+speed bounds, closed waypoints, euler, paper horizon": (
+            m4, loop, MpcProblem(4, 2, 12, 0.05, lane_half_width_m=0.2, lane_slack_weight=50.0,
+                                 lane_slack_weight_l1=5.0, **p4),
+            MpcConfig(discretization="euler", horizon="paper", horizon_step_m=0.05, v_ref_mps=1.2),
+            np.array([0.3, -0.5, 0.4, 1.3])),
+        "paper linearization, no feedforward, circle": (
+            m4, CirclePath((1.0, -1.0), 2.0, ccw=False), MpcProblem(4, 2, 20, 0.02, du_max_per_s=[1.0, 3.0], **p4),
+            MpcConfig(linearization="paper", feedforward="none", v_ref_mps=1.0), np.array([1.0, 1.2, -0.2, 0.8])),
+    }
+
+
+@pytest.mark.parametrize("case", list(_feature_cases()))
+def test_fast_matches_osqp_with_every_supported_constraint(case):
+    """Rate bounds, Rc, state bounds, the soft lane with slack, Euler, the paper's horizon and
+    linearization, waypoint and circle paths: the same commands and plans as OSQP at random
+    states, warm-started from each controller's own previous plan."""
+    model, path, pb, cfg, x0 = _feature_cases()[case]
+    fast = FastLtvMpc(model, path, pb, cfg)
+    # FastLtvMpc bounds the centre of gravity by the problem's lane as given; LtvMpc keeps half the
+    # body width plus a margin inside it -- a point-sized body without margin makes them the same
+    ref = LtvMpc(model, path, pb, cfg, TIGHT, footprint=Footprint(0.5, 1e-9), lane_margin_m=0.0)
+    rng = np.random.default_rng(3)
+    plant = Plant(model)
+    x = x0.copy()
+    wf, wr = fast.initial_warm(x), ref.initial_warm(x)
+    for k in range(60):
+        of, orf = fast.step(x, wf), ref.step(x, wr)
+        assert of.status == "ok" and orf.status in ("ok", "inaccurate"), (k, of.status, orf.status)
+        # OSQP's own accuracy: 1e-9 when it converges, looser when it stops 'inaccurate'
+        tol = 1e-5 if orf.status == "ok" else COMMAND_TOL_RAD
+        assert np.abs(of.u - orf.u).max() <= tol, (k, of.u, orf.u, orf.status)
+        np.testing.assert_allclose(of.X_pred, orf.X_pred, atol=tol)
+        np.testing.assert_allclose(of.refs, orf.refs, atol=1e-9)
+        assert (of.s_m, of.e_y_m, of.e_psi_rad) == pytest.approx((orf.s_m, orf.e_y_m, orf.e_psi_rad), abs=1e-9)
+        wf, wr = of.warm, orf.warm
+        x = plant.step(x, orf.u, pb.dt_s)
+        x[:3] += rng.normal(0, [0.01, 0.01, 0.03])  # kicks so the bounds and the lane become active
+
+
+# ------------------------------------------------------------------------------ the QP solver
+def _kkt_residuals(H, g, C, b, r):
+    stat = np.abs(H @ r.z + g - C.T @ r.lam).max()
+    feas = max(0.0, -(C @ r.z - b).min()) if len(b) else 0.0
+    comp = np.abs(r.lam * (C @ r.z - b)).max() if len(b) else 0.0
+    return stat, feas, comp, r.lam.min() if len(b) else 0.0
+
+
+def test_dense_qp_solutions_are_exact_and_agree_with_clarabel_and_osqp():
+    clarabel = pytest.importorskip("clarabel")
+    import osqp
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(11)
+    solver = DenseQpSolver(40, 100)
+    for trial in range(60):
+        n, m = int(rng.integers(1, 40)), int(rng.integers(0, 100))
+        M = rng.normal(size=(n, n))
+        H = M @ M.T + 0.1 * np.eye(n)
+        g = 5 * rng.normal(size=n)
+        C = np.vstack([np.eye(n), -np.eye(n)])[: min(m, 2 * n)] if trial % 2 else rng.normal(size=(m, n))
+        b = C @ rng.normal(size=n) - rng.uniform(0, 1, size=C.shape[0])
+        r = solver.solve(H, g, C, b)
+        assert r.status == "ok"
+        stat, feas, comp, lam_min = _kkt_residuals(H, g, C, b, r)
+        scale = 1 + np.abs(g).max() + np.abs(H).max()
+        assert stat <= 1e-9 * scale and feas <= 1e-9 and comp <= 1e-8 * scale and lam_min >= 0
+        if C.shape[0]:
+            st = clarabel.DefaultSettings()
+            st.verbose = False
+            cl = clarabel.DefaultSolver(sp.csc_matrix(np.triu(H)), g, sp.csc_matrix(-C), -b,
+                                        [clarabel.NonnegativeConeT(C.shape[0])], st).solve()
+            zc = np.array(cl.x)
+            assert r.objective <= 0.5 * zc @ H @ zc + g @ zc + 1e-7 * scale
+            assert np.abs(r.z - zc).max() <= 1e-5 * (1 + np.abs(zc).max())
+            o = osqp.OSQP()
+            o.setup(sp.csc_matrix(np.triu(H)), g, sp.csc_matrix(C), b, np.full(C.shape[0], np.inf),
+                    eps_abs=1e-9, eps_rel=1e-9, max_iter=100000, verbose=False, polishing=True)
+            zo = o.solve(raise_error=False).x
+            assert np.abs(r.z - zo).max() <= 1e-5 * (1 + np.abs(zo).max())
+
+
+def test_dense_qp_reports_infeasible_and_not_positive_definite():
+    solver = DenseQpSolver(5, 10)
+    H, g = np.eye(3), np.ones(3)
+    c = np.array([1.0, 2.0, -1.0])
+    r = solver.solve(H, g, np.vstack([c, -c]), np.array([5.0, -4.0]))  # c'z >= 5 and c'z <= 4
+    assert r.status == "infeasible" and not np.isfinite(r.objective)
+    zero = np.zeros((1, 3))
+    assert solver.solve(H, g, zero, np.array([1e-3])).status == "infeasible"  # 0 >= 1e-3
+    assert solver.solve(H, g, zero, np.array([-1.0])).status == "ok"  # 0 >= -1 always holds
+    assert solver.solve(np.diag([1.0, 0.0, 1.0]), g).status == "failed"
+    assert solver.solve(H, np.array([1.0, np.nan, 0.0])).status == "failed"
+    with pytest.raises(ValueError, match="exceeds"):
+        solver.solve(np.eye(6), np.zeros(6))
+
+
+def test_infeasible_controller_problem_is_reported_and_falls_back_counted():
+    """Speed bounds [0, 1] with the car at 3 m/s and braking limited: every QP is infeasible;
+    both backends say so, never output NaN, and count the same fallbacks."""
+    model = KinematicBicycle4()
+    pb = MpcProblem(4, 2, 10, 0.01, Q=[1, 1, 1, 1], R=0.1, u_min=[-STEER, -0.1], u_max=[STEER, 0.1],
+                    x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [1.0])
+    path = StraightPath([0, 0], [50, 0])
+    runs = {}
+    # the fast path's ladder is shifted_plan, hold_last: give the OSQP controller the same one
+    legacy = MpcConfig(v_ref_mps=1.0, fallback=FallbackConfig(("shifted_plan", "hold_last")))
+    for ctrl in (FastLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0)), LtvMpc(model, path, pb, legacy)):
+        r = simulate(ctrl, Plant(model), path, [0, 0.2, 0, 3.0], 0.01, 30)
+        assert all(np.isfinite(r.u).ravel())
+        runs[ctrl.backend_name] = r
+    assert set(runs["fast"].status) == {"infeasible"}
+    assert runs["fast"].fallback == runs["osqp"].fallback
+    assert compute_metrics(runs["fast"])["fallbacks"] == 30
+
+
+def test_iteration_cap_gives_max_iter_and_a_deliberate_fallback():
+    """At the P1 start the steering saturates over most of the horizon (many active-set
+    changes): with a cap of 2 the step stops with ``max_iter`` and holds the last input."""
+    model = KinematicBicycle3(1.0)
+    pb = MpcProblem(3, 1, 30, 0.01, Q=np.ones(3), R=1.0, u_min=-STEER, u_max=STEER, du_max_per_s=math.radians(90))
+    path = StraightPath([1, 0], [11, 0])
+    ctrl = FastLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0), FastSettings(max_iter=2))
+    x = np.array([2.0, -2.0, math.pi / 2])
+    warm = ctrl.initial_warm(x)
+    warm = WarmStart(warm.s_m, np.array([0.3]))
+    out = ctrl.step(x, warm)
+    assert out.status == "max_iter" and out.fallback == "hold_last"
+    assert abs(out.u[0] - 0.3) <= math.radians(90) * 0.01 + 1e-12
+    full = FastLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0)).step(x, warm)
+    assert full.status == "ok"
+    plan = FastLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0), FastSettings(max_iter=2)).step(x, full.warm)
+    assert plan.status == "max_iter" and plan.fallback == "shifted_plan"
+    rate = math.radians(90) * 0.01
+    np.testing.assert_allclose(plan.u, np.clip(full.warm.U[1], full.u - rate, full.u + rate))
+
+
+@pytest.mark.parametrize("bad, field", [([np.nan, 0, 0], "x"), ([0, np.inf, 0], "y"), ([0, 0, -np.inf], "yaw")])
+def test_non_finite_state_and_bad_warm_start_are_clear_value_errors(bad, field):
+    model = KinematicBicycle3(1.0)
+    pb = MpcProblem(3, 1, 10, 0.01, Q=np.ones(3), R=1.0, u_min=-STEER, u_max=STEER)
+    c = FastLtvMpc(model, StraightPath([0, 0], [10, 0]), pb)
+    warm = c.initial_warm([0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match=f"state field\\(s\\) {field} not finite"):
+        c.step(np.array(bad, float), warm)
+    with pytest.raises(ValueError, match="shape"):
+        c.step(np.zeros(4), warm)
+    with pytest.raises(ValueError, match="warm plan"):
+        c.step(np.zeros(3), WarmStart(0.0, np.zeros(1), np.zeros((5, 3)), np.zeros((4, 1))))
+    out = c.step([0.0, 0.1, 0.0], warm)  # a list is accepted
+    assert out.status == "ok"
+
+
+# ------------------------------------------------------------------------------ the factory
+def test_factory_falls_back_to_osqp_and_says_why():
+    model = KinematicBicycle3(1.0)
+    pb = MpcProblem(3, 1, 10, 0.01, Q=np.ones(3), R=0.0, u_min=-STEER, u_max=STEER)  # R + Rc singular
+    path = StraightPath([0, 0], [10, 0])
+    assert "positive definite" in fast_unsupported_reason(model, path, pb)
+    with pytest.warns(FastPathUnavailable, match="positive definite"):
+        c = make_mpc(model, path, pb, backend="fast")
+    assert isinstance(c, LtvMpc) and c.backend_name == "osqp"
+    with pytest.raises(ValueError, match="fast backend cannot"):
+        FastLtvMpc(model, path, pb)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert make_mpc(model, path, MpcProblem(3, 1, 10, 0.01, Q=1.0, R=1.0), backend="fast").backend_name == "fast"
+        assert make_mpc(model, path, pb, backend="osqp").backend_name == "osqp"
+    with pytest.raises(ValueError, match="backend"):
+        make_mpc(model, path, pb, backend="gpu")
+
+
+# --------------------------------------------------------------- compiled models and paths
+@pytest.mark.parametrize("model", [KinematicBicycle3(2.0, KinematicParams(0.2, 0.1)), KinematicBicycle4()])
+@pytest.mark.parametrize("method", ["rk4", "euler"])
+def test_compiled_discretization_equals_numpy(model, method):
+    from mpcdrive.models.compiled import METHOD_EULER, METHOD_RK4, discrete_step_jacobians, model_code, rollout_into
+
+    kind, mp = model_code(model)
+    rng = np.random.default_rng(0)
+    N, nx, nu = 8, model.nx, model.nu
+    X = rng.normal(size=(N, nx))
+    U = rng.uniform(-1, 1, size=(N, nu))
+    F, A, B = np.zeros((N, nx)), np.zeros((N, nx, nx)), np.zeros((N, nx, nu))
+    code = METHOD_RK4 if method == "rk4" else METHOD_EULER
+    for k in range(N):
+        discrete_step_jacobians(kind, mp, nx, nu, X, U, k, 0.05, code, F, A, B, np.zeros((7, nx, nx)))
+    F0, A0, B0 = discrete_step_and_jacobians(model, X, U, 0.05, method)
+    np.testing.assert_allclose(F, F0, atol=1e-13)
+    np.testing.assert_allclose(A, A0, atol=1e-13)
+    np.testing.assert_allclose(B, B0, atol=1e-13)
+    Xr = np.zeros((N, nx))
+    Xr[0] = X[0]
+    rollout_into(kind, mp, nx, Xr, U, N - 1, 0.05, code, np.zeros((3, nx)))
+    for k in range(N - 1):
+        np.testing.assert_allclose(Xr[k + 1], discrete_step(model, Xr[k], U[k], 0.05, method), atol=1e-13)
+
+
+@pytest.mark.parametrize("path", [
+    StraightPath([1.0, -2.0], [4.0, 2.0]),
+    CirclePath((0.5, 0.2), 1.5, ccw=False, start_angle_rad=0.7),
+    WaypointPath([[0, 0], [2, 1], [4, 0], [6, 2]]),
+    WaypointPath([[0, 0], [4, 0], [5, 3], [2, 5], [-1, 3]], closed=True),
+], ids=["straight", "circle", "waypoints", "closed-waypoints"])
+def test_compiled_path_geometry_equals_the_path_objects(path):
+    from mpcdrive.paths.compiled import path_arrays, path_eval, path_project
+
+    pa = path_arrays(path)
+    rng = np.random.default_rng(1)
+    L = path.length_m
+    for s in rng.uniform(-0.3 * L, 2.3 * L, size=200):
+        x, y, h, k = path_eval(pa.kind, pa.geo, pa.tab_s, pa.tab_xy, pa.tab_h, pa.tab_k, s)
+        np.testing.assert_allclose([x, y], path.position(s), atol=1e-12)
+        assert h == pytest.approx(float(path.heading(s)), abs=1e-12)
+        assert k == pytest.approx(float(path.curvature(s)), abs=1e-9)
+    for s_guess in rng.uniform(0, 2 * L, size=100):
+        p = path.position(s_guess) + rng.normal(0, 0.3, size=2)
+        for window in (0.5, 2.0, L):
+            s_c, ey_c = path_project(pa.kind, pa.geo, pa.tab_s, pa.tab_xy, s_guess, window, p[0], p[1])
+            s_r, ey_r = path.project(p, s_guess, window)
+            assert (s_c, ey_c) == pytest.approx((s_r, ey_r), abs=1e-9)
+
+
+# ------------------------------------------------------------------------------ compile cache
+def test_a_second_process_loads_the_compiled_step_from_the_cache():
+    """This process has compiled (or loaded) the step; a fresh one must find it in numba's
+    on-disk cache (cache hits, no misses) instead of recompiling."""
+    from mpcdrive.control import fast
+
+    model = KinematicBicycle3(1.0)
+    c = FastLtvMpc(model, StraightPath([0, 0], [5, 0]), MpcProblem(3, 1, 5, 0.01, Q=1.0, R=1.0))
+    c.step(np.zeros(3), c.initial_warm(np.zeros(3)))
+    cache_dir = Path(fast._control_step.stats.cache_path)
+    assert any(cache_dir.glob("fast._control_step-*.nbi")), f"no cache index in {cache_dir}"
+    code = (
+        "import json, numpy as np\n"
+        "from mpcdrive.control import fast\n"
+        "from mpcdrive.models import KinematicBicycle4\n"
+        "from mpcdrive.ocp import MpcProblem\n"
+        "from mpcdrive.paths import CirclePath\n"
+        "c = fast.FastLtvMpc(KinematicBicycle4(), CirclePath(), MpcProblem(4, 2, 7, 0.01, Q=1.0, R=1.0))\n"
+        "x = np.array([1.5, 0.0, 1.6, 1.0])\n"
+        "c.step(x, c.initial_warm(x))\n"
+        "st = fast._control_step.stats\n"
+        "print(json.dumps({'hits': sum(st.cache_hits.values()), 'misses': sum(st.cache_misses.values())}))\n"
+    )
+    src = str(Path(fast.__file__).resolve().parents[2])
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                          env={**__import__("os").environ, "PYTHONPATH": src})
+    stats = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert stats == {"hits": 1, "misses": 0}, stats
+
+
+def test_stale_cache_files_are_dropped_when_a_dependency_changes(tmp_path):
+    """numba watches only a function's own file; the controller's cache must also follow the
+    files whose code it inlines."""
+    from mpcdrive._jitcache import drop_stale_cache
+
+    dep = tmp_path / "dep.py"
+    dep.write_text("a = 1\n")
+    cache = tmp_path / "cache"
+    cache.mkdir()
+
+    def fake_cache():
+        for name in ("fast._control_step-1.py311.nbi", "fast._control_step-1.py311.1.nbc", "other.f-1.py311.nbi"):
+            (cache / name).write_text("x")
+
+    fake_cache()
+    assert drop_stale_cache(cache, "fast", [dep])  # no fingerprint yet: dropped
+    assert sorted(p.name for p in cache.iterdir()) == ["fast.deps-sha1", "other.f-1.py311.nbi"]
+    fake_cache()
+    assert not drop_stale_cache(cache, "fast", [dep])  # unchanged: kept
+    assert (cache / "fast._control_step-1.py311.nbi").exists()
+    dep.write_text("a = 2\n")
+    assert drop_stale_cache(cache, "fast", [dep])  # changed: dropped
+    assert not (cache / "fast._control_step-1.py311.nbi").exists() and (cache / "other.f-1.py311.nbi").exists()
