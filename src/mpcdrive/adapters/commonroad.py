@@ -36,6 +36,7 @@ from ..scenarios.schema import ScenarioSpec
 
 PRESET = "commonroad_ford_escort"
 _EXTEND_M = 30.0
+_V_SWITCH_MPS = 7.319  # CommonRoad Ford Escort: speed above which the acceleration limit falls as 1/v
 
 
 def available() -> bool:
@@ -58,6 +59,17 @@ class CommonRoadImport:
     spec: ScenarioSpec
     route: tuple[int, ...]
     centerline: np.ndarray  # (M, 2) [m]
+
+    def write_outputs(self, result, out_dir: Path) -> dict:
+        """Write ``solution.xml`` (up to the goal, else the whole drive) and return the
+        ``commonroad`` metrics: route, goal step and the drivability checker's verdicts."""
+        report = check_drive(self, result)
+        path = write_solution(self, result, Path(out_dir), report.goal_step)
+        return {"commonroad": {"file": self.file.name, "route_lanelets": list(self.route),
+                               "goal_reached": report.goal_step is not None, "goal_step": report.goal_step,
+                               "collision_free": report.collision_free, "road_compliant": report.road_compliant,
+                               "ks_feasible": report.feasible, "states_checked": report.steps_checked,
+                               "solution": path.name}}
 
 
 def _angle_diff(a: float, b: float) -> float:
@@ -231,6 +243,9 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
         ll = net.find_lanelet_by_id(lid)
         widths.append(float(np.min(np.hypot(*(ll.left_vertices - ll.right_vertices).T))))
     pre = PRESETS[PRESET]
+    # CommonRoad's longitudinal limit: a_max, reduced to a_max v_switch / v above v_switch
+    v_max = max(v_ref, v0) + 2.0
+    a_lim = 0.9 * pre.max_accel_mps2 * min(1.0, _V_SWITCH_MPS / v_max)
     obstacles = [_obstacle_entry(o, dt) for o in scenario.obstacles]
     spec = ScenarioSpec.model_validate({
         "id": str(scenario.scenario_id),
@@ -238,7 +253,7 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
         "dt_s": dt,
         "duration_s": t_end,
         "vehicle": {"model": "kinematic4", "preset": PRESET, "speed_mps": v_ref, "footprint_discs": 3},
-        "path": {"type": "waypoints", "points": [tuple(map(float, p)) for p in line]},
+        "path": {"type": "waypoints", "points": [tuple(map(float, p)) for p in line], "ds_m": 0.2},
         "road": {"lane_width_m": min(widths), "margin_m": 0.1},
         "initial_state": {"x_m": float(p0[0]), "y_m": float(p0[1]), "yaw_deg": math.degrees(yaw0), "v_mps": v0},
         "obstacles": obstacles,
@@ -251,8 +266,8 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
             "Rc": [100.0, 1.0],
             "max_steer_deg": math.degrees(pre.max_steer_rad),
             "max_steer_rate_deg_s": math.degrees(pre.max_steer_rate_rad_s) * 0.95,
-            "accel_limits_mps2": (-8.0, 3.0),
-            "speed_limits_mps": (0.0, max(v_ref, v0) + 5.0),
+            "accel_limits_mps2": (-a_lim, a_lim),
+            "speed_limits_mps": (0.0, v_max),
             "reference_speed_mps": v_ref,
             "horizon_step_m": 0.5,
         },
