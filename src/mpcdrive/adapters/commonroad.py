@@ -18,8 +18,8 @@ Import:
   length and width, steering and steering-rate limits; ``dt`` = the scenario's time step;
   reference speed = the goal velocity range's middle, else the initial speed; ``hard`` avoidance.
 
-The car's reference point (the state's x, y) is its centre of gravity; a CommonRoad KS
-trajectory is given at the rear axle (:func:`solution_trajectory` shifts it by ``lr``).
+The car's reference point (the state's x, y) is its centre of gravity, as in CommonRoad's KS
+states (its checker moves them to the rear axle itself).
 """
 
 from __future__ import annotations
@@ -159,10 +159,15 @@ def route_centerline(net, route: list[int], start_xy: np.ndarray) -> np.ndarray:
             cv = cv[min(j + 1, len(cv) - 1):]
         pts.append(cv)
     line = np.vstack(pts)
-    j = int(np.argmin(np.hypot(*(line - start_xy).T)))
-    line = line[max(j - 1, 0):]
-    keep = np.concatenate([[True], np.hypot(*np.diff(line, axis=0).T) > 0.5])
+    # resample at about 1 m (lanelet polylines can have vertices tens of metres apart)
+    seg = np.hypot(*np.diff(line, axis=0).T)
+    keep = np.concatenate([[True], seg > 1e-6])
     line = line[keep]
+    s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(line, axis=0).T))]
+    s_new = np.linspace(0.0, s[-1], max(2, int(math.ceil(s[-1])) + 1))
+    line = np.column_stack([np.interp(s_new, s, line[:, 0]), np.interp(s_new, s, line[:, 1])])
+    j = int(np.argmin(np.hypot(*(line - start_xy).T)))
+    line = line[max(j - 2, 0):]
     d = line[-1] - line[-2]
     d = d / np.hypot(*d)
     return np.vstack([line, line[-1] + _EXTEND_M * d])
@@ -290,21 +295,30 @@ def goal_step(imp: CommonRoadImport, result) -> int | None:
 
 
 def solution_trajectory(imp: CommonRoadImport, result, last_step: int | None = None):
-    """The driven trajectory as a CommonRoad KS trajectory (rear-axle positions, steering, speed,
-    yaw) from step 0 to ``last_step`` (default: all)."""
+    """The driven trajectory as a CommonRoad KS trajectory from step 0 to ``last_step``
+    (default: all).
+
+    Positions are the centre of gravity (CommonRoad's KS states are given there; its model moves
+    the rear axle, ``lr`` behind), the velocity is the rear axle's, ``v cos(beta)`` with the slip
+    angle ``beta = atan(lr / L tan(delta))``, and the steering angle of state k is the mean of the
+    commands held before and after it (KS steers with a bounded rate, our plant holds each command
+    for a step: the ramp through the means covers the same mean steering per step)."""
     from commonroad.scenario.state import KSState
     from commonroad.scenario.trajectory import Trajectory
 
-    lr = imp.spec.vehicle.lr_m
+    v = imp.spec.vehicle
+    lr, wheelbase = v.lr_m, v.lf_m + v.lr_m
     n = len(result.t_s) if last_step is None else last_step + 1
+    steer = np.asarray(result.steer_rad, float)
     states = []
     for k in range(n):
         x = result.x[k]
-        yaw = float(x[2])
+        before = steer[k - 1] if k > 0 else steer[0]
+        beta = math.atan(lr / wheelbase * math.tan(steer[k]))
         states.append(KSState(time_step=int(round(result.t_s[k] / imp.spec.dt_s)),
-                              position=np.array([x[0] - lr * math.cos(yaw), x[1] - lr * math.sin(yaw)]),
-                              steering_angle=float(result.steer_rad[k - 1]) if k > 0 else 0.0,
-                              velocity=float(x[3]), orientation=yaw))
+                              position=np.array([x[0], x[1]], float),
+                              steering_angle=float(0.5 * (before + steer[k])),
+                              velocity=float(x[3] * math.cos(beta)), orientation=float(x[2])))
     return Trajectory(states[0].time_step, states)
 
 
