@@ -138,7 +138,7 @@ def _straightest_route(net, start: int, length_m: float) -> list[int]:
         end_dir = ll.center_vertices[-1] - ll.center_vertices[-2]
         h = math.atan2(end_dir[1], end_dir[0])
 
-        def turn(s):
+        def turn(s, h=h):
             cv = net.find_lanelet_by_id(s).center_vertices
             d = cv[-1] - cv[0]
             return _angle_diff(math.atan2(d[1], d[0]), h)
