@@ -73,9 +73,14 @@ def test_import_maps_route_obstacles_and_initial_state(name):
     # dynamic obstacles carry their recorded trajectories as known predictions
     for o, entry in zip(imp.scenario.obstacles, spec.obstacles):
         if o.obstacle_role.value == "dynamic":
-            last = o.prediction.trajectory.state_list[-1]
-            assert entry.trajectory.points[-1] == pytest.approx(tuple(last.position))
-            assert entry.trajectory.t_s[-1] == pytest.approx(last.time_step * spec.dt_s)
+            states = o.prediction.trajectory.state_list
+            last = states[-1]
+            assert entry.trajectory.points[-2] == pytest.approx(tuple(last.position))
+            assert entry.trajectory.t_s[-2] == pytest.approx(last.time_step * spec.dt_s)
+            # then extended at the last velocity
+            v = (last.position - states[-2].position) / spec.dt_s
+            extra = entry.trajectory.t_s[-1] - entry.trajectory.t_s[-2]
+            assert entry.trajectory.points[-1] == pytest.approx(tuple(last.position + v * extra))
         else:
             assert entry.trajectory is None
 
@@ -168,3 +173,27 @@ def test_cli_runs_a_commonroad_file(tmp_path):
     cr = json.loads((out / "metrics.json").read_text())["commonroad"]
     assert cr["goal_reached"] and cr["collision_free"] and cr["road_compliant"] and cr["ks_feasible"]
     assert (out / "solution.xml").is_file() and (out / "trajectory.csv").is_file()
+
+
+@needs_files
+@pytest.mark.slow
+def test_blocked_lane_stops_behind_the_parked_car(capsys):
+    """ZAM_Tutorial_Urban-3_2 ("critical evasive"): a parked car blocks the route lanelet 12 m ahead
+    at 9 m/s. The lane is the route lanelet, so the controller does not change lanes: it stops behind
+    the car -- collision-free, on the road and KS-feasible, but the goal (past the car) is not
+    reached. The first 6 s of the 100 s scenario show it."""
+    imp = load_commonroad(DIR / "ZAM_Tutorial_Urban-3_2.xml")
+    imp = replace(imp, spec=imp.spec.model_copy(update={"duration_s": 6.0}))
+    exp = build_experiment(imp.spec)
+    res = run_experiment(exp)
+    m = compute_metrics(res, exp.footprint)
+    rep = check_drive(imp, res)
+    with capsys.disabled():
+        print(f"\nZAM_Tutorial_Urban-3_2.xml (first 6 s): checker: {rep.line()}; ours: final speed "
+              f"{res.x_final[3]:.2f} m/s, min clearance {np.min(res.clearance_m):.2f} m, "
+              f"solver failures {m['solver_failures']}")
+    assert rep.collision_free and rep.road_compliant and rep.feasible
+    assert rep.goal_step is None
+    parked = imp.scenario.obstacles[0].initial_state.position
+    assert res.x_final[3] < 0.2 and res.x_final[0] < parked[0]
+    assert np.min(res.clearance_m) > 0.0

@@ -36,6 +36,7 @@ from ..scenarios.schema import ScenarioSpec
 
 PRESET = "commonroad_ford_escort"
 _EXTEND_M = 30.0
+_EXTRAPOLATE_S = 10.0  # recorded obstacle trajectories are extended this long at their last velocity
 _V_SWITCH_MPS = 7.319  # CommonRoad Ford Escort: speed above which the acceleration limit falls as 1/v
 
 
@@ -192,10 +193,16 @@ def _obstacle_entry(o, dt: float) -> dict:
     pred = getattr(o, "prediction", None)
     if pred is not None and getattr(pred, "trajectory", None) is not None:
         states = [st] + list(pred.trajectory.state_list)
-        yaws = np.unwrap([float(s.orientation) for s in states])
-        entry["trajectory"] = {"t_s": [s.time_step * dt for s in states],
-                               "points": [(float(s.position[0]), float(s.position[1])) for s in states],
-                               "yaw_deg": [math.degrees(y) for y in yaws]}
+        yaws = list(np.unwrap([float(s.orientation) for s in states]))
+        t = [s.time_step * dt for s in states]
+        pts = [(float(s.position[0]), float(s.position[1])) for s in states]
+        if len(states) >= 2:
+            # past the end of the recording the obstacle keeps its last velocity (not a sudden stop)
+            vx, vy = ((pts[-1][0] - pts[-2][0]) / (t[-1] - t[-2]), (pts[-1][1] - pts[-2][1]) / (t[-1] - t[-2]))
+            t.append(t[-1] + _EXTRAPOLATE_S)
+            pts.append((pts[-1][0] + vx * _EXTRAPOLATE_S, pts[-1][1] + vy * _EXTRAPOLATE_S))
+            yaws.append(yaws[-1])
+        entry["trajectory"] = {"t_s": t, "points": pts, "yaw_deg": [math.degrees(y) for y in yaws]}
     return entry
 
 
