@@ -201,3 +201,18 @@ def test_obstacle_rows_are_separating_half_planes():
     # the car on the path is far from an obstacle at y = 1.2: every row holds there
     assert np.all(lhs[active] >= t.rows_b[active] - 1e-9)
     assert math.isfinite(float(t.rows_b[active].max()))
+
+
+def test_frenet_box_finds_an_obstacle_far_from_the_guess():
+    """A full-size car 40 m ahead of the arc-length guess is placed where it is, not at the end of
+    a short search window around the guess."""
+    from mpcdrive.paths import WaypointPath
+
+    c = math.sqrt(0.5)
+    path = WaypointPath([(0.0, 0.0), (50.0 * c, 50.0 * c), (100.0 * c, 100.0 * c)], ds_m=0.2)
+    # 60 m along the diagonal, 0.5 m left of it, aligned with it
+    ob = Obstacle(rectangle(4.5, 2.0), (60.0 * c - 0.5 * c, 60.0 * c + 0.5 * c, math.pi / 4))
+    box = frenet_box(path, ob.at(0.0), 20.0)
+    assert box.s_ref == pytest.approx(60.0, abs=0.05)
+    assert (box.s_lo, box.s_hi) == pytest.approx((57.75, 62.25), abs=0.05)
+    assert (box.e_lo, box.e_hi) == pytest.approx((-0.5, 1.5), abs=0.05)

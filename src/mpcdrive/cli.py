@@ -63,9 +63,21 @@ def _load(name: str):
         raise BadInput(str(e)) from None
 
 
-def _run_into(spec, out_dir: Path, show_progress: bool, source: str | None = None):
+def _load_commonroad(file: str):
+    from .adapters.commonroad import available, load_commonroad
+
+    if not available():
+        raise BadInput(f"{file}: CommonRoad scenarios need the commonroad extra (pip install 'mpcdrive[commonroad]')")
+    try:
+        return load_commonroad(file)
+    except (OSError, ValueError) as e:
+        raise BadInput(f"{file}: {e}") from None
+
+
+def _run_into(spec, out_dir: Path, show_progress: bool, source: str | None = None, extra_outputs=None):
     """Run one scenario and write its files into ``out_dir`` (with the interactive
-    ``report.html``); returns (result, metrics, figures, footprint)."""
+    ``report.html``; ``extra_outputs(result, out_dir)`` writes more); returns (result, metrics,
+    figures, footprint)."""
     from .io import write_json, write_trajectory_csv
     from .io.atomic import atomic_write_text
     from .plots import write_run_figures
@@ -84,6 +96,9 @@ def _run_into(spec, out_dir: Path, show_progress: bool, source: str | None = Non
     write_trajectory_csv(result, out_dir / "trajectory.csv")
     write_json(out_dir / "metrics.json", metrics)
     atomic_write_text(out_dir / "scenario.yaml", dump_scenario(spec))
+    if extra_outputs is not None:
+        metrics.update(extra_outputs(result, out_dir))
+        write_json(out_dir / "metrics.json", metrics)
     figures = write_run_figures(result, out_dir)
     write_run_html(out_dir, result, metrics, figures, exp.footprint, run_id=spec.id,
                    description=spec.description)
@@ -131,16 +146,21 @@ def list_cmd() -> None:
 
 @app.command()
 def run(
-    scenario: str = typer.Argument(..., help="built-in scenario id or a YAML scenario file"),
+    scenario: str = typer.Argument(..., help="built-in scenario id, a YAML scenario file or a CommonRoad .xml"),
     out: Path | None = typer.Option(None, "--out", help="output directory (default runs/<id>-<timestamp>)"),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
 ) -> None:
     """Run one scenario; write trajectory.csv, metrics.json, figures, the resolved scenario and
     report.html (an interactive replay)."""
-    spec = _load(scenario)
+    extra = None
+    if scenario.lower().endswith(".xml"):
+        imported = _load_commonroad(scenario)
+        spec, extra = imported.spec, imported.write_outputs
+    else:
+        spec = _load(scenario)
     out_dir = out or _default_out(spec.id)
     with _output_dir(out_dir) as tmp:
-        _, metrics, _, _ = _run_into(spec, tmp, not quiet, source=scenario)
+        _, metrics, _, _ = _run_into(spec, tmp, not quiet, source=scenario, extra_outputs=extra)
     typer.echo(_summary_line(spec.id, metrics))
     typer.echo(f"wrote {out_dir}")
 

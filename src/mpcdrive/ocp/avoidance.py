@@ -105,13 +105,16 @@ class FrenetBox:
 
 def frenet_box(path: Path, shape, s_guess: float) -> FrenetBox:
     """Frenet extent of a world shape near arc length ``s_guess``."""
+    # the search window reaches the shape however far it is from the path point at s_guess
     if isinstance(shape, WorldCircle):
-        s, e = path.project(shape.center, s_guess, window_m=max(2.0, 2 * shape.radius_m))
+        far = float(np.hypot(*(shape.center - path.position(s_guess))))
+        s, e = path.project(shape.center, s_guess, window_m=max(2.0, 2 * shape.radius_m) + far)
         r = shape.radius_m
         return FrenetBox(s, s - r, s + r, e - r, e + r)
     pts = shape.points
     c = pts.mean(axis=0)
-    s, _ = path.project(c, s_guess, window_m=2.0 + float(np.ptp(pts)))
+    far = float(np.hypot(*(c - path.position(s_guess))))
+    s, _ = path.project(c, s_guess, window_m=2.0 + float(np.ptp(pts)) + far)
     h = float(path.heading(s))
     t = np.array([math.cos(h), math.sin(h)])
     n = np.array([-t[1], t[0]])
@@ -282,6 +285,10 @@ class Avoidance:
             h = np.asarray(self.path.heading(s_ref), float)
             nl = np.column_stack([-np.sin(h), np.cos(h)])  # path left normal at the obstacle
             q_lat = self.path.position(s_ref) + nl * e_edge[:, None]
+            if side == SIDE_BLOCKED:
+                h_lo = np.asarray(self.path.heading(s_lo), float)
+                tb = np.column_stack([np.cos(h_lo), np.sin(h_lo)])  # path tangent at the near end
+                q_stop = self.path.position(s_lo)
             for i, o in enumerate(self.offsets):
                 P = lin[:, :2] + o * np.column_stack([c, s])
                 dist, q = self._nearest(P, j, centers[j], times)
@@ -294,6 +301,13 @@ class Avoidance:
                 n = np.where(lateral[:, None], side * nl, n)
                 q = np.where(lateral[:, None], q_lat, q)
                 active |= lateral
+                if side == SIDE_BLOCKED:
+                    # stop behind an obstacle now ahead: a half-plane across the path at its near end
+                    # (the nearest-point normal points forward once the linearization passes it)
+                    ahead = np.full(len(s_lo), boxes[j][0].s_lo >= s_arr[0] + self.half_length)
+                    n = np.where(ahead[:, None], -tb, n)
+                    q = np.where(ahead[:, None], q_stop, q)
+                    active |= ahead
                 row = slot * nd + i
                 # n . (p + J (x - xbar)) >= n . q + r_need, J = d p / d (x, y, yaw)
                 ay = o * (-n[:, 0] * s + n[:, 1] * c)

@@ -68,7 +68,7 @@ def build_path(spec) -> Path:
         return CirclePath(spec.center, spec.radius_m, spec.ccw, math.radians(spec.start_angle_deg))
     if spec.type == "csv":
         return load_track(spec).path
-    return WaypointPath(spec.points, closed=spec.closed, smoothing=spec.smoothing)
+    return WaypointPath(spec.points, closed=spec.closed, smoothing=spec.smoothing, ds_m=spec.ds_m)
 
 
 def build_obstacle(spec: ObstacleSpec) -> Obstacle:

@@ -67,6 +67,7 @@ class WaypointsSpec(_Strict):
     points: list[Point] = Field(min_length=2)
     closed: bool = False
     smoothing: NonNeg = 0.0
+    ds_m: Positive | None = None  # table spacing [m] (default: length / 20000, within 2 mm .. 0.1 m)
 
     @model_validator(mode="after")
     def _distinct(self):
