@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Protocol
 
 import numpy as np
@@ -23,3 +24,15 @@ class Controller(Protocol):
     def initial_warm(self, x0: np.ndarray) -> WarmStart: ...
 
     def step(self, x: np.ndarray, warm: WarmStart) -> ControlOutput: ...
+
+
+def check_state(x, state_names: tuple[str, ...]) -> np.ndarray:
+    """``x`` as a float array of one value per state; a ValueError naming the bad fields otherwise."""
+    x = np.asarray(x, dtype=float)
+    n = len(state_names)
+    if x.shape != (n,):
+        raise ValueError(f"state must have shape ({n},) {state_names}, got {x.shape}")
+    bad = [name for name, v in zip(state_names, x) if not math.isfinite(v)]
+    if bad:
+        raise ValueError(f"state field(s) {', '.join(bad)} not finite: {dict(zip(state_names, x.tolist()))}")
+    return x

@@ -42,6 +42,7 @@ from ..paths.base import Path
 from ..paths.compiled import path_arrays, path_eval, path_project, wrap_angle
 from ..solvers.dense_qp import STATUS_WORDS, gi_solve
 from ..types import ControlOutput, WarmStart
+from .base import check_state
 from .mpc import MpcConfig, plan_fallback
 
 _TWO_PI = 2.0 * math.pi
@@ -769,13 +770,7 @@ class FastLtvMpc:
         return WarmStart(s_m=float(s0), u_prev=np.zeros(self.nu))
 
     def _check_state(self, x) -> np.ndarray:
-        x = np.asarray(x, dtype=float)
-        if x.shape != (self.nx,):
-            raise ValueError(f"state must have shape ({self.nx},) {self.model.state_names}, got {x.shape}")
-        bad = [n for n, v in zip(self.model.state_names, x) if not math.isfinite(v)]
-        if bad:
-            raise ValueError(f"state field(s) {', '.join(bad)} not finite: {dict(zip(self.model.state_names, x.tolist()))}")
-        return x
+        return check_state(x, tuple(self.model.state_names))
 
     # -- one control step -----------------------------------------------------------------------
     def step(self, x, warm: WarmStart) -> ControlOutput:

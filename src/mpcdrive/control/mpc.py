@@ -29,6 +29,7 @@ from ..solvers.projected_gradient import ProjectedGradientBackend, ProjectedGrad
 from ..types import ControlOutput, SolveResult, WarmStart
 from ..units import TWO_PI, wrap_angle
 from .fallback import FALLBACK_HOLD, FALLBACK_SHIFTED_PLAN, FallbackConfig, FallbackLadder  # noqa: F401
+from .base import check_state
 
 
 @dataclass(frozen=True)
@@ -225,13 +226,7 @@ class LtvMpc:
         return WarmStart(s_m=float(s0), u_prev=np.zeros(self.nu))
 
     def _check_state(self, x) -> np.ndarray:
-        x = np.asarray(x, dtype=float)
-        if x.shape != (self.nx,):
-            raise ValueError(f"state must have shape ({self.nx},) {self.model.state_names}, got {x.shape}")
-        bad = [n for n, v in zip(self.model.state_names, x) if not math.isfinite(v)]
-        if bad:
-            raise ValueError(f"state field(s) {', '.join(bad)} not finite: {dict(zip(self.model.state_names, x.tolist()))}")
-        return x
+        return check_state(x, tuple(self.model.state_names))
 
     def _check_warm(self, warm: WarmStart) -> np.ndarray:
         u_prev = np.asarray(warm.u_prev, dtype=float)
