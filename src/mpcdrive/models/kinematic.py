@@ -118,7 +118,16 @@ def kinematic_jacobian_entries(yaw, v, delta, lq, lr_m, ns):
                                       lr_m, ns)
 
 
-class KinematicBicycle3:
+class _FromComponents:
+    """``f`` of a model from its single definition ``f_components`` (numpy batches)."""
+
+    def f(self, x, u):
+        x = np.asarray(x, float)
+        u = np.asarray(u, float)
+        return np.stack(self.f_components(_components(x), _components(u)), axis=-1)
+
+
+class KinematicBicycle3(_FromComponents):
     """Kinematic bicycle at constant speed.
 
     x : (3,) [x m, y m, yaw rad]; u : (1,) [delta rad] front steering angle.
@@ -139,11 +148,6 @@ class KinematicBicycle3:
         """The equations, on sequences of state / input components and the math namespace ``ns``
         (numpy, or a symbolic one such as CasADi's): the single definition behind :meth:`f`."""
         return kinematic_rhs(x[2], self.v_mps, u[0], self.params.lq, self.params.lr_m, ns)
-
-    def f(self, x, u):
-        x = np.asarray(x, float)
-        u = np.asarray(u, float)
-        return np.stack(self.f_components(_components(x), _components(u)), axis=-1)
 
     def jacobians(self, x, u):
         x = np.asarray(x, float)
@@ -174,7 +178,7 @@ class KinematicBicycle3:
         return _kinematic_reference(pose, kappa, self.params, feedforward, 1)
 
 
-class KinematicBicycle4:
+class KinematicBicycle4(_FromComponents):
     """Kinematic bicycle with speed as a state.
 
     x : (4,) [x m, y m, yaw rad, v m/s]; u : (2,) [delta rad, a m/s^2].
@@ -191,11 +195,6 @@ class KinematicBicycle4:
     def f_components(self, x, u, ns=np):
         """The equations on state / input components (see KinematicBicycle3.f_components)."""
         return (*kinematic_rhs(x[2], x[3], u[0], self.params.lq, self.params.lr_m, ns), u[1])
-
-    def f(self, x, u):
-        x = np.asarray(x, float)
-        u = np.asarray(u, float)
-        return np.stack(self.f_components(_components(x), _components(u)), axis=-1)
 
     def jacobians(self, x, u):
         x = np.asarray(x, float)
