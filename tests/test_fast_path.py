@@ -15,6 +15,7 @@ import subprocess
 import sys
 import warnings
 from pathlib import Path
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -381,3 +382,93 @@ def test_stale_cache_files_are_dropped_when_a_dependency_changes(tmp_path):
     dep.write_text("a = 2\n")
     assert drop_stale_cache(cache, "fast", [dep])  # changed: dropped
     assert not (cache / "fast._control_step-1.py311.nbi").exists() and (cache / "other.f-1.py311.nbi").exists()
+
+
+# ------------------------------------------------------------------ obstacles on the fast path
+def _obstacle_cases():
+    from mpcdrive.bench.problems import p3
+    from mpcdrive.ocp.avoidance import AvoidanceConfig
+    from mpcdrive.scene import Circle, ConstantVelocity, Obstacle, rectangle
+
+    b3 = p3()
+    m4 = KinematicBicycle4()
+    pb4 = MpcProblem(4, 2, 25, 0.02, Q=[5, 5, 10, 2], R=[0.1, 0.05], u_min=[-STEER, -2.0], u_max=[STEER, 1.5],
+                     x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [1.4], lane_half_width_m=0.9,
+                     du_max_per_s=[3.0, 5.0])
+    crossing = Obstacle(rectangle(0.4, 0.3), (3.0, -1.5, 0.3), ConstantVelocity(0.0, 0.5), name="crossing")
+    cone = Obstacle(Circle(0.2), (5.5, 0.15, 0.0), name="cone")
+    far = Obstacle(Circle(0.2), (40.0, 0.0, 0.0), name="far away")
+    return {
+        "P3: gaussian, lane, start outside the lane": (b3.model, b3.path, b3.problem, b3.config, b3.x0,
+                                                       b3.obstacles, b3.avoidance, 1),
+        "potential, moving rectangle + cone + far, speed, rates, waypoints": (
+            m4, WaypointPath([[0, 0], [4, 0.3], [8, -0.2], [12, 0]]), pb4, MpcConfig(v_ref_mps=1.0),
+            np.array([0.0, 0.2, 0.0, 0.8]), (crossing, cone, far),
+            AvoidanceConfig("potential", weight=0.5, epsilon_m2=0.05, max_obstacles=2, influence_m=4.0), 1),
+        "gaussian, SQP to convergence": (b3.model, b3.path, b3.problem, replace(b3.config, sqp_max_iterations=8,
+                                          sqp_tol=1e-6, sqp_max_time_s=10.0), np.array([2.0, 0.3, 0.0]),
+                                         b3.obstacles, b3.avoidance, 8),
+    }
+
+
+@pytest.mark.parametrize("case", list(_obstacle_cases()))
+def test_fast_matches_osqp_with_obstacle_costs(case):
+    """Potential and Gaussian obstacle costs (static and constant-velocity obstacles, circles and
+    rectangles, the nearest max_obstacles within reach), RTI and SQP: the fast path's commands
+    and plans are OSQP's, fed the states of OSQP's closed loop."""
+    model, path, pb, cfg, x0, obstacles, av, max_sqp = _obstacle_cases()[case]
+    fp = Footprint()
+    fast = make_mpc(model, path, pb, cfg, "fast", obstacles=obstacles, avoidance=av, footprint=fp)
+    ref = make_mpc(model, path, pb, cfg, "osqp", osqp_settings=TIGHT, obstacles=obstacles, avoidance=av, footprint=fp)
+    assert fast.backend_name == "fast" and ref.backend_name == "osqp"
+    plant = Plant(model)
+    x = x0.copy()
+    wr = ref.initial_warm(x)
+    worst, iters, near, unsolved = 0.0, [], 0, 0
+    for k in range(450):
+        orf = ref.step(x, wr)
+        of = fast.step(x, wr)  # the same warm start (plan, time)
+        assert of.status == "ok", (k, of.status)
+        assert of.warm.t_s == pytest.approx(orf.warm.t_s)
+        if orf.status != "ok":  # OSQP did not reach 1e-9 (its command is a fallback's): nothing to compare
+            unsolved += 1
+        else:
+            worst = max(worst, float(np.abs(of.u - orf.u).max()))
+            np.testing.assert_allclose(of.X_pred, orf.X_pred, atol=1e-5)
+            iters.append((of.sqp_iterations, orf.sqp_iterations))
+        near += any(np.hypot(*(np.array(o.pose_at(wr.t_s)[:2]) - x[:2])) < 1.5 for o in obstacles)
+        wr = orf.warm
+        x = plant.step(x, orf.u, pb.dt_s)
+    assert worst <= 1e-5, worst
+    assert unsolved <= 20, unsolved
+    assert near > 20  # the obstacles were close enough to matter
+    if max_sqp > 1:
+        assert max(i for i, _ in iters) > 1
+        assert all(abs(a - b) <= 1 for a, b in iters)  # the same SQP path (give or take the last test)
+
+
+def test_fast_path_obstacle_cost_changes_the_command():
+    """The obstacle cost really enters the fast QP: without it the command differs."""
+    from mpcdrive.bench.problems import p3
+
+    b = p3()
+    x = np.array([4.2, 0.05, 0.0])
+    with_ob = make_mpc(b.model, b.path, b.problem, b.config, "fast", obstacles=b.obstacles, avoidance=b.avoidance)
+    without = make_mpc(b.model, b.path, b.problem, b.config, "fast")
+    u1 = with_ob.step(x, with_ob.initial_warm(x)).u
+    u0 = without.step(x, without.initial_warm(x)).u
+    assert abs(u1[0] - u0[0]) > 1e-3
+
+
+def test_obstacle_formulations_the_fast_path_declines_are_named():
+    from mpcdrive.control.fast import obstacles_unsupported_reason
+    from mpcdrive.ocp.avoidance import AvoidanceConfig
+    from mpcdrive.scene import Circle, Obstacle
+    from mpcdrive.scene.obstacles import TrajectoryMotion
+
+    ob = Obstacle(Circle(0.2), (1.0, 0.0, 0.0))
+    assert obstacles_unsupported_reason((ob,), AvoidanceConfig("gaussian")) is None
+    assert "hard" in obstacles_unsupported_reason((ob,), AvoidanceConfig("hard"))
+    assert "corridor" in obstacles_unsupported_reason((ob,), AvoidanceConfig("corridor"))
+    rec = Obstacle(Circle(0.2), (1.0, 0.0, 0.0), TrajectoryMotion([0.0, 1.0], [0.0, 1.0], [0.0, 0.0], [0.0, 0.0]))
+    assert "TrajectoryMotion" in obstacles_unsupported_reason((rec,), AvoidanceConfig("potential"))

@@ -43,10 +43,6 @@ def make_mpc(model, path: Path, problem: MpcProblem, config: MpcConfig = MpcConf
         settings = fast_settings if fast_settings is not None else FastSettings()
         fp = footprint if footprint is not None else Footprint()
         reason = None
-        if obstacles:
-            reason = "obstacles are solved by the OSQP controller only"
-        elif config.speed_profile is not None or config.prediction_substeps != 1 or config.sqp_max_iterations != 1:
-            reason = "speed profiles, prediction substeps and SQP iterations need the OSQP controller"
         fast_problem = problem
         if reason is None and problem.lane_half_width_m is not None:
             # the same body-inside-the-lane bound the OSQP controller keeps
@@ -56,9 +52,9 @@ def make_mpc(model, path: Path, problem: MpcProblem, config: MpcConfig = MpcConf
             else:
                 fast_problem = replace(problem, lane_half_width_m=lim)
         if reason is None:
-            reason = fast_unsupported_reason(model, path, fast_problem, config, settings)
+            reason = fast_unsupported_reason(model, path, fast_problem, config, settings, obstacles, avoidance)
         if reason is None:
-            return FastLtvMpc(model, path, fast_problem, config, settings)
+            return FastLtvMpc(model, path, fast_problem, config, settings, obstacles, avoidance)
         warnings.warn(f"fast backend not used: {reason}; using the OSQP controller", FastPathUnavailable,
                       stacklevel=2)
     kw = {} if footprint is None else {"footprint": footprint}

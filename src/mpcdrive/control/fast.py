@@ -10,7 +10,15 @@ function that works in buffers allocated at construction. The QP is condensed on
 by a backward recursion ``P_k = W_k + A_k' P_{k+1} A_k`` (O(N^2) blocks), and the dense QP is
 solved by the dual active-set method of :mod:`mpcdrive.solvers.dense_qp`, which is exact (no
 tolerance on optimality; feasibility to 1e-9) and costs a single Cholesky factorization when no
-constraint is active.
+constraint is active. The soft lane's slacks enter that QP only where they can be nonzero
+(:func:`_lane_solve`: first without slacks, checked by the exact-penalty condition), so a car
+inside its lane pays for N nu variables, not N (nu + 1).
+
+Obstacles with the potential (eq. 55) or Gaussian (eq. 56) cost -- static or at constant
+velocity, circles or polygons -- add their convex second-order model at the linearization
+trajectory to the state weights of each step, exactly as ``ocp.avoidance`` does for the OSQP
+controller; SQP iterations (``MpcConfig.sqp_max_iterations``) re-run the compiled step around
+the current iterate.
 
 Compiled functions use numba's on-disk cache, so only the first process on a machine compiles
 (tens of seconds); later processes load the machine code.
@@ -37,9 +45,11 @@ from ..models.compiled import (
     model_steady_state,
     rollout_into,
 )
+from ..ocp.avoidance import AvoidanceConfig
 from ..ocp.problem import MpcProblem
 from ..paths.base import Path
 from ..paths.compiled import path_arrays, path_eval, path_project, wrap_angle
+from ..scene.obstacles import Circle, ConstantVelocity, Polygon, Static
 from ..solvers.dense_qp import STATUS_WORDS, gi_solve
 from ..types import ControlOutput, WarmStart
 from .base import check_state
@@ -52,17 +62,29 @@ _BAD_STATE = 4
 
 # integer parameters (ip)
 _I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH, _I_LIN, _I_METHOD, _I_HORIZON, _I_FF, _I_LANE, \
-    _I_MCONST, _I_RATE0, _I_MAXITER, _I_GAMMA, _I_NZ, _I_RICCATI, _I_MQ = range(17)
-_NIP = 17
+    _I_MCONST, _I_RATE0, _I_MAXITER, _I_GAMMA, _I_NZ, _I_RICCATI, _I_MQ, _I_OFORM, _I_NOBS, _I_OMAX = range(20)
+_NIP = 20
+# obstacle cost formulations (ip[_I_OFORM])
+_OBS_NONE, _OBS_POTENTIAL, _OBS_GAUSSIAN = 0, 1, 2
+# linearization modes of a step: no plan (roll out the references), the previous step's plan
+# shifted by one step (real-time iteration), the current SQP iterate as it is
+MODE_NO_PLAN, MODE_SHIFTED_PLAN, MODE_ITERATE = 0, 1, 2
+# columns of an obstacle row: pose (x, y) [m] at t = 0, velocity (vx, vy) [m/s], bounding radius
+# [m], offset (x, y) [m] of the point projected for the path heading, projection window extra [m]
+_OB_X, _OB_Y, _OB_VX, _OB_VY, _OB_RB, _OB_OX, _OB_OY, _OB_WIN = range(8)
+_NOB = 8
 # the float arrays of a controller, all views of one buffer (one argument to the compiled step:
 # passing arrays one by one costs about 0.1 us each in the call)
 (_W_FP, _W_MP, _W_BND, _W_GEO, _W_WQ, _W_RM, _W_RC, _W_TABS, _W_TABXY, _W_TABH, _W_TABK, _W_C, _W_B,
  _W_REFS, _W_XREF, _W_UREF, _W_XBAR, _W_UBAR, _W_F, _W_A, _W_BD, _W_CD, _W_LANEN, _W_LANEB, _W_XF, _W_P,
  _W_LAM, _W_VB, _W_S, _W_T2, _W_GAM, _W_H, _W_G, _W_Z, _W_L, _W_J, _W_RQ, _W_D, _W_ZDIR, _W_R, _W_UQ,
- _W_SQ, _W_ROWN, _W_LAMQ, _W_DW, _W_KG, _W_KF, _W_PA, _W_MG, _W_GG, _W_QV) = range(51)
-_NW = 51
+ _W_SQ, _W_ROWN, _W_LAMQ, _W_DW, _W_KG, _W_KF, _W_PA, _W_MG, _W_GG, _W_QV, _W_WE, _W_QT, _W_OBS,
+ _W_ODIST) = range(55)
+_NW = 55
 # float parameters (fp)
-_F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_LANEW, _F_SLACK2, _F_SLACK1, _F_TOL = range(8)
+_F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_LANEW, _F_SLACK2, _F_SLACK1, _F_TOL, _F_OW, _F_OEPS, _F_OSX, \
+    _F_OSY, _F_OINF = range(13)
+_NFP = 13
 # info outputs
 _O_S, _O_EY, _O_EPSI, _O_ITER = range(4)
 
@@ -89,9 +111,53 @@ class FastSettings:
             raise ValueError(f"max_variables must be >= 1, got {self.max_variables}")
 
 
+def obstacles_unsupported_reason(obstacles, avoidance: AvoidanceConfig | None) -> str | None:
+    """Why the compiled step cannot take these obstacles as ``LtvMpc`` would, or None.
+
+    Covered: the cost formulations (``potential``, ``gaussian``) without a detour reference, on
+    circle and polygon obstacles that stand still or move at constant velocity."""
+    if not obstacles:
+        return None
+    av = avoidance or AvoidanceConfig()
+    if not av.uses_cost:
+        return f"the {av.formulation!r} obstacle formulation (constraint rows) is solved by the OSQP controller only"
+    if av.detour != "none":
+        return f"the {av.detour!r} detour reference is built by the OSQP controller only"
+    for ob in obstacles:
+        if not isinstance(ob.motion, (Static, ConstantVelocity)):
+            return f"obstacle {ob.name or '?'} follows a {type(ob.motion).__name__} (only static or constant velocity)"
+        if not isinstance(ob.shape, (Circle, Polygon)):
+            return f"obstacle {ob.name or '?'} has a {type(ob.shape).__name__} shape"
+    return None
+
+
+def _obstacle_table(obstacles) -> np.ndarray:
+    """(n, _NOB) rows of the compiled obstacle description (see ``_OB_*``)."""
+    tab = np.zeros((max(len(obstacles), 1), _NOB))
+    for j, ob in enumerate(obstacles):
+        x0, y0, yaw0 = ob.pose
+        vx, vy = (ob.motion.vx_mps, ob.motion.vy_mps) if isinstance(ob.motion, ConstantVelocity) else (0.0, 0.0)
+        tab[j, [_OB_X, _OB_Y, _OB_VX, _OB_VY, _OB_RB]] = x0, y0, vx, vy, ob.shape.bounding_radius_m
+        if isinstance(ob.shape, Circle):
+            tab[j, _OB_WIN] = max(2.0, 2.0 * ob.shape.radius_m)
+        else:  # as ocp.avoidance.frenet_box: the vertex mean is projected (a fixed offset: no rotation)
+            pts = ob.at(0.0).points
+            tab[j, _OB_OX], tab[j, _OB_OY] = pts.mean(axis=0) - (x0, y0)
+            tab[j, _OB_WIN] = 2.0 + float(np.ptp(pts))
+    return tab
+
+
 def fast_unsupported_reason(model, path: Path, problem: MpcProblem, config: MpcConfig = MpcConfig(),
-                            settings: FastSettings = FastSettings()) -> str | None:
+                            settings: FastSettings = FastSettings(), obstacles=(),
+                            avoidance: AvoidanceConfig | None = None) -> str | None:
     """Why the compiled step cannot solve this problem exactly as ``LtvMpc`` would, or None."""
+    if config.speed_profile is not None:
+        return "speed profiles need the OSQP controller"
+    if config.prediction_substeps != 1:
+        return "prediction substeps need the OSQP controller"
+    reason = obstacles_unsupported_reason(obstacles, avoidance)
+    if reason is not None:
+        return reason
     if model_code(model) is None:
         return f"model {type(model).__name__} has no compiled form"
     if path_arrays(path) is None:
@@ -110,9 +176,10 @@ def fast_unsupported_reason(model, path: Path, problem: MpcProblem, config: MpcC
 
 
 def _constant_rows(problem: MpcProblem, nz: int):
-    """Rows of ``C z >= b`` that do not change between steps (input bounds, input rates, slack
-    signs), the row of the first u_0 rate row (its b follows u_prev), and how many rows the
-    step adds (state bounds, lane)."""
+    """Rows of ``C z >= b`` that do not change between steps (input bounds, input rates), the row
+    of the first u_0 rate row (its b follows u_prev), how many rows the step adds after them
+    (state bounds, lane) and the lane slacks' sign rows, which go last (a solve without the
+    slacks leaves them out)."""
     N, nu = problem.N, problem.nu
     rows, rhs = [], []
 
@@ -143,29 +210,25 @@ def _constant_rows(problem: MpcProblem, nz: int):
                 rows += [r, -r]
                 rhs += [-dmax[i], -dmax[i]]
     lane = problem.lane_half_width_m is not None
-    if lane:
-        for k in range(N):
-            rows.append(unit(N * nu + k))
-            rhs.append(0.0)
+    slack_rows = [unit(N * nu + k) for k in range(N)] if lane else []
     n_state = N * int(np.isfinite(problem.x_min).sum() + np.isfinite(problem.x_max).sum())
     n_var = n_state + (2 * N if lane else 0)
-    return rows, rhs, r_rate0, n_var
+    return rows, rhs, r_rate0, n_var, slack_rows
 
 
 @njit(cache=True)
-def _riccati(N, nx, nu, A, B, c, xref, uref, Wq, Rm, x, P, p, K, kf, PA, M, G, q, z):
+def _riccati(N, nx, nu, A, B, c, qt, uref, Wq, Rm, x, P, p, K, kf, PA, M, G, q, z):
     """Unconstrained minimizer of the tracking cost (no Rc, no slack) by the backward Riccati
     recursion ``V_k(x) = x'P_k x + 2 p_k'x + const``, ``u_k = K_k x_k + kf_k``: O(N) work.
+    The state cost of x_k is ``x' Wq[k-1] x - 2 qt[k-1]' x``.
 
     Scratch: PA (nx, nx), M (nu, nx), G (nu, nu), q (nx,). Writes z[:N nu] = U of the minimizer
     (rolled out from x) and uses p[1:] for the rolled-out states. Returns False if some
     ``R + B'PB`` is not numerically positive definite."""
     for i in range(nx):
-        t = 0.0
         for j in range(nx):
             P[N, i, j] = Wq[N - 1, i, j]
-            t -= Wq[N - 1, i, j] * xref[N, j]
-        p[N, i] = t
+        p[N, i] = -qt[N - 1, i]
     for k in range(N - 1, -1, -1):
         # q = P c + p ; PA = P A ; M = B'PA ; G = R + B'PB ; h = B'q - R ur (in kf[k])
         for i in range(nx):
@@ -236,9 +299,7 @@ def _riccati(N, nx, nu, A, B, c, xref, uref, Wq, Rm, x, P, p, K, kf, PA, M, G, q
         if k >= 1:
             # P_k = W_k + A'PA + M'K ; p_k = -W_k r_k + A'q + M'kf
             for i in range(nx):
-                t = 0.0
-                for j in range(nx):
-                    t -= Wq[k - 1, i, j] * xref[k, j]
+                t = -qt[k - 1, i]
                 for l in range(nx):
                     t += A[k, l, i] * q[l]
                 for a in range(nu):
@@ -289,6 +350,80 @@ def _plan_feasible(N, nx, nu, z, Xr, u_prev, u_min, u_max, dmax, x_min, x_max, t
     return True
 
 
+@njit(cache=True)
+def _obstacle_cost(form, nobs, omax, obs, odist, fp, t_s, dt, x, Xbar, F, N, s0, pkind, geo, tab_s, tab_xy,
+                   tab_h, tab_k, We, qt):
+    """Add the potential (eq. 55) or Gaussian (eq. 56) obstacle cost's second-order model at the
+    linearization trajectory (x_k = Xbar[k], x_N = F[N-1]), its Hessian projected onto the PSD
+    cone, to the state cost ``x' We x - 2 qt' x`` of x_1..x_N; as ``ocp.avoidance`` does for the
+    OSQP controller: the ``max_obstacles`` nearest obstacles within the influence distance, each
+    predicted at constant velocity, Sigma aligned with the path where the obstacle is."""
+    w, eps, reach = fp[_F_OW], fp[_F_OEPS], fp[_F_OINF]
+    isx2, isy2 = 1.0 / (fp[_F_OSX] * fp[_F_OSX]), 1.0 / (fp[_F_OSY] * fp[_F_OSY])
+    for j in range(nobs):
+        d = math.hypot(obs[j, _OB_X] + obs[j, _OB_VX] * t_s - x[0], obs[j, _OB_Y] + obs[j, _OB_VY] * t_s - x[1])
+        d -= obs[j, _OB_RB]
+        odist[j] = d if d <= reach else math.inf
+    s00, s01, s11 = 0.0, 0.0, 0.0
+    for _slot in range(min(omax, nobs)):
+        j, best = -1, math.inf
+        for jj in range(nobs):  # nearest first, ties by index
+            if odist[jj] < best:
+                j, best = jj, odist[jj]
+        if j < 0:
+            break
+        odist[j] = math.inf
+        vx, vy = obs[j, _OB_VX], obs[j, _OB_VY]
+        if form == _OBS_GAUSSIAN:
+            cx = obs[j, _OB_X] + vx * t_s + obs[j, _OB_OX]
+            cy = obs[j, _OB_Y] + vy * t_s + obs[j, _OB_OY]
+            px0, py0, _h0, _k0 = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s0)
+            sj, _e = path_project(pkind, geo, tab_s, tab_xy, s0, obs[j, _OB_WIN] + math.hypot(cx - px0, cy - py0),
+                                  cx, cy)
+            h = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, sj)[2]
+            ch, sh = math.cos(h), math.sin(h)
+            s00 = ch * ch * isx2 + sh * sh * isy2
+            s01 = ch * sh * (isx2 - isy2)
+            s11 = sh * sh * isx2 + ch * ch * isy2
+        for k in range(1, N + 1):
+            if k < N:
+                px, py = Xbar[k, 0], Xbar[k, 1]
+            else:
+                px, py = F[N - 1, 0], F[N - 1, 1]
+            tk = t_s + dt * k
+            dx = px - (obs[j, _OB_X] + vx * tk)
+            dy = py - (obs[j, _OB_Y] + vy * tk)
+            if form == _OBS_POTENTIAL:
+                den = dx * dx + dy * dy + eps
+                d2, d3 = den * den, den * den * den
+                g0, g1 = -2.0 * w * dx / d2, -2.0 * w * dy / d2
+                a = -2.0 * w / d2 + 8.0 * w * dx * dx / d3
+                b = 8.0 * w * dx * dy / d3
+                cc = -2.0 * w / d2 + 8.0 * w * dy * dy / d3
+            else:
+                sd0, sd1 = s00 * dx + s01 * dy, s01 * dx + s11 * dy
+                val = w * math.exp(-0.5 * (dx * sd0 + dy * sd1))
+                g0, g1 = -val * sd0, -val * sd1
+                a, b, cc = val * (sd0 * sd0 - s00), val * (sd0 * sd1 - s01), val * (sd1 * sd1 - s11)
+            # projection of [[a, b], [b, cc]] onto the PSD cone (closed-form 2 x 2 eigen-split)
+            half = 0.5 * (a + cc)
+            rad = math.sqrt(0.25 * (a - cc) * (a - cc) + b * b)
+            l1, l2 = half + rad, half - rad
+            if l2 >= 0.0:
+                h00, h01, h11 = a, b, cc
+            elif l1 <= 0.0:
+                h00, h01, h11 = 0.0, 0.0, 0.0
+            else:
+                f = l1 / (l1 - l2)
+                h00, h01, h11 = f * (a - l2), f * b, f * (cc - l2)
+            We[k - 1, 0, 0] += 0.5 * h00
+            We[k - 1, 0, 1] += 0.5 * h01
+            We[k - 1, 1, 0] += 0.5 * h01
+            We[k - 1, 1, 1] += 0.5 * h11
+            qt[k - 1, 0] -= 0.5 * (g0 - h00 * px - h01 * py)
+            qt[k - 1, 1] -= 0.5 * (g1 - h01 * px - h11 * py)
+
+
 @njit(cache=True, inline="always")
 def _v1(w, fo, i):
     return w[fo[i]:fo[i + 1]]
@@ -305,9 +440,11 @@ def _v3(w, fo, fs, i):
 
 
 @njit(cache=True)
-def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, wbuf, ibuf, out, info):
-    """One control step; returns a status code (0 ok, 1 infeasible, 2 max_iter, 3 failed,
-    4 non-finite state). Writes ``out = [u (nu), X ((N+1) nx), U (N nu), xref ((N+1) nx)]`` and
+def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, wbuf, ibuf, out, info):
+    """One control step (or one SQP iteration of it) at time ``t_s`` [s]; returns a status code
+    (0 ok, 1 infeasible, 2 max_iter, 3 failed, 4 non-finite state). ``mode`` says what (Xw, Uw)
+    is (``MODE_*``: no plan, the previous step's plan, the current SQP iterate). Writes
+    ``out = [u (nu), X ((N+1) nx), U (N nu), xref ((N+1) nx)]`` and
     ``info = [s, e_y, e_psi, iterations]``. ``wbuf`` holds every float array (constants and
     work), ``ibuf`` the integer parameters, the layout of ``wbuf`` and the active-set work."""
     ip = ibuf[:_NIP]
@@ -316,6 +453,7 @@ def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, wbuf, ibuf, out, info):
     a0 = _NIP + 4 * _NW + 1
     active = ibuf[a0:a0 + ip[_I_NZ]]
     isact = ibuf[a0 + ip[_I_NZ]:a0 + ip[_I_NZ] + ip[_I_MQ]]
+    kpos = ibuf[a0 + ip[_I_NZ] + ip[_I_MQ]:a0 + ip[_I_NZ] + ip[_I_MQ] + ip[_I_N]]
     fp, mp, bnd, geo = _v1(wbuf, fo, _W_FP), _v1(wbuf, fo, _W_MP), _v1(wbuf, fo, _W_BND), _v1(wbuf, fo, _W_GEO)
     Wq, Rm, Rc = _v3(wbuf, fo, fs, _W_WQ), _v2(wbuf, fo, fs, _W_RM), _v2(wbuf, fo, fs, _W_RC)
     tab_s, tab_xy = _v1(wbuf, fo, _W_TABS), _v2(wbuf, fo, fs, _W_TABXY)
@@ -333,6 +471,7 @@ def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, wbuf, ibuf, out, info):
     sq, rown, lamq = _v1(wbuf, fo, _W_SQ), _v1(wbuf, fo, _W_ROWN), _v1(wbuf, fo, _W_LAMQ)
     dw, Kg, kf = _v3(wbuf, fo, fs, _W_DW), _v3(wbuf, fo, fs, _W_KG), _v2(wbuf, fo, fs, _W_KF)
     PA, Mg, Gg, qv = _v2(wbuf, fo, fs, _W_PA), _v2(wbuf, fo, fs, _W_MG), _v2(wbuf, fo, fs, _W_GG), _v1(wbuf, fo, _W_QV)
+    We, qt = _v3(wbuf, fo, fs, _W_WE), _v2(wbuf, fo, fs, _W_QT)
     mkind, nx, nu, N = ip[_I_MODEL], ip[_I_NX], ip[_I_NU], ip[_I_N]
     pkind, lin, meth, hmode, ff, lane = ip[_I_PATH], ip[_I_LIN], ip[_I_METHOD], ip[_I_HORIZON], ip[_I_FF], ip[_I_LANE]
     nz = ip[_I_NZ]
@@ -385,13 +524,22 @@ def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, wbuf, ibuf, out, info):
             xref[k, 2] -= slip
 
     # -- linearization points and discrete model ---------------------------------------------
-    if lin == 1:
+    if mode == MODE_ITERATE:
+        for i in range(nx):
+            Xbar[0, i] = x[i]
+        for k in range(1, N):
+            for i in range(nx):
+                Xbar[k, i] = Xw[k, i]
+        for k in range(N):
+            for a in range(nu):
+                Ubar[k, a] = Uw[k, a]
+    elif lin == 1:
         for k in range(N):
             for i in range(nx):
                 Xbar[k, i] = x[i]
             for a in range(nu):
                 Ubar[k, a] = u_prev[a]
-    elif has_plan:
+    elif mode == MODE_SHIFTED_PLAN:
         sh = _TWO_PI * np.rint((x[2] - Xw[1, 2]) / _TWO_PI)
         for i in range(nx):
             Xbar[0, i] = x[i]
@@ -409,7 +557,7 @@ def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, wbuf, ibuf, out, info):
         for i in range(nx):
             Xbar[0, i] = x[i]
         rollout_into(mkind, mp, nx, Xbar, Ubar, N - 1, dt, meth, dw[0])
-    kmax = 1 if lin == 1 else N
+    kmax = 1 if lin == 1 and mode != MODE_ITERATE else N
     for k in range(kmax):
         discrete_step_jacobians(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
     for k in range(kmax, N):
@@ -433,6 +581,20 @@ def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, wbuf, ibuf, out, info):
             finite = finite and math.isfinite(uref[k, j])
     if not finite:
         return 3
+    # -- state cost of x_1..x_N: x' We x - 2 qt' x, with the obstacle cost's convex model ------
+    for k in range(N):
+        for i in range(nx):
+            t = 0.0
+            for j in range(nx):
+                t += Wq[k, i, j] * xref[k + 1, j]
+            qt[k, i] = t
+    if ip[_I_OFORM] != _OBS_NONE:
+        for k in range(N):
+            for i in range(nx):
+                for j in range(nx):
+                    We[k, i, j] = Wq[k, i, j]
+        _obstacle_cost(ip[_I_OFORM], ip[_I_NOBS], ip[_I_OMAX], _v2(wbuf, fo, fs, _W_OBS), _v1(wbuf, fo, _W_ODIST),
+                       fp, t_s, dt, x, Xbar, F, N, s0, pkind, geo, tab_s, tab_xy, tab_h, tab_k, We, qt)
     if lane == 1:
         for k in range(N):
             yaw = refs[k + 1, 2]
@@ -443,7 +605,7 @@ def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, wbuf, ibuf, out, info):
     # -- no Rc, no lane: try the unconstrained minimizer (Riccati, O(N)); if it satisfies every
     # bound it is the QP's solution ---------------------------------------------------------------
     if ip[_I_RICCATI] == 1:
-        if _riccati(N, nx, nu, A, B, c, xref, uref, Wq, Rm, x, P, lam, Kg, kf, PA, Mg, Gg, qv, z):
+        if _riccati(N, nx, nu, A, B, c, qt, uref, We, Rm, x, P, lam, Kg, kf, PA, Mg, Gg, qv, z):
             if _plan_feasible(N, nx, nu, z, lam, u_prev, u_min, u_max, dmax, x_min, x_max, fp[_F_TOL]):
                 _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out)
                 return 0
@@ -460,11 +622,11 @@ def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, wbuf, ibuf, out, info):
     # P_N = W_N ; P_k = W_k + A_k' P_{k+1} A_k ; lam_k = W_k e_k + A_k' lam_{k+1}
     for i in range(nx):
         for j in range(nx):
-            P[N, i, j] = Wq[N - 1, i, j]
+            P[N, i, j] = We[N - 1, i, j]
     for i in range(nx):
-        t = 0.0
+        t = -qt[N - 1, i]
         for j in range(nx):
-            t += Wq[N - 1, i, j] * (xf[N, j] - xref[N, j])
+            t += We[N - 1, i, j] * xf[N, j]
         lam[N, i] = t
     for k in range(N - 1, 0, -1):
         for i in range(nx):
@@ -475,14 +637,14 @@ def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, wbuf, ibuf, out, info):
                 T2[i, j] = t  # P_{k+1} A_k (T2 is nx x max(nx, nu))
         for i in range(nx):
             for j in range(nx):
-                t = Wq[k - 1, i, j]
+                t = We[k - 1, i, j]
                 for l in range(nx):
                     t += A[k, l, i] * T2[l, j]
                 P[k, i, j] = t
         for i in range(nx):
-            t = 0.0
+            t = -qt[k - 1, i]
             for j in range(nx):
-                t += Wq[k - 1, i, j] * (xf[k, j] - xref[k, j]) + A[k, j, i] * lam[k + 1, j]
+                t += We[k - 1, i, j] * xf[k, j] + A[k, j, i] * lam[k + 1, j]
             lam[k, i] = t
     # gradient
     for k in range(N):
@@ -544,13 +706,6 @@ def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, wbuf, ibuf, out, info):
             for cc in range(c0, nzu):
                 H[cc, row] = H[row, cc]
         cur = nxt
-    if lane == 1:
-        for k in range(N):
-            for jj in range(nz):
-                H[nzu + k, jj] = 0.0
-                H[jj, nzu + k] = 0.0
-            H[nzu + k, nzu + k] = 2.0 * fp[_F_SLACK2]
-            g[nzu + k] = fp[_F_SLACK1]
 
     # -- constraint rows that change each step -------------------------------------------------
     r0 = ip[_I_RATE0]
@@ -560,6 +715,7 @@ def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, wbuf, ibuf, out, info):
             b[r0 + 1] = -u_prev[a] - dmax[a]
             r0 += 2
     m = ip[_I_MCONST]
+    m_lane = m
     if ip[_I_GAMMA] == 1:
         # Gam[k] = d x_{k+1} / d z: Gam[k] = A_k Gam[k-1] in the first k blocks, B_k in block k,
         # zero after it (never written)
@@ -592,6 +748,7 @@ def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, wbuf, ibuf, out, info):
                     m += 1
         if lane == 1:
             w = fp[_F_LANEW]
+            m_lane = m
             for k in range(1, N + 1):
                 n0, n1 = lane_n[k - 1, 0], lane_n[k - 1, 1]
                 nxf = n0 * xf[k, 0] + n1 * xf[k, 1]
@@ -602,20 +759,106 @@ def _control_step(x, s_guess, u_prev, Xw, Uw, has_plan, wbuf, ibuf, out, info):
                 for jj in range(nzu, nz):
                     C[m, jj] = 0.0
                     C[m + 1, jj] = 0.0
-                C[m, nzu + k - 1] = 1.0
-                C[m + 1, nzu + k - 1] = 1.0
                 b[m] = nxf - lane_b[k - 1] - w
                 b[m + 1] = lane_b[k - 1] - w - nxf
                 m += 2
 
     # -- solve, then the plan and the command --------------------------------------------------
-    code, iters = gi_solve(H, g, C, b, m, nz, z, lamq, active, isact, L, J, Rq, d, zdir, r, uq,
-                           sq, rown, ip[_I_MAXITER], fp[_F_TOL])
+    if lane == 1:
+        # steps where the linearization trajectory is on or beyond a lane edge (within 1 mm)
+        edge = fp[_F_LANEW] - 1e-3
+        for k in range(N):
+            px, py = (Xbar[k + 1, 0], Xbar[k + 1, 1]) if k < N - 1 else (F[N - 1, 0], F[N - 1, 1])
+            kpos[k] = 1 if abs(lane_n[k, 0] * px + lane_n[k, 1] * py - lane_b[k]) > edge else 0
+        for k in range(N - 1, 0, -1):  # and the 3 steps after each (RTI plans move a little)
+            if kpos[k - 1] == 1 or (k >= 2 and kpos[k - 2] == 1) or (k >= 3 and kpos[k - 3] == 1):
+                kpos[k] = 1
+        code, iters = _lane_solve(H, g, C, b, m, m_lane, N, nzu, kpos, fp[_F_SLACK2], fp[_F_SLACK1], z, lamq,
+                                  active, isact, L, J, Rq, d, zdir, r, uq, sq, rown, ip[_I_MAXITER], fp[_F_TOL])
+    else:
+        code, iters = gi_solve(H, g, C, b, m, nz, z, lamq, active, isact, L, J, Rq, d, zdir, r, uq,
+                               sq, rown, ip[_I_MAXITER], fp[_F_TOL])
     info[_O_ITER] = iters
     if code != 0:
         return code
     _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out)
     return 0
+
+
+@njit(cache=True)
+def _lane_solve(H, g, C, b, m, m_lane, N, nzu, kpos, w2, w1, z, lam, active, isact, L, J, Rq, d, zdir, r, uq,
+                sq, rown, max_iter, tol):
+    """The condensed QP with the soft lane bound, the lane slacks only where they can be nonzero.
+
+    ``H[:nzu, :nzu]``, ``g[:nzu]`` are the input part; rows ``[0, m)`` of ``C z >= b`` the
+    constraints, the two lane rows of step k at ``m_lane + 2k`` (their slack columns are written
+    here). First the inputs alone, lane rows hard: if that solves and no step's lane multipliers
+    sum to more than the slack's l1 weight ``w1``, zero slacks satisfy the optimality conditions
+    of the soft problem (exact penalty), so it is its solution. Else slacks are given to the steps
+    flagged in ``kpos`` (1 = slack; the caller flags the steps the linearization violates), plus
+    every step whose multipliers exceed ``w1``, and solved again until no step without a slack
+    exceeds it (or with a slack on every step: the full problem). The slacks' quadratic weight is
+    ``w2``; their sign rows follow row m. z[:nzu] holds the inputs."""
+    code, iters = gi_solve(H, g, C, b, m, nzu, z, lam, active, isact, L, J, Rq, d, zdir, r, uq,
+                           sq, rown, max_iter, tol)
+    if code == 0:
+        done = True
+        for k in range(N):
+            if lam[m_lane + 2 * k] + lam[m_lane + 2 * k + 1] > w1:
+                kpos[k] = 1
+                done = False
+        if done:
+            return 0, iters
+    else:
+        nk = 0
+        for k in range(N):
+            nk += kpos[k]
+        if nk == 0:
+            for k in range(N):
+                kpos[k] = 1
+    for _round in range(N):
+        nk = 0
+        for k in range(N):
+            if kpos[k] != 0:
+                kpos[k] = nk + 1  # 1-based slack position
+                nk += 1
+        n2 = nzu + nk
+        for a in range(nk):
+            jj = nzu + a
+            for cc in range(n2):
+                H[jj, cc] = 0.0
+                H[cc, jj] = 0.0
+            H[jj, jj] = 2.0 * w2
+            g[jj] = w1
+        for k in range(N):
+            for rr in range(m_lane + 2 * k, m_lane + 2 * k + 2):
+                for cc in range(nzu, n2):
+                    C[rr, cc] = 0.0
+                if kpos[k] > 0:
+                    C[rr, nzu + kpos[k] - 1] = 1.0
+        for a in range(nk):
+            rr = m + a
+            for cc in range(n2):
+                C[rr, cc] = 0.0
+            C[rr, nzu + a] = 1.0
+            b[rr] = 0.0
+        code, it2 = gi_solve(H, g, C, b, m + nk, n2, z, lam, active, isact, L, J, Rq, d, zdir, r, uq,
+                             sq, rown, max_iter, tol)
+        iters += it2
+        if code != 0:
+            if nk == N:
+                return code, iters
+            for k in range(N):
+                kpos[k] = 1
+            continue
+        done = True
+        for k in range(N):
+            if kpos[k] == 0 and lam[m_lane + 2 * k] + lam[m_lane + 2 * k + 1] > w1:
+                kpos[k] = 1
+                done = False
+        if done:
+            return 0, iters
+    return 3, iters
 
 
 @njit(cache=True)
@@ -658,18 +901,25 @@ class FastLtvMpc:
 
     Same interface and results as :class:`~mpcdrive.control.mpc.LtvMpc`; statuses ``ok``,
     ``infeasible``, ``max_iter``, ``failed``; fallbacks as ``LtvMpc`` (shifted previous plan,
-    else the last command), named in ``ControlOutput.fallback``.
+    else the last command), named in ``ControlOutput.fallback``. Obstacles with a cost
+    formulation (see :func:`obstacles_unsupported_reason`) enter each QP as the cost's convex
+    model at the linearization trajectory; ``config.sqp_max_iterations > 1`` re-linearizes and
+    re-solves (each iteration one compiled call) until the inputs move less than
+    ``config.sqp_tol``, as ``LtvMpc`` does. The lane bound is ``problem.lane_half_width_m`` as
+    given (the factory subtracts the body's half width and margin, as ``LtvMpc`` does itself).
     """
 
     name = "ltv-mpc-fast"
     backend_name = "fast"
 
     def __init__(self, model, path: Path, problem: MpcProblem, config: MpcConfig = MpcConfig(),
-                 settings: FastSettings = FastSettings()):
-        reason = fast_unsupported_reason(model, path, problem, config, settings)
+                 settings: FastSettings = FastSettings(), obstacles=(), avoidance: AvoidanceConfig | None = None):
+        reason = fast_unsupported_reason(model, path, problem, config, settings, obstacles, avoidance)
         if reason is not None:
             raise ValueError(f"the fast backend cannot solve this problem: {reason}")
         self.model, self.path, self.problem, self.config, self.settings = model, path, problem, config, settings
+        self.obstacles = tuple(obstacles)
+        self.avoidance = (avoidance or AvoidanceConfig()) if obstacles else None
         nx, nu, N = model.nx, model.nu, problem.N
         self.nx, self.nu, self.N = nx, nu, N
         self.dt_s = problem.dt_s
@@ -683,8 +933,8 @@ class FastLtvMpc:
         pa = path_arrays(path)
         lane = problem.lane_half_width_m is not None
         nz = N * nu + (N if lane else 0)
-        rows, rhs, r_rate0, n_var = _constant_rows(problem, nz)
-        m_max = len(rows) + n_var
+        rows, rhs, r_rate0, n_var, slack_rows = _constant_rows(problem, nz)
+        m_max = len(rows) + n_var + len(slack_rows)
         mq = max(m_max, 1)
         C = np.zeros((mq, nz))
         b_ = np.zeros(mq)
@@ -706,7 +956,14 @@ class FastLtvMpc:
         ip[_I_NZ] = nz
         ip[_I_RICCATI] = int(not lane and not np.any(problem.Rc))
         ip[_I_MQ] = mq
-        fp = np.zeros(8)
+        av = self.avoidance
+        if av is not None:
+            ip[_I_OFORM] = _OBS_POTENTIAL if av.formulation == "potential" else _OBS_GAUSSIAN
+            ip[_I_NOBS] = len(self.obstacles)
+            ip[_I_OMAX] = av.max_obstacles
+        fp = np.zeros(_NFP)
+        if av is not None:
+            fp[[_F_OW, _F_OEPS, _F_OSX, _F_OSY, _F_OINF]] = (av.weight, av.epsilon_m2, *av.sigma_m, av.influence_m)
         fp[_F_DT], fp[_F_VREF] = problem.dt_s, self.v_ref_mps
         fp[_F_HSTEP], fp[_F_WINDOW] = config.horizon_step_m, config.projection_window_m
         fp[_F_LANEW] = problem.lane_half_width_m if lane else 0.0
@@ -728,6 +985,8 @@ class FastLtvMpc:
             _W_D: (nz,), _W_ZDIR: (nz,), _W_R: (nz,), _W_UQ: (nz,), _W_SQ: (mq,), _W_ROWN: (mq,),
             _W_LAMQ: (mq,), _W_DW: (7, nw, nw), _W_KG: (N, nu, nx), _W_KF: (N, nu), _W_PA: (nx, nx),
             _W_MG: (nu, nx), _W_GG: (nu, nu), _W_QV: (nx,),
+            _W_WE: np.stack([problem.Q] * (N - 1) + [problem.QN]), _W_QT: (N, nx),
+            _W_OBS: _obstacle_table(self.obstacles), _W_ODIST: (max(len(self.obstacles), 1),),
         }
         shapes = [np.shape(arrays[i]) if isinstance(arrays[i], np.ndarray) else arrays[i] for i in range(_NW)]
         sizes = [int(np.prod(sh)) for sh in shapes]
@@ -741,7 +1000,7 @@ class FastLtvMpc:
         for i, v in arrays.items():
             if isinstance(v, np.ndarray):
                 self._w[i][...] = v
-        self._ibuf = np.concatenate([ip, fo, fs.ravel(), np.zeros(nz + mq, dtype=np.int64)])
+        self._ibuf = np.concatenate([ip, fo, fs.ravel(), np.zeros(nz + mq + N, dtype=np.int64)])
         self._info = np.zeros(4)
         self._noX = np.zeros((N + 1, nx))
         self._noU = np.zeros((N, nu))
@@ -759,7 +1018,7 @@ class FastLtvMpc:
         x[2] = float(self.path.heading(0.0))
         if self.nx >= 4:
             x[3] = self.v_ref_mps
-        _control_step(x, 0.0, np.zeros(self.nu), self._noX, self._noU, False, self._wbuf, self._ibuf,
+        _control_step(x, 0.0, 0.0, np.zeros(self.nu), self._noX, self._noU, MODE_NO_PLAN, self._wbuf, self._ibuf,
                       np.empty(self._out_size), self._info)
 
     # -- warm start ---------------------------------------------------------------------------
@@ -796,20 +1055,39 @@ class FastLtvMpc:
         else:
             X, U = self._noX, self._noU
         out = np.empty(self._out_size)
-        code = _control_step(x, float(warm.s_m), u_prev, X, U, has_plan, self._wbuf, self._ibuf, out, self._info)
+        t_s = float(warm.t_s)
         info = self._info
+        code = _control_step(x, float(warm.s_m), t_s, u_prev, X, U, MODE_SHIFTED_PLAN if has_plan else MODE_NO_PLAN,
+                             self._wbuf, self._ibuf, out, info)
         N, nx, nu = self.N, self.nx, self.nu
+        cfg = self.config
+        it = 1
+        e_y, e_psi = info[1], info[2]
+        t_qp = time.perf_counter() - t0  # the last QP's time: no new QP that would end past the cap
+        while code == 0 and it < cfg.sqp_max_iterations and time.perf_counter() - t0 + t_qp < cfg.sqp_max_time_s:
+            t1 = time.perf_counter()
+            U_it = out[self._o_U:self._o_R].reshape(N, nu)
+            if float(np.max(np.abs(U_it - self._w[_W_UBAR]))) < cfg.sqp_tol:
+                break
+            X_it = out[self._o_X:self._o_U].reshape(N + 1, nx)
+            out = np.empty(self._out_size)
+            code = _control_step(x, float(info[0]), t_s, u_prev, X_it, U_it, MODE_ITERATE, self._wbuf, self._ibuf,
+                                 out, info)
+            it += 1
+            t_qp = time.perf_counter() - t1
+        t_next = t_s + self.dt_s
         if code == 0:
             u = out[:nu]
             X_pred = out[self._o_X:self._o_U].reshape(N + 1, nx)
             U_plan = out[self._o_U:self._o_R].reshape(N, nu)
             refs = out[self._o_R:].reshape(N + 1, nx)
-            return ControlOutput(u, "ok", "", time.perf_counter() - t0, info[0], info[1], info[2],
-                                 X_pred, refs, WarmStart(info[0], u, X_pred, U_plan))
+            return ControlOutput(u, "ok", "", time.perf_counter() - t0, info[0], e_y, e_psi,
+                                 X_pred, refs, WarmStart(info[0], u, X_pred, U_plan, t_next, warm.sides), it)
         if code == _BAD_STATE:
             self._check_state(x)  # raises, naming the field
         status = STATUS_WORDS[code]
         refs = self._w[_W_XREF].copy()
         u, name, new_warm, X_pred = plan_fallback(self.problem, x, float(info[0]), warm)
-        return ControlOutput(u, status, name, time.perf_counter() - t0, float(info[0]), float(info[1]),
-                             float(info[2]), X_pred, refs, new_warm)
+        new_warm = WarmStart(new_warm.s_m, new_warm.u_prev, new_warm.X, new_warm.U, t_next, warm.sides)
+        return ControlOutput(u, status, name, time.perf_counter() - t0, float(info[0]), float(e_y),
+                             float(e_psi), X_pred, refs, new_warm, it)

@@ -90,8 +90,8 @@ class MpcConfig:
     projection_window_m : half-width of the arc-length window searched around the last s [m];
     sqp_max_iterations : QPs per step: 1 is the real-time iteration (one QP on the model and
         obstacle terms linearized along the shifted previous plan); more re-linearize at each new
-        solution until the inputs move less than ``sqp_tol`` [input units] or ``sqp_max_time_s``
-        of wall time is spent.
+        solution until the inputs move less than ``sqp_tol`` [input units]; no iteration starts
+        that would end past ``sqp_max_time_s`` of wall time (judged by the last one's time).
     prediction_substeps : integration substeps per control step in the prediction model (stiff
         models such as the dynamic bicycle need them at long steps).
     fallback : what to do, in order, when a solve fails (:class:`~mpcdrive.control.fallback.FallbackConfig`).
@@ -243,14 +243,17 @@ class LtvMpc:
         d = self.prepare(x, warm)
         res = self._solve(d, warm)
         it = 1
+        t_qp = time.perf_counter() - t0  # the last iteration's time: none that would end past the cap
         while (it < self.config.sqp_max_iterations and res.ok
-               and time.perf_counter() - t0 < self.config.sqp_max_time_s):
+               and time.perf_counter() - t0 + t_qp < self.config.sqp_max_time_s):
             dU = float(np.max(np.abs(res.U - d.Ubar)))
             if dU < self.config.sqp_tol:
                 break
+            t1 = time.perf_counter()
             d = self.prepare(x, warm, around=(res.X, res.U), s_m=d.s_m)
             res = self._solve(d, warm)
             it += 1
+            t_qp = time.perf_counter() - t1
         return self.finish(d, warm, res, t0, it)
 
     def _solve(self, d: StepData, warm: WarmStart) -> SolveResult:
