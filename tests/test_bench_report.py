@@ -1,6 +1,7 @@
 """Bench entries per backend, the horizon and obstacle sweeps, cold start, allocations and the
 bench report: checked by structure and consistency, never by time."""
 
+import json
 import math
 import warnings
 
@@ -12,7 +13,7 @@ from mpcdrive.bench.extras import cold_start, horizon_sweep, obstacle_sweep, ste
 from mpcdrive.bench.problems import p3, p3_obstacles
 from mpcdrive.bench.runner import make_controller
 from mpcdrive.control.factory import BACKENDS, FastPathUnavailable
-from mpcdrive.plots.bench import make_horizon_figure, plot_horizon_scaling
+from mpcdrive.plots.bench import make_horizon_figure, make_obstacle_figure, plot_horizon_scaling, plot_obstacle_scaling
 from mpcdrive.report.bench import render_bench_report, write_bench_report
 
 KEYS = {"p50_us", "p99_us", "max_us", "steps", "rms_lateral_error_m"}
@@ -54,7 +55,7 @@ def test_horizon_sweep_report_and_figure(results, tmp_path):
     assert "## P1: per-step time as the horizon grows" in text and "| 12 |" in text
     assert "![per-step time vs horizon](h.png)" in text and "noisy machine" in text
     assert "| P1 | mpcdrive_osqp |" in text.split("## Speed-up")[1]
-    assert "Obstacle sweep" in text
+    assert "## P3: per-step time as obstacles are added" not in text  # no sweep given, no section
     assert render_bench_report(results).split("## Speed-up")[0].count("| P1 |") == 3
 
 
@@ -134,3 +135,26 @@ def test_obstacle_sweep_structure(obstacles):
     assert obstacles[2]["fast"]["rms_lateral_error_m"] == pytest.approx(
         obstacles[2]["osqp"]["rms_lateral_error_m"], rel=1e-3, abs=1e-5)
 
+
+def test_obstacle_sweep_report_and_figure(results, obstacles, tmp_path):
+    fig = make_obstacle_figure(obstacles)
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == "obstacles [count]" and "[us]" in ax.get_ylabel()
+    assert len(ax.lines) == 2 * len(BACKENDS) and list(ax.lines[0].get_xdata()) == [0, 2]
+    assert ax.get_yscale() == "log"
+    fell = any(r["fallback"] for per in obstacles.values() for r in per.values())
+    assert bool(ax.collections) == fell  # fallback points are marked
+    # as read back from JSON (string keys) too
+    back = json.loads(json.dumps(obstacles))
+    assert plot_obstacle_scaling(back, tmp_path / "o.png").stat().st_size > 1000
+    path = write_bench_report(tmp_path, results, obstacles=back, obstacle_figure="o.png")
+    text = path.read_text()
+    section = text.split("## P3: per-step time as obstacles are added")[1]
+    assert "min clearance [m]" in section and "solver failures" in section
+    for n in (0, 2):
+        for b in BACKENDS:
+            r = obstacles[n][b]
+            assert f"| {n} | {b} | {r['backend']} |" in section
+    assert "![per-step time vs obstacle count](o.png)" in section
+    if fell:
+        assert "Fallbacks:" in section
