@@ -141,7 +141,7 @@ def test_obstacle_sweep_report_and_figure(results, obstacles, tmp_path):
     ax = fig.axes[0]
     assert ax.get_xlabel() == "obstacles [count]" and "[us]" in ax.get_ylabel()
     assert len(ax.lines) == 2 * len(BACKENDS) and list(ax.lines[0].get_xdata()) == [0, 2]
-    assert ax.get_yscale() == "log"
+    assert ax.get_yscale() == "log" and list(ax.get_xticks()) == [0, 2]
     fell = any(r["fallback"] for per in obstacles.values() for r in per.values())
     assert bool(ax.collections) == fell  # fallback points are marked
     # as read back from JSON (string keys) too

@@ -69,6 +69,7 @@ def make_obstacle_figure(sweep: Mapping[int, Mapping[str, Mapping]],
                        s=140, facecolors="none", edgecolors=color,
                        label=f"{b} requested, {', '.join(ran)} ran")
     ax.set_yscale("log")
+    ax.set_xticks(counts)
     ax.set_xlabel("obstacles [count]")
     ax.set_ylabel("controller step [us]")
     ax.set_title(title)

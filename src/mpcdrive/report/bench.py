@@ -26,10 +26,11 @@ def _obstacle_section(obstacles: Mapping, figure: str | None) -> list[str]:
     counts = sorted(sweep)
     lines = ["", "## P3: per-step time as obstacles are added", "",
              "P3 (straight line, lane |y| <= 1.75 m, Gaussian obstacle cost) with n static obstacles "
-             "spread over x in [3, 10] m, every one in the problem at every step. `ran` is the backend "
-             "that actually ran (a requested backend that does not cover the problem falls back to "
-             "OSQP); clearance is between the car's footprint and the nearest obstacle over the whole "
-             "drive, failures are steps whose solve did not succeed.", "",
+             "spread over x in [3, 10] m, every one in the problem at every step (the Gaussian terms "
+             "add into each predicted step's position cost: the QP keeps its size, building the terms "
+             "grows with n). `ran` is the backend that actually ran (a requested backend that does not "
+             "cover the problem falls back to OSQP); clearance is between the car's footprint and the "
+             "nearest obstacle over the whole drive, failures are steps whose solve did not succeed.", "",
              "| obstacles | backend | ran | p50 [us] | p99 [us] | max [us] | steps | min clearance [m] "
              "| solver failures | rms e_y [m] |",
              "|---:|---|---|---:|---:|---:|---:|---:|---:|---:|"]
