@@ -322,7 +322,8 @@ def bench(
     steps: int = typer.Option(1000, "--steps", min=20, help="closed-loop steps per problem"),
     baseline_steps: int = typer.Option(200, "--baseline-steps", min=20, help="closed-loop steps for the slow baselines"),
     report: Path | None = typer.Option(None, "--report", help="also measure per-step time against the horizon "
-                                       "(P1, N = 10..100), cold start and memory; write DIR/bench.md, a figure and JSON"),
+                                       "(P1, N = 10..100) and the obstacle count (P3, 0..20 obstacles), cold start "
+                                       "and memory; write DIR/bench.md, figures and JSON"),
 ) -> None:
     """Per-step latency of the PERF.md benchmark problems (median, p99, max; warm-up excluded)."""
     from .bench import PROBLEMS, format_table, run_bench
@@ -345,14 +346,15 @@ def bench(
 
 
 def _bench_report(out_dir: Path, results: dict, log) -> None:
-    from .bench.extras import cold_start, horizon_sweep, step_allocations
+    from .bench.extras import cold_start, horizon_sweep, obstacle_sweep, step_allocations
     from .control.factory import BACKENDS
     from .io import write_json
     from .io.atomic import atomic_output_dir
-    from .plots.bench import plot_horizon_scaling
+    from .plots.bench import plot_horizon_scaling, plot_obstacle_scaling
     from .report.bench import write_bench_report
 
     sweep = horizon_sweep(log=log)
+    obstacles = obstacle_sweep(log=log)
     cold, alloc = {}, {}
     for b in BACKENDS:
         log(f"cold start and memory: {b}")
@@ -362,9 +364,11 @@ def _bench_report(out_dir: Path, results: dict, log) -> None:
             "the medians of repeated runs.")
     with atomic_output_dir(out_dir) as tmp:
         plot_horizon_scaling(sweep, tmp / "horizon.png")
-        write_json(tmp / "bench.json", {"latency": results, "horizon_sweep_P1": sweep, "cold_start": cold,
-                                        "allocations": alloc})
-        write_bench_report(tmp, results, sweep, cold, alloc, figure="horizon.png", note=note)
+        plot_obstacle_scaling(obstacles, tmp / "obstacles.png")
+        write_json(tmp / "bench.json", {"latency": results, "horizon_sweep_P1": sweep,
+                                        "obstacle_sweep_P3": obstacles, "cold_start": cold, "allocations": alloc})
+        write_bench_report(tmp, results, sweep, cold, alloc, figure="horizon.png", note=note,
+                           obstacles=obstacles, obstacle_figure="obstacles.png")
     typer.echo(f"wrote {out_dir / 'bench.md'}")
 
 

@@ -75,4 +75,45 @@ def p3() -> BenchProblem:
                         obstacles=(obstacle,), avoidance=av)
 
 
+#: obstacle sweep geometry: centres spread over x in [3, 10] m, alternating this far right / left
+#: of the centreline [m]
+OBSTACLE_SPAN_M = (3.0, 10.0)
+OBSTACLE_OFFSET_M = 0.3
+#: influence distance of the sweep [m]: more than any obstacle's distance from any point of the
+#: drive (the car starts at (2, -2) m and, at 1 m/s, is near x = 11 m after 1000 steps; 50 m holds
+#: for drives of up to about 3,500 steps), so none is ever dropped
+OBSTACLE_INFLUENCE_M = 50.0
+
+
+def p3_obstacles(n: int) -> BenchProblem:
+    """P3 with ``n`` static circle obstacles (r = 0.25 m, P3's Gaussian cost), for the per-step
+    time against the obstacle count.
+
+    n = 0 is P1 with P3's lane (|y| <= 1.75 m) and no avoidance; n = 1 is P3's obstacle (x = 5 m
+    on the centreline); n >= 2 puts the centres at x evenly spread over [3, 10] m, alternately
+    ``OBSTACLE_OFFSET_M`` = 0.3 m right and left of the centreline (the first on the right):
+    a zig-zag the car passes on one side. Neighbours stay apart (>= 0.7 m between centres for
+    n <= 20). ``max_obstacles = n`` and ``influence_m = OBSTACLE_INFLUENCE_M`` (50 m, P3's
+    default is 5 m) so every obstacle is in the problem at every step of the drive -- behind the
+    car and far ahead included -- and the time measured is that of n obstacle terms. With the
+    Gaussian cost the QP keeps its size: the n terms add into the position cost of each
+    predicted step, so what grows with n is the work of building them."""
+    n = int(n)
+    if n < 0:
+        raise ValueError(f"the obstacle count must be >= 0, got {n}")
+    base = p3()
+    if n == 0:
+        return replace(base, name="P3-0obs", description="P1 with P3's lane |y| <= 1.75 m, no obstacles",
+                       obstacles=(), avoidance=None)
+    if n == 1:
+        poses = [base.obstacles[0].pose]
+    else:
+        xs = np.linspace(*OBSTACLE_SPAN_M, n)
+        poses = [(float(x), OBSTACLE_OFFSET_M * (1.0 if i % 2 else -1.0), 0.0) for i, x in enumerate(xs)]
+    obstacles = tuple(Obstacle(Circle(0.25), pose, name=f"cone{i}") for i, pose in enumerate(poses))
+    av = replace(base.avoidance, max_obstacles=n, influence_m=OBSTACLE_INFLUENCE_M)
+    return replace(base, name=f"P3-{n}obs", obstacles=obstacles, avoidance=av,
+                   description=f"P3 with {n} obstacle(s) with Gaussian cost, lane |y| <= 1.75 m")
+
+
 PROBLEMS = {"P1": p1, "P2": p2, "P3": p3}

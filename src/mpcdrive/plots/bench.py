@@ -1,4 +1,5 @@
-"""Figure of the bench report: per-step time against the horizon length (reads results)."""
+"""Figures of the bench report: per-step time against the horizon length and against the
+obstacle count (read results, never solve)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from matplotlib.figure import Figure
 
 from mpcdrive.io.atomic import atomic_write_bytes
 
-__all__ = ["make_horizon_figure", "plot_horizon_scaling"]
+__all__ = ["make_horizon_figure", "make_obstacle_figure", "plot_horizon_scaling", "plot_obstacle_scaling"]
 
 _COLORS = {"fast": "tab:green", "osqp": "tab:blue"}
 
@@ -41,10 +42,54 @@ def make_horizon_figure(sweep: Mapping[int, Mapping[str, Mapping]], title: str =
     return fig
 
 
-def plot_horizon_scaling(sweep, path: str | os.PathLike) -> Path:
-    """Write :func:`make_horizon_figure` as a PNG atomically; return the path."""
-    fig = make_horizon_figure(sweep)
+def make_obstacle_figure(sweep: Mapping[int, Mapping[str, Mapping]],
+                         title: str = "P3: per-step time vs obstacle count") -> Figure:
+    """Median (solid) and p99 (dashed) per-step time [us] against the obstacle count for each
+    requested backend, log scale; where a backend fell back to another one (its ``backend``
+    field differs from the requested name) the point is also circled, open.
+
+    sweep : ``{n: {backend: {"p50_us", "p99_us", "backend", ...}}}`` as
+    :func:`mpcdrive.bench.extras.obstacle_sweep` (keys may be strings, as read from JSON)."""
+    fig = Figure(figsize=(7.0, 4.5), layout="constrained")
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    sweep = {int(n): v for n, v in sweep.items()}
+    counts = sorted(sweep)
+    backends = sorted({b for n in counts for b in sweep[n]})
+    for b in backends:
+        pts = [(n, sweep[n][b]) for n in counts if b in sweep[n]]
+        xs = [n for n, _ in pts]
+        color = _COLORS.get(b)
+        ax.plot(xs, [r["p50_us"] for _, r in pts], "o-", color=color, label=f"{b} median")
+        ax.plot(xs, [r["p99_us"] for _, r in pts], "s--", color=color, alpha=0.6, label=f"{b} p99")
+        fell = [(n, r) for n, r in pts if r.get("backend", b) != b]
+        if fell:
+            ran = sorted({r["backend"] for _, r in fell})
+            ax.scatter([n for n, _ in fell] * 2, [r["p50_us"] for _, r in fell] + [r["p99_us"] for _, r in fell],
+                       s=140, facecolors="none", edgecolors=color,
+                       label=f"{b} requested, {', '.join(ran)} ran")
+    ax.set_yscale("log")
+    ax.set_xticks(counts)
+    ax.set_xlabel("obstacles [count]")
+    ax.set_ylabel("controller step [us]")
+    ax.set_title(title)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize="small")
+    return fig
+
+
+def _write_png(fig: Figure, path: str | os.PathLike) -> Path:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=120)
     fig.clear()
     return atomic_write_bytes(path, buf.getvalue())
+
+
+def plot_horizon_scaling(sweep, path: str | os.PathLike) -> Path:
+    """Write :func:`make_horizon_figure` as a PNG atomically; return the path."""
+    return _write_png(make_horizon_figure(sweep), path)
+
+
+def plot_obstacle_scaling(sweep, path: str | os.PathLike) -> Path:
+    """Write :func:`make_obstacle_figure` as a PNG atomically; return the path."""
+    return _write_png(make_obstacle_figure(sweep), path)
