@@ -45,10 +45,10 @@ def _with_backend(spec, backend):
 
 
 # ------------------------------------------------------------------------------ built-in scenarios
-#: built-in scenarios the fast path covers (kinematic models, no obstacles, no speed profile);
+#: built-in scenarios the fast path covers (kinematic models, obstacle costs, no speed profile);
 #: the others run on the OSQP controller (see test_unsupported_scenarios_fall_back_to_osqp)
 FAST_SCENARIOS = ["paper-exp1", "paper-exp2", "paper-exp3", "paper-exp4", "paper-disturbance-v1",
-                  "paper-disturbance-v4", "paper-smoothing"]
+                  "paper-disturbance-v4", "paper-smoothing", "paper-exp5-potential", "paper-exp5-gaussian"]
 
 
 def test_unsupported_scenarios_fall_back_to_osqp():

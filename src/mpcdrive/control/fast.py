@@ -49,6 +49,7 @@ from ..ocp.avoidance import AvoidanceConfig
 from ..ocp.problem import MpcProblem
 from ..paths.base import Path
 from ..paths.compiled import path_arrays, path_eval, path_project, wrap_angle
+from ..scene.footprint import Footprint
 from ..scene.obstacles import Circle, ConstantVelocity, Polygon, Static
 from ..solvers.dense_qp import STATUS_WORDS, gi_solve
 from ..types import ControlOutput, WarmStart
@@ -62,8 +63,11 @@ _BAD_STATE = 4
 
 # integer parameters (ip)
 _I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH, _I_LIN, _I_METHOD, _I_HORIZON, _I_FF, _I_LANE, \
-    _I_MCONST, _I_RATE0, _I_MAXITER, _I_GAMMA, _I_NZ, _I_RICCATI, _I_MQ, _I_OFORM, _I_NOBS, _I_OMAX = range(20)
-_NIP = 20
+    _I_MCONST, _I_RATE0, _I_MAXITER, _I_GAMMA, _I_NZ, _I_RICCATI, _I_MQ, _I_OFORM, _I_NOBS, _I_OMAX, \
+    _I_DETOUR = range(21)
+_NIP = 21
+# passing sides (as ocp.avoidance), and "not chosen yet" in the compiled side memory
+_SIDE_LEFT, _SIDE_RIGHT, _SIDE_BLOCKED, _SIDE_NONE = 1, -1, 0, 2
 # obstacle cost formulations (ip[_I_OFORM])
 _OBS_NONE, _OBS_POTENTIAL, _OBS_GAUSSIAN = 0, 1, 2
 # linearization modes of a step: no plan (roll out the references), the previous step's plan
@@ -79,12 +83,12 @@ _NOB = 8
  _W_REFS, _W_XREF, _W_UREF, _W_XBAR, _W_UBAR, _W_F, _W_A, _W_BD, _W_CD, _W_LANEN, _W_LANEB, _W_XF, _W_P,
  _W_LAM, _W_VB, _W_S, _W_T2, _W_GAM, _W_H, _W_G, _W_Z, _W_L, _W_J, _W_RQ, _W_D, _W_ZDIR, _W_R, _W_UQ,
  _W_SQ, _W_ROWN, _W_LAMQ, _W_DW, _W_KG, _W_KF, _W_PA, _W_MG, _W_GG, _W_QV, _W_WE, _W_QT, _W_OBS,
- _W_ODIST) = range(55)
-_NW = 55
+ _W_ODIST, _W_OPROJ, _W_SARR, _W_EREF) = range(58)
+_NW = 58
 # float parameters (fp)
 _F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_LANEW, _F_SLACK2, _F_SLACK1, _F_TOL, _F_OW, _F_OEPS, _F_OSX, \
-    _F_OSY, _F_OINF = range(13)
-_NFP = 13
+    _F_OSY, _F_OINF, _F_OMARGIN, _F_HW, _F_HL, _F_RAMP = range(17)
+_NFP = 17
 # info outputs
 _O_S, _O_EY, _O_EPSI, _O_ITER = range(4)
 
@@ -114,16 +118,17 @@ class FastSettings:
 def obstacles_unsupported_reason(obstacles, avoidance: AvoidanceConfig | None) -> str | None:
     """Why the compiled step cannot take these obstacles as ``LtvMpc`` would, or None.
 
-    Covered: the cost formulations (``potential``, ``gaussian``) without a detour reference, on
-    circle and polygon obstacles that stand still or move at constant velocity."""
+    Covered: the cost formulations (``potential``, ``gaussian``) on circle and polygon obstacles
+    that stand still or move at constant velocity; with the trapezoidal detour reference, on
+    static circles."""
     if not obstacles:
         return None
     av = avoidance or AvoidanceConfig()
     if not av.uses_cost:
         return f"the {av.formulation!r} obstacle formulation (constraint rows) is solved by the OSQP controller only"
-    if av.detour != "none":
-        return f"the {av.detour!r} detour reference is built by the OSQP controller only"
     for ob in obstacles:
+        if av.detour != "none" and not (isinstance(ob.motion, Static) and isinstance(ob.shape, Circle)):
+            return f"the {av.detour!r} detour around obstacle {ob.name or '?'} (not a static circle) needs the OSQP controller"
         if not isinstance(ob.motion, (Static, ConstantVelocity)):
             return f"obstacle {ob.name or '?'} follows a {type(ob.motion).__name__} (only static or constant velocity)"
         if not isinstance(ob.shape, (Circle, Polygon)):
@@ -351,36 +356,100 @@ def _plan_feasible(N, nx, nu, z, Xr, u_prev, u_min, u_max, dmax, x_min, x_max, t
 
 
 @njit(cache=True)
-def _obstacle_cost(form, nobs, omax, obs, odist, fp, t_s, dt, x, Xbar, F, N, s0, pkind, geo, tab_s, tab_xy,
-                   tab_h, tab_k, We, qt):
-    """Add the potential (eq. 55) or Gaussian (eq. 56) obstacle cost's second-order model at the
-    linearization trajectory (x_k = Xbar[k], x_N = F[N-1]), its Hessian projected onto the PSD
-    cone, to the state cost ``x' We x - 2 qt' x`` of x_1..x_N; as ``ocp.avoidance`` does for the
-    OSQP controller: the ``max_obstacles`` nearest obstacles within the influence distance, each
-    predicted at constant velocity, Sigma aligned with the path where the obstacle is."""
-    w, eps, reach = fp[_F_OW], fp[_F_OEPS], fp[_F_OINF]
-    isx2, isy2 = 1.0 / (fp[_F_OSX] * fp[_F_OSX]), 1.0 / (fp[_F_OSY] * fp[_F_OSY])
+def _select_obstacles(nobs, omax, obs, odist, oproj, osel, fp, t_s, x, s0, pkind, geo, tab_s, tab_xy, tab_h,
+                      tab_k):
+    """The ``max_obstacles`` nearest obstacles within the influence distance of the vehicle at time
+    ``t_s`` (nearest first, ties by index, as ``ocp.avoidance``) into osel; returns how many.
+    oproj[j] = (s, e_y) of each one's projected point [m] (its Frenet position now)."""
+    reach = fp[_F_OINF]
     for j in range(nobs):
         d = math.hypot(obs[j, _OB_X] + obs[j, _OB_VX] * t_s - x[0], obs[j, _OB_Y] + obs[j, _OB_VY] * t_s - x[1])
         d -= obs[j, _OB_RB]
         odist[j] = d if d <= reach else math.inf
-    s00, s01, s11 = 0.0, 0.0, 0.0
+    px0, py0, _h0, _k0 = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s0)
+    nsel = 0
     for _slot in range(min(omax, nobs)):
         j, best = -1, math.inf
-        for jj in range(nobs):  # nearest first, ties by index
+        for jj in range(nobs):
             if odist[jj] < best:
                 j, best = jj, odist[jj]
         if j < 0:
             break
         odist[j] = math.inf
+        osel[nsel] = j
+        nsel += 1
+        cx = obs[j, _OB_X] + obs[j, _OB_VX] * t_s + obs[j, _OB_OX]
+        cy = obs[j, _OB_Y] + obs[j, _OB_VY] * t_s + obs[j, _OB_OY]
+        oproj[j, 0], oproj[j, 1] = path_project(pkind, geo, tab_s, tab_xy, s0,
+                                                obs[j, _OB_WIN] + math.hypot(cx - px0, cy - py0), cx, cy)
+    return nsel
+
+
+@njit(cache=True)
+def _detour(nsel, osel, obs, oproj, sides, fp, N, s_arr, refs, xref, e_ref):
+    """The paper's trapezoidal detour around the selected (static, circular) obstacles, as
+    ``ocp.avoidance``: pick each one's passing side (kept from ``sides`` while it has room;
+    ``fp[_F_LANEW]`` is the bound of the centre of gravity, so the room needed is the margin),
+    shift the references sideways over the obstacle with ramps before and after it, and turn
+    their heading with the slope."""
+    margin, hw, hl, ramp = fp[_F_OMARGIN], fp[_F_HW], fp[_F_HL], fp[_F_RAMP]
+    lim = fp[_F_LANEW] if fp[_F_LANEW] > 0.0 else math.inf
+    for k in range(N + 1):
+        e_ref[k] = 0.0
+    any_shift = False
+    for a in range(nsel):
+        j = osel[a]
+        r = obs[j, _OB_RB]
+        s_ref, e_c = oproj[j, 0], oproj[j, 1]
+        e_lo, e_hi = e_c - r, e_c + r
+        room_left, room_right = lim - e_hi, lim + e_lo
+        prev = sides[j]
+        if prev == _SIDE_LEFT and room_left >= margin:
+            side = _SIDE_LEFT
+        elif prev == _SIDE_RIGHT and room_right >= margin:
+            side = _SIDE_RIGHT
+        elif max(room_left, room_right) < margin:
+            side = _SIDE_BLOCKED
+        else:
+            side = _SIDE_LEFT if room_left >= room_right else _SIDE_RIGHT
+        sides[j] = side
+        if side == _SIDE_BLOCKED:
+            continue
+        shift = (e_hi + hw + 2.0 * margin) if side == _SIDE_LEFT else (e_lo - hw - 2.0 * margin)
+        lo_s, hi_s = s_ref - r - hl, s_ref + r + hl
+        rr = max(ramp, 1e-9)
+        for k in range(N + 1):
+            f = min(max(min((s_arr[k] - (lo_s - ramp)) / rr, ((hi_s + ramp) - s_arr[k]) / rr), 0.0), 1.0)
+            cand = shift * f
+            if abs(cand) > abs(e_ref[k]):
+                e_ref[k] = cand
+                any_shift = any_shift or cand != 0.0
+    if not any_shift:
+        return
+    for k in range(N + 1):
+        h = refs[k, 2]
+        xref[k, 0] -= math.sin(h) * e_ref[k]
+        xref[k, 1] += math.cos(h) * e_ref[k]
+    for k in range(1, N + 1):
+        xref[k, 2] += math.atan((e_ref[k] - e_ref[k - 1]) / max(s_arr[k] - s_arr[k - 1], 1e-9))
+
+
+@njit(cache=True)
+def _obstacle_cost(form, nsel, osel, obs, oproj, fp, t_s, dt, Xbar, F, N, pkind, geo, tab_s, tab_xy, tab_h,
+                   tab_k, We, qt):
+    """Add the potential (eq. 55) or Gaussian (eq. 56) cost of the selected obstacles, its
+    second-order model at the linearization trajectory (x_k = Xbar[k], x_N = F[N-1]) with the
+    Hessian projected onto the PSD cone, to the state cost ``x' We x - 2 qt' x`` of x_1..x_N, as
+    ``ocp.avoidance`` does for the OSQP controller: each obstacle predicted at constant velocity,
+    Sigma aligned with the path where the obstacle is now."""
+    w, eps = fp[_F_OW], fp[_F_OEPS]
+    isx2, isy2 = 1.0 / (fp[_F_OSX] * fp[_F_OSX]), 1.0 / (fp[_F_OSY] * fp[_F_OSY])
+    s00, s01, s11 = 0.0, 0.0, 0.0
+    for a in range(nsel):
+        j = osel[a]
         vx, vy = obs[j, _OB_VX], obs[j, _OB_VY]
         if form == _OBS_GAUSSIAN:
-            cx = obs[j, _OB_X] + vx * t_s + obs[j, _OB_OX]
-            cy = obs[j, _OB_Y] + vy * t_s + obs[j, _OB_OY]
-            px0, py0, _h0, _k0 = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s0)
-            sj, _e = path_project(pkind, geo, tab_s, tab_xy, s0, obs[j, _OB_WIN] + math.hypot(cx - px0, cy - py0),
-                                  cx, cy)
-            h = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, sj)[2]
+            h = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, oproj[j, 0])[2]
             ch, sh = math.cos(h), math.sin(h)
             s00 = ch * ch * isx2 + sh * sh * isy2
             s01 = ch * sh * (isx2 - isy2)
@@ -440,20 +509,23 @@ def _v3(w, fo, fs, i):
 
 
 @njit(cache=True)
-def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, wbuf, ibuf, out, info):
+def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, wbuf, ibuf, out, info):
     """One control step (or one SQP iteration of it) at time ``t_s`` [s]; returns a status code
     (0 ok, 1 infeasible, 2 max_iter, 3 failed, 4 non-finite state). ``mode`` says what (Xw, Uw)
     is (``MODE_*``: no plan, the previous step's plan, the current SQP iterate). Writes
     ``out = [u (nu), X ((N+1) nx), U (N nu), xref ((N+1) nx)]`` and
-    ``info = [s, e_y, e_psi, iterations]``. ``wbuf`` holds every float array (constants and
-    work), ``ibuf`` the integer parameters, the layout of ``wbuf`` and the active-set work."""
+    ``info = [s, e_y, e_psi, iterations]``. ``sides`` : passing side per obstacle (``_SIDE_*``),
+    read and updated by the detour. ``wbuf`` holds every float array (constants and work),
+    ``ibuf`` the integer parameters, the layout of ``wbuf`` and the active-set work."""
     ip = ibuf[:_NIP]
     fo = ibuf[_NIP:_NIP + _NW + 1]
     fs = ibuf[_NIP + _NW + 1:_NIP + 4 * _NW + 1]
     a0 = _NIP + 4 * _NW + 1
     active = ibuf[a0:a0 + ip[_I_NZ]]
     isact = ibuf[a0 + ip[_I_NZ]:a0 + ip[_I_NZ] + ip[_I_MQ]]
-    kpos = ibuf[a0 + ip[_I_NZ] + ip[_I_MQ]:a0 + ip[_I_NZ] + ip[_I_MQ] + ip[_I_N]]
+    a1 = a0 + ip[_I_NZ] + ip[_I_MQ]
+    kpos = ibuf[a1:a1 + ip[_I_N]]
+    osel = ibuf[a1 + ip[_I_N]:a1 + ip[_I_N] + max(ip[_I_NOBS], 1)]
     fp, mp, bnd, geo = _v1(wbuf, fo, _W_FP), _v1(wbuf, fo, _W_MP), _v1(wbuf, fo, _W_BND), _v1(wbuf, fo, _W_GEO)
     Wq, Rm, Rc = _v3(wbuf, fo, fs, _W_WQ), _v2(wbuf, fo, fs, _W_RM), _v2(wbuf, fo, fs, _W_RC)
     tab_s, tab_xy = _v1(wbuf, fo, _W_TABS), _v2(wbuf, fo, fs, _W_TABXY)
@@ -472,6 +544,7 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, wbuf, ibuf, out, info):
     dw, Kg, kf = _v3(wbuf, fo, fs, _W_DW), _v3(wbuf, fo, fs, _W_KG), _v2(wbuf, fo, fs, _W_KF)
     PA, Mg, Gg, qv = _v2(wbuf, fo, fs, _W_PA), _v2(wbuf, fo, fs, _W_MG), _v2(wbuf, fo, fs, _W_GG), _v1(wbuf, fo, _W_QV)
     We, qt = _v3(wbuf, fo, fs, _W_WE), _v2(wbuf, fo, fs, _W_QT)
+    obs, oproj, s_arr = _v2(wbuf, fo, fs, _W_OBS), _v2(wbuf, fo, fs, _W_OPROJ), _v1(wbuf, fo, _W_SARR)
     mkind, nx, nu, N = ip[_I_MODEL], ip[_I_NX], ip[_I_NU], ip[_I_N]
     pkind, lin, meth, hmode, ff, lane = ip[_I_PATH], ip[_I_LIN], ip[_I_METHOD], ip[_I_HORIZON], ip[_I_FF], ip[_I_LANE]
     nz = ip[_I_NZ]
@@ -498,6 +571,7 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, wbuf, ibuf, out, info):
     for k in range(N + 1):
         sk = s0 + fp[_F_HSTEP] * k if hmode == 1 else s0 + acc
         acc += vdt
+        s_arr[k] = sk
         px, py, hk, kap = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, sk)
         refs[k, 0] = px
         refs[k, 1] = py
@@ -522,6 +596,13 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, wbuf, ibuf, out, info):
             if k < N:
                 uref[k, 0] = steer
             xref[k, 2] -= slip
+
+    nsel = 0
+    if ip[_I_OFORM] != _OBS_NONE:
+        nsel = _select_obstacles(ip[_I_NOBS], ip[_I_OMAX], obs, _v1(wbuf, fo, _W_ODIST), oproj, osel, fp, t_s, x,
+                                 s0, pkind, geo, tab_s, tab_xy, tab_h, tab_k)
+        if ip[_I_DETOUR] == 1:
+            _detour(nsel, osel, obs, oproj, sides, fp, N, s_arr, refs, xref, _v1(wbuf, fo, _W_EREF))
 
     # -- linearization points and discrete model ---------------------------------------------
     if mode == MODE_ITERATE:
@@ -593,8 +674,8 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, wbuf, ibuf, out, info):
             for i in range(nx):
                 for j in range(nx):
                     We[k, i, j] = Wq[k, i, j]
-        _obstacle_cost(ip[_I_OFORM], ip[_I_NOBS], ip[_I_OMAX], _v2(wbuf, fo, fs, _W_OBS), _v1(wbuf, fo, _W_ODIST),
-                       fp, t_s, dt, x, Xbar, F, N, s0, pkind, geo, tab_s, tab_xy, tab_h, tab_k, We, qt)
+        _obstacle_cost(ip[_I_OFORM], nsel, osel, obs, oproj, fp, t_s, dt, Xbar, F, N, pkind, geo, tab_s, tab_xy,
+                       tab_h, tab_k, We, qt)
     if lane == 1:
         for k in range(N):
             yaw = refs[k + 1, 2]
@@ -913,13 +994,18 @@ class FastLtvMpc:
     backend_name = "fast"
 
     def __init__(self, model, path: Path, problem: MpcProblem, config: MpcConfig = MpcConfig(),
-                 settings: FastSettings = FastSettings(), obstacles=(), avoidance: AvoidanceConfig | None = None):
+                 settings: FastSettings = FastSettings(), obstacles=(), avoidance: AvoidanceConfig | None = None,
+                 footprint: Footprint = Footprint()):
         reason = fast_unsupported_reason(model, path, problem, config, settings, obstacles, avoidance)
         if reason is not None:
             raise ValueError(f"the fast backend cannot solve this problem: {reason}")
         self.model, self.path, self.problem, self.config, self.settings = model, path, problem, config, settings
         self.obstacles = tuple(obstacles)
         self.avoidance = (avoidance or AvoidanceConfig()) if obstacles else None
+        self.footprint = footprint
+        #: passing sides are kept (in WarmStart.sides) only where a detour uses them
+        self._sides = np.full(max(len(self.obstacles), 1), _SIDE_NONE, dtype=np.int64)
+        self._detour = self.avoidance is not None and self.avoidance.detour != "none"
         nx, nu, N = model.nx, model.nu, problem.N
         self.nx, self.nu, self.N = nx, nu, N
         self.dt_s = problem.dt_s
@@ -961,9 +1047,12 @@ class FastLtvMpc:
             ip[_I_OFORM] = _OBS_POTENTIAL if av.formulation == "potential" else _OBS_GAUSSIAN
             ip[_I_NOBS] = len(self.obstacles)
             ip[_I_OMAX] = av.max_obstacles
+            ip[_I_DETOUR] = int(self._detour)
         fp = np.zeros(_NFP)
         if av is not None:
             fp[[_F_OW, _F_OEPS, _F_OSX, _F_OSY, _F_OINF]] = (av.weight, av.epsilon_m2, *av.sigma_m, av.influence_m)
+            fp[[_F_OMARGIN, _F_HW, _F_HL, _F_RAMP]] = (av.margin_m, 0.5 * footprint.width_m, 0.5 * footprint.length_m,
+                                                      av.detour_ramp_m)
         fp[_F_DT], fp[_F_VREF] = problem.dt_s, self.v_ref_mps
         fp[_F_HSTEP], fp[_F_WINDOW] = config.horizon_step_m, config.projection_window_m
         fp[_F_LANEW] = problem.lane_half_width_m if lane else 0.0
@@ -987,6 +1076,7 @@ class FastLtvMpc:
             _W_MG: (nu, nx), _W_GG: (nu, nu), _W_QV: (nx,),
             _W_WE: np.stack([problem.Q] * (N - 1) + [problem.QN]), _W_QT: (N, nx),
             _W_OBS: _obstacle_table(self.obstacles), _W_ODIST: (max(len(self.obstacles), 1),),
+            _W_OPROJ: (max(len(self.obstacles), 1), 2), _W_SARR: (N + 1,), _W_EREF: (N + 1,),
         }
         shapes = [np.shape(arrays[i]) if isinstance(arrays[i], np.ndarray) else arrays[i] for i in range(_NW)]
         sizes = [int(np.prod(sh)) for sh in shapes]
@@ -1000,7 +1090,7 @@ class FastLtvMpc:
         for i, v in arrays.items():
             if isinstance(v, np.ndarray):
                 self._w[i][...] = v
-        self._ibuf = np.concatenate([ip, fo, fs.ravel(), np.zeros(nz + mq + N, dtype=np.int64)])
+        self._ibuf = np.concatenate([ip, fo, fs.ravel(), np.zeros(nz + mq + N + max(len(self.obstacles), 1), dtype=np.int64)])
         self._info = np.zeros(4)
         self._noX = np.zeros((N + 1, nx))
         self._noU = np.zeros((N, nu))
@@ -1018,8 +1108,8 @@ class FastLtvMpc:
         x[2] = float(self.path.heading(0.0))
         if self.nx >= 4:
             x[3] = self.v_ref_mps
-        _control_step(x, 0.0, 0.0, np.zeros(self.nu), self._noX, self._noU, MODE_NO_PLAN, self._wbuf, self._ibuf,
-                      np.empty(self._out_size), self._info)
+        _control_step(x, 0.0, 0.0, np.zeros(self.nu), self._noX, self._noU, MODE_NO_PLAN, self._sides.copy(),
+                      self._wbuf, self._ibuf, np.empty(self._out_size), self._info)
 
     # -- warm start ---------------------------------------------------------------------------
     def initial_warm(self, x0) -> WarmStart:
@@ -1030,6 +1120,16 @@ class FastLtvMpc:
 
     def _check_state(self, x) -> np.ndarray:
         return check_state(x, tuple(self.model.state_names))
+
+    def _load_sides(self, sides: tuple) -> np.ndarray:
+        """The side memory array of ``WarmStart.sides`` (untouched without a detour)."""
+        arr = self._sides
+        if self._detour:
+            arr[:] = _SIDE_NONE
+            for j, side in sides:
+                if 0 <= j < len(self.obstacles):
+                    arr[j] = side
+        return arr
 
     # -- one control step -----------------------------------------------------------------------
     def step(self, x, warm: WarmStart) -> ControlOutput:
@@ -1057,8 +1157,9 @@ class FastLtvMpc:
         out = np.empty(self._out_size)
         t_s = float(warm.t_s)
         info = self._info
+        sides = self._load_sides(warm.sides)
         code = _control_step(x, float(warm.s_m), t_s, u_prev, X, U, MODE_SHIFTED_PLAN if has_plan else MODE_NO_PLAN,
-                             self._wbuf, self._ibuf, out, info)
+                             sides, self._wbuf, self._ibuf, out, info)
         N, nx, nu = self.N, self.nx, self.nu
         cfg = self.config
         it = 1
@@ -1071,23 +1172,27 @@ class FastLtvMpc:
                 break
             X_it = out[self._o_X:self._o_U].reshape(N + 1, nx)
             out = np.empty(self._out_size)
-            code = _control_step(x, float(info[0]), t_s, u_prev, X_it, U_it, MODE_ITERATE, self._wbuf, self._ibuf,
-                                 out, info)
+            sides = self._load_sides(warm.sides)
+            code = _control_step(x, float(info[0]), t_s, u_prev, X_it, U_it, MODE_ITERATE, sides, self._wbuf,
+                                 self._ibuf, out, info)
             it += 1
             t_qp = time.perf_counter() - t1
         t_next = t_s + self.dt_s
+        new_sides = warm.sides
+        if self._detour:
+            new_sides = tuple((j, int(v)) for j, v in enumerate(sides) if v != _SIDE_NONE)
         if code == 0:
             u = out[:nu]
             X_pred = out[self._o_X:self._o_U].reshape(N + 1, nx)
             U_plan = out[self._o_U:self._o_R].reshape(N, nu)
             refs = out[self._o_R:].reshape(N + 1, nx)
             return ControlOutput(u, "ok", "", time.perf_counter() - t0, info[0], e_y, e_psi,
-                                 X_pred, refs, WarmStart(info[0], u, X_pred, U_plan, t_next, warm.sides), it)
+                                 X_pred, refs, WarmStart(info[0], u, X_pred, U_plan, t_next, new_sides), it)
         if code == _BAD_STATE:
             self._check_state(x)  # raises, naming the field
         status = STATUS_WORDS[code]
         refs = self._w[_W_XREF].copy()
         u, name, new_warm, X_pred = plan_fallback(self.problem, x, float(info[0]), warm)
-        new_warm = WarmStart(new_warm.s_m, new_warm.u_prev, new_warm.X, new_warm.U, t_next, warm.sides)
+        new_warm = WarmStart(new_warm.s_m, new_warm.u_prev, new_warm.X, new_warm.U, t_next, new_sides)
         return ControlOutput(u, status, name, time.perf_counter() - t0, float(info[0]), float(e_y),
                              float(e_psi), X_pred, refs, new_warm, it)
