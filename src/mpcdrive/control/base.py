@@ -36,3 +36,17 @@ def check_state(x, state_names: tuple[str, ...]) -> np.ndarray:
     if bad:
         raise ValueError(f"state field(s) {', '.join(bad)} not finite: {dict(zip(state_names, x.tolist()))}")
     return x
+
+
+class TrackingWarmStart:
+    """Warm start and state check shared by the path-tracking MPC controllers (needs ``model``,
+    ``path`` and ``nu`` on the instance)."""
+
+    def initial_warm(self, x0) -> WarmStart:
+        """Warm start of the first step: a global projection of x0, zero previous input."""
+        x0 = self._check_state(x0)
+        s0, _ = self.path.project(x0[:2])
+        return WarmStart(s_m=float(s0), u_prev=np.zeros(self.nu))
+
+    def _check_state(self, x) -> np.ndarray:
+        return check_state(x, tuple(self.model.state_names))

@@ -53,7 +53,7 @@ from ..scene.footprint import Footprint
 from ..scene.obstacles import Circle, ConstantVelocity, Polygon, Static
 from ..solvers.dense_qp import STATUS_WORDS, gi_solve
 from ..types import ControlOutput, WarmStart
-from .base import check_state
+from .base import TrackingWarmStart
 from .mpc import MpcConfig, plan_fallback
 
 _TWO_PI = 2.0 * math.pi
@@ -977,7 +977,7 @@ from ..solvers import dense_qp as _dense_qp  # noqa: E402
 _jitcache.refresh(_control_step, [m.__file__ for m in (_kinematic, _models_compiled, _paths_compiled, _dense_qp)])
 
 
-class FastLtvMpc:
+class FastLtvMpc(TrackingWarmStart):
     """Tracking LTV-MPC of ``model`` along ``path``, every step compiled (see the module text).
 
     Same interface and results as :class:`~mpcdrive.control.mpc.LtvMpc`; statuses ``ok``,
@@ -1111,16 +1111,7 @@ class FastLtvMpc:
         _control_step(x, 0.0, 0.0, np.zeros(self.nu), self._noX, self._noU, MODE_NO_PLAN, self._sides.copy(),
                       self._wbuf, self._ibuf, np.empty(self._out_size), self._info)
 
-    # -- warm start ---------------------------------------------------------------------------
-    def initial_warm(self, x0) -> WarmStart:
-        """Warm start of the first step: a global projection of x0, zero previous input."""
-        x0 = self._check_state(x0)
-        s0, _ = self.path.project(x0[:2])
-        return WarmStart(s_m=float(s0), u_prev=np.zeros(self.nu))
-
-    def _check_state(self, x) -> np.ndarray:
-        return check_state(x, tuple(self.model.state_names))
-
+    # -- warm start: initial_warm and _check_state from TrackingWarmStart ---------------------
     def _load_sides(self, sides: tuple) -> np.ndarray:
         """The side memory array of ``WarmStart.sides`` (untouched without a detour)."""
         arr = self._sides

@@ -29,7 +29,7 @@ from ..solvers.projected_gradient import ProjectedGradientBackend, ProjectedGrad
 from ..types import ControlOutput, SolveResult, WarmStart
 from ..units import TWO_PI, wrap_angle
 from .fallback import FALLBACK_HOLD, FALLBACK_SHIFTED_PLAN, FallbackConfig, FallbackLadder  # noqa: F401
-from .base import check_state
+from .base import TrackingWarmStart
 
 
 @dataclass(frozen=True)
@@ -136,7 +136,7 @@ class MpcConfig:
             raise ValueError(f"fallback must be a FallbackConfig, got {type(self.fallback).__name__}")
 
 
-class LtvMpc:
+class LtvMpc(TrackingWarmStart):
     """Tracking LTV-MPC of ``model`` along ``path`` solving ``problem`` with OSQP (or, given
     :class:`~mpcdrive.solvers.ProjectedGradientSettings`, the paper's projected gradient descent).
 
@@ -218,16 +218,7 @@ class LtvMpc:
         self._du_step = problem.du_max_per_s * problem.dt_s  # (nu,) largest input change per step
         self.fallback = FallbackLadder(self, config.fallback)
 
-    # -- warm start ---------------------------------------------------------------------------
-    def initial_warm(self, x0) -> WarmStart:
-        """Warm start of the first step: a global projection of x0, zero previous input."""
-        x0 = self._check_state(x0)
-        s0, _ = self.path.project(x0[:2])
-        return WarmStart(s_m=float(s0), u_prev=np.zeros(self.nu))
-
-    def _check_state(self, x) -> np.ndarray:
-        return check_state(x, tuple(self.model.state_names))
-
+    # -- warm start: initial_warm and _check_state from TrackingWarmStart ---------------------
     def _check_warm(self, warm: WarmStart) -> np.ndarray:
         u_prev = np.asarray(warm.u_prev, dtype=float)
         if u_prev.shape != (self.nu,) or not np.all(np.isfinite(u_prev)):
