@@ -8,13 +8,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mpcdrive.control import LtvMpc
+from mpcdrive.control import LtvMpc, MpcConfig
 from mpcdrive.experiments import AVOIDANCE_SCENARIOS
+from mpcdrive.models import KinematicBicycle4, KinematicParams
+from mpcdrive.ocp import MpcProblem
 from mpcdrive.ocp.avoidance import SIDE_BLOCKED, SIDE_LEFT, SIDE_RIGHT, Avoidance, AvoidanceConfig, AvoidanceMemory, frenet_box
-from mpcdrive.paths import StraightPath
+from mpcdrive.paths import CirclePath, StraightPath
 from mpcdrive.scenarios import ScenarioSpec, build_experiment, load_scenario, run_experiment
-from mpcdrive.scene import Circle, Footprint, Obstacle, rectangle
-from mpcdrive.sim import compute_metrics
+from mpcdrive.scene import Circle, ConstantVelocity, Footprint, Obstacle, TrajectoryMotion, rectangle
+from mpcdrive.sim import Plant, compute_metrics, simulate
 from mpcdrive.solvers.osqp_backend import OsqpSettings
 
 
@@ -216,3 +218,166 @@ def test_frenet_box_finds_an_obstacle_far_from_the_guess():
     assert box.s_ref == pytest.approx(60.0, abs=0.05)
     assert (box.s_lo, box.s_hi) == pytest.approx((57.75, 62.25), abs=0.05)
     assert (box.e_lo, box.e_hi) == pytest.approx((-0.5, 1.5), abs=0.05)
+
+
+# --------------------------------------------------------------------------- full-size cars in lanes
+CAR = Footprint(5.0, 2.0)  # highway-env's car: 5 m x 2 m, three discs
+
+
+def test_a_gap_narrower_than_the_body_blocks_the_lane():
+    """A 2 m car centred in a 5 m lane leaves 1.5 m each side: too little for a 2 m wide car, so
+    the lane is blocked (stop behind it), not passed on a side that would need the lane slack."""
+    path = StraightPath([0, 0], [100, 0])
+    for formulation in ("hard", "corridor"):
+        av = Avoidance(AvoidanceConfig(formulation, margin_m=0.1, influence_m=30.0), [Obstacle(rectangle(5, 2), (20, 0, 0))],
+                       path, CAR, 10, 0.2, 2.5)
+        needed = av.passing_room_m
+        # the body's full width and both margins, plus (hard) the discs' overhang beyond the body
+        assert needed == pytest.approx(2.0 + 0.1 + (CAR.disc_radius_m - 1.0 if formulation == "hard" else 0.0))
+        s_arr = 2.0 * np.arange(11.0)
+        Xlin = np.column_stack([s_arr, np.zeros(11), np.zeros(11)])
+        assert av.terms(0.0, Xlin[0], Xlin, s_arr, AvoidanceMemory()).sides == {0: SIDE_BLOCKED}
+        # moved 1.5 m to the right it leaves 3 m on the left: pass there
+        av.obstacles = [Obstacle(rectangle(5, 2), (20, -1.5, 0))]
+        assert av.terms(0.0, Xlin[0], Xlin, s_arr, AvoidanceMemory()).sides == {0: SIDE_LEFT}
+
+
+def test_a_moving_obstacle_is_judged_where_the_car_meets_it():
+    """A car now in the next lane, cutting into ours: beside the lane now, in it when we get
+    there -- the lane is blocked."""
+    path = StraightPath([0, 0], [200, 0])
+    cutting_in = Obstacle(rectangle(5, 2), (10.0, -5.0, 0.0), ConstantVelocity(5.0, 2.5))
+    av = Avoidance(AvoidanceConfig("hard", margin_m=0.1, influence_m=40.0), [cutting_in], path, CAR, 15, 0.2, 2.5)
+    s_arr = 2.0 * np.arange(16.0)  # 10 m/s
+    Xlin = np.column_stack([s_arr, np.zeros(16), np.zeros(16)])
+    assert av.terms(0.0, Xlin[0], Xlin, s_arr, AvoidanceMemory()).sides == {0: SIDE_BLOCKED}
+    # the same car staying in its lane is passed on our side of it
+    av.obstacles = [Obstacle(rectangle(5, 2), (10.0, -5.0, 0.0), ConstantVelocity(5.0, 0.0))]
+    assert av.terms(0.0, Xlin[0], Xlin, s_arr, AvoidanceMemory()).sides == {0: SIDE_LEFT}
+
+
+def test_stop_line_lies_across_the_cars_own_road_in_a_bend():
+    """Behind a car blocking the lane in a bend, the stop half-plane is the path's tangent where
+    the car's front disc will be (a plane through the bend further on would reward moving
+    sideways), or at the stop line once it would pass it; its boundary holds the disc back by
+    the clearance along the path."""
+    path = CirclePath((0.0, 0.0), 20.0)
+    cfg = AvoidanceConfig("hard", margin_m=0.3, influence_m=40.0)
+    s_ob = 12.0  # the blocking car's centre, 12 m along the circle
+    th = s_ob / 20.0
+    ob = Obstacle(rectangle(5, 2), (20 * math.cos(th), 20 * math.sin(th), th + math.pi / 2))
+    N = 10
+    av = Avoidance(cfg, [ob], path, CAR, N, 0.2, 2.5)
+    s_arr = 0.7 * np.arange(N + 1.0)  # 3.5 m/s: the front disc passes the stop line at the end
+    Xlin = np.column_stack([20 * np.cos(s_arr / 20), 20 * np.sin(s_arr / 20), s_arr / 20 + math.pi / 2])
+    t = av.terms(0.0, Xlin[0], Xlin, s_arr, AvoidanceMemory())
+    assert t.sides == {0: SIDE_BLOCKED}
+    front = CAR.n_discs - 1
+    o = CAR.disc_offsets_m[front]
+    s_stop = s_ob - 2.5 - (CAR.disc_radius_m + cfg.margin_m)
+    s_bar = np.minimum(s_arr[1:] + o, s_stop)
+    assert s_bar[0] < s_stop - 4.0 and s_bar[-1] == s_stop
+    tangent = np.column_stack([np.cos(s_bar / 20 + math.pi / 2), np.sin(s_bar / 20 + math.pi / 2)])
+    np.testing.assert_allclose(t.rows_a[:, front, :2], -tangent, atol=0.01)
+    # on the boundary: the front disc on the path at the stop arc length (a bend bends it by a few cm)
+    for k in (0, 4, N - 1):
+        yaw = Xlin[k + 1, 2]
+        centre = path.position(s_stop) - o * np.array([math.cos(yaw), math.sin(yaw)])
+        assert t.rows_a[k, front] @ [*centre, yaw] - t.rows_b[k, front] == pytest.approx(0.0, abs=0.1)
+
+
+def test_no_stop_line_for_a_car_on_a_stretch_of_road_that_only_passes_near_by():
+    """On a closed track the far side of the loop may lie within the influence distance: a car
+    there blocks 'the lane' 60 m ahead along the path, beyond the horizon -- no stop line and no
+    reference cap, so the car drives on."""
+    path = CirclePath((0.0, 0.0), 15.0)  # the far side is 30 m away, 47 m along the path
+    ob = Obstacle(rectangle(5, 2), (-15.0, 0.0, -math.pi / 2))
+    cfg = AvoidanceConfig("hard", margin_m=0.3, influence_m=40.0, follow_gap_s=1.0)
+    N = 10
+    av = Avoidance(cfg, [ob], path, CAR, N, 0.2, 2.5)
+    s_arr = 2.0 * np.arange(N + 1.0)
+    Xlin = np.column_stack([15 * np.cos(s_arr / 15), 15 * np.sin(s_arr / 15), s_arr / 15 + math.pi / 2])
+    t = av.terms(0.0, Xlin[0], Xlin, s_arr, AvoidanceMemory())
+    assert t.sides == {0: SIDE_BLOCKED} and t.s_max is None
+    # every row holds on the car's own plan (no half-plane cuts across its road)
+    active = np.isfinite(t.rows_b)
+    lhs = np.einsum("kmi,ki->km", t.rows_a, Xlin[1:, :3])
+    assert np.all(lhs[active] >= t.rows_b[active] - 1e-9)
+    # the same car 8 m ahead of us is within reach: stop line and cap
+    av.obstacles = [Obstacle(rectangle(5, 2), (15 * math.cos(8 / 15), 15 * math.sin(8 / 15), 8 / 15 + math.pi / 2))]
+    t = av.terms(0.0, Xlin[0], Xlin, s_arr, AvoidanceMemory())
+    assert t.s_max is not None and t.s_max[0] == pytest.approx(8.0 - 2.5 - av.stop_distance_m, abs=0.05)
+
+
+def _circle_follower(path: CirclePath, s0: float, v: float, t_end: float) -> Obstacle:
+    """A 5 m x 2 m car driving along the circle from arc length s0 at v [m/s]."""
+    t = np.arange(0.0, t_end, 0.1)
+    s = s0 + v * t
+    P = path.position(s)
+    yaw = np.asarray(path.heading(s))
+    return Obstacle(rectangle(5, 2), (P[0, 0], P[0, 1], yaw[0]),
+                    TrajectoryMotion(t, P[:, 0] - P[0, 0], P[:, 1] - P[0, 1], yaw - yaw[0]), "leader")
+
+
+@pytest.mark.parametrize("follow_gap_s", [None, 1.0])
+def test_following_a_slower_car_in_a_bend(follow_gap_s):
+    """A car at 10 m/s closes on a car driving 6 m/s ahead in its lane on a 20 m circle. With a
+    follow gap the references trail the leader by that time gap: the car settles at its speed,
+    the gap and the lane centre. Without it the references run on at 10 m/s and pull the car
+    against the stop constraint, which in a bend it eases by cutting inwards."""
+    path = CirclePath((0.0, 0.0), 20.0)
+    model = KinematicBicycle4(KinematicParams(2.5, 2.5))
+    dt, N, steps = 0.2, 15, 120
+    pb = MpcProblem(4, 2, N, dt, Q=[1.0, 1.0, 2.0, 0.5], R=[1.0, 0.05], Rc=[20.0, 0.05],
+                    u_min=[-0.78, -5.0], u_max=[0.78, 5.0], du_max_per_s=[1.0, np.inf],
+                    x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [20.0], lane_half_width_m=2.5)
+    leader = _circle_follower(path, 25.0, 6.0, dt * steps + 10.0)
+    cfg = AvoidanceConfig("hard", margin_m=0.3, influence_m=30.0, follow_gap_s=follow_gap_s)
+    c = LtvMpc(model, path, pb, MpcConfig(v_ref_mps=10.0, projection_window_m=6.0), obstacles=(leader,),
+               avoidance=cfg, footprint=CAR, lane_margin_m=0.0)
+    x0 = np.array([20.0, 0.0, math.pi / 2, 10.0])
+    r = simulate(c, Plant(model), path, x0, dt, steps, obstacles=(leader,), footprint=CAR, lane_half_width_m=2.5)
+    m = compute_metrics(r, CAR)
+    assert m["collisions"] == 0 and m["min_obstacle_clearance_m"] > 0.2
+    assert m["solver_failures"] == 0 and m["fallbacks"] == 0
+    late = slice(steps // 2, None)
+    assert np.abs(r.v_mps[late] - 6.0).max() < 0.2
+    # centre to centre along the path: a car length, the stop line's bumper gap, the time gap
+    stop_gap = c.avoidance.stop_distance_m - 2.5
+    arc_gap = 25.0 + 6.0 * r.t_s[late] - r.s_m[late]
+    if follow_gap_s is None:  # held back by the stop constraint alone, a little off-centre
+        np.testing.assert_allclose(arc_gap, 5.0 + stop_gap, atol=0.1)
+        assert abs(r.e_y_m[-1]) > 0.05
+    else:
+        np.testing.assert_allclose(arc_gap, 5.0 + stop_gap + follow_gap_s * 6.0, atol=0.2)
+        assert np.abs(r.e_y_m).max() < 0.15 and abs(r.e_y_m[-1]) < 0.03
+
+
+def test_set_obstacles_replaces_what_the_controller_avoids():
+    """Moving obstacles handed over afresh each step: the QP keeps its size, the plan follows."""
+    path = StraightPath([0, 0], [300, 0])
+    model = KinematicBicycle4(KinematicParams(2.5, 2.5))
+    pb = MpcProblem(4, 2, 15, 0.2, Q=[1.0, 1.0, 2.0, 0.5], R=[1.0, 0.05], u_min=[-0.78, -5.0], u_max=[0.78, 5.0],
+                    x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [20.0], lane_half_width_m=2.5)
+    stopped_ahead = Obstacle(rectangle(5, 2), (20.0, 0.0, 0.0), name="stopped")
+    cfg = AvoidanceConfig("hard", margin_m=0.3, influence_m=30.0, max_obstacles=2, follow_gap_s=1.0)
+    c = LtvMpc(model, path, pb, MpcConfig(v_ref_mps=10.0), obstacles=(stopped_ahead,), avoidance=cfg,
+               footprint=CAR, lane_margin_m=0.0)
+    x = np.array([0.0, 0.0, 0.0, 10.0])
+    rows = c.qp.problem.obstacle_rows
+    brake = c.step(x, c.initial_warm(x))
+    assert brake.u[1] < -2.0  # 12.5 m to its rear at 10 m/s
+    # it drives off at 10 m/s and a second car appears far behind: no reason to brake
+    moving = Obstacle(rectangle(5, 2), (20.0, 0.0, 0.0), ConstantVelocity(10.0, 0.0), name="moving")
+    behind = Obstacle(rectangle(5, 2), (-60.0, -5.0, 0.0), ConstantVelocity(10.0, 0.0), name="behind")
+    c.set_obstacles([moving, behind])
+    assert c.obstacles == (moving, behind)
+    free = c.step(x, c.initial_warm(x))
+    assert free.u[1] > -0.5 and free.status == "ok"
+    assert c.qp.problem.obstacle_rows == rows == 2 * CAR.n_discs
+    with pytest.raises(ValueError, match=r"obstacles\[1\] must be an Obstacle"):
+        c.set_obstacles([moving, (1.0, 2.0)])
+    bare = LtvMpc(model, path, pb, MpcConfig(v_ref_mps=10.0))
+    assert bare.obstacles == ()
+    with pytest.raises(ValueError, match="built without obstacles"):
+        bare.set_obstacles([moving])

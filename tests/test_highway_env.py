@@ -17,8 +17,10 @@ from mpcdrive.adapters.highway_env import (
     HighwayEnvMpcDriver,
     drive_env,
     lane_centerline,
+    lane_following_obstacle,
     lane_sequence,
     racetrack_config,
+    vehicle_obstacle,
 )
 from mpcdrive.sim import compute_metrics
 
@@ -54,9 +56,43 @@ def test_action_scaling_rejects_bad_ranges(kwargs, field):
         ActionScaling().from_action([0.1])
 
 
+def test_lane_following_prediction_on_a_circle():
+    """A car 0.8 m outside the lane centre, yawed 0.1 rad towards it, at 8 m/s on a 20 m circle:
+    the prediction starts at its pose, moves 8 m/s along the lane and steers onto its centre."""
+    from types import SimpleNamespace
+
+    from mpcdrive.paths import CirclePath
+
+    path = CirclePath((0.0, 0.0), 20.0)  # counter-clockwise: the centre is on the left
+    th = 0.3
+    car = SimpleNamespace(position=np.array([20.8 * math.cos(th), 20.8 * math.sin(th)]),
+                          heading=th + math.pi / 2 + 0.1, speed=8.0, LENGTH=5.0, WIDTH=2.0)
+    ob = lane_following_obstacle(car, path, np.arange(0.0, 3.01, 0.2), t_s=1.0, tau_lateral_s=0.5)
+    assert ob.pose_at(1.0) == pytest.approx((*car.position, car.heading), abs=1e-12)
+    assert ob.pose_at(0.0) == ob.pose_at(1.0)  # held before now
+    np.testing.assert_allclose(np.ptp(ob.shape.points, axis=0), [5.0, 2.0])
+    s0, e0 = path.project(car.position)
+    assert e0 == pytest.approx(-0.8)
+    for t in (0.5, 1.0, 3.0):
+        x, y, yaw = ob.pose_at(1.0 + t)
+        s, e = path.project([x, y], s0 + 8.0 * t, 3.0)
+        assert s == pytest.approx(s0 + 8.0 * t, abs=0.02)
+        assert e == pytest.approx(-0.8 * math.exp(-t / 0.5), abs=0.02)
+        assert yaw == pytest.approx(float(path.heading(s)) + 0.1 * math.exp(-t / 0.5), abs=1e-3)
+    assert ob.pose_at(9.0) == ob.pose_at(4.0)  # held after the last prediction
+    with pytest.raises(ValueError, match="times_s"):
+        lane_following_obstacle(car, path, [0.2, 0.4])
+    with pytest.raises(ValueError, match="tau_lateral_s"):
+        lane_following_obstacle(car, path, [0.0, 0.2], tau_lateral_s=0.0)
+
+
 def test_racetrack_config_checks_its_numbers():
     cfg = racetrack_config(steering_range_rad=(-0.6, 0.6), policy_frequency_hz=5, simulation_frequency_hz=15)
-    assert cfg["other_vehicles"] == 0
+    assert cfg["other_vehicles"] == 1  # highway-env's own default: one car ahead in the ego's lane
+    assert racetrack_config(other_vehicles=0)["other_vehicles"] == 0
+    for bad in (-1, 2.5, True):
+        with pytest.raises(ValueError, match="other_vehicles"):
+            racetrack_config(other_vehicles=bad)
     assert cfg["action"]["steering_range"] == [-0.6, 0.6] and cfg["action"]["longitudinal"] is True
     with pytest.raises(ValueError, match="simulation_frequency_hz"):
         racetrack_config(policy_frequency_hz=5, simulation_frequency_hz=12)
@@ -87,7 +123,7 @@ def make_env(gym, seed: int, **config):
 @pytest.mark.slow
 @pytest.mark.parametrize("lane_id", [0, 1])
 def test_centerline_follows_the_racetrack_lane(gym, lane_id):
-    env = make_env(gym, 0)
+    env = make_env(gym, 0, other_vehicles=0)
     net = env.unwrapped.road.network
     seq, closed = lane_sequence(net, ("a", "b", lane_id))
     assert closed and len(seq) == 9 and all(ix[2] == lane_id for ix in seq)
@@ -131,8 +167,8 @@ def test_action_scaling_matches_the_environment(gym):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1])
-def test_mpc_drives_the_racetrack_on_the_road(gym, seed):
-    env = make_env(gym, seed)
+def test_mpc_drives_the_empty_racetrack_on_the_road(gym, seed):
+    env = make_env(gym, seed, other_vehicles=0)
     driver = HighwayEnvMpcDriver(env, DriverSettings(v_ref_mps=10.0))
     vehicle = env.unwrapped.vehicle
     assert driver.model.params.lf_m == driver.model.params.lr_m == vehicle.LENGTH / 2
@@ -155,7 +191,8 @@ def test_mpc_drives_the_racetrack_on_the_road(gym, seed):
 
 @pytest.mark.slow
 def test_steering_only_keeps_the_speed_and_the_road(gym):
-    env = make_env(gym, 2, action={"type": "ContinuousAction", "longitudinal": False, "lateral": True})
+    env = make_env(gym, 2, other_vehicles=0,
+                   action={"type": "ContinuousAction", "longitudinal": False, "lateral": True})
     driver = HighwayEnvMpcDriver(env)
     assert driver.model.nx == 3 and not driver.scaling.longitudinal
     drive = drive_env(env, driver, 150)
@@ -166,9 +203,83 @@ def test_steering_only_keeps_the_speed_and_the_road(gym):
 
 
 @pytest.mark.slow
-def test_driver_refuses_other_vehicles(gym):
-    # TODO(obstacles): drive among other vehicles once the controller avoids obstacles
-    env = make_env(gym, 0, other_vehicles=1)
-    with pytest.raises(ValueError, match="obstacle avoidance is not supported yet"):
-        HighwayEnvMpcDriver(env)
+def test_a_vehicle_becomes_its_rectangle_moving_at_its_velocity(gym):
+    env = make_env(gym, 1, other_vehicles=10)
+    u = env.unwrapped
+    others = [v for v in u.road.vehicles if v is not u.vehicle]
+    assert len(others) >= 3
+    for v in others:
+        ob = vehicle_obstacle(v, t_s=3.0)  # the controller's clock reads 3 s now
+        assert ob.pose_at(3.0) == pytest.approx((v.position[0], v.position[1], v.heading), abs=1e-12)
+        # the same corners as highway-env's own collision polygon
+        corners = ob.at(3.0).points
+        theirs = v.polygon()[:4]
+        assert sorted(map(tuple, np.round(corners, 9))) == sorted(map(tuple, np.round(theirs, 9)))
+        np.testing.assert_allclose(np.ptp(ob.shape.points, axis=0), [v.LENGTH, v.WIDTH])
+        # a constant velocity: highway-env's speed along the heading
+        x0, y0, h0 = ob.pose_at(3.0)
+        x1, y1, h1 = ob.pose_at(3.5)
+        np.testing.assert_allclose([(x1 - x0) / 0.5, (y1 - y0) / 0.5], v.velocity, atol=1e-9)
+        assert h1 == h0 and math.hypot(*v.velocity) == pytest.approx(v.speed)
     env.close()
+
+
+@pytest.mark.slow
+def test_lane_following_prediction_stays_on_the_lane_and_comes_true(gym):
+    """The predicted rectangles start at the vehicles' poses, keep to their lanes through the
+    bends (where a straight line leaves the road) and are where highway-env drives them 1 s on."""
+    env = make_env(gym, 1, other_vehicles=10)
+    u = env.unwrapped
+    driver = HighwayEnvMpcDriver(env, DriverSettings(v_ref_mps=10.0))
+    others = driver.others
+    net = u.road.network
+    times = np.arange(0.0, 3.01, 0.2)
+    obs = driver.obstacles(t_s=2.0)
+    straight_off_road = 0
+    for v, ob in zip(others, obs):
+        assert ob.pose_at(2.0) == pytest.approx((v.position[0], v.position[1], v.heading), abs=1e-9)
+        for t in times[5:]:  # after 1 s: any offset from the lane centre has mostly decayed
+            x, y, _ = ob.pose_at(2.0 + t)
+            lane = net.get_lane(net.get_closest_lane_index(np.array([x, y])))
+            assert abs(lane.local_coordinates(np.array([x, y]))[1]) < 0.5 * lane.width_at(0.0)
+        xs, ys, _ = vehicle_obstacle(v, 2.0).pose_at(5.0)
+        lane = net.get_lane(net.get_closest_lane_index(np.array([xs, ys])))
+        straight_off_road += not lane.on_lane(np.array([xs, ys]))
+    assert straight_off_road >= 1  # the straight-line prediction leaves the road within 3 s
+    # drive 1 s (5 policy steps): the vehicles are where the prediction put them
+    predicted = [ob.pose_at(2.0 + 1.0) for ob in obs]
+    for _ in range(5):
+        action, _ = driver.act()
+        env.step(action)
+    err = [math.hypot(v.position[0] - p[0], v.position[1] - p[1]) for v, p in zip(others, predicted)]
+    assert max(err) < 1.0, err
+    env.close()
+
+
+def drive_among_other_vehicles(gym, seed: int, settings: DriverSettings = DriverSettings(), steps: int = 300):
+    env = make_env(gym, seed, other_vehicles=10)
+    driver = HighwayEnvMpcDriver(env, settings)
+    drive = drive_env(env, driver, steps)
+    env.close()
+    return driver, drive
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 7])
+def test_mpc_drives_among_other_vehicles_without_a_crash(gym, seed):
+    """300 policy steps (60 s, over a lap) among highway-env's IDM cars: no crash, never off the
+    road, in its lane; the cars came near and were avoided as obstacles (passed in the next lane,
+    followed in its own)."""
+    driver, drive = drive_among_other_vehicles(gym, seed)
+    r = drive.result
+    assert len(driver.others) >= 4
+    assert r.steps == 300, "the episode ended early (off the road or crashed)"
+    assert not drive.crashed and drive.on_road.all() and not drive.terminated
+    m = compute_metrics(r, drive.footprint)
+    assert m["collisions"] == 0 and m["min_obstacle_clearance_m"] == pytest.approx(drive.clearance_m.min())
+    assert 0.5 < drive.clearance_m.min() < 3.0  # close, and clear of them
+    assert (drive.considered > 0).sum() > 100 and drive.considered.max() >= 2
+    assert m["solver_failures"] == 0 and m["fallbacks"] == 0
+    assert m["max_abs_lateral_error_m"] < 0.5 and m["max_lane_excess_m"] == 0.0
+    assert r.v_mps.min() < 9.0  # slowed down behind a slower car at least once
+    assert r.s_m[-1] - r.s_m[0] > 0.9 * driver.path.length_m

@@ -22,34 +22,44 @@ What the adapter does:
   [m/s^2]; :class:`ActionScaling` converts our radians and m/s^2 into that normalized action
   (order ``[acceleration, steering]`` when both are controlled) and the MPC's input bounds are
   exactly those ranges, so a command is never clipped by the environment.
-
-TODO(obstacles): other vehicles are not avoided yet -- the controller has no obstacle terms.
-:func:`racetrack_config` therefore sets ``other_vehicles: 0``, and :class:`HighwayEnvMpcDriver`
-refuses an environment with other vehicles on the road. Once obstacles exist, pass the other
-vehicles (position, heading, LENGTH x WIDTH rectangles, predicted at constant speed over the
-horizon) to the controller here.
+* **Other vehicles -> moving obstacles.** Every other vehicle (and solid road object) is a
+  ``LENGTH`` x ``WIDTH`` rectangle at its position and heading; each policy step the driver hands
+  the controller their current poses (:meth:`LtvMpc.set_obstacles`, on the controller's clock),
+  predicted over the horizon at constant speed along the lane each one steers to
+  (:func:`lane_following_obstacle`; its offset from that lane's centre decays, as highway-env's
+  lane keeping makes it) -- a straight-line prediction (:func:`vehicle_obstacle`,
+  ``prediction="constant_velocity"``) runs off the racetrack's 15-25 m bends within the horizon
+  and makes phantom obstacles of cars in the next lane. The avoidance is ``hard`` with car
+  following (``follow_gap_s``): the ego keeps to its lane (the lane bound keeps its body inside),
+  passes cars in the next lane, and behind a car in its own lane -- or one cutting in, judged
+  where the ego meets it -- it slows down and follows at a time gap instead of overtaking.
+  Vehicles beyond the influence distance (20 m) are ignored, the nearest three considered.
 
 Example::
 
     import gymnasium as gym
-    env = gym.make("racetrack-v0", config=racetrack_config())
+    env = gym.make("racetrack-v0", config=racetrack_config(other_vehicles=10))
     env.reset(seed=0)
     drive = drive_env(env, HighwayEnvMpcDriver(env), steps=300)
-    print(drive.result.e_y_m.max(), drive.on_road.all())
+    print(drive.result.e_y_m.max(), drive.on_road.all(), drive.crashed, drive.clearance_m.min())
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
 from ..control.mpc import LtvMpc, MpcConfig
 from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams
+from ..ocp.avoidance import AvoidanceConfig
 from ..ocp.problem import MpcProblem
 from ..paths.waypoints import WaypointPath
-from ..sim.metrics import Footprint
+from ..scene.footprint import Footprint
+from ..scene.geometry import shape_distance
+from ..scene.obstacles import ConstantVelocity, Obstacle, TrajectoryMotion, rectangle
 from ..types import ControlOutput, SimResult
 
 __all__ = [
@@ -59,8 +69,10 @@ __all__ = [
     "HighwayEnvMpcDriver",
     "drive_env",
     "lane_centerline",
+    "lane_following_obstacle",
     "lane_sequence",
     "racetrack_config",
+    "vehicle_obstacle",
 ]
 
 #: highway-env's ContinuousAction defaults (used when the env config names no range)
@@ -72,13 +84,16 @@ def racetrack_config(*, longitudinal: bool = True,
                      steering_range_rad: tuple[float, float] = DEFAULT_STEERING_RANGE_RAD,
                      acceleration_range_mps2: tuple[float, float] = DEFAULT_ACCELERATION_RANGE_MPS2,
                      policy_frequency_hz: int = 5, simulation_frequency_hz: int = 15,
-                     duration_s: float = 300.0) -> dict:
+                     duration_s: float = 300.0, other_vehicles: int = 1) -> dict:
     """Configuration for ``gym.make("racetrack-v0", config=...)``: continuous steering (and
-    acceleration when ``longitudinal``), a cheap kinematics observation (the driver reads the
-    vehicle state itself) and no other vehicles (see the module's TODO).
+    acceleration when ``longitudinal``) and a cheap kinematics observation (the driver reads the
+    vehicle states itself).
 
     ``simulation_frequency_hz`` must be a multiple of ``policy_frequency_hz`` (the environment
-    repeats the action ``simulation / policy`` times)."""
+    repeats the action ``simulation / policy`` times). ``other_vehicles``: racetrack-v0's own
+    meaning -- 0 is an empty track; n >= 1 places one car ahead in the ego's lane (6-9 m/s) and
+    up to n - 1 more at random places (highway-env drops those within 20 m of another car);
+    highway-env's default is 1."""
     for name, rng in (("steering_range_rad", steering_range_rad),
                       ("acceleration_range_mps2", acceleration_range_mps2)):
         lo, hi = (float(v) for v in rng)
@@ -92,6 +107,8 @@ def racetrack_config(*, longitudinal: bool = True,
                          f"({policy_frequency_hz}), got {simulation_frequency_hz}")
     if not (math.isfinite(duration_s) and duration_s > 0):
         raise ValueError(f"duration_s must be positive, got {duration_s}")
+    if isinstance(other_vehicles, bool) or int(other_vehicles) != other_vehicles or other_vehicles < 0:
+        raise ValueError(f"other_vehicles must be an integer >= 0, got {other_vehicles}")
     return {
         "observation": {"type": "Kinematics"},
         "action": {
@@ -101,7 +118,7 @@ def racetrack_config(*, longitudinal: bool = True,
             "steering_range": [float(v) for v in steering_range_rad],
             "acceleration_range": [float(v) for v in acceleration_range_mps2],
         },
-        "other_vehicles": 0,  # TODO(obstacles): the controller cannot avoid them yet
+        "other_vehicles": int(other_vehicles),
         "policy_frequency": int(policy_frequency_hz),
         "simulation_frequency": int(simulation_frequency_hz),
         "duration": float(duration_s),
@@ -260,7 +277,13 @@ class DriverSettings:
     max_steer_rate_rad_s : steering rate bound [rad/s] (None: unbounded);
     speed_limits_mps : (low, high) speed bounds [m/s]; lane_margin_m : distance kept between
     the vehicle's side and the lane edge by the soft lane bound [m];
-    centerline_ds_m / centerline_smoothing_m : see :func:`lane_centerline`.
+    centerline_ds_m / centerline_smoothing_m : see :func:`lane_centerline`;
+    avoidance : how other vehicles enter the MPC (an
+    :class:`~mpcdrive.ocp.avoidance.AvoidanceConfig`; the default: hard half-planes with 0.3 m
+    clearance, vehicles within 20 m, the nearest 3, car following at a 1 s time gap);
+    prediction : ``lane`` (constant speed along the lane each vehicle steers to, its offset from
+    the lane centre decaying with time constant ``tau_lateral_s`` [s]) or ``constant_velocity``
+    (a straight line; it leaves the road in the bends).
     """
 
     horizon: int = 15
@@ -273,6 +296,10 @@ class DriverSettings:
     lane_margin_m: float = 0.0
     centerline_ds_m: float = 1.0
     centerline_smoothing_m: float = 0.02
+    avoidance: AvoidanceConfig = AvoidanceConfig("hard", margin_m=0.3, influence_m=20.0, max_obstacles=3,
+                                                 follow_gap_s=1.0)
+    prediction: Literal["lane", "constant_velocity"] = "lane"
+    tau_lateral_s: float = 1.0
 
     def __post_init__(self):
         if int(self.horizon) != self.horizon or self.horizon < 1:
@@ -283,6 +310,68 @@ class DriverSettings:
             raise ValueError(f"max_steer_rate_rad_s must be positive, got {self.max_steer_rate_rad_s}")
         if not (math.isfinite(self.lane_margin_m) and self.lane_margin_m >= 0):
             raise ValueError(f"lane_margin_m must be >= 0, got {self.lane_margin_m}")
+        if not isinstance(self.avoidance, AvoidanceConfig):
+            raise ValueError(f"avoidance must be an AvoidanceConfig, got {type(self.avoidance).__name__}")
+        if self.prediction not in ("lane", "constant_velocity"):
+            raise ValueError(f"prediction must be 'lane' or 'constant_velocity', got {self.prediction!r}")
+        if not self.tau_lateral_s > 0:
+            raise ValueError(f"tau_lateral_s must be positive, got {self.tau_lateral_s}")
+
+
+def vehicle_obstacle(vehicle, t_s: float = 0.0, name: str = "") -> Obstacle:
+    """A highway-env vehicle (or road object) as a moving obstacle: its ``LENGTH`` x ``WIDTH``
+    rectangle [m] centred at its ``position`` [m] with its ``heading`` [rad], moving at its
+    current velocity ``speed (cos heading, sin heading)`` [m/s].
+
+    t_s : the time [s] on the controller's clock at which the vehicle is where it is now (the
+    ``warm.t_s`` of the step that uses the obstacle), so ``pose_at(t_s)`` is its current pose
+    and ``pose_at(t_s + k dt)`` the constant-velocity prediction ``k`` steps ahead."""
+    if not math.isfinite(t_s):
+        raise ValueError(f"t_s must be finite, got {t_s}")
+    x, y = (float(v) for v in vehicle.position)
+    heading, speed = float(vehicle.heading), float(getattr(vehicle, "speed", 0.0))
+    vx, vy = speed * math.cos(heading), speed * math.sin(heading)
+    return Obstacle(rectangle(float(vehicle.LENGTH), float(vehicle.WIDTH)),
+                    (x - vx * t_s, y - vy * t_s, heading), ConstantVelocity(vx, vy), name)
+
+
+def lane_following_obstacle(vehicle, path, times_s, t_s: float = 0.0, *, s_guess: float | None = None,
+                            tau_lateral_s: float = 1.0, name: str = "") -> Obstacle:
+    """A highway-env vehicle as an obstacle that follows its lane: the ``LENGTH`` x ``WIDTH``
+    rectangle [m] starts at the vehicle's pose and moves along ``path`` (the lane's centreline,
+    a :class:`~mpcdrive.paths.Path`) at its current speed [m/s], its lateral offset [m] and
+    heading offset [rad] from the lane decaying with time constant ``tau_lateral_s`` [s] (the
+    vehicle steers back to the lane centre; ``math.inf`` keeps the offsets).
+
+    times_s : (K,) prediction times [s] from now (increasing, starting at 0; the pose is held
+    after the last); t_s : the controller's clock [s] now (see :func:`vehicle_obstacle`);
+    s_guess : arc length [m] near which to project the vehicle (None: the whole path)."""
+    times = np.asarray(times_s, dtype=float)
+    if times.ndim != 1 or len(times) < 1 or times[0] != 0.0 or np.any(np.diff(times) <= 0):
+        raise ValueError("times_s must be increasing prediction times starting at 0")
+    if not math.isfinite(t_s):
+        raise ValueError(f"t_s must be finite, got {t_s}")
+    if not tau_lateral_s > 0:
+        raise ValueError(f"tau_lateral_s must be positive, got {tau_lateral_s}")
+    xy = np.array([float(v) for v in vehicle.position])
+    heading, speed = float(vehicle.heading), float(getattr(vehicle, "speed", 0.0))
+    window = 10.0 + float(vehicle.LENGTH)
+    s0, e0 = path.project(xy, s_guess, window) if s_guess is not None else path.project(xy)
+    s = s0 + max(speed, 0.0) * times
+    if not path.closed:
+        s = np.minimum(s, path.length_m)
+    h = np.asarray(path.heading(s), dtype=float)
+    dpsi = (heading - float(path.heading(s0)) + math.pi) % (2.0 * math.pi) - math.pi
+    decay = np.exp(-times / tau_lateral_s)
+    normal = np.column_stack([-np.sin(h), np.cos(h)])
+    P = np.asarray(path.position(s), dtype=float) + (e0 * decay)[:, None] * normal
+    # the prediction starts exactly at the vehicle's pose
+    P += (xy - P[0]) * decay[:, None]
+    yaw = np.unwrap(h + dpsi * decay)
+    yaw += heading - yaw[0]
+    motion = TrajectoryMotion(t_s + times, P[:, 0] - xy[0], P[:, 1] - xy[1], yaw - heading)
+    return Obstacle(rectangle(float(vehicle.LENGTH), float(vehicle.WIDTH)), (xy[0], xy[1], heading),
+                    motion, name)
 
 
 def _vehicle_state(vehicle, nx: int) -> np.ndarray:
@@ -296,9 +385,13 @@ class HighwayEnvMpcDriver:
     """LTV-MPC driver of a created (and reset) highway-env environment's ego vehicle.
 
     Built once per episode (after ``env.reset``): path from the ego's lane, model from the
-    vehicle's length, QP from the action ranges. :meth:`act` reads the vehicle state
-    (position [m], heading [rad], speed [m/s]) and returns the normalized action and the
+    vehicle's length, QP from the action ranges, and the list of the other vehicles (and solid
+    road objects: ``others``, their order fixed, an obstacle's index its identity). :meth:`act`
+    reads the vehicle state (position [m], heading [rad], speed [m/s]) and the other vehicles'
+    poses, hands those to the controller as obstacles and returns the normalized action and the
     controller's output. The controller's period is the policy period ``1 / policy_frequency``.
+    With steering only (no longitudinal action) the ego cannot slow down behind a slower car in
+    its lane: it keeps its lane and speed, and the avoidance can only hold it off sideways.
     """
 
     def __init__(self, env, settings: DriverSettings = DriverSettings()):
@@ -310,11 +403,10 @@ class HighwayEnvMpcDriver:
         if cfg["action"].get("dynamical", False):
             raise ValueError("action.dynamical must be false: the driver models highway-env's "
                              "kinematic Vehicle, not the dynamical BicycleVehicle")
-        others = [v for v in u.road.vehicles if v is not vehicle] + list(getattr(u.road, "objects", []))
-        if others:
-            # TODO(obstacles): hand them to the controller once it has obstacle terms
-            raise ValueError(f"{len(others)} other vehicle(s)/object(s) on the road: obstacle "
-                             "avoidance is not supported yet; set other_vehicles: 0")
+        # everything the ego can collide with, in a fixed order (index = obstacle identity)
+        self.others = tuple(o for o in [*u.road.vehicles, *getattr(u.road, "objects", [])]
+                            if o is not vehicle and getattr(o, "collidable", True)
+                            and getattr(o, "solid", True))
         self.env = env
         self.settings = settings
         self.scaling = ActionScaling.from_env(env)
@@ -323,6 +415,8 @@ class HighwayEnvMpcDriver:
         self.path, self.lane_half_width_m = lane_centerline(
             u.road.network, self.lane_index, ds_m=settings.centerline_ds_m,
             smoothing_m=settings.centerline_smoothing_m)
+        self._lane_paths = dict.fromkeys(lane_sequence(u.road.network, self.lane_index)[0], self.path)
+        self._times_s = self.dt_s * np.arange(int(settings.horizon) + 1)
         length_m, width_m = float(vehicle.LENGTH), float(vehicle.WIDTH)
         self.footprint = Footprint(length_m, width_m)
         params = KinematicParams(0.5 * length_m, 0.5 * length_m)
@@ -343,28 +437,61 @@ class HighwayEnvMpcDriver:
             v_ref, nq, nr = float(vehicle.speed), 3, 1
         if len(s.Q) < nq or len(s.R) < nr or len(s.Rc) < nr:
             raise ValueError(f"settings need Q with {nq} and R, Rc with {nr} entries")
-        half = self.lane_half_width_m - 0.5 * width_m - s.lane_margin_m
-        if half <= 0:
+        if self.lane_half_width_m - 0.5 * width_m - s.lane_margin_m <= 0:
             raise ValueError(f"lane half width {self.lane_half_width_m} m leaves no room for the "
                              f"vehicle ({width_m} m wide) with a margin of {s.lane_margin_m} m")
+        # the controller keeps the body (half its width plus the margin) inside the lane
         problem = MpcProblem(
             nx=self.model.nx, nu=self.model.nu, N=int(s.horizon), dt_s=self.dt_s,
             Q=np.array(s.Q[:nq]), R=np.array(s.R[:nr]), Rc=np.array(s.Rc[:nr]),
             u_min=np.array(u_min), u_max=np.array(u_max), du_max_per_s=np.array(du),
-            x_min=x_min, x_max=x_max, lane_half_width_m=half,
+            x_min=x_min, x_max=x_max, lane_half_width_m=self.lane_half_width_m,
         )
         # the projection window must cover the distance driven per step, and more
         window = max(2.0, 3.0 * max(v_ref, float(vehicle.speed)) * self.dt_s)
         config = MpcConfig(v_ref_mps=v_ref, projection_window_m=window)
-        self.controller = LtvMpc(self.model, self.path, problem, config)
+        self.controller = LtvMpc(self.model, self.path, problem, config,
+                                 obstacles=self.obstacles(0.0), avoidance=s.avoidance,
+                                 footprint=self.footprint, lane_margin_m=s.lane_margin_m)
         self.warm = self.controller.initial_warm(self.state())
 
     def state(self) -> np.ndarray:
         """(nx,) ego state [x m, y m, yaw rad(, v m/s)] read from the environment."""
         return _vehicle_state(self.env.unwrapped.vehicle, self.model.nx)
 
+    def lane_path(self, lane_index):
+        """Centreline path of the lanes followed from ``lane_index`` (built once per sequence)."""
+        lane_index = tuple(lane_index)
+        if lane_index not in self._lane_paths:
+            seq, _ = lane_sequence(self.env.unwrapped.road.network, lane_index)
+            path, _ = lane_centerline(self.env.unwrapped.road.network, lane_index,
+                                      ds_m=self.settings.centerline_ds_m,
+                                      smoothing_m=self.settings.centerline_smoothing_m)
+            for ix in seq:
+                self._lane_paths.setdefault(ix, path)
+        return self._lane_paths[lane_index]
+
+    def obstacles(self, t_s: float) -> tuple[Obstacle, ...]:
+        """The other vehicles (and solid road objects) where they are now, as obstacles on the
+        controller's clock at ``t_s`` [s]: moving along their lane (:func:`lane_following_obstacle`,
+        towards the lane they steer to) or, with ``prediction="constant_velocity"`` and for
+        objects off the lanes, in a straight line (:func:`vehicle_obstacle`)."""
+        s = self.settings
+        out = []
+        for j, o in enumerate(self.others):
+            name = f"{type(o).__name__}-{j}"
+            lane = getattr(o, "target_lane_index", None) or getattr(o, "lane_index", None)
+            if s.prediction == "lane" and lane is not None and float(getattr(o, "speed", 0.0)) != 0.0:
+                out.append(lane_following_obstacle(o, self.lane_path(lane), self._times_s, t_s,
+                                                   tau_lateral_s=s.tau_lateral_s, name=name))
+            else:
+                out.append(vehicle_obstacle(o, t_s, name))
+        return tuple(out)
+
     def act(self) -> tuple[np.ndarray, ControlOutput]:
         """One control step: (normalized action for ``env.step``, controller output)."""
+        if self.others:
+            self.controller.set_obstacles(self.obstacles(self.warm.t_s))
         out = self.controller.step(self.state(), self.warm)
         self.warm = out.warm
         steer = float(out.u[0])
@@ -380,7 +507,10 @@ class HighwayDrive:
     applied after the action's scaling); on_road : (K,) the environment's ``vehicle.on_road``
     after each step; crashed : the vehicle crashed; terminated / truncated : how the episode
     ended (both False when ``steps`` ran out first); rewards : (K,) per-step rewards;
-    footprint : the vehicle body.
+    footprint : the vehicle body; clearance_m : (K,) signed distance [m] between the body and
+    the nearest other vehicle (or road object) at each logged state (inf without any);
+    considered : (K,) number of obstacles the controller considered at each step (within the
+    avoidance's influence distance, at most ``max_obstacles``).
     """
 
     result: SimResult
@@ -390,6 +520,8 @@ class HighwayDrive:
     truncated: bool
     rewards: np.ndarray
     footprint: Footprint
+    clearance_m: np.ndarray
+    considered: np.ndarray
 
 
 def drive_env(env, driver: HighwayEnvMpcDriver, steps: int) -> HighwayDrive:
@@ -400,11 +532,17 @@ def drive_env(env, driver: HighwayEnvMpcDriver, steps: int) -> HighwayDrive:
     model, path = driver.model, driver.path
     N, nx = driver.controller.N, model.nx
     T, X, U, S, EY, EPSI, XP, RF, ST = [], [], [], [], [], [], [], [], []
-    status, fallback, on_road, rewards = [], [], [], []
+    status, fallback, on_road, rewards, clearance, considered = [], [], [], [], [], []
     terminated = truncated = False
     for k in range(int(steps)):
         x = driver.state()
+        t_s = driver.warm.t_s
+        body = driver.footprint.polygon(*x[:3])
+        clearance.append(min((shape_distance(body, vehicle_obstacle(o).at(0.0)) for o in driver.others),
+                             default=np.inf))
         action, out = driver.act()
+        avoidance = driver.controller.avoidance
+        considered.append(0 if avoidance is None else len(avoidance.relevant(t_s, x[:2])))
         steer, accel = driver.scaling.from_action(action)
         T.append(k * driver.dt_s)
         X.append(x)
@@ -424,6 +562,12 @@ def drive_env(env, driver: HighwayEnvMpcDriver, steps: int) -> HighwayDrive:
             break
     Xa = np.array(X)
     Ua = np.array(U, dtype=float).reshape(len(X), model.nu)
+    clearance = np.array(clearance)
+    meta = {}
+    if driver.others:
+        hit = clearance < 0.0
+        meta = {"min_obstacle_clearance_m": float(clearance.min()),
+                "collisions": int(np.count_nonzero(hit[1:] & ~hit[:-1]) + (1 if hit[0] else 0))}
     result = SimResult(
         t_s=np.array(T), x=Xa, u=Ua, x_final=driver.state(), s_m=np.array(S),
         e_y_m=np.array(EY), e_psi_rad=np.array(EPSI), yaw_rad=Xa[:, 2].copy(),
@@ -438,7 +582,9 @@ def drive_env(env, driver: HighwayEnvMpcDriver, steps: int) -> HighwayDrive:
         goal_reached=None,
         meta={"id": "highway-env-racetrack", "description": "highway-env racetrack driven by LTV-MPC",
               "max_steer_rad": float(driver.scaling.steering_range_rad[1]),
-              "lane_index": list(driver.lane_index), "on_road_steps": int(sum(on_road))},
+              "lane_index": list(driver.lane_index), "on_road_steps": int(sum(on_road)),
+              "other_vehicles": len(driver.others), **meta},
     )
     return HighwayDrive(result, np.array(on_road, dtype=bool), bool(u.vehicle.crashed),
-                        bool(terminated), bool(truncated), np.array(rewards), driver.footprint)
+                        bool(terminated), bool(truncated), np.array(rewards), driver.footprint,
+                        clearance, np.array(considered, dtype=int))

@@ -389,11 +389,13 @@ def _select_obstacles(nobs, omax, obs, odist, oproj, osel, fp, t_s, x, s0, pkind
 def _detour(nsel, osel, obs, oproj, sides, fp, N, s_arr, refs, xref, e_ref):
     """The paper's trapezoidal detour around the selected (static, circular) obstacles, as
     ``ocp.avoidance``: pick each one's passing side (kept from ``sides`` while it has room;
-    ``fp[_F_LANEW]`` is the bound of the centre of gravity, so the room needed is the margin),
+    ``fp[_F_LANEW]`` is the bound of the centre of gravity, so the room needed is the margin
+    plus the body's half width),
     shift the references sideways over the obstacle with ramps before and after it, and turn
     their heading with the slope."""
     margin, hw, hl, ramp = fp[_F_OMARGIN], fp[_F_HW], fp[_F_HL], fp[_F_RAMP]
     lim = fp[_F_LANEW] if fp[_F_LANEW] > 0.0 else math.inf
+    need = margin + hw  # as Avoidance.passing_room_m for the cost formulations, less lim's share
     for k in range(N + 1):
         e_ref[k] = 0.0
     any_shift = False
@@ -404,11 +406,11 @@ def _detour(nsel, osel, obs, oproj, sides, fp, N, s_arr, refs, xref, e_ref):
         e_lo, e_hi = e_c - r, e_c + r
         room_left, room_right = lim - e_hi, lim + e_lo
         prev = sides[j]
-        if prev == _SIDE_LEFT and room_left >= margin:
+        if prev == _SIDE_LEFT and room_left >= need:
             side = _SIDE_LEFT
-        elif prev == _SIDE_RIGHT and room_right >= margin:
+        elif prev == _SIDE_RIGHT and room_right >= need:
             side = _SIDE_RIGHT
-        elif max(room_left, room_right) < margin:
+        elif max(room_left, room_right) < need:
             side = _SIDE_BLOCKED
         else:
             side = _SIDE_LEFT if room_left >= room_right else _SIDE_RIGHT

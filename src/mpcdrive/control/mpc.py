@@ -18,7 +18,7 @@ import numpy as np
 
 from ..models.base import VehicleModel
 from ..models.discretize import Method, discrete_step_and_jacobians, rollout
-from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory
+from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory, follow_references
 from ..ocp.problem import MpcProblem
 from ..paths.base import Path
 from ..scene.footprint import Footprint
@@ -218,6 +218,28 @@ class LtvMpc(TrackingWarmStart):
         self._du_step = problem.du_max_per_s * problem.dt_s  # (nu,) largest input change per step
         self.fallback = FallbackLadder(self, config.fallback)
 
+    # -- obstacles ----------------------------------------------------------------------------
+    @property
+    def obstacles(self) -> tuple[Obstacle, ...]:
+        """The obstacles the controller avoids (empty without avoidance)."""
+        return () if self.avoidance is None else tuple(self.avoidance.obstacles)
+
+    def set_obstacles(self, obstacles) -> None:
+        """Replace the obstacles, e.g. with fresh predictions of moving ones each step; the QP is
+        not rebuilt (``AvoidanceConfig.max_obstacles``, nearest first, fixes its rows, so any
+        number may be given). Poses and motions are on the controller's clock: an obstacle is
+        at ``pose_at(warm.t_s)`` at the step that receives ``warm``. Index ``j`` must keep naming
+        the same obstacle from call to call: the passing side chosen for it is remembered in
+        ``warm.sides`` under that index. Only a controller built with obstacles has the rows."""
+        if self.avoidance is None:
+            raise ValueError("this controller was built without obstacles, so its QP has no obstacle "
+                             "terms: pass obstacles (and avoidance) at construction")
+        obstacles = tuple(obstacles)
+        for j, ob in enumerate(obstacles):
+            if not isinstance(ob, Obstacle):
+                raise ValueError(f"obstacles[{j}] must be an Obstacle, got {type(ob).__name__}")
+        self.avoidance.obstacles = list(obstacles)
+
     # -- warm start: initial_warm and _check_state from TrackingWarmStart ---------------------
     def _check_warm(self, warm: WarmStart) -> np.ndarray:
         u_prev = np.asarray(warm.u_prev, dtype=float)
@@ -275,13 +297,8 @@ class LtvMpc(TrackingWarmStart):
 
         # references over the horizon
         s_arr, v_arr = self._horizon(s0)
-        refs = horizon_states(self.path, s_arr, x[2])
+        refs = self._references(s_arr, v_arr, x[2], cfg.speed_profile is not None)
         xref, uref = self._xref, self._uref
-        xr, ur = model.reference(refs[:, :3], refs[:, 3], v_arr, cfg.feedforward == "curvature")
-        xref[:] = xr
-        uref[:] = ur[:N]
-        if cfg.speed_profile is not None and self._accel_index is not None:
-            uref[:, self._accel_index] += np.diff(v_arr) / dt
         # linearization points
         Xbar, Ubar = self._Xbar, self._Ubar
         if around is not None:
@@ -306,18 +323,19 @@ class LtvMpc(TrackingWarmStart):
         Xlin = self._Xlin
         Xlin[:N] = Xbar
         Xlin[N] = Fbar[-1]
-        # lane normals at the (undetoured) centreline
-        if self.qp.lane:
-            yaw = refs[1:, 2]
-            self._lane_n[:, 0] = -np.sin(yaw)
-            self._lane_n[:, 1] = np.cos(yaw)
-            self._lane_b[:] = np.einsum("ki,ki->k", self._lane_n, refs[1:, :2])
         terms = None
         sides = warm.sides
         if self.avoidance is not None:
             memory = AvoidanceMemory(dict(warm.sides))
             terms = self.avoidance.terms(warm.t_s, x, Xlin, s_arr, memory)
             sides = tuple(sorted(memory.sides.items()))
+            if terms.s_max is not None:
+                # car following: the references approach the stop line behind the obstacle
+                # blocking the lane ahead and move on with its prediction
+                follow = follow_references(s_arr, v_arr, terms.s_max, float(model.speed(x)), dt,
+                                           self.avoidance.config.follow_decel_mps2)
+                if follow is not None:
+                    refs = self._references(*follow, x[2], True)
             if terms.e_ref is not None and np.any(terms.e_ref):
                 # the paper's detour: shift the reference sideways, turn its heading with the slope
                 h = refs[:, 2]
@@ -326,12 +344,30 @@ class LtvMpc(TrackingWarmStart):
                 ds = np.maximum(np.diff(s_arr), 1e-9)
                 slope = np.diff(terms.e_ref) / ds
                 xref[1:, 2] += np.arctan(slope)
+        # lane normals at the (undetoured) centreline at the references
+        if self.qp.lane:
+            yaw = refs[1:, 2]
+            self._lane_n[:, 0] = -np.sin(yaw)
+            self._lane_n[:, 1] = np.cos(yaw)
+            self._lane_b[:] = np.einsum("ki,ki->k", self._lane_n, refs[1:, :2])
         return StepData(x, float(s0), float(e_y), float(e_psi), xref, uref, Xbar, Ubar, Fbar, Ad, Bd, c,
                         self._lane_n, self._lane_b, Xlin,
                         self._lane_lo if terms is None or terms.lane_lo is None else terms.lane_lo,
                         self._lane_hi if terms is None or terms.lane_hi is None else terms.lane_hi,
                         None if terms is None else terms.rows_a, None if terms is None else terms.rows_b,
                         None if terms is None else terms.H, None if terms is None else terms.g, sides)
+
+    def _references(self, s_arr: np.ndarray, v_arr: np.ndarray, yaw_now: float, accel_ff: bool) -> np.ndarray:
+        """Fill the state and input references for path points at arc lengths ``s_arr`` (N+1,)
+        driven at speeds ``v_arr`` (N+1,) [m/s] (with ``accel_ff`` the speed changes become the
+        acceleration reference); returns the path states ``[x, y, yaw, kappa]`` (N+1, 4)."""
+        refs = horizon_states(self.path, s_arr, yaw_now)
+        xr, ur = self.model.reference(refs[:, :3], refs[:, 3], v_arr, self.config.feedforward == "curvature")
+        self._xref[:] = xr
+        self._uref[:] = ur[:self.N]
+        if accel_ff and self._accel_index is not None:
+            self._uref[:, self._accel_index] += np.diff(v_arr) / self.dt_s
+        return refs
 
     def _horizon(self, s0: float) -> tuple[np.ndarray, np.ndarray]:
         """(N+1,) arc lengths [m] and reference speeds [m/s] of the horizon references. With a

@@ -46,7 +46,15 @@ class AvoidanceConfig:
     influence_m : obstacles farther than this from the vehicle are ignored [m];
     max_obstacles : obstacles considered per step (nearest first) -- fixes the QP size;
     detour : ``none`` or ``trapezoid`` (the paper's detour reference around each obstacle);
-    detour_ramp_m : length of the trapezoid's ramps [m].
+    detour_ramp_m : length of the trapezoid's ramps [m];
+    follow_gap_s : None (the references run on at the reference speed; the stop constraint alone
+        holds the car back) or a time gap [s] (hard, corridor): behind an obstacle that blocks the
+        lane ahead, the horizon references approach a stop line that moves with the obstacle's
+        prediction, trailing a moving one by this gap at its speed -- car following, without the
+        tracking cost pulling the car against the stop constraint (see :func:`follow_references`);
+    follow_decel_mps2 : the hardest braking [m/s^2] of those references relative to the line
+        (closer than that they fall back at this rate; the stop constraint still holds the car
+        off the obstacle).
     """
 
     formulation: Formulation = "hard"
@@ -58,6 +66,8 @@ class AvoidanceConfig:
     max_obstacles: int = 3
     detour: Literal["none", "trapezoid"] = "none"
     detour_ramp_m: float = 1.0
+    follow_gap_s: float | None = None
+    follow_decel_mps2: float = 3.0
 
     def __post_init__(self):
         if self.formulation not in ("hard", "corridor", "potential", "gaussian"):
@@ -74,6 +84,13 @@ class AvoidanceConfig:
             raise ValueError("max_obstacles must be >= 1")
         if self.detour not in ("none", "trapezoid"):
             raise ValueError(f"detour must be 'none' or 'trapezoid', got {self.detour!r}")
+        if self.follow_gap_s is not None:
+            if not (math.isfinite(self.follow_gap_s) and self.follow_gap_s >= 0):
+                raise ValueError(f"follow_gap_s must be None or a finite number >= 0, got {self.follow_gap_s}")
+            if not self.uses_rows:
+                raise ValueError("follow_gap_s needs a stop constraint: formulation hard or corridor")
+        if not (math.isfinite(self.follow_decel_mps2) and self.follow_decel_mps2 > 0):
+            raise ValueError(f"follow_decel_mps2 must be a positive finite number, got {self.follow_decel_mps2}")
 
     @property
     def uses_rows(self) -> bool:
@@ -138,8 +155,9 @@ class AvoidanceTerms:
     lane_lo, lane_hi : (N,) lateral bounds [m] (corridor; None = lane only);
     H : (N, 2, 2), g : (N, 2) position cost model (None without cost);
     e_ref : (N+1,) lateral offset of the detour reference [m] (None without detour);
-    sides : passing side per considered obstacle; nearest_clearance_m : smallest predicted
-    centre-to-obstacle distance (diagnostics)."""
+    sides : passing side per considered obstacle;
+    s_max : (N+1,) furthest arc length [m] of the horizon references (the stop line behind the
+    obstacles blocking the lane ahead, see ``follow_gap_s``; None when it does not apply)."""
 
     rows_a: np.ndarray | None
     rows_b: np.ndarray | None
@@ -149,6 +167,7 @@ class AvoidanceTerms:
     g: np.ndarray | None
     e_ref: np.ndarray | None
     sides: dict
+    s_max: np.ndarray | None = None
 
 
 class Avoidance:
@@ -180,8 +199,10 @@ class Avoidance:
         self._e_ref = np.zeros(N1)
 
     # -- helpers ----------------------------------------------------------------------
-    def _relevant(self, t_s: float, xy: np.ndarray) -> list[int]:
-        """Indices of obstacles within the influence distance, nearest first (at most max_obstacles)."""
+    def relevant(self, t_s: float, xy: np.ndarray) -> list[int]:
+        """Indices of the obstacles a step at time ``t_s`` [s] from position ``xy`` [m] considers:
+        those within the influence distance (centre distance minus bounding radius), nearest
+        first, at most max_obstacles."""
         reach = self.config.influence_m
         d = []
         for j, ob in enumerate(self.obstacles):
@@ -192,8 +213,17 @@ class Avoidance:
         d.sort()
         return [j for _, j in d[: self.config.max_obstacles]]
 
+    @property
+    def passing_room_m(self) -> float:
+        """Width [m] of the gap between an obstacle and the lane edge that passing it needs: the
+        body's centre line keeps ``half width + lane margin`` from the lane edge and, from the
+        obstacle, ``margin`` plus the body's half width (corridor) or the radius of the discs
+        that cover the body (hard half-planes act on the disc centres)."""
+        obstacle_side = self.r_disc if self.config.formulation == "hard" else self.half_width
+        return self.half_width + self.lane_margin + self.config.margin_m + obstacle_side
+
     def _choose_side(self, j: int, box: FrenetBox, memory: AvoidanceMemory) -> int:
-        needed = self.half_width + self.config.margin_m + self.lane_margin
+        needed = self.passing_room_m
         lane = self.lane_half if self.lane_half is not None else np.inf
         room_left = lane - box.e_hi
         room_right = lane + box.e_lo
@@ -225,7 +255,7 @@ class Avoidance:
         x : (nx,) measured state; Xlin : (N+1, nx) linearization trajectory (row k for x_k);
         s_arr : (N+1,) horizon reference arc lengths [m]; memory : passing sides, updated."""
         cfg = self.config
-        rel = self._relevant(t_s, x[:2])
+        rel = self.relevant(t_s, x[:2])
         sides: dict[int, int] = {}
         boxes: dict[int, list[FrenetBox]] = {}
         centers: dict[int, np.ndarray] = {}
@@ -233,8 +263,10 @@ class Avoidance:
         for j in rel:
             boxes[j], centers[j], times = self._track(j, t_s, s_arr)
             bx = boxes[j]
-            ref_box = bx[0] if not self.obstacles[j].moving else min(bx, key=lambda b: abs(b.s_ref - s_arr[0]))
-            sides[j] = self._choose_side(j, ref_box, memory)
+            # a moving obstacle is judged where the car meets it: the horizon step at which the
+            # car's reference is nearest to it along the path
+            meet = int(np.argmin([abs(b.s_ref - sk) for b, sk in zip(bx, s_arr)])) if self.obstacles[j].moving else 0
+            sides[j] = self._choose_side(j, bx[meet], memory)
         memory.sides.update(sides)
         rows_a = rows_b = lo = hi = H = g = e_ref = None
         if cfg.detour == "trapezoid":
@@ -242,10 +274,42 @@ class Avoidance:
         if cfg.formulation == "hard":
             rows_a, rows_b = self._hard_rows(Xlin, s_arr, rel, boxes, centers, times, sides)
         elif cfg.formulation == "corridor":
-            lo, hi, rows_a, rows_b = self._corridor(s_arr, rel, boxes, sides)
+            lo, hi, rows_a, rows_b = self._corridor(Xlin, s_arr, rel, boxes, sides)
         else:
             H, g = self._cost(Xlin, rel, boxes, centers)
-        return AvoidanceTerms(rows_a, rows_b, lo, hi, H, g, e_ref, sides)
+        s_max = None if cfg.follow_gap_s is None else self._stop_lines(s_arr, rel, boxes, sides)
+        return AvoidanceTerms(rows_a, rows_b, lo, hi, H, g, e_ref, sides, s_max)
+
+    @property
+    def stop_distance_m(self) -> float:
+        """Arc length [m] between an obstacle's near end and the reference point of a car held
+        back by the stop constraint: the front disc's clearance (hard) or margin plus half the
+        body (corridor)."""
+        if self.config.formulation == "hard":
+            return self.r_disc + self.config.margin_m + float(np.max(self.offsets))
+        return self.config.margin_m + self.half_length
+
+    def _blocks_ahead(self, box0: FrenetBox, s_arr: np.ndarray) -> bool:
+        """A blocking obstacle (Frenet box now) gets a stop line: its centre is ahead of the car's
+        (``s_arr[0]``) and its near end within reach of the horizon (the stop line is no farther
+        than the last reference). Farther along the path -- on a closed track that may be a
+        stretch of road that only passes near by -- the path turns and a stop half-plane would
+        cut across the car's road."""
+        return s_arr[0] <= box0.s_ref and box0.s_lo <= s_arr[-1] + self.stop_distance_m
+
+    def _stop_lines(self, s_arr, rel, boxes, sides) -> np.ndarray | None:
+        """(N+1,) furthest reference arc lengths behind the blocking obstacles ahead (or None)."""
+        s_max = None
+        dt, gap = self.dt_s, self.config.follow_gap_s
+        for j in rel:
+            if sides[j] != SIDE_BLOCKED or not self._blocks_ahead(boxes[j][0], s_arr):
+                continue
+            s_lo = np.array([b.s_lo for b in boxes[j]])
+            v = np.maximum(np.diff(s_lo) / dt, 0.0)
+            v = np.append(v, v[-1]) if len(v) else np.zeros(1)
+            line = s_lo - self.stop_distance_m - gap * v
+            s_max = line if s_max is None else np.minimum(s_max, line)
+        return s_max
 
     def sigma_inv(self, heading_rad: float) -> np.ndarray:
         """Sigma^-1 of eq. 56 in the world frame, sx along and sy across the path heading."""
@@ -266,6 +330,23 @@ class Avoidance:
         out = [point_shape(P[k], ob.at(times[k + 1])) for k in range(len(P))]
         return np.array([d for d, _ in out]), np.array([q for _, q in out])
 
+    def _lin_arc_lengths(self, Xlin: np.ndarray, s0: float) -> np.ndarray:
+        """(N,) arc lengths [m] of the linearization trajectory's steps 1..N: ``s0`` plus the
+        distance travelled along it (the car stays near the path)."""
+        return s0 + np.cumsum(np.hypot(*np.diff(Xlin[:, :2], axis=0).T))
+
+    def _stop_plane(self, s_lo: np.ndarray, s_at: np.ndarray, clearance: float) -> tuple[np.ndarray, np.ndarray]:
+        """The stop constraint ``s(p) <= s_lo - clearance`` linearized at arc length
+        ``min(s_at, s_lo - clearance)`` (s_at: where the point is expected): unit tangents t
+        (K, 2) and points q (K, 2) with the constraint ``t . p <= t . q - clearance``. Linearizing
+        where the car is, not at the obstacle, keeps the half-plane across the car's own road
+        where the path bends (a plane through a bend further on would let the car gain ground by
+        moving sideways)."""
+        s_bar = np.minimum(s_at, s_lo - clearance)
+        h = np.asarray(self.path.heading(s_bar), float)
+        t = np.column_stack([np.cos(h), np.sin(h)])
+        return t, self.path.position(s_bar) + t * (s_lo - s_bar)[:, None]
+
     def _hard_rows(self, Xlin, s_arr, rel, boxes, centers, times, sides):
         a, b = self._a, self._b
         a[:] = 0.0
@@ -275,6 +356,7 @@ class Avoidance:
         nd = len(self.offsets)
         r_need = self.r_disc + self.config.margin_m
         reach = r_need + self.half_length
+        s_lin = self._lin_arc_lengths(Xlin, s_arr[0])
         for slot, j in enumerate(rel):
             side = sides[j]
             bx = boxes[j][1:]
@@ -285,10 +367,6 @@ class Avoidance:
             h = np.asarray(self.path.heading(s_ref), float)
             nl = np.column_stack([-np.sin(h), np.cos(h)])  # path left normal at the obstacle
             q_lat = self.path.position(s_ref) + nl * e_edge[:, None]
-            if side == SIDE_BLOCKED:
-                h_lo = np.asarray(self.path.heading(s_lo), float)
-                tb = np.column_stack([np.cos(h_lo), np.sin(h_lo)])  # path tangent at the near end
-                q_stop = self.path.position(s_lo)
             for i, o in enumerate(self.offsets):
                 P = lin[:, :2] + o * np.column_stack([c, s])
                 dist, q = self._nearest(P, j, centers[j], times)
@@ -301,13 +379,13 @@ class Avoidance:
                 n = np.where(lateral[:, None], side * nl, n)
                 q = np.where(lateral[:, None], q_lat, q)
                 active |= lateral
-                if side == SIDE_BLOCKED:
-                    # stop behind an obstacle now ahead: a half-plane across the path at its near end
-                    # (the nearest-point normal points forward once the linearization passes it)
-                    ahead = np.full(len(s_lo), boxes[j][0].s_lo >= s_arr[0] + self.half_length)
-                    n = np.where(ahead[:, None], -tb, n)
-                    q = np.where(ahead[:, None], q_stop, q)
-                    active |= ahead
+                if side == SIDE_BLOCKED and self._blocks_ahead(boxes[j][0], s_arr):
+                    # stop behind an obstacle now ahead: the disc's arc length at most its near end
+                    # less the clearance (the nearest-point normal points forward once the
+                    # linearization passes it)
+                    tb, q = self._stop_plane(s_lo, s_lin + o, r_need)
+                    n = -tb
+                    active[:] = True
                 row = slot * nd + i
                 # n . (p + J (x - xbar)) >= n . q + r_need, J = d p / d (x, y, yaw)
                 ay = o * (-n[:, 0] * s + n[:, 1] * c)
@@ -319,7 +397,7 @@ class Avoidance:
                 b[:, row] = np.where(active, rhs, -np.inf)
         return a, b
 
-    def _corridor(self, s_arr, rel, boxes, sides):
+    def _corridor(self, Xlin, s_arr, rel, boxes, sides):
         lane = (self.lane_half if self.lane_half is not None else 1e3) - self.half_width - self.lane_margin
         lo, hi = self._lo, self._hi
         lo[:] = -lane
@@ -328,6 +406,8 @@ class Avoidance:
         a[:] = 0.0
         b[:] = -np.inf
         m = self.config.margin_m
+        ahead = {j: self._blocks_ahead(boxes[j][0], s_arr) for j in rel}
+        s_lin = self._lin_arc_lengths(Xlin, s_arr[0])
         for k in range(1, self.N + 1):
             sk = s_arr[k]
             for j in rel:
@@ -340,13 +420,12 @@ class Avoidance:
                     hi[k - 1] = min(hi[k - 1], box.e_lo - m - self.half_width)
             for slot, j in enumerate(rel):
                 box = boxes[j][k]
-                if sides[j] != SIDE_BLOCKED:
+                if sides[j] != SIDE_BLOCKED or not ahead[j]:
                     continue
-                # stop before it: t . p <= t . p_path(s_lo) - margin - half length
-                h = float(self.path.heading(box.s_lo))
-                t = np.array([math.cos(h), math.sin(h)])
-                a[k - 1, slot, :2] = -t
-                b[k - 1, slot] = -(t @ self.path.position(box.s_lo)) + m + self.half_length
+                # stop before it: s(p) <= s_lo - margin - half length, i.e. t . p <= t . q - that
+                t, q = self._stop_plane(np.array([box.s_lo]), s_lin[k - 1:k], m + self.half_length)
+                a[k - 1, slot, :2] = -t[0]
+                b[k - 1, slot] = -(t[0] @ q[0]) + m + self.half_length
         # keep the tube non-empty: if the bounds cross, centre them (the slack handles the rest)
         bad = lo > hi
         mid = 0.5 * (lo + hi)
@@ -395,6 +474,30 @@ class Avoidance:
             cand = shift * f
             e[:] = np.where(np.abs(cand) > np.abs(e), cand, e)
         return e
+
+
+def follow_references(s_arr: np.ndarray, v_arr: np.ndarray, s_max: np.ndarray, v0_mps: float, dt_s: float,
+                      decel_mps2: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """Horizon references behind a stop line that moves: arc lengths (N+1,) [m] and speeds (N+1,)
+    [m/s] of a car starting at ``s_arr[0]`` with speed ``v0_mps`` that drives at the free
+    references' speed ``v_arr`` where it can, and otherwise at the speed from which braking at
+    ``decel_mps2`` relative to the line ``s_max`` (N+1,) [m] ends on it (past the line, the
+    speed that falls back behind it the same way) -- never braking harder than ``decel_mps2``.
+    None when the line never holds the car back (the free references ``s_arr`` stand)."""
+    N = len(s_arr) - 1
+    v_line = np.append(np.diff(s_max) / dt_s, (s_max[-1] - s_max[-2]) / dt_s if N > 1 else 0.0)
+    s_out, v_out = np.empty(N + 1), np.empty(N + 1)
+    v = max(float(v0_mps), 0.0)
+    s, held = float(s_arr[0]), False
+    s_out[0], v_out[0] = s, v
+    for k in range(1, N + 1):
+        room = s_max[k - 1] - s  # now; < 0: past the line, fall back behind it
+        v_allow = max(v_line[k - 1], 0.0) + math.copysign(math.sqrt(2.0 * decel_mps2 * abs(room)), room)
+        held |= v_allow < v_arr[k]
+        v_next = max(min(v_arr[k], v_allow), v - decel_mps2 * dt_s, 0.0)
+        s = min(s + 0.5 * (v + v_next) * dt_s, float(s_arr[k]))
+        s_out[k], v_out[k], v = s, v_next, v_next
+    return (s_out, v_out) if held else None
 
 
 def obstacle_cost(config: AvoidanceConfig, dx: np.ndarray, dy: np.ndarray, heading_rad: float = 0.0) -> np.ndarray:
