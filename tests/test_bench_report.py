@@ -94,7 +94,7 @@ def test_obstacle_problem_has_n_obstacles_all_in_play_over_the_drive(n):
     # and the controller puts all of them in the problem, at the start and at the end
     ctrl = prob.controller()
     for t, xy in ((0.0, prob.x0[:2]), (10.0, drive[-1])):
-        assert sorted(ctrl.avoidance._relevant(t, xy)) == list(range(n))
+        assert sorted(ctrl.avoidance.relevant(t, xy)) == list(range(n))
 
 
 def test_obstacle_problem_rejects_negative_count():
