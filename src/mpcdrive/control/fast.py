@@ -183,8 +183,8 @@ def fast_unsupported_reason(model, path: Path, problem: MpcProblem, config: MpcC
 def _constant_rows(problem: MpcProblem, nz: int):
     """Rows of ``C z >= b`` that do not change between steps (input bounds, input rates), the row
     of the first u_0 rate row (its b follows u_prev), how many rows the step adds after them
-    (state bounds, lane) and the lane slacks' sign rows, which go last (a solve without the
-    slacks leaves them out)."""
+    (state bounds, lane) and how many lane-slack sign rows may follow those (written per step by
+    ``_lane_solve``)."""
     N, nu = problem.N, problem.nu
     rows, rhs = [], []
 
@@ -215,10 +215,10 @@ def _constant_rows(problem: MpcProblem, nz: int):
                 rows += [r, -r]
                 rhs += [-dmax[i], -dmax[i]]
     lane = problem.lane_half_width_m is not None
-    slack_rows = [unit(N * nu + k) for k in range(N)] if lane else []
+    n_slack = N if lane else 0
     n_state = N * int(np.isfinite(problem.x_min).sum() + np.isfinite(problem.x_max).sum())
     n_var = n_state + (2 * N if lane else 0)
-    return rows, rhs, r_rate0, n_var, slack_rows
+    return rows, rhs, r_rate0, n_var, n_slack
 
 
 @njit(cache=True)
@@ -1021,8 +1021,8 @@ class FastLtvMpc(TrackingWarmStart):
         pa = path_arrays(path)
         lane = problem.lane_half_width_m is not None
         nz = N * nu + (N if lane else 0)
-        rows, rhs, r_rate0, n_var, slack_rows = _constant_rows(problem, nz)
-        m_max = len(rows) + n_var + len(slack_rows)
+        rows, rhs, r_rate0, n_var, n_slack = _constant_rows(problem, nz)
+        m_max = len(rows) + n_var + n_slack
         mq = max(m_max, 1)
         C = np.zeros((mq, nz))
         b_ = np.zeros(mq)

@@ -18,6 +18,21 @@ __all__ = ["make_horizon_figure", "make_obstacle_figure", "plot_horizon_scaling"
 _COLORS = {"fast": "tab:green", "osqp": "tab:blue"}
 
 
+def _latency_lines(ax, sweep: Mapping[int, Mapping[str, Mapping]]) -> dict:
+    """Median (solid) and p99 (dashed) lines per backend of a sweep ``{x: {backend: figures}}``
+    (integer x); returns ``{backend: [(x, figures), ...]}``."""
+    xs_all = sorted(sweep)
+    out = {}
+    for b in sorted({b for n in xs_all for b in sweep[n]}):
+        pts = [(n, sweep[n][b]) for n in xs_all if b in sweep[n]]
+        xs = [n for n, _ in pts]
+        color = _COLORS.get(b)
+        ax.plot(xs, [r["p50_us"] for _, r in pts], "o-", color=color, label=f"{b} median")
+        ax.plot(xs, [r["p99_us"] for _, r in pts], "s--", color=color, alpha=0.6, label=f"{b} p99")
+        out[b] = pts
+    return out
+
+
 def make_horizon_figure(sweep: Mapping[int, Mapping[str, Mapping]], title: str = "P1: per-step time vs horizon") -> Figure:
     """Median (solid) and p99 (dashed) per-step time [us] against N for each backend, log scale.
 
@@ -25,14 +40,7 @@ def make_horizon_figure(sweep: Mapping[int, Mapping[str, Mapping]], title: str =
     fig = Figure(figsize=(7.0, 4.5), layout="constrained")
     FigureCanvasAgg(fig)
     ax = fig.subplots()
-    Ns = sorted(int(n) for n in sweep)
-    backends = sorted({b for n in Ns for b in sweep[n]})
-    for b in backends:
-        pts = [(n, sweep[n][b]) for n in Ns if b in sweep[n]]
-        xs = [n for n, _ in pts]
-        color = _COLORS.get(b)
-        ax.plot(xs, [r["p50_us"] for _, r in pts], "o-", color=color, label=f"{b} median")
-        ax.plot(xs, [r["p99_us"] for _, r in pts], "s--", color=color, alpha=0.6, label=f"{b} p99")
+    _latency_lines(ax, {int(n): v for n, v in sweep.items()})
     ax.set_yscale("log")
     ax.set_xlabel("horizon N [steps]")
     ax.set_ylabel("controller step [us]")
@@ -55,13 +63,8 @@ def make_obstacle_figure(sweep: Mapping[int, Mapping[str, Mapping]],
     ax = fig.subplots()
     sweep = {int(n): v for n, v in sweep.items()}
     counts = sorted(sweep)
-    backends = sorted({b for n in counts for b in sweep[n]})
-    for b in backends:
-        pts = [(n, sweep[n][b]) for n in counts if b in sweep[n]]
-        xs = [n for n, _ in pts]
+    for b, pts in _latency_lines(ax, sweep).items():
         color = _COLORS.get(b)
-        ax.plot(xs, [r["p50_us"] for _, r in pts], "o-", color=color, label=f"{b} median")
-        ax.plot(xs, [r["p99_us"] for _, r in pts], "s--", color=color, alpha=0.6, label=f"{b} p99")
         fell = [(n, r) for n, r in pts if r.get("backend", b) != b]
         if fell:
             ran = sorted({r["backend"] for _, r in fell})
