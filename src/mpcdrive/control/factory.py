@@ -54,7 +54,7 @@ def make_mpc(model, path: Path, problem: MpcProblem, config: MpcConfig = MpcConf
         if reason is None:
             reason = fast_unsupported_reason(model, path, fast_problem, config, settings, obstacles, avoidance)
         if reason is None:
-            return FastLtvMpc(model, path, fast_problem, config, settings, obstacles, avoidance, fp)
+            return FastLtvMpc(model, path, fast_problem, config, settings, obstacles, avoidance, fp, lane_margin_m)
         warnings.warn(f"fast backend not used: {reason}; using the OSQP controller", FastPathUnavailable,
                       stacklevel=2)
     kw = {} if footprint is None else {"footprint": footprint}

@@ -11,7 +11,7 @@ by a backward recursion ``P_k = W_k + A_k' P_{k+1} A_k`` (O(N^2) blocks), and th
 solved by the dual active-set method of :mod:`mpcdrive.solvers.dense_qp`, which is exact (no
 tolerance on optimality; feasibility to 1e-9) and costs a single Cholesky factorization when no
 constraint is active. The soft lane's slacks enter that QP only where they can be nonzero
-(:func:`_lane_solve`: first without slacks, checked by the exact-penalty condition), so a car
+(:func:`_soft_solve`: first without slacks, checked by the exact-penalty condition), so a car
 inside its lane pays for N nu variables, not N (nu + 1).
 
 Obstacles with the potential (eq. 55) or Gaussian (eq. 56) cost -- static or at constant
@@ -19,6 +19,14 @@ velocity, circles or polygons -- add their convex second-order model at the line
 trajectory to the state weights of each step, exactly as ``ocp.avoidance`` does for the OSQP
 controller; SQP iterations (``MpcConfig.sqp_max_iterations``) re-run the compiled step around
 the current iterate.
+
+The constraint formulations (``hard`` half-planes, ``corridor`` bounds with stop half-planes)
+run the compiled step in two stages: up to the linearization trajectory, then -- after
+``ocp.avoidance`` (the same Python code as for the OSQP controller: side choice, Frenet boxes of
+any obstacle shape and motion, linearized rows) has written the step's rows, lane bounds and
+detour offsets into the buffers -- condensing and the solve. Their rows are soft with one
+slack per step, as in ``ocp.qp``, and get the same treatment as the lane rows: slacks only for
+the steps that can need them (:func:`_soft_solve`).
 
 Compiled functions use numba's on-disk cache, so only the first process on a machine compiles
 (tens of seconds); later processes load the machine code.
@@ -45,7 +53,7 @@ from ..models.compiled import (
     model_steady_state,
     rollout_into,
 )
-from ..ocp.avoidance import AvoidanceConfig
+from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory
 from ..ocp.problem import MpcProblem
 from ..paths.base import Path
 from ..paths.compiled import path_arrays, path_eval, path_project, wrap_angle
@@ -64,8 +72,8 @@ _BAD_STATE = 4
 # integer parameters (ip)
 _I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH, _I_LIN, _I_METHOD, _I_HORIZON, _I_FF, _I_LANE, \
     _I_MCONST, _I_RATE0, _I_MAXITER, _I_GAMMA, _I_NZ, _I_RICCATI, _I_MQ, _I_OFORM, _I_NOBS, _I_OMAX, \
-    _I_DETOUR = range(21)
-_NIP = 21
+    _I_DETOUR, _I_OROWS = range(22)
+_NIP = 22
 # passing sides (as ocp.avoidance), and "not chosen yet" in the compiled side memory
 _SIDE_LEFT, _SIDE_RIGHT, _SIDE_BLOCKED, _SIDE_NONE = 1, -1, 0, 2
 # obstacle cost formulations (ip[_I_OFORM])
@@ -73,6 +81,9 @@ _OBS_NONE, _OBS_POTENTIAL, _OBS_GAUSSIAN = 0, 1, 2
 # linearization modes of a step: no plan (roll out the references), the previous step's plan
 # shifted by one step (real-time iteration), the current SQP iterate as it is
 MODE_NO_PLAN, MODE_SHIFTED_PLAN, MODE_ITERATE = 0, 1, 2
+# stages of a step: all of it; up to the linearization trajectory (obstacle rows are built from it
+# in Python by ``ocp.avoidance``); the rest, with those rows in the buffers
+STAGE_ALL, STAGE_LINEARIZE, STAGE_SOLVE = 0, 1, 2
 # columns of an obstacle row: pose (x, y) [m] at t = 0, velocity (vx, vy) [m/s], bounding radius
 # [m], offset (x, y) [m] of the point projected for the path heading, projection window extra [m]
 _OB_X, _OB_Y, _OB_VX, _OB_VY, _OB_RB, _OB_OX, _OB_OY, _OB_WIN = range(8)
@@ -83,12 +94,12 @@ _NOB = 8
  _W_REFS, _W_XREF, _W_UREF, _W_XBAR, _W_UBAR, _W_F, _W_A, _W_BD, _W_CD, _W_LANEN, _W_LANEB, _W_XF, _W_P,
  _W_LAM, _W_VB, _W_S, _W_T2, _W_GAM, _W_H, _W_G, _W_Z, _W_L, _W_J, _W_RQ, _W_D, _W_ZDIR, _W_R, _W_UQ,
  _W_SQ, _W_ROWN, _W_LAMQ, _W_DW, _W_KG, _W_KF, _W_PA, _W_MG, _W_GG, _W_QV, _W_WE, _W_QT, _W_OBS,
- _W_ODIST, _W_OPROJ, _W_SARR, _W_EREF) = range(58)
-_NW = 58
+ _W_ODIST, _W_OPROJ, _W_SARR, _W_EREF, _W_ROWA, _W_ROWB, _W_LLO, _W_LHI, _W_XLIN, _W_GSUM) = range(64)
+_NW = 64
 # float parameters (fp)
 _F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_LANEW, _F_SLACK2, _F_SLACK1, _F_TOL, _F_OW, _F_OEPS, _F_OSX, \
-    _F_OSY, _F_OINF, _F_OMARGIN, _F_HW, _F_HL, _F_RAMP = range(17)
-_NFP = 17
+    _F_OSY, _F_OINF, _F_OMARGIN, _F_HW, _F_HL, _F_RAMP, _F_OSLACK2, _F_OSLACK1 = range(19)
+_NFP = 19
 # info outputs
 _O_S, _O_EY, _O_EPSI, _O_ITER = range(4)
 
@@ -119,13 +130,17 @@ def obstacles_unsupported_reason(obstacles, avoidance: AvoidanceConfig | None) -
     """Why the compiled step cannot take these obstacles as ``LtvMpc`` would, or None.
 
     Covered: the cost formulations (``potential``, ``gaussian``) on circle and polygon obstacles
-    that stand still or move at constant velocity; with the trapezoidal detour reference, on
-    static circles."""
+    that stand still or move at constant velocity, compiled; with the trapezoidal detour
+    reference, on static circles. The constraint formulations (``hard``, ``corridor``) on any
+    obstacle, their rows built by ``ocp.avoidance`` between two compiled stages; not with car
+    following (``follow_gap_s``)."""
     if not obstacles:
         return None
     av = avoidance or AvoidanceConfig()
-    if not av.uses_cost:
-        return f"the {av.formulation!r} obstacle formulation (constraint rows) is solved by the OSQP controller only"
+    if av.uses_rows:
+        if av.follow_gap_s is not None:
+            return "car following (follow_gap_s) needs the OSQP controller"
+        return None
     for ob in obstacles:
         if av.detour != "none" and not (isinstance(ob.motion, Static) and isinstance(ob.shape, Circle)):
             return f"the {av.detour!r} detour around obstacle {ob.name or '?'} (not a static circle) needs the OSQP controller"
@@ -174,7 +189,12 @@ def fast_unsupported_reason(model, path: Path, problem: MpcProblem, config: MpcC
     lane = problem.lane_half_width_m is not None
     if lane and problem.lane_slack_weight <= 0:
         return "lane_slack_weight is 0 (the slack needs a quadratic weight)"
-    nz = problem.N * problem.nu + (problem.N if lane else 0)
+    rows = bool(obstacles) and (avoidance or AvoidanceConfig()).uses_rows
+    if rows and problem.obstacle_slack_weight <= 0:
+        return "obstacle_slack_weight is 0 (the slack needs a quadratic weight)"
+    if rows and not lane and (avoidance or AvoidanceConfig()).formulation == "corridor":
+        return "the corridor formulation needs a lane (lane_half_width_m)"
+    nz = problem.N * problem.nu + (problem.N if lane else 0) + (problem.N if rows else 0)
     if nz > settings.max_variables:
         return f"the condensed QP has {nz} variables, more than max_variables={settings.max_variables}"
     return None
@@ -184,7 +204,7 @@ def _constant_rows(problem: MpcProblem, nz: int):
     """Rows of ``C z >= b`` that do not change between steps (input bounds, input rates), the row
     of the first u_0 rate row (its b follows u_prev), how many rows the step adds after them
     (state bounds, lane) and how many lane-slack sign rows may follow those (written per step by
-    ``_lane_solve``)."""
+    ``_soft_solve``)."""
     N, nu = problem.N, problem.nu
     rows, rhs = [], []
 
@@ -426,8 +446,14 @@ def _detour(nsel, osel, obs, oproj, sides, fp, N, s_arr, refs, xref, e_ref):
             if abs(cand) > abs(e_ref[k]):
                 e_ref[k] = cand
                 any_shift = any_shift or cand != 0.0
-    if not any_shift:
-        return
+    if any_shift:
+        _shift_references(N, s_arr, refs, e_ref, xref)
+
+
+@njit(cache=True)
+def _shift_references(N, s_arr, refs, e_ref, xref):
+    """The detour: shift the state references sideways by ``e_ref`` (N+1,) [m] from the path
+    points ``refs`` and turn their heading with the slope of the shift."""
     for k in range(N + 1):
         h = refs[k, 2]
         xref[k, 0] -= math.sin(h) * e_ref[k]
@@ -511,10 +537,13 @@ def _v3(w, fo, fs, i):
 
 
 @njit(cache=True)
-def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, wbuf, ibuf, out, info):
+def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibuf, out, info):
     """One control step (or one SQP iteration of it) at time ``t_s`` [s]; returns a status code
     (0 ok, 1 infeasible, 2 max_iter, 3 failed, 4 non-finite state). ``mode`` says what (Xw, Uw)
-    is (``MODE_*``: no plan, the previous step's plan, the current SQP iterate). Writes
+    is (``MODE_*``: no plan, the previous step's plan, the current SQP iterate). ``stage``
+    (``STAGE_*``): the whole step; or only up to the linearization trajectory (written to the
+    ``_W_XLIN`` buffer, horizon arc lengths in ``_W_SARR``), after which the caller writes the
+    obstacle rows, lane bounds and detour offsets of the step and runs the rest. Writes
     ``out = [u (nu), X ((N+1) nx), U (N nu), xref ((N+1) nx)]`` and
     ``info = [s, e_y, e_psi, iterations]``. ``sides`` : passing side per obstacle (``_SIDE_*``),
     read and updated by the detour. ``wbuf`` holds every float array (constants and work),
@@ -526,8 +555,10 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, wbuf, ibuf, out,
     active = ibuf[a0:a0 + ip[_I_NZ]]
     isact = ibuf[a0 + ip[_I_NZ]:a0 + ip[_I_NZ] + ip[_I_MQ]]
     a1 = a0 + ip[_I_NZ] + ip[_I_MQ]
-    kpos = ibuf[a1:a1 + ip[_I_N]]
-    osel = ibuf[a1 + ip[_I_N]:a1 + ip[_I_N] + max(ip[_I_NOBS], 1)]
+    kpos = ibuf[a1:a1 + 2 * ip[_I_N]]
+    a2 = a1 + 2 * ip[_I_N] + max(ip[_I_NOBS], 1)
+    osel = ibuf[a1 + 2 * ip[_I_N]:a2]
+    rgrp = ibuf[a2:a2 + ip[_I_MQ]]
     fp, mp, bnd, geo = _v1(wbuf, fo, _W_FP), _v1(wbuf, fo, _W_MP), _v1(wbuf, fo, _W_BND), _v1(wbuf, fo, _W_GEO)
     Wq, Rm, Rc = _v3(wbuf, fo, fs, _W_WQ), _v2(wbuf, fo, fs, _W_RM), _v2(wbuf, fo, fs, _W_RC)
     tab_s, tab_xy = _v1(wbuf, fo, _W_TABS), _v2(wbuf, fo, fs, _W_TABXY)
@@ -547,6 +578,8 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, wbuf, ibuf, out,
     PA, Mg, Gg, qv = _v2(wbuf, fo, fs, _W_PA), _v2(wbuf, fo, fs, _W_MG), _v2(wbuf, fo, fs, _W_GG), _v1(wbuf, fo, _W_QV)
     We, qt = _v3(wbuf, fo, fs, _W_WE), _v2(wbuf, fo, fs, _W_QT)
     obs, oproj, s_arr = _v2(wbuf, fo, fs, _W_OBS), _v2(wbuf, fo, fs, _W_OPROJ), _v1(wbuf, fo, _W_SARR)
+    lane_lo, lane_hi = _v1(wbuf, fo, _W_LLO), _v1(wbuf, fo, _W_LHI)
+    rowa, rowb, nrow = _v3(wbuf, fo, fs, _W_ROWA), _v2(wbuf, fo, fs, _W_ROWB), ip[_I_OROWS]
     mkind, nx, nu, N = ip[_I_MODEL], ip[_I_NX], ip[_I_NU], ip[_I_N]
     pkind, lin, meth, hmode, ff, lane = ip[_I_PATH], ip[_I_LIN], ip[_I_METHOD], ip[_I_HORIZON], ip[_I_FF], ip[_I_LANE]
     nz = ip[_I_NZ]
@@ -561,109 +594,125 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, wbuf, ibuf, out,
         if not math.isfinite(x[i]):
             return _BAD_STATE
 
-    # -- projection and horizon references -------------------------------------------------
-    s0, e_y = path_project(pkind, geo, tab_s, tab_xy, s_guess, fp[_F_WINDOW], x[0], x[1])
-    h0 = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s0)[2]
-    info[_O_S] = s0
-    info[_O_EY] = e_y
-    info[_O_EPSI] = wrap_angle(x[2] - h0)
-    info[_O_ITER] = 0.0
-    acc = 0.0
-    vdt = abs(v_ref) * dt
-    for k in range(N + 1):
-        sk = s0 + fp[_F_HSTEP] * k if hmode == 1 else s0 + acc
-        acc += vdt
-        s_arr[k] = sk
-        px, py, hk, kap = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, sk)
-        refs[k, 0] = px
-        refs[k, 1] = py
-        refs[k, 2] = hk
-        refs[k, 3] = kap
-    shift = _TWO_PI * np.rint((x[2] - refs[0, 2]) / _TWO_PI)
-    for k in range(N + 1):
-        refs[k, 2] += shift
-        xref[k, 0] = refs[k, 0]
-        xref[k, 1] = refs[k, 1]
-        xref[k, 2] = refs[k, 2]
-        if nx >= 4:
-            xref[k, 3] = v_ref
-    for k in range(N):
-        for a in range(nu):
-            uref[k, a] = 0.0
-    if ff == 1:
-        steer, slip = 0.0, 0.0
-        for k in range(N + 1):
-            if k == 0 or refs[k, 3] != refs[k - 1, 3]:  # same curvature, same steady state
-                steer, slip = model_steady_state(mkind, mp, refs[k, 3])
-            if k < N:
-                uref[k, 0] = steer
-            xref[k, 2] -= slip
-
     nsel = 0
-    if ip[_I_OFORM] != _OBS_NONE:
-        nsel = _select_obstacles(ip[_I_NOBS], ip[_I_OMAX], obs, _v1(wbuf, fo, _W_ODIST), oproj, osel, fp, t_s, x,
-                                 s0, pkind, geo, tab_s, tab_xy, tab_h, tab_k)
-        if ip[_I_DETOUR] == 1:
-            _detour(nsel, osel, obs, oproj, sides, fp, N, s_arr, refs, xref, _v1(wbuf, fo, _W_EREF))
+    if stage != STAGE_SOLVE:
+        # -- projection and horizon references -------------------------------------------------
+        s0, e_y = path_project(pkind, geo, tab_s, tab_xy, s_guess, fp[_F_WINDOW], x[0], x[1])
+        h0 = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s0)[2]
+        info[_O_S] = s0
+        info[_O_EY] = e_y
+        info[_O_EPSI] = wrap_angle(x[2] - h0)
+        info[_O_ITER] = 0.0
+        acc = 0.0
+        vdt = abs(v_ref) * dt
+        for k in range(N + 1):
+            sk = s0 + fp[_F_HSTEP] * k if hmode == 1 else s0 + acc
+            acc += vdt
+            s_arr[k] = sk
+            px, py, hk, kap = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, sk)
+            refs[k, 0] = px
+            refs[k, 1] = py
+            refs[k, 2] = hk
+            refs[k, 3] = kap
+        shift = _TWO_PI * np.rint((x[2] - refs[0, 2]) / _TWO_PI)
+        for k in range(N + 1):
+            refs[k, 2] += shift
+            xref[k, 0] = refs[k, 0]
+            xref[k, 1] = refs[k, 1]
+            xref[k, 2] = refs[k, 2]
+            if nx >= 4:
+                xref[k, 3] = v_ref
+        for k in range(N):
+            for a in range(nu):
+                uref[k, a] = 0.0
+        if ff == 1:
+            steer, slip = 0.0, 0.0
+            for k in range(N + 1):
+                if k == 0 or refs[k, 3] != refs[k - 1, 3]:  # same curvature, same steady state
+                    steer, slip = model_steady_state(mkind, mp, refs[k, 3])
+                if k < N:
+                    uref[k, 0] = steer
+                xref[k, 2] -= slip
 
-    # -- linearization points and discrete model ---------------------------------------------
-    if mode == MODE_ITERATE:
-        for i in range(nx):
-            Xbar[0, i] = x[i]
-        for k in range(1, N):
+        nsel = 0
+        if ip[_I_OFORM] != _OBS_NONE:
+            nsel = _select_obstacles(ip[_I_NOBS], ip[_I_OMAX], obs, _v1(wbuf, fo, _W_ODIST), oproj, osel, fp, t_s, x,
+                                     s0, pkind, geo, tab_s, tab_xy, tab_h, tab_k)
+            if ip[_I_DETOUR] == 1:
+                _detour(nsel, osel, obs, oproj, sides, fp, N, s_arr, refs, xref, _v1(wbuf, fo, _W_EREF))
+
+        # -- linearization points and discrete model ---------------------------------------------
+        if mode == MODE_ITERATE:
             for i in range(nx):
-                Xbar[k, i] = Xw[k, i]
-        for k in range(N):
-            for a in range(nu):
-                Ubar[k, a] = Uw[k, a]
-    elif lin == 1:
+                Xbar[0, i] = x[i]
+            for k in range(1, N):
+                for i in range(nx):
+                    Xbar[k, i] = Xw[k, i]
+            for k in range(N):
+                for a in range(nu):
+                    Ubar[k, a] = Uw[k, a]
+        elif lin == 1:
+            for k in range(N):
+                for i in range(nx):
+                    Xbar[k, i] = x[i]
+                for a in range(nu):
+                    Ubar[k, a] = u_prev[a]
+        elif mode == MODE_SHIFTED_PLAN:
+            sh = _TWO_PI * np.rint((x[2] - Xw[1, 2]) / _TWO_PI)
+            for i in range(nx):
+                Xbar[0, i] = x[i]
+            for k in range(1, N):
+                for i in range(nx):
+                    Xbar[k, i] = Xw[k + 1, i]
+                Xbar[k, 2] += sh
+            for k in range(N):
+                for a in range(nu):
+                    Ubar[k, a] = Uw[min(k + 1, N - 1), a]
+        else:
+            for k in range(N):
+                for a in range(nu):
+                    Ubar[k, a] = uref[k, a]
+            for i in range(nx):
+                Xbar[0, i] = x[i]
+            rollout_into(mkind, mp, nx, Xbar, Ubar, N - 1, dt, meth, dw[0])
+        kmax = 1 if lin == 1 and mode != MODE_ITERATE else N
+        for k in range(kmax):
+            discrete_step_jacobians(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
+        for k in range(kmax, N):
+            for i in range(nx):
+                F[k, i] = F[0, i]
+                for j in range(nx):
+                    A[k, i, j] = A[0, i, j]
+                for a in range(nu):
+                    B[k, i, a] = B[0, i, a]
+        finite = True
         for k in range(N):
             for i in range(nx):
-                Xbar[k, i] = x[i]
-            for a in range(nu):
-                Ubar[k, a] = u_prev[a]
-    elif mode == MODE_SHIFTED_PLAN:
-        sh = _TWO_PI * np.rint((x[2] - Xw[1, 2]) / _TWO_PI)
-        for i in range(nx):
-            Xbar[0, i] = x[i]
-        for k in range(1, N):
-            for i in range(nx):
-                Xbar[k, i] = Xw[k + 1, i]
-            Xbar[k, 2] += sh
-        for k in range(N):
-            for a in range(nu):
-                Ubar[k, a] = Uw[min(k + 1, N - 1), a]
-    else:
-        for k in range(N):
-            for a in range(nu):
-                Ubar[k, a] = uref[k, a]
-        for i in range(nx):
-            Xbar[0, i] = x[i]
-        rollout_into(mkind, mp, nx, Xbar, Ubar, N - 1, dt, meth, dw[0])
-    kmax = 1 if lin == 1 and mode != MODE_ITERATE else N
-    for k in range(kmax):
-        discrete_step_jacobians(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
-    for k in range(kmax, N):
-        for i in range(nx):
-            F[k, i] = F[0, i]
-            for j in range(nx):
-                A[k, i, j] = A[0, i, j]
-            for a in range(nu):
-                B[k, i, a] = B[0, i, a]
-    finite = True
-    for k in range(N):
-        for i in range(nx):
-            t = F[k, i]
-            for j in range(nx):
-                t -= A[k, i, j] * Xbar[k, j]
+                t = F[k, i]
+                for j in range(nx):
+                    t -= A[k, i, j] * Xbar[k, j]
+                for j in range(nu):
+                    t -= B[k, i, j] * Ubar[k, j]
+                c[k, i] = t
+                finite = finite and math.isfinite(t) and math.isfinite(xref[k + 1, i])
             for j in range(nu):
-                t -= B[k, i, j] * Ubar[k, j]
-            c[k, i] = t
-            finite = finite and math.isfinite(t) and math.isfinite(xref[k + 1, i])
-        for j in range(nu):
-            finite = finite and math.isfinite(uref[k, j])
-    if not finite:
-        return 3
+                finite = finite and math.isfinite(uref[k, j])
+        if not finite:
+            return 3
+        if stage == STAGE_LINEARIZE:
+            Xlin = _v2(wbuf, fo, fs, _W_XLIN)
+            for k in range(N):
+                for i in range(nx):
+                    Xlin[k, i] = Xbar[k, i]
+            for i in range(nx):
+                Xlin[N, i] = F[N - 1, i]
+            return 0
+    elif ip[_I_OROWS] > 0:
+        e_ref = _v1(wbuf, fo, _W_EREF)
+        for k in range(N + 1):
+            if e_ref[k] != 0.0:
+                _shift_references(N, s_arr, refs, e_ref, xref)
+                break
     # -- state cost of x_1..x_N: x' We x - 2 qt' x, with the obstacle cost's convex model ------
     for k in range(N):
         for i in range(nx):
@@ -830,7 +879,6 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, wbuf, ibuf, out,
                     b[m] = xf[k, i] - x_max[i]
                     m += 1
         if lane == 1:
-            w = fp[_F_LANEW]
             m_lane = m
             for k in range(1, N + 1):
                 n0, n1 = lane_n[k - 1, 0], lane_n[k - 1, 1]
@@ -842,21 +890,53 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, wbuf, ibuf, out,
                 for jj in range(nzu, nz):
                     C[m, jj] = 0.0
                     C[m + 1, jj] = 0.0
-                b[m] = nxf - lane_b[k - 1] - w
-                b[m + 1] = lane_b[k - 1] - w - nxf
+                b[m] = nxf - lane_b[k - 1] - lane_hi[k - 1]
+                b[m + 1] = lane_b[k - 1] + lane_lo[k - 1] - nxf
+                rgrp[m] = k - 1
+                rgrp[m + 1] = k - 1
                 m += 2
+        if nrow > 0:
+            # obstacle half-planes a . (x_k, y_k, yaw_k) >= b of this step (b = -inf: unused)
+            if lane == 0:
+                m_lane = m
+            for k in range(1, N + 1):
+                for q in range(nrow):
+                    if not rowb[k - 1, q] > -math.inf:
+                        continue
+                    r0_, r1_, r2_ = rowa[k - 1, q, 0], rowa[k - 1, q, 1], rowa[k - 1, q, 2]
+                    for jj in range(nzu):
+                        C[m, jj] = r0_ * Gam[k - 1, 0, jj] + r1_ * Gam[k - 1, 1, jj] + r2_ * Gam[k - 1, 2, jj]
+                    for jj in range(nzu, nz):
+                        C[m, jj] = 0.0
+                    b[m] = rowb[k - 1, q] - (r0_ * xf[k, 0] + r1_ * xf[k, 1] + r2_ * xf[k, 2])
+                    rgrp[m] = N + k - 1
+                    m += 1
 
     # -- solve, then the plan and the command --------------------------------------------------
-    if lane == 1:
-        # steps where the linearization trajectory is on or beyond a lane edge (within 1 mm)
-        edge = fp[_F_LANEW] - 1e-3
-        for k in range(N):
-            px, py = (Xbar[k + 1, 0], Xbar[k + 1, 1]) if k < N - 1 else (F[N - 1, 0], F[N - 1, 1])
-            kpos[k] = 1 if abs(lane_n[k, 0] * px + lane_n[k, 1] * py - lane_b[k]) > edge else 0
-        for k in range(N - 1, 0, -1):  # and the 3 steps after each (RTI plans move a little)
-            if kpos[k - 1] == 1 or (k >= 2 and kpos[k - 2] == 1) or (k >= 3 and kpos[k - 3] == 1):
-                kpos[k] = 1
-        code, iters = _lane_solve(H, g, C, b, m, m_lane, N, nzu, kpos, fp[_F_SLACK2], fp[_F_SLACK1], z, lamq,
+    if lane == 1 or nrow > 0:
+        # soft rows (slack groups: lane rows of step k in group k, obstacle rows in N + k) that
+        # the linearization trajectory is on or beyond (within 1 mm)
+        for k in range(2 * N):
+            kpos[k] = 0
+        if lane == 1:
+            for k in range(N):
+                px, py = (Xbar[k + 1, 0], Xbar[k + 1, 1]) if k < N - 1 else (F[N - 1, 0], F[N - 1, 1])
+                dev = lane_n[k, 0] * px + lane_n[k, 1] * py - lane_b[k]
+                if dev > lane_hi[k] - 1e-3 or dev < lane_lo[k] + 1e-3:
+                    kpos[k] = 1
+        if nrow > 0:
+            for k in range(N):
+                Xl = Xbar[k + 1] if k < N - 1 else F[N - 1]
+                for q in range(nrow):
+                    if rowb[k, q] > -math.inf and (rowa[k, q, 0] * Xl[0] + rowa[k, q, 1] * Xl[1]
+                                                    + rowa[k, q, 2] * Xl[2] < rowb[k, q] + 1e-3):
+                        kpos[N + k] = 1
+        for f0 in range(0, 2 * N, N):  # and the 3 steps after each (RTI plans move a little)
+            for k in range(N - 1, 0, -1):
+                if kpos[f0 + k - 1] == 1 or (k >= 2 and kpos[f0 + k - 2] == 1) or (k >= 3 and kpos[f0 + k - 3] == 1):
+                    kpos[f0 + k] = 1
+        code, iters = _soft_solve(H, g, C, b, m, m_lane, rgrp, N, nzu, kpos, fp[_F_SLACK2], fp[_F_SLACK1],
+                                  fp[_F_OSLACK2], fp[_F_OSLACK1], _v1(wbuf, fo, _W_GSUM), z, lamq,
                                   active, isact, L, J, Rq, d, zdir, r, uq, sq, rown, ip[_I_MAXITER], fp[_F_TOL])
     else:
         code, iters = gi_solve(H, g, C, b, m, nz, z, lamq, active, isact, L, J, Rq, d, zdir, r, uq,
@@ -869,41 +949,59 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, wbuf, ibuf, out,
 
 
 @njit(cache=True)
-def _lane_solve(H, g, C, b, m, m_lane, N, nzu, kpos, w2, w1, z, lam, active, isact, L, J, Rq, d, zdir, r, uq,
-                sq, rown, max_iter, tol):
-    """The condensed QP with the soft lane bound, the lane slacks only where they can be nonzero.
+def _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, every) -> bool:
+    """Flag (kpos = 1) every slack group (``every``; else every group without a slack, kpos 0)
+    whose rows' multipliers sum to more than its slack's l1 weight; True if none does (zero
+    slacks are then optimal there)."""
+    for grp in range(2 * N):
+        gsum[grp] = 0.0
+    for rr in range(m_soft, m):
+        gsum[rgrp[rr]] += lam[rr]
+    done = True
+    for grp in range(2 * N):
+        if (every or kpos[grp] == 0) and gsum[grp] > (w1l if grp < N else w1o):
+            kpos[grp] = 1
+            done = False
+    return done
+
+
+@njit(cache=True)
+def _soft_solve(H, g, C, b, m, m_soft, rgrp, N, nzu, kpos, w2l, w1l, w2o, w1o, gsum, z, lam, active, isact, L, J,
+                Rq, d, zdir, r, uq, sq, rown, max_iter, tol):
+    """The condensed QP with soft rows, their slacks only where they can be nonzero.
 
     ``H[:nzu, :nzu]``, ``g[:nzu]`` are the input part; rows ``[0, m)`` of ``C z >= b`` the
-    constraints, the two lane rows of step k at ``m_lane + 2k`` (their slack columns are written
-    here). First the inputs alone, lane rows hard: if that solves and no step's lane multipliers
-    sum to more than the slack's l1 weight ``w1``, zero slacks satisfy the optimality conditions
-    of the soft problem (exact penalty), so it is its solution. Else slacks are given to the steps
-    flagged in ``kpos`` (1 = slack; the caller flags the steps the linearization violates), plus
-    every step whose multipliers exceed ``w1``, and solved again until no step without a slack
-    exceeds it (or with a slack on every step: the full problem). The slacks' quadratic weight is
-    ``w2``; their sign rows follow row m. z[:nzu] holds the inputs."""
+    constraints, of which rows ``[m_soft, m)`` are soft: row ``rr`` belongs to slack group
+    ``rgrp[rr]`` (the lane rows of step k to group k, slack weights ``w2l`` quadratic, ``w1l``
+    linear; the obstacle rows of step k to group N + k, weights ``w2o``, ``w1o``), one slack per
+    group shared by its rows, as in ``ocp.qp``. First the inputs alone, soft rows hard: if that
+    solves and no group's multipliers sum to more than its slack's l1 weight, zero slacks satisfy
+    the optimality conditions of the soft problem (exact penalty), so it is its solution. Else
+    slacks are given to the groups flagged in ``kpos`` (1 = slack; the caller flags those the
+    linearization violates), plus every group whose multipliers exceed the weight, and solved
+    again until no group without a slack exceeds it (or with a slack on every group that has
+    rows: the full problem). The slacks' sign rows follow row m. z[:nzu] holds the inputs."""
     code, iters = gi_solve(H, g, C, b, m, nzu, z, lam, active, isact, L, J, Rq, d, zdir, r, uq,
                            sq, rown, max_iter, tol)
-    if code == 0:
-        done = True
-        for k in range(N):
-            if lam[m_lane + 2 * k] + lam[m_lane + 2 * k + 1] > w1:
-                kpos[k] = 1
-                done = False
-        if done:
-            return 0, iters
-    else:
+    if code == 0 and _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, True):
+        return 0, iters
+    full = False
+    for _round in range(2 * N + 1):
         nk = 0
-        for k in range(N):
-            nk += kpos[k]
-        if nk == 0:
-            for k in range(N):
-                kpos[k] = 1
-    for _round in range(N):
-        nk = 0
-        for k in range(N):
-            if kpos[k] != 0:
-                kpos[k] = nk + 1  # 1-based slack position
+        if full or (code != 0 and _round == 0):
+            # no (useful) flags: a slack on every group that has rows
+            nflag = 0
+            for grp in range(2 * N):
+                nflag += 1 if kpos[grp] != 0 else 0
+            if full or nflag == 0:
+                for grp in range(2 * N):
+                    kpos[grp] = 0
+                for rr in range(m_soft, m):
+                    kpos[rgrp[rr]] = 1
+                full = True
+        for grp in range(2 * N):
+            if kpos[grp] != 0:
+                kpos[grp] = nk + 1  # 1-based slack position
                 nk += 1
         n2 = nzu + nk
         for a in range(nk):
@@ -911,14 +1009,17 @@ def _lane_solve(H, g, C, b, m, m_lane, N, nzu, kpos, w2, w1, z, lam, active, isa
             for cc in range(n2):
                 H[jj, cc] = 0.0
                 H[cc, jj] = 0.0
-            H[jj, jj] = 2.0 * w2
-            g[jj] = w1
-        for k in range(N):
-            for rr in range(m_lane + 2 * k, m_lane + 2 * k + 2):
-                for cc in range(nzu, n2):
-                    C[rr, cc] = 0.0
-                if kpos[k] > 0:
-                    C[rr, nzu + kpos[k] - 1] = 1.0
+        for grp in range(2 * N):
+            if kpos[grp] > 0:
+                jj = nzu + kpos[grp] - 1
+                H[jj, jj] = 2.0 * (w2l if grp < N else w2o)
+                g[jj] = w1l if grp < N else w1o
+        for rr in range(m_soft, m):
+            for cc in range(nzu, n2):
+                C[rr, cc] = 0.0
+            grp = rgrp[rr]
+            if kpos[grp] > 0:
+                C[rr, nzu + kpos[grp] - 1] = 1.0
         for a in range(nk):
             rr = m + a
             for cc in range(n2):
@@ -929,17 +1030,14 @@ def _lane_solve(H, g, C, b, m, m_lane, N, nzu, kpos, w2, w1, z, lam, active, isa
                              sq, rown, max_iter, tol)
         iters += it2
         if code != 0:
-            if nk == N:
+            if full:
                 return code, iters
-            for k in range(N):
-                kpos[k] = 1
+            full = True
             continue
-        done = True
-        for k in range(N):
-            if kpos[k] == 0 and lam[m_lane + 2 * k] + lam[m_lane + 2 * k + 1] > w1:
-                kpos[k] = 1
-                done = False
-        if done:
+        for grp in range(2 * N):
+            if kpos[grp] > 0:
+                kpos[grp] = 1
+        if _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, False):
             return 0, iters
     return 3, iters
 
@@ -986,10 +1084,14 @@ class FastLtvMpc(TrackingWarmStart):
     ``infeasible``, ``max_iter``, ``failed``; fallbacks as ``LtvMpc`` (shifted previous plan,
     else the last command), named in ``ControlOutput.fallback``. Obstacles with a cost
     formulation (see :func:`obstacles_unsupported_reason`) enter each QP as the cost's convex
-    model at the linearization trajectory; ``config.sqp_max_iterations > 1`` re-linearizes and
+    model at the linearization trajectory; the constraint formulations (``hard``, ``corridor``)
+    as rows built by ``ocp.avoidance`` between two compiled stages, their passing sides kept
+    in ``WarmStart.sides`` as ``LtvMpc`` keeps them; ``config.sqp_max_iterations > 1`` re-linearizes and
     re-solves (each iteration one compiled call) until the inputs move less than
     ``config.sqp_tol``, as ``LtvMpc`` does. The lane bound is ``problem.lane_half_width_m`` as
-    given (the factory subtracts the body's half width and margin, as ``LtvMpc`` does itself).
+    given (the factory subtracts the body's half width and margin, as ``LtvMpc`` does itself);
+    ``lane_margin_m`` is that margin, with which the obstacle rows' side choice recovers the
+    road's half width.
     """
 
     name = "ltv-mpc-fast"
@@ -997,7 +1099,7 @@ class FastLtvMpc(TrackingWarmStart):
 
     def __init__(self, model, path: Path, problem: MpcProblem, config: MpcConfig = MpcConfig(),
                  settings: FastSettings = FastSettings(), obstacles=(), avoidance: AvoidanceConfig | None = None,
-                 footprint: Footprint = Footprint()):
+                 footprint: Footprint = Footprint(), lane_margin_m: float = 0.05):
         reason = fast_unsupported_reason(model, path, problem, config, settings, obstacles, avoidance)
         if reason is not None:
             raise ValueError(f"the fast backend cannot solve this problem: {reason}")
@@ -1007,8 +1109,21 @@ class FastLtvMpc(TrackingWarmStart):
         self.footprint = footprint
         #: passing sides are kept (in WarmStart.sides) only where a detour uses them
         self._sides = np.full(max(len(self.obstacles), 1), _SIDE_NONE, dtype=np.int64)
-        self._detour = self.avoidance is not None and self.avoidance.detour != "none"
+        av = self.avoidance
+        rows = av is not None and av.uses_rows
+        #: the compiled detour (cost formulations; with rows ocp.avoidance shifts the references)
+        self._detour = av is not None and av.detour != "none" and not rows
         nx, nu, N = model.nx, model.nu, problem.N
+        lane = problem.lane_half_width_m is not None
+        #: constraint formulations: ocp.avoidance builds each step's rows between the two stages;
+        #: its lane is the road's (the problem's bound plus the body's half width and margin)
+        self._rows = None
+        n_orow = 0
+        if rows:
+            road_half = problem.lane_half_width_m + 0.5 * footprint.width_m + lane_margin_m if lane else None
+            self._rows = Avoidance(av, list(self.obstacles), path, footprint, N, problem.dt_s, road_half,
+                                   lane_margin_m)
+            n_orow = av.rows_per_step(footprint)
         self.nx, self.nu, self.N = nx, nu, N
         self.dt_s = problem.dt_s
         if config.v_ref_mps is not None:
@@ -1019,16 +1134,18 @@ class FastLtvMpc(TrackingWarmStart):
             raise ValueError(f"reference speed must be finite, got {self.v_ref_mps}")
         kind, mp = model_code(model)
         pa = path_arrays(path)
-        lane = problem.lane_half_width_m is not None
-        nz = N * nu + (N if lane else 0)
-        rows, rhs, r_rate0, n_var, n_slack = _constant_rows(problem, nz)
-        m_max = len(rows) + n_var + n_slack
+        nz = N * nu + (N if lane else 0) + (N if rows else 0)
+        crows, rhs, r_rate0, n_var, n_slack = _constant_rows(problem, nz)
+        if rows:
+            n_var += N * n_orow
+            n_slack += N
+        m_max = len(crows) + n_var + n_slack
         mq = max(m_max, 1)
         C = np.zeros((mq, nz))
         b_ = np.zeros(mq)
-        if rows:
-            C[: len(rows)] = np.array(rows)
-            b_[: len(rows)] = rhs
+        if crows:
+            C[: len(crows)] = np.array(crows)
+            b_[: len(crows)] = rhs
         need_gamma = n_var > 0
         ip = np.zeros(_NIP, dtype=np.int64)
         ip[[_I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH]] = [kind, nx, nu, N, pa.kind]
@@ -1037,15 +1154,15 @@ class FastLtvMpc(TrackingWarmStart):
         ip[_I_HORIZON] = 1 if config.horizon == "paper" else 0
         ip[_I_FF] = 1 if config.feedforward == "curvature" else 0
         ip[_I_LANE] = int(lane)
-        ip[_I_MCONST] = len(rows)
+        ip[_I_MCONST] = len(crows)
         ip[_I_RATE0] = r_rate0
         ip[_I_MAXITER] = settings.max_iter
         ip[_I_GAMMA] = int(need_gamma)
         ip[_I_NZ] = nz
-        ip[_I_RICCATI] = int(not lane and not np.any(problem.Rc))
+        ip[_I_RICCATI] = int(not lane and not rows and not np.any(problem.Rc))
         ip[_I_MQ] = mq
-        av = self.avoidance
-        if av is not None:
+        ip[_I_OROWS] = n_orow
+        if av is not None and not rows:
             ip[_I_OFORM] = _OBS_POTENTIAL if av.formulation == "potential" else _OBS_GAUSSIAN
             ip[_I_NOBS] = len(self.obstacles)
             ip[_I_OMAX] = av.max_obstacles
@@ -1059,6 +1176,7 @@ class FastLtvMpc(TrackingWarmStart):
         fp[_F_HSTEP], fp[_F_WINDOW] = config.horizon_step_m, config.projection_window_m
         fp[_F_LANEW] = problem.lane_half_width_m if lane else 0.0
         fp[_F_SLACK2], fp[_F_SLACK1] = problem.lane_slack_weight, problem.lane_slack_weight_l1
+        fp[_F_OSLACK2], fp[_F_OSLACK1] = problem.obstacle_slack_weight, problem.obstacle_slack_weight_l1
         fp[_F_TOL] = settings.feasibility_tol
         bnd = np.concatenate([problem.u_min, problem.u_max, problem.du_max_per_s * problem.dt_s,
                               problem.x_min, problem.x_max])
@@ -1079,6 +1197,9 @@ class FastLtvMpc(TrackingWarmStart):
             _W_WE: np.stack([problem.Q] * (N - 1) + [problem.QN]), _W_QT: (N, nx),
             _W_OBS: _obstacle_table(self.obstacles), _W_ODIST: (max(len(self.obstacles), 1),),
             _W_OPROJ: (max(len(self.obstacles), 1), 2), _W_SARR: (N + 1,), _W_EREF: (N + 1,),
+            _W_ROWA: (N, max(n_orow, 1), 3), _W_ROWB: np.full((N, max(n_orow, 1)), -np.inf),
+            _W_LLO: np.full(N, -fp[_F_LANEW]), _W_LHI: np.full(N, fp[_F_LANEW]), _W_XLIN: (N + 1, nx),
+            _W_GSUM: (2 * N,),
         }
         shapes = [np.shape(arrays[i]) if isinstance(arrays[i], np.ndarray) else arrays[i] for i in range(_NW)]
         sizes = [int(np.prod(sh)) for sh in shapes]
@@ -1092,7 +1213,8 @@ class FastLtvMpc(TrackingWarmStart):
         for i, v in arrays.items():
             if isinstance(v, np.ndarray):
                 self._w[i][...] = v
-        self._ibuf = np.concatenate([ip, fo, fs.ravel(), np.zeros(nz + mq + N + max(len(self.obstacles), 1), dtype=np.int64)])
+        self._ibuf = np.concatenate([ip, fo, fs.ravel(),
+                                     np.zeros(nz + mq + 2 * N + max(len(self.obstacles), 1) + mq, dtype=np.int64)])
         self._info = np.zeros(4)
         self._noX = np.zeros((N + 1, nx))
         self._noU = np.zeros((N, nu))
@@ -1110,8 +1232,8 @@ class FastLtvMpc(TrackingWarmStart):
         x[2] = float(self.path.heading(0.0))
         if self.nx >= 4:
             x[3] = self.v_ref_mps
-        _control_step(x, 0.0, 0.0, np.zeros(self.nu), self._noX, self._noU, MODE_NO_PLAN, self._sides.copy(),
-                      self._wbuf, self._ibuf, np.empty(self._out_size), self._info)
+        _control_step(x, 0.0, 0.0, np.zeros(self.nu), self._noX, self._noU, MODE_NO_PLAN, STAGE_ALL,
+                      self._sides.copy(), self._wbuf, self._ibuf, np.empty(self._out_size), self._info)
 
     # -- warm start: initial_warm and _check_state from TrackingWarmStart ---------------------
     def _load_sides(self, sides: tuple) -> np.ndarray:
@@ -1123,6 +1245,36 @@ class FastLtvMpc(TrackingWarmStart):
                 if 0 <= j < len(self.obstacles):
                     arr[j] = side
         return arr
+
+    def _run(self, x, s_guess: float, t_s: float, u_prev, X, U, mode: int, warm_sides: tuple, out):
+        """One compiled step (or SQP iteration); with constraint rows, in two stages around
+        ``ocp.avoidance``. Returns the status code and the passing sides for the next step."""
+        sides = self._load_sides(warm_sides)
+        if self._rows is None:
+            code = _control_step(x, s_guess, t_s, u_prev, X, U, mode, STAGE_ALL, sides, self._wbuf, self._ibuf,
+                                 out, self._info)
+            if self._detour:
+                return code, tuple((j, int(v)) for j, v in enumerate(sides) if v != _SIDE_NONE)
+            return code, warm_sides
+        code = _control_step(x, s_guess, t_s, u_prev, X, U, mode, STAGE_LINEARIZE, sides, self._wbuf, self._ibuf,
+                             out, self._info)
+        if code != 0:
+            return code, warm_sides
+        w = self._w
+        memory = AvoidanceMemory(dict(warm_sides))
+        terms = self._rows.terms(t_s, x, w[_W_XLIN], w[_W_SARR], memory)
+        w[_W_ROWA][...] = terms.rows_a
+        w[_W_ROWB][...] = terms.rows_b
+        if terms.lane_lo is not None:
+            w[_W_LLO][...] = terms.lane_lo
+            w[_W_LHI][...] = terms.lane_hi
+        if terms.e_ref is None:
+            w[_W_EREF][...] = 0.0
+        else:
+            w[_W_EREF][...] = terms.e_ref
+        code = _control_step(x, s_guess, t_s, u_prev, X, U, mode, STAGE_SOLVE, sides, self._wbuf, self._ibuf,
+                             out, self._info)
+        return code, tuple(sorted(memory.sides.items()))
 
     # -- one control step -----------------------------------------------------------------------
     def step(self, x, warm: WarmStart) -> ControlOutput:
@@ -1150,9 +1302,8 @@ class FastLtvMpc(TrackingWarmStart):
         out = np.empty(self._out_size)
         t_s = float(warm.t_s)
         info = self._info
-        sides = self._load_sides(warm.sides)
-        code = _control_step(x, float(warm.s_m), t_s, u_prev, X, U, MODE_SHIFTED_PLAN if has_plan else MODE_NO_PLAN,
-                             sides, self._wbuf, self._ibuf, out, info)
+        code, new_sides = self._run(x, float(warm.s_m), t_s, u_prev, X, U,
+                                    MODE_SHIFTED_PLAN if has_plan else MODE_NO_PLAN, warm.sides, out)
         N, nx, nu = self.N, self.nx, self.nu
         cfg = self.config
         it = 1
@@ -1165,15 +1316,10 @@ class FastLtvMpc(TrackingWarmStart):
                 break
             X_it = out[self._o_X:self._o_U].reshape(N + 1, nx)
             out = np.empty(self._out_size)
-            sides = self._load_sides(warm.sides)
-            code = _control_step(x, float(info[0]), t_s, u_prev, X_it, U_it, MODE_ITERATE, sides, self._wbuf,
-                                 self._ibuf, out, info)
+            code, new_sides = self._run(x, float(info[0]), t_s, u_prev, X_it, U_it, MODE_ITERATE, warm.sides, out)
             it += 1
             t_qp = time.perf_counter() - t1
         t_next = t_s + self.dt_s
-        new_sides = warm.sides
-        if self._detour:
-            new_sides = tuple((j, int(v)) for j, v in enumerate(sides) if v != _SIDE_NONE)
         if code == 0:
             u = out[:nu]
             X_pred = out[self._o_X:self._o_U].reshape(N + 1, nx)
