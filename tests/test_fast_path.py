@@ -25,7 +25,7 @@ from mpcdrive.control.fast import FastLtvMpc, FastSettings, fast_unsupported_rea
 from mpcdrive.models import KinematicBicycle3, KinematicBicycle4, KinematicParams
 from mpcdrive.models.discretize import discrete_step, discrete_step_and_jacobians
 from mpcdrive.ocp import MpcProblem
-from mpcdrive.paths import CirclePath, StraightPath, WaypointPath
+from mpcdrive.paths import CirclePath, ConstantSpeed, SpeedProfile, StraightPath, WaypointPath
 from mpcdrive.scenarios import build_experiment, builtin_ids, load_scenario, run_experiment
 from mpcdrive.sim import Plant, compute_metrics, simulate
 from mpcdrive.solvers.dense_qp import DenseQpSolver
@@ -115,14 +115,28 @@ def _feature_cases():
         "paper linearization, no feedforward, circle": (
             m4, CirclePath((1.0, -1.0), 2.0, ccw=False), MpcProblem(4, 2, 20, 0.02, du_max_per_s=[1.0, 3.0], **p4),
             MpcConfig(linearization="paper", feedforward="none", v_ref_mps=1.0), np.array([1.0, 1.2, -0.2, 0.8])),
+        "speed profile from rest, closed waypoints, accel feedforward": (
+            m4, loop, MpcProblem(4, 2, 15, 0.05, du_max_per_s=[3.0, 20.0], **p4),
+            MpcConfig(speed_profile=SpeedProfile(loop, 3.0, 1.5, 2.0, 1.4)), np.array([0.3, -0.2, 0.1, 0.0])),
+        "speed profile to a stop, open waypoints, euler, lane": (
+            m4, wp, MpcProblem(4, 2, 12, 0.05, lane_half_width_m=0.3, **p4),
+            MpcConfig(discretization="euler",
+                      speed_profile=SpeedProfile(wp, 2.0, 1.0, 1.5, 1.3, v_start_mps=0.5, v_end_mps=0.0)),
+            np.array([0.1, 0.05, 0.3, 0.6])),
+        "speed profile, three-state model": (
+            m3, wp, MpcProblem(3, 1, 15, 0.02, Q=[1, 4, 1], R=0.5, u_min=-STEER, u_max=STEER),
+            MpcConfig(speed_profile=SpeedProfile(wp, 3.0, 2.0, 2.0, 1.5)), np.array([0.2, 0.3, 0.4])),
+        "constant-speed profile": (
+            m4, CirclePath((1.0, -1.0), 2.0), MpcProblem(4, 2, 20, 0.02, **p4),
+            MpcConfig(speed_profile=ConstantSpeed(0.9)), np.array([1.0, -3.1, 0.1, 0.5])),
     }
 
 
 @pytest.mark.parametrize("case", list(_feature_cases()))
 def test_fast_matches_osqp_with_every_supported_constraint(case):
     """Rate bounds, Rc, state bounds, the soft lane with slack, Euler, the paper's horizon and
-    linearization, waypoint and circle paths: the same commands and plans as OSQP at random
-    states, warm-started from each controller's own previous plan."""
+    linearization, waypoint and circle paths, speed profiles: the same commands and plans as OSQP
+    at random states, warm-started from each controller's own previous plan."""
     model, path, pb, cfg, x0 = _feature_cases()[case]
     fast = FastLtvMpc(model, path, pb, cfg)
     # FastLtvMpc bounds the centre of gravity by the problem's lane as given; LtvMpc keeps half the
