@@ -118,6 +118,10 @@ def _feature_cases():
         "speed profile from rest, closed waypoints, accel feedforward": (
             m4, loop, MpcProblem(4, 2, 15, 0.05, du_max_per_s=[3.0, 20.0], **p4),
             MpcConfig(speed_profile=SpeedProfile(loop, 3.0, 1.5, 2.0, 1.4)), np.array([0.3, -0.2, 0.1, 0.0])),
+        "speed profile, exp discretization": (
+            m4, loop, MpcProblem(4, 2, 15, 0.05, **p4),
+            MpcConfig(discretization="exp", speed_profile=SpeedProfile(loop, 3.0, 1.5, 2.0, 1.4)),
+            np.array([0.2, 0.1, 0.05, 0.8])),
         "speed profile to a stop, open waypoints, euler, lane": (
             m4, wp, MpcProblem(4, 2, 12, 0.05, lane_half_width_m=0.3, **p4),
             MpcConfig(discretization="euler",
@@ -294,9 +298,10 @@ def test_factory_falls_back_to_osqp_and_says_why():
 
 # --------------------------------------------------------------- compiled models and paths
 @pytest.mark.parametrize("model", [KinematicBicycle3(2.0, KinematicParams(0.2, 0.1)), KinematicBicycle4()])
-@pytest.mark.parametrize("method", ["rk4", "euler"])
+@pytest.mark.parametrize("method", ["rk4", "euler", "exp"])
 def test_compiled_discretization_equals_numpy(model, method):
-    from mpcdrive.models.compiled import METHOD_EULER, METHOD_RK4, discrete_step_jacobians, model_code, rollout_into
+    from mpcdrive.models.compiled import (METHOD_EULER, METHOD_EXP, METHOD_RK4, discrete_step_jacobians, model_code,
+                                          rollout_into)
 
     kind, mp = model_code(model)
     rng = np.random.default_rng(0)
@@ -304,13 +309,16 @@ def test_compiled_discretization_equals_numpy(model, method):
     X = rng.normal(size=(N, nx))
     U = rng.uniform(-1, 1, size=(N, nu))
     F, A, B = np.zeros((N, nx)), np.zeros((N, nx, nx)), np.zeros((N, nx, nu))
-    code = METHOD_RK4 if method == "rk4" else METHOD_EULER
+    code = {"rk4": METHOD_RK4, "euler": METHOD_EULER, "exp": METHOD_EXP}[method]
+    nw = nx + nu + 1 if method == "exp" else nx
     for k in range(N):
-        discrete_step_jacobians(kind, mp, nx, nu, X, U, k, 0.05, code, F, A, B, np.zeros((7, nx, nx)))
+        discrete_step_jacobians(kind, mp, nx, nu, X, U, k, 0.05, code, F, A, B, np.zeros((7, nw, nw)))
     F0, A0, B0 = discrete_step_and_jacobians(model, X, U, 0.05, method)
     np.testing.assert_allclose(F, F0, atol=1e-13)
     np.testing.assert_allclose(A, A0, atol=1e-13)
     np.testing.assert_allclose(B, B0, atol=1e-13)
+    if method == "exp":  # the Jacobians are the rollout's: rollout_into does Euler and RK4
+        return
     Xr = np.zeros((N, nx))
     Xr[0] = X[0]
     rollout_into(kind, mp, nx, Xr, U, N - 1, 0.05, code, np.zeros((3, nx)))

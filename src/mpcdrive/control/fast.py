@@ -7,8 +7,8 @@ following a speed profile (:class:`~mpcdrive.paths.SpeedProfile` or
 :class:`~mpcdrive.paths.ConstantSpeed`, arc-length horizon: the references move along the path as
 the profile does in time, take its speed, and an ``accel`` input gets its acceleration as
 reference; see :mod:`mpcdrive.paths.profile_compiled`) --, linearization along the shifted
-previous plan or the paper's frozen point, Euler / RK4 Jacobians, cost, input / rate / state
-bounds, soft lane bound with slack, fallbacks) but runs every step in one numba-compiled
+previous plan or the paper's frozen point, Euler / RK4 / ``exp`` discrete models, cost, input /
+rate / state bounds, soft lane bound with slack, fallbacks) but runs every step in one numba-compiled
 function that works in buffers allocated at construction. The QP is condensed onto the inputs
 (and lane slacks): the states are eliminated with the linearized dynamics, the Hessian is built
 by a backward recursion ``P_k = W_k + A_k' P_{k+1} A_k`` (O(N^2) blocks), and the dense QP is
@@ -43,6 +43,7 @@ from numba import njit
 
 from ..models.compiled import (
     METHOD_EULER,
+    METHOD_EXP,
     METHOD_RK4,
     discrete_step_jacobians,
     model_code,
@@ -169,8 +170,6 @@ def fast_unsupported_reason(model, path: Path, problem: MpcProblem, config: MpcC
             return f"a speed profile with the {config.horizon!r} horizon needs the OSQP controller"
     if config.prediction_substeps != 1:
         return "prediction substeps need the OSQP controller"
-    if config.discretization not in ("euler", "rk4"):
-        return f"the {config.discretization!r} discretization needs the OSQP controller"
     reason = obstacles_unsupported_reason(obstacles, avoidance)
     if reason is not None:
         return reason
@@ -662,7 +661,13 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, wbuf, ibuf, out,
                 Ubar[k, a] = uref[k, a]
         for i in range(nx):
             Xbar[0, i] = x[i]
-        rollout_into(mkind, mp, nx, Xbar, Ubar, N - 1, dt, meth, dw[0])
+        if meth == METHOD_EXP:
+            for k in range(N - 1):
+                discrete_step_jacobians(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
+                for i in range(nx):
+                    Xbar[k + 1, i] = F[k, i]
+        else:
+            rollout_into(mkind, mp, nx, Xbar, Ubar, N - 1, dt, meth, dw[0])
     kmax = 1 if lin == 1 and mode != MODE_ITERATE else N
     for k in range(kmax):
         discrete_step_jacobians(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
@@ -1059,7 +1064,7 @@ class FastLtvMpc(TrackingWarmStart):
         ip = np.zeros(_NIP, dtype=np.int64)
         ip[[_I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH]] = [kind, nx, nu, N, pa.kind]
         ip[_I_LIN] = 1 if config.linearization == "paper" else 0
-        ip[_I_METHOD] = METHOD_RK4 if config.discretization == "rk4" else METHOD_EULER
+        ip[_I_METHOD] = {"rk4": METHOD_RK4, "euler": METHOD_EULER, "exp": METHOD_EXP}[config.discretization]
         ip[_I_HORIZON] = 1 if config.horizon == "paper" else 0
         ip[_I_FF] = 1 if config.feedforward == "curvature" else 0
         ip[_I_LANE] = int(lane)
@@ -1103,7 +1108,7 @@ class FastLtvMpc(TrackingWarmStart):
             _W_GAM: (N, nx, N * nu) if need_gamma else (1, 1, 1),
             _W_H: (nz, nz), _W_G: (nz,), _W_Z: (nz,), _W_L: (nz, nz), _W_J: (nz, nz), _W_RQ: (nz, nz),
             _W_D: (nz,), _W_ZDIR: (nz,), _W_R: (nz,), _W_UQ: (nz,), _W_SQ: (mq,), _W_ROWN: (mq,),
-            _W_LAMQ: (mq,), _W_DW: (7, nw, nw), _W_KG: (N, nu, nx), _W_KF: (N, nu), _W_PA: (nx, nx),
+            _W_LAMQ: (mq,), _W_DW: (7, nx + nu + 1, nx + nu + 1), _W_KG: (N, nu, nx), _W_KF: (N, nu), _W_PA: (nx, nx),
             _W_MG: (nu, nx), _W_GG: (nu, nu), _W_QV: (nx,),
             _W_WE: np.stack([problem.Q] * (N - 1) + [problem.QN]), _W_QT: (N, nx),
             _W_OBS: _obstacle_table(self.obstacles), _W_ODIST: (max(len(self.obstacles), 1),),
