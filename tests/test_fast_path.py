@@ -45,17 +45,20 @@ def _with_backend(spec, backend):
 
 
 # ------------------------------------------------------------------------------ built-in scenarios
-#: built-in scenarios the fast path covers (kinematic models, obstacle costs, no speed profile);
-#: the others run on the OSQP controller (see test_unsupported_scenarios_fall_back_to_osqp)
+#: built-in scenarios the fast path covers (kinematic models, obstacle costs, speed profiles, the
+#: kinematic MPC on a dynamic plant); the others run on the OSQP controller (see
+#: test_unsupported_scenarios_fall_back_to_osqp)
 FAST_SCENARIOS = ["paper-exp1", "paper-exp2", "paper-exp3", "paper-exp4", "paper-disturbance-v1",
-                  "paper-disturbance-v4", "paper-smoothing", "paper-exp5-potential", "paper-exp5-gaussian"]
+                  "paper-disturbance-v4", "paper-smoothing", "paper-exp5-potential", "paper-exp5-gaussian",
+                  "mismatch-kinematic-mpc"]
 
 
-def test_unsupported_scenarios_fall_back_to_osqp():
-    for sid in ("paper-exp5-hard", "track-raceway"):
-        with pytest.warns(UserWarning, match="fast backend not used"):
-            exp = build_experiment(_with_backend(load_scenario(sid), "fast"))
-        assert exp.mpc.backend_name == "osqp"
+@pytest.mark.parametrize("sid, reason", [("paper-exp5-hard", "constraint rows"),
+                                         ("track-raceway", "DynamicBicycle has no compiled form")])
+def test_unsupported_scenarios_fall_back_to_osqp(sid, reason):
+    with pytest.warns(UserWarning, match=f"fast backend not used: .*{reason}"):
+        exp = build_experiment(_with_backend(load_scenario(sid), "fast"))
+    assert exp.mpc.backend_name == "osqp"
     assert set(FAST_SCENARIOS) <= set(builtin_ids())
 
 
@@ -64,8 +67,8 @@ def builtin_pair(request):
     spec = load_scenario(request.param)
     ref = build_experiment(_with_backend(spec, "osqp"))
     fast = build_experiment(_with_backend(spec, "fast"))
-    assert isinstance(fast.controller, FastLtvMpc), "every built-in scenario must run on the fast path"
-    assert isinstance(ref.controller, LtvMpc)
+    assert isinstance(fast.mpc, FastLtvMpc), "every built-in scenario must run on the fast path"
+    assert isinstance(ref.mpc, LtvMpc)
     return request.param, ref, fast, run_experiment(ref)
 
 
