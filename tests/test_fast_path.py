@@ -299,6 +299,20 @@ def test_factory_falls_back_to_osqp_and_says_why():
         make_mpc(model, path, pb, backend="gpu")
 
 
+def test_speed_profiles_the_fast_path_declines_are_named():
+    model, path = KinematicBicycle4(), StraightPath([0, 0], [10, 0])
+    pb = MpcProblem(4, 2, 10, 0.05, Q=[1, 1, 1, 1], R=[1, 1])
+
+    class Ramp:
+        def speed(self, s_m):
+            return 1.0 + 0.1 * np.asarray(s_m)
+
+    assert "Ramp has no compiled form" in fast_unsupported_reason(model, path, pb, MpcConfig(speed_profile=Ramp()))
+    paper = MpcConfig(horizon="paper", speed_profile=ConstantSpeed(1.0))
+    assert "'paper' horizon" in fast_unsupported_reason(model, path, pb, paper)
+    assert fast_unsupported_reason(model, path, pb, MpcConfig(speed_profile=ConstantSpeed(1.0))) is None
+
+
 # --------------------------------------------------------------- compiled models and paths
 @pytest.mark.parametrize("model", [KinematicBicycle3(2.0, KinematicParams(0.2, 0.1)), KinematicBicycle4()])
 @pytest.mark.parametrize("method", ["rk4", "euler", "exp"])
