@@ -93,7 +93,7 @@ def _time_at(prof, s):
     sg, tg, _ = _tables(prof)
     if prof[_P_CLOSED] != 0.0:
         length = prof[_P_LENGTH]
-        laps = math.floor(s / length)
+        laps = np.floor(s / length)
         return laps * tg[tg.size - 1] + _interp(s - laps * length, sg, tg)
     return _interp(s, sg, tg)
 
@@ -147,7 +147,7 @@ def profile_arc_lengths(prof, s0_m, dt_s, out):
     for k in range(out.size):
         t = t0 + dt_s * k
         if closed:
-            laps = math.floor(t / lap_t)
+            laps = np.floor(t / lap_t)
             out[k] = laps * prof[_P_LENGTH] + _s_at_time(prof, t - laps * lap_t)
         else:
             out[k] = _s_at_time(prof, t)
