@@ -25,7 +25,7 @@ from mpcdrive.control.fast import FastLtvMpc, FastSettings, fast_unsupported_rea
 from mpcdrive.models import KinematicBicycle3, KinematicBicycle4, KinematicParams
 from mpcdrive.models.discretize import discrete_step, discrete_step_and_jacobians
 from mpcdrive.ocp import MpcProblem
-from mpcdrive.paths import CirclePath, StraightPath, WaypointPath
+from mpcdrive.paths import CirclePath, ConstantSpeed, SpeedProfile, StraightPath, WaypointPath
 from mpcdrive.scenarios import build_experiment, builtin_ids, load_scenario, run_experiment
 from mpcdrive.sim import Plant, compute_metrics, simulate
 from mpcdrive.solvers.dense_qp import DenseQpSolver
@@ -45,21 +45,21 @@ def _with_backend(spec, backend):
 
 
 # ------------------------------------------------------------------------------ built-in scenarios
-#: built-in scenarios the fast path covers (kinematic models, obstacle costs, no speed profile);
-#: the others run on the OSQP controller (see test_unsupported_scenarios_fall_back_to_osqp)
+#: built-in scenarios the fast path covers (kinematic models, obstacle costs, speed profiles, the
+#: kinematic MPC on a dynamic plant); the others run on the OSQP controller (see
+#: test_unsupported_scenarios_fall_back_to_osqp)
 FAST_SCENARIOS = ["paper-exp1", "paper-exp2", "paper-exp3", "paper-exp4", "paper-disturbance-v1",
                   "paper-disturbance-v4", "paper-smoothing", "paper-exp5-potential", "paper-exp5-gaussian",
-                  "paper-exp5-hard", "paper-exp5-corridor"]
+                  "paper-exp5-hard", "paper-exp5-corridor", "mismatch-kinematic-mpc"]
 #: built-in scenarios with obstacle constraint rows where OSQP at its scenario tolerance stops short
 #: on some steps (status max_iter / inaccurate, then a fallback): checked against OSQP at 1e-9
 ROW_SCENARIOS = ["obstacle-overtake", "obstacle-slalom", "obstacle-crossing", "obstacle-blocked"]
 
 
 def test_unsupported_scenarios_fall_back_to_osqp():
-    for sid in ("track-raceway",):
-        with pytest.warns(UserWarning, match="fast backend not used"):
-            exp = build_experiment(_with_backend(load_scenario(sid), "fast"))
-        assert exp.mpc.backend_name == "osqp"
+    with pytest.warns(UserWarning, match="fast backend not used: .*DynamicBicycle has no compiled form"):
+        exp = build_experiment(_with_backend(load_scenario("track-raceway"), "fast"))
+    assert exp.mpc.backend_name == "osqp"
     assert set(FAST_SCENARIOS) | set(ROW_SCENARIOS) <= set(builtin_ids())
     # car following (not in the scenario schema) is declined by name
     from mpcdrive.ocp.avoidance import AvoidanceConfig
@@ -76,8 +76,8 @@ def builtin_pair(request):
     spec = load_scenario(request.param)
     ref = build_experiment(_with_backend(spec, "osqp"))
     fast = build_experiment(_with_backend(spec, "fast"))
-    assert isinstance(fast.controller, FastLtvMpc), "every built-in scenario must run on the fast path"
-    assert isinstance(ref.controller, LtvMpc)
+    assert isinstance(fast.mpc, FastLtvMpc), "every built-in scenario must run on the fast path"
+    assert isinstance(ref.mpc, LtvMpc)
     return request.param, ref, fast, run_experiment(ref)
 
 
@@ -127,14 +127,32 @@ def _feature_cases():
         "paper linearization, no feedforward, circle": (
             m4, CirclePath((1.0, -1.0), 2.0, ccw=False), MpcProblem(4, 2, 20, 0.02, du_max_per_s=[1.0, 3.0], **p4),
             MpcConfig(linearization="paper", feedforward="none", v_ref_mps=1.0), np.array([1.0, 1.2, -0.2, 0.8])),
+        "speed profile from rest, closed waypoints, accel feedforward": (
+            m4, loop, MpcProblem(4, 2, 15, 0.05, du_max_per_s=[3.0, 20.0], **p4),
+            MpcConfig(speed_profile=SpeedProfile(loop, 3.0, 1.5, 2.0, 1.4)), np.array([0.3, -0.2, 0.1, 0.0])),
+        "speed profile, exp discretization": (
+            m4, loop, MpcProblem(4, 2, 15, 0.05, **p4),
+            MpcConfig(discretization="exp", speed_profile=SpeedProfile(loop, 3.0, 1.5, 2.0, 1.4)),
+            np.array([0.2, 0.1, 0.05, 0.8])),
+        "speed profile to a stop, open waypoints, euler, lane": (
+            m4, wp, MpcProblem(4, 2, 12, 0.05, lane_half_width_m=0.3, **p4),
+            MpcConfig(discretization="euler",
+                      speed_profile=SpeedProfile(wp, 2.0, 1.0, 1.5, 1.3, v_start_mps=0.5, v_end_mps=0.0)),
+            np.array([0.1, 0.05, 0.3, 0.6])),
+        "speed profile, three-state model": (
+            m3, wp, MpcProblem(3, 1, 15, 0.02, Q=[1, 4, 1], R=0.5, u_min=-STEER, u_max=STEER),
+            MpcConfig(speed_profile=SpeedProfile(wp, 3.0, 2.0, 2.0, 1.5)), np.array([0.2, 0.3, 0.4])),
+        "constant-speed profile": (
+            m4, CirclePath((1.0, -1.0), 2.0), MpcProblem(4, 2, 20, 0.02, **p4),
+            MpcConfig(speed_profile=ConstantSpeed(0.9)), np.array([1.0, -3.1, 0.1, 0.5])),
     }
 
 
 @pytest.mark.parametrize("case", list(_feature_cases()))
 def test_fast_matches_osqp_with_every_supported_constraint(case):
     """Rate bounds, Rc, state bounds, the soft lane with slack, Euler, the paper's horizon and
-    linearization, waypoint and circle paths: the same commands and plans as OSQP at random
-    states, warm-started from each controller's own previous plan."""
+    linearization, waypoint and circle paths, speed profiles: the same commands and plans as OSQP
+    at random states, warm-started from each controller's own previous plan."""
     model, path, pb, cfg, x0 = _feature_cases()[case]
     fast = FastLtvMpc(model, path, pb, cfg)
     # FastLtvMpc bounds the centre of gravity by the problem's lane as given; LtvMpc keeps half the
@@ -290,11 +308,26 @@ def test_factory_falls_back_to_osqp_and_says_why():
         make_mpc(model, path, pb, backend="gpu")
 
 
+def test_speed_profiles_the_fast_path_declines_are_named():
+    model, path = KinematicBicycle4(), StraightPath([0, 0], [10, 0])
+    pb = MpcProblem(4, 2, 10, 0.05, Q=[1, 1, 1, 1], R=[1, 1])
+
+    class Ramp:
+        def speed(self, s_m):
+            return 1.0 + 0.1 * np.asarray(s_m)
+
+    assert "Ramp has no compiled form" in fast_unsupported_reason(model, path, pb, MpcConfig(speed_profile=Ramp()))
+    paper = MpcConfig(horizon="paper", speed_profile=ConstantSpeed(1.0))
+    assert "'paper' horizon" in fast_unsupported_reason(model, path, pb, paper)
+    assert fast_unsupported_reason(model, path, pb, MpcConfig(speed_profile=ConstantSpeed(1.0))) is None
+
+
 # --------------------------------------------------------------- compiled models and paths
 @pytest.mark.parametrize("model", [KinematicBicycle3(2.0, KinematicParams(0.2, 0.1)), KinematicBicycle4()])
-@pytest.mark.parametrize("method", ["rk4", "euler"])
+@pytest.mark.parametrize("method", ["rk4", "euler", "exp"])
 def test_compiled_discretization_equals_numpy(model, method):
-    from mpcdrive.models.compiled import METHOD_EULER, METHOD_RK4, discrete_step_jacobians, model_code, rollout_into
+    from mpcdrive.models.compiled import (METHOD_EULER, METHOD_EXP, METHOD_RK4, discrete_step_jacobians, model_code,
+                                          rollout_into)
 
     kind, mp = model_code(model)
     rng = np.random.default_rng(0)
@@ -302,13 +335,16 @@ def test_compiled_discretization_equals_numpy(model, method):
     X = rng.normal(size=(N, nx))
     U = rng.uniform(-1, 1, size=(N, nu))
     F, A, B = np.zeros((N, nx)), np.zeros((N, nx, nx)), np.zeros((N, nx, nu))
-    code = METHOD_RK4 if method == "rk4" else METHOD_EULER
+    code = {"rk4": METHOD_RK4, "euler": METHOD_EULER, "exp": METHOD_EXP}[method]
+    nw = nx + nu + 1 if method == "exp" else nx
     for k in range(N):
-        discrete_step_jacobians(kind, mp, nx, nu, X, U, k, 0.05, code, F, A, B, np.zeros((7, nx, nx)))
+        discrete_step_jacobians(kind, mp, nx, nu, X, U, k, 0.05, code, F, A, B, np.zeros((7, nw, nw)))
     F0, A0, B0 = discrete_step_and_jacobians(model, X, U, 0.05, method)
     np.testing.assert_allclose(F, F0, atol=1e-13)
     np.testing.assert_allclose(A, A0, atol=1e-13)
     np.testing.assert_allclose(B, B0, atol=1e-13)
+    if method == "exp":  # the Jacobians are the rollout's: rollout_into does Euler and RK4
+        return
     Xr = np.zeros((N, nx))
     Xr[0] = X[0]
     rollout_into(kind, mp, nx, Xr, U, N - 1, 0.05, code, np.zeros((3, nx)))

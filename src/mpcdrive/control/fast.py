@@ -2,9 +2,13 @@
 one Python call.
 
 :class:`FastLtvMpc` solves the same problem as ``LtvMpc`` (same projection, horizon
-references with curvature feedforward and slip-corrected yaw, linearization along the shifted
-previous plan or the paper's frozen point, Euler / RK4 Jacobians, cost, input / rate / state
-bounds, soft lane bound with slack, fallbacks) but runs every step in one numba-compiled
+references with curvature feedforward and slip-corrected yaw -- at a constant reference speed or
+following a speed profile (:class:`~mpcdrive.paths.SpeedProfile` or
+:class:`~mpcdrive.paths.ConstantSpeed`, arc-length horizon: the references move along the path as
+the profile does in time, take its speed, and an ``accel`` input gets its acceleration as
+reference; see :mod:`mpcdrive.paths.profile_compiled`) --, linearization along the shifted
+previous plan or the paper's frozen point, Euler / RK4 / ``exp`` discrete models, cost, input /
+rate / state bounds, soft lane bound with slack, fallbacks) but runs every step in one numba-compiled
 function that works in buffers allocated at construction. The QP is condensed onto the inputs
 (and lane slacks): the states are eliminated with the linearized dynamics, the Hessian is built
 by a backward recursion ``P_k = W_k + A_k' P_{k+1} A_k`` (O(N^2) blocks), and the dense QP is
@@ -47,6 +51,7 @@ from numba import njit
 
 from ..models.compiled import (
     METHOD_EULER,
+    METHOD_EXP,
     METHOD_RK4,
     discrete_step_jacobians,
     model_code,
@@ -57,6 +62,7 @@ from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory
 from ..ocp.problem import MpcProblem
 from ..paths.base import Path
 from ..paths.compiled import path_arrays, path_eval, path_project, wrap_angle
+from ..paths.profile_compiled import profile_arc_lengths, profile_array, profile_speed
 from ..scene.footprint import Footprint
 from ..scene.obstacles import Circle, ConstantVelocity, Polygon, Static
 from ..solvers.dense_qp import STATUS_WORDS, gi_solve
@@ -72,8 +78,8 @@ _BAD_STATE = 4
 # integer parameters (ip)
 _I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH, _I_LIN, _I_METHOD, _I_HORIZON, _I_FF, _I_LANE, \
     _I_MCONST, _I_RATE0, _I_MAXITER, _I_GAMMA, _I_NZ, _I_RICCATI, _I_MQ, _I_OFORM, _I_NOBS, _I_OMAX, \
-    _I_DETOUR, _I_OROWS = range(22)
-_NIP = 22
+    _I_DETOUR, _I_OROWS, _I_PROFILE, _I_ACCEL = range(24)
+_NIP = 24
 # passing sides (as ocp.avoidance), and "not chosen yet" in the compiled side memory
 _SIDE_LEFT, _SIDE_RIGHT, _SIDE_BLOCKED, _SIDE_NONE = 1, -1, 0, 2
 # obstacle cost formulations (ip[_I_OFORM])
@@ -94,8 +100,9 @@ _NOB = 8
  _W_REFS, _W_XREF, _W_UREF, _W_XBAR, _W_UBAR, _W_F, _W_A, _W_BD, _W_CD, _W_LANEN, _W_LANEB, _W_XF, _W_P,
  _W_LAM, _W_VB, _W_S, _W_T2, _W_GAM, _W_H, _W_G, _W_Z, _W_L, _W_J, _W_RQ, _W_D, _W_ZDIR, _W_R, _W_UQ,
  _W_SQ, _W_ROWN, _W_LAMQ, _W_DW, _W_KG, _W_KF, _W_PA, _W_MG, _W_GG, _W_QV, _W_WE, _W_QT, _W_OBS,
- _W_ODIST, _W_OPROJ, _W_SARR, _W_EREF, _W_ROWA, _W_ROWB, _W_LLO, _W_LHI, _W_XLIN, _W_GSUM) = range(64)
-_NW = 64
+ _W_ODIST, _W_OPROJ, _W_SARR, _W_EREF, _W_ROWA, _W_ROWB, _W_LLO, _W_LHI, _W_XLIN, _W_GSUM, _W_PROF,
+ _W_VARR) = range(66)
+_NW = 66
 # float parameters (fp)
 _F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_LANEW, _F_SLACK2, _F_SLACK1, _F_TOL, _F_OW, _F_OEPS, _F_OSX, \
     _F_OSY, _F_OINF, _F_OMARGIN, _F_HW, _F_HL, _F_RAMP, _F_OSLACK2, _F_OSLACK1 = range(19)
@@ -171,8 +178,12 @@ def fast_unsupported_reason(model, path: Path, problem: MpcProblem, config: MpcC
                             settings: FastSettings = FastSettings(), obstacles=(),
                             avoidance: AvoidanceConfig | None = None) -> str | None:
     """Why the compiled step cannot solve this problem exactly as ``LtvMpc`` would, or None."""
-    if config.speed_profile is not None:
-        return "speed profiles need the OSQP controller"
+    prof = config.speed_profile
+    if prof is not None:
+        if profile_array(prof) is None:
+            return f"speed profile {type(prof).__name__} has no compiled form"
+        if config.horizon != "arc_length":
+            return f"a speed profile with the {config.horizon!r} horizon needs the OSQP controller"
     if config.prediction_substeps != 1:
         return "prediction substeps need the OSQP controller"
     reason = obstacles_unsupported_reason(obstacles, avoidance)
@@ -580,6 +591,7 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
     obs, oproj, s_arr = _v2(wbuf, fo, fs, _W_OBS), _v2(wbuf, fo, fs, _W_OPROJ), _v1(wbuf, fo, _W_SARR)
     lane_lo, lane_hi = _v1(wbuf, fo, _W_LLO), _v1(wbuf, fo, _W_LHI)
     rowa, rowb, nrow = _v3(wbuf, fo, fs, _W_ROWA), _v2(wbuf, fo, fs, _W_ROWB), ip[_I_OROWS]
+    prof, v_arr = _v1(wbuf, fo, _W_PROF), _v1(wbuf, fo, _W_VARR)
     mkind, nx, nu, N = ip[_I_MODEL], ip[_I_NX], ip[_I_NU], ip[_I_N]
     pkind, lin, meth, hmode, ff, lane = ip[_I_PATH], ip[_I_LIN], ip[_I_METHOD], ip[_I_HORIZON], ip[_I_FF], ip[_I_LANE]
     nz = ip[_I_NZ]
@@ -603,13 +615,21 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
         info[_O_EY] = e_y
         info[_O_EPSI] = wrap_angle(x[2] - h0)
         info[_O_ITER] = 0.0
+        # horizon arc lengths and reference speeds: as the profile moves in time, or the constant
+        # reference speed (or the paper's fixed step)
+        has_prof = ip[_I_PROFILE] == 1
+        if has_prof:
+            profile_arc_lengths(prof, s0, dt, s_arr)
         acc = 0.0
         vdt = abs(v_ref) * dt
         for k in range(N + 1):
-            sk = s0 + fp[_F_HSTEP] * k if hmode == 1 else s0 + acc
-            acc += vdt
-            s_arr[k] = sk
-            px, py, hk, kap = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, sk)
+            if has_prof:
+                v_arr[k] = profile_speed(prof, s_arr[k])
+            else:
+                s_arr[k] = s0 + fp[_F_HSTEP] * k if hmode == 1 else s0 + acc
+                acc += vdt
+                v_arr[k] = v_ref
+            px, py, hk, kap = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s_arr[k])
             refs[k, 0] = px
             refs[k, 1] = py
             refs[k, 2] = hk
@@ -621,7 +641,7 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
             xref[k, 1] = refs[k, 1]
             xref[k, 2] = refs[k, 2]
             if nx >= 4:
-                xref[k, 3] = v_ref
+                xref[k, 3] = v_arr[k]
         for k in range(N):
             for a in range(nu):
                 uref[k, a] = 0.0
@@ -633,6 +653,9 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
                 if k < N:
                     uref[k, 0] = steer
                 xref[k, 2] -= slip
+        if has_prof and ip[_I_ACCEL] >= 0:  # the profile's speed changes as acceleration reference
+            for k in range(N):
+                uref[k, ip[_I_ACCEL]] += (v_arr[k + 1] - v_arr[k]) / dt
 
         nsel = 0
         if ip[_I_OFORM] != _OBS_NONE:
@@ -674,7 +697,13 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
                     Ubar[k, a] = uref[k, a]
             for i in range(nx):
                 Xbar[0, i] = x[i]
-            rollout_into(mkind, mp, nx, Xbar, Ubar, N - 1, dt, meth, dw[0])
+            if meth == METHOD_EXP:
+                for k in range(N - 1):
+                    discrete_step_jacobians(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
+                    for i in range(nx):
+                        Xbar[k + 1, i] = F[k, i]
+            else:
+                rollout_into(mkind, mp, nx, Xbar, Ubar, N - 1, dt, meth, dw[0])
         kmax = 1 if lin == 1 and mode != MODE_ITERATE else N
         for k in range(kmax):
             discrete_step_jacobians(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
@@ -1071,10 +1100,11 @@ def _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out):
 # numba caches _control_step keyed to this file only; it inlines code from these
 from .. import _jitcache  # noqa: E402
 from ..models import compiled as _models_compiled, kinematic as _kinematic  # noqa: E402
-from ..paths import compiled as _paths_compiled  # noqa: E402
+from ..paths import compiled as _paths_compiled, profile_compiled as _profile_compiled  # noqa: E402
 from ..solvers import dense_qp as _dense_qp  # noqa: E402
 
-_jitcache.refresh(_control_step, [m.__file__ for m in (_kinematic, _models_compiled, _paths_compiled, _dense_qp)])
+_jitcache.refresh(_control_step, [m.__file__ for m in (_kinematic, _models_compiled, _paths_compiled,
+                                                       _profile_compiled, _dense_qp)])
 
 
 class FastLtvMpc(TrackingWarmStart):
@@ -1128,6 +1158,8 @@ class FastLtvMpc(TrackingWarmStart):
         self.dt_s = problem.dt_s
         if config.v_ref_mps is not None:
             self.v_ref_mps = float(config.v_ref_mps)
+        elif config.speed_profile is not None:
+            self.v_ref_mps = float(config.speed_profile.speed(0.0))
         else:
             self.v_ref_mps = float(model.speed(np.zeros(nx)))
         if not np.isfinite(self.v_ref_mps):
@@ -1150,7 +1182,7 @@ class FastLtvMpc(TrackingWarmStart):
         ip = np.zeros(_NIP, dtype=np.int64)
         ip[[_I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH]] = [kind, nx, nu, N, pa.kind]
         ip[_I_LIN] = 1 if config.linearization == "paper" else 0
-        ip[_I_METHOD] = METHOD_RK4 if config.discretization == "rk4" else METHOD_EULER
+        ip[_I_METHOD] = {"rk4": METHOD_RK4, "euler": METHOD_EULER, "exp": METHOD_EXP}[config.discretization]
         ip[_I_HORIZON] = 1 if config.horizon == "paper" else 0
         ip[_I_FF] = 1 if config.feedforward == "curvature" else 0
         ip[_I_LANE] = int(lane)
@@ -1162,6 +1194,9 @@ class FastLtvMpc(TrackingWarmStart):
         ip[_I_RICCATI] = int(not lane and not rows and not np.any(problem.Rc))
         ip[_I_MQ] = mq
         ip[_I_OROWS] = n_orow
+        prof = np.zeros(1) if config.speed_profile is None else profile_array(config.speed_profile)
+        ip[_I_PROFILE] = int(config.speed_profile is not None)
+        ip[_I_ACCEL] = list(model.input_names).index("accel") if "accel" in model.input_names else -1
         if av is not None and not rows:
             ip[_I_OFORM] = _OBS_POTENTIAL if av.formulation == "potential" else _OBS_GAUSSIAN
             ip[_I_NOBS] = len(self.obstacles)
@@ -1192,14 +1227,15 @@ class FastLtvMpc(TrackingWarmStart):
             _W_GAM: (N, nx, N * nu) if need_gamma else (1, 1, 1),
             _W_H: (nz, nz), _W_G: (nz,), _W_Z: (nz,), _W_L: (nz, nz), _W_J: (nz, nz), _W_RQ: (nz, nz),
             _W_D: (nz,), _W_ZDIR: (nz,), _W_R: (nz,), _W_UQ: (nz,), _W_SQ: (mq,), _W_ROWN: (mq,),
-            _W_LAMQ: (mq,), _W_DW: (7, nw, nw), _W_KG: (N, nu, nx), _W_KF: (N, nu), _W_PA: (nx, nx),
+            _W_LAMQ: (mq,), _W_DW: (7, nx + nu + 1, nx + nu + 1), _W_KG: (N, nu, nx), _W_KF: (N, nu),
+            _W_PA: (nx, nx),
             _W_MG: (nu, nx), _W_GG: (nu, nu), _W_QV: (nx,),
             _W_WE: np.stack([problem.Q] * (N - 1) + [problem.QN]), _W_QT: (N, nx),
             _W_OBS: _obstacle_table(self.obstacles), _W_ODIST: (max(len(self.obstacles), 1),),
             _W_OPROJ: (max(len(self.obstacles), 1), 2), _W_SARR: (N + 1,), _W_EREF: (N + 1,),
             _W_ROWA: (N, max(n_orow, 1), 3), _W_ROWB: np.full((N, max(n_orow, 1)), -np.inf),
             _W_LLO: np.full(N, -fp[_F_LANEW]), _W_LHI: np.full(N, fp[_F_LANEW]), _W_XLIN: (N + 1, nx),
-            _W_GSUM: (2 * N,),
+            _W_GSUM: (2 * N,), _W_PROF: prof, _W_VARR: (N + 1,),
         }
         shapes = [np.shape(arrays[i]) if isinstance(arrays[i], np.ndarray) else arrays[i] for i in range(_NW)]
         sizes = [int(np.prod(sh)) for sh in shapes]

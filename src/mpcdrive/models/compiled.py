@@ -5,13 +5,18 @@ The equations are not written again here: the functions of :mod:`mpcdrive.models
 as they stand, with numpy as their math namespace. This module only places their results in
 state order and chains them through Euler / RK4 exactly as :mod:`mpcdrive.models.discretize`
 does. The input is constant over a step, so the slip angle and its derivative are evaluated
-once per step rather than once per RK4 stage.
+once per step rather than once per RK4 stage. The ``exp`` method takes the matrix exponential
+of the augmented linearization with :func:`expm_into`, the scaling and squaring Taylor
+polynomial of ``discretize`` (the scaling chosen per step, where numpy picks one for a whole
+batch: both are accurate to about 1e-14).
 
 A model is described to compiled code by ``(kind, mp)``: ``kind`` an integer (see
 :data:`KIND_KINEMATIC3`) and ``mp`` a float array of parameters ``[lq, lr_m, v_mps]``.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import njit
@@ -31,6 +36,7 @@ KIND_KINEMATIC4 = 4  # x, y, yaw, v; steer, accel
 
 METHOD_EULER = 0
 METHOD_RK4 = 1
+METHOD_EXP = 2
 
 _slip = njit(cache=True, inline="always")(slip_terms)
 _dslip = njit(cache=True, inline="always")(slip_angle_derivative)
@@ -111,13 +117,53 @@ _WA, _WB, _WJX, _WJU, _WTX, _WTU, _WV = range(7)
 
 
 @njit(cache=True)
+def expm_into(W, n, im, ie, it):
+    """W[ie, :n, :n] = expm(W[im, :n, :n]) as :func:`mpcdrive.models.discretize._expm` computes it:
+    scaling the norm under 1/2, a degree-12 Taylor polynomial (Horner), squaring back. W[im] is
+    overwritten with the scaled matrix, W[it] is scratch."""
+    norm = 0.0
+    for i in range(n):
+        t = 0.0
+        for j in range(n):
+            t += abs(W[im, i, j])
+        norm = max(norm, t)
+    sq = max(0, int(math.ceil(math.log2(norm / 0.5)))) if norm > 0.5 else 0
+    scale = 2.0 ** sq
+    for i in range(n):
+        for j in range(n):
+            W[im, i, j] = W[im, i, j] / scale
+            W[ie, i, j] = (1.0 if i == j else 0.0) + W[im, i, j] / 12.0
+    for p in range(11, 0, -1):  # E = I + X E / p
+        for i in range(n):
+            for j in range(n):
+                t = 0.0
+                for l in range(n):
+                    t += W[im, i, l] * W[ie, l, j]
+                W[it, i, j] = t
+        for i in range(n):
+            for j in range(n):
+                W[ie, i, j] = (1.0 if i == j else 0.0) + W[it, i, j] / p
+    for _ in range(sq):
+        for i in range(n):
+            for j in range(n):
+                t = 0.0
+                for l in range(n):
+                    t += W[ie, i, l] * W[ie, l, j]
+                W[it, i, j] = t
+        for i in range(n):
+            for j in range(n):
+                W[ie, i, j] = W[it, i, j]
+
+
+@njit(cache=True)
 def discrete_step_jacobians(kind, mp, nx, nu, X, U, k, dt, method, F, A, B, W):
     """F[k] = x_{k+1} (nx,), A[k] (nx, nx), B[k] (nx, nu): the discrete map of
     :func:`mpcdrive.models.discretize.discrete_step_and_jacobians` at (X[k], U[k]) and its
     exact Jacobians.
 
-    W : work array (7, nx, nx) (nu <= nx). Works by index, without array views (each view
-    costs a reference count in compiled code)."""
+    W : work array (7, nw, nw), nw >= nx (nu <= nx) for Euler and RK4, nw >= nx + nu + 1 for
+    ``exp``. Works by index, without array views (each view costs a reference count in compiled
+    code)."""
     beta, dbeta = _slip(U[k, 0], mp[0], np), _dslip(U[k, 0], mp[0], np)
     # stage state in W[_WV, 0], stage derivative in W[_WV, 1]
     for i in range(nx):
@@ -133,6 +179,26 @@ def discrete_step_jacobians(kind, mp, nx, nu, X, U, k, dt, method, F, A, B, W):
     W[_WV, 1, 2] = psid
     if kind == KIND_KINEMATIC4:
         W[_WV, 1, 3] = U[k, 1]
+    if method == METHOD_EXP:
+        # expm of [[A, B, f], [0, 0, 0]] dt: F = x + its last column, Ad, Bd its blocks
+        n = nx + nu + 1
+        for i in range(n):
+            for j in range(n):
+                W[_WJX, i, j] = 0.0
+        for i in range(nx):
+            for j in range(nx):
+                W[_WJX, i, j] = W[_WA, i, j] * dt
+            for j in range(nu):
+                W[_WJX, i, nx + j] = W[_WB, i, j] * dt
+            W[_WJX, i, n - 1] = W[_WV, 1, i] * dt
+        expm_into(W, n, _WJX, _WJU, _WTX)
+        for i in range(nx):
+            F[k, i] = X[k, i] + W[_WJU, i, n - 1]
+            for j in range(nx):
+                A[k, i, j] = W[_WJU, i, j]
+            for j in range(nu):
+                B[k, i, j] = W[_WJU, i, nx + j]
+        return
     if method == METHOD_EULER:
         for i in range(nx):
             F[k, i] = X[k, i] + dt * W[_WV, 1, i]
@@ -197,7 +263,8 @@ def discrete_step_jacobians(kind, mp, nx, nu, X, U, k, dt, method, F, A, B, W):
 
 @njit(cache=True)
 def rollout_into(kind, mp, nx, X, U, n, dt, method, w):
-    """X[k + 1] = F(X[k], U[k]) for k < n (no Jacobians). w : work array (3, nx)."""
+    """X[k + 1] = F(X[k], U[k]) for k < n (no Jacobians) by Euler or RK4 (``exp`` needs the
+    Jacobians: :func:`discrete_step_jacobians`). w : work array (3, nx)."""
     for k in range(n):
         beta = _slip(U[k, 0], mp[0], np)
         for i in range(nx):
