@@ -566,3 +566,27 @@ def test_lane_update_requires_normals():
     qp = LtvQp(pb)
     with pytest.raises(ValueError):
         qp.update(d["x0"], d["Ad"], d["Bd"], d["c"], d["xref"], d["uref"], d["u_prev"])
+
+
+def test_ctrl_c_inside_an_osqp_solve_is_raised_not_a_failed_step(monkeypatch):
+    """OSQP catches SIGINT during a solve and returns the status "interrupted": the backend
+    raises KeyboardInterrupt instead of reporting a failed step (the controller would fall back
+    and the run would go on, ignoring the user's Ctrl-C)."""
+    import osqp
+
+    pb, d = make_instance(3, kind="kinematic", lane=False, rate=True, xbounds=False, rc=False)
+    qp = LtvQp(pb)
+    backend = OsqpBackend(qp, TIGHT)
+    qp.update(**d)
+    assert backend.solve().status == "ok"
+    real = backend._solver.solve
+
+    def interrupted(**kw):
+        res = real(**kw)
+        res.info.status_val = osqp.SolverStatus.OSQP_SIGINT
+        res.info.status = "interrupted"
+        return res
+
+    monkeypatch.setattr(backend._solver, "solve", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        backend.solve()

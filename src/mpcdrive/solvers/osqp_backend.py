@@ -81,6 +81,7 @@ class OsqpBackend:
         import osqp  # here, not at module import: start-up time of processes that never use OSQP
 
         self._solver = osqp.OSQP()
+        self._sigint = osqp.SolverStatus.OSQP_SIGINT
         d = qp.data()
         self._solver.setup(d.P, d.q, d.A, d.l, d.u, **settings.as_kwargs())
         self._z0 = np.zeros(qp.n_var)
@@ -113,6 +114,10 @@ class OsqpBackend:
         if warm_X is not None and warm_U is not None:
             self._solver.warm_start(x=qp.pack(warm_X, warm_U, out=self._z0))
         res = self._solver.solve(raise_error=False)
+        if res.info.status_val == self._sigint:
+            # OSQP catches Ctrl-C during a solve and returns "interrupted": the user's interrupt,
+            # not a failed step to fall back from
+            raise KeyboardInterrupt
         status = _STATUS_WORDS.get(res.info.status, STATUS_FAILED)
         z = res.x
         if z is None or not np.all(np.isfinite(z)):
