@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mpcdrive.scene import Circle, ConstantVelocity, Footprint, Obstacle, Polygon, TrajectoryMotion, rectangle, shape_distance
-from mpcdrive.scene.geometry import point_polygon, points_polygon
+from mpcdrive.scene.geometry import point_polygon, points_polygon, points_polygons
 
 coord = st.floats(-5, 5, allow_nan=False)
 angle = st.floats(-math.pi, math.pi, allow_nan=False)
@@ -83,6 +83,20 @@ def test_vectorized_point_polygon_agrees():
     for k in range(len(P)):
         dk, qk = point_polygon(P[k], poly)
         assert d[k] == pytest.approx(dk) and np.allclose(q[k], qk)
+
+
+def test_point_to_its_own_polygon_agrees():
+    """A moving obstacle: point k against the polygon at time k (inside, outside, on corners)."""
+    rng = np.random.default_rng(1)
+    turning = TrajectoryMotion(np.array([0.0, 20.0]), np.array([0.0, 16.0]), np.array([0.0, -6.0]), np.array([0.0, 10.0]))
+    ob = Obstacle(rectangle(1.0, 0.5), (0.3, -0.2, 0.7), turning)
+    polys = np.stack([ob.at(0.1 * k).points for k in range(200)])
+    P = polys.mean(axis=1) + rng.uniform(-1.2, 1.2, size=(200, 2))
+    d, q = points_polygons(P, polys)
+    assert (d < 0).any() and (d > 0).any()
+    for k in range(len(P)):
+        dk, qk = point_polygon(P[k], polys[k])
+        assert d[k] == pytest.approx(dk, abs=1e-12) and np.allclose(q[k], qk, atol=1e-12)
 
 
 def test_motion_models():

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..paths.base import Path
 from ..scene.footprint import Footprint
-from ..scene.geometry import point_shape, points_polygon
+from ..scene.geometry import points_polygon, points_polygons
 from ..scene.obstacles import Circle, Obstacle, WorldCircle
 
 Formulation = Literal["hard", "corridor", "potential", "gaussian"]
@@ -238,16 +238,18 @@ class Avoidance:
 
     # -- one step ---------------------------------------------------------------------
     def _track(self, j: int, t_s: float, s_arr: np.ndarray):
-        """Obstacle j over the horizon: Frenet boxes (N+1) and centres (N+1, 2); a static
-        obstacle is projected once."""
+        """Obstacle j over the horizon: Frenet boxes (N+1), centres (N+1, 2) and world shapes
+        (N+1); a static obstacle is placed and projected once."""
         ob = self.obstacles[j]
         times = t_s + self.dt_s * np.arange(self.N + 1)
         centers = np.array([ob.pose_at(t)[:2] for t in times])
         if ob.moving:
-            boxes = [frenet_box(self.path, ob.at(t), s_arr[k]) for k, t in enumerate(times)]
+            shapes = [ob.at(t) for t in times]
+            boxes = [frenet_box(self.path, sh, s_arr[k]) for k, sh in enumerate(shapes)]
         else:
-            boxes = [frenet_box(self.path, ob.at(t_s), s_arr[0])] * (self.N + 1)
-        return boxes, centers, times
+            shapes = [ob.at(t_s)] * (self.N + 1)
+            boxes = [frenet_box(self.path, shapes[0], s_arr[0])] * (self.N + 1)
+        return boxes, centers, shapes
 
     def terms(self, t_s: float, x: np.ndarray, Xlin: np.ndarray, s_arr: np.ndarray, memory: AvoidanceMemory) -> AvoidanceTerms:
         """Obstacle terms for the horizon starting at time ``t_s`` [s].
@@ -259,9 +261,9 @@ class Avoidance:
         sides: dict[int, int] = {}
         boxes: dict[int, list[FrenetBox]] = {}
         centers: dict[int, np.ndarray] = {}
-        times = None
+        world: dict[int, list] = {}
         for j in rel:
-            boxes[j], centers[j], times = self._track(j, t_s, s_arr)
+            boxes[j], centers[j], world[j] = self._track(j, t_s, s_arr)
             bx = boxes[j]
             # a moving obstacle is judged where the car meets it: the horizon step at which the
             # car's reference is nearest to it along the path
@@ -272,7 +274,7 @@ class Avoidance:
         if cfg.detour == "trapezoid":
             e_ref = self._detour(s_arr, boxes, sides)
         if cfg.formulation == "hard":
-            rows_a, rows_b = self._hard_rows(Xlin, s_arr, rel, boxes, centers, times, sides)
+            rows_a, rows_b = self._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides)
         elif cfg.formulation == "corridor":
             lo, hi, rows_a, rows_b = self._corridor(Xlin, s_arr, rel, boxes, sides)
         else:
@@ -316,7 +318,7 @@ class Avoidance:
         Rm = np.array([[math.cos(heading_rad), -math.sin(heading_rad)], [math.sin(heading_rad), math.cos(heading_rad)]])
         return Rm @ self._Sinv_local @ Rm.T
 
-    def _nearest(self, P: np.ndarray, j: int, centers: np.ndarray, times) -> tuple[np.ndarray, np.ndarray]:
+    def _nearest(self, P: np.ndarray, j: int, centers: np.ndarray, shapes) -> tuple[np.ndarray, np.ndarray]:
         """Signed distances (K,) and nearest boundary points (K, 2) of points P (K, 2) to obstacle
         j at the matching horizon times (rows 1..N)."""
         ob = self.obstacles[j]
@@ -326,9 +328,8 @@ class Avoidance:
             n = np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-12)
             return n - ob.shape.radius_m, C + ob.shape.radius_m * v / n[:, None]
         if not ob.moving:
-            return points_polygon(P, ob.at(times[0]).points)
-        out = [point_shape(P[k], ob.at(times[k + 1])) for k in range(len(P))]
-        return np.array([d for d, _ in out]), np.array([q for _, q in out])
+            return points_polygon(P, shapes[0].points)
+        return points_polygons(P, np.stack([sh.points for sh in shapes[1:]]))
 
     def _lin_arc_lengths(self, Xlin: np.ndarray, s0: float) -> np.ndarray:
         """(N,) arc lengths [m] of the linearization trajectory's steps 1..N: ``s0`` plus the
@@ -347,7 +348,7 @@ class Avoidance:
         t = np.column_stack([np.cos(h), np.sin(h)])
         return t, self.path.position(s_bar) + t * (s_lo - s_bar)[:, None]
 
-    def _hard_rows(self, Xlin, s_arr, rel, boxes, centers, times, sides):
+    def _hard_rows(self, Xlin, s_arr, rel, boxes, centers, world, sides):
         a, b = self._a, self._b
         a[:] = 0.0
         b[:] = -np.inf
@@ -369,7 +370,7 @@ class Avoidance:
             q_lat = self.path.position(s_ref) + nl * e_edge[:, None]
             for i, o in enumerate(self.offsets):
                 P = lin[:, :2] + o * np.column_stack([c, s])
-                dist, q = self._nearest(P, j, centers[j], times)
+                dist, q = self._nearest(P, j, centers[j], world[j])
                 v = P - q
                 nv = np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-12)
                 n = v / nv[:, None] * np.where(dist >= 0, 1.0, -1.0)[:, None]

@@ -23,10 +23,17 @@ def point_polygon(p: np.ndarray, poly: np.ndarray) -> tuple[float, np.ndarray]:
 
 def points_polygon(P: np.ndarray, poly: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Vectorized :func:`point_polygon` for points P (K, 2): distances (K,), nearest points (K, 2)."""
-    a = poly[None, :, :]
-    d = (np.roll(poly, -1, axis=0) - poly)[None, :, :]
+    return points_polygons(P, poly[None])
+
+
+def points_polygons(P: np.ndarray, polys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`point_polygon` of point ``P[k]`` (K, 2) and convex ccw polygon ``polys[k]`` (K, M, 2)
+    (or one polygon for all points, (1, M, 2)): distances (K,), nearest points (K, 2)."""
+    a = polys
+    d = np.roll(polys, -1, axis=1) - polys
     rel = P[:, None, :] - a
-    t = np.clip(np.einsum("kmi,kmi->km", rel, np.broadcast_to(d, rel.shape)) / np.einsum("mi,mi->m", d[0], d[0]), 0.0, 1.0)
+    t = np.clip(np.einsum("kmi,kmi->km", rel, np.broadcast_to(d, rel.shape))
+                / np.einsum("kmi,kmi->km", d, d), 0.0, 1.0)
     q = a + t[..., None] * d
     diff = P[:, None, :] - q
     dist = np.hypot(diff[..., 0], diff[..., 1])
