@@ -30,7 +30,6 @@ from typing import Literal
 import numpy as np
 
 from ..ocp.problem import MpcProblem
-from ..ocp.qp import LtvQp
 from ..solvers.osqp_backend import OsqpBackend, OsqpSettings
 from ..types import SolveResult, WarmStart
 
@@ -136,6 +135,8 @@ class FallbackLadder:
         self._is = names_u.index("steer") if "steer" in names_u else None
         self.relax_qp = self.relax_backend = None
         if FALLBACK_RELAX in config.ladder:
+            from ..ocp.qp import LtvQp  # scipy.sparse: imported when an OSQP controller is built
+
             self.relax_qp = LtvQp(relaxed_problem(pb, config.relax_slack_factor))
             self.relax_backend = OsqpBackend(self.relax_qp, relaxed_settings(controller.backend.settings))
 

@@ -21,11 +21,14 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..ocp.qp import LtvQp
 from ..types import STATUS_FAILED, STATUS_INACCURATE, STATUS_OK, SolveResult
+
+if TYPE_CHECKING:  # scipy.sparse is imported when an OSQP or projected-gradient controller is built
+    from ..ocp.qp import LtvQp
 
 
 @dataclass(frozen=True)
