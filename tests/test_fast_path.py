@@ -240,16 +240,24 @@ def test_infeasible_controller_problem_is_reported_and_falls_back_counted():
     pb = MpcProblem(4, 2, 10, 0.01, Q=[1, 1, 1, 1], R=0.1, u_min=[-STEER, -0.1], u_max=[STEER, 0.1],
                     x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [1.0])
     path = StraightPath([0, 0], [50, 0])
-    runs = {}
-    # the fast path's ladder is shifted_plan, hold_last: give the OSQP controller the same one
-    legacy = MpcConfig(v_ref_mps=1.0, fallback=FallbackConfig(("shifted_plan", "hold_last")))
-    for ctrl in (FastLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0)), LtvMpc(model, path, pb, legacy)):
-        r = simulate(ctrl, Plant(model), path, [0, 0.2, 0, 3.0], 0.01, 30)
-        assert all(np.isfinite(r.u).ravel())
-        runs[ctrl.backend_name] = r
-    assert set(runs["fast"].status) == {"infeasible"}
-    assert runs["fast"].fallback == runs["osqp"].fallback
-    assert compute_metrics(runs["fast"])["fallbacks"] == 30
+    for ladder, rung in ((("shifted_plan", "hold_last"), None), (("relax", "shifted_plan", "brake"), "relax"),
+                         (("brake",), "brake")):
+        cfg = MpcConfig(v_ref_mps=1.0, fallback=FallbackConfig(ladder))
+        runs = {}
+        for ctrl in (FastLtvMpc(model, path, pb, cfg), LtvMpc(model, path, pb, cfg)):
+            r = simulate(ctrl, Plant(model), path, [0, 0.2, 0, 3.0], 0.01, 30)
+            assert all(np.isfinite(r.u).ravel())
+            runs[ctrl.backend_name] = r
+        assert set(runs["fast"].status) == {"infeasible"}
+        assert runs["fast"].fallback == runs["osqp"].fallback, ladder
+        assert compute_metrics(runs["fast"])["fallbacks"] == 30
+        if rung is not None:
+            # relax: the problem without the speed bound, solved (OSQP to its relaxed 1e-4);
+            # brake: full braking within the input bounds, the steering held
+            assert set(runs["fast"].fallback) == {rung}
+            np.testing.assert_allclose(runs["fast"].u, runs["osqp"].u, atol=2e-3 if rung == "relax" else 1e-12)
+            if rung == "brake":
+                assert np.all(runs["fast"].u[:, 1] == -0.1)
 
 
 def test_iteration_cap_gives_max_iter_and_a_deliberate_fallback():
@@ -258,7 +266,8 @@ def test_iteration_cap_gives_max_iter_and_a_deliberate_fallback():
     model = KinematicBicycle3(1.0)
     pb = MpcProblem(3, 1, 30, 0.01, Q=np.ones(3), R=1.0, u_min=-STEER, u_max=STEER, du_max_per_s=math.radians(90))
     path = StraightPath([1, 0], [11, 0])
-    ctrl = FastLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0), FastSettings(max_iter=2))
+    cfg = MpcConfig(v_ref_mps=1.0, fallback=FallbackConfig(("shifted_plan", "hold_last")))
+    ctrl = FastLtvMpc(model, path, pb, cfg, FastSettings(max_iter=2))
     x = np.array([2.0, -2.0, math.pi / 2])
     warm = ctrl.initial_warm(x)
     warm = WarmStart(warm.s_m, np.array([0.3]))
@@ -267,7 +276,7 @@ def test_iteration_cap_gives_max_iter_and_a_deliberate_fallback():
     assert abs(out.u[0] - 0.3) <= math.radians(90) * 0.01 + 1e-12
     full = FastLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0)).step(x, warm)
     assert full.status == "ok"
-    plan = FastLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0), FastSettings(max_iter=2)).step(x, full.warm)
+    plan = FastLtvMpc(model, path, pb, cfg, FastSettings(max_iter=2)).step(x, full.warm)
     assert plan.status == "max_iter" and plan.fallback == "shifted_plan"
     rate = math.radians(90) * 0.01
     np.testing.assert_allclose(plan.u, np.clip(full.warm.U[1], full.u - rate, full.u + rate))

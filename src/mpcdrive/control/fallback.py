@@ -120,12 +120,16 @@ class FallbackLadder:
     """Runs a :class:`FallbackConfig` ladder for one controller (the relaxed QP is built once here).
 
     ``controller`` provides ``model``, ``problem``, ``N``, ``dt_s``, ``config.discretization`` and,
-    for ``relax``, ``backend.settings``.
+    for ``relax``, ``backend.settings`` -- unless ``relax`` is given: a callable ``(d, warm)``
+    returning ``(u, WarmStart, X_pred)`` from the controller's own relaxed solve, or None when it
+    fails. The rungs read ``x`` and ``s_m`` of the step data ``d`` (and, for the built-in
+    ``relax``, the linearization: :class:`~mpcdrive.control.mpc.StepData`).
     """
 
-    def __init__(self, controller, config: FallbackConfig):
+    def __init__(self, controller, config: FallbackConfig, relax=None):
         self.ctrl = controller
         self.config = config
+        self._relax_fn = relax
         pb = controller.problem
         model = controller.model
         self._rate = pb.du_max_per_s * pb.dt_s  # (nu,) largest change per step
@@ -134,7 +138,7 @@ class FallbackLadder:
         self._ia = names_u.index("accel") if "accel" in names_u else None
         self._is = names_u.index("steer") if "steer" in names_u else None
         self.relax_qp = self.relax_backend = None
-        if FALLBACK_RELAX in config.ladder:
+        if FALLBACK_RELAX in config.ladder and relax is None:
             from ..ocp.qp import LtvQp  # scipy.sparse: imported when an OSQP controller is built
 
             self.relax_qp = LtvQp(relaxed_problem(pb, config.relax_slack_factor))
@@ -161,6 +165,13 @@ class FallbackLadder:
 
     # -- rungs ----------------------------------------------------------------------------------
     def _relax(self, d, warm: WarmStart):
+        if self._relax_fn is not None:
+            got = self._relax_fn(d, warm)
+            if got is None:
+                return None
+            u, new_warm, X = got
+            u = self._bound(u, warm.u_prev)
+            return u, dataclasses.replace(new_warm, u_prev=u), X
         qp, be = self.relax_qp, self.relax_backend
         qp.update(d.x, d.Ad, d.Bd, d.c, d.xref, d.uref, warm.u_prev, d.lane_normal, d.lane_offset,
                   d.lane_lo, d.lane_hi)
@@ -208,7 +219,8 @@ class FallbackLadder:
     # -- the ladder -----------------------------------------------------------------------------
     def run(self, d, warm: WarmStart) -> tuple[np.ndarray, str, WarmStart, np.ndarray]:
         """(command (nu,), rung name, next warm start, predicted states (N+1, nx)) for step data
-        ``d`` (:class:`~mpcdrive.control.mpc.StepData`) after a failed solve."""
+        ``d`` (:class:`~mpcdrive.control.mpc.StepData`, or anything with ``x`` and ``s_m`` when
+        ``relax`` was given) after a failed solve."""
         rungs = {
             FALLBACK_RELAX: self._relax,
             FALLBACK_SHIFTED_PLAN: self._shifted_plan,

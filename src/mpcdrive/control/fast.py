@@ -44,7 +44,8 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from types import SimpleNamespace
 
 import numpy as np
 from numba import njit
@@ -68,7 +69,8 @@ from ..scene.obstacles import Circle, ConstantVelocity, Polygon, Static
 from ..solvers.dense_qp import STATUS_WORDS, gi_solve
 from ..types import ControlOutput, WarmStart
 from .base import TrackingWarmStart
-from .mpc import MpcConfig, plan_fallback
+from .fallback import FALLBACK_HOLD, FALLBACK_RELAX, FallbackConfig, FallbackLadder, relaxed_problem
+from .mpc import MpcConfig
 
 _TWO_PI = 2.0 * math.pi
 
@@ -1111,8 +1113,9 @@ class FastLtvMpc(TrackingWarmStart):
     """Tracking LTV-MPC of ``model`` along ``path``, every step compiled (see the module text).
 
     Same interface and results as :class:`~mpcdrive.control.mpc.LtvMpc`; statuses ``ok``,
-    ``infeasible``, ``max_iter``, ``failed``; fallbacks as ``LtvMpc`` (shifted previous plan,
-    else the last command), named in ``ControlOutput.fallback``. Obstacles with a cost
+    ``infeasible``, ``max_iter``, ``failed``; after a failed solve the ladder of
+    ``config.fallback`` as ``LtvMpc`` runs it (its ``relax`` rung on a second compiled controller
+    built here for the relaxed problem), the rung named in ``ControlOutput.fallback``. Obstacles with a cost
     formulation (see :func:`obstacles_unsupported_reason`) enter each QP as the cost's convex
     model at the linearization trajectory; the constraint formulations (``hard``, ``corridor``)
     as rows built by ``ocp.avoidance`` between two compiled stages, their passing sides kept
@@ -1259,6 +1262,16 @@ class FastLtvMpc(TrackingWarmStart):
         self._o_R = self._o_U + N * nu
         self._out_size = self._o_R + (N + 1) * nx
         self._warm_up()
+        # the fallback ladder of config.fallback; its relax rung solves the step again on a second
+        # compiled controller without rate limits and state bounds, with a cheaper lane slack
+        self._relaxed = None
+        if FALLBACK_RELAX in config.fallback.ladder:
+            self._relaxed = FastLtvMpc(
+                model, path, relaxed_problem(problem, config.fallback.relax_slack_factor),
+                replace(config, sqp_max_iterations=1, fallback=FallbackConfig((FALLBACK_HOLD,))),
+                replace(settings, max_iter=2 * settings.max_iter), obstacles, avoidance, footprint, lane_margin_m)
+        self.fallback = FallbackLadder(self, config.fallback,
+                                       relax=self._relax_step if self._relaxed is not None else None)
 
     def _warm_up(self) -> None:
         """One discarded step at the path start, so that loading (or, on a first run, compiling)
@@ -1281,6 +1294,13 @@ class FastLtvMpc(TrackingWarmStart):
                 if 0 <= j < len(self.obstacles):
                     arr[j] = side
         return arr
+
+    def _relax_step(self, d, warm: WarmStart):
+        """The relax rung: the relaxed controller's step (None if it fails too)."""
+        out = self._relaxed.step(d.x, warm)
+        if out.status != "ok":
+            return None
+        return out.u, replace(out.warm, s_m=d.s_m), out.X_pred
 
     def _run(self, x, s_guess: float, t_s: float, u_prev, X, U, mode: int, warm_sides: tuple, out):
         """One compiled step (or SQP iteration); with constraint rows, in two stages around
@@ -1367,7 +1387,7 @@ class FastLtvMpc(TrackingWarmStart):
             self._check_state(x)  # raises, naming the field
         status = STATUS_WORDS[code]
         refs = self._w[_W_XREF].copy()
-        u, name, new_warm, X_pred = plan_fallback(self.problem, x, float(info[0]), warm)
-        new_warm = WarmStart(new_warm.s_m, new_warm.u_prev, new_warm.X, new_warm.U, t_next, new_sides)
+        u, name, new_warm, X_pred = self.fallback.run(SimpleNamespace(x=x, s_m=float(info[0])), warm)
+        new_warm = replace(new_warm, t_s=t_next, sides=new_sides)
         return ControlOutput(u, status, name, time.perf_counter() - t0, float(info[0]), float(e_y),
                              float(e_psi), X_pred, refs, new_warm, it)

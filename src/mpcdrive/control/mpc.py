@@ -28,7 +28,7 @@ from ..solvers.osqp_backend import OsqpBackend, OsqpSettings
 from ..solvers.projected_gradient import ProjectedGradientBackend, ProjectedGradientSettings
 from ..types import ControlOutput, SolveResult, WarmStart
 from ..units import TWO_PI, wrap_angle
-from .fallback import FALLBACK_HOLD, FALLBACK_SHIFTED_PLAN, FallbackConfig, FallbackLadder  # noqa: F401
+from .fallback import FallbackConfig, FallbackLadder
 from .base import TrackingWarmStart
 
 
@@ -415,22 +415,3 @@ class LtvMpc(TrackingWarmStart):
             warm=new_warm,
             sqp_iterations=iterations,
         )
-
-
-def plan_fallback(problem: MpcProblem, x, s0: float, warm: WarmStart):
-    """Deliberate fallback when the QP did not solve: the previous plan shifted by one step,
-    or (no plan) the last applied input; either is kept within the input and rate bounds.
-
-    Returns ``(u (nu,), fallback name, WarmStart for the next step, X_pred (N+1, nx))``."""
-    pb = problem
-    rate = pb.du_max_per_s * pb.dt_s
-    if warm.U is not None and warm.X is not None and warm.U.shape[0] > 1:
-        U = np.vstack([warm.U[1:], warm.U[-1:]])
-        X = np.vstack([warm.X[1:], warm.X[-1:]])
-        u_raw, name = U[0], FALLBACK_SHIFTED_PLAN
-    else:
-        U = X = None
-        u_raw, name = warm.u_prev, FALLBACK_HOLD
-    u = np.clip(np.clip(u_raw, warm.u_prev - rate, warm.u_prev + rate), pb.u_min, pb.u_max)
-    X_pred = X if X is not None else np.repeat(np.asarray(x, float)[None, :], pb.N + 1, axis=0)
-    return u, name, WarmStart(s_m=float(s0), u_prev=u, X=X, U=U), X_pred
