@@ -51,7 +51,7 @@ from ..paths.base import Path
 from ..paths.compiled import path_arrays, path_eval, path_project, wrap_angle
 from ..scene.footprint import Footprint
 from ..scene.obstacles import Circle, ConstantVelocity, Polygon, Static
-from ..solvers.dense_qp import STATUS_WORDS, gi_solve
+from ..solvers.dense_qp import STATUS_WORDS, gi_solve, single_nonzero_columns
 from ..types import ControlOutput, WarmStart
 from .base import TrackingWarmStart
 from .mpc import MpcConfig, plan_fallback
@@ -525,7 +525,8 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, wbuf, ibuf, out,
     a0 = _NIP + 4 * _NW + 1
     active = ibuf[a0:a0 + ip[_I_NZ]]
     isact = ibuf[a0 + ip[_I_NZ]:a0 + ip[_I_NZ] + ip[_I_MQ]]
-    a1 = a0 + ip[_I_NZ] + ip[_I_MQ]
+    rowcol = ibuf[a0 + ip[_I_NZ] + ip[_I_MQ]:a0 + ip[_I_NZ] + 2 * ip[_I_MQ]]
+    a1 = a0 + ip[_I_NZ] + 2 * ip[_I_MQ]
     kpos = ibuf[a1:a1 + ip[_I_N]]
     osel = ibuf[a1 + ip[_I_N]:a1 + ip[_I_N] + max(ip[_I_NOBS], 1)]
     fp, mp, bnd, geo = _v1(wbuf, fo, _W_FP), _v1(wbuf, fo, _W_MP), _v1(wbuf, fo, _W_BND), _v1(wbuf, fo, _W_GEO)
@@ -857,9 +858,9 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, wbuf, ibuf, out,
             if kpos[k - 1] == 1 or (k >= 2 and kpos[k - 2] == 1) or (k >= 3 and kpos[k - 3] == 1):
                 kpos[k] = 1
         code, iters = _lane_solve(H, g, C, b, m, m_lane, N, nzu, kpos, fp[_F_SLACK2], fp[_F_SLACK1], z, lamq,
-                                  active, isact, L, J, Rq, d, zdir, r, uq, sq, rown, ip[_I_MAXITER], fp[_F_TOL])
+                                  active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, ip[_I_MAXITER], fp[_F_TOL])
     else:
-        code, iters = gi_solve(H, g, C, b, m, nz, z, lamq, active, isact, L, J, Rq, d, zdir, r, uq,
+        code, iters = gi_solve(H, g, C, b, m, nz, z, lamq, active, isact, rowcol, L, J, Rq, d, zdir, r, uq,
                                sq, rown, ip[_I_MAXITER], fp[_F_TOL])
     info[_O_ITER] = iters
     if code != 0:
@@ -869,7 +870,7 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, wbuf, ibuf, out,
 
 
 @njit(cache=True)
-def _lane_solve(H, g, C, b, m, m_lane, N, nzu, kpos, w2, w1, z, lam, active, isact, L, J, Rq, d, zdir, r, uq,
+def _lane_solve(H, g, C, b, m, m_lane, N, nzu, kpos, w2, w1, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq,
                 sq, rown, max_iter, tol):
     """The condensed QP with the soft lane bound, the lane slacks only where they can be nonzero.
 
@@ -881,8 +882,9 @@ def _lane_solve(H, g, C, b, m, m_lane, N, nzu, kpos, w2, w1, z, lam, active, isa
     flagged in ``kpos`` (1 = slack; the caller flags the steps the linearization violates), plus
     every step whose multipliers exceed ``w1``, and solved again until no step without a slack
     exceeds it (or with a slack on every step: the full problem). The slacks' quadratic weight is
-    ``w2``; their sign rows follow row m. z[:nzu] holds the inputs."""
-    code, iters = gi_solve(H, g, C, b, m, nzu, z, lam, active, isact, L, J, Rq, d, zdir, r, uq,
+    ``w2``; their sign rows follow row m (``rowcol`` names their single nonzero). z[:nzu] holds
+    the inputs."""
+    code, iters = gi_solve(H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq,
                            sq, rown, max_iter, tol)
     if code == 0:
         done = True
@@ -925,7 +927,8 @@ def _lane_solve(H, g, C, b, m, m_lane, N, nzu, kpos, w2, w1, z, lam, active, isa
                 C[rr, cc] = 0.0
             C[rr, nzu + a] = 1.0
             b[rr] = 0.0
-        code, it2 = gi_solve(H, g, C, b, m + nk, n2, z, lam, active, isact, L, J, Rq, d, zdir, r, uq,
+            rowcol[rr] = nzu + a
+        code, it2 = gi_solve(H, g, C, b, m + nk, n2, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq,
                              sq, rown, max_iter, tol)
         iters += it2
         if code != 0:
@@ -1092,7 +1095,12 @@ class FastLtvMpc(TrackingWarmStart):
         for i, v in arrays.items():
             if isinstance(v, np.ndarray):
                 self._w[i][...] = v
-        self._ibuf = np.concatenate([ip, fo, fs.ravel(), np.zeros(nz + mq + N + max(len(self.obstacles), 1), dtype=np.int64)])
+        # active-set work: active (nz), isact (mq), rowcol (mq: the constant rows' single nonzero
+        # columns, -1 for the rows written per step), kpos (N), osel (obstacles)
+        rowcol = np.full(mq, -1, dtype=np.int64)
+        rowcol[: len(rows)] = single_nonzero_columns(C[: len(rows)])
+        self._ibuf = np.concatenate([ip, fo, fs.ravel(), np.zeros(nz + mq, dtype=np.int64), rowcol,
+                                     np.zeros(N + max(len(self.obstacles), 1), dtype=np.int64)])
         self._info = np.zeros(4)
         self._noX = np.zeros((N + 1, nx))
         self._noU = np.zeros((N, nu))
