@@ -10,9 +10,10 @@ the constraints added so far, so an MPC step whose constraints are all inactive 
 Cholesky factorization and two triangular solves. Factorizations are kept in the orthogonal
 form ``J = L^{-T} Q``, ``J' N_A = [R; 0]`` (O(n^2) per change of the active set): ``J`` is
 stored transposed, so that every update reads and writes contiguous rows. Adding a constraint
-applies one Householder reflection to the free part of ``J'`` (a rank-one update of about
-2 n (n - q) multiply-adds for q active constraints, where a sequence of Givens rotations would
-cost three times as much); dropping one restores ``R``'s triangle with Givens rotations.
+applies one Householder reflection to the free part of ``J'``: a rank-one update of
+n (n - q) multiply-adds for q active constraints, built from the primal search direction
+already at hand, a quarter of the multiplications of a sequence of Givens rotations. Dropping
+one restores ``R``'s triangle with Givens rotations.
 
 Rows with a single nonzero (input bounds, slack signs) are named by the caller (``rowcol``):
 their value ``c z_j - b`` costs O(1) in the scan for the most violated row, and their search
