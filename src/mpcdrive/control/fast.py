@@ -66,7 +66,7 @@ from ..paths.compiled import path_arrays, path_eval, path_project, wrap_angle
 from ..paths.profile_compiled import profile_arc_lengths, profile_array, profile_speed
 from ..scene.footprint import Footprint
 from ..scene.obstacles import Circle, ConstantVelocity, Polygon, Static
-from ..solvers.dense_qp import STATUS_WORDS, gi_solve
+from ..solvers.dense_qp import STATUS_WORDS, gi_solve, single_nonzero_columns
 from ..types import ControlOutput, WarmStart
 from .base import TrackingWarmStart
 from .fallback import FALLBACK_HOLD, FALLBACK_RELAX, FallbackConfig, FallbackLadder, relaxed_problem
@@ -567,7 +567,8 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
     a0 = _NIP + 4 * _NW + 1
     active = ibuf[a0:a0 + ip[_I_NZ]]
     isact = ibuf[a0 + ip[_I_NZ]:a0 + ip[_I_NZ] + ip[_I_MQ]]
-    a1 = a0 + ip[_I_NZ] + ip[_I_MQ]
+    rowcol = ibuf[a0 + ip[_I_NZ] + ip[_I_MQ]:a0 + ip[_I_NZ] + 2 * ip[_I_MQ]]
+    a1 = a0 + ip[_I_NZ] + 2 * ip[_I_MQ]
     kpos = ibuf[a1:a1 + 2 * ip[_I_N]]
     a2 = a1 + 2 * ip[_I_N] + max(ip[_I_NOBS], 1)
     osel = ibuf[a1 + 2 * ip[_I_N]:a2]
@@ -896,6 +897,7 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
         for k in range(1, N + 1):
             for i in range(nx):
                 if math.isfinite(x_min[i]):
+                    rowcol[m] = -1
                     for jj in range(nzu):
                         C[m, jj] = Gam[k - 1, i, jj]
                     for jj in range(nzu, nz):
@@ -903,6 +905,7 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
                     b[m] = x_min[i] - xf[k, i]
                     m += 1
                 if math.isfinite(x_max[i]):
+                    rowcol[m] = -1
                     for jj in range(nzu):
                         C[m, jj] = -Gam[k - 1, i, jj]
                     for jj in range(nzu, nz):
@@ -925,6 +928,8 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
                 b[m + 1] = lane_b[k - 1] + lane_lo[k - 1] - nxf
                 rgrp[m] = k - 1
                 rgrp[m + 1] = k - 1
+                rowcol[m] = -1
+                rowcol[m + 1] = -1
                 m += 2
         if nrow > 0:
             # obstacle half-planes a . (x_k, y_k, yaw_k) >= b of this step (b = -inf: unused)
@@ -941,6 +946,7 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
                         C[m, jj] = 0.0
                     b[m] = rowb[k - 1, q] - (r0_ * xf[k, 0] + r1_ * xf[k, 1] + r2_ * xf[k, 2])
                     rgrp[m] = N + k - 1
+                    rowcol[m] = -1
                     m += 1
 
     # -- solve, then the plan and the command --------------------------------------------------
@@ -968,9 +974,10 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
                     kpos[f0 + k] = 1
         code, iters = _soft_solve(H, g, C, b, m, m_lane, rgrp, N, nzu, kpos, fp[_F_SLACK2], fp[_F_SLACK1],
                                   fp[_F_OSLACK2], fp[_F_OSLACK1], _v1(wbuf, fo, _W_GSUM), z, lamq,
-                                  active, isact, L, J, Rq, d, zdir, r, uq, sq, rown, ip[_I_MAXITER], fp[_F_TOL])
+                                  active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, ip[_I_MAXITER],
+                                  fp[_F_TOL])
     else:
-        code, iters = gi_solve(H, g, C, b, m, nz, z, lamq, active, isact, L, J, Rq, d, zdir, r, uq,
+        code, iters = gi_solve(H, g, C, b, m, nz, z, lamq, active, isact, rowcol, L, J, Rq, d, zdir, r, uq,
                                sq, rown, ip[_I_MAXITER], fp[_F_TOL])
     info[_O_ITER] = iters
     if code != 0:
@@ -997,8 +1004,8 @@ def _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, every) -> bool:
 
 
 @njit(cache=True)
-def _soft_solve(H, g, C, b, m, m_soft, rgrp, N, nzu, kpos, w2l, w1l, w2o, w1o, gsum, z, lam, active, isact, L, J,
-                Rq, d, zdir, r, uq, sq, rown, max_iter, tol):
+def _soft_solve(H, g, C, b, m, m_soft, rgrp, N, nzu, kpos, w2l, w1l, w2o, w1o, gsum, z, lam, active, isact, rowcol,
+                L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol):
     """The condensed QP with soft rows, their slacks only where they can be nonzero.
 
     ``H[:nzu, :nzu]``, ``g[:nzu]`` are the input part; rows ``[0, m)`` of ``C z >= b`` the
@@ -1011,8 +1018,9 @@ def _soft_solve(H, g, C, b, m, m_soft, rgrp, N, nzu, kpos, w2l, w1l, w2o, w1o, g
     slacks are given to the groups flagged in ``kpos`` (1 = slack; the caller flags those the
     linearization violates), plus every group whose multipliers exceed the weight, and solved
     again until no group without a slack exceeds it (or with a slack on every group that has
-    rows: the full problem). The slacks' sign rows follow row m. z[:nzu] holds the inputs."""
-    code, iters = gi_solve(H, g, C, b, m, nzu, z, lam, active, isact, L, J, Rq, d, zdir, r, uq,
+    rows: the full problem). The slacks' sign rows follow row m (``rowcol`` names their single
+    nonzero; the other rows written per step are marked dense there). z[:nzu] holds the inputs."""
+    code, iters = gi_solve(H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq,
                            sq, rown, max_iter, tol)
     if code == 0 and _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, True):
         return 0, iters
@@ -1057,7 +1065,8 @@ def _soft_solve(H, g, C, b, m, m_soft, rgrp, N, nzu, kpos, w2l, w1l, w2o, w1o, g
                 C[rr, cc] = 0.0
             C[rr, nzu + a] = 1.0
             b[rr] = 0.0
-        code, it2 = gi_solve(H, g, C, b, m + nk, n2, z, lam, active, isact, L, J, Rq, d, zdir, r, uq,
+            rowcol[rr] = nzu + a
+        code, it2 = gi_solve(H, g, C, b, m + nk, n2, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq,
                              sq, rown, max_iter, tol)
         iters += it2
         if code != 0:
@@ -1252,8 +1261,13 @@ class FastLtvMpc(TrackingWarmStart):
         for i, v in arrays.items():
             if isinstance(v, np.ndarray):
                 self._w[i][...] = v
-        self._ibuf = np.concatenate([ip, fo, fs.ravel(),
-                                     np.zeros(nz + mq + 2 * N + max(len(self.obstacles), 1) + mq, dtype=np.int64)])
+        # active-set work: active (nz), isact (mq), rowcol (mq: the constant rows' single nonzero
+        # columns, -1 for a dense row; the step marks the rows it writes), kpos (2N), osel
+        # (obstacles), rgrp (mq)
+        rowcol = np.full(mq, -1, dtype=np.int64)
+        rowcol[: len(crows)] = single_nonzero_columns(C[: len(crows)])
+        self._ibuf = np.concatenate([ip, fo, fs.ravel(), np.zeros(nz + mq, dtype=np.int64), rowcol,
+                                     np.zeros(2 * N + max(len(self.obstacles), 1) + mq, dtype=np.int64)])
         self._info = np.zeros(4)
         self._noX = np.zeros((N + 1, nx))
         self._noU = np.zeros((N, nu))

@@ -8,8 +8,16 @@ at the unconstrained minimum ``-H^{-1} g`` and adds the most violated constraint
 time, dropping constraints whose multiplier would turn negative; every iterate is optimal for
 the constraints added so far, so an MPC step whose constraints are all inactive costs one
 Cholesky factorization and two triangular solves. Factorizations are kept in the orthogonal
-form ``J = L^{-T} Q``, ``J' N_A = [R; 0]`` and updated with Givens rotations (O(n^2) per
-change of the active set).
+form ``J = L^{-T} Q``, ``J' N_A = [R; 0]`` (O(n^2) per change of the active set): ``J`` is
+stored transposed, so that every update reads and writes contiguous rows. Adding a constraint
+applies one Householder reflection to the free part of ``J'``: a rank-one update of
+n (n - q) multiply-adds for q active constraints, built from the primal search direction
+already at hand, a quarter of the multiplications of a sequence of Givens rotations. Dropping
+one restores ``R``'s triangle with Givens rotations.
+
+Rows with a single nonzero (input bounds, slack signs) are named by the caller (``rowcol``):
+their value ``c z_j - b`` costs O(1) in the scan for the most violated row, and their search
+direction ``J' n = c J'[:, j]`` O(n) instead of a matrix-vector product.
 
 Everything here is compiled with numba (``cache=True``: a new process loads the machine code
 from the cache instead of recompiling) and works in caller-provided buffers: nothing is
@@ -75,19 +83,21 @@ def _unconstrained(L, g, z, n):
 
 
 @njit(cache=True, fastmath=_FM)
-def _inverse_transpose(L, J, n):
-    """J = L^{-T} (upper triangular), column by column of L^{-1}."""
-    for j in range(n):
-        for i in range(n):
-            J[j, i] = 0.0
-        # column j of L^{-1}: solve L y = e_j; y_i = 0 for i < j
-        J[j, j] = 1.0 / L[j, j]
-        for i in range(j + 1, n):
-            t = 0.0
-            for k in range(j, i):
-                t -= L[i, k] * J[j, k]
-            J[j, i] = t / L[i, i]
-    # J currently holds (L^{-1})' row-major as J[j, i] = (L^{-1})[i, j]: that is L^{-T}[j, i]
+def _inverse_lower(L, Jt, n):
+    """Jt = L^{-1} (lower triangular), row by row: row i is (e_i - sum_{l<i} L[i, l] row l) / L[i, i].
+    This is J' for the initial ``J = L^{-T}``."""
+    for i in range(n):
+        for k in range(n):
+            Jt[i, k] = 0.0
+        for l in range(i):
+            a = L[i, l]
+            if a != 0.0:
+                for k in range(l + 1):
+                    Jt[i, k] -= a * Jt[l, k]
+        inv = 1.0 / L[i, i]
+        for k in range(i):
+            Jt[i, k] *= inv
+        Jt[i, i] = inv
 
 
 @njit(cache=True, fastmath=_FM)
@@ -99,13 +109,16 @@ def _givens(a, b):
 
 
 @njit(cache=True, fastmath=_FM)
-def gi_solve(H, g, C, b, m, n, z, lam, active, isact, L, J, R, d, zdir, r, u, s, rownorm, max_iter, tol):
+def gi_solve(H, g, C, b, m, n, z, lam, active, isact, rowcol, L, Jt, R, d, zdir, r, u, s, rownorm, max_iter, tol):
     """Solve ``min 1/2 z'Hz + g'z  s.t.  C[:m, :n] z >= b[:m]``; returns (status, iterations).
 
-    H : (>=n, >=n) SPD (lower triangle read); g : (n,); C : (>=m, >=n); b : (m,).
+    H : (>=n, >=n) SPD (lower triangle read); g : (n,); C : (>=m, >=n); b : (m,);
+    rowcol : (m,) int, the column of row i's only nonzero (a bound: its value, its product with
+    z and the search direction cost O(1) / O(n) instead of O(n) / O(n^2)), or -1 where the row
+    is to be read whole (always correct; :func:`single_nonzero_columns` computes it).
     Outputs: z : (n,) the solution; lam : (m,) multipliers (>= 0, zero for inactive rows);
     active : (n,) int, indices of the active rows (first ``q`` entries, q = number active).
-    Work buffers: L, J, R (n x n), d, zdir, r, u (n,), s, rownorm (m,), isact (m,) int.
+    Work buffers: L, Jt, R (n x n), d, zdir, r, u (n,), s, rownorm (m,), isact (m,) int.
     tol : feasibility tolerance on the violation of a row scaled by its norm.
     """
     if not cholesky_lower(H, L, n):
@@ -117,9 +130,13 @@ def gi_solve(H, g, C, b, m, n, z, lam, active, isact, L, J, R, d, zdir, r, u, s,
     for i in range(m):
         lam[i] = 0.0
         isact[i] = 0
-        t = 0.0
-        for j in range(n):
-            t += C[i, j] * C[i, j]
+        j1 = rowcol[i]
+        if j1 >= 0:
+            t = C[i, j1] * C[i, j1]
+        else:
+            t = 0.0
+            for j in range(n):
+                t += C[i, j] * C[i, j]
         rownorm[i] = math.sqrt(t)
         if not (math.isfinite(t) and math.isfinite(b[i])):
             return QP_FAILED, 0
@@ -135,9 +152,14 @@ def gi_solve(H, g, C, b, m, n, z, lam, active, isact, L, J, R, d, zdir, r, u, s,
         for i in range(m):
             if rownorm[i] == 0.0 or isact[i] != 0:
                 continue
-            t = -b[i]
-            for j in range(n):
-                t += C[i, j] * z[j]
+            j1 = rowcol[i]  # (inline: a helper taking the arrays is several times slower here)
+            if j1 >= 0:
+                t = C[i, j1] * z[j1] - b[i]
+            else:
+                t = 0.0
+                for j in range(n):
+                    t += C[i, j] * z[j]
+                t -= b[i]
             s[i] = t
             v = t / rownorm[i]
             if v < worst:
@@ -146,10 +168,11 @@ def gi_solve(H, g, C, b, m, n, z, lam, active, isact, L, J, R, d, zdir, r, u, s,
         if p < 0:
             break
         if not have_j:
-            _inverse_transpose(L, J, n)
+            _inverse_lower(L, Jt, n)
             have_j = True
         up = 0.0  # multiplier of the constraint being added
         sp = s[p]
+        jp = rowcol[p]
         # -- step 2: move towards satisfying row p ----------------------------------------------
         while True:
             it += 1
@@ -157,23 +180,33 @@ def gi_solve(H, g, C, b, m, n, z, lam, active, isact, L, J, R, d, zdir, r, u, s,
                 for k in range(q):
                     lam[active[k]] = u[k]
                 return QP_MAX_ITER, it - 1
-            # d = J' n_p
+            # d = J' n_p (a column of J' for a row with a single nonzero)
             dd = 0.0
-            for j in range(n):
-                t = 0.0
-                for i in range(n):
-                    t += J[i, j] * C[p, i]
-                d[j] = t
-                dd += t * t
+            if jp >= 0:
+                cp = C[p, jp]
+                for j in range(n):
+                    t = cp * Jt[j, jp]
+                    d[j] = t
+                    dd += t * t
+            else:
+                for j in range(n):
+                    t = 0.0
+                    for i in range(n):
+                        t += Jt[j, i] * C[p, i]
+                    d[j] = t
+                    dd += t * t
             # primal direction zdir = J2 d2, dual direction r = R^{-1} d1
-            d2 = 0.0
-            for j in range(q, n):
-                d2 += d[j] * d[j]
+            tail = 0.0  # |d[q+1:]|^2
             for i in range(n):
-                t = 0.0
-                for j in range(q, n):
-                    t += J[i, j] * d[j]
-                zdir[i] = t
+                zdir[i] = 0.0
+            for j in range(q, n):
+                dj = d[j]
+                if dj != 0.0:
+                    if j > q:
+                        tail += dj * dj
+                    for i in range(n):
+                        zdir[i] += dj * Jt[j, i]
+            d2 = d[q] * d[q] + tail if q < n else 0.0
             for k in range(q - 1, -1, -1):
                 t = d[k]
                 for l in range(k + 1, q):
@@ -204,18 +237,32 @@ def gi_solve(H, g, C, b, m, n, z, lam, active, isact, L, J, R, d, zdir, r, u, s,
                 u[k] -= tstep * r[k]
             up += tstep
             if t2 <= t1:
-                # full step: add p to the active set; rotate d[q:] onto d[q]
-                for j in range(n - 1, q, -1):
-                    c_, s_, h = _givens(d[j - 1], d[j])
-                    if h == 0.0:
-                        continue
-                    d[j - 1] = h
-                    d[j] = 0.0
+                # full step: add p to the active set. A Householder reflection of rows q.. of J'
+                # maps d[q:] onto (-sgn(d_q) sigma, 0, ..), sigma = |d[q:]|: with
+                # v = d[q:] + sgn(d_q) sigma e_q (no cancellation) the rows change by
+                # -(2 v_j / v'v) w, w = J2 v = zdir + sgn(d_q) sigma J'[q]; row q is then negated
+                # where needed so that R keeps a positive diagonal
+                sigma = math.sqrt(d2)
+                dq = d[q]
+                if q < n - 1:
+                    sg = 1.0 if dq >= 0.0 else -1.0
+                    vq = dq + sg * sigma
+                    beta = 2.0 / (vq * vq + tail)
+                    f = sg * sigma
                     for i in range(n):
-                        a_ = J[i, j - 1]
-                        b_ = J[i, j]
-                        J[i, j - 1] = c_ * a_ + s_ * b_
-                        J[i, j] = -s_ * a_ + c_ * b_
+                        zdir[i] += f * Jt[q, i]  # now w
+                    f = beta * vq
+                    for i in range(n):
+                        Jt[q, i] = -sg * (Jt[q, i] - f * zdir[i])
+                    for j in range(q + 1, n):
+                        f = beta * d[j]
+                        if f != 0.0:
+                            for i in range(n):
+                                Jt[j, i] -= f * zdir[i]
+                elif dq < 0.0:
+                    for i in range(n):
+                        Jt[q, i] = -Jt[q, i]
+                d[q] = sigma
                 for k in range(q + 1):
                     R[k, q] = d[k]
                 active[q] = p
@@ -242,20 +289,30 @@ def gi_solve(H, g, C, b, m, n, z, lam, active, isact, L, J, R, d, zdir, r, u, s,
                     R[j + 1, l] = -s_ * a_ + c_ * b_
                 R[j + 1, j] = 0.0
                 for i in range(n):
-                    a_ = J[i, j]
-                    b_ = J[i, j + 1]
-                    J[i, j] = c_ * a_ + s_ * b_
-                    J[i, j + 1] = -s_ * a_ + c_ * b_
-            t = -b[p]
-            for j in range(n):
-                t += C[p, j] * z[j]
-            sp = t
+                    a_ = Jt[j, i]
+                    b_ = Jt[j + 1, i]
+                    Jt[j, i] = c_ * a_ + s_ * b_
+                    Jt[j + 1, i] = -s_ * a_ + c_ * b_
+            if jp >= 0:
+                sp = C[p, jp] * z[jp] - b[p]
+            else:
+                sp = 0.0
+                for j in range(n):
+                    sp += C[p, j] * z[j]
+                sp -= b[p]
     for k in range(q):
         lam[active[k]] = u[k]
     for i in range(n):
         if not math.isfinite(z[i]):
             return QP_FAILED, it
     return QP_OK, it
+
+
+def single_nonzero_columns(C: np.ndarray) -> np.ndarray:
+    """The ``rowcol`` argument of :func:`gi_solve` for the rows of ``C``: the column of each
+    row's only nonzero, -1 for rows with none or several."""
+    nz = np.asarray(C) != 0.0
+    return np.where(nz.sum(axis=1) == 1, nz.argmax(axis=1), -1).astype(np.int64)
 
 
 @dataclass(frozen=True)
@@ -311,8 +368,9 @@ class DenseQpSolver:
             b = np.zeros(1)
         z = np.zeros(n)
         lam = np.zeros(max(m, 1))
+        rowcol = single_nonzero_columns(C)
         v = self._vec
-        code, it = gi_solve(H, g, C, b, m, n, z, lam, self._active, self._isact, self._L, self._J, self._R,
+        code, it = gi_solve(H, g, C, b, m, n, z, lam, self._active, self._isact, rowcol, self._L, self._J, self._R,
                             v[0], v[1], v[2], v[3], self._s, self._norm, self.max_iter, self.tol)
         obj = float(0.5 * z @ H @ z + g @ z) if code == QP_OK else float("nan")
         return DenseQpResult(STATUS_WORDS[code], z, lam[:m].copy(), obj, int(it))
