@@ -32,6 +32,11 @@ detour offsets into the buffers -- condensing and the solve. Their rows are soft
 slack per step, as in ``ocp.qp``, and get the same treatment as the lane rows: slacks only for
 the steps that can need them (:func:`_soft_solve`).
 
+Models: the kinematic bicycle with 3 and 4 states and the dynamic bicycle (6 states, linear or
+Pacejka tires, low-speed blend), their equations and references compiled in
+:mod:`mpcdrive.models.compiled` (the dynamic model's references are its steady cornering state
+and inputs, as ``DynamicBicycle.reference`` computes them).
+
 Compiled functions use numba's on-disk cache, so only the first process on a machine compiles
 (tens of seconds); later processes load the machine code.
 
@@ -56,7 +61,7 @@ from ..models.compiled import (
     METHOD_RK4,
     discrete_step_jacobians,
     model_code,
-    model_steady_state,
+    model_references,
     rollout_into,
 )
 from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory
@@ -103,8 +108,8 @@ _NOB = 8
  _W_LAM, _W_VB, _W_S, _W_T2, _W_GAM, _W_H, _W_G, _W_Z, _W_L, _W_J, _W_RQ, _W_D, _W_ZDIR, _W_R, _W_UQ,
  _W_SQ, _W_ROWN, _W_LAMQ, _W_DW, _W_KG, _W_KF, _W_PA, _W_MG, _W_GG, _W_QV, _W_WE, _W_QT, _W_OBS,
  _W_ODIST, _W_OPROJ, _W_SARR, _W_EREF, _W_ROWA, _W_ROWB, _W_LLO, _W_LHI, _W_XLIN, _W_GSUM, _W_PROF,
- _W_VARR) = range(66)
-_NW = 66
+ _W_VARR, _W_REFW) = range(67)
+_NW = 67
 # float parameters (fp)
 _F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_LANEW, _F_SLACK2, _F_SLACK1, _F_TOL, _F_OW, _F_OEPS, _F_OSX, \
     _F_OSY, _F_OINF, _F_OMARGIN, _F_HW, _F_HL, _F_RAMP, _F_OSLACK2, _F_OSLACK1 = range(19)
@@ -640,22 +645,8 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
         shift = _TWO_PI * np.rint((x[2] - refs[0, 2]) / _TWO_PI)
         for k in range(N + 1):
             refs[k, 2] += shift
-            xref[k, 0] = refs[k, 0]
-            xref[k, 1] = refs[k, 1]
-            xref[k, 2] = refs[k, 2]
-            if nx >= 4:
-                xref[k, 3] = v_arr[k]
-        for k in range(N):
-            for a in range(nu):
-                uref[k, a] = 0.0
-        if ff == 1:
-            steer, slip = 0.0, 0.0
-            for k in range(N + 1):
-                if k == 0 or refs[k, 3] != refs[k - 1, 3]:  # same curvature, same steady state
-                    steer, slip = model_steady_state(mkind, mp, refs[k, 3])
-                if k < N:
-                    uref[k, 0] = steer
-                xref[k, 2] -= slip
+        # the model's references (model.reference): path pose, speed states, steady-state feedforward
+        model_references(mkind, mp, refs, v_arr, N + 1, ff == 1, xref, uref, _v2(wbuf, fo, fs, _W_REFW))
         if has_prof and ip[_I_ACCEL] >= 0:  # the profile's speed changes as acceleration reference
             for k in range(N):
                 uref[k, ip[_I_ACCEL]] += (v_arr[k + 1] - v_arr[k]) / dt
@@ -1110,11 +1101,11 @@ def _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out):
 
 # numba caches _control_step keyed to this file only; it inlines code from these
 from .. import _jitcache  # noqa: E402
-from ..models import compiled as _models_compiled, kinematic as _kinematic  # noqa: E402
+from ..models import compiled as _models_compiled, dynamic as _dynamic, kinematic as _kinematic  # noqa: E402
 from ..paths import compiled as _paths_compiled, profile_compiled as _profile_compiled  # noqa: E402
 from ..solvers import dense_qp as _dense_qp  # noqa: E402
 
-_jitcache.refresh(_control_step, [m.__file__ for m in (_kinematic, _models_compiled, _paths_compiled,
+_jitcache.refresh(_control_step, [m.__file__ for m in (_kinematic, _dynamic, _models_compiled, _paths_compiled,
                                                        _profile_compiled, _dense_qp)])
 
 
@@ -1247,7 +1238,7 @@ class FastLtvMpc(TrackingWarmStart):
             _W_OPROJ: (max(len(self.obstacles), 1), 2), _W_SARR: (N + 1,), _W_EREF: (N + 1,),
             _W_ROWA: (N, max(n_orow, 1), 3), _W_ROWB: np.full((N, max(n_orow, 1)), -np.inf),
             _W_LLO: np.full(N, -fp[_F_LANEW]), _W_LHI: np.full(N, fp[_F_LANEW]), _W_XLIN: (N + 1, nx),
-            _W_GSUM: (2 * N,), _W_PROF: prof, _W_VARR: (N + 1,),
+            _W_GSUM: (2 * N,), _W_PROF: prof, _W_VARR: (N + 1,), _W_REFW: (N + 1, 8),
         }
         shapes = [np.shape(arrays[i]) if isinstance(arrays[i], np.ndarray) else arrays[i] for i in range(_NW)]
         sizes = [int(np.prod(sh)) for sh in shapes]
@@ -1293,7 +1284,7 @@ class FastLtvMpc(TrackingWarmStart):
         x = np.zeros(self.nx)
         x[:2] = self.path.position(0.0)
         x[2] = float(self.path.heading(0.0))
-        if self.nx >= 4:
+        if self.nx >= 4:  # the speed state: v (kinematic bicycle) or vx (dynamic bicycle)
             x[3] = self.v_ref_mps
         _control_step(x, 0.0, 0.0, np.zeros(self.nu), self._noX, self._noU, MODE_NO_PLAN, STAGE_ALL,
                       self._sides.copy(), self._wbuf, self._ibuf, np.empty(self._out_size), self._info)

@@ -1,17 +1,26 @@
 """Compiled (numba) form of the vehicle models and their discretization, for the fast controller.
 
 The equations are not written again here: the functions of :mod:`mpcdrive.models.kinematic`
-(slip angle, right-hand side and partial derivatives at a slip angle, steady state) are compiled
-as they stand, with numpy as their math namespace. This module only places their results in
-state order and chains them through Euler / RK4 exactly as :mod:`mpcdrive.models.discretize`
-does. The input is constant over a step, so the slip angle and its derivative are evaluated
-once per step rather than once per RK4 stage. The ``exp`` method takes the matrix exponential
-of the augmented linearization with :func:`expm_into`, the scaling and squaring Taylor
-polynomial of ``discretize`` (the scaling chosen per step, where numpy picks one for a whole
-batch: both are accurate to about 1e-14).
+(slip angle, right-hand side and partial derivatives at a slip angle, steady state) and of
+:mod:`mpcdrive.models.dynamic` (right-hand side, its partial derivatives with the low-speed
+blend and both tire models) are compiled as they stand, with numpy as their math namespace.
+This module only places their results in state order and chains them through Euler / RK4
+exactly as :mod:`mpcdrive.models.discretize` does. For the kinematic models the input is
+constant over a step, so the slip angle and its derivative are evaluated once per step rather
+than once per RK4 stage. The ``exp`` method takes the matrix exponential of the augmented
+linearization with :func:`expm_into`, the scaling and squaring Taylor polynomial of
+``discretize`` (the scaling chosen per step, where numpy picks one for a whole batch: both are
+accurate to about 1e-14).
+
+:func:`model_references` writes the horizon references of ``model.reference``: for the dynamic
+bicycle with the steady cornering state of :meth:`DynamicBicycle.steady_state_full
+<mpcdrive.models.dynamic.DynamicBicycle.steady_state_full>` (:func:`dynamic_steady_states`: its
+iteration, point by point, with the convergence test over the whole horizon as numpy's batch
+has it).
 
 A model is described to compiled code by ``(kind, mp)``: ``kind`` an integer (see
-:data:`KIND_KINEMATIC3`) and ``mp`` a float array of parameters ``[lq, lr_m, v_mps]``.
+:data:`KIND_KINEMATIC3`) and ``mp`` a float array of parameters: ``[lq, lr_m, v_mps]`` for the
+kinematic models, :func:`~mpcdrive.models.dynamic.dynamic_parameters` for the dynamic bicycle.
 """
 
 from __future__ import annotations
@@ -20,7 +29,17 @@ import math
 
 import numpy as np
 from numba import njit
+from numba.extending import register_jitable
 
+from . import dynamic
+from .dynamic import (
+    DYNAMIC_A_ENTRIES,
+    DYNAMIC_B_ENTRIES,
+    DynamicBicycle,
+    dynamic_parameters,
+    dynamic_rhs,
+    dynamic_rhs_and_partials,
+)
 from .kinematic import (
     KinematicBicycle3,
     KinematicBicycle4,
@@ -33,6 +52,7 @@ from .kinematic import (
 
 KIND_KINEMATIC3 = 3  # x, y, yaw; steer; constant speed mp[2]
 KIND_KINEMATIC4 = 4  # x, y, yaw, v; steer, accel
+KIND_DYNAMIC = 6  # x, y, yaw, vx, vy, r; steer, accel; mp = dynamic_parameters(...)
 
 METHOD_EULER = 0
 METHOD_RK4 = 1
@@ -43,6 +63,19 @@ _dslip = njit(cache=True, inline="always")(slip_angle_derivative)
 _rhs = njit(cache=True, inline="always")(kinematic_rhs_at_slip)
 _partials = njit(cache=True, inline="always")(kinematic_partials_at_slip)
 _ss = njit(cache=True)(steady_state_equations)
+# the dynamic equations call these helpers of their module: callable from compiled code as they are
+for _helper in (dynamic._pacejka, dynamic._pacejka_and_slope, dynamic._smoothstep, dynamic.slip_speed_floor,
+                dynamic.axle_tire):
+    register_jitable(_helper)
+_dyn_rhs = njit(cache=True, inline="always")(dynamic_rhs)
+_dyn_partials = njit(cache=True, inline="always")(dynamic_rhs_and_partials)
+_axle_tire = dynamic.axle_tire
+_smoothstep = dynamic._smoothstep
+# parameter indices of mp for the dynamic bicycle
+_LF, _LR, _M, _MU, _CSF, _CSR, _H, _C, _E, _VLO, _VHI, _G, _PACEJKA = (
+    dynamic._P_LF, dynamic._P_LR, dynamic._P_M, dynamic._P_MU, dynamic._P_CSF, dynamic._P_CSR, dynamic._P_H,
+    dynamic._P_C, dynamic._P_E, dynamic._P_VLO, dynamic._P_VHI, dynamic._P_G, dynamic._P_PACEJKA)
+_NA, _NB = len(DYNAMIC_A_ENTRIES), len(DYNAMIC_B_ENTRIES)
 
 
 def model_code(model) -> tuple[int, np.ndarray] | None:
@@ -53,67 +86,104 @@ def model_code(model) -> tuple[int, np.ndarray] | None:
     if type(model) is KinematicBicycle4:
         p = model.params
         return KIND_KINEMATIC4, np.array([p.lq, p.lr_m, 0.0])
+    if type(model) is DynamicBicycle:
+        return KIND_DYNAMIC, np.array(dynamic_parameters(model.params, model.tire))
     return None
 
 
-@njit(cache=True)
-def model_slip(kind, mp, u):
-    """(slip terms (beta [rad], sin beta, cos beta), d beta / d steer) for input u (both kinematic
-    models steer with u[0])."""
-    return _slip(u[0], mp[0], np), _dslip(u[0], mp[0], np)
+# rows of the work array of discrete_step_jacobians
+_WA, _WB, _WJX, _WJU, _WTX, _WTU, _WV = range(7)
 
 
 @njit(cache=True, inline="always")
-def model_f_at(kind, mp, x, u, beta, out):
-    """out (nx,) = f(x, u), given beta = the slip terms of u."""
-    v = x[3] if kind == KIND_KINEMATIC4 else mp[2]
-    xd, yd, psid = _rhs(x[2], v, beta, mp[1], np)
-    out[0] = xd
-    out[1] = yd
-    out[2] = psid
+def _stage_into(kind, mp, W, U, k, beta, dbeta):
+    """W[_WA] = df/dx (nx, nx), W[_WB][:, :nu] = df/du (all entries of the nw x nw blocks
+    written) and W[_WV, 1] = f, at the state W[_WV, 0] and input U[k]; beta, dbeta : the slip
+    terms of U[k, 0] and their derivative (kinematic models; unused for the dynamic one)."""
+    for i in range(W.shape[1]):
+        for j in range(W.shape[2]):
+            W[_WA, i, j] = 0.0
+            W[_WB, i, j] = 0.0
+    if kind == KIND_DYNAMIC:
+        f, a, b = _dyn_partials(W[_WV, 0, 2], W[_WV, 0, 3], W[_WV, 0, 4], W[_WV, 0, 5], U[k, 0], U[k, 1], mp, np)
+        for i in range(6):
+            W[_WV, 1, i] = f[i]
+        for n in range(_NA):
+            W[_WA, DYNAMIC_A_ENTRIES[n][0], DYNAMIC_A_ENTRIES[n][1]] = a[n]
+        for n in range(_NB):
+            W[_WB, DYNAMIC_B_ENTRIES[n][0], DYNAMIC_B_ENTRIES[n][1]] = b[n]
+        return
+    yaw = W[_WV, 0, 2]
+    v = W[_WV, 0, 3] if kind == KIND_KINEMATIC4 else mp[2]
+    j0, j1, j2, j3, j4, j5, j6, j7 = _partials(yaw, v, beta, dbeta, mp[1], np)
+    W[_WA, 0, 2] = j0
+    W[_WA, 1, 2] = j1
+    W[_WB, 0, 0] = j5
+    W[_WB, 1, 0] = j6
+    W[_WB, 2, 0] = j7
+    xd, yd, psid = _rhs(yaw, v, beta, mp[1], np)
+    W[_WV, 1, 0] = xd
+    W[_WV, 1, 1] = yd
+    W[_WV, 1, 2] = psid
     if kind == KIND_KINEMATIC4:
-        out[3] = u[1]
+        W[_WA, 0, 3] = j2
+        W[_WA, 1, 3] = j3
+        W[_WA, 2, 3] = j4
+        W[_WB, 3, 1] = 1.0
+        W[_WV, 1, 3] = U[k, 1]
+
+
+@njit(cache=True, inline="always")
+def _step_slip(kind, mp, U, k):
+    """(slip terms, d beta / d steer) of the kinematic models for the step's input U[k] (dummies
+    for the dynamic model, which needs none)."""
+    if kind == KIND_DYNAMIC:
+        return (0.0, 0.0, 1.0), 0.0
+    return _slip(U[k, 0], mp[0], np), _dslip(U[k, 0], mp[0], np)
+
+
+@njit(cache=True, inline="always")
+def _rhs_into(kind, mp, w, U, k, beta):
+    """w[1] = f(w[0], U[k]) (without Jacobians); beta : the slip terms of U[k, 0] (kinematic)."""
+    if kind == KIND_DYNAMIC:
+        f = _dyn_rhs(w[0, 2], w[0, 3], w[0, 4], w[0, 5], U[k, 0], U[k, 1], mp, np)
+        for i in range(6):
+            w[1, i] = f[i]
+        return
+    v = w[0, 3] if kind == KIND_KINEMATIC4 else mp[2]
+    xd, yd, psid = _rhs(w[0, 2], v, beta, mp[1], np)
+    w[1, 0] = xd
+    w[1, 1] = yd
+    w[1, 2] = psid
+    if kind == KIND_KINEMATIC4:
+        w[1, 3] = U[k, 1]
 
 
 @njit(cache=True)
 def model_f(kind, mp, x, u, out):
     """out (nx,) = f(x, u), the continuous dynamics."""
-    model_f_at(kind, mp, x, u, _slip(u[0], mp[0], np), out)
-
-
-@njit(cache=True, inline="always")
-def _jacobians_into(kind, mp, yaw, v, beta, dbeta, W, ia, ib):
-    """W[ia] = df/dx (nx, nx), W[ib][:, :nu] = df/du, given beta and dbeta (all entries written)."""
-    for i in range(W.shape[1]):
-        for j in range(W.shape[2]):
-            W[ia, i, j] = 0.0
-            W[ib, i, j] = 0.0
-    j0, j1, j2, j3, j4, j5, j6, j7 = _partials(yaw, v, beta, dbeta, mp[1], np)
-    W[ia, 0, 2] = j0
-    W[ia, 1, 2] = j1
-    W[ib, 0, 0] = j5
-    W[ib, 1, 0] = j6
-    W[ib, 2, 0] = j7
-    if kind == KIND_KINEMATIC4:
-        W[ia, 0, 3] = j2
-        W[ia, 1, 3] = j3
-        W[ia, 2, 3] = j4
-        W[ib, 3, 1] = 1.0
+    nx = x.shape[0]
+    w = np.zeros((2, nx))
+    U = np.zeros((1, u.shape[0]))
+    w[0, :] = x
+    U[0, :] = u
+    beta, _ = _step_slip(kind, mp, U, 0)
+    _rhs_into(kind, mp, w, U, 0, beta)
+    out[:] = w[1]
 
 
 @njit(cache=True)
 def model_jacobians(kind, mp, x, u, A, B):
     """A (nx, nx) = df/dx, B (nx, nu) = df/du at (x, u)."""
     nx = A.shape[0]
-    W = np.zeros((2, nx, nx))
-    v = x[3] if kind == KIND_KINEMATIC4 else mp[2]
-    _jacobians_into(kind, mp, x[2], v, _slip(u[0], mp[0], np), _dslip(u[0], mp[0], np), W, 0, 1)
-    A[:, :] = W[0]
-    B[:, :] = W[1, :, :B.shape[1]]
-
-
-# rows of the work array of discrete_step_jacobians
-_WA, _WB, _WJX, _WJU, _WTX, _WTU, _WV = range(7)
+    W = np.zeros((7, nx, nx))
+    U = np.zeros((1, u.shape[0]))
+    W[_WV, 0, :] = x
+    U[0, :] = u
+    beta, dbeta = _step_slip(kind, mp, U, 0)
+    _stage_into(kind, mp, W, U, 0, beta, dbeta)
+    A[:, :] = W[_WA]
+    B[:, :] = W[_WB, :, :B.shape[1]]
 
 
 @njit(cache=True)
@@ -164,21 +234,11 @@ def discrete_step_jacobians(kind, mp, nx, nu, X, U, k, dt, method, F, A, B, W):
     W : work array (7, nw, nw), nw >= nx (nu <= nx) for Euler and RK4, nw >= nx + nu + 1 for
     ``exp``. Works by index, without array views (each view costs a reference count in compiled
     code)."""
-    beta, dbeta = _slip(U[k, 0], mp[0], np), _dslip(U[k, 0], mp[0], np)
+    beta, dbeta = _step_slip(kind, mp, U, k)
     # stage state in W[_WV, 0], stage derivative in W[_WV, 1]
     for i in range(nx):
         W[_WV, 0, i] = X[k, i]
-    if kind == KIND_KINEMATIC4:
-        v = X[k, 3]
-    else:
-        v = mp[2]
-    _jacobians_into(kind, mp, X[k, 2], v, beta, dbeta, W, _WA, _WB)
-    xd, yd, psid = _rhs(X[k, 2], v, beta, mp[1], np)
-    W[_WV, 1, 0] = xd
-    W[_WV, 1, 1] = yd
-    W[_WV, 1, 2] = psid
-    if kind == KIND_KINEMATIC4:
-        W[_WV, 1, 3] = U[k, 1]
+    _stage_into(kind, mp, W, U, k, beta, dbeta)
     if method == METHOD_EXP:
         # expm of [[A, B, f], [0, 0, 0]] dt: F = x + its last column, Ad, Bd its blocks
         n = nx + nu + 1
@@ -221,16 +281,7 @@ def discrete_step_jacobians(kind, mp, nx, nu, X, U, k, dt, method, F, A, B, W):
         wgt = 1.0 if stage == 2 else 2.0
         for i in range(nx):
             W[_WV, 0, i] = X[k, i] + h * W[_WV, 1, i]
-        yaw = W[_WV, 0, 2]
-        if kind == KIND_KINEMATIC4:
-            v = W[_WV, 0, 3]
-        _jacobians_into(kind, mp, yaw, v, beta, dbeta, W, _WA, _WB)
-        xd, yd, psid = _rhs(yaw, v, beta, mp[1], np)
-        W[_WV, 1, 0] = xd
-        W[_WV, 1, 1] = yd
-        W[_WV, 1, 2] = psid
-        if kind == KIND_KINEMATIC4:
-            W[_WV, 1, 3] = U[k, 1]
+        _stage_into(kind, mp, W, U, k, beta, dbeta)
         # J_next_x = A_s (I + h J_x) ; J_next_u = A_s (h J_u) + B_s
         for i in range(nx):
             for j in range(nx):
@@ -266,18 +317,12 @@ def rollout_into(kind, mp, nx, X, U, n, dt, method, w):
     """X[k + 1] = F(X[k], U[k]) for k < n (no Jacobians) by Euler or RK4 (``exp`` needs the
     Jacobians: :func:`discrete_step_jacobians`). w : work array (3, nx)."""
     for k in range(n):
-        beta = _slip(U[k, 0], mp[0], np)
+        beta, _ = _step_slip(kind, mp, U, k)
         for i in range(nx):
             w[0, i] = X[k, i]
         for stage in range(4 if method == METHOD_RK4 else 1):
             h = 0.5 * dt if stage < 2 else dt
-            v = w[0, 3] if kind == KIND_KINEMATIC4 else mp[2]
-            xd, yd, psid = _rhs(w[0, 2], v, beta, mp[1], np)
-            w[1, 0] = xd
-            w[1, 1] = yd
-            w[1, 2] = psid
-            if kind == KIND_KINEMATIC4:
-                w[1, 3] = U[k, 1]
+            _rhs_into(kind, mp, w, U, k, beta)
             wgt = 1.0 if (stage == 0 or stage == 3) else 2.0
             for i in range(nx):
                 if stage == 0:
@@ -294,17 +339,164 @@ def rollout_into(kind, mp, nx, X, U, n, dt, method, w):
 
 
 @njit(cache=True)
-def model_steady_state(kind, mp, kappa):
-    """(steering [rad], slip angle [rad]) on curvature kappa [1/m]."""
-    return _ss(kappa, mp[0], mp[1], np)
+def _inverse_tire(n, front, mp):
+    """Slip angle [rad] at which the front (``front`` true) or rear axle gives the normalized force
+    Fy / Fz = n (clipped below the peak): ``DynamicBicycle._inverse_tire`` for one value."""
+    cs = mp[_CSF] if front else mp[_CSR]
+    if mp[_PACEJKA] == 0.0:
+        return n / (mp[_MU] * cs)
+    C, E = mp[_C], mp[_E]
+    B = cs / C
+    psi = math.tan(math.asin(min(max(n / mp[_MU], -0.999), 0.999)) / C)
+    if E == 0:
+        return psi / B
+    z = psi
+    for i in range(30):  # Newton on z - E (z - atan z) = psi, as dynamic._pacejka_inverse
+        step = (z - E * (z - math.atan(z)) - psi) / (1.0 - E * (1.0 - 1.0 / (1.0 + z * z)))
+        z = z - step
+        if i >= 2 and (abs(E) < 0.1 or abs(step) < 1e-13):
+            break
+    return z / B
+
+
+@njit(cache=True)
+def _solve_given_accel(mp, kappa, v, a, beta, delta):
+    """One pass of ``DynamicBicycle.steady_state_full``'s inner solve at curvature kappa [1/m],
+    speed v [m/s] and drive acceleration a [m/s^2] (which sets the axle loads), from the slip
+    beta and steering delta [rad] of the last pass: (the acceleration they require, beta, delta)."""
+    m, lf, lr = mp[_M], mp[_LF], mp[_LR]
+    L = lf + lr
+    v_eps = 0.5 * mp[_VLO]
+    pacejka = mp[_PACEJKA] != 0.0
+    r = v * kappa
+    Fzf = m * (mp[_G] * lr - a * mp[_H]) / L
+    Fzr = m * (mp[_G] * lf + a * mp[_H]) / L
+    for _ in range(2):
+        vx = max(v * math.cos(beta), v_eps)
+        ar = _inverse_tire(m * r * vx * lf / (L * Fzr), False, mp)
+        qr = math.tan(-ar) if pacejka else -ar
+        beta = math.atan2(qr * vx + lr * r, vx)
+    vx = max(v * math.cos(beta), v_eps)
+    vy = v * math.sin(beta)
+    q = (vy + lf * r) / vx
+    gf = math.atan(q) if pacejka else q
+    n0 = m * r * vx * lr / (L * Fzf)
+    for _ in range(3):
+        n = n0 / math.cos(delta)
+        af = _inverse_tire(n, True, mp)
+        slope = _axle_tire(af, True, mp, np)[1]
+        dg = 1.0 - n * math.tan(delta) / max(slope, 1e-9)
+        delta = delta - (delta - af - gf) / (dg if abs(dg) > 0.1 else 1.0)
+    return n0 / math.cos(delta) * Fzf * math.sin(delta) / m - r * vy, beta, delta
+
+
+# columns of the work array of dynamic_steady_states
+_SD, _SB, _SA0, _SG0, _SA1, _SG1, _SAN, _SLEAD = range(8)
+
+
+@njit(cache=True)
+def dynamic_steady_states(mp, refs, v, n, ws):
+    """``DynamicBicycle.steady_state_full`` of the points k < n at curvature refs[k, 3] [1/m] and
+    speed v[k] [m/s], as one numpy batch: the secant iteration on the acceleration stops when all
+    points have converged. Writes ws[k, 0:3] = (steering [rad], slip beta [rad], accel [m/s^2]);
+    ws : work array (n, 8). A point with the curvature and speed of the one before copies it."""
+    L = mp[_LF] + mp[_LR]
+    for k in range(n):
+        lead = k == 0 or refs[k, 3] != refs[k - 1, 3] or v[k] != v[k - 1]
+        ws[k, _SLEAD] = 1.0 if lead else 0.0
+        if lead:
+            g0, beta, delta = _solve_given_accel(mp, refs[k, 3], v[k], 0.0, 0.0, L * refs[k, 3])
+            ws[k, _SA0] = 0.0
+            ws[k, _SG0] = g0
+            ws[k, _SA1] = g0
+            ws[k, _SB] = beta
+            ws[k, _SD] = delta
+    for _ in range(12):
+        converged = True
+        for k in range(n):
+            if ws[k, _SLEAD] == 0.0:
+                continue
+            a0, g0, a1 = ws[k, _SA0], ws[k, _SG0], ws[k, _SA1]
+            g1, beta, delta = _solve_given_accel(mp, refs[k, 3], v[k], a1, ws[k, _SB], ws[k, _SD])
+            ws[k, _SB] = beta
+            ws[k, _SD] = delta
+            res0, res1 = g0 - a0, g1 - a1
+            converged = converged and abs(res1) < 1e-8  # m/s^2 (NaN: not converged, as numpy's max)
+            den = res1 - res0
+            ws[k, _SG1] = g1
+            ws[k, _SAN] = a1 - res1 * (a1 - a0) / den if abs(den) > 1e-14 else g1
+        if converged:
+            break
+        for k in range(n):
+            if ws[k, _SLEAD] != 0.0:
+                ws[k, _SA0] = ws[k, _SA1]
+                ws[k, _SG0] = ws[k, _SG1]
+                ws[k, _SA1] = ws[k, _SAN]
+    lr = mp[_LR]
+    for k in range(n):
+        if ws[k, _SLEAD] == 0.0:
+            for i in range(3):
+                ws[k, i] = ws[k - 1, i]
+            continue
+        kappa, delta, beta, a = refs[k, 3], ws[k, _SD], ws[k, _SB], ws[k, _SA1]
+        # kinematic steady state and the blend
+        beta_k = math.asin(min(max(lr * kappa, -0.999), 0.999))
+        delta_k = math.atan(math.tan(beta_k) / (lr / L))
+        w = _smoothstep(v[k] * math.cos(beta), mp[_VLO], mp[_VHI], np)
+        ws[k, 0] = w * delta + (1 - w) * delta_k
+        ws[k, 1] = w * beta + (1 - w) * beta_k
+        ws[k, 2] = w * a
+
+
+@njit(cache=True)
+def model_references(kind, mp, refs, v, n, feedforward, xref, uref, ws):
+    """``model.reference`` of the path points k < n (``refs[k] = [x m, y m, heading rad, kappa
+    1/m]``, speeds ``v[k]`` [m/s]): xref[k] (nx,) for k < n, uref[k] (nu,) for k < n - 1 (the
+    horizon's last point has no input). ``feedforward``: the steady-state cornering state and
+    inputs, else the path pose (and speed) with zero inputs. ws : work array (n, 8) (dynamic model)."""
+    for k in range(n):
+        xref[k, 0] = refs[k, 0]
+        xref[k, 1] = refs[k, 1]
+        xref[k, 2] = refs[k, 2]
+    for k in range(n - 1):
+        for a in range(uref.shape[1]):
+            uref[k, a] = 0.0
+    if kind == KIND_DYNAMIC:
+        if feedforward:
+            dynamic_steady_states(mp, refs, v, n, ws)
+        for k in range(n):
+            xref[k, 5] = v[k] * refs[k, 3]
+            if feedforward:
+                beta = ws[k, 1]
+                xref[k, 2] -= beta
+                xref[k, 3] = v[k] * math.cos(beta)
+                xref[k, 4] = v[k] * math.sin(beta)
+                if k < n - 1:
+                    uref[k, 0] = ws[k, 0]
+                    uref[k, 1] = ws[k, 2]
+            else:
+                xref[k, 3] = v[k]
+                xref[k, 4] = 0.0
+        return
+    if kind == KIND_KINEMATIC4:
+        for k in range(n):
+            xref[k, 3] = v[k]
+    if feedforward:
+        steer, slip = 0.0, 0.0
+        for k in range(n):
+            if k == 0 or refs[k, 3] != refs[k - 1, 3]:  # same curvature, same steady state
+                steer, slip = _ss(refs[k, 3], mp[0], mp[1], np)
+            if k < n - 1:
+                uref[k, 0] = steer
+            xref[k, 2] -= slip
 
 
 def _refresh_cache():
     from .. import _jitcache
     from . import kinematic
 
-    # functions here inline the equations of kinematic.py; numba only watches this file
-    _jitcache.refresh(discrete_step_jacobians, [kinematic.__file__])
+    # functions here inline the equations of kinematic.py and dynamic.py; numba only watches this file
+    _jitcache.refresh(discrete_step_jacobians, [kinematic.__file__, dynamic.__file__])
 
 
 _refresh_cache()

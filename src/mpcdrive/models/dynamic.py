@@ -32,6 +32,11 @@ bicycle written in the same states: the pose moves with the kinematic velocities
 ``vy_k = vx lq tan(delta)``, ``r_k = vx tan(delta) / L`` and ``vy``, ``r`` relax towards them with
 time constant ``kinematic_relax_s``. Below ``v_blend_low_mps`` the model *is* the kinematic bicycle
 (no division by ``vx``); there is no NaN at zero or negative speed.
+
+The equations and their analytic partial derivatives are the module functions
+:func:`dynamic_rhs` and :func:`dynamic_rhs_and_partials` of a parameter sequence
+(:func:`dynamic_parameters`) and a math namespace: :class:`DynamicBicycle` evaluates them on numpy
+batches (or CasADi symbols), and the compiled controller compiles them as they stand.
 """
 
 from __future__ import annotations
@@ -152,13 +157,13 @@ def _pacejka(alpha, B, C, E, ns):
     return ns.sin(C * ns.arctan(z - E * (z - ns.arctan(z))))
 
 
-def _pacejka_and_slope(alpha, B, C, E):
-    """(normalized force, its derivative wrt alpha) for numpy arrays."""
+def _pacejka_and_slope(alpha, B, C, E, ns):
+    """(normalized force, its derivative wrt alpha) with math namespace ``ns``."""
     z = B * alpha
-    psi = z - E * (z - np.arctan(z))
+    psi = z - E * (z - ns.arctan(z))
     dpsi = 1.0 - E * (1.0 - 1.0 / (1.0 + z * z))
-    ang = C * np.arctan(psi)
-    return np.sin(ang), np.cos(ang) * C / (1.0 + psi * psi) * dpsi * B
+    ang = C * ns.arctan(psi)
+    return ns.sin(ang), ns.cos(ang) * C / (1.0 + psi * psi) * dpsi * B
 
 
 def _pacejka_inverse(y, B, C, E):
@@ -192,6 +197,182 @@ def _smoothstep(vx, lo, hi, ns):
     return t * t * (3.0 - 2.0 * t)
 
 
+# ------------------------------------------------------------------------------ the equations
+# The equations are module functions of a parameter sequence P (see dynamic_parameters) and a
+# math namespace ns, so that numpy batches, CasADi and the compiled controller (numba, with numpy
+# as ns) run the same definition.
+_P_LF, _P_LR, _P_M, _P_IZ, _P_MU, _P_CSF, _P_CSR, _P_H, _P_C, _P_E, _P_VLO, _P_VHI, _P_TAU, _P_G, \
+    _P_PACEJKA = range(15)
+
+#: (row, column) of the entries of df/dx and df/du that :func:`dynamic_rhs_and_partials` returns
+#: (all others are zero)
+DYNAMIC_A_ENTRIES = ((0, 2), (0, 3), (0, 4), (1, 2), (1, 3), (1, 4), (2, 3), (2, 5),
+                     (3, 3), (3, 4), (3, 5), (4, 3), (4, 4), (4, 5), (5, 3), (5, 4), (5, 5))
+DYNAMIC_B_ENTRIES = ((0, 0), (1, 0), (2, 0), (3, 0), (3, 1), (4, 0), (4, 1), (5, 0), (5, 1))
+
+
+def dynamic_parameters(params: DynamicParams, tire: TireModel) -> tuple[float, ...]:
+    """The parameter sequence P of the equation functions: the fields of ``params`` in the order
+    of the ``_P_*`` indices and 1.0 for Pacejka tires (0.0 linear)."""
+    p = params
+    return (p.lf_m, p.lr_m, p.mass_kg, p.yaw_inertia_kgm2, p.friction, p.cs_front_per_rad, p.cs_rear_per_rad,
+            p.h_cg_m, p.pacejka_c, p.pacejka_e, p.v_blend_low_mps, p.v_blend_high_mps, p.kinematic_relax_s,
+            p.g_mps2, 1.0 if tire == "pacejka" else 0.0)
+
+
+def slip_speed_floor(P):
+    """The speed [m/s] ``vx`` is floored at in the slip angles (below ``v_blend_low`` the dynamic
+    part has no weight)."""
+    return 0.5 * P[_P_VLO]
+
+
+def axle_tire(alpha, front, P, ns):
+    """(Fy / Fz, d(Fy / Fz) / d alpha) of the front (``front`` true) or rear axle at slip alpha [rad]."""
+    cs = P[_P_CSF] if front else P[_P_CSR]
+    if P[_P_PACEJKA] != 0.0:
+        y, dy = _pacejka_and_slope(alpha, cs / P[_P_C], P[_P_C], P[_P_E], ns)
+        return P[_P_MU] * y, P[_P_MU] * dy
+    k = P[_P_MU] * cs
+    return k * alpha, k
+
+
+def dynamic_rhs(yaw, vx, vy, r, delta, a, P, ns):
+    """The six state derivatives (module docstring) at states yaw [rad], vx, vy [m/s], r [rad/s]
+    and inputs delta [rad], a [m/s^2]; parameters P (:func:`dynamic_parameters`), math namespace
+    ``ns`` (numpy, CasADi, or numpy in compiled code)."""
+    lf, lr, m = P[_P_LF], P[_P_LR], P[_P_M]
+    L = lf + lr
+    # dynamic part
+    vxs = ns.fmax(vx, slip_speed_floor(P))
+    Fzf = m * (P[_P_G] * lr - a * P[_P_H]) / L
+    Fzr = m * (P[_P_G] * lf + a * P[_P_H]) / L
+    if P[_P_PACEJKA] != 0.0:
+        af = delta - ns.arctan((vy + lf * r) / vxs)
+        ar = -ns.arctan((vy - lr * r) / vxs)
+        Fyf = P[_P_MU] * Fzf * _pacejka(af, P[_P_CSF] / P[_P_C], P[_P_C], P[_P_E], ns)
+        Fyr = P[_P_MU] * Fzr * _pacejka(ar, P[_P_CSR] / P[_P_C], P[_P_C], P[_P_E], ns)
+    else:
+        af = delta - (vy + lf * r) / vxs
+        ar = -(vy - lr * r) / vxs
+        Fyf = P[_P_MU] * P[_P_CSF] * Fzf * af
+        Fyr = P[_P_MU] * P[_P_CSR] * Fzr * ar
+    sd, cd = ns.sin(delta), ns.cos(delta)
+    dvx_d = a - Fyf * sd / m + r * vy
+    dvy_d = (Fyf * cd + Fyr) / m - r * vx
+    dr_d = (lf * Fyf * cd - lr * Fyr) / P[_P_IZ]
+    # kinematic part in the same states
+    td = ns.tan(delta)
+    lq = lr / L
+    vy_k = vx * lq * td
+    r_k = vx * td / L
+    tau = P[_P_TAU]
+    dvy_k = a * lq * td + (vy_k - vy) / tau
+    dr_k = a * td / L + (r_k - r) / tau
+    # blend
+    w = _smoothstep(vx, P[_P_VLO], P[_P_VHI], ns)
+    vy_p = w * vy + (1.0 - w) * vy_k
+    r_p = w * r + (1.0 - w) * r_k
+    c, s = ns.cos(yaw), ns.sin(yaw)
+    return (
+        vx * c - vy_p * s,
+        vx * s + vy_p * c,
+        r_p,
+        w * dvx_d + (1.0 - w) * a,
+        w * dvy_d + (1.0 - w) * dvy_k,
+        w * dr_d + (1.0 - w) * dr_k,
+    )
+
+
+def dynamic_rhs_and_partials(yaw, vx, vy, r, delta, a, P, ns):
+    """(f, A entries, B entries): the derivatives of :func:`dynamic_rhs` and their analytic
+    partial derivatives, df/dx at :data:`DYNAMIC_A_ENTRIES` and df/du at
+    :data:`DYNAMIC_B_ENTRIES` (exact wherever f is differentiable: the floor of vx at
+    :func:`slip_speed_floor` and the blend corners are kinks). ``ns`` is numpy (arrays or, in
+    compiled code, scalars)."""
+    lf, lr, m, Iz = P[_P_LF], P[_P_LR], P[_P_M], P[_P_IZ]
+    L = lf + lr
+    v_eps = slip_speed_floor(P)
+    # slip-angle arguments q = (vy +- l r) / vxs and their derivatives
+    vxs = ns.fmax(vx, v_eps)
+    dvxs = (vx > v_eps) * 1.0
+    qf = (vy + lf * r) / vxs
+    qr = (vy - lr * r) / vxs
+    if P[_P_PACEJKA] != 0.0:
+        gf, dgf = ns.arctan(qf), 1.0 / (1.0 + qf * qf)
+        gr, dgr = ns.arctan(qr), 1.0 / (1.0 + qr * qr)
+    else:
+        gf, dgf = qf, 1.0
+        gr, dgr = qr, 1.0
+    af = delta - gf
+    ar = -gr
+    # d alpha / d (vx, vy, r)
+    af_vx = dgf * qf / vxs * dvxs
+    af_vy = -dgf / vxs
+    af_r = -dgf * lf / vxs
+    ar_vx = dgr * qr / vxs * dvxs
+    ar_vy = -dgr / vxs
+    ar_r = dgr * lr / vxs
+    Fzf = m * (P[_P_G] * lr - a * P[_P_H]) / L
+    Fzr = m * (P[_P_G] * lf + a * P[_P_H]) / L
+    Fzf_a = -m * P[_P_H] / L
+    Fzr_a = m * P[_P_H] / L
+    nf, dnf = axle_tire(af, True, P, ns)
+    nr, dnr = axle_tire(ar, False, P, ns)
+    Fyf, Fyr = Fzf * nf, Fzr * nr
+    kf, kr = Fzf * dnf, Fzr * dnr  # dFy / d alpha
+    Fyf_vx, Fyf_vy, Fyf_r, Fyf_d, Fyf_a = kf * af_vx, kf * af_vy, kf * af_r, kf, Fzf_a * nf
+    Fyr_vx, Fyr_vy, Fyr_r, Fyr_a = kr * ar_vx, kr * ar_vy, kr * ar_r, Fzr_a * nr
+    sd, cd = ns.sin(delta), ns.cos(delta)
+    # dynamic derivatives and their partials (vx, vy, r, delta, a)
+    dvx_d = a - Fyf * sd / m + r * vy
+    dvy_d = (Fyf * cd + Fyr) / m - r * vx
+    dr_d = (lf * Fyf * cd - lr * Fyr) / Iz
+    Dvx = (-sd / m * Fyf_vx, -sd / m * Fyf_vy + r, -sd / m * Fyf_r + vy,
+           -(Fyf_d * sd + Fyf * cd) / m, 1.0 - sd / m * Fyf_a)
+    Dvy = ((cd * Fyf_vx + Fyr_vx) / m - r, (cd * Fyf_vy + Fyr_vy) / m, (cd * Fyf_r + Fyr_r) / m - vx,
+           (cd * Fyf_d - sd * Fyf) / m, (cd * Fyf_a + Fyr_a) / m)
+    Dr = ((lf * cd * Fyf_vx - lr * Fyr_vx) / Iz, (lf * cd * Fyf_vy - lr * Fyr_vy) / Iz,
+          (lf * cd * Fyf_r - lr * Fyr_r) / Iz, lf * (cd * Fyf_d - sd * Fyf) / Iz,
+          (lf * cd * Fyf_a - lr * Fyr_a) / Iz)
+    # kinematic part
+    td = ns.tan(delta)
+    sec2 = 1.0 + td * td
+    lq, tau = lr / L, P[_P_TAU]
+    vy_k = vx * lq * td
+    r_k = vx * td / L
+    dvy_k = a * lq * td + (vy_k - vy) / tau
+    dr_k = a * td / L + (r_k - r) / tau
+    Kvy = (lq * td / tau, -1.0 / tau, 0.0, (a + vx / tau) * lq * sec2, lq * td)
+    Kr = (td / (L * tau), 0.0, -1.0 / tau, (a + vx / tau) * sec2 / L, td / L)
+    # blend weight w (the smoothstep) and its derivative (zero outside the blend, where t is 0 or 1)
+    lo, hi = P[_P_VLO], P[_P_VHI]
+    t = ns.fmin(ns.fmax((vx - lo) / (hi - lo), 0.0), 1.0)
+    w = t * t * (3.0 - 2.0 * t)
+    dw = 6.0 * t * (1.0 - t) / (hi - lo)
+    W = 1.0 - w
+    # blended partials (vx, vy, r, delta, a); the kinematic vx' = a has the partials (0, 0, 0, 0, 1)
+    Bvx = (w * Dvx[0] + dw * (dvx_d - a), w * Dvx[1], w * Dvx[2], w * Dvx[3], w * Dvx[4] + W)
+    Bvy = (w * Dvy[0] + W * Kvy[0] + dw * (dvy_d - dvy_k), w * Dvy[1] + W * Kvy[1], w * Dvy[2] + W * Kvy[2],
+           w * Dvy[3] + W * Kvy[3], w * Dvy[4] + W * Kvy[4])
+    Br = (w * Dr[0] + W * Kr[0] + dw * (dr_d - dr_k), w * Dr[1] + W * Kr[1], w * Dr[2] + W * Kr[2],
+          w * Dr[3] + W * Kr[3], w * Dr[4] + W * Kr[4])
+    # pose velocities
+    vy_p = w * vy + W * vy_k
+    vyp_vx = dw * (vy - vy_k) + W * lq * td
+    vyp_d = W * vx * lq * sec2
+    rp_vx = dw * (r - r_k) + W * td / L
+    rp_d = W * vx * sec2 / L
+    c, s = ns.cos(yaw), ns.sin(yaw)
+    f = (vx * c - vy_p * s, vx * s + vy_p * c, w * r + W * r_k, w * dvx_d + W * a, w * dvy_d + W * dvy_k,
+         w * dr_d + W * dr_k)
+    A = (-vx * s - vy_p * c, c - s * vyp_vx, -s * w,
+         vx * c - vy_p * s, s + c * vyp_vx, c * w,
+         rp_vx, w,
+         Bvx[0], Bvx[1], Bvx[2], Bvy[0], Bvy[1], Bvy[2], Br[0], Br[1], Br[2])
+    B = (-s * vyp_d, c * vyp_d, rp_d, Bvx[3], Bvx[4], Bvy[3], Bvy[4], Br[3], Br[4])
+    return f, A, B
+
+
 class DynamicBicycle:
     """Dynamic bicycle with ``tire`` ``"linear"`` (the paper's) or ``"pacejka"`` tires.
 
@@ -210,10 +391,11 @@ class DynamicBicycle:
         self.params = params
         self.tire = tire
         p = params
+        #: the parameter sequence of the equation functions (:func:`dynamic_parameters`)
+        self._P = dynamic_parameters(params, tire)
         self._Bf = p.cs_front_per_rad / p.pacejka_c
         self._Br = p.cs_rear_per_rad / p.pacejka_c
-        # slip angles divide by max(vx, v_eps); below v_blend_low the dynamic part has no weight
-        self._v_eps = 0.5 * p.v_blend_low_mps
+        self._v_eps = slip_speed_floor(self._P)
 
     def __repr__(self) -> str:
         return f"DynamicBicycle(tire={self.tire!r}, params={self.params!r})"
@@ -222,48 +404,7 @@ class DynamicBicycle:
     def f_components(self, x, u, ns=np):
         """The equations on sequences of state / input components with math namespace ``ns``
         (numpy or CasADi); returns the six derivatives. Serves :meth:`f` and symbolic backends."""
-        p = self.params
-        yaw, vx, vy, r = x[2], x[3], x[4], x[5]
-        delta, a = u[0], u[1]
-        m, L, lf, lr = p.mass_kg, p.wheelbase_m, p.lf_m, p.lr_m
-        # dynamic part
-        vxs = ns.fmax(vx, self._v_eps)
-        Fzf = m * (p.g_mps2 * lr - a * p.h_cg_m) / L
-        Fzr = m * (p.g_mps2 * lf + a * p.h_cg_m) / L
-        if self.tire == "linear":
-            af = delta - (vy + lf * r) / vxs
-            ar = -(vy - lr * r) / vxs
-            Fyf = p.friction * p.cs_front_per_rad * Fzf * af
-            Fyr = p.friction * p.cs_rear_per_rad * Fzr * ar
-        else:
-            af = delta - ns.arctan((vy + lf * r) / vxs)
-            ar = -ns.arctan((vy - lr * r) / vxs)
-            Fyf = p.friction * Fzf * _pacejka(af, self._Bf, p.pacejka_c, p.pacejka_e, ns)
-            Fyr = p.friction * Fzr * _pacejka(ar, self._Br, p.pacejka_c, p.pacejka_e, ns)
-        sd, cd = ns.sin(delta), ns.cos(delta)
-        dvx_d = a - Fyf * sd / m + r * vy
-        dvy_d = (Fyf * cd + Fyr) / m - r * vx
-        dr_d = (lf * Fyf * cd - lr * Fyr) / p.yaw_inertia_kgm2
-        # kinematic part in the same states
-        td = ns.tan(delta)
-        vy_k = vx * p.lq * td
-        r_k = vx * td / L
-        tau = p.kinematic_relax_s
-        dvy_k = a * p.lq * td + (vy_k - vy) / tau
-        dr_k = a * td / L + (r_k - r) / tau
-        # blend
-        w = _smoothstep(vx, p.v_blend_low_mps, p.v_blend_high_mps, ns)
-        vy_p = w * vy + (1.0 - w) * vy_k
-        r_p = w * r + (1.0 - w) * r_k
-        c, s = ns.cos(yaw), ns.sin(yaw)
-        return (
-            vx * c - vy_p * s,
-            vx * s + vy_p * c,
-            r_p,
-            w * dvx_d + (1.0 - w) * a,
-            w * dvy_d + (1.0 - w) * dvy_k,
-            w * dr_d + (1.0 - w) * dr_k,
-        )
+        return dynamic_rhs(x[2], x[3], x[4], x[5], u[0], u[1], self._P, ns)
 
     def f(self, x, u):
         x = np.asarray(x, float)
@@ -275,14 +416,8 @@ class DynamicBicycle:
     # -- analytic Jacobians ---------------------------------------------------------------------
     def _tire(self, alpha, which: str):
         """(Fy / Fz, d(Fy / Fz) / d alpha) of the front or rear axle."""
-        p = self.params
-        if self.tire == "linear":
-            cs = p.cs_front_per_rad if which == "f" else p.cs_rear_per_rad
-            k = p.friction * cs
-            return k * alpha, np.full_like(alpha, k)
-        B = self._Bf if which == "f" else self._Br
-        y, dy = _pacejka_and_slope(alpha, B, p.pacejka_c, p.pacejka_e)
-        return p.friction * y, p.friction * dy
+        n, dn = axle_tire(alpha, which == "f", self._P, np)
+        return n, np.broadcast_to(dn, np.shape(alpha))
 
     def jacobians(self, x, u):
         """Analytic (df/dx (..., 6, 6), df/du (..., 6, 2)); exact derivatives of :meth:`f` wherever
@@ -291,118 +426,22 @@ class DynamicBicycle:
         return A, B
 
     def f_and_jacobians(self, x, u):
-        """(f (..., 6), df/dx (..., 6, 6), df/du (..., 6, 2)) in one pass (shared intermediates)."""
+        """(f (..., 6), df/dx (..., 6, 6), df/du (..., 6, 2)) in one pass (shared intermediates):
+        :func:`dynamic_rhs_and_partials` placed in arrays."""
         x = np.asarray(x, float)
         u = np.asarray(u, float)
-        p = self.params
-        yaw, vx, vy, r = x[..., 2], x[..., 3], x[..., 4], x[..., 5]
-        delta, a = u[..., 0], u[..., 1]
-        m, L, lf, lr, Iz = p.mass_kg, p.wheelbase_m, p.lf_m, p.lr_m, p.yaw_inertia_kgm2
-        # slip-angle arguments q = (vy +- l r) / vxs and their derivatives
-        vxs = np.maximum(vx, self._v_eps)
-        dvxs = (vx > self._v_eps).astype(float)
-        qf = (vy + lf * r) / vxs
-        qr = (vy - lr * r) / vxs
-        if self.tire == "linear":
-            gf, dgf = qf, np.ones_like(qf)
-            gr, dgr = qr, np.ones_like(qr)
-        else:
-            gf, dgf = np.arctan(qf), 1.0 / (1.0 + qf * qf)
-            gr, dgr = np.arctan(qr), 1.0 / (1.0 + qr * qr)
-        af = delta - gf
-        ar = -gr
-        # d alpha / d (vx, vy, r)
-        af_vx = dgf * qf / vxs * dvxs
-        af_vy = -dgf / vxs
-        af_r = -dgf * lf / vxs
-        ar_vx = dgr * qr / vxs * dvxs
-        ar_vy = -dgr / vxs
-        ar_r = dgr * lr / vxs
-        Fzf = m * (p.g_mps2 * lr - a * p.h_cg_m) / L
-        Fzr = m * (p.g_mps2 * lf + a * p.h_cg_m) / L
-        Fzf_a = -m * p.h_cg_m / L
-        Fzr_a = m * p.h_cg_m / L
-        nf, dnf = self._tire(af, "f")
-        nr, dnr = self._tire(ar, "r")
-        Fyf, Fyr = Fzf * nf, Fzr * nr
-        kf, kr = Fzf * dnf, Fzr * dnr  # dFy / d alpha
-        Fyf_vx, Fyf_vy, Fyf_r, Fyf_d, Fyf_a = kf * af_vx, kf * af_vy, kf * af_r, kf, Fzf_a * nf
-        Fyr_vx, Fyr_vy, Fyr_r, Fyr_a = kr * ar_vx, kr * ar_vy, kr * ar_r, Fzr_a * nr
-        sd, cd = np.sin(delta), np.cos(delta)
-        # dynamic derivatives and their partials (vx, vy, r, delta, a)
-        dvx_d = a - Fyf * sd / m + r * vy
-        dvy_d = (Fyf * cd + Fyr) / m - r * vx
-        dr_d = (lf * Fyf * cd - lr * Fyr) / Iz
-        Dvx = (-sd / m * Fyf_vx, -sd / m * Fyf_vy + r, -sd / m * Fyf_r + vy,
-               -(Fyf_d * sd + Fyf * cd) / m, 1.0 - sd / m * Fyf_a)
-        Dvy = ((cd * Fyf_vx + Fyr_vx) / m - r, (cd * Fyf_vy + Fyr_vy) / m, (cd * Fyf_r + Fyr_r) / m - vx,
-               (cd * Fyf_d - sd * Fyf) / m, (cd * Fyf_a + Fyr_a) / m)
-        Dr = ((lf * cd * Fyf_vx - lr * Fyr_vx) / Iz, (lf * cd * Fyf_vy - lr * Fyr_vy) / Iz,
-              (lf * cd * Fyf_r - lr * Fyr_r) / Iz, lf * (cd * Fyf_d - sd * Fyf) / Iz,
-              (lf * cd * Fyf_a - lr * Fyr_a) / Iz)
-        # kinematic part
-        td = np.tan(delta)
-        sec2 = 1.0 + td * td
-        lq, tau = p.lq, p.kinematic_relax_s
-        vy_k = vx * lq * td
-        r_k = vx * td / L
-        dvy_k = a * lq * td + (vy_k - vy) / tau
-        dr_k = a * td / L + (r_k - r) / tau
-        zero = np.zeros_like(vx)
-        Kvx = (zero, zero, zero, zero, np.ones_like(vx))
-        Kvy = (lq * td / tau, np.full_like(vx, -1.0 / tau), zero, (a + vx / tau) * lq * sec2, lq * td)
-        Kr = (td / (L * tau), zero, np.full_like(vx, -1.0 / tau), (a + vx / tau) * sec2 / L, td / L)
-        # blend weight
-        lo, hi = p.v_blend_low_mps, p.v_blend_high_mps
-        t = np.clip((vx - lo) / (hi - lo), 0.0, 1.0)
-        w = t * t * (3.0 - 2.0 * t)
-        dw = np.where((vx > lo) & (vx < hi), 6.0 * t * (1.0 - t) / (hi - lo), 0.0)
-        W = 1.0 - w
-
-        def blend(D, K, gd, gk):
-            out = [w * dd + W * kk for dd, kk in zip(D, K)]
-            out[0] = out[0] + dw * (gd - gk)
-            return out
-
-        Bvx = blend(Dvx, Kvx, dvx_d, a)
-        Bvy = blend(Dvy, Kvy, dvy_d, dvy_k)
-        Br = blend(Dr, Kr, dr_d, dr_k)
-        # pose velocities
-        vy_p = w * vy + W * vy_k
-        vyp_vx = dw * (vy - vy_k) + W * lq * td
-        vyp_vy = w
-        vyp_d = W * vx * lq * sec2
-        rp_vx = dw * (r - r_k) + W * td / L
-        rp_r = w
-        rp_d = W * vx * sec2 / L
-        c, s = np.cos(yaw), np.sin(yaw)
-        shape = x.shape[:-1]
+        fs, a_entries, b_entries = dynamic_rhs_and_partials(x[..., 2], x[..., 3], x[..., 4], x[..., 5],
+                                                            u[..., 0], u[..., 1], self._P, np)
+        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1])
         A = np.zeros(shape + (6, 6))
         B = np.zeros(shape + (6, 2))
-        A[..., 0, 2] = -vx * s - vy_p * c
-        A[..., 0, 3] = c - s * vyp_vx
-        A[..., 0, 4] = -s * vyp_vy
-        B[..., 0, 0] = -s * vyp_d
-        A[..., 1, 2] = vx * c - vy_p * s
-        A[..., 1, 3] = s + c * vyp_vx
-        A[..., 1, 4] = c * vyp_vy
-        B[..., 1, 0] = c * vyp_d
-        A[..., 2, 3] = rp_vx
-        A[..., 2, 5] = rp_r
-        B[..., 2, 0] = rp_d
-        for row, D in ((3, Bvx), (4, Bvy), (5, Br)):
-            A[..., row, 3] = D[0]
-            A[..., row, 4] = D[1]
-            A[..., row, 5] = D[2]
-            B[..., row, 0] = D[3]
-            B[..., row, 1] = D[4]
+        for (i, j), value in zip(DYNAMIC_A_ENTRIES, a_entries):
+            A[..., i, j] = value
+        for (i, j), value in zip(DYNAMIC_B_ENTRIES, b_entries):
+            B[..., i, j] = value
         f = np.empty(shape + (6,))
-        f[..., 0] = vx * c - vy_p * s
-        f[..., 1] = vx * s + vy_p * c
-        f[..., 2] = w * r + W * r_k
-        f[..., 3] = w * dvx_d + W * a
-        f[..., 4] = w * dvy_d + W * dvy_k
-        f[..., 5] = w * dr_d + W * dr_k
+        for i, value in enumerate(fs):
+            f[..., i] = value
         return f, A, B
 
     # -- helpers ----------------------------------------------------------------------------
