@@ -597,8 +597,8 @@ def test_fast_constraint_rows_match_tight_osqp(sid):
 @pytest.mark.parametrize("sid", TIGHT_DYNAMIC_SCENARIOS)
 def test_fast_dynamic_scenarios_match_tight_osqp(sid):
     """Fed the states of OSQP's closed loop (at 1e-10) and OSQP's own warm start, the fast
-    controller gives OSQP's command on every step; its own closed loop takes as many steps, without
-    failures or fallbacks, and with the same saturated steering."""
+    controller gives OSQP's command on every step; its own closed loop ends within two steps of
+    OSQP's, without failures or fallbacks, and with the same saturated steering."""
     spec = load_scenario(sid)
     c = spec.controller.model_copy(update={"backend": "osqp", "osqp_eps": 1e-10, "osqp_max_iter": 200000})
     ref = build_experiment(spec.model_copy(update={"controller": c}))
@@ -617,7 +617,9 @@ def test_fast_dynamic_scenarios_match_tight_osqp(sid):
     assert du.max() <= COMMAND_TOL_RAD, f"{sid}: max |du| {du.max():.2e} at step {du.argmax()}"
     m_ref = compute_metrics(ref_result, ref.footprint)
     m_fast = compute_metrics(run_experiment(fast), fast.footprint)
-    assert m_fast["steps"] == m_ref["steps"] and m_fast["goal_reached"] == m_ref["goal_reached"]
+    # the closed loops part by roundoff (see test_track_raceway_closed_loop_is_chaotic): the goal
+    # may be reached a step earlier or later
+    assert abs(m_fast["steps"] - m_ref["steps"]) <= 2 and m_fast["goal_reached"] == m_ref["goal_reached"]
     assert (m_fast["solver_failures"], m_fast["fallbacks"]) == (0, 0)
     assert abs(m_fast["max_abs_steer_rad"] - m_ref["max_abs_steer_rad"]) <= COMMAND_TOL_RAD
 
