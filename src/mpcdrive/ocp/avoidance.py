@@ -241,12 +241,13 @@ class Avoidance:
         """Obstacle j over the horizon: Frenet boxes (N+1), centres (N+1, 2) and world shapes
         (N+1); a static obstacle is placed and projected once."""
         ob = self.obstacles[j]
-        times = t_s + self.dt_s * np.arange(self.N + 1)
-        centers = np.array([ob.pose_at(t)[:2] for t in times])
         if ob.moving:
+            times = t_s + self.dt_s * np.arange(self.N + 1)
+            centers = np.array([ob.pose_at(t)[:2] for t in times])
             shapes = [ob.at(t) for t in times]
             boxes = [frenet_box(self.path, sh, s_arr[k]) for k, sh in enumerate(shapes)]
         else:
+            centers = np.repeat(np.array([ob.pose_at(t_s)[:2]]), self.N + 1, axis=0)
             shapes = [ob.at(t_s)] * (self.N + 1)
             boxes = [frenet_box(self.path, shapes[0], s_arr[0])] * (self.N + 1)
         return boxes, centers, shapes
@@ -319,17 +320,22 @@ class Avoidance:
         return Rm @ self._Sinv_local @ Rm.T
 
     def _nearest(self, P: np.ndarray, j: int, centers: np.ndarray, shapes) -> tuple[np.ndarray, np.ndarray]:
-        """Signed distances (K,) and nearest boundary points (K, 2) of points P (K, 2) to obstacle
-        j at the matching horizon times (rows 1..N)."""
+        """Signed distances (R, K) and nearest boundary points (R, K, 2) of points P (R, K, 2) to
+        obstacle j, point ``P[r, k]`` at horizon time k + 1 (rows 1..N of ``centers``, ``shapes``)."""
         ob = self.obstacles[j]
+        R, K = P.shape[:2]
         if isinstance(ob.shape, Circle):
-            C = centers[1:]
+            C = centers[1:][None]
             v = P - C
-            n = np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-12)
-            return n - ob.shape.radius_m, C + ob.shape.radius_m * v / n[:, None]
+            n = np.maximum(np.hypot(v[..., 0], v[..., 1]), 1e-12)
+            return n - ob.shape.radius_m, C + ob.shape.radius_m * v / n[..., None]
+        flat = P.reshape(R * K, 2)
         if not ob.moving:
-            return points_polygon(P, shapes[0].points)
-        return points_polygons(P, np.stack([sh.points for sh in shapes[1:]]))
+            d, q = points_polygon(flat, shapes[0].points)
+        else:
+            polys = np.stack([sh.points for sh in shapes[1:]])
+            d, q = points_polygons(flat, np.tile(polys, (R, 1, 1)))
+        return d.reshape(R, K), q.reshape(R, K, 2)
 
     def _lin_arc_lengths(self, Xlin: np.ndarray, s0: float) -> np.ndarray:
         """(N,) arc lengths [m] of the linearization trajectory's steps 1..N: ``s0`` plus the
@@ -355,9 +361,12 @@ class Avoidance:
         lin = Xlin[1:, :3]
         c, s = np.cos(lin[:, 2]), np.sin(lin[:, 2])
         nd = len(self.offsets)
+        off = np.asarray(self.offsets, float)[:, None]  # (nd, 1): every disc at once, (nd, N) arrays
         r_need = self.r_disc + self.config.margin_m
         reach = r_need + self.half_length
         s_lin = self._lin_arc_lengths(Xlin, s_arr[0])
+        P = lin[None, :, :2] + off[..., None] * np.column_stack([c, s])[None]  # disc centres (nd, N, 2)
+        s_disc = s_arr[None, 1:] + off
         for slot, j in enumerate(rel):
             side = sides[j]
             bx = boxes[j][1:]
@@ -368,34 +377,32 @@ class Avoidance:
             h = np.asarray(self.path.heading(s_ref), float)
             nl = np.column_stack([-np.sin(h), np.cos(h)])  # path left normal at the obstacle
             q_lat = self.path.position(s_ref) + nl * e_edge[:, None]
-            for i, o in enumerate(self.offsets):
-                P = lin[:, :2] + o * np.column_stack([c, s])
-                dist, q = self._nearest(P, j, centers[j], world[j])
-                v = P - q
-                nv = np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-12)
-                n = v / nv[:, None] * np.where(dist >= 0, 1.0, -1.0)[:, None]
-                active = dist - self.r_disc <= self.config.influence_m
-                s_disc = s_arr[1:] + o
-                lateral = (side != SIDE_BLOCKED) & (s_lo - reach <= s_disc) & (s_disc <= s_hi + reach)
-                n = np.where(lateral[:, None], side * nl, n)
-                q = np.where(lateral[:, None], q_lat, q)
-                active |= lateral
-                if side == SIDE_BLOCKED and self._blocks_ahead(boxes[j][0], s_arr):
-                    # stop behind an obstacle now ahead: the disc's arc length at most its near end
-                    # less the clearance (the nearest-point normal points forward once the
-                    # linearization passes it)
-                    tb, q = self._stop_plane(s_lo, s_lin + o, r_need)
-                    n = -tb
-                    active[:] = True
-                row = slot * nd + i
-                # n . (p + J (x - xbar)) >= n . q + r_need, J = d p / d (x, y, yaw)
-                ay = o * (-n[:, 0] * s + n[:, 1] * c)
-                a[:, row, 0] = np.where(active, n[:, 0], 0.0)
-                a[:, row, 1] = np.where(active, n[:, 1], 0.0)
-                a[:, row, 2] = np.where(active, ay, 0.0)
-                rhs = (np.einsum("ki,ki->k", n, q) + r_need - np.einsum("ki,ki->k", n, P)
-                       + n[:, 0] * lin[:, 0] + n[:, 1] * lin[:, 1] + ay * lin[:, 2])
-                b[:, row] = np.where(active, rhs, -np.inf)
+            dist, q = self._nearest(P, j, centers[j], world[j])
+            v = P - q
+            nv = np.maximum(np.hypot(v[..., 0], v[..., 1]), 1e-12)
+            n = v / nv[..., None] * np.where(dist >= 0, 1.0, -1.0)[..., None]
+            active = dist - self.r_disc <= self.config.influence_m
+            lateral = (side != SIDE_BLOCKED) & (s_lo - reach <= s_disc) & (s_disc <= s_hi + reach)
+            n = np.where(lateral[..., None], side * nl, n)
+            q = np.where(lateral[..., None], q_lat, q)
+            active |= lateral
+            if side == SIDE_BLOCKED and self._blocks_ahead(boxes[j][0], s_arr):
+                # stop behind an obstacle now ahead: the disc's arc length at most its near end
+                # less the clearance (the nearest-point normal points forward once the
+                # linearization passes it)
+                tb, q = self._stop_plane(np.tile(s_lo, nd), (s_lin + off).ravel(), r_need)
+                n = -tb.reshape(nd, -1, 2)
+                q = q.reshape(nd, -1, 2)
+                active[:] = True
+            rows = slice(slot * nd, (slot + 1) * nd)
+            # n . (p + J (x - xbar)) >= n . q + r_need, J = d p / d (x, y, yaw)
+            ay = off * (-n[..., 0] * s + n[..., 1] * c)
+            a[:, rows, 0] = np.where(active, n[..., 0], 0.0).T
+            a[:, rows, 1] = np.where(active, n[..., 1], 0.0).T
+            a[:, rows, 2] = np.where(active, ay, 0.0).T
+            rhs = (np.einsum("dki,dki->dk", n, q) + r_need - np.einsum("dki,dki->dk", n, P)
+                   + n[..., 0] * lin[:, 0] + n[..., 1] * lin[:, 1] + ay * lin[:, 2])
+            b[:, rows] = np.where(active, rhs, -np.inf).T
         return a, b
 
     def _corridor(self, Xlin, s_arr, rel, boxes, sides):
