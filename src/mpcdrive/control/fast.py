@@ -8,7 +8,8 @@ following a speed profile (:class:`~mpcdrive.paths.SpeedProfile` or
 the profile does in time, take its speed, and an ``accel`` input gets its acceleration as
 reference; see :mod:`mpcdrive.paths.profile_compiled`) --, linearization along the shifted
 previous plan or the paper's frozen point, Euler / RK4 / ``exp`` discrete models, cost, input /
-rate / state bounds, soft lane bound with slack, fallbacks) but runs every step in one numba-compiled
+rate / state bounds, soft lane bound with slack, the fallback ladder of ``config.fallback`` --
+its ``relax`` rung on a second compiled controller for the relaxed problem) but runs every step in one numba-compiled
 function that works in buffers allocated at construction. The QP is condensed onto the inputs
 (and lane slacks): the states are eliminated with the linearized dynamics, the Hessian is built
 by a backward recursion ``P_k = W_k + A_k' P_{k+1} A_k`` (O(N^2) blocks), and the dense QP is
