@@ -61,6 +61,22 @@ def test_run_writes_the_contract_files(tmp_path):
     assert page.startswith("<!DOCTYPE html>") and '"steps":30' in page and '"left":[[' in page
     assert page.count("data:image/png;base64,") == len(list(out.glob("*.png")))
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+    assert metrics["controller_backend"] == "osqp"
+
+
+def test_run_fast_uses_the_compiled_controller_with_the_same_commands(tmp_path):
+    """``--fast`` runs the scenario on the fast path (recorded in metrics.json and the resolved
+    scenario) and steers as the OSQP reference does."""
+    runs = {}
+    for name, extra in (("ref", ()), ("fast", ("--fast",))):
+        out = tmp_path / name
+        r = cli("run", str(short_scenario(tmp_path)), "--out", str(out), "-q", *extra)
+        assert r.returncode == 0, r.stderr
+        runs[name] = (json.loads((out / "metrics.json").read_text()), list(csv.DictReader((out / "trajectory.csv").read_text().splitlines())))
+    assert runs["fast"][0]["controller_backend"] == "fast" and runs["ref"][0]["controller_backend"] == "osqp"
+    assert "backend: fast" in (tmp_path / "fast" / "scenario.yaml").read_text()
+    steer = {k: [float(row["steer"]) for row in v[1]] for k, v in runs.items()}
+    assert max(abs(a - b) for a, b in zip(steer["fast"], steer["ref"])) < 1e-4
 
 
 @pytest.mark.parametrize(

@@ -63,6 +63,13 @@ def _load(name: str):
         raise BadInput(str(e)) from None
 
 
+def _on_backend(spec, fast: bool):
+    """``spec`` with its controller on the compiled fast path when ``fast`` (else as written)."""
+    if not fast:
+        return spec
+    return spec.model_copy(update={"controller": spec.controller.model_copy(update={"backend": "fast"})})
+
+
 def _load_commonroad(file: str):
     from .adapters.commonroad import available, load_commonroad
 
@@ -149,6 +156,8 @@ def run(
     scenario: str = typer.Argument(..., help="built-in scenario id, a YAML scenario file or a CommonRoad .xml"),
     out: Path | None = typer.Option(None, "--out", help="output directory (default runs/<id>-<timestamp>)"),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
+    fast: bool = typer.Option(False, "--fast", help="run the controller on the compiled fast path "
+                              "(controller.backend: fast; same commands as the OSQP reference)"),
 ) -> None:
     """Run one scenario; write trajectory.csv, metrics.json, figures, the resolved scenario and
     report.html (an interactive replay)."""
@@ -158,6 +167,7 @@ def run(
         spec, extra = imported.spec, imported.write_outputs
     else:
         spec = _load(scenario)
+    spec = _on_backend(spec, fast)
     out_dir = out or _default_out(spec.id)
     with _output_dir(out_dir) as tmp:
         _, metrics, _, _ = _run_into(spec, tmp, not quiet, source=scenario, extra_outputs=extra)
@@ -170,6 +180,7 @@ def reproduce(
     out: Path | None = typer.Option(None, "--out", help="output directory (default runs/reproduce-<timestamp>)"),
     only: list[str] | None = typer.Option(None, "--only", help="run only these experiment ids"),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
+    fast: bool = typer.Option(False, "--fast", help="run the controllers on the compiled fast path"),
 ) -> None:
     """Run every paper experiment; write DIR/<id>/, DIR/metrics.json, DIR/report.md and
     DIR/report.html (every experiment's replay, metrics and figures in one page)."""
@@ -184,7 +195,7 @@ def reproduce(
         if unknown:
             raise BadInput(f"--only: unknown experiment id(s) {', '.join(unknown)} (known: {', '.join(ids)})")
         ids = [i for i in ids if i in only]
-    specs = [_load(i) for i in ids]
+    specs = [_on_backend(_load(i), fast) for i in ids]
     out_dir = out or _default_out("reproduce")
     all_metrics, entries, results, html_runs = {}, [], {}, []
     t0 = time.perf_counter()

@@ -38,8 +38,9 @@ def _rms(a) -> float:
 def compute_metrics(result: SimResult, footprint: Footprint = Footprint()) -> dict:
     """Metrics of one run; keys as in CONTRACT.md plus ``converged_*`` (second half of the run),
     ``steer_total_variation_rad`` (sum of |steering changes|, for the smoothing study),
-    ``fallback_counts`` (steps per fallback rung, every rung listed) and ``termination`` (why the
-    run ended: ``completed``, ``goal_reached`` or ``diverged``).
+    ``fallback_counts`` (steps per fallback rung, every rung listed), ``termination`` (why the
+    run ended: ``completed``, ``goal_reached`` or ``diverged``) and ``controller_backend`` (the
+    MPC implementation that ran, ``osqp`` or ``fast``, from ``meta["backend"]``; None if absent).
 
     Steering rates include the first step's change from the initial steering angle
     (``meta["initial_steer_rad"]``, 0 by default: the wheels start straight)."""
@@ -77,6 +78,8 @@ def compute_metrics(result: SimResult, footprint: Footprint = Footprint()) -> di
         },
         "goal_reached": result.goal_reached,
         "termination": result.meta.get("termination", "completed"),
+        # the controller implementation that ran (osqp or fast; None when not recorded)
+        "controller_backend": result.meta.get("backend") or None,
     }
 
 
