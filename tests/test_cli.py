@@ -163,3 +163,13 @@ def test_compare_avoidance_table(tmp_path):
     assert (out / "cost_map_gaussian.png").exists() and (out / "paper-exp5-hard.png").exists()
     bad = cli("compare-avoidance", "--formulation", "magnets")
     assert bad.returncode == 2 and "unknown magnets" in bad.stderr
+
+
+def test_reproduce_fast_runs_every_selected_experiment_compiled(tmp_path):
+    """``reproduce --fast``, including the Gaussian cost map that reads the controller's obstacles."""
+    out = tmp_path / "rep"
+    r = cli("reproduce", "--out", str(out), "--only", "paper-exp5-gaussian", "--only", "paper-exp5-hard", "--fast", "-q")
+    assert r.returncode == 0, r.stderr
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert {m["controller_backend"] for m in metrics.values()} == {"fast"}
+    assert (out / "gaussian_cost_map.png").stat().st_size > 1000

@@ -568,7 +568,7 @@ def test_fast_constraint_rows_match_tight_osqp(sid):
     ref = build_experiment(_tight(spec))
     fast = build_experiment(_with_backend(spec, "fast"))
     assert isinstance(fast.controller, FastLtvMpc)
-    assert fast.controller.avoidance.uses_rows
+    assert fast.controller.avoidance.config.uses_rows
     ref_result = run_experiment(ref)
     rc, fc = ref.controller, fast.controller
     warm = rc.initial_warm(ref_result.x[0])
@@ -636,3 +636,14 @@ def test_track_raceway_closed_loop_is_chaotic():
         result = run_experiment(replace(exp, x0=x0))
         rms.append(compute_metrics(result, exp.footprint)["rms_lateral_error_m"])
     assert max(rms) - min(rms) > METRIC_TOL_M + 0.01 * min(rms), rms
+
+
+@pytest.mark.parametrize("sid", ["paper-exp5-gaussian", "paper-exp5-hard"])
+def test_fast_controller_keeps_its_obstacles_as_the_osqp_one_does(sid):
+    """Reports and adapters read ``controller.avoidance`` (config, obstacles): the same on both."""
+    spec = load_scenario(sid)
+    ref, fast = (build_experiment(_with_backend(spec, b)).controller for b in ("osqp", "fast"))
+    assert isinstance(fast, FastLtvMpc)
+    assert fast.avoidance.config == ref.avoidance.config
+    assert list(map(repr, fast.avoidance.obstacles)) == list(map(repr, ref.avoidance.obstacles))
+    assert fast.avoidance.lane_half == ref.avoidance.lane_half

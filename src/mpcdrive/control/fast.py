@@ -1139,25 +1139,25 @@ class FastLtvMpc(TrackingWarmStart):
             raise ValueError(f"the fast backend cannot solve this problem: {reason}")
         self.model, self.path, self.problem, self.config, self.settings = model, path, problem, config, settings
         self.obstacles = tuple(obstacles)
-        self.avoidance = (avoidance or AvoidanceConfig()) if obstacles else None
         self.footprint = footprint
         #: passing sides are kept (in WarmStart.sides) only where a detour uses them
         self._sides = np.full(max(len(self.obstacles), 1), _SIDE_NONE, dtype=np.int64)
-        av = self.avoidance
+        av = (avoidance or AvoidanceConfig()) if obstacles else None
         rows = av is not None and av.uses_rows
         #: the compiled detour (cost formulations; with rows ocp.avoidance shifts the references)
         self._detour = av is not None and av.detour != "none" and not rows
         nx, nu, N = model.nx, model.nu, problem.N
         lane = problem.lane_half_width_m is not None
-        #: constraint formulations: ocp.avoidance builds each step's rows between the two stages;
-        #: its lane is the road's (the problem's bound plus the body's half width and margin)
-        self._rows = None
-        n_orow = 0
-        if rows:
+        #: the obstacle terms as LtvMpc keeps them (``avoidance.config``, ``.obstacles``,
+        #: ``.relevant``); its lane is the road's (the problem's bound plus the body's half width and
+        #: margin). With a constraint formulation it builds each step's rows between the two stages.
+        self.avoidance = None
+        if av is not None:
             road_half = problem.lane_half_width_m + 0.5 * footprint.width_m + lane_margin_m if lane else None
-            self._rows = Avoidance(av, list(self.obstacles), path, footprint, N, problem.dt_s, road_half,
-                                   lane_margin_m)
-            n_orow = av.rows_per_step(footprint)
+            self.avoidance = Avoidance(av, list(self.obstacles), path, footprint, N, problem.dt_s, road_half,
+                                       lane_margin_m)
+        self._rows = self.avoidance if rows else None
+        n_orow = av.rows_per_step(footprint) if rows else 0
         self.nx, self.nu, self.N = nx, nu, N
         self.dt_s = problem.dt_s
         if config.v_ref_mps is not None:
