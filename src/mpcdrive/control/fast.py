@@ -71,7 +71,7 @@ from ..paths.base import Path
 from ..paths.compiled import path_arrays, path_eval, path_project, wrap_angle
 from ..paths.profile_compiled import profile_arc_lengths, profile_array, profile_speed
 from ..scene.footprint import Footprint
-from ..scene.obstacles import Circle, ConstantVelocity, Polygon, Static
+from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Polygon, Static
 from ..solvers.dense_qp import STATUS_WORDS, gi_solve, single_nonzero_columns
 from ..types import ControlOutput, WarmStart
 from .base import TrackingWarmStart
@@ -1289,6 +1289,31 @@ class FastLtvMpc(TrackingWarmStart):
             x[3] = self.v_ref_mps
         _control_step(x, 0.0, 0.0, np.zeros(self.nu), self._noX, self._noU, MODE_NO_PLAN, STAGE_ALL,
                       self._sides.copy(), self._wbuf, self._ibuf, np.empty(self._out_size), self._info)
+
+    # -- obstacles ----------------------------------------------------------------------------
+    def set_obstacles(self, obstacles) -> None:
+        """Replace the obstacles, as :meth:`LtvMpc.set_obstacles <mpcdrive.control.mpc.LtvMpc.set_obstacles>`
+        does (fresh predictions of moving ones each step; index j keeps naming the same
+        obstacle; nothing is rebuilt). With a constraint formulation any number may be given;
+        with a cost formulation the compiled obstacle table keeps the number given at
+        construction, and each obstacle must be one the compiled cost covers."""
+        if self.avoidance is None:
+            raise ValueError("this controller was built without obstacles, so its QP has no obstacle "
+                             "terms: pass obstacles (and avoidance) at construction")
+        obstacles = tuple(obstacles)
+        for j, ob in enumerate(obstacles):
+            if not isinstance(ob, Obstacle):
+                raise ValueError(f"obstacles[{j}] must be an Obstacle, got {type(ob).__name__}")
+        if self._rows is None:
+            if len(obstacles) != len(self.obstacles):
+                raise ValueError(f"the compiled obstacle cost was built for {len(self.obstacles)} obstacle(s), "
+                                 f"got {len(obstacles)}: build the controller with that many")
+            reason = obstacles_unsupported_reason(obstacles, self.avoidance.config)
+            if reason is not None:
+                raise ValueError(f"the fast backend cannot take these obstacles: {reason}")
+            self._w[_W_OBS][...] = _obstacle_table(obstacles)
+        self.obstacles = obstacles
+        self.avoidance.obstacles = list(obstacles)
 
     # -- warm start: initial_warm and _check_state from TrackingWarmStart ---------------------
     def _load_sides(self, sides: tuple) -> np.ndarray:
