@@ -7,6 +7,7 @@ from typing import Protocol
 
 import numpy as np
 
+from ..scene.obstacles import Obstacle
 from ..types import ControlOutput, WarmStart
 
 
@@ -50,3 +51,17 @@ class TrackingWarmStart:
 
     def _check_state(self, x) -> np.ndarray:
         return check_state(x, tuple(self.model.state_names))
+
+
+def checked_obstacles(avoidance, obstacles) -> tuple:
+    """The obstacles of a ``set_obstacles`` call as a tuple of :class:`Obstacle`; a ValueError
+    for a controller built without obstacles (``avoidance`` None: its QP has no obstacle terms)
+    or for an item that is not an Obstacle."""
+    if avoidance is None:
+        raise ValueError("this controller was built without obstacles, so its QP has no obstacle "
+                         "terms: pass obstacles (and avoidance) at construction")
+    obstacles = tuple(obstacles)
+    for j, ob in enumerate(obstacles):
+        if not isinstance(ob, Obstacle):
+            raise ValueError(f"obstacles[{j}] must be an Obstacle, got {type(ob).__name__}")
+    return obstacles

@@ -71,10 +71,10 @@ from ..paths.base import Path
 from ..paths.compiled import path_arrays, path_eval, path_project, wrap_angle
 from ..paths.profile_compiled import profile_arc_lengths, profile_array, profile_speed
 from ..scene.footprint import Footprint
-from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Polygon, Static
+from ..scene.obstacles import Circle, ConstantVelocity, Polygon, Static
 from ..solvers.dense_qp import STATUS_WORDS, gi_solve, single_nonzero_columns
 from ..types import ControlOutput, WarmStart
-from .base import TrackingWarmStart
+from .base import TrackingWarmStart, checked_obstacles
 from .fallback import FALLBACK_HOLD, FALLBACK_RELAX, FallbackConfig, FallbackLadder, relaxed_problem
 from .mpc import MpcConfig
 
@@ -1297,13 +1297,7 @@ class FastLtvMpc(TrackingWarmStart):
         obstacle; nothing is rebuilt). With a constraint formulation any number may be given;
         with a cost formulation the compiled obstacle table keeps the number given at
         construction, and each obstacle must be one the compiled cost covers."""
-        if self.avoidance is None:
-            raise ValueError("this controller was built without obstacles, so its QP has no obstacle "
-                             "terms: pass obstacles (and avoidance) at construction")
-        obstacles = tuple(obstacles)
-        for j, ob in enumerate(obstacles):
-            if not isinstance(ob, Obstacle):
-                raise ValueError(f"obstacles[{j}] must be an Obstacle, got {type(ob).__name__}")
+        obstacles = checked_obstacles(self.avoidance, obstacles)
         if self._rows is None:
             if len(obstacles) != len(self.obstacles):
                 raise ValueError(f"the compiled obstacle cost was built for {len(self.obstacles)} obstacle(s), "

@@ -29,7 +29,7 @@ from ..solvers.projected_gradient import ProjectedGradientBackend, ProjectedGrad
 from ..types import ControlOutput, SolveResult, WarmStart
 from ..units import TWO_PI, wrap_angle
 from .fallback import FallbackConfig, FallbackLadder
-from .base import TrackingWarmStart
+from .base import TrackingWarmStart, checked_obstacles
 
 
 @dataclass(frozen=True)
@@ -231,13 +231,7 @@ class LtvMpc(TrackingWarmStart):
         at ``pose_at(warm.t_s)`` at the step that receives ``warm``. Index ``j`` must keep naming
         the same obstacle from call to call: the passing side chosen for it is remembered in
         ``warm.sides`` under that index. Only a controller built with obstacles has the rows."""
-        if self.avoidance is None:
-            raise ValueError("this controller was built without obstacles, so its QP has no obstacle "
-                             "terms: pass obstacles (and avoidance) at construction")
-        obstacles = tuple(obstacles)
-        for j, ob in enumerate(obstacles):
-            if not isinstance(ob, Obstacle):
-                raise ValueError(f"obstacles[{j}] must be an Obstacle, got {type(ob).__name__}")
+        obstacles = checked_obstacles(self.avoidance, obstacles)
         self.avoidance.obstacles = list(obstacles)
 
     # -- warm start: initial_warm and _check_state from TrackingWarmStart ---------------------
