@@ -203,7 +203,8 @@ class SpeedProfile:
         v = np.r_[self.v_mps, self.v_mps[0]] if self.closed else self.v_mps
         vi, vj = v[i], v[i + 1]
         a = (vj * vj - vi * vi) / (2.0 * self.ds_m)
-        tau = np.clip(t - tg[i], 0.0, tg[i + 1] - tg[i])  # inf for a segment between two stops
+        with np.errstate(invalid="ignore"):  # past a stop both ends are inf: nan, taken as no motion
+            tau = np.clip(t - tg[i], 0.0, tg[i + 1] - tg[i])  # inf for a segment between two stops
         ds = np.where(np.isfinite(tau), vi * tau + 0.5 * a * tau * tau, 0.0)
         ds = np.where(np.isfinite(tg[i + 1]) & (t >= tg[i + 1]), self.ds_m, ds)
         s = sg[i] + np.clip(ds, 0.0, self.ds_m)
