@@ -97,13 +97,14 @@ _WA, _WB, _WJX, _WJU, _WTX, _WTU, _WV = range(7)
 
 @njit(cache=True, inline="always")
 def _stage_into(kind, mp, W, U, k, beta, dbeta):
-    """W[_WA] = df/dx (nx, nx), W[_WB][:, :nu] = df/du (all entries of the nw x nw blocks
-    written) and W[_WV, 1] = f, at the state W[_WV, 0] and input U[k]; beta, dbeta : the slip
+    """W[_WA] = df/dx (nx, nx), W[_WB][:, :nu] = df/du (their leading nx x nx and nx x 2 blocks
+    written: the entries the steps read) and W[_WV, 1] = f, at the state W[_WV, 0] and input U[k]; beta, dbeta : the slip
     terms of U[k, 0] and their derivative (kinematic models; unused for the dynamic one)."""
-    for i in range(W.shape[1]):
-        for j in range(W.shape[2]):
+    for i in range(kind):  # a kind's code is its number of states (3, 4, 6); inputs: at most 2
+        for j in range(kind):
             W[_WA, i, j] = 0.0
-            W[_WB, i, j] = 0.0
+        W[_WB, i, 0] = 0.0
+        W[_WB, i, 1] = 0.0
     if kind == KIND_DYNAMIC:
         f, a, b = _dyn_partials(W[_WV, 0, 2], W[_WV, 0, 3], W[_WV, 0, 4], W[_WV, 0, 5], U[k, 0], U[k, 1], mp, np)
         for i in range(6):
