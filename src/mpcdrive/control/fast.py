@@ -219,10 +219,11 @@ def fast_unsupported_reason(model, path: Path, problem: MpcProblem, config: MpcC
     return None
 
 
-def _constant_rows(problem: MpcProblem, nz: int):
+def _constant_rows(problem: MpcProblem, nz: int, n_orow: int = 0):
     """Rows of ``C z >= b`` that do not change between steps (input bounds, input rates), the row
     of the first u_0 rate row (its b follows u_prev), how many rows the step adds after them
-    (state bounds, lane) and how many lane-slack sign rows may follow those (written per step by
+    (state bounds, lane, ``n_orow`` obstacle rows per step) and how many slack sign rows may
+    follow those (one per step for the lane and for the obstacle rows; written per step by
     ``_soft_solve``)."""
     N, nu = problem.N, problem.nu
     rows, rhs = [], []
@@ -254,9 +255,9 @@ def _constant_rows(problem: MpcProblem, nz: int):
                 rows += [r, -r]
                 rhs += [-dmax[i], -dmax[i]]
     lane = problem.lane_half_width_m is not None
-    n_slack = N if lane else 0
+    n_slack = (N if lane else 0) + (N if n_orow else 0)
     n_state = N * int(np.isfinite(problem.x_min).sum() + np.isfinite(problem.x_max).sum())
-    n_var = n_state + (2 * N if lane else 0)
+    n_var = n_state + (2 * N if lane else 0) + N * n_orow
     return rows, rhs, r_rate0, n_var, n_slack
 
 
@@ -652,7 +653,6 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
             for k in range(N):
                 uref[k, ip[_I_ACCEL]] += (v_arr[k + 1] - v_arr[k]) / dt
 
-        nsel = 0
         if ip[_I_OFORM] != _OBS_NONE:
             nsel = _select_obstacles(ip[_I_NOBS], ip[_I_OMAX], obs, _v1(wbuf, fo, _W_ODIST), oproj, osel, fp, t_s, x,
                                      s0, pkind, geo, tab_s, tab_xy, tab_h, tab_k)
@@ -1138,10 +1138,10 @@ class FastLtvMpc(TrackingWarmStart):
         if reason is not None:
             raise ValueError(f"the fast backend cannot solve this problem: {reason}")
         self.model, self.path, self.problem, self.config, self.settings = model, path, problem, config, settings
-        self.obstacles = tuple(obstacles)
+        obstacles = tuple(obstacles)
         self.footprint = footprint
         #: passing sides are kept (in WarmStart.sides) only where a detour uses them
-        self._sides = np.full(max(len(self.obstacles), 1), _SIDE_NONE, dtype=np.int64)
+        self._sides = np.full(max(len(obstacles), 1), _SIDE_NONE, dtype=np.int64)
         av = (avoidance or AvoidanceConfig()) if obstacles else None
         rows = av is not None and av.uses_rows
         #: the compiled detour (cost formulations; with rows ocp.avoidance shifts the references)
@@ -1154,7 +1154,7 @@ class FastLtvMpc(TrackingWarmStart):
         self.avoidance = None
         if av is not None:
             road_half = problem.lane_half_width_m + 0.5 * footprint.width_m + lane_margin_m if lane else None
-            self.avoidance = Avoidance(av, list(self.obstacles), path, footprint, N, problem.dt_s, road_half,
+            self.avoidance = Avoidance(av, list(obstacles), path, footprint, N, problem.dt_s, road_half,
                                        lane_margin_m)
         self._rows = self.avoidance if rows else None
         n_orow = av.rows_per_step(footprint) if rows else 0
@@ -1171,10 +1171,7 @@ class FastLtvMpc(TrackingWarmStart):
         kind, mp = model_code(model)
         pa = path_arrays(path)
         nz = N * nu + (N if lane else 0) + (N if rows else 0)
-        crows, rhs, r_rate0, n_var, n_slack = _constant_rows(problem, nz)
-        if rows:
-            n_var += N * n_orow
-            n_slack += N
+        crows, rhs, r_rate0, n_var, n_slack = _constant_rows(problem, nz, n_orow)
         m_max = len(crows) + n_var + n_slack
         mq = max(m_max, 1)
         C = np.zeros((mq, nz))
@@ -1203,7 +1200,7 @@ class FastLtvMpc(TrackingWarmStart):
         ip[_I_ACCEL] = list(model.input_names).index("accel") if "accel" in model.input_names else -1
         if av is not None and not rows:
             ip[_I_OFORM] = _OBS_POTENTIAL if av.formulation == "potential" else _OBS_GAUSSIAN
-            ip[_I_NOBS] = len(self.obstacles)
+            ip[_I_NOBS] = len(obstacles)
             ip[_I_OMAX] = av.max_obstacles
             ip[_I_DETOUR] = int(self._detour)
         fp = np.zeros(_NFP)
@@ -1235,8 +1232,8 @@ class FastLtvMpc(TrackingWarmStart):
             _W_PA: (nx, nx),
             _W_MG: (nu, nx), _W_GG: (nu, nu), _W_QV: (nx,),
             _W_WE: np.stack([problem.Q] * (N - 1) + [problem.QN]), _W_QT: (N, nx),
-            _W_OBS: _obstacle_table(self.obstacles), _W_ODIST: (max(len(self.obstacles), 1),),
-            _W_OPROJ: (max(len(self.obstacles), 1), 2), _W_SARR: (N + 1,), _W_EREF: (N + 1,),
+            _W_OBS: _obstacle_table(obstacles), _W_ODIST: (max(len(obstacles), 1),),
+            _W_OPROJ: (max(len(obstacles), 1), 2), _W_SARR: (N + 1,), _W_EREF: (N + 1,),
             _W_ROWA: (N, max(n_orow, 1), 3), _W_ROWB: np.full((N, max(n_orow, 1)), -np.inf),
             _W_LLO: np.full(N, -fp[_F_LANEW]), _W_LHI: np.full(N, fp[_F_LANEW]), _W_XLIN: (N + 1, nx),
             _W_GSUM: (2 * N,), _W_PROF: prof, _W_VARR: (N + 1,), _W_REFW: (N + 1, 8),
@@ -1259,7 +1256,7 @@ class FastLtvMpc(TrackingWarmStart):
         rowcol = np.full(mq, -1, dtype=np.int64)
         rowcol[: len(crows)] = single_nonzero_columns(C[: len(crows)])
         self._ibuf = np.concatenate([ip, fo, fs.ravel(), np.zeros(nz + mq, dtype=np.int64), rowcol,
-                                     np.zeros(2 * N + max(len(self.obstacles), 1) + mq, dtype=np.int64)])
+                                     np.zeros(2 * N + max(len(obstacles), 1) + mq, dtype=np.int64)])
         self._info = np.zeros(4)
         self._noX = np.zeros((N + 1, nx))
         self._noU = np.zeros((N, nu))
@@ -1291,6 +1288,11 @@ class FastLtvMpc(TrackingWarmStart):
                       self._sides.copy(), self._wbuf, self._ibuf, np.empty(self._out_size), self._info)
 
     # -- obstacles ----------------------------------------------------------------------------
+    @property
+    def obstacles(self) -> tuple:
+        """The obstacles the controller avoids (empty without avoidance)."""
+        return () if self.avoidance is None else tuple(self.avoidance.obstacles)
+
     def set_obstacles(self, obstacles) -> None:
         """Replace the obstacles, as :meth:`LtvMpc.set_obstacles <mpcdrive.control.mpc.LtvMpc.set_obstacles>`
         does (fresh predictions of moving ones each step; index j keeps naming the same
@@ -1306,7 +1308,6 @@ class FastLtvMpc(TrackingWarmStart):
             if reason is not None:
                 raise ValueError(f"the fast backend cannot take these obstacles: {reason}")
             self._w[_W_OBS][...] = _obstacle_table(obstacles)
-        self.obstacles = obstacles
         self.avoidance.obstacles = list(obstacles)
 
     # -- warm start: initial_warm and _check_state from TrackingWarmStart ---------------------
@@ -1316,7 +1317,7 @@ class FastLtvMpc(TrackingWarmStart):
         if self._detour:
             arr[:] = _SIDE_NONE
             for j, side in sides:
-                if 0 <= j < len(self.obstacles):
+                if 0 <= j < len(arr):
                     arr[j] = side
         return arr
 
