@@ -693,3 +693,28 @@ def test_set_obstacles_is_refused_where_the_compiled_cost_cannot_take_them():
         build_experiment(_with_backend(load_scenario("paper-exp1"), "fast")).controller.set_obstacles([ob])
     fc.set_obstacles([Obstacle(Circle(0.3), (2.0, 0.1, 0.0))])  # one static circle: taken
     assert fc.obstacles[0].pose == (2.0, 0.1, 0.0)
+
+
+def test_the_relax_rung_avoids_the_obstacles_set_last():
+    """After ``set_obstacles`` the relax rung (a second compiled controller) sees the new
+    obstacles: its command equals that of a controller built with them."""
+    from mpcdrive.ocp.avoidance import AvoidanceConfig
+    from mpcdrive.scene import Circle, Obstacle
+
+    model = KinematicBicycle4()
+    # speed bound [0, 1] with the car at 3 m/s and braking limited: every QP is infeasible and
+    # the relaxed problem (no state bounds) solves
+    pb = MpcProblem(4, 2, 10, 0.05, Q=[1, 1, 1, 1], R=0.1, u_min=[-STEER, -0.1], u_max=[STEER, 0.1],
+                    x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [1.0])
+    path = StraightPath([0, 0], [50, 0])
+    far, near = Obstacle(Circle(0.3), (40.0, 0.0, 0.0)), Obstacle(Circle(0.3), (1.5, 0.1, 0.0))
+    av = AvoidanceConfig("hard", influence_m=3.0)
+    moved = FastLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0), obstacles=(far,), avoidance=av)
+    moved.set_obstacles((near,))
+    built = FastLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0), obstacles=(near,), avoidance=av)
+    kept = FastLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0), obstacles=(far,), avoidance=av)
+    x = np.array([0.0, 0.0, 0.0, 3.0])
+    outs = [c.step(x, c.initial_warm(x)) for c in (moved, built, kept)]
+    assert [o.fallback for o in outs] == ["relax"] * 3
+    np.testing.assert_array_equal(outs[0].u, outs[1].u)
+    assert np.abs(outs[0].u - outs[2].u).max() > 1e-6  # the obstacle matters to this command

@@ -1309,6 +1309,8 @@ class FastLtvMpc(TrackingWarmStart):
                 raise ValueError(f"the fast backend cannot take these obstacles: {reason}")
             self._w[_W_OBS][...] = _obstacle_table(obstacles)
         self.avoidance.obstacles = list(obstacles)
+        if self._relaxed is not None:  # the relax rung avoids the same obstacles
+            self._relaxed.set_obstacles(obstacles)
 
     # -- warm start: initial_warm and _check_state from TrackingWarmStart ---------------------
     def _load_sides(self, sides: tuple) -> np.ndarray:
