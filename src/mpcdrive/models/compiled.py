@@ -187,6 +187,17 @@ def model_jacobians(kind, mp, x, u, A, B):
     B[:, :] = W[_WB, :, :B.shape[1]]
 
 
+@njit(cache=True, inline="always")
+def _matmul_into(W, n, ia, ib, io):
+    """W[io, :n, :n] = W[ia, :n, :n] @ W[ib, :n, :n] (io differs from ia and ib)."""
+    for i in range(n):
+        for j in range(n):
+            t = 0.0
+            for l in range(n):
+                t += W[ia, i, l] * W[ib, l, j]
+            W[io, i, j] = t
+
+
 @njit(cache=True)
 def expm_into(W, n, im, ie, it):
     """W[ie, :n, :n] = expm(W[im, :n, :n]) as :func:`mpcdrive.models.discretize._expm` computes it:
@@ -205,22 +216,12 @@ def expm_into(W, n, im, ie, it):
             W[im, i, j] = W[im, i, j] / scale
             W[ie, i, j] = (1.0 if i == j else 0.0) + W[im, i, j] / 12.0
     for p in range(11, 0, -1):  # E = I + X E / p
-        for i in range(n):
-            for j in range(n):
-                t = 0.0
-                for l in range(n):
-                    t += W[im, i, l] * W[ie, l, j]
-                W[it, i, j] = t
+        _matmul_into(W, n, im, ie, it)
         for i in range(n):
             for j in range(n):
                 W[ie, i, j] = (1.0 if i == j else 0.0) + W[it, i, j] / p
     for _ in range(sq):
-        for i in range(n):
-            for j in range(n):
-                t = 0.0
-                for l in range(n):
-                    t += W[ie, i, l] * W[ie, l, j]
-                W[it, i, j] = t
+        _matmul_into(W, n, ie, ie, it)
         for i in range(n):
             for j in range(n):
                 W[ie, i, j] = W[it, i, j]
