@@ -1,7 +1,7 @@
 """CommonRoad import / export, judged by CommonRoad's own drivability checker.
 
-The scenario files are real CommonRoad scenarios kept beside the repository
-(``../shared/scenarios/commonroad`` from the repository root; attribution in the README there).
+The scenario files are real CommonRoad scenarios kept in ``tests/data/commonroad`` (provenance,
+licences and checksums in the README there).
 """
 
 import json
@@ -24,8 +24,7 @@ from mpcdrive.adapters.commonroad import check_drive, load_commonroad, write_sol
 from mpcdrive.scenarios import build_experiment, run_experiment  # noqa: E402
 from mpcdrive.sim import compute_metrics  # noqa: E402
 
-DIR = Path(__file__).resolve().parents[1].parent / "shared" / "scenarios" / "commonroad"
-needs_files = pytest.mark.skipif(not DIR.is_dir(), reason="the shared CommonRoad scenario files are absent")
+DIR = Path(__file__).resolve().parent / "data" / "commonroad"
 
 # scenario file -> (route lanelets, obstacles); the first route lanelet holds the start
 EXPECTED_IMPORT = {
@@ -49,7 +48,6 @@ def drive(name: str):
     return _DRIVES[name]
 
 
-@needs_files
 @pytest.mark.parametrize("name", sorted(EXPECTED_IMPORT))
 def test_import_maps_route_obstacles_and_initial_state(name):
     imp = load_commonroad(DIR / name)
@@ -105,7 +103,6 @@ EXPECTED_VERDICTS = {
 }
 
 
-@needs_files
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(EXPECTED_VERDICTS))
 def test_drive_is_judged_safe_by_the_drivability_checker(name, capsys):
@@ -123,7 +120,6 @@ def test_drive_is_judged_safe_by_the_drivability_checker(name, capsys):
         assert clearance > 0.0
 
 
-@needs_files
 @pytest.mark.slow
 def test_checker_catches_a_colliding_and_an_off_road_trajectory():
     """The same drive moved onto the parked car, then off the road, must fail those checks."""
@@ -144,7 +140,6 @@ def test_checker_catches_a_colliding_and_an_off_road_trajectory():
     assert not check_drive(imp, replace(res, x=x)).feasible
 
 
-@needs_files
 @pytest.mark.slow
 def test_solution_file_round_trips(tmp_path):
     from commonroad.common.solution import CommonRoadSolutionReader
@@ -163,7 +158,6 @@ def test_solution_file_round_trips(tmp_path):
     assert states[k].velocity == pytest.approx(res.x[k, 3], rel=1e-2)  # rear-axle speed, v cos(beta)
 
 
-@needs_files
 @pytest.mark.slow
 def test_cli_runs_a_commonroad_file(tmp_path):
     out = tmp_path / "run"
@@ -175,7 +169,6 @@ def test_cli_runs_a_commonroad_file(tmp_path):
     assert (out / "solution.xml").is_file() and (out / "trajectory.csv").is_file()
 
 
-@needs_files
 @pytest.mark.slow
 def test_blocked_lane_stops_behind_the_parked_car(capsys):
     """ZAM_Tutorial_Urban-3_2 ("critical evasive"): a parked car blocks the route lanelet 12 m ahead

@@ -162,7 +162,7 @@ def run(
     """Run one scenario; write trajectory.csv, metrics.json, figures, the resolved scenario and
     report.html (an interactive replay)."""
     extra = None
-    if scenario.lower().endswith(".xml"):
+    if scenario.lower().endswith((".xml", ".xml.gz")):
         imported = _load_commonroad(scenario)
         spec, extra = imported.spec, imported.write_outputs
     else:

@@ -214,6 +214,19 @@ def _interval_mid(v) -> float | None:
     return float(v)
 
 
+def _read_file(reader, file: Path):
+    """(scenario, planning problems) of a ``.xml`` file, or of a gzip-compressed ``.xml.gz``."""
+    if not file.name.endswith(".gz"):
+        return reader(str(file)).open()
+    import gzip
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        plain = Path(tmp) / file.name.removesuffix(".gz")
+        plain.write_bytes(gzip.decompress(file.read_bytes()))
+        return reader(str(plain)).open()
+
+
 def load_commonroad(file: str | Path) -> CommonRoadImport:
     """Read a CommonRoad scenario file and map it (first planning problem); ValueError on a file
     we cannot read or map."""
@@ -221,7 +234,7 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
 
     file = Path(file)
     try:
-        scenario, pps = CommonRoadFileReader(str(file)).open()
+        scenario, pps = _read_file(CommonRoadFileReader, file)
     except Exception as e:  # the reader raises anything from lxml errors to KeyError
         raise ValueError(f"not a readable CommonRoad scenario ({type(e).__name__}: {e})".splitlines()[0]) from None
     if not pps.planning_problem_dict:
