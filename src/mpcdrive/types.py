@@ -18,6 +18,12 @@ STATUS_FAILED = "failed"
 STATUS_BAD_STATE = "bad_state"
 
 
+class ScenarioWarning(UserWarning):
+    """Something in a scenario that is legal but probably not what the user meant (an angle in a
+    ``_deg`` field that looks like radians, a speed far beyond the model's range, ...). The run
+    goes on; the CLI prints each as one line on stderr."""
+
+
 @dataclass(frozen=True)
 class SolveResult:
     """One solve of a finite-horizon problem.
