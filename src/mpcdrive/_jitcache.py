@@ -49,3 +49,15 @@ def refresh(dispatcher, dependencies: Iterable[str | Path]) -> None:
     except AttributeError:
         return
     drop_stale_cache(cache_dir, stem, [*dependencies, dispatcher.py_func.__code__.co_filename])
+
+
+def has_cache(dispatcher) -> bool:
+    """True when numba's cache holds an index for ``dispatcher`` (a later process loads it instead
+    of compiling); False when none is found or this numba keeps it elsewhere."""
+    try:
+        cache_dir = Path(dispatcher._cache._cache_path)
+        stem = Path(dispatcher.py_func.__code__.co_filename).stem
+        name = dispatcher.py_func.__name__
+    except AttributeError:
+        return False
+    return any(cache_dir.glob(f"{stem}.{name}-*.nbi"))

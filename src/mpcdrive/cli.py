@@ -19,7 +19,24 @@ app = typer.Typer(
     no_args_is_help=True,
     help="mpcdrive: safe autonomous driving with Model Predictive Control.",
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # plain click help: flags without a '<bool>' metavar
 )
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        from . import __version__
+
+        typer.echo(f"mpcdrive {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", callback=_print_version, is_eager=True,
+                                 help="print the version and exit"),
+) -> None:
+    """mpcdrive: safe autonomous driving with Model Predictive Control."""
 
 
 class BadInput(Exception):
@@ -153,8 +170,9 @@ def list_cmd() -> None:
 
 @app.command()
 def run(
-    scenario: str = typer.Argument(..., help="built-in scenario id, a YAML scenario file or a CommonRoad .xml"),
-    out: Path | None = typer.Option(None, "--out", help="output directory (default runs/<id>-<timestamp>)"),
+    scenario: str = typer.Argument(..., metavar="SCENARIO",
+                                   help="built-in scenario id, a YAML scenario file or a CommonRoad .xml"),
+    out: Path | None = typer.Option(None, "--out", metavar="DIR", help="output directory (default runs/<id>-<timestamp>)"),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
     fast: bool = typer.Option(False, "--fast", help="run the controller on the compiled fast path "
                               "(controller.backend: fast; same commands as the OSQP reference)"),
@@ -263,15 +281,17 @@ def compare_avoidance(
             raise BadInput(f"--scenario: {sp.id} has no obstacles")
     out_dir = out or _default_out("avoidance")
     rows, table = [], {}
+    n_runs, k_run = len(specs) * len(forms), 0
     with _output_dir(out_dir) as tmp:
         for sp in specs:
             runs = {}
             for f in forms:
+                k_run += 1
                 data = sp.model_dump()
                 data["avoidance"] = {**(data.get("avoidance") or {}), **FORMULATION_TUNING[f]}
                 data["id"] = f"{sp.id}--{f}"
                 spec = ScenarioSpec.model_validate(data)
-                typer.echo(f"{sp.id} / {f}", err=True)
+                typer.echo(f"[{k_run}/{n_runs}] {sp.id} / {f}", err=True)
                 result, m, _, _ = _run_into(spec, tmp / sp.id / f, not quiet)
                 runs[f] = result
                 table.setdefault(sp.id, {})[f] = m
@@ -422,7 +442,7 @@ def compare_models_cmd(
 
 @app.command()
 def sweep(
-    scenario: str = typer.Argument(..., help="built-in scenario id or a YAML scenario file"),
+    scenario: str = typer.Argument(..., metavar="SCENARIO", help="built-in scenario id or a YAML scenario file"),
     runs: int = typer.Option(100, "--runs", min=1, help="number of runs"),
     seed: int = typer.Option(0, "--seed", min=0, help="seed of the whole sweep (each run gets its own from it)"),
     vary: list[str] | None = typer.Option(
@@ -471,9 +491,23 @@ def sweep(
 
 @contextmanager
 def _sweep_progress(enabled: bool, total: int):
-    """A progress bar over runs on stderr, counting failures (a no-op when disabled)."""
+    """A progress bar over runs on stderr, counting failures (a no-op when disabled); when stderr
+    is not a terminal (a log file, CI), a plain line every 5 % of the runs or 10 s instead."""
     if not enabled:
         yield None
+        return
+    if not sys.stderr.isatty():
+        every = max(1, total // 20)
+        state = {"failed": 0, "last": time.monotonic()}
+
+        def line(done: int, n: int, row: dict) -> None:
+            state["failed"] += 0 if row.get("success") else 1
+            now = time.monotonic()
+            if done == n or done % every == 0 or now - state["last"] > 10.0:
+                state["last"] = now
+                typer.echo(f"sweep: {done}/{n} runs, {state['failed']} failed", err=True)
+
+        yield line
         return
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
@@ -490,6 +524,20 @@ def _sweep_progress(enabled: bool, total: int):
         yield cb
 
 
+def _log_to_stderr() -> None:
+    """The library's INFO lines (logger ``mpcdrive``: e.g. the one-time compile notice) go to
+    stderr as ``mpcdrive: <message>``."""
+    import logging
+
+    log = logging.getLogger("mpcdrive")
+    if not log.handlers:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("mpcdrive: %(message)s"))
+        log.addHandler(handler)
+        log.setLevel(logging.INFO)
+        log.propagate = False
+
+
 def main() -> None:
     """Console-script entry point with the exit codes of CONTRACT.md."""
     import signal
@@ -498,6 +546,9 @@ def main() -> None:
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, _terminated)
+    _log_to_stderr()
+    if len(sys.argv) == 1:  # a bare `mpcdrive` shows the help as it is, not folded into a usage error
+        sys.argv.append("--help")
     try:
         rc = app(standalone_mode=False)
         if rc == 130:  # typer turns Ctrl-C into a returned exit code 130 in this mode

@@ -1108,6 +1108,20 @@ from ..solvers import dense_qp as _dense_qp  # noqa: E402
 
 _jitcache.refresh(_control_step, [m.__file__ for m in (_kinematic, _dynamic, _models_compiled, _paths_compiled,
                                                        _profile_compiled, _dense_qp)])
+_announced = [False]
+
+
+def _announce_compile() -> None:
+    """Log one line (logger ``mpcdrive``, INFO; the CLI prints it) before the first compile on a
+    machine: the compiled step is built from numba's cache when one exists for these sources."""
+    if _announced[0]:
+        return
+    _announced[0] = True
+    if not _jitcache.has_cache(_control_step):
+        import logging
+
+        logging.getLogger("mpcdrive").info(
+            "compiling the fast controller for this machine (once: numba caches it; about 40-100 s on 2 cores)")
 
 
 class FastLtvMpc(TrackingWarmStart):
@@ -1137,6 +1151,7 @@ class FastLtvMpc(TrackingWarmStart):
         reason = fast_unsupported_reason(model, path, problem, config, settings, obstacles, avoidance)
         if reason is not None:
             raise ValueError(f"the fast backend cannot solve this problem: {reason}")
+        _announce_compile()
         self.model, self.path, self.problem, self.config, self.settings = model, path, problem, config, settings
         obstacles = tuple(obstacles)
         self.footprint = footprint

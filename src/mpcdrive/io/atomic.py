@@ -32,6 +32,12 @@ def _fsync_dir(directory: Path) -> None:
         os.close(fd)
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically; create the parent directory if needed.
 
@@ -43,6 +49,7 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     target.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
     try:
+        os.fchmod(fd, 0o666 & ~_umask())  # as open() would make it (mkstemp makes 0600)
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
             fh.flush()
@@ -79,16 +86,19 @@ def atomic_output_dir(final_dir: str | os.PathLike) -> Iterator[Path]:
     Write every output file of a run into the yielded directory.  When the ``with`` block ends
     without an exception the directory is renamed to ``final_dir``; when it raises (including
     ``KeyboardInterrupt``) the temporary directory is deleted and the exception propagates, so
-    ``final_dir`` holds complete output or does not exist.
+    ``final_dir`` holds complete output or does not exist. The yielded path is absolute (a
+    relative ``final_dir`` is taken from the working directory at the call), and the directory
+    gets the permissions the user's umask gives a new directory.
 
     Raises ``FileExistsError`` (before the block runs, and again before the rename) when
     ``final_dir`` exists and is not an empty directory.  An existing empty directory is replaced.
     """
-    final = Path(final_dir)
+    final = Path(final_dir).absolute()
     _check_free(final)
     final.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".tmp", dir=final.parent))
     try:
+        tmp.chmod(0o777 & ~_umask())  # mkdtemp makes 0700
         yield tmp
         _check_free(final)
         if final.exists():
