@@ -17,6 +17,14 @@ STATUS_MAX_ITER = "max_iter"
 STATUS_FAILED = "failed"
 STATUS_BAD_STATE = "bad_state"
 
+#: fallback rungs, as logged in ``SimResult.fallback`` and ``trajectory.csv`` (``control.fallback``)
+FALLBACK_RELAX = "relax"
+FALLBACK_SHIFTED_PLAN = "shifted_plan"
+FALLBACK_BRAKE = "brake"
+FALLBACK_HOLD = "hold_last"
+#: every rung, in the order a report lists them
+FALLBACK_KINDS: tuple[str, ...] = (FALLBACK_RELAX, FALLBACK_SHIFTED_PLAN, FALLBACK_BRAKE, FALLBACK_HOLD)
+
 
 class ScenarioWarning(UserWarning):
     """Something in a scenario that is legal but probably not what the user meant (an angle in a

@@ -31,14 +31,15 @@ import numpy as np
 
 from ..ocp.problem import MpcProblem
 from ..solvers.osqp_backend import OsqpBackend, OsqpSettings
-from ..types import SolveResult, WarmStart
-
-FALLBACK_RELAX = "relax"
-FALLBACK_SHIFTED_PLAN = "shifted_plan"
-FALLBACK_BRAKE = "brake"
-FALLBACK_HOLD = "hold_last"
-#: every rung, in the order a report lists them
-FALLBACK_KINDS: tuple[str, ...] = (FALLBACK_RELAX, FALLBACK_SHIFTED_PLAN, FALLBACK_BRAKE, FALLBACK_HOLD)
+from ..types import (  # noqa: F401  (the rung names are re-exported here, their home for controllers)
+    FALLBACK_BRAKE,
+    FALLBACK_HOLD,
+    FALLBACK_KINDS,
+    FALLBACK_RELAX,
+    FALLBACK_SHIFTED_PLAN,
+    SolveResult,
+    WarmStart,
+)
 #: rungs that always yield a command
 TERMINAL_FALLBACKS: tuple[str, ...] = (FALLBACK_BRAKE, FALLBACK_HOLD)
 DEFAULT_LADDER: tuple[str, ...] = (FALLBACK_RELAX, FALLBACK_SHIFTED_PLAN, FALLBACK_BRAKE)

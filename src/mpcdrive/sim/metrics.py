@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..control.fallback import FALLBACK_KINDS
 from ..scene.footprint import Footprint
-from ..types import STATUS_INACCURATE, STATUS_OK, SimResult
+from ..types import FALLBACK_KINDS, STATUS_INACCURATE, STATUS_OK, SimResult
 
 
 def lane_excess_per_step(result: SimResult, footprint: Footprint = Footprint()) -> np.ndarray | None:

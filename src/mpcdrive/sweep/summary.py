@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..control.fallback import FALLBACK_KINDS
 from ..io import write_json
 from ..io.atomic import atomic_write_bytes, atomic_write_text
+from ..types import FALLBACK_KINDS
 from .runner import METRIC_COLUMNS, SweepPlan
 
 __all__ = ["result_columns", "summarize", "summary_markdown", "write_sweep_outputs"]
