@@ -169,3 +169,60 @@ def test_scenario_fallback_keys_reach_the_controller_and_the_csv(tmp_path):
     assert [row["fallback"] for row in rows] == list(r.fallback)
     counts = compute_metrics(r)["fallback_counts"]
     assert counts["brake"] + counts["shifted_plan"] == 30 and counts["brake"] == 3
+
+
+def _straight_speed_controller(obstacles=(), lane_half_width_m=None):
+    """KinematicBicycle4 at 5 m/s on a straight road, braking limit 6 m/s^2, main solve failing."""
+    from mpcdrive.ocp.avoidance import AvoidanceConfig
+
+    model = KinematicBicycle4()
+    pb = MpcProblem(4, 2, 10, 0.05, Q=[1, 1, 1, 1], R=0.1, u_min=[-STEER, -6.0], u_max=[STEER, 2.0],
+                    lane_half_width_m=lane_half_width_m)
+    path = StraightPath([0, 0], [100, 0])
+    c = LtvMpc(model, path, pb, MpcConfig(v_ref_mps=5.0), obstacles=tuple(obstacles),
+               avoidance=AvoidanceConfig() if obstacles else None)
+    c.backend.solve = lambda *a, **k: failing(10, 4, 2)
+    return c
+
+
+def _plan(X):
+    X = np.asarray(X, float)
+    return SolveResult("ok", X, np.zeros((X.shape[0] - 1, 2)), 0.0, 10, 0.0)
+
+
+def _drive_straight(x0, v, n, dt, dy_per_step=0.0):
+    return np.array([[x0 + v * dt * k, dy_per_step * k, 0.0, v] for k in range(n + 1)])
+
+
+def test_relax_plan_into_an_obstacle_is_not_applied_the_car_brakes_at_full_deceleration():
+    from mpcdrive.scene.obstacles import Circle, Obstacle
+
+    c = _straight_speed_controller([Obstacle(Circle(0.5), (6.0, 0.0, 0.0))])
+    x = np.array([0.0, 0.0, 0.0, 5.0])
+    # the relaxed solve "succeeds" with a plan that drives straight through the obstacle at 6 m
+    c.fallback.relax_backend.solve = lambda *a, **k: _plan(_drive_straight(0.0, 5.0, 10, 0.05 * 3))
+    out = c.step(x, c.initial_warm(x))
+    assert out.fallback == "brake"
+    assert out.u[1] == pytest.approx(-6.0)  # the vehicle's full braking (u_min), not 1 m/s^2
+    # the same plan without the obstacle in its way is applied
+    c2 = _straight_speed_controller([Obstacle(Circle(0.5), (6.0, 5.0, 0.0))])
+    c2.fallback.relax_backend.solve = c.fallback.relax_backend.solve
+    assert c2.step(x, c2.initial_warm(x)).fallback == "relax"
+
+
+def test_relax_plan_leaving_the_road_is_not_applied():
+    c = _straight_speed_controller(lane_half_width_m=1.75)
+    x = np.array([0.0, 0.0, 0.0, 5.0])
+    # drifting 0.3 m left per step: the body's corner leaves the 1.75 m half-width road
+    c.fallback.relax_backend.solve = lambda *a, **k: _plan(_drive_straight(0.0, 5.0, 10, 0.05, 0.3))
+    assert c.step(x, c.initial_warm(x)).fallback == "brake"
+    c.fallback.relax_backend.solve = lambda *a, **k: _plan(_drive_straight(0.0, 5.0, 10, 0.05, 0.01))
+    assert c.step(x, c.initial_warm(x)).fallback == "relax"
+
+
+def test_plan_check_can_be_switched_off():
+    c = _straight_speed_controller(lane_half_width_m=1.75)
+    c.fallback.config = FallbackConfig(check_plans=False)
+    x = np.array([0.0, 0.0, 0.0, 5.0])
+    c.fallback.relax_backend.solve = lambda *a, **k: _plan(_drive_straight(0.0, 5.0, 10, 0.05, 0.3))
+    assert c.step(x, c.initial_warm(x)).fallback == "relax"

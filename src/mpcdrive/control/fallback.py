@@ -9,10 +9,16 @@ A ladder is a sequence of rungs tried one after the other until one yields a com
 * ``shifted_plan``: the previous plan shifted by one step. Fails when there is no plan, or when
   the plan has already been shifted ``N - 1`` times (nothing of it is left).
 * ``brake``: controlled braking. Models with a speed state ``v`` and an ``accel`` input
-  decelerate at ``brake_decel_mps2`` (never past standstill, never into reverse) with the
+  decelerate at ``brake_decel_mps2`` (default: the vehicle's full braking, the lower bound of
+  its ``accel`` input; never past standstill, never into reverse) with the
   steering held (``brake_steering="hold"``) or brought back to straight at the steering-rate
   limit (``"straighten"``); constant-speed models hold the last steering angle. Always succeeds.
 * ``hold_last``: the last applied input. Always succeeds.
+
+A rung that plans (``relax``, ``shifted_plan``) is applied only when its predicted trajectory is
+safe: the footprint clear of every obstacle at its predicted pose, and inside the road when the
+controller has one (``road_half_width_m``). Otherwise the ladder goes on to the next rung, in the end
+to braking: a fallback never makes a failed step worse than braking would (``check_plans``).
 
 Whatever the rung, the command is clipped to the input bounds and to the rate limit from the
 previous input, and it is never NaN. The rung used is logged per step (``ControlOutput.fallback``,
@@ -30,6 +36,8 @@ from typing import Literal
 import numpy as np
 
 from ..ocp.problem import MpcProblem
+from ..scene.footprint import Footprint
+from ..scene.geometry import shape_distance
 from ..solvers.osqp_backend import OsqpBackend, OsqpSettings
 from ..types import (  # noqa: F401  (the rung names are re-exported here, their home for controllers)
     FALLBACK_BRAKE,
@@ -73,19 +81,23 @@ def check_ladder(ladder) -> tuple[str, ...]:
 class FallbackConfig:
     """The fallback ladder of a tracking MPC (see the module docstring).
 
-    ladder : rungs in order; brake_decel_mps2 : braking deceleration [m/s^2] (> 0);
+    ladder : rungs in order; brake_decel_mps2 : braking deceleration [m/s^2] (> 0; None: the
+    vehicle's full braking, the lower bound of the ``accel`` input, 1 m/s^2 if it has none);
     brake_steering : ``hold`` or ``straighten``; relax_slack_factor : how many times cheaper the
-    lane slack is in the relaxed problem (>= 1).
+    lane slack is in the relaxed problem (>= 1); check_plans : apply a planning rung only when its
+    predicted trajectory is collision-free and inside the road.
     """
 
     ladder: tuple[str, ...] = DEFAULT_LADDER
-    brake_decel_mps2: float = 1.0
+    brake_decel_mps2: float | None = None
     brake_steering: Literal["hold", "straighten"] = "hold"
     relax_slack_factor: float = 100.0
+    check_plans: bool = True
 
     def __post_init__(self):
         object.__setattr__(self, "ladder", check_ladder(self.ladder))
-        if not (isinstance(self.brake_decel_mps2, (int, float)) and math.isfinite(self.brake_decel_mps2)
+        if self.brake_decel_mps2 is not None and not (
+                isinstance(self.brake_decel_mps2, (int, float)) and math.isfinite(self.brake_decel_mps2)
                 and self.brake_decel_mps2 > 0):
             raise ValueError(f"brake_decel_mps2 must be a positive finite number, got {self.brake_decel_mps2!r}")
         if self.brake_steering not in ("hold", "straighten"):
@@ -127,10 +139,13 @@ class FallbackLadder:
     ``relax``, the linearization: :class:`~mpcdrive.control.mpc.StepData`).
     """
 
-    def __init__(self, controller, config: FallbackConfig, relax=None):
+    def __init__(self, controller, config: FallbackConfig, relax=None, *, footprint: Footprint = Footprint(),
+                 road_half_width_m: float | None = None):
         self.ctrl = controller
         self.config = config
         self._relax_fn = relax
+        self.footprint = footprint
+        self.road_half_width_m = road_half_width_m
         pb = controller.problem
         model = controller.model
         self._rate = pb.du_max_per_s * pb.dt_s  # (nu,) largest change per step
@@ -138,6 +153,10 @@ class FallbackLadder:
         self._iv = names_x.index("v") if "v" in names_x else None
         self._ia = names_u.index("accel") if "accel" in names_u else None
         self._is = names_u.index("steer") if "steer" in names_u else None
+        self.brake_decel_mps2 = config.brake_decel_mps2
+        if self.brake_decel_mps2 is None:
+            full = -float(pb.u_min[self._ia]) if self._ia is not None else math.nan
+            self.brake_decel_mps2 = full if math.isfinite(full) and full > 0 else 1.0
         self.relax_qp = self.relax_backend = None
         if FALLBACK_RELAX in config.ladder and relax is None:
             from ..ocp.qp import LtvQp  # scipy.sparse: imported when an OSQP controller is built
@@ -158,7 +177,7 @@ class FallbackLadder:
         u = u_prev.astype(float).copy()
         if self._iv is not None and self._ia is not None:
             v = float(x[self._iv])
-            a = min(self.config.brake_decel_mps2, abs(v) / dt)  # stop at standstill, not beyond
+            a = min(self.brake_decel_mps2, abs(v) / dt)  # stop at standstill, not beyond
             u[self._ia] = -math.copysign(a, v) if v != 0.0 else 0.0
         if self._is is not None and self.config.brake_steering == "straighten":
             u[self._is] = 0.0  # reached at the rate limit by _bound
@@ -217,6 +236,35 @@ class FallbackLadder:
         X = np.repeat(d.x[None, :], self.ctrl.N + 1, axis=0)
         return u, WarmStart(s_m=d.s_m, u_prev=u), X
 
+    def plan_is_safe(self, X: np.ndarray, t0_s: float) -> bool:
+        """True when the footprint along the predicted states ``X`` (K, nx) [x m, y m, yaw rad, ...]
+        (state k at time ``t0_s + k dt``) stays clear of every obstacle the controller avoids, at
+        the obstacle's predicted pose, and its corners inside the road (|lateral offset| <=
+        ``road_half_width_m`` from the path) when there is one."""
+        X = np.asarray(X, float)
+        if X.ndim != 2 or not np.all(np.isfinite(X[:, :3])):
+            return False
+        av = getattr(self.ctrl, "avoidance", None)
+        obstacles = list(av.obstacles) if av is not None else []
+        dt = self.ctrl.dt_s
+        corners = self.footprint.corners()
+        path = self.ctrl.path
+        s_m = None
+        for k, x in enumerate(X):
+            if obstacles:
+                body = self.footprint.polygon(float(x[0]), float(x[1]), float(x[2]))
+                t = t0_s + k * dt
+                if any(shape_distance(body, ob.at(t)) <= 0.0 for ob in obstacles):
+                    return False
+            if self.road_half_width_m is not None:
+                s_m, e_y = path.project(x[:2], s_guess=s_m)
+                # the corners' offsets from the centre, onto the path's left normal there
+                rel = float(x[2]) - float(path.heading(s_m))
+                lateral = e_y + corners[:, 0] * math.sin(rel) + corners[:, 1] * math.cos(rel)
+                if np.max(np.abs(lateral)) > self.road_half_width_m:
+                    return False
+        return True
+
     # -- the ladder -----------------------------------------------------------------------------
     def run(self, d, warm: WarmStart) -> tuple[np.ndarray, str, WarmStart, np.ndarray]:
         """(command (nu,), rung name, next warm start, predicted states (N+1, nx)) for step data
@@ -232,6 +280,10 @@ class FallbackLadder:
             got = rungs[name](d, warm)
             if got is not None:
                 u, new_warm, X_pred = got
-                if np.all(np.isfinite(u)):
-                    return u, name, new_warm, X_pred
+                if not np.all(np.isfinite(u)):
+                    continue
+                if (self.config.check_plans and name not in TERMINAL_FALLBACKS
+                        and not self.plan_is_safe(X_pred, warm.t_s)):
+                    continue  # this rung's plan collides or leaves the road: braking is safer
+                return u, name, new_warm, X_pred
         raise RuntimeError("internal error: the fallback ladder yielded no finite command")  # pragma: no cover

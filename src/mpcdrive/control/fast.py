@@ -1288,8 +1288,11 @@ class FastLtvMpc(TrackingWarmStart):
                 model, path, relaxed_problem(problem, config.fallback.relax_slack_factor),
                 replace(config, sqp_max_iterations=1, fallback=FallbackConfig((FALLBACK_HOLD,))),
                 replace(settings, max_iter=2 * settings.max_iter), obstacles, avoidance, footprint, lane_margin_m)
+        # its problem bounds the centre: the road is that bound plus the body's half width and margin
+        road = problem.lane_half_width_m + 0.5 * footprint.width_m + lane_margin_m if lane else None
         self.fallback = FallbackLadder(self, config.fallback,
-                                       relax=self._relax_step if self._relaxed is not None else None)
+                                       relax=self._relax_step if self._relaxed is not None else None,
+                                       footprint=footprint, road_half_width_m=road)
 
     def _warm_up(self) -> None:
         """One discarded step at the path start, so that loading (or, on a first run, compiling)

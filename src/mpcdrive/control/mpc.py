@@ -216,7 +216,8 @@ class LtvMpc(TrackingWarmStart):
         else:
             self._lane_lo = self._lane_hi = None
         self._du_step = problem.du_max_per_s * problem.dt_s  # (nu,) largest input change per step
-        self.fallback = FallbackLadder(self, config.fallback)
+        self.fallback = FallbackLadder(self, config.fallback, footprint=footprint,
+                                       road_half_width_m=problem.lane_half_width_m)
 
     # -- obstacles ----------------------------------------------------------------------------
     @property

@@ -291,7 +291,7 @@ class ControllerSpec(_Strict):
     delay_compensation: bool = False
     osqp_max_iter: Int = Field(4000, ge=1)
     fallback: list[FallbackName] = Field(default_factory=lambda: list(DEFAULT_LADDER))
-    brake_decel_mps2: Positive = 1.0
+    brake_decel_mps2: Positive | None = None  # None: the vehicle's full braking (accel_limits_mps2[0])
     brake_steering: Literal["hold", "straighten"] = "hold"
     relax_slack_factor: Annotated[float, Field(strict=True, ge=1, allow_inf_nan=False)] = 100.0
 
