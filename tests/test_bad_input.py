@@ -326,6 +326,25 @@ def test_obstacle_near_the_start_is_judged_on_the_real_shapes(tmp_path):
     assert len(load_scenario(p).obstacles) == 1
 
 
+def test_commonroad_obstacle_on_the_start_is_rejected():
+    pytest.importorskip("commonroad_dc")
+    from pathlib import Path
+
+    from mpcdrive.adapters.commonroad import load_commonroad
+    from mpcdrive.scenarios import reject_initial_overlap
+
+    f = Path(__file__).resolve().parent / "data" / "commonroad" / "ZAM_Tutorial-1_2_T-1.xml"
+    spec = load_commonroad(f).spec
+    init = spec.initial_state
+    parked = spec.obstacles[0].model_copy(update={"position": (init.x_m + 1.0, init.y_m), "velocity_mps": None,
+                                                  "trajectory": None})
+    bad = spec.model_copy(update={"obstacles": [*spec.obstacles, parked]})
+    with pytest.raises(ScenarioError) as e:
+        reject_initial_overlap(bad, str(f))
+    assert str(e.value).startswith(f"{f}: obstacles.{len(spec.obstacles)}: ") and "overlaps" in str(e.value)
+    assert reject_initial_overlap(spec, str(f)) is spec
+
+
 # (value that looks wrong, field named, words of the warning)
 WARNING_CASES = [
     ("speed far beyond the model", _set(["vehicle", "speed_mps"], 100.0), "vehicle.speed_mps", "far beyond"),

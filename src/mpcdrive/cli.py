@@ -174,11 +174,14 @@ def run(
     report.html (an interactive replay)."""
     extra = None
     if scenario.lower().endswith((".xml", ".xml.gz")):
-        from .scenarios import warn_suspicious
+        from .scenarios import reject_initial_overlap, warn_suspicious
 
         imported = _load_commonroad(scenario)
         spec, extra = imported.spec, imported.write_outputs
-        warn_suspicious(spec, scenario)
+        try:
+            warn_suspicious(reject_initial_overlap(spec, scenario), scenario)
+        except ScenarioError as e:
+            raise BadInput(str(e)) from None
     else:
         spec = _load(scenario)
     spec = _on_backend(spec, fast)

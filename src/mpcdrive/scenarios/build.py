@@ -154,10 +154,13 @@ def scenario_warnings(spec: ScenarioSpec) -> list[tuple[str, str]]:
 def _start_outside_lane(spec: ScenarioSpec) -> str | None:
     """Why the initial position lies outside the lane, or None (inside, or no lane)."""
     init = spec.initial_state
-    track = load_track(spec.path) if spec.path.type == "csv" else None
-    if spec.road is None and (track is None or not track.has_widths):
+    try:
+        track = load_track(spec.path) if spec.path.type == "csv" else None
+        if spec.road is None and (track is None or not track.has_widths):
+            return None
+        path = track.path if track is not None else build_path(spec.path)
+    except ValueError:  # a path that cannot be built: build_experiment says why
         return None
-    path = track.path if track is not None else build_path(spec.path)
     s, e_y = path.project(np.array([init.x_m, init.y_m], float))
     if spec.road is not None:
         right = left = spec.road.lane_width_m / 2.0

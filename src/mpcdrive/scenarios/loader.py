@@ -101,6 +101,12 @@ def validate_scenario_data(data, source: str) -> ScenarioSpec:
             msg = "required key missing"
         more = f" (and {len(e.errors()) - 1} more problem(s))" if len(e.errors()) > 1 else ""
         raise ScenarioError(source, loc or "(top level)", msg + more) from None
+    return reject_initial_overlap(spec, source)
+
+
+def reject_initial_overlap(spec: ScenarioSpec, source: str) -> ScenarioSpec:
+    """``spec``, or :class:`ScenarioError` naming ``obstacles.<i>`` when an obstacle overlaps the
+    car's footprint at the start (:func:`~mpcdrive.scenarios.build.initial_overlap`)."""
     from .build import initial_overlap
 
     overlap = initial_overlap(spec)
