@@ -5,6 +5,7 @@ Running this file as a script prints the table (class -> message) for the docs."
 
 import math
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -96,6 +97,12 @@ SCENARIO_CASES = [
     ("fallback: zero braking", _set(["controller", "brake_decel_mps2"], 0.0), "controller.brake_decel_mps2", "greater than 0"),
     ("plant: speed error on a speed-state model", _k4(["plant", "speed_mps"], 1.2), "", "only for the constant-speed model"),
     ("plant: negative axle distance", _set(["plant", "lr_m"], -0.1), "plant.lr_m", "greater than 0"),
+    ("obstacle on the start", _set(["obstacles"], [{"shape": "circle", "position": [3, 1], "radius_m": 0.1},
+                                                   {"shape": "circle", "position": [0.3, 0.1], "radius_m": 0.1}]),
+     "obstacles.1", "overlaps the car's footprint at the start"),
+    ("moving obstacle on the start", _set(["obstacles"], [{"shape": "rectangle", "position": [0.5, 0.0], "length_m": 0.6,
+                                                           "width_m": 0.3, "velocity_mps": [-1.0, 0.0]}]),
+     "obstacles.0", "overlaps the car's footprint at the start"),
     ("YAML: duplicate key", "id: t\nid: u\n", "line 2", "duplicate key 'id'"),
     ("YAML: malformed", "id: [unclosed\n", "line", "not valid YAML"),
     ("YAML: two documents", "id: t\n---\nid: u\n", "", "not valid YAML"),
@@ -307,6 +314,62 @@ def test_bad_sweep_option_from_the_cli_exits_2_with_one_line(tmp_path, capsys, m
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--vary initial_state.q" in err
     assert not (tmp_path / "o").exists()
+
+
+def test_obstacle_near_the_start_is_judged_on_the_real_shapes(tmp_path):
+    """A circle 0.12 m from the body's front-left corner (inside the body's bounding circle) is
+    clear of the footprint (0.5 m x 0.27 m at the origin): accepted."""
+    data = yaml.safe_load(yaml.safe_dump(BASE))
+    data["obstacles"] = [{"shape": "circle", "position": [0.35, 0.2], "radius_m": 0.1}]
+    p = tmp_path / "s.yaml"
+    p.write_text(yaml.safe_dump(data))
+    assert len(load_scenario(p).obstacles) == 1
+
+
+def test_commonroad_obstacle_on_the_start_is_rejected():
+    pytest.importorskip("commonroad_dc")
+    from pathlib import Path
+
+    from mpcdrive.adapters.commonroad import load_commonroad
+    from mpcdrive.scenarios import reject_initial_overlap
+
+    f = Path(__file__).resolve().parent / "data" / "commonroad" / "ZAM_Tutorial-1_2_T-1.xml"
+    spec = load_commonroad(f).spec
+    init = spec.initial_state
+    parked = spec.obstacles[0].model_copy(update={"position": (init.x_m + 1.0, init.y_m), "velocity_mps": None,
+                                                  "trajectory": None})
+    bad = spec.model_copy(update={"obstacles": [*spec.obstacles, parked]})
+    with pytest.raises(ScenarioError) as e:
+        reject_initial_overlap(bad, str(f))
+    assert str(e.value).startswith(f"{f}: obstacles.{len(spec.obstacles)}: ") and "overlaps" in str(e.value)
+    assert reject_initial_overlap(spec, str(f)) is spec
+
+
+# (value that looks wrong, field named, words of the warning)
+WARNING_CASES = [
+    ("speed far beyond the model", _set(["vehicle", "speed_mps"], 100.0), "vehicle.speed_mps", "far beyond"),
+    ("initial speed far beyond the model", _k4(["initial_state", "v_mps"], 60.0), "initial_state.v_mps", "far beyond"),
+    ("steering limit in radians", _set(["controller", "max_steer_deg"], 0.7), "controller.max_steer_deg",
+     "looks like radians"),
+    ("steering rate in radians", _set(["controller", "max_steer_rate_deg_s"], 1.5), "controller.max_steer_rate_deg_s",
+     "looks like radians"),
+    ("dt in milliseconds", lambda d: d.update(dt_s=10, duration_s=20.0), "dt_s", "looks like milliseconds"),
+    ("start outside the lane", lambda d: d.update(road={"lane_width_m": 1.0}, initial_state={"y_m": -0.8}),
+     "initial_state", "outside the lane"),
+]
+
+
+@pytest.mark.parametrize("cls, mutate, field, words", WARNING_CASES, ids=[c[0] for c in WARNING_CASES])
+def test_suspicious_values_warn_once_naming_the_field(tmp_path, cls, mutate, field, words):
+    from mpcdrive.types import ScenarioWarning
+
+    p = _write_case(tmp_path, mutate)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        load_scenario(p)
+    ours = [str(w.message) for w in caught if issubclass(w.category, ScenarioWarning)]
+    assert len(ours) == 1, ours
+    assert ours[0].startswith(f"{p}: {field}: ") and words in ours[0] and "\n" not in ours[0]
 
 
 def test_valid_edge_inputs_still_run():

@@ -173,3 +173,21 @@ def test_reproduce_fast_runs_every_selected_experiment_compiled(tmp_path):
     metrics = json.loads((out / "metrics.json").read_text())
     assert {m["controller_backend"] for m in metrics.values()} == {"fast"}
     assert (out / "gaussian_cost_map.png").stat().st_size > 1000
+
+
+def test_scenario_warning_is_one_line_on_stderr_and_the_run_goes_on(tmp_path):
+    p = tmp_path / "rad.yaml"
+    p.write_text(short_scenario(tmp_path).read_text().replace("R: [1]}", "R: [1], max_steer_deg: 0.7}"))
+    r = cli("run", str(p), "--out", str(tmp_path / "out"), "-q")
+    assert r.returncode == 0, r.stderr
+    lines = [ln for ln in r.stderr.splitlines() if "warning" in ln]
+    assert lines == [f"mpcdrive: warning: {p}: controller.max_steer_deg: 0.7 looks like radians "
+                     "(0.7 rad = 40.11 deg); this field is in degrees"], r.stderr
+    assert (tmp_path / "out" / "metrics.json").is_file()
+
+
+def test_run_summary_states_the_safety_outcome(tmp_path):
+    r = cli("run", str(short_scenario(tmp_path)), "--out", str(tmp_path / "out"), "-q")
+    assert r.returncode == 0, r.stderr
+    line = r.stdout.splitlines()[0]
+    assert line.startswith("short: inside the lane; no failed solves | 30 steps"), line

@@ -107,7 +107,7 @@ def _run_into(spec, out_dir: Path, show_progress: bool, source: str | None = Non
     from .plots import write_run_figures
     from .report import write_run_html
     from .scenarios import build_experiment, dump_scenario, run_experiment
-    from .sim import compute_metrics
+    from .sim import apply_goal_region, compute_metrics
 
     try:
         exp = build_experiment(spec)
@@ -122,6 +122,10 @@ def _run_into(spec, out_dir: Path, show_progress: bool, source: str | None = Non
     atomic_write_text(out_dir / "scenario.yaml", dump_scenario(spec))
     if extra_outputs is not None:
         metrics.update(extra_outputs(result, out_dir))
+        cr = metrics.get("commonroad")
+        if cr is not None:  # the goal is the planning problem's, the checker's verdicts count too
+            metrics = apply_goal_region(metrics, cr["goal_reached"], collision_free=cr["collision_free"],
+                                        road_compliant=cr["road_compliant"])
         write_json(out_dir / "metrics.json", metrics)
     figures = write_run_figures(result, out_dir)
     write_run_html(out_dir, result, metrics, figures, exp.footprint, run_id=spec.id,
@@ -153,11 +157,16 @@ def _default_out(stem: str) -> Path:
 
 
 def _summary_line(sid: str, m: dict) -> str:
+    """The run's safety verdict in words (``UNSAFE:`` first when it collided, left the road or
+    diverged), then its tracking figures."""
+    from .sim import run_verdict
+
     st = m["solve_time_us"]
+    v = run_verdict(m)
     return (
-        f"{sid}: {m['steps']} steps, rms |e_y| {m['rms_lateral_error_m']:.4g} m, final |e_y| "
-        f"{m['final_lateral_error_m']:.3g} m, max |steer| {m['max_abs_steer_rad']:.3f} rad, "
-        f"failures {m['solver_failures']}, fallbacks {m['fallbacks']}, step p50 {st['p50']:.0f} us"
+        f"{'UNSAFE: ' if v.unsafe else ''}{sid}: {'; '.join(v.findings)} | {m['steps']} steps, rms |e_y| "
+        f"{m['rms_lateral_error_m']:.4g} m, final |e_y| {m['final_lateral_error_m']:.3g} m, max |steer| "
+        f"{m['max_abs_steer_rad']:.3f} rad, step p50 {st['p50']:.0f} us"
     )
 
 
@@ -176,13 +185,21 @@ def run(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
     fast: bool = typer.Option(False, "--fast", help="run the controller on the compiled fast path "
                               "(controller.backend: fast; same commands as the OSQP reference)"),
+    check: bool = typer.Option(False, "--check", help="exit with code 3 when the run collided, left the "
+                               "road or missed its goal (outputs are still written)"),
 ) -> None:
     """Run one scenario; write trajectory.csv, metrics.json, figures, the resolved scenario and
     report.html (an interactive replay)."""
     extra = None
     if scenario.lower().endswith((".xml", ".xml.gz")):
+        from .scenarios import reject_initial_overlap, warn_suspicious
+
         imported = _load_commonroad(scenario)
         spec, extra = imported.spec, imported.write_outputs
+        try:
+            warn_suspicious(reject_initial_overlap(spec, scenario), scenario)
+        except ScenarioError as e:
+            raise BadInput(str(e)) from None
     else:
         spec = _load(scenario)
     spec = _on_backend(spec, fast)
@@ -191,6 +208,13 @@ def run(
         _, metrics, _, _ = _run_into(spec, tmp, not quiet, source=scenario, extra_outputs=extra)
     typer.echo(_summary_line(spec.id, metrics))
     typer.echo(f"wrote {out_dir}")
+    if check:
+        from .sim import run_verdict
+
+        problems = run_verdict(metrics).problems()
+        if problems:
+            typer.echo(f"mpcdrive: --check: {spec.id} failed: {', '.join(problems)}", err=True)
+            raise typer.Exit(3)
 
 
 @app.command()
@@ -538,8 +562,27 @@ def _log_to_stderr() -> None:
         log.propagate = False
 
 
+def _scenario_warnings_as_lines() -> None:
+    """Print each :class:`~mpcdrive.types.ScenarioWarning` as one line on stderr,
+    ``mpcdrive: warning: <file>: <field>: <problem>`` (other warnings as Python prints them)."""
+    import warnings
+
+    from .types import ScenarioWarning
+
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, ScenarioWarning):
+            typer.echo(f"mpcdrive: warning: {' '.join(str(message).split())}", err=True)
+        else:
+            shown(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = show
+
+
 def main() -> None:
-    """Console-script entry point with the exit codes of CONTRACT.md."""
+    """Console-script entry point. Exit codes: 0 done, 1 other failures, 2 bad input, 3 a
+    ``run --check`` that collided, left the road or missed its goal, 130 interrupted."""
     import signal
 
     def _terminated(signum, frame):  # SIGTERM cleans up like Ctrl-C: no partial output is kept
@@ -547,6 +590,7 @@ def main() -> None:
 
     signal.signal(signal.SIGTERM, _terminated)
     _log_to_stderr()
+    _scenario_warnings_as_lines()
     if len(sys.argv) == 1:  # a bare `mpcdrive` shows the help as it is, not folded into a usage error
         sys.argv.append("--help")
     try:

@@ -1,7 +1,8 @@
 """Scenario files (YAML, validated by pydantic) and the built-in experiments."""
 
 from .build import Experiment, build_experiment, run_experiment
-from .loader import ScenarioError, builtin_ids, dump_scenario, load_scenario, validate_scenario_data
+from .loader import (ScenarioError, builtin_ids, dump_scenario, load_scenario,
+                     reject_initial_overlap, validate_scenario_data, warn_suspicious)
 from .schema import ScenarioSpec
 
 __all__ = [
@@ -12,6 +13,8 @@ __all__ = [
     "builtin_ids",
     "dump_scenario",
     "load_scenario",
+    "reject_initial_overlap",
     "run_experiment",
     "validate_scenario_data",
+    "warn_suspicious",
 ]

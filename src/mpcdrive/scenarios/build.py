@@ -89,6 +89,90 @@ def build_obstacle(spec: ObstacleSpec) -> Obstacle:
         return Obstacle(shape, (x0, y0, yaw), motion, spec.name)
     motion = Static() if spec.velocity_mps is None else ConstantVelocity(*spec.velocity_mps)
     return Obstacle(shape, (spec.position[0], spec.position[1], yaw), motion, spec.name)
+def initial_overlap(spec: ScenarioSpec) -> tuple[str, str] | None:
+    """(field, problem) for the first obstacle that overlaps the car's footprint at t = 0 (the
+    body rectangle at the initial pose against the obstacle's shape at t = 0; touching is
+    allowed), else None. An obstacle that cannot be built is left to :func:`build_experiment`."""
+    from ..scene.geometry import shape_distance
+
+    v, init = spec.vehicle, spec.initial_state
+    body = Footprint(v.length_m, v.width_m, n_discs=v.footprint_discs).polygon(
+        init.x_m, init.y_m, math.radians(init.yaw_deg))
+    for i, o in enumerate(spec.obstacles):
+        try:
+            d = shape_distance(body, build_obstacle(o).at(0.0))
+        except ValueError:
+            continue
+        if d < 0.0:
+            return (f"obstacles.{i}", f"{o.shape} obstacle{f' {o.name!r}' if o.name else ''} overlaps the car's "
+                    f"footprint at the start (t = 0, {-d:.3g} m deep): move it or the initial state")
+    return None
+
+
+#: largest Froude-like speed ratio v / sqrt(g L) (L the wheelbase) a scenario runs without a
+#: warning: 15 is 77 m/s for a 2.7 m passenger car (beyond its top speed, ratio about 13) and
+#: 27 m/s for the 0.33 m 1:10 car (ratio 11 at 20 m/s); far beyond it no bicycle model here is
+#: valid (tyre forces, aerodynamics and the discretization all break down)
+MAX_FROUDE = 15.0
+#: a ``_deg`` limit below this many degrees looks like radians (pi / 2: a steering limit in rad)
+RADIAN_LIKE_DEG = math.pi / 2
+#: a control period of at least this many seconds looks like milliseconds
+MS_LIKE_DT_S = 1.0
+
+
+def scenario_warnings(spec: ScenarioSpec) -> list[tuple[str, str]]:
+    """(field, problem) for every legal but suspicious value: a speed far beyond what the model
+    is valid for (above ``MAX_FROUDE`` sqrt(g L), L = lf + lr), a ``_deg`` limit that looks like
+    radians (nonzero and below pi / 2), a ``dt_s`` that looks like milliseconds (>= 1 s), and an
+    initial position whose centre is outside the lane (``road``, else a track's road widths)."""
+    out = []
+    v, c = spec.vehicle, spec.controller
+    wheelbase = v.lf_m + v.lr_m
+    v_valid = MAX_FROUDE * math.sqrt(9.81 * wheelbase)
+    speeds = [("vehicle.speed_mps", v.speed_mps), ("plant.speed_mps", spec.plant.speed_mps),
+              ("initial_state.v_mps", spec.initial_state.v_mps),
+              ("controller.reference_speed_mps", c.reference_speed_mps),
+              ("controller.speed_profile.v_max_mps", None if c.speed_profile is None else c.speed_profile.v_max_mps)]
+    for field, speed in speeds:
+        if speed is not None and abs(speed) > v_valid:
+            out.append((field, f"{speed:g} m/s is far beyond what the model is valid for with a {wheelbase:.3g} m "
+                        f"wheelbase (above {v_valid:.3g} m/s = {MAX_FROUDE:g} sqrt(g L)): check the value and its units"))
+    for field, deg in (("controller.max_steer_deg", c.max_steer_deg),
+                       ("controller.max_steer_rate_deg_s", c.max_steer_rate_deg_s)):
+        if deg is not None and 0 < abs(deg) < RADIAN_LIKE_DEG:
+            out.append((field, f"{deg:g} looks like radians ({deg:g} rad = {math.degrees(deg):.4g} deg); "
+                        "this field is in degrees"))
+    if spec.dt_s >= MS_LIKE_DT_S:
+        out.append(("dt_s", f"a control period of {spec.dt_s:g} s looks like milliseconds "
+                    f"({spec.dt_s:g} ms = {spec.dt_s / 1000:g} s); dt_s is in seconds"))
+    lane = _start_outside_lane(spec)
+    if lane is not None:
+        out.append(("initial_state", lane))
+    return out
+
+
+def _start_outside_lane(spec: ScenarioSpec) -> str | None:
+    """Why the initial position lies outside the lane, or None (inside, or no lane)."""
+    init = spec.initial_state
+    try:
+        track = load_track(spec.path) if spec.path.type == "csv" else None
+        if spec.road is None and (track is None or not track.has_widths):
+            return None
+        path = track.path if track is not None else build_path(spec.path)
+    except ValueError:  # a path that cannot be built: build_experiment says why
+        return None
+    s, e_y = path.project(np.array([init.x_m, init.y_m], float))
+    if spec.road is not None:
+        right = left = spec.road.lane_width_m / 2.0
+    else:
+        right, left = (float(w) for w in track.widths_at(s))
+    if -right <= e_y <= left:
+        return None
+    side, width = ("left", left) if e_y > 0 else ("right", right)
+    return (f"the car starts {abs(e_y):.3g} m {side} of the path, outside the lane ({width:.3g} m to its "
+            f"{side} edge)")
+
+
 def dynamic_params(v, scale=None) -> DynamicParams:
     """Dynamic-bicycle parameters of a vehicle spec, optionally scaled (plant.param_scale)."""
     p = DynamicParams(

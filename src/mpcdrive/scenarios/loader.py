@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import warnings
 from importlib import resources
 from pathlib import Path
 
@@ -89,7 +90,7 @@ def validate_scenario_data(data, source: str) -> ScenarioSpec:
     if not isinstance(data, dict):
         raise ScenarioError(source, "", "a scenario file must be a YAML mapping of keys to values")
     try:
-        return ScenarioSpec.model_validate(data)
+        spec = ScenarioSpec.model_validate(data)
     except ValidationError as e:
         err = e.errors()[0]
         loc = ".".join(str(p) for p in err["loc"] if not (isinstance(p, str) and p in ("straight", "circle", "waypoints", "csv")))
@@ -100,6 +101,30 @@ def validate_scenario_data(data, source: str) -> ScenarioSpec:
             msg = "required key missing"
         more = f" (and {len(e.errors()) - 1} more problem(s))" if len(e.errors()) > 1 else ""
         raise ScenarioError(source, loc or "(top level)", msg + more) from None
+    return reject_initial_overlap(spec, source)
+
+
+def reject_initial_overlap(spec: ScenarioSpec, source: str) -> ScenarioSpec:
+    """``spec``, or :class:`ScenarioError` naming ``obstacles.<i>`` when an obstacle overlaps the
+    car's footprint at the start (:func:`~mpcdrive.scenarios.build.initial_overlap`)."""
+    from .build import initial_overlap
+
+    overlap = initial_overlap(spec)
+    if overlap is not None:
+        raise ScenarioError(source, *overlap)
+    return spec
+
+
+def warn_suspicious(spec: ScenarioSpec, source: str) -> ScenarioSpec:
+    """Warn (:class:`~mpcdrive.types.ScenarioWarning`, one ``source: field: problem`` message
+    each) about every legal but suspicious value of ``spec`` (see
+    :func:`~mpcdrive.scenarios.build.scenario_warnings`); returns ``spec``."""
+    from ..types import ScenarioWarning
+    from .build import scenario_warnings
+
+    for field, problem in scenario_warnings(spec):
+        warnings.warn(str(ScenarioError(source, field, problem)), ScenarioWarning, stacklevel=2)
+    return spec
 
 
 def _resolve_track_file(spec: ScenarioSpec, source: str, base_dir: Path | None) -> ScenarioSpec:
@@ -129,13 +154,16 @@ def load_scenario(name_or_path: str | Path) -> ScenarioSpec:
 
     A CSV track ``path.file`` is a packaged track name or a path relative to the scenario file;
     the returned spec holds it as an absolute path. Raises :class:`ScenarioError` (one-line
-    message: file, field, problem) on bad input.
+    message: file, field, problem) on bad input (also an obstacle overlapping the car at the
+    start); warns with :class:`~mpcdrive.types.ScenarioWarning` about suspicious values
+    (:func:`warn_suspicious`).
     """
     name = str(name_or_path)
     if name in builtin_ids():
         path = _builtin_dir() / f"{name}.yaml"
         source = f"builtin:{name}"
-        return _resolve_track_file(_parse(path.read_text(encoding="utf-8"), source), source, None)
+        return warn_suspicious(_resolve_track_file(_parse(path.read_text(encoding="utf-8"), source), source, None),
+                               source)
     p = Path(name)
     if p.suffix.lower() not in (".yaml", ".yml"):
         if not p.exists():
@@ -147,7 +175,7 @@ def load_scenario(name_or_path: str | Path) -> ScenarioSpec:
         raise ScenarioError(name, "", "file not found") from None
     except (OSError, UnicodeDecodeError) as e:
         raise ScenarioError(name, "", f"cannot read file ({e})") from None
-    return _resolve_track_file(_parse(text, name), name, p.resolve().parent)
+    return warn_suspicious(_resolve_track_file(_parse(text, name), name, p.resolve().parent), name)
 
 
 def dump_scenario(spec: ScenarioSpec) -> str:

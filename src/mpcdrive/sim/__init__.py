@@ -2,7 +2,9 @@
 
 from .actuator import ActuatorState, SteeringActuator
 from .closed_loop import Disturbance, Plant, simulate
-from .metrics import Footprint, compute_metrics, lane_excess_per_step
+from .metrics import LANE_TOLERANCE_M, Footprint, apply_goal_region, compute_metrics, goal_met, lane_excess_per_step
+from .verdict import RunVerdict, run_verdict
 
-__all__ = ["ActuatorState", "SteeringActuator", "Disturbance", "Footprint", "Plant", "compute_metrics",
-           "lane_excess_per_step", "simulate"]
+__all__ = ["ActuatorState", "SteeringActuator", "Disturbance", "Footprint", "LANE_TOLERANCE_M", "Plant",
+           "RunVerdict", "apply_goal_region", "compute_metrics", "goal_met", "lane_excess_per_step", "run_verdict",
+           "simulate"]

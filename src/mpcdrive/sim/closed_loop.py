@@ -155,8 +155,9 @@ def simulate(
     path's end (``stop_at_path_end``), and ``goal_reached`` says whether it did.
     ``progress(k, steps)`` is called every step when given. With ``obstacles`` the clearance
     between the vehicle ``footprint`` and every obstacle is measured at each step
-    (``SimResult.clearance_m``; negative = overlap) and the obstacles' poses are logged in
-    ``meta["obstacles"]``.
+    (``SimResult.clearance_m``; negative = overlap), the obstacles' poses are logged in
+    ``meta["obstacles"]``, the number of contacts in ``meta["collisions"]`` and each contact
+    (which obstacle, when, how deep) in ``meta["collision_events"]`` (:func:`collision_events`).
     On a closed path, ``laps`` ends the
     run once the vehicle has driven that many laps from its start (``goal_reached`` says whether
     it did within ``steps``). ``abort_lateral_error_m`` ends the run early when the lateral error
@@ -257,10 +258,12 @@ def simulate(
     meta = dict(meta or {})
     clearance = None
     if obstacles:
-        clearance, meta["obstacles"] = _clearances(Xs[sl], T[sl], obstacles, footprint)
+        per_obstacle, meta["obstacles"] = _clearances(Xs[sl], T[sl], obstacles, footprint)
+        clearance = per_obstacle.min(axis=0)
         meta["min_obstacle_clearance_m"] = float(clearance.min())
         hit = clearance < 0.0
         meta["collisions"] = int(np.count_nonzero(hit[1:] & ~hit[:-1]) + (1 if hit[0] else 0))
+        meta["collision_events"] = collision_events(per_obstacle, T[sl], obstacles)
     v = model.speed(Xs[sl])
     steer = Us[sl, 0]
     accel = Us[sl, list(model.input_names).index("accel")] if "accel" in model.input_names else np.zeros(k_end)
@@ -292,17 +295,34 @@ def simulate(
     )
 
 
+def collision_events(clearance_m: np.ndarray, t_s: np.ndarray, obstacles) -> list[dict]:
+    """One event per contact of the footprint with an obstacle, in time order: ``obstacle``
+    (index in the scenario's list), ``name``, ``step`` and ``t_s`` [s] of the first overlapping
+    step, ``steps`` in contact and ``depth_m`` (deepest penetration [m], > 0).
+
+    ``clearance_m`` : (n_obstacles, K) footprint-to-obstacle signed distances [m] (negative =
+    overlap). A contact starts at a step with overlap after one without (or at step 0)."""
+    events = []
+    for i, d in enumerate(clearance_m):
+        hit = d < 0.0
+        starts = np.flatnonzero(hit & ~np.r_[False, hit[:-1]])
+        ends = np.flatnonzero(hit & ~np.r_[hit[1:], False]) + 1
+        for a, b in zip(starts, ends):
+            events.append({"obstacle": i, "name": obstacles[i].name, "step": int(a), "t_s": float(t_s[a]),
+                           "steps": int(b - a), "depth_m": float(-d[a:b].min())})
+    return sorted(events, key=lambda e: (e["step"], e["obstacle"]))
+
+
 def _clearances(X: np.ndarray, T: np.ndarray, obstacles, footprint: Footprint):
-    """(K,) smallest footprint-to-obstacle signed distance per step [m], and the obstacles'
-    logged shapes and poses (for reports)."""
+    """(n_obstacles, K) footprint-to-obstacle signed distance per obstacle and step [m], and the
+    obstacles' logged shapes and poses (for reports)."""
     K = len(T)
-    clear = np.full(K, np.inf)
+    clear = np.full((len(obstacles), K), np.inf)
     logs = []
-    for ob in obstacles:
+    for i, ob in enumerate(obstacles):
         poses = np.array([ob.pose_at(t) for t in T])
         for k in range(K):
-            d = shape_distance(footprint.polygon(*X[k, :3]), ob.at(T[k]))
-            clear[k] = min(clear[k], d)
+            clear[i, k] = shape_distance(footprint.polygon(*X[k, :3]), ob.at(T[k]))
         entry = {"name": ob.name, "moving": ob.moving}
         if isinstance(ob.shape, Circle):
             centers = poses[:, :2].round(4)

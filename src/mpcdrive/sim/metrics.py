@@ -1,4 +1,4 @@
-"""Run metrics (CONTRACT.md's metrics.json), computed from a SimResult only."""
+"""Run metrics (``metrics.json``), computed from a SimResult only."""
 
 from __future__ import annotations
 
@@ -29,17 +29,52 @@ def _lane_excess(result: SimResult, footprint: Footprint) -> float:
     return 0.0 if e is None or e.size == 0 else float(np.max(e))
 
 
+#: lane excess [m] up to which a run still counts as inside the lane (the goal definition, the
+#: run verdict): the excess is measured on the projection onto the path's polyline table, whose
+#: chord error kappa ds^2 / 8 stays below a millimetre for the tables' spacing (<= 0.1 m) on
+#: curves down to 1.25 m radius; anything beyond is a real excursion
+LANE_TOLERANCE_M = 1e-3
+
+
+def goal_met(region_reached: bool | None, max_lane_excess_m: float, collisions: int) -> bool | None:
+    """The one definition of ``goal_reached``: the goal region was reached (``region_reached``)
+    AND the body stayed inside the lane (largest excess <= :data:`LANE_TOLERANCE_M`) AND there
+    was no collision. None when the run has no goal (``region_reached`` None: a closed path
+    without ``laps``, or a run that does not stop at the path's end)."""
+    if region_reached is None:
+        return None
+    return bool(region_reached) and max_lane_excess_m <= LANE_TOLERANCE_M and int(collisions) == 0
+
+
+def apply_goal_region(metrics: dict, region_reached: bool, *, collision_free: bool = True,
+                      road_compliant: bool = True) -> dict:
+    """``metrics`` with the goal judged on another goal region (a CommonRoad planning problem's):
+    ``goal_region_reached`` becomes ``region_reached`` and ``goal_reached`` follows
+    :func:`goal_met`, also requiring an external checker's ``collision_free`` and
+    ``road_compliant`` verdicts (the drivability checker's for CommonRoad)."""
+    met = goal_met(region_reached, metrics["max_lane_excess_m"], metrics["collisions"])
+    return {**metrics, "goal_region_reached": bool(region_reached),
+            "goal_reached": bool(met and collision_free and road_compliant)}
+
+
 def _rms(a) -> float:
     a = np.asarray(a, float)
     return float(np.sqrt(np.mean(a * a))) if a.size else float("nan")
 
 
 def compute_metrics(result: SimResult, footprint: Footprint = Footprint()) -> dict:
-    """Metrics of one run; keys as in CONTRACT.md plus ``converged_*`` (second half of the run),
+    """Metrics of one run (the keys of ``metrics.json``): tracking, steering, obstacle and lane figures plus ``converged_*`` (second half of the run),
     ``steer_total_variation_rad`` (sum of |steering changes|, for the smoothing study),
     ``fallback_counts`` (steps per fallback rung, every rung listed), ``termination`` (why the
     run ended: ``completed``, ``goal_reached`` or ``diverged``) and ``controller_backend`` (the
     MPC implementation that ran, ``osqp`` or ``fast``, from ``meta["backend"]``; None if absent).
+
+    Safety: ``collisions`` (contacts with obstacles), ``collision_events`` (each contact:
+    ``obstacle`` index, ``name``, ``step``, ``t_s``, ``steps``, ``depth_m``; ``[]`` without one),
+    ``first_collision`` (the first event or None), ``lane_half_width_m`` (None: no lane was
+    given), ``max_lane_excess_m``. ``goal_region_reached`` is the raw test (the run reached the
+    end of an open path or its laps; ``SimResult.goal_reached``), ``goal_reached`` the
+    definition of :func:`goal_met`: region reached, inside the lane and without collision.
 
     Steering rates include the first step's change from the initial steering angle
     (``meta["initial_steer_rad"]``, 0 by default: the wheels start straight)."""
@@ -52,6 +87,9 @@ def compute_metrics(result: SimResult, footprint: Footprint = Footprint()) -> di
     rate = np.diff(steer0) / result.dt_s
     st = result.solve_time_s * 1e6
     failures = sum(1 for s in result.status if s not in (STATUS_OK, STATUS_INACCURATE))
+    collisions = int(result.meta.get("collisions", 0))
+    events = [dict(e) for e in result.meta.get("collision_events", ())]
+    lane_excess = _lane_excess(result, footprint)
     return {
         "steps": int(K),
         "duration_s": float(K * result.dt_s),
@@ -65,8 +103,11 @@ def compute_metrics(result: SimResult, footprint: Footprint = Footprint()) -> di
         "max_abs_steer_rate_rad_s": float(np.max(np.abs(rate))),
         "steer_total_variation_rad": float(np.sum(np.abs(np.diff(steer0)))),
         "min_obstacle_clearance_m": result.meta.get("min_obstacle_clearance_m"),
-        "collisions": int(result.meta.get("collisions", 0)),
-        "max_lane_excess_m": _lane_excess(result, footprint),
+        "collisions": collisions,
+        "collision_events": events,
+        "first_collision": events[0] if events else None,
+        "lane_half_width_m": result.lane_half_width_m,
+        "max_lane_excess_m": lane_excess,
         "solver_failures": int(failures),
         "fallbacks": int(sum(1 for f in result.fallback if f)),
         "fallback_counts": _fallback_counts(result.fallback),
@@ -75,7 +116,8 @@ def compute_metrics(result: SimResult, footprint: Footprint = Footprint()) -> di
             "p99": float(np.percentile(st, 99)),
             "max": float(np.max(st)),
         },
-        "goal_reached": result.goal_reached,
+        "goal_region_reached": result.goal_reached,
+        "goal_reached": goal_met(result.goal_reached, lane_excess, collisions),
         "termination": result.meta.get("termination", "completed"),
         # the controller implementation that ran (osqp or fast; None when not recorded)
         "controller_backend": result.meta.get("backend") or None,

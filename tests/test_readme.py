@@ -1,0 +1,138 @@
+"""The README is a contract: every command, flag, snippet and scenario key it shows works.
+
+The two set-up commands of its first block are run verbatim by CI (``.ci/run``); here: the
+commands table against each command's ``--help``, every other shell example and Python snippet
+run (with the step counts of ``SMALLER`` where the README's own would take minutes), the
+scenario-file YAML validated, and every key a built-in scenario uses shown in the README."""
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from mpcdrive.scenarios import builtin_ids
+
+ROOT = Path(__file__).resolve().parents[1]
+README = (ROOT / "README.md").read_text(encoding="utf-8")
+
+#: README text -> what the test runs instead (fewer runs / steps); each must occur in the README
+SMALLER = {
+    "--runs 200": "--runs 2",
+    "steps=300": "steps=20",
+}
+
+
+def blocks(lang: str) -> list[str]:
+    return re.findall(rf"^```{lang}\n(.*?)^```", README, re.S | re.M)
+
+
+def _commands_table() -> list[str]:
+    return re.findall(r"^\| `(mpcdrive [^`]+)` \|", README, re.M)
+
+
+def _help(cmd: str) -> str:
+    r = subprocess.run([sys.executable, "-m", "mpcdrive.cli", cmd, "--help"], capture_output=True, text=True)
+    assert r.returncode == 0, f"mpcdrive {cmd} --help: {r.stderr}"
+    return r.stdout
+
+
+def test_first_block_is_the_two_set_up_commands():
+    first = blocks("bash")[0].strip().splitlines()
+    assert len(first) == 2
+    assert "pip install -e ." in first[0] and first[0].endswith("mpcdrive reproduce")
+    assert "pytest" in first[1]
+    assert README.startswith("```bash\n"), "the set-up commands come first"
+
+
+def test_every_substitution_still_matches_the_readme():
+    for text in SMALLER:
+        assert text in README, f"{text!r} no longer in the README: update SMALLER"
+
+
+@pytest.mark.parametrize("usage", _commands_table())
+def test_commands_table_matches_the_help(usage):
+    words = usage.split()
+    cmd = words[1]
+    text = _help(cmd)
+    flags = set(re.findall(r"--[a-z][a-z-]*", usage))
+    missing = [f for f in sorted(flags) if not re.search(rf"(?<![\w-]){re.escape(f)}(?![\w-])", text)]
+    assert not missing, f"README shows {missing} for 'mpcdrive {cmd}', its --help does not"
+    for token in re.findall(r"(--[a-z-]+) [A-Z_]+ \.\.\.", usage):
+        pytest.fail(f"README shows '{token} X ...' (several values after one flag); the flag takes one: "
+                    f"write '{token} X [{token} Y ...]'")
+
+
+def test_commands_table_lists_every_command():
+    r = subprocess.run([sys.executable, "-m", "mpcdrive.cli", "--help"], capture_output=True, text=True)
+    listed = {u.split()[1] for u in _commands_table()}
+    commands = set(re.findall(r"^  ([a-z][a-z-]+)\s{2,}", r.stdout.split("Commands:")[1], re.M))
+    assert commands and commands <= listed, f"not in the README's table: {sorted(commands - listed)}"
+
+
+def _shell_examples() -> list[str]:
+    out = []
+    for block in blocks("bash")[1:]:
+        text = block.replace("\\\n", " ")
+        out += [line.strip() for line in text.splitlines() if line.strip().startswith("mpcdrive ")]
+    return out
+
+
+@pytest.mark.parametrize("line", _shell_examples())
+def test_shell_examples_run(line, tmp_path):
+    for a, b in SMALLER.items():
+        line = line.replace(a, b)
+    args = [a.strip("'") for a in re.findall(r"'[^']*'|\S+", line)][1:]
+    if "--out" not in args:
+        args += ["--out", str(tmp_path / "out")]
+    r = subprocess.run([sys.executable, "-m", "mpcdrive.cli", *args], capture_output=True, text=True, cwd=tmp_path)
+    assert r.returncode == 0, f"{line}\n{r.stderr}"
+
+
+@pytest.mark.parametrize("index", range(len(blocks("python"))))
+def test_python_snippets_run(index, tmp_path):
+    code = blocks("python")[index]
+    for a, b in SMALLER.items():
+        code = code.replace(a, b)
+    if "highway_env" in code:
+        pytest.importorskip("highway_env")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path,
+                       env={**__import__("os").environ, "SDL_VIDEODRIVER": "dummy"})
+    assert r.returncode == 0, r.stderr
+    assert "DeprecationWarning" not in r.stderr and "is out of date" not in r.stderr, r.stderr
+
+
+def test_scenario_file_examples_validate(tmp_path):
+    """Every YAML block is a complete scenario file a user can copy: it validates."""
+    from mpcdrive.scenarios import load_scenario
+
+    docs = blocks("yaml")
+    assert docs, "the README shows no scenario file"
+    for i, text in enumerate(docs):
+        p = tmp_path / f"readme-{i}.yaml"
+        p.write_text(text)
+        load_scenario(p)  # raises with the file, field and problem on drift
+
+
+def _keys(d, prefix=""):
+    for k, v in d.items():
+        yield prefix + k
+        if isinstance(v, dict):
+            yield from _keys(v, prefix + k + ".")
+
+
+def test_every_key_of_the_built_in_scenarios_is_shown():
+    from mpcdrive.scenarios.loader import _builtin_dir
+
+    shown = set(re.findall(r"\b([A-Za-z_][A-Za-z0-9_]*)\b", "\n".join(blocks("yaml"))))
+    shown |= set(re.findall(r"`([a-z_][a-z0-9_.]*)`", README))
+    missing = set()
+    for sid in builtin_ids():
+        data = yaml.safe_load((_builtin_dir() / f"{sid}.yaml").read_text())
+        for key in _keys(data):
+            leaf = key.rsplit(".", 1)[-1]
+            if leaf not in shown and key not in shown:
+                missing.add(key)
+    assert not missing, f"built-in scenarios use keys the README never shows: {sorted(missing)}"
