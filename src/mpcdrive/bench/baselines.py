@@ -5,7 +5,10 @@
 * ``casadi_ipopt``: CasADi Opti + IPOPT on the nonlinear model (RK4 of the same equations),
   the problem built once with parameters and warm-started each step; with a Gaussian or
   potential obstacle cost and a lane, the same non-convex cost and the same soft lane bound, so
-  it is also the reference NLP the SQP is checked against.
+  it is also the reference NLP the SQP is checked against. With hard avoidance (P4) it gets the
+  same obstacle rows as the QP: each step's half-planes ``a . (x_k, y_k, yaw_k) + sigma_k >= b``
+  on the footprint discs, linearized along the linearization trajectory by ``ocp.avoidance``,
+  with the QP's slack ``sigma_k >= 0`` per predicted step and the same slack weights.
 
 Both reuse :meth:`LtvMpc.prepare` so references and linearization are identical to ours and only
 the problem building and solving differ. Optional: needs the ``bench`` extra.
@@ -20,6 +23,10 @@ import numpy as np
 
 from ..types import STATUS_FAILED, STATUS_OK, SolveResult
 from .problems import BenchProblem
+
+
+#: right-hand side standing in for an unused obstacle row (its a is 0, so 0 >= this holds)
+_UNUSED_ROW_B = -1e9
 
 
 class CvxpyRebuildMpc:
@@ -133,6 +140,17 @@ class CasadiIpoptMpc:
                 opti.subject_to(e <= core._lane_hi[k] + eps[k])
                 opti.subject_to(e >= core._lane_lo[k] - eps[k])
                 cost += pb.lane_slack_weight * eps[k] ** 2 + pb.lane_slack_weight_l1 * eps[k]
+        # hard avoidance: the QP's linearized half-plane rows, one slack per predicted step
+        self.rows_a = self.rows_b = None
+        if core.problem.obstacle_rows:
+            M = core.problem.obstacle_rows
+            sig = opti.variable(N)
+            self.rows_a = [opti.parameter(M, 3) for _ in range(N)]
+            self.rows_b = opti.parameter(M, N)
+            opti.subject_to(sig >= 0)
+            for k in range(N):
+                opti.subject_to(ca.mtimes(self.rows_a[k], X[:3, k + 1]) + sig[k] >= self.rows_b[:, k])
+                cost += pb.obstacle_slack_weight * sig[k] ** 2 + pb.obstacle_slack_weight_l1 * sig[k]
         # non-convex obstacle cost on the predicted centre of gravity
         self.obs_c = []
         av = core.avoidance
@@ -167,6 +185,11 @@ class CasadiIpoptMpc:
         if self.lane_n is not None:
             opti.set_value(self.lane_n, d.lane_normal.T)
             opti.set_value(self.lane_b, d.lane_offset)
+        if self.rows_a is not None:
+            for k, a in enumerate(self.rows_a):
+                opti.set_value(a, d.rows_a[k])
+            # an unused row (b = -inf) as a row that always holds
+            opti.set_value(self.rows_b, np.where(np.isfinite(d.rows_b), d.rows_b, _UNUSED_ROW_B).T)
         for ob, c in self.obs_c:
             opti.set_value(c, np.array([ob.pose_at(warm.t_s + (k + 1) * self.core.dt_s)[:2] for k in range(self.N)]).T)
         opti.set_initial(self.X, np.vstack([d.Xbar, d.Fbar[-1:]]).T)
