@@ -109,3 +109,26 @@ def test_casadi_baseline_gets_the_same_obstacle_rows():
     assert base.rows_b.shape == (base.core.problem.obstacle_rows, prob.problem.N)
     rec = time_closed_loop(base, prob, 3)
     assert rec["solver_failures"] == 0 and rec["collision_steps"] == 0
+
+
+def test_casadi_baseline_plans_within_the_steering_rate_limit():
+    """P4 is the first problem with an input-rate limit: the NLP must keep it as the QP does (a
+    plan that ignores it is not what the car can do once the command is clipped)."""
+    pytest.importorskip("casadi")
+    from mpcdrive.bench.baselines import CasadiIpoptMpc
+
+    prob = p4()
+    base = CasadiIpoptMpc(prob)
+    dmax = prob.problem.du_max_per_s[0] * prob.dt_s
+    plant = Plant(prob.model)
+    x = prob.x0.copy()
+    warm = base.initial_warm(x)
+    worst = 0.0
+    for _ in range(70):  # into the lane change around the slower car
+        u_prev = warm.u_prev[0]
+        out = base.step(x, warm)
+        warm = out.warm
+        worst = max(worst, float(np.max(np.abs(np.diff(np.concatenate([[u_prev], warm.U[:, 0]]))))))
+        x = plant.step(x, out.u, prob.dt_s)
+    assert worst > 0.5 * dmax  # the limit is reached ...
+    assert worst <= dmax + 1e-4  # ... and kept, to IPOPT's constraint tolerance (constr_viol_tol)

@@ -1,9 +1,11 @@
 """What people use today, on the same closed loop as mpcdrive (``mpcdrive bench --baselines``).
 
 * ``cvxpy_rebuild``: the PythonRobotics style -- the QP is written in cvxpy and rebuilt from
-  scratch every step (same references, linearization and constraints as mpcdrive's QP).
+  scratch every step (same references, linearization and constraints as mpcdrive's QP: input
+  and state bounds, input rates).
 * ``casadi_ipopt``: CasADi Opti + IPOPT on the nonlinear model (RK4 of the same equations),
-  the problem built once with parameters and warm-started each step; with a Gaussian or
+  the problem built once with parameters and warm-started each step, with the QP's input and
+  state bounds and input-rate limits; with a Gaussian or
   potential obstacle cost and a lane, the same non-convex cost and the same soft lane bound, so
   it is also the reference NLP the SQP is checked against. With hard avoidance (P4) it gets the
   same obstacle rows as the QP: each step's half-planes ``a . (x_k, y_k, yaw_k) + sigma_k >= b``
@@ -51,6 +53,7 @@ class CvxpyRebuildMpc:
         X = cp.Variable((N + 1, nx))
         U = cp.Variable((N, nu))
         cost = 0
+        dmax = pb.du_max_per_s * pb.dt_s  # largest input change per step
         cons = [X[0] == d.x]
         for k in range(N):
             cons.append(X[k + 1] == d.Ad[k] @ X[k] + d.Bd[k] @ U[k] + d.c[k])
@@ -61,6 +64,8 @@ class CvxpyRebuildMpc:
             W = pb.QN if k == N - 1 else pb.Q
             cost += cp.quad_form(X[k + 1] - d.xref[k + 1], W)
             for i in range(nu):
+                if np.isfinite(dmax[i]):  # the input-rate rows
+                    cons.append(cp.abs(U[k, i] - prev[i]) <= dmax[i])
                 if np.isfinite(pb.u_min[i]):
                     cons.append(U[k, i] >= pb.u_min[i])
                 if np.isfinite(pb.u_max[i]):
@@ -110,10 +115,14 @@ class CasadiIpoptMpc:
         uref = opti.parameter(nu, N)
         uprev = opti.parameter(nu)
         cost = 0
+        dmax = pb.du_max_per_s * dt  # largest input change per step
         opti.subject_to(X[:, 0] == x0)
         for k in range(N):
             opti.subject_to(X[:, k + 1] == F(X[:, k], U[:, k]))
             du = U[:, k] - (uprev if k == 0 else U[:, k - 1])
+            for i in range(nu):  # the QP's input-rate rows
+                if np.isfinite(dmax[i]):
+                    opti.subject_to(opti.bounded(-dmax[i], du[i], dmax[i]))
             eu = U[:, k] - uref[:, k]
             ex = X[:, k + 1] - xref[:, k + 1]
             W = pb.QN if k == N - 1 else pb.Q
