@@ -132,3 +132,18 @@ def test_casadi_baseline_plans_within_the_steering_rate_limit():
         x = plant.step(x, out.u, prob.dt_s)
     assert worst > 0.5 * dmax  # the limit is reached ...
     assert worst <= dmax + 1e-4  # ... and kept, to IPOPT's constraint tolerance (constr_viol_tol)
+
+
+def test_the_documented_p4_traffic_is_the_one_built():
+    """docs/benchmarks.md lists P4's cars; they must be those p4_traffic draws (to the rounding
+    of the printed figures: half a unit of the last digit)."""
+    import re
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "benchmarks.md").read_text()
+    rows = re.findall(r"^\| (lead|right\d|left\d|ego-lane\d) \| ([-\d.]+) \| ([-\d.]+) \| ([-\d.]+) \|$", text, re.M)
+    built = {ob.name: (ob.pose[0], ob.pose[1], ob.motion.vx_mps) for ob in p4_traffic()}
+    assert {r[0] for r in rows} == set(built) and len(rows) == len(built)
+    for name, x, y, v in rows:
+        bx, by, bv = built[name]
+        assert abs(float(x) - bx) <= 0.05 and abs(float(y) - by) <= 0.05 and abs(float(v) - bv) <= 0.005
