@@ -371,16 +371,20 @@ def _gaussian_cost_map(specs, path: Path):
 
 @app.command()
 def bench(
-    problem: list[str] | None = typer.Option(None, "--problem", help="P1, P2 (repeatable; default all)"),
-    baselines: bool = typer.Option(False, "--baselines", help="also time the cvxpy rebuild and CasADi+IPOPT baselines"),
+    problem: list[str] | None = typer.Option(None, "--problem", help="P1 line, P2 circle with speed, P3 obstacle cost, "
+                                       "P4 three-lane traffic (repeatable; default all)"),
+    baselines: bool = typer.Option(False, "--baselines", help="also time the cvxpy rebuild and CasADi+IPOPT baselines "
+                                   "(cvxpy only without obstacles)"),
     json_file: Path | None = typer.Option(None, "--json", help="write the results as JSON"),
-    steps: int = typer.Option(1000, "--steps", min=20, help="closed-loop steps per problem"),
-    baseline_steps: int = typer.Option(200, "--baseline-steps", min=20, help="closed-loop steps for the slow baselines"),
+    steps: int = typer.Option(1000, "--steps", min=20, help="closed-loop steps per problem (P4: at most its 300)"),
+    baseline_steps: int = typer.Option(200, "--baseline-steps", min=20, help="closed-loop steps for the slow baselines "
+                                       "(P4: at most its 300)"),
     report: Path | None = typer.Option(None, "--report", help="also measure per-step time against the horizon "
                                        "(P1, N = 10..100) and the obstacle count (P3, 0..20 obstacles), cold start "
                                        "and memory; write DIR/bench.md, figures and JSON"),
 ) -> None:
-    """Per-step latency of the PERF.md benchmark problems (median, p99, max; warm-up excluded)."""
+    """Per-step latency of the benchmark problems P1-P4 of docs/benchmarks.md (median, p99, max;
+    warm-up excluded), with collisions and clearance where there are obstacles."""
     from .bench import PROBLEMS, format_table, run_bench
     from .io import write_json
 

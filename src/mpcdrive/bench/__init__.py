@@ -1,4 +1,4 @@
-"""``mpcdrive bench``: per-step latency on the PERF.md benchmark problems."""
+"""``mpcdrive bench``: per-step latency on the benchmark problems P1-P4 (docs/benchmarks.md)."""
 
 from .problems import PROBLEMS, BenchProblem
 from .runner import format_table, run_bench

@@ -1,11 +1,16 @@
 """What people use today, on the same closed loop as mpcdrive (``mpcdrive bench --baselines``).
 
 * ``cvxpy_rebuild``: the PythonRobotics style -- the QP is written in cvxpy and rebuilt from
-  scratch every step (same references, linearization and constraints as mpcdrive's QP).
+  scratch every step (same references, linearization and constraints as mpcdrive's QP: input
+  and state bounds, input rates).
 * ``casadi_ipopt``: CasADi Opti + IPOPT on the nonlinear model (RK4 of the same equations),
-  the problem built once with parameters and warm-started each step; with a Gaussian or
+  the problem built once with parameters and warm-started each step, with the QP's input and
+  state bounds and input-rate limits; with a Gaussian or
   potential obstacle cost and a lane, the same non-convex cost and the same soft lane bound, so
-  it is also the reference NLP the SQP is checked against.
+  it is also the reference NLP the SQP is checked against. With hard avoidance (P4) it gets the
+  same obstacle rows as the QP: each step's half-planes ``a . (x_k, y_k, yaw_k) + sigma_k >= b``
+  on the footprint discs, linearized along the linearization trajectory by ``ocp.avoidance``,
+  with the QP's slack ``sigma_k >= 0`` per predicted step and the same slack weights.
 
 Both reuse :meth:`LtvMpc.prepare` so references and linearization are identical to ours and only
 the problem building and solving differ. Optional: needs the ``bench`` extra.
@@ -20,6 +25,10 @@ import numpy as np
 
 from ..types import STATUS_FAILED, STATUS_OK, SolveResult
 from .problems import BenchProblem
+
+
+#: right-hand side standing in for an unused obstacle row (its a is 0, so 0 >= this holds)
+_UNUSED_ROW_B = -1e9
 
 
 class CvxpyRebuildMpc:
@@ -44,6 +53,7 @@ class CvxpyRebuildMpc:
         X = cp.Variable((N + 1, nx))
         U = cp.Variable((N, nu))
         cost = 0
+        dmax = pb.du_max_per_s * pb.dt_s  # largest input change per step
         cons = [X[0] == d.x]
         for k in range(N):
             cons.append(X[k + 1] == d.Ad[k] @ X[k] + d.Bd[k] @ U[k] + d.c[k])
@@ -54,6 +64,8 @@ class CvxpyRebuildMpc:
             W = pb.QN if k == N - 1 else pb.Q
             cost += cp.quad_form(X[k + 1] - d.xref[k + 1], W)
             for i in range(nu):
+                if np.isfinite(dmax[i]):  # the input-rate rows
+                    cons.append(cp.abs(U[k, i] - prev[i]) <= dmax[i])
                 if np.isfinite(pb.u_min[i]):
                     cons.append(U[k, i] >= pb.u_min[i])
                 if np.isfinite(pb.u_max[i]):
@@ -103,10 +115,14 @@ class CasadiIpoptMpc:
         uref = opti.parameter(nu, N)
         uprev = opti.parameter(nu)
         cost = 0
+        dmax = pb.du_max_per_s * dt  # largest input change per step
         opti.subject_to(X[:, 0] == x0)
         for k in range(N):
             opti.subject_to(X[:, k + 1] == F(X[:, k], U[:, k]))
             du = U[:, k] - (uprev if k == 0 else U[:, k - 1])
+            for i in range(nu):  # the QP's input-rate rows
+                if np.isfinite(dmax[i]):
+                    opti.subject_to(opti.bounded(-dmax[i], du[i], dmax[i]))
             eu = U[:, k] - uref[:, k]
             ex = X[:, k + 1] - xref[:, k + 1]
             W = pb.QN if k == N - 1 else pb.Q
@@ -133,6 +149,17 @@ class CasadiIpoptMpc:
                 opti.subject_to(e <= core._lane_hi[k] + eps[k])
                 opti.subject_to(e >= core._lane_lo[k] - eps[k])
                 cost += pb.lane_slack_weight * eps[k] ** 2 + pb.lane_slack_weight_l1 * eps[k]
+        # hard avoidance: the QP's linearized half-plane rows, one slack per predicted step
+        self.rows_a = self.rows_b = None
+        if core.problem.obstacle_rows:
+            M = core.problem.obstacle_rows
+            sig = opti.variable(N)
+            self.rows_a = [opti.parameter(M, 3) for _ in range(N)]
+            self.rows_b = opti.parameter(M, N)
+            opti.subject_to(sig >= 0)
+            for k in range(N):
+                opti.subject_to(ca.mtimes(self.rows_a[k], X[:3, k + 1]) + sig[k] >= self.rows_b[:, k])
+                cost += pb.obstacle_slack_weight * sig[k] ** 2 + pb.obstacle_slack_weight_l1 * sig[k]
         # non-convex obstacle cost on the predicted centre of gravity
         self.obs_c = []
         av = core.avoidance
@@ -167,6 +194,11 @@ class CasadiIpoptMpc:
         if self.lane_n is not None:
             opti.set_value(self.lane_n, d.lane_normal.T)
             opti.set_value(self.lane_b, d.lane_offset)
+        if self.rows_a is not None:
+            for k, a in enumerate(self.rows_a):
+                opti.set_value(a, d.rows_a[k])
+            # an unused row (b = -inf) as a row that always holds
+            opti.set_value(self.rows_b, np.where(np.isfinite(d.rows_b), d.rows_b, _UNUSED_ROW_B).T)
         for ob, c in self.obs_c:
             opti.set_value(c, np.array([ob.pose_at(warm.t_s + (k + 1) * self.core.dt_s)[:2] for k in range(self.N)]).T)
         opti.set_initial(self.X, np.vstack([d.Xbar, d.Fbar[-1:]]).T)

@@ -1,4 +1,4 @@
-"""The benchmark problems of PERF.md, defined once for every implementation."""
+"""The benchmark problems P1-P4 (docs/benchmarks.md), defined once for every implementation."""
 
 from __future__ import annotations
 
@@ -10,7 +10,9 @@ import numpy as np
 from ..control.mpc import LtvMpc, MpcConfig
 from ..ocp.avoidance import AvoidanceConfig
 from ..scene import Circle, Footprint, Obstacle
-from ..models.kinematic import KinematicBicycle3, KinematicBicycle4
+from ..scene.obstacles import ConstantVelocity, rectangle
+from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams
+from ..models.presets import get_preset
 from ..ocp.problem import MpcProblem
 from ..paths import CirclePath, Path, StraightPath
 
@@ -30,6 +32,8 @@ class BenchProblem:
     obstacles: tuple = ()
     avoidance: AvoidanceConfig | None = None
     footprint: Footprint = Footprint()
+    #: the problem's own closed-loop length (P4), else None: as many steps as asked
+    steps: int | None = None
 
     def controller(self, **config_changes) -> LtvMpc:
         """mpcdrive's controller for this problem (config fields may be overridden)."""
@@ -116,4 +120,100 @@ def p3_obstacles(n: int) -> BenchProblem:
                    description=f"P3 with {n} obstacle(s) with Gaussian cost, lane |y| <= 1.75 m")
 
 
-PROBLEMS = {"P1": p1, "P2": p2, "P3": p3}
+#: P4 geometry and traffic: lanes [m], road length [m], cars [m], their speed range [m/s], seed
+P4_LANE_WIDTH_M = 3.5
+P4_ROAD_LENGTH_M = 300.0
+P4_CAR_LENGTH_M, P4_CAR_WIDTH_M = 4.5, 1.8
+P4_SPEED_RANGE_MPS = (12.0, 25.0)
+P4_SEED = 20261201
+#: the ego: start [m] on the centre lane and speed [m/s]; the slower car ahead of it: gap between
+#: the two centres [m] and speed [m/s]; the other cars of the ego lane: at least this fast [m/s]
+P4_EGO_X_M, P4_EGO_SPEED_MPS = 30.0, 20.0
+P4_LEAD_GAP_M, P4_LEAD_SPEED_MPS = 45.0, 14.0
+P4_AHEAD_MIN_SPEED_MPS = 20.5
+#: cars per lane: right (y = -3.5 m), left (y = 3.5 m), ego lane (y = 0, the slower car included)
+P4_CARS_PER_LANE = (7, 7, 6)
+#: least distance between the centres of two cars in one lane [m] (a 4.5 m car plus 15.5 m)
+P4_MIN_HEADWAY_M = 20.0
+#: the passing window [s] and the room [m] (centre to centre, along the road) that the left lane
+#: leaves around the ego's nominal drive in it
+P4_PASS_WINDOW_S = (2.0, 14.0)
+P4_PASS_ROOM_M = 25.0
+
+
+def _p4_lane(rng, n: int, x_from: float, v_range: tuple[float, float]) -> list[tuple[float, float]]:
+    """``n`` cars (x [m], v [m/s]) on [x_from, road end]: positions uniform with at least
+    P4_MIN_HEADWAY_M between them, speeds uniform in ``v_range`` sorted so that no car is faster
+    than the one ahead of it."""
+    xs: list[float] = []
+    while len(xs) < n:
+        x = float(rng.uniform(x_from, P4_ROAD_LENGTH_M))
+        if all(abs(x - o) >= P4_MIN_HEADWAY_M for o in xs):
+            xs.append(x)
+    return list(zip(sorted(xs), np.sort(rng.uniform(*v_range, n)).tolist()))
+
+
+def _p4_leaves_room(cars: list[tuple[float, float]]) -> bool:
+    """No car within P4_PASS_ROOM_M of the ego's nominal drive (20 m/s from its start) during the
+    passing window."""
+    t = np.linspace(*P4_PASS_WINDOW_S, 61)
+    ego = P4_EGO_X_M + P4_EGO_SPEED_MPS * t
+    return all(np.all(np.abs(x + v * t - ego) >= P4_PASS_ROOM_M) for x, v in cars)
+
+
+def p4_traffic(seed: int = P4_SEED) -> tuple[Obstacle, ...]:
+    """The 20 cars of P4: 4.5 m x 1.8 m rectangles at constant velocity along +x, drawn with
+    ``seed``; lanes centred at y = -3.5 (right), 0 (the ego's) and 3.5 m (left).
+
+    Each lane's cars are spread uniformly over the road (at least ``P4_MIN_HEADWAY_M`` = 20 m
+    between centres) at speeds uniform in [12, 25] m/s, sorted so that no car is faster than the
+    one ahead of it (the predictions never drive through each other). Right lane: 7 cars. Left
+    lane: 7 cars, the lane drawn again until it leaves the ego room to pass (no car within
+    ``P4_PASS_ROOM_M`` = 25 m of the ego's nominal 20 m/s drive for t in [2, 14] s). Ego lane:
+    the slower car (``lead``) 45 m ahead of the ego at 14 m/s and 5 cars ahead of it at
+    20.5-25 m/s, faster than the ego; nothing behind the ego in its lane (a constant-velocity car
+    would run into it from behind whatever it did)."""
+    rng = np.random.default_rng(seed)
+    n_right, n_left, n_ego = P4_CARS_PER_LANE
+    right = _p4_lane(rng, n_right, 0.0, P4_SPEED_RANGE_MPS)
+    left = _p4_lane(rng, n_left, 0.0, P4_SPEED_RANGE_MPS)
+    while not _p4_leaves_room(left):
+        left = _p4_lane(rng, n_left, 0.0, P4_SPEED_RANGE_MPS)
+    lead_x = P4_EGO_X_M + P4_LEAD_GAP_M
+    ahead = _p4_lane(rng, n_ego - 1, lead_x + P4_MIN_HEADWAY_M, (P4_AHEAD_MIN_SPEED_MPS, P4_SPEED_RANGE_MPS[1]))
+    shape = rectangle(P4_CAR_LENGTH_M, P4_CAR_WIDTH_M)
+    lanes = ((-P4_LANE_WIDTH_M, "right", right), (P4_LANE_WIDTH_M, "left", left), (0.0, "ego-lane", ahead))
+    cars = [Obstacle(shape, (lead_x, 0.0, 0.0), ConstantVelocity(P4_LEAD_SPEED_MPS, 0.0), name="lead")]
+    for y, lane, entries in lanes:
+        cars += [Obstacle(shape, (x, y, 0.0), ConstantVelocity(v, 0.0), name=f"{lane}{i}")
+                 for i, (x, v) in enumerate(entries)]
+    return tuple(cars)
+
+
+def p4() -> BenchProblem:
+    """P4: real traffic on a straight three-lane road (300 m, lanes 3.5 m; the road is the three
+    lanes, |y| <= 5.25 m about the centre lane the ego tracks), ego the BMW 320i preset
+    (``commonroad_bmw_320i``: lf, lr, 4.508 m x 1.61 m, steering +-1.066 rad at up to 0.4 rad/s)
+    on the kinematic bicycle with speed state (``kinematic4``) at 20 m/s, dt = 0.1 s, N = 30,
+    Q = diag(1, 1, 2, 1), R = diag(10, 0.1), Rc = diag(100, 1), acceleration in [-6, 3] m/s^2,
+    speed in [0, 25] m/s; the 20 cars of :func:`p4_traffic` predicted at constant velocity, hard
+    avoidance rows (three discs per body, margin 0.3 m, the 5 nearest cars within 70 m);
+    300 closed-loop steps (30 s; the straight road runs on past its 300 m as the traffic does)."""
+    pre = get_preset("commonroad_bmw_320i")
+    model = KinematicBicycle4(KinematicParams(pre.params.lf_m, pre.params.lr_m))
+    dt = 0.1
+    pb = MpcProblem(4, 2, 30, dt, Q=[1.0, 1.0, 2.0, 1.0], R=[10.0, 0.1], Rc=[100.0, 1.0],
+                    u_min=[-pre.max_steer_rad, -6.0], u_max=[pre.max_steer_rad, 3.0],
+                    du_max_per_s=[pre.max_steer_rate_rad_s, np.inf],
+                    x_min=[-np.inf, -np.inf, -np.inf, 0.0], x_max=[np.inf, np.inf, np.inf, 25.0],
+                    lane_half_width_m=1.5 * P4_LANE_WIDTH_M)
+    # the projection window covers the distance driven per step, and more
+    cfg = MpcConfig(v_ref_mps=P4_EGO_SPEED_MPS, projection_window_m=3.0 * 25.0 * dt)
+    av = AvoidanceConfig("hard", margin_m=0.3, influence_m=70.0, max_obstacles=5)
+    return BenchProblem("P4", "three-lane road, 20 cars, kinematic4 BMW 320i at 20 m/s, N = 30, dt = 0.1 s",
+                        model, StraightPath([0.0, 0.0], [P4_ROAD_LENGTH_M, 0.0]), pb, cfg,
+                        np.array([P4_EGO_X_M, 0.0, 0.0, P4_EGO_SPEED_MPS]), dt_s=dt, obstacles=p4_traffic(),
+                        avoidance=av, footprint=Footprint(pre.length_m, pre.width_m, n_discs=3), steps=300)
+
+
+PROBLEMS = {"P1": p1, "P2": p2, "P3": p3, "P4": p4}

@@ -5,11 +5,13 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 
 from ..control.factory import BACKENDS, DEFAULT_BACKEND, make_mpc
 from ..sim.closed_loop import Plant
+from ..sim.metrics import lane_excess_per_step
 from ..scene.geometry import shape_distance
 from .problems import PROBLEMS, BenchProblem
 
@@ -24,29 +26,44 @@ BENCH_HEADLINE = "fast"
 def time_closed_loop(controller, prob: BenchProblem, steps: int) -> dict:
     """Run ``steps`` steps of the closed loop, timing each ``controller.step`` call.
 
-    Returns p50/p99/max [us] over the steps after the warm-up, the step count, and the RMS
-    lateral error [m] (evidence that every implementation solved the same problem)."""
+    Returns p50/p99/max [us] over the steps after the warm-up, the step count, the RMS lateral
+    error [m] (evidence that every implementation solved the same problem), and what safety
+    says: ``solver_failures`` (steps whose solve did not succeed), ``min_obstacle_clearance_m``
+    (least signed distance between the footprint and any obstacle over the drive, negative when
+    they overlapped; None without obstacles), ``collision_steps`` (steps with the footprint
+    touching or overlapping an obstacle) and ``max_lane_excess_m`` (how far a footprint corner
+    got outside the lane or road, 0 inside; None without a lane)."""
     plant = Plant(prob.model)
     x = prob.x0.copy()
     warm = controller.initial_warm(x)
     times = np.empty(steps)
     ey = np.empty(steps)
+    epsi = np.empty(steps)
+    yaw = np.empty(steps)
     failures = 0
     qps = 0
+    collisions = 0
     min_clear = None
     for k in range(steps):
         t0 = time.perf_counter()
         out = controller.step(x, warm)
         times[k] = time.perf_counter() - t0
         warm = out.warm
-        ey[k] = out.e_y_m
+        ey[k], epsi[k], yaw[k] = out.e_y_m, out.e_psi_rad, x[2]
         failures += out.status not in ("ok", "inaccurate")
         qps += out.sqp_iterations
-        for ob in prob.obstacles:
-            d = shape_distance(prob.footprint.polygon(*x[:3]), ob.at(k * prob.dt_s))
+        if prob.obstacles:
+            body = prob.footprint.polygon(*x[:3])
+            d = min(shape_distance(body, ob.at(k * prob.dt_s)) for ob in prob.obstacles)
+            collisions += d <= 0.0
             min_clear = d if min_clear is None else min(min_clear, d)
         x = plant.step(x, out.u, prob.dt_s)
     t = times[min(WARMUP_STEPS, steps - 1):] * 1e6
+    lane = prob.problem.lane_half_width_m
+    excess = None
+    if lane is not None:
+        drive = SimpleNamespace(yaw_rad=yaw, e_psi_rad=epsi, e_y_m=ey, lane_half_width_m=lane)
+        excess = float(np.max(lane_excess_per_step(drive, prob.footprint)))
     return {
         "p50_us": float(np.percentile(t, 50)),
         "p99_us": float(np.percentile(t, 99)),
@@ -55,6 +72,8 @@ def time_closed_loop(controller, prob: BenchProblem, steps: int) -> dict:
         "rms_lateral_error_m": float(np.sqrt(np.mean(ey ** 2))),
         "solver_failures": int(failures),
         "min_obstacle_clearance_m": min_clear,
+        "collision_steps": int(collisions),
+        "max_lane_excess_m": excess,
         "qps_per_step": qps / steps,
     }
 
@@ -67,48 +86,56 @@ def make_controller(prob: BenchProblem, backend: str = DEFAULT_BACKEND):
 
 def run_bench(names, baselines: bool = False, steps: int = 1000, baseline_steps: int = 200,
               log: Callable[[str], None] = lambda m: None) -> dict:
-    """``{problem: {implementation: figures}}`` for the named problems (see CONTRACT.md).
+    """``{problem: {implementation: figures}}`` for the named problems (docs/benchmarks.md).
 
-    Implementations: ``mpcdrive_<backend>`` for each controller backend, ``mpcdrive`` (the
+    A problem with its own closed-loop length (P4: 300 steps) runs at most that many steps
+    (``steps`` and ``baseline_steps`` cap it). Implementations: ``mpcdrive_<backend>`` for each controller backend, ``mpcdrive`` (the
     figures of the default backend, named in its ``backend`` field) and, with ``baselines``,
     the installed baselines plus ``mpcdrive_same_steps`` (the default backend over the
     baselines' step count). Every entry is timed on the same closed loop in this process."""
     out: dict[str, dict] = {}
     for name in names:
         prob = PROBLEMS[name]()
+        steps_p = steps if prob.steps is None else min(steps, prob.steps)
+        baseline_steps_p = baseline_steps if prob.steps is None else min(baseline_steps, prob.steps)
         res: dict[str, dict] = {}
         for backend in BACKENDS:
-            log(f"{name}: mpcdrive ({backend} backend), {steps} steps")
+            log(f"{name}: mpcdrive ({backend} backend), {steps_p} steps")
             ctrl = make_controller(prob, backend)
-            res[f"mpcdrive_{backend}"] = {**time_closed_loop(ctrl, prob, steps), "backend": ctrl.backend_name}
+            res[f"mpcdrive_{backend}"] = {**time_closed_loop(ctrl, prob, steps_p), "backend": ctrl.backend_name}
         res = {"mpcdrive": dict(res[f"mpcdrive_{BENCH_HEADLINE}"]), **res}
         if prob.avoidance is not None and prob.avoidance.uses_cost:
             converged = replace(prob, config=replace(prob.config, sqp_max_iterations=SQP_MAX_ITERATIONS,
                                                      sqp_tol=SQP_TOL, sqp_max_time_s=SQP_MAX_TIME_S))
             for backend in BACKENDS:
                 log(f"{name}: mpcdrive ({backend} backend), SQP to convergence (<= {SQP_MAX_ITERATIONS} QPs, "
-                    f"{SQP_MAX_TIME_S * 1e3:g} ms cap), {steps} steps")
+                    f"{SQP_MAX_TIME_S * 1e3:g} ms cap), {steps_p} steps")
                 ctrl = make_controller(converged, backend)
-                res[f"mpcdrive_sqp_converged_{backend}"] = {**time_closed_loop(ctrl, converged, steps),
+                res[f"mpcdrive_sqp_converged_{backend}"] = {**time_closed_loop(ctrl, converged, steps_p),
                                                             "backend": ctrl.backend_name}
             res["mpcdrive_sqp_converged"] = dict(res[f"mpcdrive_sqp_converged_{BENCH_HEADLINE}"])
         if baselines:
             from .baselines import available_baselines
 
             for bname, factory in available_baselines(prob).items():
-                log(f"{name}: {bname}, {baseline_steps} steps")
-                res[bname] = time_closed_loop(factory(prob), prob, baseline_steps)
+                log(f"{name}: {bname}, {baseline_steps_p} steps")
+                res[bname] = time_closed_loop(factory(prob), prob, baseline_steps_p)
             # our controller over the baselines' step count, for a like-for-like tracking error
-            res["mpcdrive_same_steps"] = time_closed_loop(make_controller(prob), prob, baseline_steps)
+            res["mpcdrive_same_steps"] = time_closed_loop(make_controller(prob), prob, baseline_steps_p)
         out[name] = res
     return out
 
 
 def format_table(results: dict) -> str:
-    """A plain-text table of the bench results."""
-    lines = [f"{'problem':<8}{'implementation':<22}{'p50 [us]':>12}{'p99 [us]':>12}{'max [us]':>12}{'steps':>8}{'rms e_y [m]':>14}"]
+    """A plain-text table of the bench results; with obstacles, the least clearance [m] and the
+    steps in collision of each implementation (``—`` without obstacles)."""
+    lines = [f"{'problem':<8}{'implementation':<30}{'p50 [us]':>12}{'p99 [us]':>12}{'max [us]':>12}{'steps':>8}"
+             f"{'rms e_y [m]':>14}{'min clear [m]':>15}{'collisions':>12}"]
     for prob, impls in results.items():
         for impl, r in impls.items():
-            lines.append(f"{prob:<8}{impl:<22}{r['p50_us']:>12.1f}{r['p99_us']:>12.1f}{r['max_us']:>12.1f}"
-                         f"{r['steps']:>8d}{r['rms_lateral_error_m']:>14.5f}")
+            clear = r.get("min_obstacle_clearance_m")
+            hits = r.get("collision_steps") if clear is not None else None
+            lines.append(f"{prob:<8}{impl:<30}{r['p50_us']:>12.1f}{r['p99_us']:>12.1f}{r['max_us']:>12.1f}"
+                         f"{r['steps']:>8d}{r['rms_lateral_error_m']:>14.5f}"
+                         f"{'—' if clear is None else f'{clear:.3f}':>15}{'—' if hits is None else hits:>12}")
     return "\n".join(lines)
