@@ -75,9 +75,9 @@ def test_a_long_road_speed_map_gets_speed_along_the_path():
 
 
 def test_moving_obstacle_is_drawn_once_at_its_closest_approach_with_the_time():
-    res = _run(length_m=20.0, lane=2.0, obstacles=[_crossing()], e_y=np.zeros(200))
+    res = _run(length_m=20.0, lane=4.0, obstacles=[_crossing()], e_y=np.zeros(200))  # 20 m x 4 m: one map
     fig = figures._make_trajectory(res)
-    ax = fig.get_axes()[0]
+    (ax,) = fig.get_axes()
     outlines = obstacle_outlines(res.meta["obstacles"][0])
     k = closest_approach(outlines, res.xy)
     # where the car is nearest: at x = 10 m while the walker is nearest y = 0
@@ -91,9 +91,10 @@ def test_moving_obstacle_is_drawn_once_at_its_closest_approach_with_the_time():
     np.testing.assert_allclose(vehicle.get_xydata()[0], res.xy[k])
     # the same in path coordinates on a long road
     long = _run(obstacles=[_crossing()], e_y=np.zeros(200))
-    ax_s = figures._make_trajectory(long).get_axes()[1]
+    ax_map, ax_s = figures._make_trajectory(long).get_axes()
     k = closest_approach(obstacle_outlines(long.meta["obstacles"][0]), long.xy)
     assert [t.get_text() for t in ax_s.texts if t.get_text()] == [f"t = {long.t_s[k]:.1f} s"]
+    assert len(_filled(ax_map)) == 1 and not [t for t in ax_map.texts if t.get_text()]  # the strip: no label
 
 
 def test_polyline_coordinates():

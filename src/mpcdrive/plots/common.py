@@ -173,12 +173,14 @@ def closest_approach(outlines: list[np.ndarray], xy: np.ndarray) -> int:
     return int(np.argmin(dist))
 
 
-def draw_obstacles(ax, result: SimResult, frenet_path_xy: np.ndarray | None = None) -> None:
+def draw_obstacles(ax, result: SimResult, frenet_path_xy: np.ndarray | None = None,
+                   time_labels: bool = True) -> None:
     """Obstacles logged in ``result.meta["obstacles"]``: static ones filled; a moving one filled
     where it was at its closest approach to the vehicle, labelled with that time, the vehicle's
     position at that time marked, and the path of its centre dotted with an arrow (direction of
     motion). With ``frenet_path_xy`` everything is drawn in path coordinates (s, e_y) of that
-    polyline instead of x, y."""
+    polyline instead of x, y; ``time_labels=False`` leaves the times out (a map strip whose
+    path-coordinate panel shows them)."""
     xy = np.asarray(result.xy, float)
     t = np.asarray(result.t_s, float)
     to_plot = (lambda pts: polyline_coordinates(frenet_path_xy, pts)) if frenet_path_xy is not None \
@@ -204,7 +206,7 @@ def draw_obstacles(ax, result: SimResult, frenet_path_xy: np.ndarray | None = No
         o = to_plot(outlines[k])
         ax.fill(o[:, 0], o[:, 1], facecolor="0.75", edgecolor="0.15", lw=1.0, alpha=0.9, zorder=2.5,
                 label="moving obstacle at closest approach" if first_moving else None)
-        if k < len(xy):
+        if k < len(xy) and time_labels:
             ego = to_plot(xy[k:k + 1])[0]
             ax.plot(ego[0], ego[1], "o", mfc="white", mec="k", ms=5, zorder=4.5,
                     label="vehicle at that time" if first_moving else None)

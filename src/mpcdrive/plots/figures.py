@@ -98,7 +98,7 @@ def is_long_road(result: SimResult) -> bool:
 
 
 def _draw_trajectory(ax, result: SimResult, title: str | None = None, horizons: bool = True,
-                     legend: bool = True) -> None:
+                     legend: bool = True, time_labels: bool = True) -> None:
     path = np.asarray(result.path_xy, dtype=float)
     xy = np.asarray(result.xy, dtype=float)
     if horizons and result.X_pred is not None and np.ndim(result.X_pred) == 3:
@@ -114,7 +114,7 @@ def _draw_trajectory(ax, result: SimResult, title: str | None = None, horizons: 
             left, right = lane_boundaries(path, float(result.lane_half_width_m))
             ax.plot(left[:, 0], left[:, 1], color="k", lw=1.0, ls="--", label="lane boundary")
             ax.plot(right[:, 0], right[:, 1], color="k", lw=1.0, ls="--")
-    draw_obstacles(ax, result)
+    draw_obstacles(ax, result, time_labels=time_labels)
     ax.plot(xy[:, 0], xy[:, 1], color=DRIVEN_COLOR, lw=1.5, label="driven trajectory", zorder=3)
     if xy.shape[0]:
         ax.plot(xy[0, 0], xy[0, 1], "o", color="tab:green", ms=7, label="start", zorder=4)
@@ -150,7 +150,11 @@ def _draw_path_coordinates(ax, result: SimResult, title: str | None = None) -> N
         ax.plot(s[0], e_y[0], "o", color="tab:green", ms=7, label="start", zorder=4)
         ax.plot(s[-1], e_y[-1], "s", color=DRIVEN_COLOR, ms=5, label="end", zorder=4)
     top = max(abs(half) if half is not None else 0.0, float(np.nanmax(np.abs(e_y))) if e_y.size else 0.0, 0.5)
-    ax.set_ylim(-2.0 * top, 2.0 * top)
+    # obstacles that reach within two lane half-widths of the path are shown whole
+    near = [np.abs(p.get_xy()[:, 1]) for p in ax.patches if hasattr(p, "get_xy")]
+    reach = max([float(a.max()) for a in near if a.size and a.min() < 2.0 * top], default=0.0)
+    top = max(2.0 * top, 1.05 * reach)
+    ax.set_ylim(-top, top)
     ax.set_xlim(lo, hi)
     ax.set_xlabel("distance along the path s [m]")
     ax.set_ylabel("lateral offset e_y [m]")
@@ -231,7 +235,7 @@ def _make_trajectory(result: SimResult, title: str | None = None) -> Figure:
         fig, axes = new_figure(1, 2, size=(map_w + 9.5, 5.5), width_ratios=[map_w + 0.9, 8.6])
         ax_map, ax_s = axes[0, 0], axes[0, 1]
     _draw_trajectory(ax_map, result, title if title is not None else title_for("Trajectory (true scale)", result),
-                     legend=False)
+                     legend=False, time_labels=False)
     _draw_path_coordinates(ax_s, result)
     return fig
 
@@ -345,8 +349,10 @@ def _make_steering_comparison(results: Mapping[str, SimResult], title: str | Non
 # --------------------------------------------------------------------------- public API
 def plot_trajectory(result: SimResult, path: str | os.PathLike, title: str | None = None) -> Path:
     """Reference path (blue) vs driven trajectory (red) in x/y [m], equal aspect, start marker,
-    lane boundaries at +-``result.lane_half_width_m`` when set, and a few predicted horizons
-    (thin grey, about every 10 % of the run).  Writes a PNG; returns ``path``."""
+    lane boundaries at +-``result.lane_half_width_m`` when set, a few predicted horizons (thin
+    grey, about every 10 % of the run), obstacles (moving ones where they were at their closest
+    approach, with the time). A map more than ``LONG_ROAD_RATIO`` times longer than wide gets
+    a second panel in path coordinates (s, e_y) [m].  Writes a PNG; returns ``path``."""
     return save(_make_trajectory(result, title), path)
 
 
