@@ -22,6 +22,7 @@ from mpcdrive.io import (
     write_trajectory_csv,
 )
 from mpcdrive.plots import figures
+from mpcdrive.plots.common import lane_boundaries
 from mpcdrive.report import ReportEntry, write_reproduce_report
 from mpcdrive.types import STATUS_INFEASIBLE, STATUS_OK, SimResult
 
@@ -214,7 +215,7 @@ def test_figure_structure_and_png(result, tmp_path, name):
 
 def test_trajectory_figure_content(result):
     fig = figures._make_trajectory(result, title="custom")
-    (ax,) = fig.get_axes()
+    ax = fig.get_axes()[0]  # the map (a 61 m x 3.5 m road also gets a path-coordinate panel)
     assert ax.get_title() == "custom"
     by_label = {ln.get_label(): ln for ln in ax.get_lines()}
     np.testing.assert_allclose(by_label["reference path"].get_xydata(), result.path_xy)
@@ -231,7 +232,7 @@ def test_lane_boundaries_on_circle():
     th = np.linspace(0, 2 * np.pi, 200)
     circle = np.column_stack([10 * np.cos(th), 10 * np.sin(th)])
     circle = np.vstack([circle[:5], circle[4:5], circle[5:]])  # a repeated point
-    left, right = figures._lane_boundaries(circle, 2.0)
+    left, right = lane_boundaries(circle, 2.0)
     np.testing.assert_allclose(np.hypot(*left.T), 8.0, atol=0.02)  # CCW: left is inside
     np.testing.assert_allclose(np.hypot(*right.T), 12.0, atol=0.02)
 

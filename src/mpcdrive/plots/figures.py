@@ -13,16 +13,30 @@ closing and thousands of runs do not grow memory.
 
 from __future__ import annotations
 
-import io
 import os
 from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from mpcdrive.io.atomic import atomic_write_bytes
+from mpcdrive.plots.common import (
+    DRIVEN_COLOR,
+    ITER_LABEL,
+    LONG_ROAD_RATIO,
+    REF_COLOR,
+    RUN_COLORS,
+    aspect_ratio,
+    draw_obstacles,
+    lane_boundaries,
+    new_figure,
+    run_label,
+    save,
+    set_suptitle,
+    set_title,
+    title_for,
+)
+from mpcdrive.plots.laps import plot_lateral_acceleration, plot_speed_map
 from mpcdrive.types import SimResult
 from mpcdrive.units import rad2deg
 
@@ -41,42 +55,7 @@ __all__ = [
     "write_run_figures",
 ]
 
-_DPI = 120
-_ITER_LABEL = "iteration k [-]"
-_REF_COLOR = "tab:blue"
-_DRIVEN_COLOR = "tab:red"
-
-
 # --------------------------------------------------------------------------- helpers
-def _new_figure(nrows: int = 1, ncols: int = 1, size=(7.0, 4.5), **kw) -> tuple[Figure, np.ndarray]:
-    fig = Figure(figsize=size, layout="constrained")
-    FigureCanvasAgg(fig)
-    axes = fig.subplots(nrows, ncols, squeeze=False, **kw)
-    return fig, axes
-
-
-def _save(fig: Figure, path: str | os.PathLike) -> Path:
-    """Render ``fig`` to PNG and write it atomically; return the path."""
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=_DPI)
-    fig.clear()  # drop artists now rather than at garbage collection
-    return atomic_write_bytes(path, buf.getvalue())
-
-
-def _label(result: SimResult) -> str:
-    """Short run name for titles from ``result.meta`` ('' when none is recorded)."""
-    for key in ("id", "scenario_id", "scenario", "name"):
-        value = result.meta.get(key)
-        if isinstance(value, str) and value:
-            return value
-    return ""
-
-
-def _title(base: str, result: SimResult) -> str:
-    name = _label(result)
-    return f"{base} — {name}" if name else base
-
-
 def _iterations(result: SimResult) -> np.ndarray:
     return np.arange(result.steps)
 
@@ -101,27 +80,25 @@ def _max_steer_rad(result: SimResult) -> float | None:
     return value if np.isfinite(value) and value > 0 else None
 
 
-def _lane_boundaries(path_xy: np.ndarray, half_width_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Left and right lane boundaries (M, 2) [m]: the polyline offset by +-half width along its
-    unit normals (central-difference tangents; repeated points keep the previous normal)."""
-    p = np.asarray(path_xy, dtype=float)
-    tangent = np.gradient(p, axis=0)
-    norm = np.hypot(tangent[:, 0], tangent[:, 1])
-    good = norm > 1e-12
-    if not good.any():
-        raise ValueError("reference path has no extent; cannot draw lane boundaries")
-    # carry the last valid tangent over degenerate (repeated) points
-    idx = np.where(good, np.arange(len(p)), 0)
-    idx = np.maximum.accumulate(idx)
-    first_good = int(np.argmax(good))
-    idx[: first_good + 1] = first_good
-    unit = tangent[idx] / norm[idx, None]
-    normal = np.column_stack([-unit[:, 1], unit[:, 0]])  # left of the direction of travel
-    return p + half_width_m * normal, p - half_width_m * normal
-
-
 # --------------------------------------------------------------------------- drawing on axes
-def _draw_trajectory(ax, result: SimResult, title: str | None = None, horizons: bool = True) -> None:
+def _map_extent(result: SimResult) -> tuple[float, bool]:
+    """(aspect ratio, wide) of the map: reference path, lane and driven trajectory."""
+    path = np.asarray(result.path_xy, dtype=float)
+    sets = [path, np.asarray(result.xy, dtype=float)]
+    if result.lane_half_width_m is not None and path.ndim == 2 and path.shape[0] >= 2:
+        sets.extend(lane_boundaries(path, float(result.lane_half_width_m)))
+    return aspect_ratio(*sets)
+
+
+def is_long_road(result: SimResult) -> bool:
+    """True when the map of the run is more than ``LONG_ROAD_RATIO`` times longer than wide (a
+    road of 230 m x 4 m): its figures add a panel in path coordinates (s, e_y)."""
+    ratio, _ = _map_extent(result)
+    return ratio > LONG_ROAD_RATIO
+
+
+def _draw_trajectory(ax, result: SimResult, title: str | None = None, horizons: bool = True,
+                     legend: bool = True, time_labels: bool = True) -> None:
     path = np.asarray(result.path_xy, dtype=float)
     xy = np.asarray(result.xy, dtype=float)
     if horizons and result.X_pred is not None and np.ndim(result.X_pred) == 3:
@@ -132,75 +109,75 @@ def _draw_trajectory(ax, result: SimResult, title: str | None = None, horizons: 
                 ax.plot(X[k, :, 0], X[k, :, 1], color="0.55", lw=0.8, zorder=1,
                         label="predicted horizon" if i == 0 else None)
     if path.ndim == 2 and path.shape[0] >= 1:
-        ax.plot(path[:, 0], path[:, 1], color=_REF_COLOR, lw=1.5, label="reference path", zorder=2)
+        ax.plot(path[:, 0], path[:, 1], color=REF_COLOR, lw=1.5, label="reference path", zorder=2)
         if result.lane_half_width_m is not None and path.shape[0] >= 2:
-            left, right = _lane_boundaries(path, float(result.lane_half_width_m))
+            left, right = lane_boundaries(path, float(result.lane_half_width_m))
             ax.plot(left[:, 0], left[:, 1], color="k", lw=1.0, ls="--", label="lane boundary")
             ax.plot(right[:, 0], right[:, 1], color="k", lw=1.0, ls="--")
-    _draw_obstacles(ax, result)
-    ax.plot(xy[:, 0], xy[:, 1], color=_DRIVEN_COLOR, lw=1.5, label="driven trajectory", zorder=3)
+    draw_obstacles(ax, result, time_labels=time_labels)
+    ax.plot(xy[:, 0], xy[:, 1], color=DRIVEN_COLOR, lw=1.5, label="driven trajectory", zorder=3)
     if xy.shape[0]:
         ax.plot(xy[0, 0], xy[0, 1], "o", color="tab:green", ms=7, label="start", zorder=4)
-        ax.plot(xy[-1, 0], xy[-1, 1], "s", color=_DRIVEN_COLOR, ms=5, label="end", zorder=4)
+        ax.plot(xy[-1, 0], xy[-1, 1], "s", color=DRIVEN_COLOR, ms=5, label="end", zorder=4)
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    ax.set_title(title if title is not None else _title("Trajectory", result))
+    set_title(ax, title if title is not None else title_for("Trajectory", result))
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="best", fontsize="small")
+    if legend:
+        ax.legend(loc="best", fontsize="small")
 
 
-def _obstacle_outlines(entry: Mapping) -> list[np.ndarray]:
-    """Closed outlines (M, 2) of a logged obstacle, one per logged time (one if static):
-    ``{"type": "circle", "center": [x, y] | (T, 2), "radius_m": r}`` or
-    ``{"type": "polygon", "points": (P, 2) | (T, P, 2)}``."""
-    if entry.get("type") == "circle":
-        c = np.atleast_2d(np.asarray(entry["center"], dtype=float))
-        th = np.linspace(0.0, 2.0 * np.pi, 48)
-        r = float(entry["radius_m"])
-        return [np.column_stack([x + r * np.cos(th), y + r * np.sin(th)]) for x, y in c]
-    p = np.asarray(entry.get("points", []), dtype=float)
-    if p.ndim == 2:
-        p = p[None]
-    return [np.vstack([q, q[:1]]) for q in p]
-
-
-def _draw_obstacles(ax, result: SimResult) -> None:
-    """Obstacles logged in ``result.meta["obstacles"]``: static ones filled, moving ones as
-    outlines at a few times (darker = later) with the path of their centre."""
-    for i, entry in enumerate(result.meta.get("obstacles") or []):
-        outlines = _obstacle_outlines(entry)
-        if not outlines:
-            continue
-        label = "obstacle" if i == 0 else None
-        if len(outlines) == 1:
-            o = outlines[0]
-            ax.fill(o[:, 0], o[:, 1], color="0.35", alpha=0.8, zorder=2.5, label=label)
-            continue
-        ks = np.unique(np.linspace(0, len(outlines) - 1, 6).astype(int))
-        for j, k in enumerate(ks):
-            o = outlines[k]
-            ax.plot(o[:, 0], o[:, 1], color="0.2", alpha=0.25 + 0.75 * j / max(len(ks) - 1, 1), lw=1.0,
-                    zorder=2.5, label=label if j == len(ks) - 1 else None)
-        centres = np.array([o[:-1].mean(axis=0) for o in outlines])
-        ax.plot(centres[:, 0], centres[:, 1], color="0.4", lw=0.8, ls=":", zorder=2.4)
+def _draw_path_coordinates(ax, result: SimResult, title: str | None = None) -> None:
+    """The run in path coordinates: lateral offset e_y [m] over the distance along the path s [m]
+    (the lateral axis exaggerated), lane, obstacles (moving ones at their closest approach)."""
+    path = np.asarray(result.path_xy, dtype=float)
+    s_path = np.r_[0.0, np.cumsum(np.hypot(*np.diff(path, axis=0).T))] if len(path) >= 2 else np.zeros(len(path))
+    s = np.asarray(result.s_m, dtype=float)
+    e_y = np.asarray(result.e_y_m, dtype=float)
+    lo = min(0.0, float(np.nanmin(s))) if s.size else 0.0
+    hi = max(float(s_path[-1]) if s_path.size else 0.0, float(np.nanmax(s)) if s.size else 0.0)
+    ax.plot([lo, hi], [0.0, 0.0], color=REF_COLOR, lw=1.5, label="reference path (e_y = 0)", zorder=2)
+    half = result.lane_half_width_m
+    if half is not None:
+        for sign in (1.0, -1.0):
+            ax.plot([lo, hi], [sign * half, sign * half], color="k", lw=1.0, ls="--",
+                    label="lane boundary" if sign > 0 else None)
+    if len(path) >= 2:
+        draw_obstacles(ax, result, frenet_path_xy=path)
+    ax.plot(s, e_y, color=DRIVEN_COLOR, lw=1.5, label="driven trajectory", zorder=3)
+    if s.size:
+        ax.plot(s[0], e_y[0], "o", color="tab:green", ms=7, label="start", zorder=4)
+        ax.plot(s[-1], e_y[-1], "s", color=DRIVEN_COLOR, ms=5, label="end", zorder=4)
+    top = max(abs(half) if half is not None else 0.0, float(np.nanmax(np.abs(e_y))) if e_y.size else 0.0, 0.5)
+    # obstacles that reach within two lane half-widths of the path are shown whole
+    near = [np.abs(p.get_xy()[:, 1]) for p in ax.patches if hasattr(p, "get_xy")]
+    reach = max([float(a.max()) for a in near if a.size and a.min() < 2.0 * top], default=0.0)
+    top = max(2.0 * top, 1.05 * reach)
+    ax.set_ylim(-top, top)
+    ax.set_xlim(lo, hi)
+    ax.set_xlabel("distance along the path s [m]")
+    ax.set_ylabel("lateral offset e_y [m]")
+    set_title(ax, title if title is not None else title_for("In path coordinates (lateral axis stretched)", result))
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", borderaxespad=0.0)
 
 
 def _draw_lateral(ax, result: SimResult, log_y: bool = False) -> None:
     abs_ey = np.abs(np.asarray(result.e_y_m, dtype=float))
     k = _iterations(result)
-    ax.set_xlabel(_ITER_LABEL)
+    ax.set_xlabel(ITER_LABEL)
     ax.set_ylabel("|e_y| [m]")
-    ax.set_title(_title("Lateral (distance) deviation", result))
+    set_title(ax, title_for("Lateral (distance) deviation", result))
     ax.grid(True, alpha=0.3)
     top = _finite_max(abs_ey)
     if log_y:
         pos = abs_ey[np.isfinite(abs_ey) & (abs_ey > 0)]
         floor = max(float(pos.min()) * 0.5, 1e-9) if pos.size else 1e-9
-        ax.semilogy(k, np.maximum(abs_ey, floor), color=_DRIVEN_COLOR, lw=1.2)
+        ax.semilogy(k, np.maximum(abs_ey, floor), color=DRIVEN_COLOR, lw=1.2)
         ax.set_ylim(floor, max(2.0 * (top or floor), 10 * floor))
     else:
-        ax.plot(k, abs_ey, color=_DRIVEN_COLOR, lw=1.2)
+        ax.plot(k, abs_ey, color=DRIVEN_COLOR, lw=1.2)
         ax.set_ylim(0.0, max(1.1 * top, 1e-3) if top is not None else 1e-3)
     if k.size:
         ax.set_xlim(0, max(int(k[-1]), 1))
@@ -209,12 +186,12 @@ def _draw_lateral(ax, result: SimResult, log_y: bool = False) -> None:
 def _draw_heading(ax, result: SimResult) -> None:
     e_psi_deg = rad2deg(np.asarray(result.e_psi_rad, dtype=float))
     k = _iterations(result)
-    ax.plot(k, e_psi_deg, color=_DRIVEN_COLOR, lw=1.2)
+    ax.plot(k, e_psi_deg, color=DRIVEN_COLOR, lw=1.2)
     ax.axhline(0.0, color="k", lw=0.6)
     _symmetric_ylim(ax, e_psi_deg, floor=0.1)
-    ax.set_xlabel(_ITER_LABEL)
+    ax.set_xlabel(ITER_LABEL)
     ax.set_ylabel("e_psi [deg]")
-    ax.set_title(_title("Heading deviation", result))
+    set_title(ax, title_for("Heading deviation", result))
     ax.grid(True, alpha=0.3)
     if k.size:
         ax.set_xlim(0, max(int(k[-1]), 1))
@@ -223,7 +200,7 @@ def _draw_heading(ax, result: SimResult) -> None:
 def _draw_steering(ax, result: SimResult) -> None:
     steer_deg = rad2deg(np.asarray(result.steer_rad, dtype=float))
     k = _iterations(result)
-    ax.plot(k, steer_deg, color=_DRIVEN_COLOR, lw=1.2, label="steering angle")
+    ax.plot(k, steer_deg, color=DRIVEN_COLOR, lw=1.2, label="steering angle")
     bound = _max_steer_rad(result)
     floor = 0.5
     if bound is not None:
@@ -233,9 +210,9 @@ def _draw_steering(ax, result: SimResult) -> None:
         floor = b * 1.1
         ax.legend(loc="best", fontsize="small")
     _symmetric_ylim(ax, steer_deg, floor=floor)
-    ax.set_xlabel(_ITER_LABEL)
+    ax.set_xlabel(ITER_LABEL)
     ax.set_ylabel("steering angle delta [deg]")
-    ax.set_title(_title("Steering angle", result))
+    set_title(ax, title_for("Steering angle", result))
     ax.grid(True, alpha=0.3)
     if k.size:
         ax.set_xlim(0, max(int(k[-1]), 1))
@@ -243,25 +220,40 @@ def _draw_steering(ax, result: SimResult) -> None:
 
 # --------------------------------------------------------------------------- figure builders
 def _make_trajectory(result: SimResult, title: str | None = None) -> Figure:
-    fig, axes = _new_figure(size=(7.0, 6.0))
-    _draw_trajectory(axes[0, 0], result, title)
+    ratio, wide = _map_extent(result)
+    if ratio <= LONG_ROAD_RATIO:
+        fig, axes = new_figure(size=(7.0, 6.0))
+        _draw_trajectory(axes[0, 0], result, title)
+        return fig
+    # a long road: the true-scale map as a strip, the run in path coordinates beside it
+    if wide:
+        map_h = float(np.clip(9.0 / ratio, 0.6, 2.5))
+        fig, axes = new_figure(2, 1, size=(11.0, map_h + 4.6), height_ratios=[map_h + 0.7, 3.6])
+        ax_map, ax_s = axes[0, 0], axes[1, 0]
+    else:
+        map_w = float(np.clip(5.5 / ratio, 0.6, 2.5))
+        fig, axes = new_figure(1, 2, size=(map_w + 9.5, 5.5), width_ratios=[map_w + 0.9, 8.6])
+        ax_map, ax_s = axes[0, 0], axes[0, 1]
+    _draw_trajectory(ax_map, result, title if title is not None else title_for("Trajectory (true scale)", result),
+                     legend=False, time_labels=False)
+    _draw_path_coordinates(ax_s, result)
     return fig
 
 
 def _make_lateral_deviation(result: SimResult, log_y: bool = False) -> Figure:
-    fig, axes = _new_figure()
+    fig, axes = new_figure()
     _draw_lateral(axes[0, 0], result, log_y=log_y)
     return fig
 
 
 def _make_heading_deviation(result: SimResult) -> Figure:
-    fig, axes = _new_figure()
+    fig, axes = new_figure()
     _draw_heading(axes[0, 0], result)
     return fig
 
 
 def _make_steering(result: SimResult) -> Figure:
-    fig, axes = _new_figure()
+    fig, axes = new_figure()
     _draw_steering(axes[0, 0], result)
     return fig
 
@@ -272,59 +264,63 @@ def _has_accel_input(result: SimResult) -> bool:
 
 def _make_speed(result: SimResult) -> Figure:
     with_accel = _has_accel_input(result)
-    fig, axes = _new_figure(2 if with_accel else 1, 1, size=(7.0, 6.0 if with_accel else 4.5))
+    fig, axes = new_figure(2 if with_accel else 1, 1, size=(7.0, 6.0 if with_accel else 4.5))
     k = _iterations(result)
     ax = axes[0, 0]
-    ax.plot(k, np.asarray(result.v_mps, dtype=float), color=_DRIVEN_COLOR, lw=1.2, label="speed")
+    ax.plot(k, np.asarray(result.v_mps, dtype=float), color=DRIVEN_COLOR, lw=1.2, label="speed")
     # reference speed from the horizon references, when the model has a speed state
     names = tuple(result.state_names)
     refs = result.refs
     if "v" in names and refs is not None and np.ndim(refs) == 3 and refs.shape[0] == result.steps \
             and refs.shape[1] > 0 and refs.shape[2] > names.index("v"):
-        ax.plot(k, refs[:, 0, names.index("v")], color=_REF_COLOR, ls="--", lw=1.0,
+        ax.plot(k, refs[:, 0, names.index("v")], color=REF_COLOR, ls="--", lw=1.0,
                 label="reference speed")
     elif {"vx", "vy"} <= set(names) and refs is not None and np.ndim(refs) == 3 \
             and refs.shape[0] == result.steps and refs.shape[1] > 0 and refs.shape[2] == len(names):
         ref_v = np.hypot(refs[:, 0, names.index("vx")], refs[:, 0, names.index("vy")])
-        ax.plot(k, ref_v, color=_REF_COLOR, ls="--", lw=1.0, label="reference speed")
+        ax.plot(k, ref_v, color=REF_COLOR, ls="--", lw=1.0, label="reference speed")
     ax.set_ylabel("speed v [m/s]")
-    ax.set_title(_title("Speed", result))
+    set_title(ax, title_for("Speed", result))
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize="small")
-    ax.set_xlabel(_ITER_LABEL)
+    ax.set_xlabel(ITER_LABEL)
     if with_accel:
         ax2 = axes[1, 0]
         ax2.plot(k, np.asarray(result.accel_mps2, dtype=float), color="tab:purple", lw=1.2)
         ax2.axhline(0.0, color="k", lw=0.6)
         ax2.set_ylabel("acceleration a [m/s^2]")
-        ax2.set_xlabel(_ITER_LABEL)
-        ax2.set_title("Acceleration input")
+        ax2.set_xlabel(ITER_LABEL)
+        set_title(ax2, "Acceleration input")
         ax2.grid(True, alpha=0.3)
     return fig
 
 
 def _make_overview(result: SimResult) -> Figure:
-    fig, axes = _new_figure(2, 2, size=(12.0, 9.0))
-    _draw_trajectory(axes[0, 0], result)
+    fig, axes = new_figure(2, 2, size=(12.0, 9.0))
+    if is_long_road(result):  # a strip on this scale: the run in path coordinates instead
+        _draw_path_coordinates(axes[0, 0], result)
+        axes[0, 0].legend(loc="lower right", fontsize="x-small", ncols=2)
+    else:
+        _draw_trajectory(axes[0, 0], result)
     _draw_lateral(axes[0, 1], result)
     _draw_heading(axes[1, 0], result)
     _draw_steering(axes[1, 1], result)
-    name = _label(result)
-    fig.suptitle(f"Run overview — {name}" if name else "Run overview")
+    name = run_label(result)
+    set_suptitle(fig, f"Run overview — {name}" if name else "Run overview")
     return fig
 
 
 def _make_steering_comparison(results: Mapping[str, SimResult], title: str | None = None) -> Figure:
     if not results:
         raise ValueError("plot_steering_comparison needs at least one result")
-    fig, axes = _new_figure(2, 1, size=(8.0, 6.5))
+    fig, axes = new_figure(2, 1, size=(8.0, 6.5))
     ax, ax_rate = axes[0, 0], axes[1, 0]
     bound = None
     peak_rate = 0.0
-    for label, res in results.items():
+    for i, (label, res) in enumerate(results.items()):
         k = _iterations(res)
         steer_deg = rad2deg(np.asarray(res.steer_rad, dtype=float))
-        (line,) = ax.plot(k, steer_deg, lw=1.2, label=str(label))
+        (line,) = ax.plot(k, steer_deg, lw=1.2, color=RUN_COLORS[i % len(RUN_COLORS)], label=str(label))
         if steer_deg.size >= 2 and res.dt_s > 0:
             rate = np.diff(steer_deg) / float(res.dt_s)
             ax_rate.plot(k[1:], rate, lw=1.0, color=line.get_color(), label=str(label))
@@ -336,16 +332,16 @@ def _make_steering_comparison(results: Mapping[str, SimResult], title: str | Non
         ax.axhline(b, color="k", ls="--", lw=1.0, label=f"bound ±{b:.3g} deg")
         ax.axhline(-b, color="k", ls="--", lw=1.0)
     ax.set_ylabel("steering angle delta [deg]")
-    ax.set_title(title or "Steering angle comparison")
+    set_title(ax, title or "Steering angle comparison")
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize="small")
-    ax.set_xlabel(_ITER_LABEL)
+    ax.set_xlabel(ITER_LABEL)
     ax_rate.axhline(0.0, color="k", lw=0.6)
     top = max(1.1 * peak_rate, 0.1)
     ax_rate.set_ylim(-top, top)
     ax_rate.set_ylabel("steering rate [deg/s]")
-    ax_rate.set_xlabel(_ITER_LABEL)
-    ax_rate.set_title("Steering rate (finite difference)")
+    ax_rate.set_xlabel(ITER_LABEL)
+    set_title(ax_rate, "Steering rate (finite difference)")
     ax_rate.grid(True, alpha=0.3)
     return fig
 
@@ -353,45 +349,47 @@ def _make_steering_comparison(results: Mapping[str, SimResult], title: str | Non
 # --------------------------------------------------------------------------- public API
 def plot_trajectory(result: SimResult, path: str | os.PathLike, title: str | None = None) -> Path:
     """Reference path (blue) vs driven trajectory (red) in x/y [m], equal aspect, start marker,
-    lane boundaries at +-``result.lane_half_width_m`` when set, and a few predicted horizons
-    (thin grey, about every 10 % of the run).  Writes a PNG; returns ``path``."""
-    return _save(_make_trajectory(result, title), path)
+    lane boundaries at +-``result.lane_half_width_m`` when set, a few predicted horizons (thin
+    grey, about every 10 % of the run), obstacles (moving ones where they were at their closest
+    approach, with the time). A map more than ``LONG_ROAD_RATIO`` times longer than wide gets
+    a second panel in path coordinates (s, e_y) [m].  Writes a PNG; returns ``path``."""
+    return save(_make_trajectory(result, title), path)
 
 
 def plot_lateral_deviation(result: SimResult, path: str | os.PathLike, log_y: bool = False) -> Path:
     """|e_y| [m] over iterations (the paper's "distance deviation"); linear y from 0 unless
     ``log_y``.  Writes a PNG; returns ``path``."""
-    return _save(_make_lateral_deviation(result, log_y=log_y), path)
+    return save(_make_lateral_deviation(result, log_y=log_y), path)
 
 
 def plot_heading_deviation(result: SimResult, path: str | os.PathLike) -> Path:
     """Heading error e_psi [deg] over iterations.  Writes a PNG; returns ``path``."""
-    return _save(_make_heading_deviation(result), path)
+    return save(_make_heading_deviation(result), path)
 
 
 def plot_steering(result: SimResult, path: str | os.PathLike) -> Path:
     """Applied steering angle [deg] over iterations, with +-``meta["max_steer_rad"]`` dashed when
     recorded.  Writes a PNG; returns ``path``."""
-    return _save(_make_steering(result), path)
+    return save(_make_steering(result), path)
 
 
 def plot_speed(result: SimResult, path: str | os.PathLike) -> Path:
     """Speed [m/s] over iterations (reference speed dashed when the model has a ``v`` state),
     plus the acceleration input [m/s^2] when the model has one.  Writes a PNG; returns ``path``."""
-    return _save(_make_speed(result), path)
+    return save(_make_speed(result), path)
 
 
 def plot_overview(result: SimResult, path: str | os.PathLike) -> Path:
     """2x2 grid: trajectory, lateral deviation, heading deviation, steering (the paper's four
     figures per experiment).  Writes a PNG; returns ``path``."""
-    return _save(_make_overview(result), path)
+    return save(_make_overview(result), path)
 
 
 def plot_steering_comparison(results: Mapping[str, SimResult], path: str | os.PathLike,
                              title: str | None = None) -> Path:
     """Overlaid steering angles [deg] and steering rates [deg/s] of several runs, keyed by legend
     label (the input-smoothing experiment, the paper's Fig. 12).  Writes a PNG; returns ``path``."""
-    return _save(_make_steering_comparison(results, title), path)
+    return save(_make_steering_comparison(results, title), path)
 
 
 def speed_varies(result: SimResult, tol_mps: float = 1e-6) -> bool:
@@ -409,8 +407,6 @@ def write_run_figures(result: SimResult, out_dir: str | os.PathLike) -> list[Pat
     ``lateral_acceleration.png`` (the last three only when the model has an ``accel`` input or the
     speed varies) and ``overview.png``.
     """
-    from mpcdrive.plots.laps import plot_lateral_acceleration, plot_speed_map
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = [
@@ -430,14 +426,14 @@ def write_run_figures(result: SimResult, out_dir: str | os.PathLike) -> list[Pat
 
 
 def _make_clearance(result: SimResult) -> Figure:
-    fig, axes = _new_figure()
+    fig, axes = new_figure()
     ax = axes[0, 0]
     c = np.asarray(result.clearance_m, dtype=float)
-    ax.plot(_iterations(result), c, color=_DRIVEN_COLOR, lw=1.2, label="footprint-to-obstacle clearance")
+    ax.plot(_iterations(result), c, color=DRIVEN_COLOR, lw=1.2, label="footprint-to-obstacle clearance")
     ax.axhline(0.0, color="k", lw=1.0, ls="--", label="contact")
-    ax.set_xlabel(_ITER_LABEL)
+    ax.set_xlabel(ITER_LABEL)
     ax.set_ylabel("clearance [m]")
-    ax.set_title(_title("Obstacle clearance", result))
+    set_title(ax, title_for("Obstacle clearance", result))
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize="small")
     return fig
@@ -445,50 +441,50 @@ def _make_clearance(result: SimResult) -> Figure:
 
 def plot_clearance(result: SimResult, path: str | os.PathLike) -> Path:
     """Smallest footprint-to-obstacle distance [m] over iterations (negative = overlap)."""
-    return _save(_make_clearance(result), path)
+    return save(_make_clearance(result), path)
 
 
 def _make_trajectory_overlay(results: Mapping[str, SimResult], title: str | None = None) -> Figure:
-    fig, axes = _new_figure(size=(8.0, 4.5))
+    fig, axes = new_figure(size=(8.0, 4.5))
     ax = axes[0, 0]
     first = next(iter(results.values()))
     path = np.asarray(first.path_xy, dtype=float)
-    ax.plot(path[:, 0], path[:, 1], color=_REF_COLOR, lw=1.2, label="reference path")
+    ax.plot(path[:, 0], path[:, 1], color=REF_COLOR, lw=1.2, ls="-.", label="reference path")
     if first.lane_half_width_m is not None and len(path) >= 2:
-        left, right = _lane_boundaries(path, float(first.lane_half_width_m))
+        left, right = lane_boundaries(path, float(first.lane_half_width_m))
         ax.plot(left[:, 0], left[:, 1], color="k", lw=1.0, ls="--", label="lane boundary")
         ax.plot(right[:, 0], right[:, 1], color="k", lw=1.0, ls="--")
-    _draw_obstacles(ax, first)
-    for name, r in results.items():
-        ax.plot(r.xy[:, 0], r.xy[:, 1], lw=1.4, label=name)
+    draw_obstacles(ax, first)  # moving ones at their closest approach to the first run
+    for i, (name, r) in enumerate(results.items()):
+        ax.plot(r.xy[:, 0], r.xy[:, 1], lw=1.4, color=RUN_COLORS[i % len(RUN_COLORS)], label=name)
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    ax.set_title(title or "Trajectories")
+    set_title(ax, title or "Trajectories")
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="best", fontsize="small")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", borderaxespad=0.0)
     return fig
 
 
 def plot_trajectory_overlay(results: Mapping[str, SimResult], path: str | os.PathLike,
                             title: str | None = None) -> Path:
     """Several runs on the same road overlaid (obstacles and lane from the first)."""
-    return _save(_make_trajectory_overlay(results, title), path)
+    return save(_make_trajectory_overlay(results, title), path)
 
 
 def _make_cost_map(X: np.ndarray, Y: np.ndarray, C: np.ndarray, title: str) -> Figure:
-    fig, axes = _new_figure(size=(7.0, 4.5))
+    fig, axes = new_figure(size=(7.0, 4.5))
     ax = axes[0, 0]
     cs = ax.contourf(X, Y, C, levels=30, cmap="viridis")
     fig.colorbar(cs, ax=ax, label="obstacle cost [-]")
     ax.set_aspect("equal", adjustable="box")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    ax.set_title(title)
+    set_title(ax, title)
     return fig
 
 
 def plot_cost_map(X: np.ndarray, Y: np.ndarray, C: np.ndarray, path: str | os.PathLike,
                   title: str = "Obstacle cost map") -> Path:
     """Filled contours of an obstacle cost evaluated on a grid (the paper's Fig. 14)."""
-    return _save(_make_cost_map(X, Y, C, title), path)
+    return save(_make_cost_map(X, Y, C, title), path)

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from mpcdrive.plots.figures import _new_figure, _save
+from mpcdrive.plots.common import new_figure as _new_figure, save as _save
 
 __all__ = ["make_sweep_histograms", "make_sweep_varied", "plot_sweep_histograms", "plot_sweep_varied"]
 

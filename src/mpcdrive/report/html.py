@@ -43,6 +43,7 @@ from mpcdrive.io.atomic import atomic_write_text
 from mpcdrive.report.markdown import (
     _DEFAULT_INTRO,
     _DEFAULT_TITLE,
+    VERDICT_RULE,
     PaperValue,
     ReportEntry,
     _as_entry,
@@ -457,10 +458,11 @@ def render_html_report(runs: Sequence[HtmlRun], *, title: str, intro: str = "",
             f'<section class="{cls}" data-run="{_e(r.id)}">{"".join(body)}</section>')
     parts += sections
     if paper_values:
-        header, rows = paper_comparison(entries, paper_values)
+        header, rows, notes = paper_comparison(entries, paper_values)
+        foot = "".join(f'<p class="note">[{i}] {_e(n)}</p>' for i, n in enumerate(notes, 1))
         parts.append("<h2>Ours vs paper</h2><p>The paper's values are quoted as text (read from "
-                     "its figures and prose); ours come from the metrics of the run.</p>"
-                     + _table(header, rows, text=True))
+                     "its figures and prose); ours come from the metrics of the run. "
+                     f"{_inline_markup(VERDICT_RULE)}</p>" + _table(header, rows, text=True) + foot)
     parts += extras
     return (_PAGE_HEAD.replace("{title}", _e(title)) + "\n".join(parts)
             + _json_script("replay-data", replays) + _SCRIPT + "</body></html>\n")

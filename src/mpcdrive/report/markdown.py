@@ -23,11 +23,52 @@ from urllib.parse import quote
 from mpcdrive.io.atomic import atomic_write_text
 from mpcdrive.units import rad2deg
 
-__all__ = ["PaperValue", "ReportEntry", "render_reproduce_report", "write_reproduce_report"]
+__all__ = ["PaperFigure", "PaperValue", "ReportEntry", "paper_comparison", "render_reproduce_report",
+           "verdict", "write_reproduce_report"]
+
+
+
+@dataclass(frozen=True)
+class PaperFigure:
+    """The paper's number behind one row of the ours-vs-paper table, for its verdict.
+
+    value : the paper's number in the metric's unit (SI, radians); ``kind`` says what it is:
+      ``"about"`` a value read off a figure (ours within :data:`MATCH_TOLERANCE` of it matches;
+      lower than that is ``better`` when ``lower_is_better``), ``"at_most"`` a bound the paper's
+      curve stays below (ours at most 10 % above it matches), ``"at_least"`` a bound it stays
+      above (an obstacle avoided: clearance at least 0), ``"lower_than"`` the paper's claim
+      that this run's metric is lower than run ``relative_to``'s (compared with our run of it).
+    note : why the paper's figure and ours are not comparable, shown as a footnote where the
+      verdict is ``differs``.
+    """
+
+    value: float | None = None
+    kind: str = "about"
+    lower_is_better: bool = True
+    relative_to: str | None = None
+    note: str = ""
+
+    def __post_init__(self):
+        if self.kind not in ("about", "at_most", "at_least", "lower_than"):
+            raise ValueError(f"PaperFigure kind must be about, at_most, at_least or lower_than, got {self.kind!r}")
+        if (self.kind == "lower_than") != (self.relative_to is not None) or \
+                (self.kind != "lower_than" and _num(self.value) is None):
+            raise ValueError("PaperFigure: about / at_most / at_least need a value, lower_than a relative_to run")
+
 
 #: one row of the ours-vs-paper table: (quantity name, the paper's value as text,
-#: metrics key — dotted for nesting, e.g. ``"solve_time_us.p99"`` — or a function of the metrics)
-PaperValue = tuple[str, str, "str | Callable[[Mapping], float | None]"]
+#: metrics key — dotted for nesting, e.g. ``"solve_time_us.p99"`` — or a function of the metrics
+#: [, :class:`PaperFigure`: the paper's number, for the verdict column])
+PaperValue = tuple  # (str, str, str | Callable[[Mapping], float | None][, PaperFigure])
+
+#: relative difference within which ours matches a number read off the paper's figures
+MATCH_TOLERANCE = 0.10
+VERDICT_RULE = (
+    "Verdict: *matches* when ours is within 10 % of the paper's number (or, where the paper "
+    "gives a bound, at most 10 % beyond it; where it claims a reduction against another run, "
+    "lower than our run of that one), *better* when ours is lower than the paper's number by "
+    "more than that and lower is better (an error), *differs* otherwise (the footnote says "
+    "why), *no number* where the paper states no number to compare with.")
 
 _DEFAULT_TITLE = "mpcdrive — reproduction of the paper experiments"
 _DEFAULT_INTRO = (
@@ -175,38 +216,91 @@ def _metrics_table(entries: Sequence[ReportEntry]) -> list[str]:
     return _table(header, [[f"`{r[0]}`"] + r[1:] for r in rows])
 
 
-def _ours(metrics: Mapping | None, source) -> str:
+def _ours_value(metrics: Mapping | None, source):
     if metrics is None:
-        return "not run"
+        return None
     if callable(source):
         try:
-            value = source(metrics)
+            return source(metrics)
         except KeyError:  # a metric the run did not record
-            value = None
-    else:
-        value = _lookup(metrics, str(source))
-    return _fmt(value)
+            return None
+    return _lookup(metrics, str(source))
+
+
+def _ours(metrics: Mapping | None, source) -> str:
+    return "not run" if metrics is None else _fmt(_ours_value(metrics, source))
+
+
+def verdict(ours, figure: PaperFigure | None, reference=None) -> tuple[str, str]:
+    """(verdict word, reason) of our value against the paper's ``figure`` (see
+    :data:`VERDICT_RULE`); ``reference``: our value of the ``relative_to`` run. The reason is
+    the figure's note, or the numbers, where the verdict is ``differs``; else ''."""
+    if figure is None:
+        return "no number", ""
+    x = _num(ours)
+    if x is None:
+        return "not run", ""
+    if figure.kind == "lower_than":
+        ref = _num(reference)
+        if ref is None:
+            return "not run", ""
+        if x < ref:
+            return "matches", ""
+        return "differs", figure.note or f"Ours {_fmt(x)} is not lower than {_fmt(ref)} of {figure.relative_to}."
+    v = float(figure.value)
+    tol = MATCH_TOLERANCE * abs(v)
+    if figure.kind == "at_most":
+        if x <= v + tol:
+            return "matches", ""
+        return "differs", figure.note or f"Ours {_fmt(x)} is {_fmt(x / v, 2)}x the paper's bound {_fmt(v)}."
+    if figure.kind == "at_least":
+        if x >= v - tol:
+            return "matches", ""
+        return "differs", figure.note or f"Ours {_fmt(x)} is below the paper's {_fmt(v)}."
+    if abs(x - v) <= tol:
+        return "matches", ""
+    if figure.lower_is_better == (x < v):
+        return "better", ""
+    return "differs", figure.note or f"Ours {_fmt(x)} against the paper's {_fmt(v)}."
 
 
 def paper_comparison(entries: Sequence[ReportEntry],
                      paper_values: Mapping[str, Sequence[PaperValue]]
-                     ) -> tuple[list[str], list[list[str]]]:
-    """Header and rows (experiment id, quantity, paper value, ours) of the ours-vs-paper table;
-    ids without an entry read "not run"."""
+                     ) -> tuple[list[str], list[list[str]], list[str]]:
+    """Header, rows (experiment id, quantity, paper value, ours, verdict) and footnotes of the
+    ours-vs-paper table; ids without an entry read "not run". A row that differs names its
+    footnote (``differs [1]``); the same reason is one footnote for every row it explains."""
     by_id = {e.id: e.metrics for e in entries}
     order = [e.id for e in entries if e.id in paper_values]
     order += [i for i in paper_values if i not in by_id]
-    rows = []
+    rows, notes = [], []
     for exp_id in order:
-        for quantity, paper_text, source in paper_values[exp_id]:
-            rows.append([exp_id, quantity, paper_text, _ours(by_id.get(exp_id), source)])
-    return ["experiment", "quantity", "paper", "ours"], rows
+        for row in paper_values[exp_id]:
+            quantity, paper_text, source = row[:3]
+            figure = row[3] if len(row) > 3 else None
+            metrics = by_id.get(exp_id)
+            reference = None
+            if figure is not None and figure.relative_to is not None:
+                reference = _ours_value(by_id.get(figure.relative_to), source)
+            word, reason = verdict(_ours_value(metrics, source), figure, reference)
+            if metrics is None:
+                word = "not run"
+            elif reason:
+                if reason not in notes:
+                    notes.append(reason)
+                word = f"{word} [{notes.index(reason) + 1}]"
+            rows.append([exp_id, quantity, paper_text, _ours(metrics, source), word])
+    return ["experiment", "quantity", "paper", "ours", "verdict"], rows, notes
 
 
 def _paper_table(entries: Sequence[ReportEntry],
                  paper_values: Mapping[str, Sequence[PaperValue]]) -> list[str]:
-    header, rows = paper_comparison(entries, paper_values)
-    return _table(header, [[f"`{r[0]}`"] + r[1:] for r in rows])
+    header, rows, notes = paper_comparison(entries, paper_values)
+    lines = _table(header, [[f"`{r[0]}`"] + r[1:] for r in rows])
+    if notes:
+        lines.append("")
+        lines += [f"[{i}] {note}  " for i, note in enumerate(notes, 1)]
+    return lines
 
 
 def _image_link(fig: str) -> str:
@@ -234,7 +328,7 @@ def render_reproduce_report(entries: Iterable, paper_values: Mapping[str, Sequen
     if paper_values:
         lines += ["", "## Ours vs paper", "",
                   ("The paper's values are quoted as text (read from its figures and prose); "
-                   "ours come from the metrics of the run."), ""]
+                   "ours come from the metrics of the run. " + VERDICT_RULE), ""]
         lines += _paper_table(items, paper_values)
     for e in items:
         lines += ["", f"## `{e.id}`", ""]

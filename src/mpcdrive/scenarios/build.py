@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -15,7 +16,7 @@ from ..control.fallback import FallbackConfig
 from ..control.mpc import LtvMpc, MpcConfig
 from ..models.dynamic import DynamicBicycle, DynamicParams
 from ..control.factory import make_mpc
-from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams
+from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams, slip_terms
 from ..ocp.problem import MpcProblem
 from ..paths import CirclePath, Path, StraightPath, WaypointPath
 from ..paths.speed_profile import SpeedProfile
@@ -27,7 +28,7 @@ from ..scene.footprint import Footprint
 from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Polygon, Static, TrajectoryMotion, rectangle
 from ..solvers.osqp_backend import OsqpSettings
 from ..solvers.projected_gradient import ProjectedGradientSettings
-from ..types import SimResult
+from ..types import ScenarioWarning, SimResult
 from .schema import AvoidanceSpec, NoiseSpec, ObstacleSpec, ScenarioSpec
 
 
@@ -68,7 +69,48 @@ def build_path(spec) -> Path:
         return CirclePath(spec.center, spec.radius_m, spec.ccw, math.radians(spec.start_angle_deg))
     if spec.type == "csv":
         return load_track(spec).path
-    return WaypointPath(spec.points, closed=spec.closed, smoothing=spec.smoothing, ds_m=spec.ds_m)
+    return WaypointPath(spec.points, closed=spec.closed, smoothing=spec.smoothing, ds_m=spec.ds_m,
+                        interpolation=spec.interpolation)
+
+
+def warn_if_path_too_curved(spec: ScenarioSpec, path: Path, source: str | None = None) -> float | None:
+    """Warn (:class:`~mpcdrive.types.ScenarioWarning`) when the path turns tighter than the
+    vehicle can at full steering; returns the worst mean curvature found [1/m], or None when
+    the vehicle can follow the whole path.
+
+    The car's tightest turn: its centre of gravity moves on curvature ``sin(beta) / lr`` with the
+    slip angle ``tan(beta) = lr / (lf + lr) tan(max_steer)`` (the kinematic bicycle's, which the
+    dynamic bicycle becomes at low speed; ``tan(max_steer) / wheelbase`` at the rear axle). The
+    path's curvature is its heading change over one wheelbase (a corner's 90 deg over a metre is
+    a curvature of 1.57 1/m), the worst such stretch is compared.
+    """
+    v = spec.vehicle
+    lq = v.lr_m / (v.lf_m + v.lr_m)
+    _, sin_beta, _ = slip_terms(math.radians(spec.controller.max_steer_deg), lq, np)
+    kappa_max = float(sin_beta) / v.lr_m
+    window = v.lf_m + v.lr_m
+    L = float(path.length_m)
+    closed = bool(getattr(path, "closed", False)) or isinstance(path, CirclePath)
+    if L <= window and not closed:
+        return None
+    n = int(math.ceil((L + (window if closed else 0.0)) / (window / 8.0))) + 1
+    s = np.linspace(0.0, L + window if closed else L, n)
+    h = np.unwrap(np.asarray(path.heading(s), float))
+    shift = min(8, n - 1)
+    kappa = np.abs(h[shift:] - h[:-shift]) / (s[shift:] - s[:-shift])
+    i = int(np.argmax(kappa))
+    if kappa[i] <= kappa_max * (1.0 + 1e-6):
+        return None
+    s_at = 0.5 * (s[i] + s[i + shift]) % L if closed else 0.5 * (s[i] + s[i + shift])
+    x, y = np.asarray(path.position(s_at), float)
+    where = "path.points" if spec.path.type == "waypoints" else "path"
+    warnings.warn(
+        f"{source or 'scenario ' + repr(spec.id)}: {where}: the path turns at {kappa[i]:.3g} 1/m (radius "
+        f"{1.0 / kappa[i]:.3g} m) over {window:.3g} m around s = {s_at:.4g} m, ({x:.4g}, {y:.4g}) m, tighter than "
+        f"the vehicle's {kappa_max:.3g} 1/m (radius {1.0 / kappa_max:.3g} m) at controller.max_steer_deg "
+        f"{spec.controller.max_steer_deg:g}: it cannot follow the path there",
+        ScenarioWarning, stacklevel=2)
+    return float(kappa[i])
 
 
 def build_obstacle(spec: ObstacleSpec) -> Obstacle:
@@ -223,6 +265,7 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
     model = build_model(v.model, v)
     track = load_track(spec.path) if spec.path.type == "csv" else None
     path = track.path if track is not None else build_path(spec.path)
+    warn_if_path_too_curved(spec, path)
     profile = None if c.speed_profile is None else build_speed_profile(c.speed_profile, path, v.friction)
     init = spec.initial_state
     pose = [init.x_m, init.y_m, math.radians(init.yaw_deg)]

@@ -61,16 +61,35 @@ class CircleSpec(_Strict):
 
 
 class WaypointsSpec(_Strict):
-    """Smoothed spline through ``points`` [m] (at least two distinct points)."""
+    """Curve through ``points`` [m] (at least two distinct points).
+
+    ``interpolation``: ``pchip`` (shape-preserving: through every point, no overshoot, straight
+    legs stay straight and corners stay corners) or ``spline`` (a cubic spline, smooth but it
+    overshoots at corners; ``smoothing`` > 0 is its smoothing factor). When omitted: ``spline``
+    if ``smoothing`` > 0, else ``pchip``.
+    """
 
     type: Literal["waypoints"]
     points: list[Point] = Field(min_length=2)
     closed: bool = False
     smoothing: NonNeg = 0.0
+    interpolation: Literal["pchip", "spline"] = "pchip"
     ds_m: Positive | None = None  # table spacing [m] (default: length / 20000, within 2 mm .. 0.1 m)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_interpolation(cls, data):
+        # smoothing belongs to the spline: a file that smooths without naming a curve gets one
+        if isinstance(data, dict) and "interpolation" not in data:
+            sm = data.get("smoothing", 0.0)
+            if isinstance(sm, (int, float)) and not isinstance(sm, bool) and sm > 0:
+                data = {**data, "interpolation": "spline"}
+        return data
 
     @model_validator(mode="after")
     def _distinct(self):
+        if self.interpolation == "pchip" and self.smoothing > 0:
+            raise ValueError(f"smoothing {self.smoothing} applies to interpolation: spline only, not pchip")
         pts = [p for i, p in enumerate(self.points) if i == 0 or math.dist(p, self.points[i - 1]) > 1e-9]
         if self.closed and len(pts) > 2 and math.dist(pts[0], pts[-1]) <= 1e-9:
             pts = pts[:-1]
