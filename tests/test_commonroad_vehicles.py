@@ -232,3 +232,76 @@ def test_st_plant_agrees_with_the_dynamic_bicycle_on_a_gentle_circle():
     assert kappa_st == pytest.approx(kappa_dyn, rel=2e-3)
     # and the yaw rate is v kappa on the ST plant (steady state)
     assert xp[5] == pytest.approx(v * kappa_st, rel=1e-9)
+
+
+# ---------------------------------------------------------------- closed loop
+
+from mpcdrive.scenarios import build_experiment, run_experiment  # noqa: E402
+from mpcdrive.sim import compute_metrics  # noqa: E402
+
+
+@pytest.mark.parametrize("plant", ["ks", "st", "mb"])
+def test_scenario_runs_on_a_commonroad_plant_and_logs_the_centre_of_gravity(plant):
+    data = {**ROAD, "duration_s": 6.0, "plant": {"model": f"commonroad_{plant}", "vehicle": "bmw_320i"}}
+    spec = validate_scenario_data(data, "road.yaml")
+    exp = build_experiment(spec)
+    assert isinstance(exp.plant, CommonRoadPlant) and exp.plant.kind == plant
+    res = run_experiment(exp)
+    assert res.meta["termination"] == "completed" and len(res.t_s) == 60
+    assert res.state_names == ("x", "y", "yaw", "v") and res.x.shape == (60, 4)
+    # the logged state is the plant observed at its centre of gravity
+    xp_final = np.array(res.meta["plant_state_final"])
+    assert xp_final.shape == (exp.plant.nx,)
+    assert res.x_final == pytest.approx(exp.plant.observe(xp_final), abs=1e-12)
+    if plant == "ks":  # the rear axle is lr behind the logged centre of gravity
+        lr = exp.plant.p.b
+        assert res.x_final[:2] == pytest.approx(xp_final[:2] + lr * np.array([math.cos(xp_final[4]),
+                                                                              math.sin(xp_final[4])]))
+    # the controller brings the car from 0.5 m off the lane centre onto it and to 10 m/s
+    assert abs(res.e_y_m[-1]) < 0.05 and res.v_mps[-1] == pytest.approx(10.0, abs=0.1)
+    m = compute_metrics(res, exp.footprint)
+    assert m["solver_failures"] == 0
+
+
+def test_missing_extra_is_a_clear_error(monkeypatch):
+    import mpcdrive.adapters.commonroad_vehicles as crv
+
+    monkeypatch.setattr(crv, "available", lambda: False)
+    spec = validate_scenario_data({**ROAD, "plant": {"model": "commonroad_st", "vehicle": "bmw_320i"}}, "f.yaml")
+    with pytest.raises(ValueError, match=r"plant.model commonroad_st needs the commonroad extra"):
+        build_experiment(spec)
+
+
+def test_simulate_refuses_a_state_disturbance_on_an_observed_plant():
+    from mpcdrive.sim import Disturbance, simulate
+
+    exp = build_experiment(validate_scenario_data(
+        {**ROAD, "plant": {"model": "commonroad_ks", "vehicle": "bmw_320i"}}, "f.yaml"))
+    with pytest.raises(ValueError, match="state disturbance needs a Plant"):
+        simulate(exp.controller, exp.plant, exp.path, exp.x0, 0.1, 5,
+                 disturbance=Disturbance("normal", std=np.zeros(4)))
+
+
+@pytest.mark.parametrize("plant", ["st", "mb"])
+def test_commonroad_file_on_a_commonroad_plant_stops_behind_the_parked_car(plant):
+    """ZAM_Tutorial_Urban-3_2: a parked car blocks the lane 12 m ahead at 9 m/s. On CommonRoad's
+    ST / MB model of the Ford Escort the controller stops behind it and holds the stop: judged by
+    CommonRoad's drivability checker (collision-free, on the road), no reversing."""
+    from dataclasses import replace
+    from pathlib import Path
+
+    from mpcdrive.adapters import commonroad as cr
+
+    if not cr.available():
+        pytest.skip("commonroad-io / drivability checker not installed")
+    imp = cr.load_commonroad(Path(__file__).resolve().parent / "data" / "commonroad" / "ZAM_Tutorial_Urban-3_2.xml")
+    spec = apply_vehicle(imp.spec.model_copy(update={"duration_s": 8.0}), "ford_escort", plant)
+    exp = build_experiment(spec)
+    res = run_experiment(exp)
+    rep = cr.check_drive(replace(imp, spec=spec), res)
+    assert rep.collision_free and rep.road_compliant, rep.line()
+    assert rep.goal_step is None  # the goal lies past the parked car
+    assert res.v_mps.min() >= -1e-12 and abs(res.v_mps[-1]) <= 1e-6
+    stopped = res.v_mps <= 1e-6
+    assert stopped[-10:].all()  # the last second: standing
+    assert np.min(res.clearance_m) > 0.3

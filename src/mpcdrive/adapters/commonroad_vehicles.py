@@ -175,7 +175,7 @@ class CommonRoadPlant:
     tyre and suspension modes.
     """
 
-    def __init__(self, model: str, vehicle: str, *, max_step_s: float = 0.01, mb_step_s: float = 5e-4):
+    def __init__(self, model: str, vehicle: str, *, max_step_s: float = 0.01, mb_step_s: float = 1e-3):
         if model not in _SHORT:
             raise ValueError(f"unknown CommonRoad plant model {model!r} (known: {', '.join(_SHORT)})")
         for name, val in (("max_step_s", max_step_s), ("mb_step_s", mb_step_s)):
