@@ -117,7 +117,7 @@ def _brake_and_hold(plant: CommonRoadPlant, accel_mps2: float, hold_s: float = 5
 @pytest.mark.parametrize("kind, max_step_s", [("st", 0.01), ("st", 0.05), ("mb", None)])
 @pytest.mark.parametrize("accel", [-3.0, -11.5])
 def test_plant_brakes_to_a_stop_and_holds_it_with_the_wheels_turned(kind, max_step_s, accel):
-    # ST: below about 2 m/s its yaw-rate / slip block is stiff (eigenvalues ~ -400 / v 1/s); plain
+    # ST: at low speed its yaw-rate / slip block is stiff (spectral radius ~ 216 / v 1/s); plain
     # RK4 at 2 substeps per 0.1 s diverges here (see the next test); the plant shortens its steps.
     kw = {} if max_step_s is None else {"max_step_s": max_step_s}
     plant = CommonRoadPlant(kind, "bmw_320i", **kw)
