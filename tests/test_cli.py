@@ -1,4 +1,4 @@
-"""The command line as CONTRACT.md describes it, run as a user would (subprocess)."""
+"""The command line as docs/interfaces.md describes it, run as a user would (subprocess)."""
 
 import csv
 import json

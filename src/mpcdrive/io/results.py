@@ -1,6 +1,6 @@
 """``trajectory.csv`` and JSON output of a closed-loop run (reads results, never solves).
 
-``trajectory.csv`` (CONTRACT.md) has one row per control step and the columns
+``trajectory.csv`` (docs/interfaces.md) has one row per control step and the columns
 
     t, x, y, yaw, v, steer, accel, s, e_y, e_psi, solve_time_us, status, fallback
 

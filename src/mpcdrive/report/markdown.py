@@ -1,6 +1,6 @@
 """Markdown report of ``mpcdrive reproduce``: metrics tables, ours-vs-paper, figures.
 
-The report reads finished results (metrics dicts as in CONTRACT.md's ``metrics.json`` and
+The report reads finished results (metrics dicts as in ``metrics.json``, docs/interfaces.md, and
 figure files already written); it never runs a controller or solver.
 
 Example::
@@ -86,7 +86,7 @@ class ReportEntry:
     """One experiment of the report.
 
     id : experiment id (``paper-exp1``); description : one or more lines of text;
-    metrics : the run's metrics dict (CONTRACT.md keys, SI units, radians);
+    metrics : the run's metrics dict (docs/interfaces.md keys, SI units, radians);
     figures : figure paths relative to the report directory (``paper-exp1/trajectory.png``).
     """
 
