@@ -181,8 +181,10 @@ def test_scenario_warning_is_one_line_on_stderr_and_the_run_goes_on(tmp_path):
     r = cli("run", str(p), "--out", str(tmp_path / "out"), "-q")
     assert r.returncode == 0, r.stderr
     lines = [ln for ln in r.stderr.splitlines() if "warning" in ln]
-    assert lines == [f"mpcdrive: warning: {p}: controller.max_steer_deg: 0.7 looks like radians "
-                     "(0.7 rad = 40.11 deg); this field is in degrees"], r.stderr
+    # 0.7 deg of steering cannot turn the 1.5 m circle either: that is the second warning
+    assert lines[0] == (f"mpcdrive: warning: {p}: controller.max_steer_deg: 0.7 looks like radians "
+                        "(0.7 rad = 40.11 deg); this field is in degrees"), r.stderr
+    assert len(lines) == 2 and ": path: " in lines[1] and "cannot follow the path" in lines[1], r.stderr
     assert (tmp_path / "out" / "metrics.json").is_file()
 
 

@@ -254,7 +254,7 @@ class FallbackLadder:
             if obstacles:
                 body = self.footprint.polygon(float(x[0]), float(x[1]), float(x[2]))
                 t = t0_s + k * dt
-                if any(shape_distance(body, ob.at(t)) <= 0.0 for ob in obstacles):
+                if any(ob.present(t) and shape_distance(body, ob.at(t)) <= 0.0 for ob in obstacles):
                     return False
             if self.road_half_width_m is not None:
                 s_m, e_y = path.project(x[:2], s_guess=s_m)

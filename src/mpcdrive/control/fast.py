@@ -159,6 +159,8 @@ def obstacles_unsupported_reason(obstacles, avoidance: AvoidanceConfig | None) -
     for ob in obstacles:
         if av.detour != "none" and not (isinstance(ob.motion, Static) and isinstance(ob.shape, Circle)):
             return f"the {av.detour!r} detour around obstacle {ob.name or '?'} (not a static circle) needs the OSQP controller"
+        if ob.has_lifetime:
+            return f"obstacle {ob.name or '?'} has a lifetime (present only from t_start_s to t_end_s)"
         if not isinstance(ob.motion, (Static, ConstantVelocity)):
             return f"obstacle {ob.name or '?'} follows a {type(ob.motion).__name__} (only static or constant velocity)"
         if not isinstance(ob.shape, (Circle, Polygon)):

@@ -199,19 +199,44 @@ class Avoidance:
         self._e_ref = np.zeros(N1)
 
     # -- helpers ----------------------------------------------------------------------
-    def relevant(self, t_s: float, xy: np.ndarray) -> list[int]:
+    def relevant(self, t_s: float, xy: np.ndarray, s_m: float | None = None) -> list[int]:
         """Indices of the obstacles a step at time ``t_s`` [s] from position ``xy`` [m] considers:
-        those within the influence distance (centre distance minus bounding radius), nearest
-        first, at most max_obstacles."""
+        those present at some time of the horizon and within the influence distance (centre
+        distance minus bounding radius), nearest first, at most max_obstacles. With the car's arc
+        length ``s_m`` [m] and a constraint formulation (``hard``, ``corridor``), an obstacle that
+        follows the car (wholly behind its rear, in its lane: :meth:`_following`) is not avoided: it
+        is the follower's to keep its distance, and swerving or speeding away from it is what makes
+        a car unpredictable. (The cost formulations, the paper's, keep every obstacle in reach.)"""
         reach = self.config.influence_m
+        t_end = t_s + self.N * self.dt_s
         d = []
         for j, ob in enumerate(self.obstacles):
+            if ob.has_lifetime and (ob.t_end_s < t_s or ob.t_start_s > t_end):
+                continue
             ox, oy, _ = ob.pose_at(t_s)
             dist = math.hypot(ox - xy[0], oy - xy[1]) - ob.shape.bounding_radius_m
-            if dist <= reach:
-                d.append((dist, j))
+            if dist > reach:
+                continue
+            if s_m is not None and self.config.uses_rows and self._following(ob, t_s, xy, s_m):
+                continue
+            d.append((dist, j))
         d.sort()
         return [j for _, j in d[: self.config.max_obstacles]]
+
+    def _following(self, ob: Obstacle, t_s: float, xy: np.ndarray, s_m: float) -> bool:
+        """True when obstacle ``ob`` follows the car at arc length ``s_m``, position ``xy``, at time
+        ``t_s``: its Frenet box lies wholly behind the rear of the body and overlaps the body's
+        lateral extent (directly behind, in the car's own lane). A car behind in another lane
+        stays avoided: it may pass beside or cut in ahead."""
+        if not self.path.closed and s_m <= 0.0:
+            return False  # no path behind the start to judge on
+        box = frenet_box(self.path, ob.at(t_s), s_m)
+        if box.s_hi >= s_m - self.half_length:
+            return False
+        h = float(self.path.heading(s_m))
+        p = self.path.position(s_m)
+        e = -math.sin(h) * (xy[0] - p[0]) + math.cos(h) * (xy[1] - p[1])
+        return box.e_lo < e + self.half_width and box.e_hi > e - self.half_width
 
     @property
     def passing_room_m(self) -> float:
@@ -258,7 +283,7 @@ class Avoidance:
         x : (nx,) measured state; Xlin : (N+1, nx) linearization trajectory (row k for x_k);
         s_arr : (N+1,) horizon reference arc lengths [m]; memory : passing sides, updated."""
         cfg = self.config
-        rel = self.relevant(t_s, x[:2])
+        rel = self.relevant(t_s, x[:2], float(s_arr[0]))
         sides: dict[int, int] = {}
         boxes: dict[int, list[FrenetBox]] = {}
         centers: dict[int, np.ndarray] = {}
@@ -271,15 +296,18 @@ class Avoidance:
             meet = int(np.argmin([abs(b.s_ref - sk) for b, sk in zip(bx, s_arr)])) if self.obstacles[j].moving else 0
             sides[j] = self._choose_side(j, bx[meet], memory)
         memory.sides.update(sides)
+        # horizon steps 1..N at which each obstacle exists (its lifetime)
+        times = t_s + self.dt_s * np.arange(1, self.N + 1)
+        present = {j: np.broadcast_to(self.obstacles[j].present(times), (self.N,)) for j in rel}
         rows_a = rows_b = lo = hi = H = g = e_ref = None
         if cfg.detour == "trapezoid":
             e_ref = self._detour(s_arr, boxes, sides)
         if cfg.formulation == "hard":
-            rows_a, rows_b = self._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides)
+            rows_a, rows_b = self._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present)
         elif cfg.formulation == "corridor":
-            lo, hi, rows_a, rows_b = self._corridor(Xlin, s_arr, rel, boxes, sides)
+            lo, hi, rows_a, rows_b = self._corridor(Xlin, s_arr, rel, boxes, sides, present)
         else:
-            H, g = self._cost(Xlin, rel, boxes, centers)
+            H, g = self._cost(Xlin, rel, boxes, centers, present)
         s_max = None if cfg.follow_gap_s is None else self._stop_lines(s_arr, rel, boxes, sides)
         return AvoidanceTerms(rows_a, rows_b, lo, hi, H, g, e_ref, sides, s_max)
 
@@ -354,7 +382,7 @@ class Avoidance:
         t = np.column_stack([np.cos(h), np.sin(h)])
         return t, self.path.position(s_bar) + t * (s_lo - s_bar)[:, None]
 
-    def _hard_rows(self, Xlin, s_arr, rel, boxes, centers, world, sides):
+    def _hard_rows(self, Xlin, s_arr, rel, boxes, centers, world, sides, present):
         a, b = self._a, self._b
         a[:] = 0.0
         b[:] = -np.inf
@@ -394,6 +422,7 @@ class Avoidance:
                 n = -tb.reshape(nd, -1, 2)
                 q = q.reshape(nd, -1, 2)
                 active[:] = True
+            active &= present[j][None, :]  # no row at the steps the obstacle does not exist
             rows = slice(slot * nd, (slot + 1) * nd)
             # n . (p + J (x - xbar)) >= n . q + r_need, J = d p / d (x, y, yaw)
             ay = off * (-n[..., 0] * s + n[..., 1] * c)
@@ -405,7 +434,7 @@ class Avoidance:
             b[:, rows] = np.where(active, rhs, -np.inf).T
         return a, b
 
-    def _corridor(self, Xlin, s_arr, rel, boxes, sides):
+    def _corridor(self, Xlin, s_arr, rel, boxes, sides, present):
         lane = (self.lane_half if self.lane_half is not None else 1e3) - self.half_width - self.lane_margin
         lo, hi = self._lo, self._hi
         lo[:] = -lane
@@ -420,6 +449,8 @@ class Avoidance:
             sk = s_arr[k]
             for j in rel:
                 box = boxes[j][k]
+                if not present[j][k - 1]:
+                    continue
                 if not (box.s_lo - m - self.half_length <= sk <= box.s_hi + m + self.half_length):
                     continue
                 if sides[j] == SIDE_LEFT:
@@ -428,7 +459,7 @@ class Avoidance:
                     hi[k - 1] = min(hi[k - 1], box.e_lo - m - self.half_width)
             for slot, j in enumerate(rel):
                 box = boxes[j][k]
-                if sides[j] != SIDE_BLOCKED or not ahead[j]:
+                if sides[j] != SIDE_BLOCKED or not ahead[j] or not present[j][k - 1]:
                     continue
                 # stop before it: s(p) <= s_lo - margin - half length, i.e. t . p <= t . q - that
                 t, q = self._stop_plane(np.array([box.s_lo]), s_lin[k - 1:k], m + self.half_length)
@@ -440,7 +471,7 @@ class Avoidance:
         lo[bad] = hi[bad] = mid[bad]
         return lo, hi, a, b
 
-    def _cost(self, Xlin, rel, boxes, centers):
+    def _cost(self, Xlin, rel, boxes, centers, present):
         cfg = self.config
         H, g = self._H, self._g
         H[:] = 0.0
@@ -461,6 +492,9 @@ class Avoidance:
                 hess = val[:, None, None] * (np.einsum("ki,kj->kij", Sd, Sd) - Sinv)
             ev, V = np.linalg.eigh(hess)
             hp = np.einsum("kij,kj,klj->kil", V, np.maximum(ev, 0.0), V)
+            if not present[j].all():  # no cost at the steps the obstacle does not exist
+                hp = hp * present[j][:, None, None]
+                grad = grad * present[j][:, None]
             H += hp
             g += grad - np.einsum("kij,kj->ki", hp, p)
         return H, g

@@ -128,9 +128,12 @@ def build_obstacle(spec: ObstacleSpec) -> Obstacle:
         yaws = np.radians(tr.yaw_deg) if tr.yaw_deg is not None else np.full(len(pts), yaw)
         x0, y0 = (spec.position if spec.position is not None else pts[0])
         motion = TrajectoryMotion(np.array(tr.t_s), pts[:, 0] - x0, pts[:, 1] - y0, yaws - yaw)
-        return Obstacle(shape, (x0, y0, yaw), motion, spec.name)
-    motion = Static() if spec.velocity_mps is None else ConstantVelocity(*spec.velocity_mps)
-    return Obstacle(shape, (spec.position[0], spec.position[1], yaw), motion, spec.name)
+        pose = (x0, y0, yaw)
+    else:
+        motion = Static() if spec.velocity_mps is None else ConstantVelocity(*spec.velocity_mps)
+        pose = (spec.position[0], spec.position[1], yaw)
+    life = spec.lifetime_s if spec.lifetime_s is not None else (-math.inf, math.inf)
+    return Obstacle(shape, pose, motion, spec.name, t_start_s=life[0], t_end_s=life[1])
 def initial_overlap(spec: ScenarioSpec) -> tuple[str, str] | None:
     """(field, problem) for the first obstacle that overlaps the car's footprint at t = 0 (the
     body rectangle at the initial pose against the obstacle's shape at t = 0; touching is
@@ -142,7 +145,10 @@ def initial_overlap(spec: ScenarioSpec) -> tuple[str, str] | None:
         init.x_m, init.y_m, math.radians(init.yaw_deg))
     for i, o in enumerate(spec.obstacles):
         try:
-            d = shape_distance(body, build_obstacle(o).at(0.0))
+            ob = build_obstacle(o)
+            if not ob.present(0.0):
+                continue  # not there at the start
+            d = shape_distance(body, ob.at(0.0))
         except ValueError:
             continue
         if d < 0.0:

@@ -202,7 +202,8 @@ class TrajectorySpec(_Strict):
 class ObstacleSpec(_Strict):
     """An obstacle: ``circle`` (radius_m), ``rectangle`` (length_m, width_m) or convex ``polygon``
     (points in the obstacle frame) at ``position`` [m] with ``yaw_deg``; static, moving at
-    ``velocity_mps`` (vx, vy) or along a recorded ``trajectory``."""
+    ``velocity_mps`` (vx, vy) or along a recorded ``trajectory``; present over ``lifetime_s``
+    ([start, end] in s, default always: outside it the obstacle is neither avoided nor hit)."""
 
     shape: Literal["circle", "rectangle", "polygon"]
     position: Point | None = None
@@ -214,9 +215,12 @@ class ObstacleSpec(_Strict):
     velocity_mps: Point | None = None
     trajectory: TrajectorySpec | None = None
     name: str = ""
+    lifetime_s: tuple[Finite, Finite] | None = None
 
     @model_validator(mode="after")
     def _complete(self):
+        if self.lifetime_s is not None and self.lifetime_s[1] < self.lifetime_s[0]:
+            raise ValueError(f"lifetime_s must be [start, end] with start <= end, got {list(self.lifetime_s)}")
         need = {"circle": ("radius_m",), "rectangle": ("length_m", "width_m"), "polygon": ("points",)}[self.shape]
         for key in need:
             if getattr(self, key) is None:

@@ -123,18 +123,37 @@ class WorldPolygon:
 
 @dataclass(frozen=True, eq=False)
 class Obstacle:
-    """An obstacle: ``shape`` placed at ``pose`` (x m, y m, yaw rad) at t = 0, moved by ``motion``."""
+    """An obstacle: ``shape`` placed at ``pose`` (x m, y m, yaw rad) at t = 0, moved by ``motion``,
+    present from ``t_start_s`` to ``t_end_s`` [s] (inclusive; default: always). A CommonRoad
+    vehicle, for one, exists only over its recorded time span: outside its lifetime an obstacle
+    is neither avoided nor collided with."""
 
     shape: Circle | Polygon
     pose: tuple[float, float, float]
     motion: Static | ConstantVelocity | TrajectoryMotion = field(default_factory=Static)
     name: str = ""
+    t_start_s: float = -math.inf
+    t_end_s: float = math.inf
 
     def __post_init__(self):
         pose = tuple(float(v) for v in self.pose)
         if len(pose) != 3 or not all(math.isfinite(v) for v in pose):
             raise ValueError(f"obstacle pose must be 3 finite numbers (x m, y m, yaw rad), got {self.pose}")
         object.__setattr__(self, "pose", pose)
+        t0, t1 = float(self.t_start_s), float(self.t_end_s)
+        if math.isnan(t0) or math.isnan(t1) or t1 < t0:
+            raise ValueError(f"obstacle lifetime must be t_start_s <= t_end_s, got [{self.t_start_s}, {self.t_end_s}]")
+        object.__setattr__(self, "t_start_s", t0)
+        object.__setattr__(self, "t_end_s", t1)
+
+    @property
+    def has_lifetime(self) -> bool:
+        """True when the obstacle is absent at some time (a finite start or end)."""
+        return math.isfinite(self.t_start_s) or math.isfinite(self.t_end_s)
+
+    def present(self, t_s):
+        """Whether the obstacle exists at time ``t_s`` [s] (scalar or array)."""
+        return (self.t_start_s <= np.asarray(t_s)) & (np.asarray(t_s) <= self.t_end_s)
 
     @property
     def moving(self) -> bool:

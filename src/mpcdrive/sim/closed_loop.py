@@ -361,7 +361,8 @@ def _clearances(X: np.ndarray, T: np.ndarray, obstacles, footprint: Footprint):
     for i, ob in enumerate(obstacles):
         poses = np.array([ob.pose_at(t) for t in T])
         for k in range(K):
-            clear[i, k] = shape_distance(footprint.polygon(*X[k, :3]), ob.at(T[k]))
+            if ob.present(T[k]):  # an obstacle outside its lifetime is not there to hit
+                clear[i, k] = shape_distance(footprint.polygon(*X[k, :3]), ob.at(T[k]))
         entry = {"name": ob.name, "moving": ob.moving}
         if isinstance(ob.shape, Circle):
             centers = poses[:, :2].round(4)

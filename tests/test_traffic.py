@@ -1,0 +1,79 @@
+"""Traffic rules of the obstacle terms: lifetimes (an obstacle exists only over its time span) and
+traffic behind (a car following in the ego's lane is not avoided as if it were ahead)."""
+
+
+import numpy as np
+import pytest
+
+from mpcdrive.scenarios import build_experiment, run_experiment, validate_scenario_data
+from mpcdrive.scene.obstacles import Circle, Obstacle
+from mpcdrive.sim import compute_metrics
+
+BASE = {
+    "id": "traffic",
+    "dt_s": 0.1,
+    "duration_s": 10.0,
+    "vehicle": {"model": "kinematic4", "preset": "commonroad_bmw_320i", "speed_mps": 10.0},
+    "path": {"type": "straight", "start": [0, 0], "end": [200, 0]},
+    "road": {"lane_width_m": 3.5, "margin_m": 0.1},
+    "initial_state": {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 0, "v_mps": 10.0},
+    "avoidance": {"formulation": "hard", "margin_m": 0.3, "influence_m": 40.0},
+    "controller": {"horizon": 30, "Q": [1, 1, 2, 1], "R": [10, 0.1], "Rc": [100, 1], "max_steer_deg": 30,
+                   "accel_limits_mps2": [-6, 3], "speed_limits_mps": [0, 15], "reference_speed_mps": 10.0,
+                   "horizon_step_m": 1.0},
+}
+
+
+def drive(obstacles, **top):
+    spec = validate_scenario_data({**BASE, **top, "obstacles": obstacles}, "traffic.yaml")
+    exp = build_experiment(spec)
+    r = run_experiment(exp)
+    return r, compute_metrics(r, exp.footprint)
+
+
+def car(x, y, vx, **kw):
+    return {"shape": "rectangle", "position": [x, y], "length_m": 4.5, "width_m": 1.8, "velocity_mps": [vx, 0.0], **kw}
+
+
+def test_a_car_following_in_the_lane_causes_no_swerve_and_no_speeding_away():
+    """A faster car 25 m behind in the ego's lane: before, the ego accelerated to 10.8 m/s to keep
+    its predicted path clear of the follower's; now it keeps its lane and speed."""
+    r, m = drive([car(-25.0, 0.0, 12.0, name="follower")])
+    assert m["collisions"] == 0
+    assert np.max(np.abs(r.e_y_m)) < 0.01
+    assert np.max(r.v_mps) < 10.0 + 0.02 and np.min(r.v_mps) > 10.0 - 0.02
+
+
+def test_a_car_passing_in_the_next_lane_is_still_avoided_and_the_ego_keeps_its_lane():
+    r, m = drive([car(-25.0, 2.2, 16.0, name="passer")], duration_s=8.0)
+    assert m["collisions"] == 0 and m["min_obstacle_clearance_m"] > 0.3
+    assert m["max_lane_excess_m"] == 0.0
+
+
+def test_an_obstacle_that_appears_after_the_car_passed_is_not_avoided():
+    """A rock on the path at x = 20 m that only exists from t = 6 s on (the car is there at 2 s)."""
+    rock = {"shape": "circle", "position": [20.0, 0.0], "radius_m": 0.5, "name": "rock"}
+    r, m = drive([{**rock, "lifetime_s": [6.0, 100.0]}], duration_s=4.0)
+    assert np.max(np.abs(r.e_y_m)) < 0.01 and m["collisions"] == 0
+    r0, m0 = drive([rock], duration_s=4.0)  # always there: the car must go around or stop
+    assert m0["collisions"] == 0 and (np.max(np.abs(r0.e_y_m)) > 0.5 or r0.x[-1, 0] < 20.0)
+
+
+def test_an_obstacle_that_vanished_is_neither_avoided_nor_hit():
+    """A parked car at x = 30 m that leaves the scenario at t = 1 s (a CommonRoad vehicle's recording
+    ends): the ego drives through where it was, without a collision counted."""
+    r, m = drive([car(30.0, 0.0, 0.0, name="gone", lifetime_s=[0.0, 1.0])], duration_s=5.0)
+    assert r.x[-1, 0] > 40.0
+    assert np.max(np.abs(r.e_y_m)) < 0.01
+    assert m["collisions"] == 0
+
+
+def test_lifetime_in_the_core_and_the_schema():
+    ob = Obstacle(Circle(1.0), (0.0, 0.0, 0.0), t_start_s=1.0, t_end_s=2.0)
+    assert ob.has_lifetime and not ob.present(0.5) and ob.present(1.0) and ob.present(2.0) and not ob.present(2.1)
+    assert list(ob.present(np.array([0.0, 1.5, 3.0]))) == [False, True, False]
+    assert not Obstacle(Circle(1.0), (0.0, 0.0, 0.0)).has_lifetime
+    with pytest.raises(ValueError, match="t_start_s <= t_end_s"):
+        Obstacle(Circle(1.0), (0.0, 0.0, 0.0), t_start_s=2.0, t_end_s=1.0)
+    with pytest.raises(ValueError, match="lifetime_s"):
+        validate_scenario_data({**BASE, "obstacles": [car(30.0, 0.0, 0.0, lifetime_s=[3.0, 1.0])]}, "t.yaml")
