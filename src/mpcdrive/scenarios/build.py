@@ -306,7 +306,7 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         nx=model.nx,
         nu=model.nu,
         N=c.horizon,
-        dt_s=spec.dt_s,
+        dt_s=spec.control_period_s,  # the horizon step is the controller's period
         Q=np.array(c.Q),
         R=np.array(c.R),
         QN=None if c.QN is None else np.array(c.QN),
@@ -366,7 +366,10 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         actuator = SteeringActuator(pl.steering_actuator.time_constant_s, pl.steering_actuator.dead_time_s)
     controller: Controller = mpc
     if c.delay_compensation:
-        controller = DelayCompensator(mpc, model, actuator, spec.dt_s, path, substeps=pl.substeps)
+        # predicts over its own period with the plant's integration step
+        period_steps = int(round(spec.control_period_s / spec.dt_s))
+        controller = DelayCompensator(mpc, model, actuator, spec.control_period_s, path,
+                                      substeps=pl.substeps * period_steps)
     if tuple(plant_model.state_names) != tuple(model.state_names):
         controller = StateAdapter(controller, model, plant_model)
     if spec.plant_model not in COMMONROAD_PLANTS:
@@ -428,4 +431,6 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
         laps=spec.laps,
         # on a track, a car more than 1 m beyond the road edge has left it for good
         abort_lateral_error_m=None if exp.track is None or half is None else half + 1.0,
+        control_period_s=spec.controller.period_s,
+        between_solves=spec.controller.between_solves,
     )

@@ -11,7 +11,8 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from ..models.presets import PRESETS
 from ..control.fallback import DEFAULT_LADDER, check_ladder
@@ -287,7 +288,12 @@ class ControllerSpec(_Strict):
 
     ``speed_profile`` replaces the constant reference speed; ``solver``: ``osqp`` or the paper's
     ``projected_gradient`` (input bounds only; ``pg_*`` settings); ``delay_compensation``: predict the
-    state over the plant's steering dead time before solving (needs ``plant.steering_actuator``)."""
+    state over the plant's steering dead time before solving (needs ``plant.steering_actuator``).
+
+    ``period_s``: the controller's period [s] (default: the scenario's ``dt_s``, the plant step),
+    a whole multiple of ``dt_s`` and the horizon step of its problem; between two solves the
+    plant gets, per ``between_solves``, the last command (``hold``) or the plan's inputs followed
+    in time (``plan``; :func:`~mpcdrive.sim.simulate`)."""
 
     horizon: Int = Field(30, ge=1, le=1000)
     Q: list[NonNeg]
@@ -320,6 +326,8 @@ class ControllerSpec(_Strict):
     brake_decel_mps2: Positive | None = None  # None: the vehicle's full braking (accel_limits_mps2[0])
     brake_steering: Literal["hold", "straighten"] = "hold"
     relax_slack_factor: Annotated[float, Field(strict=True, ge=1, allow_inf_nan=False)] = 100.0
+    period_s: Positive | None = None
+    between_solves: Literal["hold", "plan"] = "hold"
 
     @field_validator("fallback")
     @classmethod
@@ -458,6 +466,33 @@ class ScenarioSpec(_Strict):
     laps: Positive | None = None
 
     @property
+    def control_period_s(self) -> float:
+        """The controller's period [s]: ``controller.period_s``, else the plant step ``dt_s``."""
+        p = self.controller.period_s
+        return self.dt_s if p is None else p
+
+    @field_validator("controller")
+    @classmethod
+    def _period(cls, c, info):
+        dt = info.data.get("dt_s")
+        if dt is None:  # dt_s itself was rejected
+            return c
+        problem = None
+        if c.period_s is not None:
+            ratio = c.period_s / dt
+            if ratio < 1 - 1e-9:
+                problem = (f"{c.period_s:g} s is shorter than the plant step dt_s {dt:g} s (the controller "
+                           "cannot run faster than the plant)")
+            elif abs(ratio - round(ratio)) > 1e-9 * ratio:
+                problem = f"{c.period_s:g} s is not a whole multiple of dt_s {dt:g} s ({ratio:.6g} plant steps)"
+        if problem is not None:
+            _raise_at(("period_s",), c.period_s, problem)
+        if c.between_solves == "plan" and c.delay_compensation:
+            _raise_at(("between_solves",), c.between_solves, "plan cannot be combined with delay_compensation "
+                      "(the compensator predicts with held commands): use hold")
+        return c
+
+    @property
     def plant_model(self) -> str:
         """The plant's model name (``same`` resolved)."""
         return self.vehicle.model if self.plant.model == "same" else self.plant.model
@@ -510,6 +545,13 @@ class ScenarioSpec(_Strict):
                              f"{d:.4g} m from the path (more than {MAX_INITIAL_DISTANCE_M:g} m): check the "
                              "coordinates and their units")
         return self
+
+
+def _raise_at(loc: tuple, value, problem: str):
+    """Raise a validation error at ``loc`` inside the field being validated (so the message names
+    e.g. ``controller.period_s``, not the enclosing model)."""
+    err = PydanticCustomError("value_error", "{problem}", {"problem": problem})
+    raise ValidationError.from_exception_data("ScenarioSpec", [InitErrorDetails(type=err, loc=loc, input=value)])
 
 
 def _segment_distance(p, a, b) -> float:
