@@ -234,3 +234,27 @@ def test_cli_bad_period_exits_2_and_writes_nothing(tmp_path):
     assert "controller.period_s" in p.stderr and "whole multiple" in p.stderr
     assert len(p.stderr.strip().splitlines()) == 1
     assert not out.exists()
+
+
+def test_yaml_period_of_a_second_or_more_warns_like_milliseconds():
+    from mpcdrive.scenarios.build import scenario_warnings
+
+    data = scenario(period_s=2.0)
+    data["duration_s"] = 4.0
+    fields = [f for f, _ in scenario_warnings(validate_scenario_data(data, "mr.yaml"))]
+    assert fields == ["controller.period_s"]
+    assert scenario_warnings(validate_scenario_data(scenario(period_s=0.1), "mr.yaml")) == []
+
+
+class NoPlan(Recorder):
+    """A controller whose commands come without a plan (as a brake or hold_last fallback's)."""
+
+    def step(self, x, warm):
+        out = self.inner.step(x, warm)
+        return dataclasses.replace(out, warm=dataclasses.replace(out.warm, U=None, X=None))
+
+
+def test_plan_holds_a_command_that_comes_without_a_plan():
+    r = run(NoPlan(mpc(PERIOD_S)), steps=100, control_period_s=PERIOD_S, between_solves="plan")
+    for i in range(10):
+        assert np.all(r.u[i * M:(i + 1) * M] == r.u[i * M])

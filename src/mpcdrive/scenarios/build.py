@@ -165,8 +165,9 @@ MS_LIKE_DT_S = 1.0
 def scenario_warnings(spec: ScenarioSpec) -> list[tuple[str, str]]:
     """(field, problem) for every legal but suspicious value: a speed far beyond what the model
     is valid for (above ``MAX_FROUDE`` sqrt(g L), L = lf + lr), a ``_deg`` limit that looks like
-    radians (nonzero and below pi / 2), a ``dt_s`` that looks like milliseconds (>= 1 s), and an
-    initial position whose centre is outside the lane (``road``, else a track's road widths)."""
+    radians (nonzero and below pi / 2), a ``dt_s`` or ``controller.period_s`` that looks like
+    milliseconds (>= 1 s), and an initial position whose centre is outside the lane (``road``,
+    else a track's road widths)."""
     out = []
     v, c = spec.vehicle, spec.controller
     wheelbase = v.lf_m + v.lr_m
@@ -187,6 +188,9 @@ def scenario_warnings(spec: ScenarioSpec) -> list[tuple[str, str]]:
     if spec.dt_s >= MS_LIKE_DT_S:
         out.append(("dt_s", f"a control period of {spec.dt_s:g} s looks like milliseconds "
                     f"({spec.dt_s:g} ms = {spec.dt_s / 1000:g} s); dt_s is in seconds"))
+    if c.period_s is not None and c.period_s >= MS_LIKE_DT_S:
+        out.append(("controller.period_s", f"a control period of {c.period_s:g} s looks like milliseconds "
+                    f"({c.period_s:g} ms = {c.period_s / 1000:g} s); period_s is in seconds"))
     lane = _start_outside_lane(spec)
     if lane is not None:
         out.append(("initial_state", lane))

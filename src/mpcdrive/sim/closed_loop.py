@@ -174,17 +174,24 @@ def solve_interval(dt_s: float, control_period_s: float | None) -> int:
     return m
 
 
-def _horizon_step_s(controller) -> float | None:
-    """The horizon step [s] of ``controller`` (or of the controller it wraps), None if unknown."""
+def _inner_attr(controller, name: str):
+    """Attribute ``name`` of ``controller`` or, if it has none, of the controller it wraps
+    (``inner``, as the state adapter and the delay compensator do); None if none has it."""
     c = controller
     for _ in range(8):
-        dt = getattr(c, "dt_s", None)
-        if isinstance(dt, numbers.Real) and not isinstance(dt, bool):
-            return float(dt)
-        c = getattr(c, "inner", None)
         if c is None:
             return None
+        value = getattr(c, name, None)
+        if value is not None:
+            return value
+        c = getattr(c, "inner", None)
     return None
+
+
+def _horizon_step_s(controller) -> float | None:
+    """The horizon step [s] of ``controller`` (or of the controller it wraps), None if unknown."""
+    dt = _inner_attr(controller, "dt_s")
+    return float(dt) if isinstance(dt, numbers.Real) and not isinstance(dt, bool) else None
 
 
 def _plan_slope(controller, out, nu: int) -> np.ndarray | None:
@@ -198,7 +205,7 @@ def _plan_slope(controller, out, nu: int) -> np.ndarray | None:
     if U.ndim != 2 or U.shape[0] < 2 or U.shape[1] != nu or not np.all(np.isfinite(U[1])):
         return None
     u1 = U[1]
-    pb = getattr(controller, "problem", None)
+    pb = _inner_attr(controller, "problem")
     lo, hi = getattr(pb, "u_min", None), getattr(pb, "u_max", None)
     if lo is not None and hi is not None:
         u1 = np.clip(u1, lo, hi)
