@@ -202,8 +202,8 @@ def test_yaml_default_period_is_the_plant_step():
 
 
 @pytest.mark.parametrize("controller, field, words", [
-    ({"period_s": 0.015}, "controller.period_s", "not a whole multiple of dt_s 0.01"),
-    ({"period_s": 0.005}, "controller.period_s", "shorter than the plant step dt_s 0.01"),
+    ({"period_s": 0.015}, "controller.period_s", "0.015 s is not a whole multiple of the plant step dt_s 0.01 s"),
+    ({"period_s": 0.005}, "controller.period_s", "0.005 s is shorter than the plant step dt_s 0.01 s"),
     ({"period_s": -0.1}, "controller.period_s", "greater than 0"),
     ({"between_solves": "zoh"}, "controller.between_solves", "'hold' or 'plan'"),
 ])

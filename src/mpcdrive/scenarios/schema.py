@@ -16,6 +16,7 @@ from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from ..models.presets import PRESETS
 from ..control.fallback import DEFAULT_LADDER, check_ladder
+from ..sim.closed_loop import solve_interval
 
 Finite = Annotated[float, Field(strict=True, allow_inf_nan=False)]
 Positive = Annotated[float, Field(strict=True, gt=0, allow_inf_nan=False)]
@@ -477,16 +478,10 @@ class ScenarioSpec(_Strict):
         dt = info.data.get("dt_s")
         if dt is None:  # dt_s itself was rejected
             return c
-        problem = None
-        if c.period_s is not None:
-            ratio = c.period_s / dt
-            if ratio < 1 - 1e-9:
-                problem = (f"{c.period_s:g} s is shorter than the plant step dt_s {dt:g} s (the controller "
-                           "cannot run faster than the plant)")
-            elif abs(ratio - round(ratio)) > 1e-9 * ratio:
-                problem = f"{c.period_s:g} s is not a whole multiple of dt_s {dt:g} s ({ratio:.6g} plant steps)"
-        if problem is not None:
-            _raise_at(("period_s",), c.period_s, problem)
+        try:
+            solve_interval(dt, c.period_s, name="period_s")
+        except ValueError as e:
+            _raise_at(("period_s",), c.period_s, str(e))
         if c.between_solves == "plan" and c.delay_compensation:
             _raise_at(("between_solves",), c.between_solves, "plan cannot be combined with delay_compensation "
                       "(the compensator predicts with held commands): use hold")

@@ -154,22 +154,22 @@ def _check_run_args(dt_s, steps, seed, lane_half_width_m) -> None:
 BETWEEN_SOLVES = ("hold", "plan")
 
 
-def solve_interval(dt_s: float, control_period_s: float | None) -> int:
+def solve_interval(dt_s: float, control_period_s: float | None, name: str = "control_period_s") -> int:
     """Plant steps per controller period: ``control_period_s / dt_s`` as a whole number (1 for
-    None); ValueError naming both when the period is not a positive whole multiple of ``dt_s``
-    within rounding (a relative 1e-9)."""
+    None); ValueError naming both (the period as ``name``) when the period is not a positive
+    whole multiple of ``dt_s`` within rounding (a relative 1e-9)."""
     if control_period_s is None:
         return 1
     p = control_period_s
     if isinstance(p, bool) or not isinstance(p, numbers.Real) or not (math.isfinite(p) and p > 0):
-        raise ValueError(f"control_period_s must be a positive finite number, got {p!r}")
+        raise ValueError(f"{name} must be a positive finite number, got {p!r}")
     ratio = p / dt_s
     m = int(round(ratio))
     if m < 1:
-        raise ValueError(f"control_period_s {p:g} s is shorter than the plant step dt_s {dt_s:g} s; "
+        raise ValueError(f"{name} {p:g} s is shorter than the plant step dt_s {dt_s:g} s; "
                          "the controller cannot run faster than the plant")
     if abs(ratio - m) > 1e-9 * ratio:
-        raise ValueError(f"control_period_s {p:g} s is not a whole multiple of the plant step dt_s {dt_s:g} s "
+        raise ValueError(f"{name} {p:g} s is not a whole multiple of the plant step dt_s {dt_s:g} s "
                          f"({ratio:.6g} plant steps)")
     return m
 
