@@ -16,6 +16,9 @@ STATUS_INFEASIBLE = "infeasible"
 STATUS_MAX_ITER = "max_iter"
 STATUS_FAILED = "failed"
 STATUS_BAD_STATE = "bad_state"
+#: a plant step between two solves of a slower controller (``simulate(control_period_s=...)``):
+#: no solve happened, the input is held or follows the plan; neither a solve nor a failure
+STATUS_HELD = "held"
 
 #: fallback rungs, as logged in ``SimResult.fallback`` and ``trajectory.csv`` (``control.fallback``)
 FALLBACK_RELAX = "relax"
@@ -100,7 +103,7 @@ class ControlOutput:
 
 @dataclass(frozen=True)
 class SimResult:
-    """Complete log of a closed-loop run; K control steps.
+    """Complete log of a closed-loop run; K plant steps of ``dt_s``.
 
     t_s : (K,) time [s]; x : (K, nx) true (plant) states when each command was computed;
     u : (K, nu) applied inputs; x_final : (nx,) state after the last step;
@@ -108,8 +111,9 @@ class SimResult:
     yaw_rad : (K,) unwrapped yaw; v_mps : (K,) speed [m/s];
     steer_rad, accel_mps2 : (K,) applied steering [rad] and acceleration [m/s^2] (0 if no input);
     X_pred : (K, N+1, nx) predictions; refs : (K, N+1, nx) horizon references;
-    status : (K,) solver status words; fallback : (K,) fallback names ("" if none);
-    solve_time_s : (K,) controller step wall time [s];
+    status : (K,) solver status words (``held`` on a plant step without a solve, when the
+    controller runs slower than the plant); fallback : (K,) fallback names ("" if none);
+    solve_time_s : (K,) controller step wall time [s] (0 on ``held`` steps);
     path_xy : (M, 2) reference path polyline for plots [m];
     lane_half_width_m : half lane width or None; state_names/input_names: labels;
     clearance_m : (K,) smallest footprint-to-obstacle distance per step [m] (None without obstacles).

@@ -171,8 +171,9 @@ MS_LIKE_DT_S = 1.0
 def scenario_warnings(spec: ScenarioSpec) -> list[tuple[str, str]]:
     """(field, problem) for every legal but suspicious value: a speed far beyond what the model
     is valid for (above ``MAX_FROUDE`` sqrt(g L), L = lf + lr), a ``_deg`` limit that looks like
-    radians (nonzero and below pi / 2), a ``dt_s`` that looks like milliseconds (>= 1 s), and an
-    initial position whose centre is outside the lane (``road``, else a track's road widths)."""
+    radians (nonzero and below pi / 2), a ``dt_s`` or ``controller.period_s`` that looks like
+    milliseconds (>= 1 s), and an initial position whose centre is outside the lane (``road``,
+    else a track's road widths)."""
     out = []
     v, c = spec.vehicle, spec.controller
     wheelbase = v.lf_m + v.lr_m
@@ -193,6 +194,9 @@ def scenario_warnings(spec: ScenarioSpec) -> list[tuple[str, str]]:
     if spec.dt_s >= MS_LIKE_DT_S:
         out.append(("dt_s", f"a control period of {spec.dt_s:g} s looks like milliseconds "
                     f"({spec.dt_s:g} ms = {spec.dt_s / 1000:g} s); dt_s is in seconds"))
+    if c.period_s is not None and c.period_s >= MS_LIKE_DT_S:
+        out.append(("controller.period_s", f"a control period of {c.period_s:g} s looks like milliseconds "
+                    f"({c.period_s:g} ms = {c.period_s / 1000:g} s); period_s is in seconds"))
     lane = _start_outside_lane(spec)
     if lane is not None:
         out.append(("initial_state", lane))
@@ -312,7 +316,7 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         nx=model.nx,
         nu=model.nu,
         N=c.horizon,
-        dt_s=spec.dt_s,
+        dt_s=spec.control_period_s,  # the horizon step is the controller's period
         Q=np.array(c.Q),
         R=np.array(c.R),
         QN=None if c.QN is None else np.array(c.QN),
@@ -372,7 +376,10 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         actuator = SteeringActuator(pl.steering_actuator.time_constant_s, pl.steering_actuator.dead_time_s)
     controller: Controller = mpc
     if c.delay_compensation:
-        controller = DelayCompensator(mpc, model, actuator, spec.dt_s, path, substeps=pl.substeps)
+        # predicts over its own period with the plant's integration step
+        period_steps = int(round(spec.control_period_s / spec.dt_s))
+        controller = DelayCompensator(mpc, model, actuator, spec.control_period_s, path,
+                                      substeps=pl.substeps * period_steps)
     if tuple(plant_model.state_names) != tuple(model.state_names):
         controller = StateAdapter(controller, model, plant_model)
     if spec.plant_model not in COMMONROAD_PLANTS:
@@ -434,4 +441,6 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
         laps=spec.laps,
         # on a track, a car more than 1 m beyond the road edge has left it for good
         abort_lateral_error_m=None if exp.track is None or half is None else half + 1.0,
+        control_period_s=spec.controller.period_s,
+        between_solves=spec.controller.between_solves,
     )

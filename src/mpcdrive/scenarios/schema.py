@@ -11,10 +11,12 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from ..models.presets import PRESETS
 from ..control.fallback import DEFAULT_LADDER, check_ladder
+from ..sim.closed_loop import solve_interval
 
 Finite = Annotated[float, Field(strict=True, allow_inf_nan=False)]
 Positive = Annotated[float, Field(strict=True, gt=0, allow_inf_nan=False)]
@@ -291,7 +293,12 @@ class ControllerSpec(_Strict):
 
     ``speed_profile`` replaces the constant reference speed; ``solver``: ``osqp`` or the paper's
     ``projected_gradient`` (input bounds only; ``pg_*`` settings); ``delay_compensation``: predict the
-    state over the plant's steering dead time before solving (needs ``plant.steering_actuator``)."""
+    state over the plant's steering dead time before solving (needs ``plant.steering_actuator``).
+
+    ``period_s``: the controller's period [s] (default: the scenario's ``dt_s``, the plant step),
+    a whole multiple of ``dt_s`` and the horizon step of its problem; between two solves the
+    plant gets, per ``between_solves``, the last command (``hold``) or the plan's inputs followed
+    in time (``plan``; :func:`~mpcdrive.sim.simulate`)."""
 
     horizon: Int = Field(30, ge=1, le=1000)
     Q: list[NonNeg]
@@ -324,6 +331,8 @@ class ControllerSpec(_Strict):
     brake_decel_mps2: Positive | None = None  # None: the vehicle's full braking (accel_limits_mps2[0])
     brake_steering: Literal["hold", "straighten"] = "hold"
     relax_slack_factor: Annotated[float, Field(strict=True, ge=1, allow_inf_nan=False)] = 100.0
+    period_s: Positive | None = None
+    between_solves: Literal["hold", "plan"] = "hold"
 
     @field_validator("fallback")
     @classmethod
@@ -462,6 +471,27 @@ class ScenarioSpec(_Strict):
     laps: Positive | None = None
 
     @property
+    def control_period_s(self) -> float:
+        """The controller's period [s]: ``controller.period_s``, else the plant step ``dt_s``."""
+        p = self.controller.period_s
+        return self.dt_s if p is None else p
+
+    @field_validator("controller")
+    @classmethod
+    def _period(cls, c, info):
+        dt = info.data.get("dt_s")
+        if dt is None:  # dt_s itself was rejected
+            return c
+        try:
+            solve_interval(dt, c.period_s, name="period_s")
+        except ValueError as e:
+            _raise_at(("period_s",), c.period_s, str(e))
+        if c.between_solves == "plan" and c.delay_compensation:
+            _raise_at(("between_solves",), c.between_solves, "plan cannot be combined with delay_compensation "
+                      "(the compensator predicts with held commands): use hold")
+        return c
+
+    @property
     def plant_model(self) -> str:
         """The plant's model name (``same`` resolved)."""
         return self.vehicle.model if self.plant.model == "same" else self.plant.model
@@ -514,6 +544,13 @@ class ScenarioSpec(_Strict):
                              f"{d:.4g} m from the path (more than {MAX_INITIAL_DISTANCE_M:g} m): check the "
                              "coordinates and their units")
         return self
+
+
+def _raise_at(loc: tuple, value, problem: str):
+    """Raise a validation error at ``loc`` inside the field being validated (so the message names
+    e.g. ``controller.period_s``, not the enclosing model)."""
+    err = PydanticCustomError("value_error", "{problem}", {"problem": problem})
+    raise ValidationError.from_exception_data("ScenarioSpec", [InitErrorDetails(type=err, loc=loc, input=value)])
 
 
 def _segment_distance(p, a, b) -> float:

@@ -17,7 +17,7 @@ from ..paths.base import Path
 from ..scene.footprint import Footprint
 from ..scene.geometry import shape_distance
 from ..scene.obstacles import Circle, Obstacle
-from ..types import SimResult
+from ..types import STATUS_HELD, SimResult
 from .actuator import ActuatorState, SteeringActuator
 
 
@@ -150,6 +150,68 @@ def _check_run_args(dt_s, steps, seed, lane_half_width_m) -> None:
         raise ValueError(f"lane_half_width_m must be a positive finite number or None, got {lane_half_width_m!r}")
 
 
+#: ways to drive the plant between two solves of a controller slower than the plant
+BETWEEN_SOLVES = ("hold", "plan")
+
+
+def solve_interval(dt_s: float, control_period_s: float | None, name: str = "control_period_s") -> int:
+    """Plant steps per controller period: ``control_period_s / dt_s`` as a whole number (1 for
+    None); ValueError naming both (the period as ``name``) when the period is not a positive
+    whole multiple of ``dt_s`` within rounding (a relative 1e-9)."""
+    if control_period_s is None:
+        return 1
+    p = control_period_s
+    if isinstance(p, bool) or not isinstance(p, numbers.Real) or not (math.isfinite(p) and p > 0):
+        raise ValueError(f"{name} must be a positive finite number, got {p!r}")
+    ratio = p / dt_s
+    m = int(round(ratio))
+    if m < 1:
+        raise ValueError(f"{name} {p:g} s is shorter than the plant step dt_s {dt_s:g} s; "
+                         "the controller cannot run faster than the plant")
+    if abs(ratio - m) > 1e-9 * ratio:
+        raise ValueError(f"{name} {p:g} s is not a whole multiple of the plant step dt_s {dt_s:g} s "
+                         f"({ratio:.6g} plant steps)")
+    return m
+
+
+def _inner_attr(controller, name: str):
+    """Attribute ``name`` of ``controller`` or, if it has none, of the controller it wraps
+    (``inner``, as the state adapter and the delay compensator do); None if none has it."""
+    c = controller
+    for _ in range(8):
+        if c is None:
+            return None
+        value = getattr(c, name, None)
+        if value is not None:
+            return value
+        c = getattr(c, "inner", None)
+    return None
+
+
+def _horizon_step_s(controller) -> float | None:
+    """The horizon step [s] of ``controller`` (or of the controller it wraps), None if unknown."""
+    dt = _inner_attr(controller, "dt_s")
+    return float(dt) if isinstance(dt, numbers.Real) and not isinstance(dt, bool) else None
+
+
+def _plan_slope(controller, out, nu: int) -> np.ndarray | None:
+    """(nu,) change of the input over one controller period along the plan of ``out``: from the
+    applied command to the plan's second input (clipped to the controller's input bounds when it
+    has them); None when the command did not come with a plan of two or more finite inputs."""
+    U = getattr(out.warm, "U", None)
+    if U is None:
+        return None
+    U = np.asarray(U, float)
+    if U.ndim != 2 or U.shape[0] < 2 or U.shape[1] != nu or not np.all(np.isfinite(U[1])):
+        return None
+    u1 = U[1]
+    pb = _inner_attr(controller, "problem")
+    lo, hi = getattr(pb, "u_min", None), getattr(pb, "u_max", None)
+    if lo is not None and hi is not None:
+        u1 = np.clip(u1, lo, hi)
+    return u1 - np.asarray(out.u, float)
+
+
 def simulate(
     controller: Controller,
     plant: Plant | ObservedPlant,
@@ -169,8 +231,32 @@ def simulate(
     footprint: Footprint = Footprint(),
     laps: float | None = None,
     abort_lateral_error_m: float | None = None,
+    control_period_s: float | None = None,
+    between_solves: str = "hold",
 ) -> SimResult:
-    """Run ``steps`` control steps of ``dt_s`` seconds from ``x0`` (plant state).
+    """Run ``steps`` plant steps of ``dt_s`` seconds from ``x0`` (plant state).
+
+    The controller is called every ``control_period_s / dt_s`` plant steps (``control_period_s``:
+    a whole multiple of ``dt_s``; None = ``dt_s``, a solve at every step) and must be built with
+    that period as its horizon step (its ``dt_s``; ValueError otherwise). Between two solves the
+    plant gets, per ``between_solves``:
+
+    * ``hold`` (zero-order hold): the command of the last solve at every plant step until the
+      next solve, the input the controller's prediction assumes;
+    * ``plan``: the plan followed in time, linearly interpolated: at the j-th plant step after a
+      solve (j = 0 .. m - 1, m plant steps per period) ``u + (j / m) (U[1] - u)``, ``u`` the
+      solve's command (``U[0]`` within the bounds) and ``U[1]`` the plan's input for the next
+      controller interval (clipped to the controller's input bounds); the input ramps towards
+      where the plan goes instead of stepping at each solve. A command without such a plan
+      (a ``brake`` or ``hold_last`` fallback, a horizon of 1) is held. A steering-delay
+      compensator, which predicts with held commands, needs ``hold``.
+
+    Every plant step is logged: on the steps between solves ``status`` is ``held``
+    (:data:`~mpcdrive.types.STATUS_HELD`), ``fallback`` empty, ``solve_time_s`` 0, the plan and
+    references those of the last solve, and the path coordinates the true state's own
+    projection; the metrics count only real solves. The measurement noise is drawn only when the
+    controller measures (at solves); the disturbance at every plant step. With the period equal
+    to ``dt_s`` the run is the one-solve-per-step loop, bit for bit.
 
     The controller sees the plant state plus ``measurement_noise``; the plant state receives
     ``disturbance`` after every step. On an open path the run ends when the vehicle passes the
@@ -195,6 +281,13 @@ def simulate(
     ``x_final``); otherwise ``termination`` is ``goal_reached`` or ``completed``.
     """
     _check_run_args(dt_s, steps, seed, lane_half_width_m)
+    m = solve_interval(dt_s, control_period_s)
+    if between_solves not in BETWEEN_SOLVES:
+        raise ValueError(f"between_solves must be 'hold' or 'plan', got {between_solves!r}")
+    h = _horizon_step_s(controller)
+    if m > 1 and h is not None and abs(h - control_period_s) > 1e-9 * control_period_s:
+        raise ValueError(f"the controller's horizon step dt_s {h:g} s differs from control_period_s "
+                         f"{control_period_s:g} s: build the controller with dt_s = the control period")
     observed = not isinstance(plant, Plant)
     if observed and not isinstance(plant, ObservedPlant):
         raise ValueError(f"plant must be a Plant or an ObservedPlant, got {type(plant).__name__}")
@@ -247,29 +340,43 @@ def simulate(
     act = None if observed or plant.actuator is None else plant.actuator.start(0.0)  # wheels start straight
     aborted = False
     termination = "completed"
+    slope = None  # input change over one period along the plan (between_solves "plan")
     for k in range(steps):
-        meas = x if measurement_noise is None else x + measurement_noise.sample(rng, nx)
-        out = controller.step(meas, warm)
-        warm = out.warm
-        # Frenet coordinates of the true state (the controller's are of the measurement)
-        if measurement_noise is None:
-            s, ey, epsi = out.s_m, out.e_y_m, out.e_psi_rad
+        j = k % m  # plant steps since the last solve
+        if j == 0:
+            meas = x if measurement_noise is None else x + measurement_noise.sample(rng, nx)
+            out = controller.step(meas, warm)
+            warm = out.warm
+            # Frenet coordinates of the true state (the controller's are of the measurement)
+            if measurement_noise is None:
+                s, ey, epsi = out.s_m, out.e_y_m, out.e_psi_rad
+            else:
+                fr = path.frenet(x[:3], out.s_m)
+                s, ey, epsi = fr.s_m, fr.e_y_m, fr.e_psi_rad
+            u = out.u
+            if m > 1 and between_solves == "plan":
+                slope = _plan_slope(controller, out, nu)
+            ST[k] = out.solve_time_s
+            status.append(out.status)
+            fallback.append(out.fallback)
         else:
-            fr = path.frenet(x[:3], out.s_m)
+            fr = path.frenet(x[:3], S[k - 1])
             s, ey, epsi = fr.s_m, fr.e_y_m, fr.e_psi_rad
-        T[k], Xs[k], Us[k] = k * dt_s, x, out.u
+            u = out.u if slope is None else out.u + (j / m) * slope
+            ST[k] = 0.0
+            status.append(STATUS_HELD)
+            fallback.append("")
+        T[k], Xs[k], Us[k] = k * dt_s, x, u
         S[k], EY[k], EPSI[k] = s, ey, epsi
-        XP[k], RF[k], ST[k] = out.X_pred, out.refs, out.solve_time_s
-        status.append(out.status)
-        fallback.append(out.fallback)
+        XP[k], RF[k] = out.X_pred, out.refs
         if observed:
-            xp_next = np.asarray(plant.step(xp, out.u, dt_s), float)
+            xp_next = np.asarray(plant.step(xp, u, dt_s), float)
             x_next = np.asarray(plant.observe(xp_next), float) if np.all(np.isfinite(xp_next)) else xp_next
         elif act is None:
-            x_next = plant.step(x, out.u, dt_s)
+            x_next = plant.step(x, u, dt_s)
         else:
-            act = act.issue(k * dt_s, float(out.u[0]))
-            x_next, act = plant.step_actuated(x, out.u, dt_s, act, k * dt_s)
+            act = act.issue(k * dt_s, float(u[0]))
+            x_next, act = plant.step_actuated(x, u, dt_s, act, k * dt_s)
         if disturbance is not None:
             x_next = x_next + disturbance.sample(rng, nx)
         if progress is not None:
@@ -293,6 +400,8 @@ def simulate(
             break
     sl = slice(0, k_end)
     meta = dict(meta or {})
+    if m > 1:
+        meta.update(control_period_s=float(control_period_s), between_solves=between_solves)
     if observed:
         meta["plant_state_final"] = [float(c) for c in xp]
     clearance = None

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..scene.footprint import Footprint
-from ..types import FALLBACK_KINDS, STATUS_INACCURATE, STATUS_OK, SimResult
+from ..types import FALLBACK_KINDS, STATUS_HELD, STATUS_INACCURATE, STATUS_OK, SimResult
 
 
 def lane_excess_per_step(result: SimResult, footprint: Footprint = Footprint()) -> np.ndarray | None:
@@ -77,7 +77,10 @@ def compute_metrics(result: SimResult, footprint: Footprint = Footprint()) -> di
     definition of :func:`goal_met`: region reached, inside the lane and without collision.
 
     Steering rates include the first step's change from the initial steering angle
-    (``meta["initial_steer_rad"]``, 0 by default: the wheels start straight)."""
+    (``meta["initial_steer_rad"]``, 0 by default: the wheels start straight).
+
+    ``solver_failures`` and ``solve_time_us`` count real solves only: the plant steps between
+    the solves of a controller slower than the plant (status ``held``) are neither."""
     K = result.steps
     ey = result.e_y_m
     half = ey[K // 2:]
@@ -85,8 +88,9 @@ def compute_metrics(result: SimResult, footprint: Footprint = Footprint()) -> di
     # steering is 0 before the first step (the controller starts from u_prev = 0)
     steer0 = np.r_[result.meta.get("initial_steer_rad", 0.0), steer]
     rate = np.diff(steer0) / result.dt_s
-    st = result.solve_time_s * 1e6
-    failures = sum(1 for s in result.status if s not in (STATUS_OK, STATUS_INACCURATE))
+    solved = np.array([s != STATUS_HELD for s in result.status], dtype=bool)
+    st = np.asarray(result.solve_time_s, float)[solved] * 1e6
+    failures = sum(1 for s in result.status if s not in (STATUS_OK, STATUS_INACCURATE, STATUS_HELD))
     collisions = int(result.meta.get("collisions", 0))
     events = [dict(e) for e in result.meta.get("collision_events", ())]
     lane_excess = _lane_excess(result, footprint)
