@@ -115,7 +115,7 @@ class DelayCompensator:
 
     def step(self, x, warm: DelayWarmStart) -> ControlOutput:
         x = np.asarray(x, float)
-        if warm.inner is None or warm.actuator is None:
+        if not isinstance(warm, DelayWarmStart) or warm.inner is None or warm.actuator is None:
             raise ValueError("warm must come from this DelayCompensator (initial_warm or a step's warm): "
                              "it has no inner warm start or actuator estimate")
         x_pred = self.predict(x, warm)
