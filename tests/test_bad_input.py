@@ -12,12 +12,12 @@ import pytest
 import yaml
 
 from mpcdrive.cli import main
-from mpcdrive.control import FallbackConfig, LtvMpc, MpcConfig
+from mpcdrive.control import DelayCompensator, FallbackConfig, LtvMpc, MpcConfig
 from mpcdrive.models import KinematicBicycle3, KinematicParams
 from mpcdrive.ocp import MpcProblem
 from mpcdrive.paths import CirclePath, StraightPath, WaypointPath
 from mpcdrive.scenarios import ScenarioError, load_scenario
-from mpcdrive.sim import Disturbance, Plant, simulate
+from mpcdrive.sim import Disturbance, Plant, SteeringActuator, simulate
 from mpcdrive.solvers.osqp_backend import OsqpSettings
 from mpcdrive.sweep import SuccessCriteria, SweepError, plan_sweep, run_sweep
 from mpcdrive.types import WarmStart
@@ -180,6 +180,12 @@ def _step_warm(u_prev):
     return c.step(np.zeros(3), WarmStart(s_m=0.0, u_prev=np.array(u_prev, float)))
 
 
+def _step_delay_foreign_warm():
+    model, c = _p1()
+    d = DelayCompensator(c, model, SteeringActuator(dead_time_s=0.02), 0.01, c.path)
+    return d.step(np.zeros(3), c.initial_warm([0.0, 0.0, 0.0]))  # the inner controller's warm start
+
+
 NAN, INF = float("nan"), float("inf")
 API_CASES = [
     ("controller: NaN state", lambda: _step_state([0, NAN, 0]), "state field(s) y not finite"),
@@ -187,6 +193,8 @@ API_CASES = [
     ("controller: NaN previous input", lambda: _step_warm([NAN]), "warm.u_prev must be 1 finite"),
     ("controller: model/problem size mismatch",
      lambda: LtvMpc(KinematicBicycle3(), StraightPath([0, 0], [1, 0]), MpcProblem(4, 2, 5, 0.01, Q=1.0, R=1.0)), "problem is sized"),
+    ("DelayCompensator: warm start of the inner controller", _step_delay_foreign_warm,
+     "warm must come from this DelayCompensator"),
     ("MpcConfig: zero horizon step", lambda: MpcConfig(horizon_step_m=0.0), "horizon_step_m"),
     ("MpcConfig: NaN projection window", lambda: MpcConfig(projection_window_m=NAN), "projection_window_m"),
     ("MpcConfig: infinite reference speed", lambda: MpcConfig(v_ref_mps=INF), "v_ref_mps"),

@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import math
-from typing import Protocol
+from typing import Protocol, TypeVar
 
 import numpy as np
 
+from ..models.base import VehicleModel
+from ..paths.base import Path
 from ..scene.obstacles import Obstacle
 from ..types import ControlOutput, WarmStart
+
+A = TypeVar("A")
 
 
 class Controller(Protocol):
@@ -43,6 +47,10 @@ class TrackingWarmStart:
     """Warm start and state check shared by the path-tracking MPC controllers (needs ``model``,
     ``path`` and ``nu`` on the instance)."""
 
+    model: VehicleModel
+    path: Path
+    nu: int
+
     def initial_warm(self, x0) -> WarmStart:
         """Warm start of the first step: a global projection of x0, zero previous input."""
         x0 = self._check_state(x0)
@@ -53,10 +61,10 @@ class TrackingWarmStart:
         return check_state(x, tuple(self.model.state_names))
 
 
-def checked_obstacles(avoidance, obstacles) -> tuple:
-    """The obstacles of a ``set_obstacles`` call as a tuple of :class:`Obstacle`; a ValueError
-    for a controller built without obstacles (``avoidance`` None: its QP has no obstacle terms)
-    or for an item that is not an Obstacle."""
+def checked_obstacles(avoidance: A | None, obstacles) -> tuple[A, tuple[Obstacle, ...]]:
+    """``(avoidance, obstacles)`` of a ``set_obstacles`` call, the obstacles as a tuple of
+    :class:`Obstacle`; a ValueError for a controller built without obstacles (``avoidance`` None:
+    its QP has no obstacle terms) or for an item that is not an Obstacle."""
     if avoidance is None:
         raise ValueError("this controller was built without obstacles, so its QP has no obstacle "
                          "terms: pass obstacles (and avoidance) at construction")
@@ -64,4 +72,4 @@ def checked_obstacles(avoidance, obstacles) -> tuple:
     for j, ob in enumerate(obstacles):
         if not isinstance(ob, Obstacle):
             raise ValueError(f"obstacles[{j}] must be an Obstacle, got {type(ob).__name__}")
-    return obstacles
+    return avoidance, obstacles

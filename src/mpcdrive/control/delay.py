@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
@@ -27,6 +28,29 @@ from ..types import ControlOutput, WarmStart
 from .base import Controller
 
 
+class ActuatorEstimate(Protocol):
+    """The state of a steering actuator model: ``issue(t_s, command_rad)`` gives the state after
+    sending a command [rad] at time ``t_s`` [s] (e.g. :class:`~mpcdrive.sim.ActuatorState`)."""
+
+    def issue(self, t_s: float, command_rad: float) -> ActuatorEstimate: ...
+
+
+S = TypeVar("S", bound=ActuatorEstimate)
+
+
+class DelayedActuator(Protocol[S]):
+    """A steering actuator with dead time ``dead_time_s`` [s] whose state ``S`` starts at a wheel
+    angle [rad] and advances over ``h_s`` [s] from ``t_s`` [s], returning the mean wheel angle
+    [rad] and the new state (e.g. :class:`~mpcdrive.sim.SteeringActuator`)."""
+
+    @property
+    def dead_time_s(self) -> float: ...
+
+    def start(self, steer_rad: float = ...) -> S: ...
+
+    def advance(self, state: S, t_s: float, h_s: float) -> tuple[float, S]: ...
+
+
 @dataclass(frozen=True)
 class DelayWarmStart(WarmStart):
     """Warm start of :class:`DelayCompensator`: the wrapped controller's warm start ``inner``, the
@@ -34,7 +58,7 @@ class DelayWarmStart(WarmStart):
     non-steering inputs held back (``pending``, oldest first, one per control period)."""
 
     inner: WarmStart | None = None
-    actuator: object | None = None
+    actuator: ActuatorEstimate | None = None
     t_s: float = 0.0
     pending: tuple = ()
 
@@ -48,7 +72,7 @@ class DelayCompensator:
     substeps : integration steps per control period for the prediction.
     """
 
-    def __init__(self, inner: Controller, model: VehicleModel, actuator, dt_s: float, path: Path,
+    def __init__(self, inner: Controller, model: VehicleModel, actuator: DelayedActuator[Any], dt_s: float, path: Path,
                  *, method: Method = "rk4", substeps: int = 5, projection_window_m: float = 2.0):
         if (inner.nx, inner.nu) != (model.nx, model.nu):
             raise ValueError("the delay compensator's model must match the wrapped controller's (nx, nu)")
@@ -91,6 +115,9 @@ class DelayCompensator:
 
     def step(self, x, warm: DelayWarmStart) -> ControlOutput:
         x = np.asarray(x, float)
+        if not isinstance(warm, DelayWarmStart) or warm.inner is None or warm.actuator is None:
+            raise ValueError("warm must come from this DelayCompensator (initial_warm or a step's warm): "
+                             "it has no inner warm start or actuator estimate")
         x_pred = self.predict(x, warm)
         out = self.inner.step(x_pred, warm.inner)
         # the actuator estimate after this step's command, at the next step's time

@@ -111,9 +111,9 @@ def relaxed_problem(pb: MpcProblem, slack_factor: float) -> MpcProblem:
     """``pb`` without rate limits and hard state bounds, with a ``slack_factor`` times cheaper lane slack."""
     return dataclasses.replace(
         pb,
-        du_max_per_s=None,
-        x_min=None,
-        x_max=None,
+        du_max_per_s=np.full(pb.nu, np.inf),
+        x_min=np.full(pb.nx, -np.inf),
+        x_max=np.full(pb.nx, np.inf),
         lane_slack_weight=pb.lane_slack_weight / slack_factor,
         lane_slack_weight_l1=pb.lane_slack_weight_l1 / slack_factor,
     )
@@ -193,6 +193,7 @@ class FallbackLadder:
             u = self._bound(u, warm.u_prev)
             return u, dataclasses.replace(new_warm, u_prev=u), X
         qp, be = self.relax_qp, self.relax_backend
+        assert qp is not None and be is not None  # built in __init__ for the relax rung without relax_fn
         qp.update(d.x, d.Ad, d.Bd, d.c, d.xref, d.uref, warm.u_prev, d.lane_normal, d.lane_offset,
                   d.lane_lo, d.lane_hi)
         # obstacles stay in the relaxed problem (their slacks keep it feasible)

@@ -1109,7 +1109,7 @@ from ..paths import compiled as _paths_compiled, profile_compiled as _profile_co
 from ..solvers import dense_qp as _dense_qp  # noqa: E402
 
 _jitcache.refresh(_control_step, [m.__file__ for m in (_kinematic, _dynamic, _models_compiled, _paths_compiled,
-                                                       _profile_compiled, _dense_qp)])
+                                                       _profile_compiled, _dense_qp) if m.__file__ is not None])
 _announced = [False]
 
 
@@ -1164,17 +1164,18 @@ class FastLtvMpc(TrackingWarmStart):
         #: the compiled detour (cost formulations; with rows ocp.avoidance shifts the references)
         self._detour = av is not None and av.detour != "none" and not rows
         nx, nu, N = model.nx, model.nu, problem.N
-        lane = problem.lane_half_width_m is not None
+        lane_w = problem.lane_half_width_m
+        lane = lane_w is not None
         #: the obstacle terms as LtvMpc keeps them (``avoidance.config``, ``.obstacles``,
         #: ``.relevant``); its lane is the road's (the problem's bound plus the body's half width and
         #: margin). With a constraint formulation it builds each step's rows between the two stages.
-        self.avoidance = None
+        self.avoidance: Avoidance | None = None
         if av is not None:
-            road_half = problem.lane_half_width_m + 0.5 * footprint.width_m + lane_margin_m if lane else None
+            road_half = lane_w + 0.5 * footprint.width_m + lane_margin_m if lane_w is not None else None
             self.avoidance = Avoidance(av, list(obstacles), path, footprint, N, problem.dt_s, road_half,
                                        lane_margin_m)
         self._rows = self.avoidance if rows else None
-        n_orow = av.rows_per_step(footprint) if rows else 0
+        n_orow = av.rows_per_step(footprint) if av is not None and rows else 0
         self.nx, self.nu, self.N = nx, nu, N
         self.dt_s = problem.dt_s
         if config.v_ref_mps is not None:
@@ -1185,8 +1186,12 @@ class FastLtvMpc(TrackingWarmStart):
             self.v_ref_mps = float(model.speed(np.zeros(nx)))
         if not np.isfinite(self.v_ref_mps):
             raise ValueError(f"reference speed must be finite, got {self.v_ref_mps}")
-        kind, mp = model_code(model)
+        # fast_unsupported_reason above rejects models, paths and speed profiles compiled code lacks
+        code = model_code(model)
         pa = path_arrays(path)
+        prof = np.zeros(1) if config.speed_profile is None else profile_array(config.speed_profile)
+        assert code is not None and pa is not None and prof is not None
+        kind, mp = code
         nz = N * nu + (N if lane else 0) + (N if rows else 0)
         crows, rhs, r_rate0, n_var, n_slack = _constant_rows(problem, nz, n_orow)
         m_max = len(crows) + n_var + n_slack
@@ -1212,7 +1217,6 @@ class FastLtvMpc(TrackingWarmStart):
         ip[_I_RICCATI] = int(not lane and not rows and not np.any(problem.Rc))
         ip[_I_MQ] = mq
         ip[_I_OROWS] = n_orow
-        prof = np.zeros(1) if config.speed_profile is None else profile_array(config.speed_profile)
         ip[_I_PROFILE] = int(config.speed_profile is not None)
         ip[_I_ACCEL] = list(model.input_names).index("accel") if "accel" in model.input_names else -1
         if av is not None and not rows:
@@ -1227,14 +1231,14 @@ class FastLtvMpc(TrackingWarmStart):
                                                       av.detour_ramp_m)
         fp[_F_DT], fp[_F_VREF] = problem.dt_s, self.v_ref_mps
         fp[_F_HSTEP], fp[_F_WINDOW] = config.horizon_step_m, config.projection_window_m
-        fp[_F_LANEW] = problem.lane_half_width_m if lane else 0.0
+        fp[_F_LANEW] = lane_w if lane_w is not None else 0.0
         fp[_F_SLACK2], fp[_F_SLACK1] = problem.lane_slack_weight, problem.lane_slack_weight_l1
         fp[_F_OSLACK2], fp[_F_OSLACK1] = problem.obstacle_slack_weight, problem.obstacle_slack_weight_l1
         fp[_F_TOL] = settings.feasibility_tol
         bnd = np.concatenate([problem.u_min, problem.u_max, problem.du_max_per_s * problem.dt_s,
                               problem.x_min, problem.x_max])
         nw = max(nx, nu)
-        arrays = {  # initial values, or the shape of a work array
+        arrays: dict[int, np.ndarray | tuple[int, ...]] = {  # initial values, or the shape of a work array
             _W_FP: fp, _W_MP: mp, _W_BND: bnd, _W_GEO: pa.geo,
             _W_WQ: np.stack([problem.Q] * (N - 1) + [problem.QN]), _W_RM: problem.R, _W_RC: problem.Rc,
             _W_TABS: pa.tab_s, _W_TABXY: pa.tab_xy, _W_TABH: pa.tab_h, _W_TABK: pa.tab_k, _W_C: C, _W_B: b_,
@@ -1255,7 +1259,8 @@ class FastLtvMpc(TrackingWarmStart):
             _W_LLO: np.full(N, -fp[_F_LANEW]), _W_LHI: np.full(N, fp[_F_LANEW]), _W_XLIN: (N + 1, nx),
             _W_GSUM: (2 * N,), _W_PROF: prof, _W_VARR: (N + 1,), _W_REFW: (N + 1, 8),
         }
-        shapes = [np.shape(arrays[i]) if isinstance(arrays[i], np.ndarray) else arrays[i] for i in range(_NW)]
+        shapes: list[tuple[int, ...]] = [np.shape(a) if isinstance(a, np.ndarray) else a
+                                         for a in (arrays[i] for i in range(_NW))]
         sizes = [int(np.prod(sh)) for sh in shapes]
         fo = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         fs = np.ones((_NW, 3), dtype=np.int64)
@@ -1291,7 +1296,7 @@ class FastLtvMpc(TrackingWarmStart):
                 replace(config, sqp_max_iterations=1, fallback=FallbackConfig((FALLBACK_HOLD,))),
                 replace(settings, max_iter=2 * settings.max_iter), obstacles, avoidance, footprint, lane_margin_m)
         # its problem bounds the centre: the road is that bound plus the body's half width and margin
-        road = problem.lane_half_width_m + 0.5 * footprint.width_m + lane_margin_m if lane else None
+        road = lane_w + 0.5 * footprint.width_m + lane_margin_m if lane_w is not None else None
         self.fallback = FallbackLadder(self, config.fallback,
                                        relax=self._relax_step if self._relaxed is not None else None,
                                        footprint=footprint, road_half_width_m=road)
@@ -1319,16 +1324,16 @@ class FastLtvMpc(TrackingWarmStart):
         obstacle; nothing is rebuilt). With a constraint formulation any number may be given;
         with a cost formulation the compiled obstacle table keeps the number given at
         construction, and each obstacle must be one the compiled cost covers."""
-        obstacles = checked_obstacles(self.avoidance, obstacles)
+        avoidance, obstacles = checked_obstacles(self.avoidance, obstacles)
         if self._rows is None:
             if len(obstacles) != len(self.obstacles):
                 raise ValueError(f"the compiled obstacle cost was built for {len(self.obstacles)} obstacle(s), "
                                  f"got {len(obstacles)}: build the controller with that many")
-            reason = obstacles_unsupported_reason(obstacles, self.avoidance.config)
+            reason = obstacles_unsupported_reason(obstacles, avoidance.config)
             if reason is not None:
                 raise ValueError(f"the fast backend cannot take these obstacles: {reason}")
             self._w[_W_OBS][...] = _obstacle_table(obstacles)
-        self.avoidance.obstacles = list(obstacles)
+        avoidance.obstacles = list(obstacles)
         if self._relaxed is not None:  # the relax rung avoids the same obstacles
             self._relaxed.set_obstacles(obstacles)
 
@@ -1345,6 +1350,7 @@ class FastLtvMpc(TrackingWarmStart):
 
     def _relax_step(self, d, warm: WarmStart):
         """The relax rung: the relaxed controller's step (None if it fails too)."""
+        assert self._relaxed is not None  # __init__ passes this rung only with a relaxed controller
         out = self._relaxed.step(d.x, warm)
         if out.status != "ok":
             return None
@@ -1395,7 +1401,7 @@ class FastLtvMpc(TrackingWarmStart):
                 raise ValueError(f"warm.u_prev must have shape ({self.nu},), got {u_prev.shape}")
         X, U = warm.X, warm.U
         has_plan = X is not None and U is not None
-        if has_plan:
+        if X is not None and U is not None:
             if X.shape != (self.N + 1, self.nx) or U.shape != (self.N, self.nu):
                 raise ValueError(f"warm plan must be X ({self.N + 1}, {self.nx}) and U ({self.N}, {self.nu}), "
                                  f"got {X.shape} and {U.shape}")
@@ -1428,7 +1434,7 @@ class FastLtvMpc(TrackingWarmStart):
             u = out[:nu]
             X_pred = out[self._o_X:self._o_U].reshape(N + 1, nx)
             U_plan = out[self._o_U:self._o_R].reshape(N, nu)
-            refs = out[self._o_R:].reshape(N + 1, nx)
+            refs: np.ndarray = out[self._o_R:].reshape(N + 1, nx)
             return ControlOutput(u, "ok", "", time.perf_counter() - t0, info[0], e_y, e_psi,
                                  X_pred, refs, WarmStart(info[0], u, X_pred, U_plan, t_next, new_sides), it)
         if code == _BAD_STATE:

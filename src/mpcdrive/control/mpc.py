@@ -24,6 +24,7 @@ from ..paths.base import Path
 from ..scene.footprint import Footprint
 from ..scene.obstacles import Obstacle
 from ..paths.reference import HorizonMode, horizon_arc_lengths, horizon_states
+from ..paths.speed_profile import SpeedReference
 from ..solvers.osqp_backend import OsqpBackend, OsqpSettings
 from ..solvers.projected_gradient import ProjectedGradientBackend, ProjectedGradientSettings
 from ..types import ControlOutput, SolveResult, WarmStart
@@ -79,8 +80,9 @@ class MpcConfig:
     horizon : ``arc_length`` (references spaced by the distance driven at the reference speed) or
         ``paper`` (fixed ``horizon_step_m`` per step, the authors' code);
     v_ref_mps : reference speed [m/s] (the model's constant speed for 3-state models when None);
-    speed_profile : reference speed along the path instead of a constant: any object with
-        ``speed(s_m) -> v_mps`` (e.g. :class:`~mpcdrive.paths.SpeedProfile`); each horizon step
+    speed_profile : reference speed along the path instead of a constant: a
+        :class:`~mpcdrive.paths.SpeedReference`, any object with ``speed(s_m) -> v_mps`` (e.g.
+        :class:`~mpcdrive.paths.SpeedProfile`); each horizon step
         then gets the profile's speed at its arc length, and a model with an ``accel`` input gets
         the profile's acceleration as input reference;
     feedforward : ``curvature`` (steering reference = the model's steady-state steering on the
@@ -107,7 +109,7 @@ class MpcConfig:
     sqp_max_iterations: int = 1
     sqp_tol: float = 1e-4
     sqp_max_time_s: float = 0.05
-    speed_profile: object | None = None
+    speed_profile: SpeedReference | None = None
     prediction_substeps: int = 1
     fallback: FallbackConfig = FallbackConfig()
 
@@ -179,7 +181,7 @@ class LtvMpc(TrackingWarmStart):
             raise ValueError(f"reference speed must be finite, got {self.v_ref_mps}")
         from ..ocp.qp import LtvQp  # scipy.sparse: imported when an OSQP controller is built
 
-        self.avoidance = None
+        self.avoidance: Avoidance | None = None
         if obstacles:
             avoidance = avoidance or AvoidanceConfig()
             if avoidance.formulation == "corridor" and problem.lane_half_width_m is None:
@@ -190,6 +192,7 @@ class LtvMpc(TrackingWarmStart):
             self.avoidance = Avoidance(avoidance, list(obstacles), path, footprint, problem.N, problem.dt_s,
                                        problem.lane_half_width_m, lane_margin_m)
         self.qp = LtvQp(problem)
+        self.backend: OsqpBackend | ProjectedGradientBackend
         if isinstance(solver_settings, ProjectedGradientSettings):
             self.backend = ProjectedGradientBackend(self.qp, solver_settings)
         else:
@@ -209,6 +212,8 @@ class LtvMpc(TrackingWarmStart):
         # for the corners swinging out when the car is yawed) stays inside
         if not (math.isfinite(lane_margin_m) and lane_margin_m >= 0):
             raise ValueError(f"lane_margin_m must be >= 0, got {lane_margin_m}")
+        self._lane_lo: np.ndarray | None
+        self._lane_hi: np.ndarray | None
         if problem.lane_half_width_m is not None:
             lim = max(problem.lane_half_width_m - 0.5 * footprint.width_m - lane_margin_m, 0.0)
             self._lane_lo = np.full(N, -lim)
@@ -232,8 +237,8 @@ class LtvMpc(TrackingWarmStart):
         at ``pose_at(warm.t_s)`` at the step that receives ``warm``. Index ``j`` must keep naming
         the same obstacle from call to call: the passing side chosen for it is remembered in
         ``warm.sides`` under that index. Only a controller built with obstacles has the rows."""
-        obstacles = checked_obstacles(self.avoidance, obstacles)
-        self.avoidance.obstacles = list(obstacles)
+        avoidance, obstacles = checked_obstacles(self.avoidance, obstacles)
+        avoidance.obstacles = list(obstacles)
 
     # -- warm start: initial_warm and _check_state from TrackingWarmStart ---------------------
     def _check_warm(self, warm: WarmStart) -> np.ndarray:
@@ -268,9 +273,9 @@ class LtvMpc(TrackingWarmStart):
         qp = self.qp
         qp.update(d.x, d.Ad, d.Bd, d.c, d.xref, d.uref, warm.u_prev, d.lane_normal, d.lane_offset,
                   d.lane_lo, d.lane_hi)
-        if d.rows_a is not None:
+        if d.rows_a is not None and d.rows_b is not None:  # set together (AvoidanceTerms)
             qp.set_obstacle_rows(d.rows_a, d.rows_b)
-        if d.H is not None:
+        if d.H is not None and d.g is not None:
             qp.add_position_cost(d.H, d.g)
         # primal warm start: the linearization trajectory
         return self.backend.solve(d.Xlin, d.Ubar)
@@ -374,8 +379,9 @@ class LtvMpc(TrackingWarmStart):
         if prof is None:
             s_arr = horizon_arc_lengths(s0, N, cfg.horizon, dt, self.v_ref_mps, cfg.horizon_step_m)
             return s_arr, np.full(N + 1, self.v_ref_mps)
-        if cfg.horizon == "arc_length" and callable(getattr(prof, "arc_length_after", None)):
-            s_arr = np.asarray(prof.arc_length_after(s0, dt * np.arange(N + 1)), float)
+        after = getattr(prof, "arc_length_after", None) if cfg.horizon == "arc_length" else None
+        if callable(after):  # optional on a SpeedReference
+            s_arr = np.asarray(after(s0, dt * np.arange(N + 1)), float)
             return s_arr, np.asarray(prof.speed(s_arr), float)
         v = np.full(N + 1, float(prof.speed(s0)))
         for _ in range(2):

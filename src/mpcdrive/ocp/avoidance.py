@@ -308,7 +308,7 @@ class Avoidance:
             lo, hi, rows_a, rows_b = self._corridor(Xlin, s_arr, rel, boxes, sides, present)
         else:
             H, g = self._cost(Xlin, rel, boxes, centers, present)
-        s_max = None if cfg.follow_gap_s is None else self._stop_lines(s_arr, rel, boxes, sides)
+        s_max = None if cfg.follow_gap_s is None else self._stop_lines(s_arr, rel, boxes, sides, gap_s=cfg.follow_gap_s)
         return AvoidanceTerms(rows_a, rows_b, lo, hi, H, g, e_ref, sides, s_max)
 
     @property
@@ -328,10 +328,10 @@ class Avoidance:
         cut across the car's road."""
         return s_arr[0] <= box0.s_ref and box0.s_lo <= s_arr[-1] + self.stop_distance_m
 
-    def _stop_lines(self, s_arr, rel, boxes, sides) -> np.ndarray | None:
+    def _stop_lines(self, s_arr, rel, boxes, sides, *, gap_s: float) -> np.ndarray | None:
         """(N+1,) furthest reference arc lengths behind the blocking obstacles ahead (or None)."""
         s_max = None
-        dt, gap = self.dt_s, self.config.follow_gap_s
+        dt, gap = self.dt_s, gap_s
         for j in rel:
             if sides[j] != SIDE_BLOCKED or not self._blocks_ahead(boxes[j][0], s_arr):
                 continue

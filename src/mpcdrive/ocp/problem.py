@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 
 def _as_matrix(w, n: int, name: str) -> np.ndarray:
@@ -38,7 +39,7 @@ def _as_bounds(lo, hi, n: int, name: str) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, init=False)
 class MpcProblem:
     """Tracking MPC over ``N`` steps of ``dt_s`` seconds.
 
@@ -58,7 +59,8 @@ class MpcProblem:
     (x, y) Hessian entries for non-convex obstacle costs approximated each step (SQP).
 
     Weights may be given as scalars, diagonals or full matrices; bounds as scalars or vectors
-    (None or +-inf = unbounded). Units follow the model's states and inputs (SI, radians).
+    (None or +-inf = unbounded). Units follow the model's states and inputs (SI, radians). The
+    attributes hold them normalized: full matrices, and one bound per state / input.
     """
 
     nx: int
@@ -67,46 +69,72 @@ class MpcProblem:
     dt_s: float
     Q: np.ndarray
     R: np.ndarray
-    QN: np.ndarray | None = None
-    Rc: np.ndarray | None = None
-    u_min: np.ndarray | float | None = None
-    u_max: np.ndarray | float | None = None
-    du_max_per_s: np.ndarray | float | None = None
-    x_min: np.ndarray | float | None = None
-    x_max: np.ndarray | float | None = None
-    lane_half_width_m: float | None = None
-    lane_slack_weight: float = 1e4
-    lane_slack_weight_l1: float = 1e3
-    obstacle_rows: int = 0
-    obstacle_slack_weight: float = 1e4
-    obstacle_slack_weight_l1: float = 1e3
-    position_cost: bool = False
+    QN: np.ndarray
+    Rc: np.ndarray
+    u_min: np.ndarray
+    u_max: np.ndarray
+    du_max_per_s: np.ndarray
+    x_min: np.ndarray
+    x_max: np.ndarray
+    lane_half_width_m: float | None
+    lane_slack_weight: float
+    lane_slack_weight_l1: float
+    obstacle_rows: int
+    obstacle_slack_weight: float
+    obstacle_slack_weight_l1: float
+    position_cost: bool
 
-    def __post_init__(self):
-        for name in ("nx", "nu"):
-            v = getattr(self, name)
+    def __init__(
+        self,
+        nx: int,
+        nu: int,
+        N: int,
+        dt_s: float,
+        Q: npt.ArrayLike,
+        R: npt.ArrayLike,
+        *,
+        QN: npt.ArrayLike | None = None,
+        Rc: npt.ArrayLike | None = None,
+        u_min: npt.ArrayLike | None = None,
+        u_max: npt.ArrayLike | None = None,
+        du_max_per_s: npt.ArrayLike | None = None,
+        x_min: npt.ArrayLike | None = None,
+        x_max: npt.ArrayLike | None = None,
+        lane_half_width_m: float | None = None,
+        lane_slack_weight: float = 1e4,
+        lane_slack_weight_l1: float = 1e3,
+        obstacle_rows: int = 0,
+        obstacle_slack_weight: float = 1e4,
+        obstacle_slack_weight_l1: float = 1e3,
+        position_cost: bool = False,
+    ):
+        for name, v in (("nx", nx), ("nu", nu)):
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"{name} must be a positive integer, got {v!r}")
-        if isinstance(self.N, bool) or not isinstance(self.N, (int, float, np.integer, np.floating)) or not np.isfinite(self.N):
-            raise ValueError(f"horizon N must be a positive integer, got {self.N!r}")
-        if int(self.N) != self.N or self.N < 1:
-            raise ValueError(f"horizon N must be a positive integer, got {self.N}")
-        if not (np.isfinite(self.dt_s) and self.dt_s > 0):
-            raise ValueError(f"dt_s must be a positive finite number, got {self.dt_s}")
-        nx, nu = self.nx, self.nu
-        object.__setattr__(self, "N", int(self.N))
-        object.__setattr__(self, "Q", _as_matrix(self.Q, nx, "Q"))
-        object.__setattr__(self, "R", _as_matrix(self.R, nu, "R"))
-        object.__setattr__(self, "QN", _as_matrix(self.Q if self.QN is None else self.QN, nx, "QN"))
-        object.__setattr__(self, "Rc", _as_matrix(0.0 if self.Rc is None else self.Rc, nu, "Rc"))
-        u_min, u_max = _as_bounds(self.u_min, self.u_max, nu, "input")
+        if isinstance(N, bool) or not isinstance(N, (int, float, np.integer, np.floating)) or not np.isfinite(N):
+            raise ValueError(f"horizon N must be a positive integer, got {N!r}")
+        if int(N) != N or N < 1:
+            raise ValueError(f"horizon N must be a positive integer, got {N}")
+        if not (np.isfinite(dt_s) and dt_s > 0):
+            raise ValueError(f"dt_s must be a positive finite number, got {dt_s}")
+        for name, value in (("nx", nx), ("nu", nu), ("N", int(N)), ("dt_s", dt_s),
+                            ("lane_half_width_m", lane_half_width_m), ("lane_slack_weight", lane_slack_weight),
+                            ("lane_slack_weight_l1", lane_slack_weight_l1), ("obstacle_rows", obstacle_rows),
+                            ("obstacle_slack_weight", obstacle_slack_weight),
+                            ("obstacle_slack_weight_l1", obstacle_slack_weight_l1), ("position_cost", position_cost)):
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "Q", _as_matrix(Q, nx, "Q"))
+        object.__setattr__(self, "R", _as_matrix(R, nu, "R"))
+        object.__setattr__(self, "QN", _as_matrix(self.Q if QN is None else QN, nx, "QN"))
+        object.__setattr__(self, "Rc", _as_matrix(0.0 if Rc is None else Rc, nu, "Rc"))
+        u_min, u_max = _as_bounds(u_min, u_max, nu, "input")
         object.__setattr__(self, "u_min", u_min)
         object.__setattr__(self, "u_max", u_max)
-        du = np.broadcast_to(np.asarray(np.inf if self.du_max_per_s is None else self.du_max_per_s, float), (nu,)).copy()
+        du = np.broadcast_to(np.asarray(np.inf if du_max_per_s is None else du_max_per_s, float), (nu,)).copy()
         if np.any(np.isnan(du)) or np.any(du <= 0):
             raise ValueError(f"du_max_per_s must be positive, got {du}")
         object.__setattr__(self, "du_max_per_s", du)
-        x_min, x_max = _as_bounds(self.x_min, self.x_max, nx, "state")
+        x_min, x_max = _as_bounds(x_min, x_max, nx, "state")
         object.__setattr__(self, "x_min", x_min)
         object.__setattr__(self, "x_max", x_max)
         if self.lane_half_width_m is not None and not (np.isfinite(self.lane_half_width_m) and self.lane_half_width_m > 0):

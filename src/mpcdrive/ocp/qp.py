@@ -265,6 +265,7 @@ class LtvQp:
             n2 = np.repeat(lane_normal[:, None, :], 2, axis=1)  # (N, 2 rows, 2)
             self._coo_vals[self._slot_n] = n2.ravel()
             w = pb.lane_half_width_m
+            assert w is not None  # self.lane is set from it in __init__ (the problem is frozen)
             self.u[self.r_lane:self.r_lane + 2 * N:2] = lane_offset + (w if lane_hi is None else lane_hi)
             self.l[self.r_lane + 1:self.r_lane + 2 * N:2] = lane_offset + (-w if lane_lo is None else lane_lo)
         if self.n_obs_rows:

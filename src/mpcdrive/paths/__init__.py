@@ -3,7 +3,7 @@
 from .base import Path, Projection
 from .circle import CirclePath
 from .reference import horizon_arc_lengths, horizon_states
-from .speed_profile import ConstantSpeed, SpeedProfile
+from .speed_profile import ConstantSpeed, SpeedProfile, SpeedReference
 from .straight import StraightPath
 from .tracks import Track, load_track_csv, track_from_text, write_track_csv
 from .waypoints import WaypointPath
@@ -12,6 +12,7 @@ __all__ = [
     "CirclePath",
     "ConstantSpeed",
     "SpeedProfile",
+    "SpeedReference",
     "Track",
     "load_track_csv",
     "track_from_text",

@@ -13,10 +13,21 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
+import numpy.typing as npt
 
 from .base import Path
+
+
+class SpeedReference(Protocol):
+    """What a controller needs of a reference speed along a path: ``speed(s_m)`` [m/s] at arc
+    length(s) ``s_m`` [m] (a float for a scalar, an array for an array). :class:`ConstantSpeed` and
+    :class:`SpeedProfile` have it, and also ``arc_length_after(s0_m, t_s)``, which a controller
+    uses when present."""
+
+    def speed(self, s_m: npt.ArrayLike) -> np.ndarray | float: ...
 
 
 @dataclass(frozen=True)
@@ -29,7 +40,7 @@ class ConstantSpeed:
         if not math.isfinite(self.v_mps):
             raise ValueError(f"v_mps must be finite, got {self.v_mps}")
 
-    def speed(self, s_m):
+    def speed(self, s_m: npt.ArrayLike) -> np.ndarray | float:
         """Reference speed [m/s] at arc length(s) s_m [m]."""
         return np.full(np.shape(s_m), self.v_mps) if np.ndim(s_m) else self.v_mps
 
@@ -71,9 +82,9 @@ class SpeedProfile:
                           ("decel_max_mps2", decel_max_mps2), ("v_max_mps", v_max_mps)):
             if not (math.isfinite(val) and val > 0):
                 raise ValueError(f"{name} must be a positive finite number, got {val}")
-        for name, val in (("v_start_mps", v_start_mps), ("v_end_mps", v_end_mps)):
-            if val is not None and not (math.isfinite(val) and val >= 0):
-                raise ValueError(f"{name} must be >= 0, got {val}")
+        for name, v_opt in (("v_start_mps", v_start_mps), ("v_end_mps", v_end_mps)):
+            if v_opt is not None and not (math.isfinite(v_opt) and v_opt >= 0):
+                raise ValueError(f"{name} must be >= 0, got {v_opt}")
         if curvature_window_m < 0 or not math.isfinite(curvature_window_m):
             raise ValueError(f"curvature_window_m must be >= 0, got {curvature_window_m}")
         self.path = path
@@ -161,7 +172,7 @@ class SpeedProfile:
         return cls(path, lateral_fraction * friction * g_mps2, **kw)
 
     # -- evaluation ---------------------------------------------------------------------------
-    def speed(self, s_m):
+    def speed(self, s_m: npt.ArrayLike) -> np.ndarray | float:
         """Reference speed [m/s] at arc length(s) ``s_m`` [m]."""
         s = np.asarray(s_m, float)
         if self.closed:

@@ -51,12 +51,17 @@ class Track:
     def has_widths(self) -> bool:
         return self.width_right_m is not None
 
+    def _widths(self) -> tuple[np.ndarray, np.ndarray]:
+        """(right, left) widths at the waypoints; a ValueError for a track without widths."""
+        if self.width_right_m is None or self.width_left_m is None:
+            raise ValueError(f"track {self.name!r} has no road widths")
+        return self.width_right_m, self.width_left_m
+
     def widths_at(self, s_m) -> tuple[np.ndarray, np.ndarray]:
         """(right, left) road widths [m] at arc length(s) s_m [m], linearly interpolated."""
-        if not self.has_widths:
-            raise ValueError(f"track {self.name!r} has no road widths")
+        wr, wl = self._widths()
         s = np.asarray(s_m, float)
-        sp, wr, wl = self.s_points_m, self.width_right_m, self.width_left_m
+        sp = self.s_points_m
         if self.closed:
             L = self.path.length_m
             s = np.mod(s, L)
@@ -70,7 +75,8 @@ class Track:
         """Narrowest distance from the centre line to a road edge [m] (None without widths)."""
         if not self.has_widths:
             return None
-        return float(min(self.width_right_m.min(), self.width_left_m.min()))
+        wr, wl = self._widths()
+        return float(min(wr.min(), wl.min()))
 
     def boundaries(self, ds_m: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(left, right) road edges (K, 2) [m] along one traversal, for plots."""
