@@ -82,34 +82,15 @@ def _load_commonroad(file: str):
 
 
 def _run_into(spec, out_dir: Path, show_progress: bool, source: str | None = None, extra_outputs=None):
-    """Run one scenario and write its files into ``out_dir`` (with the interactive
-    ``report.html``; ``extra_outputs(result, out_dir)`` writes more); returns (result, metrics,
-    figures, footprint)."""
-    from .io import write_json, write_trajectory_csv
-    from .io.atomic import atomic_write_text
-    from .plots import write_run_figures
-    from .report import write_run_html
-    from .scenarios import build_experiment, dump_scenario, run_experiment
-    from .sim import compute_metrics
+    """:func:`mpcdrive.runs.run_into` with a progress bar on stderr; a scenario that does not
+    build is bad input."""
+    from .runs import BuildError, run_into
 
     try:
-        exp = build_experiment(spec)
-    except ValueError as e:
-        raise BadInput(f"{source or spec.id}: {e}") from None
-    with _progress(show_progress, spec.id, exp.steps) as cb:
-        result = run_experiment(exp, progress=cb)
-    metrics = compute_metrics(result, exp.footprint)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    write_trajectory_csv(result, out_dir / "trajectory.csv")
-    write_json(out_dir / "metrics.json", metrics)
-    atomic_write_text(out_dir / "scenario.yaml", dump_scenario(spec))
-    if extra_outputs is not None:
-        metrics.update(extra_outputs(result, out_dir))
-        write_json(out_dir / "metrics.json", metrics)
-    figures = write_run_figures(result, out_dir)
-    write_run_html(out_dir, result, metrics, figures, exp.footprint, run_id=spec.id,
-                   description=spec.description)
-    return result, metrics, figures, exp.footprint
+        return run_into(spec, out_dir, (lambda label, n: _progress(True, label, n)) if show_progress else None,
+                        source=source, extra_outputs=extra_outputs)
+    except BuildError as e:
+        raise BadInput(str(e)) from None
 
 
 class OutputAbandoned(Exception):
