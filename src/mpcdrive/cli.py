@@ -149,7 +149,8 @@ def run(
     else:
         spec = _load(scenario)
     spec = _on_backend(spec, fast)
-    out_dir = out or _default_out(spec.id)
+    # a CommonRoad run is named after the file passed, not the benchmark id inside it
+    out_dir = out or _default_out(_file_stem(scenario) if extra is not None else spec.id)
     with _output_dir(out_dir) as tmp:
         _, metrics, _, _ = _run_into(spec, tmp, not quiet, source=scenario, extra_outputs=extra)
     typer.echo(_summary_line(spec.id, metrics))
@@ -512,6 +513,53 @@ def main() -> None:
             sys.exit(130)
         typer.echo(f"mpcdrive: error: {type(e).__name__}: {e}", err=True)
         sys.exit(1)
+
+
+def _file_stem(file: str) -> str:
+    from .adapters.commonroad_batch import file_stem
+
+    return file_stem(file)
+
+
+@app.command("commonroad")
+def commonroad_cmd(
+    files: list[str] = typer.Argument(..., help="CommonRoad files (.xml, .xml.gz) or folders holding them"),
+    out: Path | None = typer.Option(None, "--out", help="output directory (default runs/commonroad-<timestamp>)"),
+    workers: int | None = typer.Option(None, "--workers", min=1, help="local processes (default: all cores)"),
+    backend: str = typer.Option("local", "--backend", help="local (process pool) or ray"),
+) -> None:
+    """Drive every CommonRoad file and judge it with CommonRoad's drivability checker; write
+    OUT/summary.json, OUT/summary.md and OUT/<file stem>/ per file (as mpcdrive run writes it)."""
+    from .adapters.commonroad import available
+    from .adapters.commonroad_batch import collect_files, run_batch, verdict
+
+    if not available():
+        raise BadInput("commonroad: CommonRoad scenarios need the commonroad extra (pip install 'mpcdrive[commonroad]')")
+    if backend not in ("local", "ray"):
+        raise BadInput(f"--backend must be 'local' or 'ray', got {backend!r}")
+    if backend == "ray":
+        import importlib.util
+
+        if importlib.util.find_spec("ray") is None:
+            raise BadInput("--backend ray: Ray is not installed (pip install 'mpcdrive[ray]')")
+        if workers is not None:
+            raise BadInput("--workers is only for --backend local (Ray uses the cluster's CPUs)")
+    try:
+        paths = collect_files(files)
+    except ValueError as e:
+        raise BadInput(str(e)) from None
+    out_dir = out or _default_out("commonroad")
+    t0 = time.perf_counter()
+
+    def progress(k: int, n: int, row: dict) -> None:
+        typer.echo(f"[{k}/{n}] {row['file']} {verdict(row)}", err=True)
+
+    with _output_dir(out_dir) as tmp:
+        rows = run_batch(paths, tmp, workers=workers, backend=backend, progress=progress)
+    passed = sum(1 for r in rows.values() if r["passed"])
+    errors = sum(1 for r in rows.values() if r["error"])
+    typer.echo(f"{passed}/{len(rows)} files passed, {errors} with errors, {time.perf_counter() - t0:.1f} s; "
+               f"summary: {out_dir / 'summary.md'}")
 
 
 if __name__ == "__main__":

@@ -110,6 +110,7 @@ def plan_drive(net, pp, p0: np.ndarray, yaw0: float, v0: float, dt_s: float) -> 
         route = cr.lane_forward(net, [starts[0]], max(v_want, v0) * t_last + brake_m,
                                 from_m=cr._arc_to(first, p0))
         line = cr.route_centerline(net, route, p0, max(v_want, v0) * t_last + brake_m)
+        route = cr.trim_route(net, route, line)
         return _finish(route, line, "follow lane", v_want, pb,
                        note="time-only goal: follows the lane, stops at its end")
     route = cr.find_route(net, starts, goals)

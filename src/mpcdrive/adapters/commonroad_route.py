@@ -290,6 +290,17 @@ def route_centerline(net, route: list[int], start_xy: np.ndarray, length_m: floa
     return line
 
 
+def trim_route(net, route: list[int], line: np.ndarray) -> list[int]:
+    """``route`` without the lanelets past the end of ``line`` (a centre line cut short)."""
+    from shapely.geometry import Point
+
+    end = Point(*line[-1])
+    route = list(route)
+    while len(route) > 1 and net.find_lanelet_by_id(route[-1]).polygon.shapely_object.distance(end) > 1e-6:
+        route.pop()
+    return route
+
+
 def nearest_arc(line: np.ndarray, shapes) -> tuple[float, float] | None:
     """The arc length [m] along ``line`` closest to the shapes' centres, as a (s, s) stretch;
     None without shapes."""

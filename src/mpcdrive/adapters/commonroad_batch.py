@@ -1,0 +1,163 @@
+"""Drive many CommonRoad files and judge each with CommonRoad's checkers (``mpcdrive commonroad``).
+
+Each file is imported (:func:`~.commonroad.load_commonroad`), driven, written into
+``OUT/<file stem>/`` exactly as ``mpcdrive run`` writes a run (:func:`mpcdrive.runs.run_into`)
+and checked with the drivability checker; ``OUT/summary.json`` maps each file name to its row
+(:data:`ROW_FIELDS`) and ``OUT/summary.md`` shows them as a table. A file that cannot be read,
+routed or driven is a row with its ``error``, never the end of the batch. Runs go to a local
+process pool or to Ray (:func:`mpcdrive.sweep.runner.run_parallel`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+ROW_FIELDS = ("passed", "collision_free", "road_compliant", "ks_feasible", "goal_reached",
+              "min_obstacle_clearance_m", "solver_failures", "solve_time_us", "wall_s", "error")
+SUFFIXES = (".xml", ".xml.gz")
+
+
+def file_stem(path: str | Path) -> str:
+    """The file name without ``.xml`` / ``.xml.gz`` (the name of its output folder)."""
+    name = Path(path).name
+    for suf in (".xml.gz", ".xml"):
+        if name.lower().endswith(suf):
+            return name[: -len(suf)]
+    return Path(name).stem
+
+
+def collect_files(args) -> list[Path]:
+    """The scenario files named by ``args`` (files, or folders: their ``.xml`` / ``.xml.gz``
+    files, sorted); ValueError for a name that is neither or a folder without any."""
+    files: list[Path] = []
+    for a in args:
+        p = Path(a)
+        if p.is_dir():
+            found = sorted(f for f in p.iterdir() if f.is_file() and f.name.lower().endswith(SUFFIXES))
+            if not found:
+                raise ValueError(f"{p}: no CommonRoad files (.xml, .xml.gz) in this folder")
+            files += found
+        elif p.is_file():
+            files.append(p)
+        else:
+            raise ValueError(f"{p}: no such file or folder")
+    stems = [file_stem(f) for f in files]
+    dup = sorted({s for s in stems if stems.count(s) > 1})
+    if dup:
+        raise ValueError(f"two files would share the output folder {dup[0]!r}: pass one of them")
+    return files
+
+
+@dataclass(frozen=True)
+class BatchTask:
+    """One file to drive into ``out_dir`` (``configure(imp) -> imp`` adapts the import, e.g. the
+    vehicle; a top-level function so a process pool can ship it)."""
+
+    file: str
+    out_dir: str
+    configure: object = None
+
+
+def _empty_row() -> dict:
+    return {"passed": False, "collision_free": None, "road_compliant": None, "ks_feasible": None,
+            "goal_reached": None, "min_obstacle_clearance_m": None, "solver_failures": None,
+            "solve_time_us": {"p50": None, "p99": None}, "wall_s": 0.0, "error": None}
+
+
+def drive_file(task: BatchTask) -> dict:
+    """Import, drive, write and check one file; its summary row (with ``file``). Never raises:
+    a failure is the row's ``error``."""
+    from ..runs import run_into
+    from .commonroad import load_commonroad
+
+    t0 = time.perf_counter()
+    row = _empty_row()
+    row["file"] = Path(task.file).name
+    try:
+        imp = load_commonroad(task.file)
+        if task.configure is not None:
+            imp = task.configure(imp)
+        _, m, _, _ = run_into(imp.spec, Path(task.out_dir), source=task.file, extra_outputs=imp.write_outputs)
+        cr = m["commonroad"]
+        st = m.get("solve_time_us") or {}
+        clearance = m.get("min_obstacle_clearance_m")
+        row.update(passed=bool(cr["passed"]), collision_free=cr["collision_free"],
+                   road_compliant=cr["road_compliant"], ks_feasible=cr["ks_feasible"],
+                   goal_reached=cr["goal_reached"],
+                   min_obstacle_clearance_m=None if clearance is None or not math.isfinite(clearance)
+                   else float(clearance),
+                   solver_failures=int(m["solver_failures"]),
+                   solve_time_us={"p50": st.get("p50"), "p99": st.get("p99")},
+                   solution_valid=cr.get("solution_valid"), plan=cr.get("plan"))
+    except Exception as e:  # a file's failure is its row; the batch goes on
+        import shutil
+
+        row["error"] = " ".join(f"{type(e).__name__}: {e}".split())[:400]
+        shutil.rmtree(task.out_dir, ignore_errors=True)  # no half-written run folder
+    row["wall_s"] = time.perf_counter() - t0
+    return row
+
+
+def verdict(row: dict) -> str:
+    """One word or phrase for a row: passed, the failed checks, or error."""
+    if row.get("error"):
+        return f"error: {row['error']}"
+    if row["passed"]:
+        return "passed"
+    failed = [name for key, name in (("collision_free", "collision"), ("road_compliant", "off road"),
+                                     ("ks_feasible", "KS-infeasible"), ("goal_reached", "goal missed"))
+              if row.get(key) is False]
+    return "failed: " + ", ".join(failed or ["unknown"])
+
+
+def _cell(v, fmt="{:.2f}") -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, float):
+        return fmt.format(v)
+    return str(v)
+
+
+def summary_markdown(rows: dict, header: str = "") -> str:
+    """``summary.md``: one table row per file, then the errors in words."""
+    n = len(rows)
+    passed = sum(1 for r in rows.values() if r["passed"])
+    lines = ["# CommonRoad batch", "", header, "",
+             f"{passed} of {n} files passed (collision-free, on the road, KS-feasible and at the goal, as "
+             "CommonRoad's drivability checker judges the drive up to the goal).", "",
+             "| file | verdict | collision-free | road-compliant | KS-feasible | goal reached | min clearance [m] | "
+             "solver failures | solve p50 / p99 [us] | wall [s] |",
+             "|" + "---|" * 10]
+    for name, r in rows.items():
+        st = r["solve_time_us"]
+        lines.append(f"| `{name}` | {'error' if r.get('error') else verdict(r)} | {_cell(r['collision_free'])} | "
+                     f"{_cell(r['road_compliant'])} | {_cell(r['ks_feasible'])} | {_cell(r['goal_reached'])} | "
+                     f"{_cell(r['min_obstacle_clearance_m'])} | {_cell(r['solver_failures'])} | "
+                     f"{_cell(st['p50'], '{:.0f}')} / {_cell(st['p99'], '{:.0f}')} | {_cell(r['wall_s'], '{:.1f}')} |")
+    errors = [(k, r["error"]) for k, r in rows.items() if r.get("error")]
+    if errors:
+        lines += ["", "## Errors", ""] + [f"- `{k}`: {e}" for k, e in errors]
+    return "\n".join(lines) + "\n"
+
+
+def run_batch(files, out_dir: Path, *, workers: int | None = None, backend: str = "local", configure=None,
+              progress=None) -> dict:
+    """Drive every file into ``out_dir/<stem>/``, write ``summary.json`` and ``summary.md``, and
+    return the rows by file name (in the order given). ``progress(k, n, row)`` as each finishes."""
+    from ..io import write_json
+    from ..io.atomic import atomic_write_text
+    from ..sweep.runner import run_parallel
+
+    out_dir = Path(out_dir)
+    tasks = [BatchTask(str(f), str(out_dir / file_stem(f)), configure) for f in files]
+    got = run_parallel(drive_file, tasks, backend, workers, progress=progress)
+    by_name = {r["file"]: r for r in got}
+    rows = {Path(f).name: {k: v for k, v in by_name[Path(f).name].items() if k != "file"} for f in files}
+    write_json(out_dir / "summary.json", rows)
+    atomic_write_text(out_dir / "summary.md", summary_markdown(rows, f"{len(rows)} files, backend {backend}."))
+    return rows
