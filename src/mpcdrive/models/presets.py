@@ -3,7 +3,7 @@
 * ``f1tenth``: the 1:10 F1TENTH car as the F1TENTH gym simulator ships it (mass 3.74 kg, yaw
   inertia 0.04712 kg m^2, lf 0.15875 m, lr 0.17145 m, friction 1.0489, cornering stiffness
   coefficients C_Sf 4.718 / C_Sr 5.4562 per rad, CoG height 0.074 m, steering +-0.4189 rad at up to
-  3.2 rad/s, acceleration up to 9.51 m/s^2, 0.58 m x 0.31 m).
+  3.2 rad/s, acceleration up to 9.51 m/s^2 (falling as 1/v above v_switch 7.319 m/s), 0.58 m x 0.31 m).
 * ``commonroad_ford_escort``, ``commonroad_bmw_320i``, ``commonroad_vw_vanagon``: the CommonRoad
   vehicle parameter sets 1, 2 and 3 (values in US units converted with 1 lbf = 4.4482216152605 N,
   1 ft = 0.3048 m as CommonRoad does). Their single-track model uses friction = p_dy1 = 1.0489,
@@ -33,7 +33,8 @@ class VehiclePreset:
     """A named vehicle: dynamic parameters plus actuator limits and body size (SI units).
 
     max_steer_rad [rad], max_steer_rate_rad_s [rad/s], max_accel_mps2 [m/s^2] (absolute),
-    length_m, width_m [m]; source: where the numbers come from.
+    v_switch_mps [m/s]: speed above which the forward acceleration limit falls as
+    ``max_accel v_switch / v``; length_m, width_m [m]; source: where the numbers come from.
     """
 
     name: str
@@ -42,6 +43,7 @@ class VehiclePreset:
     max_steer_rad: float
     max_steer_rate_rad_s: float
     max_accel_mps2: float
+    v_switch_mps: float
     length_m: float
     width_m: float
     source: str
@@ -52,7 +54,7 @@ class VehiclePreset:
         return self.params.wheelbase_m / math.tan(self.max_steer_rad)
 
 
-def _commonroad(num, name, description, m_slug, a_ft, b_ft, iz_slugft2, hs_ft, steer, length, width):
+def _commonroad(num, name, description, m_slug, a_ft, b_ft, iz_slugft2, hs_ft, steer, v_switch, length, width):
     return VehiclePreset(
         name=name,
         description=description,
@@ -69,6 +71,7 @@ def _commonroad(num, name, description, m_slug, a_ft, b_ft, iz_slugft2, hs_ft, s
         max_steer_rad=steer,
         max_steer_rate_rad_s=0.4,
         max_accel_mps2=11.5,
+        v_switch_mps=v_switch,
         length_m=length,
         width_m=width,
         source=f"CommonRoad vehicle models, parameters_vehicle{num}",
@@ -83,19 +86,20 @@ PRESETS: dict[str, VehiclePreset] = {
         max_steer_rad=0.4189,
         max_steer_rate_rad_s=3.2,
         max_accel_mps2=9.51,
+        v_switch_mps=7.319,
         length_m=0.58,
         width_m=0.31,
         source="F1TENTH gym default vehicle parameters",
     ),
     "commonroad_ford_escort": _commonroad(
         1, "commonroad_ford_escort", "Ford Escort (CommonRoad vehicle id 1)",
-        84.0, 2.9, 4.95, 1135.0, 1.95, 0.910, 4.298, 1.674),
+        84.0, 2.9, 4.95, 1135.0, 1.95, 0.910, 4.755, 4.298, 1.674),
     "commonroad_bmw_320i": _commonroad(
         2, "commonroad_bmw_320i", "BMW 320i (CommonRoad vehicle id 2)",
-        74.91452, 3.793293, 4.667707, 1321.416, 2.01355, 1.066, 4.508, 1.610),
+        74.91452, 3.793293, 4.667707, 1321.416, 2.01355, 1.066, 7.319, 4.508, 1.610),
     "commonroad_vw_vanagon": _commonroad(
         3, "commonroad_vw_vanagon", "VW Vanagon (CommonRoad vehicle id 3)",
-        101.3367, 3.775563, 4.334437, 1824.078, 2.639405, 1.023, 4.569, 1.844),
+        101.3367, 3.775563, 4.334437, 1824.078, 2.639405, 1.023, 7.824, 4.569, 1.844),
 }
 
 

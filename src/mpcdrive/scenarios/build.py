@@ -28,7 +28,7 @@ from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Polygon, Stati
 from ..solvers.osqp_backend import OsqpSettings
 from ..solvers.projected_gradient import ProjectedGradientSettings
 from ..types import SimResult
-from .schema import AvoidanceSpec, NoiseSpec, ObstacleSpec, ScenarioSpec
+from .schema import COMMONROAD_PLANTS, AvoidanceSpec, NoiseSpec, ObstacleSpec, ScenarioSpec
 
 
 @dataclass(frozen=True)
@@ -214,6 +214,8 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
                      footprint=footprint, lane_margin_m=lane_margin)
     # the plant: same or another model, parameters scaled, steering through an actuator
     pl = spec.plant
+    if spec.plant_model in COMMONROAD_PLANTS:
+        raise ValueError(f"plant.model {spec.plant_model}: CommonRoad plants are not wired into the closed loop yet")
     # the true vehicle: the controller's unless the plant names other parameters (a model error)
     errors = {k: val for k, val in (("lf_m", pl.lf_m), ("lr_m", pl.lr_m), ("speed_mps", pl.speed_mps)) if val is not None}
     plant_v = v.model_copy(update=errors) if errors else v

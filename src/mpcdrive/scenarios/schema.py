@@ -100,8 +100,15 @@ _PRESET_KEYS = ("lf_m", "lr_m", "mass_kg", "yaw_inertia_kgm2", "friction", "cs_f
                 "h_cg_m", "pacejka_c", "pacejka_e", "length_m", "width_m")
 
 
+#: CommonRoad plant models; the closed loop observes them as kinematic4 (x, y, yaw, v at the CoG)
+COMMONROAD_PLANTS = ("commonroad_ks", "commonroad_st", "commonroad_mb")
+CommonRoadVehicle = Literal["ford_escort", "bmw_320i", "vw_vanagon"]
+
+
 def model_size(model: str) -> tuple[int, int]:
-    """(nx, nu) of a model name."""
+    """(nx, nu) of a model name (a CommonRoad plant: the size of the state it is observed in)."""
+    if model in COMMONROAD_PLANTS:
+        return 4, 2
     return {"kinematic3": (3, 1), "kinematic4": (4, 2)}.get(model, (6, 2))
 
 
@@ -352,9 +359,16 @@ class ActuatorSpec(_Strict):
 class PlantSpec(_Strict):
     """The simulated vehicle: ``same`` model as the controller or another one (model mismatch),
     parameters scaled by ``param_scale``, integrated with ``integrator`` in ``substeps`` per control
-    step, steering through ``steering_actuator``."""
+    step, steering through ``steering_actuator``.
 
-    model: Literal["same", "kinematic4", "dynamic_linear", "dynamic_pacejka"] = "same"
+    ``commonroad_ks | commonroad_st | commonroad_mb``: CommonRoad's kinematic single-track,
+    single-track or multi-body model of the CommonRoad ``vehicle`` (``ford_escort``, ``bmw_320i``,
+    ``vw_vanagon``), steered through a rate-limited servo and integrated by the plant itself
+    (see :mod:`mpcdrive.adapters.commonroad_vehicles`); needs a ``kinematic4`` controller."""
+
+    model: Literal["same", "kinematic4", "dynamic_linear", "dynamic_pacejka", "commonroad_ks", "commonroad_st",
+                   "commonroad_mb"] = "same"
+    vehicle: CommonRoadVehicle | None = None
     integrator: Literal["rk4", "euler"] = "rk4"
     substeps: int = Field(1, ge=1, le=100)
     param_scale: ParamScaleSpec | None = None
@@ -362,6 +376,21 @@ class PlantSpec(_Strict):
     lf_m: Length | None = None
     lr_m: Length | None = None
     speed_mps: Annotated[Speed, Field(gt=0)] | None = None
+
+    @model_validator(mode="after")
+    def _commonroad(self):
+        if self.model in COMMONROAD_PLANTS:
+            if self.vehicle is None:
+                raise ValueError(f"plant.model {self.model} needs plant.vehicle (ford_escort, bmw_320i or vw_vanagon)")
+            other = sorted(self.model_fields_set & {"integrator", "substeps", "param_scale", "steering_actuator",
+                                                    "lf_m", "lr_m", "speed_mps"})
+            if other:
+                raise ValueError(f"plant.{other[0]} does not apply to plant.model {self.model} (the CommonRoad "
+                                 "vehicle has its own parameters, steering servo and integrator)")
+        elif self.vehicle is not None:
+            raise ValueError(f"plant.vehicle needs a CommonRoad plant model ({', '.join(COMMONROAD_PLANTS)}), "
+                             f"got plant.model {self.model}")
+        return self
 
 
 class NoiseSpec(_Strict):
@@ -422,6 +451,13 @@ class ScenarioSpec(_Strict):
             if w is not None and len(w) != n:
                 raise ValueError(f"controller.{name} needs {n} entries for {self.vehicle.model}, got {len(w)}")
         plant_nx, plant_nu = model_size(self.plant_model)
+        if self.plant_model in COMMONROAD_PLANTS:
+            if self.vehicle.model != "kinematic4":
+                raise ValueError(f"plant.model {self.plant_model} is observed as kinematic4 (x, y, yaw, v at the "
+                                 f"centre of gravity); vehicle.model {self.vehicle.model} cannot be; use kinematic4")
+            if self.disturbance is not None:
+                raise ValueError(f"disturbance (added to the plant state) is not supported with plant.model "
+                                 f"{self.plant_model}; use measurement_noise")
         if plant_nu != nu:
             raise ValueError(f"plant.model {self.plant_model} has inputs of size {plant_nu} but the controller's "
                              f"{self.vehicle.model} has {nu}; use a model with steering and acceleration")
