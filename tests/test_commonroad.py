@@ -161,13 +161,34 @@ def test_solution_file_round_trips(tmp_path):
 
 @pytest.mark.slow
 def test_cli_runs_a_commonroad_file(tmp_path):
-    out = tmp_path / "run"
+    """``mpcdrive run FILE --vehicle vw_vanagon`` without --out: the folder is named after the
+    file (not its benchmark id), the solution names the vehicle and CommonRoad accepts it."""
+    import os
+
+    from commonroad.common.solution import CommonRoadSolutionReader, VehicleType
+
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).resolve().parents[1] / "src"),
+                                                         os.environ.get("PYTHONPATH", "")])}
     r = subprocess.run([sys.executable, "-m", "mpcdrive.cli", "run", str(DIR / "ZAM_Tutorial-1_1_T-1.xml"),
-                        "--out", str(out), "-q"], capture_output=True, text=True)
+                        "--vehicle", "vw_vanagon", "-q"], capture_output=True, text=True, cwd=tmp_path, env=env)
     assert r.returncode == 0, r.stderr
+    (out,) = (tmp_path / "runs").iterdir()
+    assert out.name.startswith("ZAM_Tutorial-1_1_T-1-")
     cr = json.loads((out / "metrics.json").read_text())["commonroad"]
     assert cr["goal_reached"] and cr["collision_free"] and cr["road_compliant"] and cr["ks_feasible"]
-    assert (out / "solution.xml").is_file() and (out / "trajectory.csv").is_file()
+    assert cr["vehicle_type"] == "VW_VANAGON" and cr["solution_valid"], cr["solution_check"]
+    sol = CommonRoadSolutionReader.open(str(out / "solution.xml"))
+    assert sol.planning_problem_solutions[0].vehicle_type == VehicleType.VW_VANAGON
+    assert (out / "trajectory.csv").is_file() and (out / "commonroad_scene.png").is_file()
+    html = (out / "report.html").read_text()
+    assert '"lanelets":[[' in html  # the road's lanelets drawn in the replay
+
+
+def test_vehicle_flags_are_checked(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "mpcdrive.cli", "run", str(DIR / "ZAM_Tutorial-1_1_T-1.xml"),
+                        "--vehicle", "audi", "--out", str(tmp_path / "o")], capture_output=True, text=True)
+    assert r.returncode == 2 and "--vehicle" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
 
 
 @pytest.mark.slow

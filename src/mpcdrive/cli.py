@@ -70,15 +70,34 @@ def _on_backend(spec, fast: bool):
     return spec.model_copy(update={"controller": spec.controller.model_copy(update={"backend": "fast"})})
 
 
-def _load_commonroad(file: str):
-    from .adapters.commonroad import available, load_commonroad
+def _load_commonroad(file: str, vehicle: str | None = None, plant: str | None = None):
+    from .adapters.commonroad import available, load_commonroad, with_vehicle
 
     if not available():
         raise BadInput(f"{file}: CommonRoad scenarios need the commonroad extra (pip install 'mpcdrive[commonroad]')")
+    _check_vehicle_flags(vehicle, plant)
     try:
-        return load_commonroad(file)
+        return with_vehicle(load_commonroad(file), vehicle, plant)
     except (OSError, ValueError) as e:
         raise BadInput(f"{file}: {e}") from None
+
+
+_CR_VEHICLES = ("ford_escort", "bmw_320i", "vw_vanagon")
+_CR_PLANTS = ("ks", "st", "mb")
+
+
+def _check_vehicle_flags(vehicle: str | None, plant: str | None) -> None:
+    """``--vehicle`` / ``--plant`` of a CommonRoad run: known names, and the vehicle models
+    package where they need it."""
+    if vehicle is not None and vehicle not in _CR_VEHICLES:
+        raise BadInput(f"--vehicle: unknown CommonRoad vehicle {vehicle!r} (known: {', '.join(_CR_VEHICLES)})")
+    if plant is not None and plant not in _CR_PLANTS:
+        raise BadInput(f"--plant: unknown CommonRoad plant model {plant!r} (known: {', '.join(_CR_PLANTS)})")
+    if vehicle is not None or plant is not None:
+        from .adapters.commonroad_vehicles import available
+
+        if not available():
+            raise BadInput("--vehicle/--plant need commonroad-vehicle-models (pip install 'mpcdrive[commonroad]')")
 
 
 def _run_into(spec, out_dir: Path, show_progress: bool, source: str | None = None, extra_outputs=None):
@@ -139,12 +158,19 @@ def run(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
     fast: bool = typer.Option(False, "--fast", help="run the controller on the compiled fast path "
                               "(controller.backend: fast; same commands as the OSQP reference)"),
+    plant: str | None = typer.Option(None, "--plant", help="CommonRoad files: the plant, a CommonRoad vehicle "
+                                     "model (ks, st, mb)"),
+    vehicle: str | None = typer.Option(None, "--vehicle", help="CommonRoad files: the vehicle (ford_escort, "
+                                       "bmw_320i, vw_vanagon; default ford_escort)"),
 ) -> None:
     """Run one scenario; write trajectory.csv, metrics.json, figures, the resolved scenario and
     report.html (an interactive replay)."""
     extra = None
-    if scenario.lower().endswith((".xml", ".xml.gz")):
-        imported = _load_commonroad(scenario)
+    is_cr = scenario.lower().endswith((".xml", ".xml.gz"))
+    if not is_cr and (plant is not None or vehicle is not None):
+        raise BadInput("--plant/--vehicle are for CommonRoad files (.xml, .xml.gz)")
+    if is_cr:
+        imported = _load_commonroad(scenario, vehicle, plant)
         spec, extra = imported.spec, imported.write_outputs
     else:
         spec = _load(scenario)
@@ -525,6 +551,9 @@ def _file_stem(file: str) -> str:
 def commonroad_cmd(
     files: list[str] = typer.Argument(..., help="CommonRoad files (.xml, .xml.gz) or folders holding them"),
     out: Path | None = typer.Option(None, "--out", help="output directory (default runs/commonroad-<timestamp>)"),
+    plant: str | None = typer.Option(None, "--plant", help="the plant, a CommonRoad vehicle model (ks, st, mb)"),
+    vehicle: str | None = typer.Option(None, "--vehicle", help="ford_escort, bmw_320i or vw_vanagon (default "
+                                       "ford_escort)"),
     workers: int | None = typer.Option(None, "--workers", min=1, help="local processes (default: all cores)"),
     backend: str = typer.Option("local", "--backend", help="local (process pool) or ray"),
 ) -> None:
@@ -544,10 +573,18 @@ def commonroad_cmd(
             raise BadInput("--backend ray: Ray is not installed (pip install 'mpcdrive[ray]')")
         if workers is not None:
             raise BadInput("--workers is only for --backend local (Ray uses the cluster's CPUs)")
+    _check_vehicle_flags(vehicle, plant)
     try:
         paths = collect_files(files)
     except ValueError as e:
         raise BadInput(str(e)) from None
+    configure = None
+    if vehicle is not None or plant is not None:
+        from functools import partial
+
+        from .adapters.commonroad import with_vehicle
+
+        configure = partial(with_vehicle, vehicle=vehicle, plant=plant)
     out_dir = out or _default_out("commonroad")
     t0 = time.perf_counter()
 
@@ -555,7 +592,7 @@ def commonroad_cmd(
         typer.echo(f"[{k}/{n}] {row['file']} {verdict(row)}", err=True)
 
     with _output_dir(out_dir) as tmp:
-        rows = run_batch(paths, tmp, workers=workers, backend=backend, progress=progress)
+        rows = run_batch(paths, tmp, workers=workers, backend=backend, configure=configure, progress=progress)
     passed = sum(1 for r in rows.values() if r["passed"])
     errors = sum(1 for r in rows.values() if r["error"])
     typer.echo(f"{passed}/{len(rows)} files passed, {errors} with errors, {time.perf_counter() - t0:.1f} s; "

@@ -26,6 +26,7 @@ def run_into(spec, out_dir: Path, progress=None, source: str | None = None, extr
     from .scenarios import build_experiment, dump_scenario, run_experiment
     from .sim import compute_metrics
 
+    out_dir = Path(out_dir).resolve()  # figure paths relative to the working directory would not embed
     try:
         exp = build_experiment(spec)
     except ValueError as e:

@@ -310,3 +310,20 @@ def solution_accepted(imp: CommonRoadImport, solution_file: Path) -> tuple[bool,
     except Exception as e:  # the checker raises SolutionCheckerException (and others) with its reason
         return False, " ".join(f"{type(e).__name__}: {e}".split())[:300]
     return bool(ok), "accepted" if ok else "rejected"
+
+
+def with_vehicle(imp: CommonRoadImport, vehicle: str | None = None, plant: str | None = None) -> CommonRoadImport:
+    """``imp`` driven with the CommonRoad ``vehicle`` (``ford_escort``, ``bmw_320i``,
+    ``vw_vanagon``: the controller's parameters and limits, the solution's vehicle type and the
+    checks') and, with ``plant`` (``ks``, ``st``, ``mb``), that CommonRoad model as the plant
+    (:func:`~.commonroad_vehicles.apply_vehicle`); unchanged when both are None. ValueError for an
+    unknown name."""
+    from dataclasses import replace
+
+    if vehicle is None and plant is None:
+        return imp
+    from .commonroad_vehicles import apply_vehicle, solution_vehicle_type
+
+    vehicle = vehicle or "ford_escort"
+    spec = apply_vehicle(imp.spec, vehicle, plant)
+    return replace(imp, spec=spec, vehicle_type=solution_vehicle_type(vehicle).name)
