@@ -47,8 +47,9 @@ def write_scene_figure(imp, result, out_dir: Path, last_step: int | None = None)
     lo, hi = xy.min(axis=0) - pad, xy.max(axis=0) + pad
     span = hi - lo
     wide = span[0] >= span[1]
-    fig, axes = plt.subplots(len(steps), 1, figsize=(10, 3.2 * len(steps))) if wide else \
-        plt.subplots(1, len(steps), figsize=(4.5 * len(steps), 8))
+    aspect = float(span[1] / span[0])  # height / width of one panel
+    fig, axes = plt.subplots(len(steps), 1, figsize=(10, len(steps) * min(max(10 * aspect, 2.0), 6.0) + 0.8)) \
+        if wide else plt.subplots(1, len(steps), figsize=(len(steps) * min(max(5 / aspect, 2.5), 5.0), 5.8))
     axes = np.atleast_1d(axes)
     dt = imp.spec.dt_s
     for ax, k in zip(axes, steps):
@@ -56,6 +57,12 @@ def write_scene_figure(imp, result, out_dir: Path, last_step: int | None = None)
         params = MPDrawParams()
         params.time_begin = ts
         params.time_end = ts
+        # commonroad-io 2024.3's traffic-sign / light artists cannot be measured with this
+        # matplotlib (their bounding box raises), so none are drawn and the layout is set by hand
+        params.traffic_sign.draw_traffic_signs = False
+        params.lanelet_network.traffic_sign.draw_traffic_signs = False
+        params.traffic_light.draw_traffic_lights = False
+        params.lanelet_network.traffic_light.draw_traffic_lights = False
         rnd = MPRenderer(draw_params=params, ax=ax, plot_limits=[lo[0], hi[0], lo[1], hi[1]])
         imp.scenario.draw(rnd)
         imp.planning_problem.draw(rnd)
@@ -68,7 +75,7 @@ def write_scene_figure(imp, result, out_dir: Path, last_step: int | None = None)
     axes[0].legend(loc="upper right", fontsize=8)
     fig.suptitle(f"{imp.scenario.scenario_id}: lanelets, obstacles and goal as CommonRoad draws them",
                  fontsize=10)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.05, top=0.92, hspace=0.3, wspace=0.2)
     path = Path(out_dir) / FIGURE
     fig.savefig(path, dpi=110)
     plt.close(fig)
