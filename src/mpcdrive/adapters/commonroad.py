@@ -1,22 +1,25 @@
 """CommonRoad scenarios: import a scenario file as a :class:`ScenarioSpec`, export the driven
 trajectory as a CommonRoad solution, and check it with the CommonRoad drivability checker.
 
-Optional extra ``commonroad`` (commonroad-io, commonroad-drivability-checker); imported lazily.
+Optional extra ``commonroad`` (commonroad-io, commonroad-drivability-checker, triangle for the
+solution checker, commonroad-vehicle-models); imported lazily.
 
 Import:
 
-* **Route.** The lanelet holding the initial position (closest heading), then a breadth-first
-  search over successor and same-direction adjacent lanelets to a goal lanelet (the goal's
-  lanelets, else those holding the goal shape's centre). A time-only goal follows the straightest
-  successors for the distance the car covers by the goal time. The route centreline is the
-  lanelets' centre polylines joined, extended 30 m past its end straight ahead.
+* **Values.** Interval-valued state fields read as the interval's middle, uncertain positions
+  (shapes) as their centre (:mod:`.commonroad_route`).
+* **Route, path, speed.** :func:`~.commonroad_goal.plan_drive`: the route to the goal over the
+  lanelet network (or along the lane for a goal without a position), its smoothed centre line up
+  to the route's end, and a curvature-limited speed profile braking to 0 there whose top speed
+  puts the car in the goal region inside the goal's time window.
 * **Road.** The lane bound is the narrowest route lanelet width (the controller keeps the body
   inside it).
 * **Obstacles.** Static and dynamic obstacles with rectangle / circle / polygon shapes; a dynamic
   obstacle's recorded trajectory is its known prediction (:class:`TrajectoryMotion`).
 * **Vehicle.** ``kinematic4`` (speed state) with the CommonRoad Ford Escort preset's wheelbase,
-  length and width, steering and steering-rate limits; ``dt`` = the scenario's time step;
-  reference speed = the goal velocity range's middle, else the initial speed; ``hard`` avoidance.
+  length and width, steering and steering-rate limits (:func:`with_vehicle` for another vehicle
+  or a CommonRoad plant); ``dt`` = the scenario's time step; ``hard`` avoidance; fallback ladder
+  ``[shifted_plan, brake]``.
 
 The car's reference point (the state's x, y) is its centre of gravity, as in CommonRoad's KS
 states (its checker moves them to the rear axle itself).
@@ -186,6 +189,10 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
             "speed_limits_mps": (0.0, v_max),
             "speed_profile": plan.speed_profile_spec(),
             "horizon_step_m": 0.5,
+            # no relax rung: it drops the speed bound and the rate limits and makes leaving the
+            # lane cheap, which in dense recorded traffic gave commands KS rejects and road departures
+            "fallback": ["shifted_plan", "brake"],
+            "brake_decel_mps2": plan.accel_mps2,
         },
     })
     return CommonRoadImport(file, scenario, pp, spec, tuple(plan.route), plan.centerline, plan, pps)

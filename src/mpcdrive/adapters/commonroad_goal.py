@@ -116,14 +116,15 @@ def plan_drive(net, pp, p0: np.ndarray, yaw0: float, v0: float, dt_s: float) -> 
     route = cr.find_route(net, starts, goals)
     if route is None:
         raise ValueError(f"no route from lanelet(s) {starts} to the goal lanelets {sorted(goals)}")
-    line = cr.route_centerline(net, route, p0)
+    goal_xy = cr.point(shapes[0].center) if shapes else None
+    line = cr.route_centerline(net, route, p0, goal_xy=goal_xy)
     # the route's stretch in the goal region (the centre line's point nearest a small region it misses)
     arc = (cr.arc_inside(line, shapes) or cr.nearest_arc(line, shapes)) if shapes else None
     if arc is None:  # a goal of lanelets only, or a region the centre line misses: stop at the route's end
         return _finish(route, line, "stop at route end", v_want, pb,
                        note="stops at the end of the goal lanelet")
     ahead = cr.lane_forward(net, route, arc[1] + brake_m)
-    ctx = _GoalDrive(net, route, ahead, line, shapes, arc, p0, v_want, (v_lo, v_hi), v_goal, pb)
+    ctx = _GoalDrive(net, route, ahead, line, shapes, arc, p0, v_want, (v_lo, v_hi), v_goal, pb, goal_xy)
     tries = [f(ctx) for f in (_through, _stop)]
     ok = [t for t in tries if t is not None and not t.note.startswith("no cruise")]
     return ok[0] if ok else tries[0]
@@ -144,6 +145,7 @@ class _GoalDrive:
     v_range: tuple
     v_goal: tuple | None
     pb: object
+    goal_xy: np.ndarray | None
 
 
 def _stop(g: _GoalDrive):
@@ -167,7 +169,7 @@ def _through(g: _GoalDrive):
     time window (a region reaching the route's end holds the stopped car from then on)."""
     ahead, v_want, v_range, pb = g.ahead, g.v_want, g.v_range, g.pb
     window = pb.window
-    line = cr.route_centerline(g.net, ahead, g.p0)
+    line = cr.route_centerline(g.net, ahead, g.p0, goal_xy=g.goal_xy)
     arc = cr.arc_inside(line, g.shapes) or cr.nearest_arc(line, g.shapes)
     s_end = float(np.sum(np.hypot(*np.diff(line, axis=0).T)))
     best = None

@@ -16,7 +16,8 @@
   successor, else the successor whose neighbours continue the lanelet's neighbours; it stops at a
   dead end or where the network leaves the choice open (no invented turns).
 * **Centreline.** The lanelets' centre polylines joined (a lane change blends from one centre
-  line to the other over :data:`LANE_CHANGE_M` as soon as the car is on the lanelet it leaves), resampled
+  line to the other over the last :data:`LANE_CHANGE_M` of the lanelet it leaves, or before the
+  goal when that lies beside it), resampled
   every metre, smoothed with a Gaussian of :data:`SMOOTH_SIGMA_M` along the arc length (lanelet
   vertices jitter by centimetres, which would be curvature spikes of the spline through them) and
   cut at the route's end: no extension past it.
@@ -253,11 +254,13 @@ def smooth(line: np.ndarray, sigma_m: float = SMOOTH_SIGMA_M, ds_m: float = RESA
     return out
 
 
-def route_polyline(net, route: list[int], start_xy: np.ndarray) -> np.ndarray:
+def route_polyline(net, route: list[int], start_xy: np.ndarray, goal_xy: np.ndarray | None = None) -> np.ndarray:
     """The route's centre line (M, 2) [m] from one metre behind ``start_xy``, unsmoothed:
-    successors joined end to start; a lane change blends from the lanelet it leaves to the
-    neighbour over :data:`LANE_CHANGE_M` from where the car enters that lanelet (or from the
-    start), then goes on along the neighbour from the point abreast."""
+    successors joined end to start; a lane change stays on the lanelet it leaves as long as it
+    can and blends to the neighbour over the last :data:`LANE_CHANGE_M` of it -- done
+    :data:`LANE_CHANGE_M` / 2 before the point abreast of ``goal_xy`` when the goal lies ahead on
+    that stretch, and begun no earlier than the start -- then goes on along the neighbour from
+    the point abreast."""
     pieces: list[np.ndarray] = []
     for k, lid in enumerate(route):
         cv = _resample(np.asarray(net.find_lanelet_by_id(lid).center_vertices, float), RESAMPLE_M)
@@ -267,9 +270,15 @@ def route_polyline(net, route: list[int], start_xy: np.ndarray) -> np.ndarray:
         elif lid not in net.find_lanelet_by_id(route[k - 1]).successor:
             prev = pieces.pop()
             s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(prev, axis=0).T))]
-            length = min(LANE_CHANGE_M, s[-1])
-            n = int(np.searchsorted(s, length, side="right"))
-            w = 0.5 - 0.5 * np.cos(math.pi * np.clip(s[:n] / max(length, 1e-9), 0.0, 1.0))
+            done = s[-1]
+            if goal_xy is not None:
+                g = float(s[int(np.argmin(np.hypot(*(prev - goal_xy).T)))])
+                if g < s[-1] - 1.0:  # the goal is abreast of this lanelet: be across before it
+                    done = min(done, g - 0.5 * LANE_CHANGE_M)
+            done = max(done, min(LANE_CHANGE_M, s[-1]))
+            begin = max(done - LANE_CHANGE_M, 0.0)
+            n = int(np.searchsorted(s, done, side="right"))
+            w = 0.5 - 0.5 * np.cos(math.pi * np.clip((s[:n] - begin) / max(done - begin, 1e-9), 0.0, 1.0))
             other = np.array([_project_onto(cv, p) for p in prev[:n]])
             pieces.append((1 - w)[:, None] * prev[:n] + w[:, None] * other)
             j = int(np.argmin(np.hypot(*(cv - pieces[-1][-1]).T)))
@@ -280,10 +289,12 @@ def route_polyline(net, route: list[int], start_xy: np.ndarray) -> np.ndarray:
     return np.vstack(pieces)
 
 
-def route_centerline(net, route: list[int], start_xy: np.ndarray, length_m: float | None = None) -> np.ndarray:
+def route_centerline(net, route: list[int], start_xy: np.ndarray, length_m: float | None = None,
+                     goal_xy: np.ndarray | None = None) -> np.ndarray:
     """Smoothed centre polyline (M, 2) [m] of a route from one metre behind the start to the
-    route's end, or ``length_m`` past the start when shorter (module docstring)."""
-    line = smooth(route_polyline(net, route, start_xy))
+    route's end, or ``length_m`` past the start when shorter; lane changes done before
+    ``goal_xy`` (module docstring)."""
+    line = smooth(route_polyline(net, route, start_xy, goal_xy))
     if length_m is not None:
         s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(line, axis=0).T))]
         line = line[: max(2, int(np.searchsorted(s, length_m + RESAMPLE_M)) + 1)]
