@@ -10,7 +10,6 @@ process pool or to Ray (:func:`mpcdrive.sweep.runner.run_parallel`).
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -64,7 +63,8 @@ class BatchTask:
 def _empty_row() -> dict:
     return {"passed": False, "collision_free": None, "road_compliant": None, "ks_feasible": None,
             "goal_reached": None, "min_obstacle_clearance_m": None, "solver_failures": None,
-            "solve_time_us": {"p50": None, "p99": None}, "wall_s": 0.0, "error": None}
+            "solve_time_us": {"p50": None, "p99": None}, "wall_s": 0.0, "error": None,
+            "min_obstacle_clearance_whole_run_m": None, "solution_valid": None, "plan": None}
 
 
 def drive_file(task: BatchTask) -> dict:
@@ -80,15 +80,15 @@ def drive_file(task: BatchTask) -> dict:
         imp = load_commonroad(task.file)
         if task.configure is not None:
             imp = task.configure(imp)
-        _, m, _, _ = run_into(imp.spec, Path(task.out_dir), source=task.file, extra_outputs=imp.write_outputs)
+        res, m, _, _ = run_into(imp.spec, Path(task.out_dir), source=task.file, extra_outputs=imp.write_outputs)
         cr = m["commonroad"]
         st = m.get("solve_time_us") or {}
-        clearance = m.get("min_obstacle_clearance_m")
         row.update(passed=bool(cr["passed"]), collision_free=cr["collision_free"],
                    road_compliant=cr["road_compliant"], ks_feasible=cr["ks_feasible"],
                    goal_reached=cr["goal_reached"],
-                   min_obstacle_clearance_m=None if clearance is None or not math.isfinite(clearance)
-                   else float(clearance),
+                   # over the drive the checker judged (up to the goal), and over the whole run
+                   min_obstacle_clearance_m=_min_clearance(res, cr["states_checked"]),
+                   min_obstacle_clearance_whole_run_m=_min_clearance(res, None),
                    solver_failures=int(m["solver_failures"]),
                    solve_time_us={"p50": st.get("p50"), "p99": st.get("p99")},
                    solution_valid=cr.get("solution_valid"), plan=cr.get("plan"))
@@ -99,6 +99,19 @@ def drive_file(task: BatchTask) -> dict:
         shutil.rmtree(task.out_dir, ignore_errors=True)  # no half-written run folder
     row["wall_s"] = time.perf_counter() - t0
     return row
+
+
+def _min_clearance(result, n: int | None) -> float | None:
+    """Smallest footprint-to-obstacle distance [m] over the first ``n`` states (all: None);
+    None without obstacles."""
+    import numpy as np
+
+    c = result.clearance_m
+    if c is None:
+        return None
+    c = np.asarray(c, float)[:n]
+    c = c[np.isfinite(c)]
+    return float(c.min()) if c.size else None
 
 
 def verdict(row: dict) -> str:
@@ -123,6 +136,13 @@ def _cell(v, fmt="{:.2f}") -> str:
     return str(v)
 
 
+def _clearance_cell(r: dict) -> str:
+    c, whole = r["min_obstacle_clearance_m"], r.get("min_obstacle_clearance_whole_run_m")
+    if whole is not None and (c is None or whole < c):
+        return f"{_cell(c)} ({_cell(whole)})"
+    return _cell(c)
+
+
 def summary_markdown(rows: dict, header: str = "") -> str:
     """``summary.md``: one table row per file, then the errors in words."""
     n = len(rows)
@@ -130,6 +150,7 @@ def summary_markdown(rows: dict, header: str = "") -> str:
     lines = ["# CommonRoad batch", "", header, "",
              f"{passed} of {n} files passed (collision-free, on the road, KS-feasible and at the goal, as "
              "CommonRoad's drivability checker judges the drive up to the goal).", "",
+             "Min clearance: footprint to obstacle over the checked drive (whole run in brackets when smaller).", "",
              "| file | verdict | collision-free | road-compliant | KS-feasible | goal reached | min clearance [m] | "
              "solver failures | solve p50 / p99 [us] | wall [s] |",
              "|" + "---|" * 10]
@@ -137,7 +158,7 @@ def summary_markdown(rows: dict, header: str = "") -> str:
         st = r["solve_time_us"]
         lines.append(f"| `{name}` | {'error' if r.get('error') else verdict(r)} | {_cell(r['collision_free'])} | "
                      f"{_cell(r['road_compliant'])} | {_cell(r['ks_feasible'])} | {_cell(r['goal_reached'])} | "
-                     f"{_cell(r['min_obstacle_clearance_m'])} | {_cell(r['solver_failures'])} | "
+                     f"{_clearance_cell(r)} | {_cell(r['solver_failures'])} | "
                      f"{_cell(st['p50'], '{:.0f}')} / {_cell(st['p99'], '{:.0f}')} | {_cell(r['wall_s'], '{:.1f}')} |")
     errors = [(k, r["error"]) for k, r in rows.items() if r.get("error")]
     if errors:
