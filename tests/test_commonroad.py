@@ -329,6 +329,12 @@ def test_time_only_goal_follows_the_lane_not_the_straightest_branch():
     from mpcdrive.adapters.commonroad_route import lane_forward
 
     net = _two_lane_network_with_exit()
+
+    def turn(lid):  # heading change from lanelet 1's end over the successor [rad]
+        cv = net.find_lanelet_by_id(lid).center_vertices
+        return abs(math.atan2(*(cv[-1] - cv[-2])[::-1]))
+
+    assert turn(23) < turn(21)  # the trap: the exit is the straightest successor
     assert lane_forward(net, [1], 1000.0) == [1, 21]
     assert lane_forward(net, [2], 1000.0) == [2, 22]  # one successor: forced
 
