@@ -4,17 +4,16 @@
   position follows the lane (:func:`~.commonroad_route.lane_forward`) far enough for the goal
   time at the cruise speed plus the braking distance.
 * **Where to stop.** The reference speed is a curvature / friction limited
-  :class:`~mpcdrive.paths.speed_profile.SpeedProfile` that ends at 0 where the path ends, and the
-  path ends either *inside the goal region* (the middle of the route's stretch in it: the car stops
-  there) or, when that cannot satisfy the goal (its speed range excludes a stop, or the goal time
-  ends before the car could arrive there braking), at the end of the route continued along the
-  lane past the goal region (the car drives through the region and stops at the route's end).
+  :class:`~mpcdrive.paths.speed_profile.SpeedProfile` that ends at 0 where the path ends. With a
+  goal region the path goes on along the lane past it and the car drives through it (a region
+  reaching the route's end holds the car when it stops there); when no cruise speed has the car
+  in the region inside the time window that way and the goal's speed range admits a stop, the path
+  ends in the middle of the route's stretch in the region instead (the car stops inside it, arriving
+  by the window's end).
 * **Speed.** The cruise speed (the profile's top speed) is the goal speed range's middle, else
-  the initial speed (:data:`~.commonroad.DEFAULT_SPEED` for a car starting at rest); where the
-  goal has a time window the cruise speed is the one closest to that (inside the goal's speed
-  range) whose profile is in the goal region within the window: arriving by its end when
-  stopping there, passing the region's middle inside the window when driving through.
-  When no speed does, the note says so and the run shows what happens.
+  the initial speed (:data:`DEFAULT_SPEED_MPS` for a car starting at rest); with a time window it
+  is the speed closest to that (inside the goal's speed range) whose profile is in the goal region
+  inside the window. When no speed does, the plan's note says so and the run shows what happens.
 """
 
 from __future__ import annotations
@@ -33,6 +32,7 @@ RUN_ON_S = 3.0  # the run ends this long after the reference stops (unless the g
 V_SWITCH_MPS = 7.319  # CommonRoad Ford Escort: speed above which the acceleration limit falls as 1/v
 A_MAX_MPS2 = 11.5  # CommonRoad Ford Escort: largest acceleration
 _PLAN_DS_M = 0.25  # grid of the speed profiles compared while planning
+_MISSED = "no cruise speed"  # how the note of a plan that misses the goal window begins
 
 
 def accel_limit(v_max_mps: float) -> float:
@@ -125,9 +125,13 @@ def plan_drive(net, pp, p0: np.ndarray, yaw0: float, v0: float, dt_s: float) -> 
                        note="stops at the end of the goal lanelet")
     ahead = cr.lane_forward(net, route, arc[1] + brake_m)
     ctx = _GoalDrive(net, route, ahead, line, shapes, arc, p0, v_want, (v_lo, v_hi), v_goal, pb, goal_xy)
-    tries = [f(ctx) for f in (_through, _stop)]
-    ok = [t for t in tries if t is not None and not t.note.startswith("no cruise")]
-    return ok[0] if ok else tries[0]
+    first = None
+    for way in (_through, _stop):
+        plan = way(ctx)
+        if plan is not None and not plan.note.startswith(_MISSED):
+            return plan
+        first = first or plan
+    return first
 
 
 @dataclass(frozen=True)
@@ -192,7 +196,7 @@ def _through(g: _GoalDrive):
                            note=f"drives into the goal region at {t_in:.1f} s{stay}")
     v, t_in, _ = best
     return _finish(ahead, line, "through goal", v, pb, arc=arc, arrival=t_in,
-                   note=f"no cruise speed in [{v_range[0]:.1f}, {v_range[1]:.1f}] m/s has the car in the goal region "
+                   note=f"{_MISSED} in [{v_range[0]:.1f}, {v_range[1]:.1f}] m/s has the car in the goal region "
                         f"in its time window [{window[0]:.1f}, {window[1]:.1f}] s: drives at {v:.1f} m/s "
                         f"(in the region at {t_in:.1f} s)")
 
