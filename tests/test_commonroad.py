@@ -458,3 +458,21 @@ def test_batch_writes_a_row_per_file_and_survives_a_broken_one(tmp_path):
     assert len(progress) == 2 and all(ln.startswith(("[1/2] ", "[2/2] ")) for ln in progress)
     assert "broken.xml error" in r.stderr
     assert "| `broken.xml` | error |" in (out / "summary.md").read_text()
+
+
+def test_ramp_start_already_touches_the_solution_checkers_road_boundary():
+    """ZAM-Ramp-1_1-T-1 starts the car at x = 0, the road's first metre: its body sticks out
+    behind the road. CommonRoad's solution checker closes the road at its ends (a triangulated
+    boundary), so it rejects any solution from this start; the oriented-rectangle boundary of
+    ``check_drive`` does not close the ends. The batch therefore reports the file as failed with
+    the checker's reason, not as passed."""
+    from commonroad.geometry.shape import Rectangle
+    from commonroad_dc.collision.collision_detection.pycrcc_collision_dispatch import create_collision_object
+    from commonroad_dc.feasibility.solution_checker import _construct_boundary_checker
+
+    imp = imported("ZAM-Ramp-1_1-T-1.xml")
+    init = imp.planning_problem.initial_state
+    v = imp.spec.vehicle
+    body = create_collision_object(Rectangle(v.length_m, v.width_m, center=np.asarray(init.position, float),
+                                             orientation=float(init.orientation)))
+    assert _construct_boundary_checker(imp.scenario).collide(body)

@@ -64,7 +64,8 @@ def _empty_row() -> dict:
     return {"passed": False, "collision_free": None, "road_compliant": None, "ks_feasible": None,
             "goal_reached": None, "min_obstacle_clearance_m": None, "solver_failures": None,
             "solve_time_us": {"p50": None, "p99": None}, "wall_s": 0.0, "error": None,
-            "min_obstacle_clearance_whole_run_m": None, "solution_valid": None, "plan": None}
+            "min_obstacle_clearance_whole_run_m": None, "solution_valid": None, "solution_check": None,
+            "plan": None}
 
 
 def drive_file(task: BatchTask) -> dict:
@@ -91,7 +92,8 @@ def drive_file(task: BatchTask) -> dict:
                    min_obstacle_clearance_whole_run_m=_min_clearance(res, None),
                    solver_failures=int(m["solver_failures"]),
                    solve_time_us={"p50": st.get("p50"), "p99": st.get("p99")},
-                   solution_valid=cr.get("solution_valid"), plan=cr.get("plan"))
+                   solution_valid=cr.get("solution_valid"), solution_check=cr.get("solution_check"),
+                   plan=cr.get("plan"))
     except Exception as e:  # a file's failure is its row; the batch goes on
         import shutil
 
@@ -123,6 +125,8 @@ def verdict(row: dict) -> str:
     failed = [name for key, name in (("collision_free", "collision"), ("road_compliant", "off road"),
                                      ("ks_feasible", "KS-infeasible"), ("goal_reached", "goal missed"))
               if row.get(key) is False]
+    if not failed and row.get("solution_valid") is False:
+        failed = [f"solution rejected by valid_solution ({row.get('solution_check')})"]
     return "failed: " + ", ".join(failed or ["unknown"])
 
 
@@ -149,17 +153,22 @@ def summary_markdown(rows: dict, header: str = "") -> str:
     passed = sum(1 for r in rows.values() if r["passed"])
     lines = ["# CommonRoad batch", "", header, "",
              f"{passed} of {n} files passed (collision-free, on the road, KS-feasible and at the goal, as "
-             "CommonRoad's drivability checker judges the drive up to the goal).", "",
+             "CommonRoad's drivability checker judges the drive up to the goal, and the solution accepted by "
+             "CommonRoad's solution checker).", "",
              "Min clearance: footprint to obstacle over the checked drive (whole run in brackets when smaller).", "",
              "| file | verdict | collision-free | road-compliant | KS-feasible | goal reached | min clearance [m] | "
              "solver failures | solve p50 / p99 [us] | wall [s] |",
              "|" + "---|" * 10]
     for name, r in rows.items():
         st = r["solve_time_us"]
-        lines.append(f"| `{name}` | {'error' if r.get('error') else verdict(r)} | {_cell(r['collision_free'])} | "
+        lines.append(f"| `{name}` | {'error' if r.get('error') else verdict(r).split(' (')[0]} | {_cell(r['collision_free'])} | "
                      f"{_cell(r['road_compliant'])} | {_cell(r['ks_feasible'])} | {_cell(r['goal_reached'])} | "
                      f"{_clearance_cell(r)} | {_cell(r['solver_failures'])} | "
                      f"{_cell(st['p50'], '{:.0f}')} / {_cell(st['p99'], '{:.0f}')} | {_cell(r['wall_s'], '{:.1f}')} |")
+    rejected = [(k, r.get("solution_check")) for k, r in rows.items()
+                if not r.get("error") and r.get("solution_valid") is False and verdict(r).startswith("failed: solution")]
+    if rejected:
+        lines += ["", "## Solutions CommonRoad's solution checker rejects", ""] + [f"- `{k}`: {e}" for k, e in rejected]
     errors = [(k, r["error"]) for k, r in rows.items() if r.get("error")]
     if errors:
         lines += ["", "## Errors", ""] + [f"- `{k}`: {e}" for k, e in errors]
