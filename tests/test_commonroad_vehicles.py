@@ -3,6 +3,8 @@ vehicles for the controller."""
 
 import math
 
+import numpy as np
+
 import pytest
 
 from mpcdrive.adapters.commonroad_vehicles import available
@@ -88,3 +90,218 @@ def test_bad_commonroad_plant_is_one_clear_line(change, field, message):
         validate_scenario_data({**ROAD, **change}, "f.yaml")
     line = str(e.value)
     assert "\n" not in line and message in line and field in line, line
+
+
+# ---------------------------------------------------------------- the plant
+
+from mpcdrive.adapters.commonroad_vehicles import CommonRoadPlant  # noqa: E402
+
+
+def _brake_and_hold(plant: CommonRoadPlant, accel_mps2: float, hold_s: float = 5.0, dt_s: float = 0.1):
+    """Brake from 10 m/s with full steering commanded, then hold the stop (accel 0, wheels at full
+    lock) for ``hold_s``; returns (observed states, plant states, time of the stop [s])."""
+    xp = plant.initial_state([0.0, 0.0, 0.0, 10.0])
+    obs, states, t_stop, t = [plant.observe(xp)], [xp], None, 0.0
+    while t_stop is None or t < t_stop + hold_s - 1e-9:
+        xp = plant.step(xp, [plant.p.steering.max, accel_mps2 if t_stop is None else 0.0], dt_s)
+        t += dt_s
+        assert np.all(np.isfinite(xp)), f"plant state not finite at t = {t:.1f} s"
+        obs.append(plant.observe(xp))
+        states.append(xp)
+        if t_stop is None and obs[-1][3] <= 0.0:
+            t_stop = t
+        assert t < 30.0, "the car never stopped"
+    return np.array(obs), np.array(states), t_stop
+
+
+@pytest.mark.parametrize("kind, max_step_s", [("st", 0.01), ("st", 0.05), ("mb", None)])
+@pytest.mark.parametrize("accel", [-3.0, -11.5])
+def test_plant_brakes_to_a_stop_and_holds_it_with_the_wheels_turned(kind, max_step_s, accel):
+    # ST: at low speed its yaw-rate / slip block is stiff (spectral radius ~ 216 / v 1/s); plain
+    # RK4 at 2 substeps per 0.1 s diverges here (see the next test); the plant shortens its steps.
+    kw = {} if max_step_s is None else {"max_step_s": max_step_s}
+    plant = CommonRoadPlant(kind, "bmw_320i", **kw)
+    obs, states, t_stop = _brake_and_hold(plant, accel)
+    if kind == "st":  # v' = a exactly: stopped within the step in which 10 m/s / |a| ends
+        assert t_stop <= 10.0 / abs(accel) + 0.1 + 1e-9
+    # (MB brakes through its tyres: at -11.5 m/s^2, beyond the friction mu g = 10.3 m/s^2, the
+    # wheels lock and the car slides to a stop in 1.3 s; the helper asserts a stop within 30 s)
+    hold = obs[-51:]
+    # never reverses (the brakes stop the car), up to rounding of v - a h
+    assert obs[:, 3].min() >= -1e-12
+    assert np.abs(hold[:, 3]).max() <= 1e-12
+    # the stopped car stays where it is: pose unchanged over the 5 s hold
+    assert np.abs(hold[:, :3] - hold[0, :3]).max() <= 1e-9
+    assert states[-1][2] == pytest.approx(plant.p.steering.max)  # wheels still at full lock
+    assert np.abs(states[:, 5]).max() < 3.0  # yaw rate [rad/s] stays physical
+
+
+def test_plain_rk4_at_two_substeps_diverges_on_st_when_braking():
+    """Why the plant bounds its steps: the package's ST right-hand side with RK4 at 0.05 s steps
+    blows up while the car slows down through a few m/s with the wheels turned."""
+    plant = CommonRoadPlant("st", "bmw_320i")
+    x = plant.initial_state([0.0, 0.0, 0.0, 10.0])
+    x[2] = 0.5  # wheels turned
+    h, diverged = 0.05, False
+    for _ in range(80):
+        u = (0.0, -3.0 if x[3] > 0.3 else 0.0)
+        k1 = plant.f(x, u)
+        k2 = plant.f(x + h / 2 * k1, u)
+        k3 = plant.f(x + h / 2 * k2, u)
+        k4 = plant.f(x + h * k3, u)
+        x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        if not np.all(np.isfinite(x)) or abs(x[5]) > 100.0:
+            diverged = True
+            break
+    assert diverged
+    # the bound the plant uses at that speed: h rho > 2 at 0.3 m/s for h = 0.05 s
+    assert plant.stiff_radius(np.r_[0, 0, 0.5, 0.3, 0, 0, 0], 0.0) * h > 2.0
+
+
+def _circle_curvature(obs: np.ndarray) -> float:
+    """Curvature [1/m] of the circle through three observed CoG positions (first, middle, last)."""
+    a, b, c = obs[0, :2], obs[len(obs) // 2, :2], obs[-1, :2]
+    area2 = abs((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+    return 2.0 * area2 / (np.linalg.norm(b - a) * np.linalg.norm(c - b) * np.linalg.norm(c - a))
+
+
+def _steady_circle(plant: CommonRoadPlant, v_mps: float, steer_rad: float, settle_s: float, arc_s: float):
+    xp = plant.initial_state([0.0, 0.0, 0.0, v_mps])
+    dt = 0.1
+    for _ in range(int(round(settle_s / dt))):
+        xp = plant.step(xp, [steer_rad, 0.0], dt)
+    obs = [plant.observe(xp)]
+    for _ in range(int(round(arc_s / dt))):
+        xp = plant.step(xp, [steer_rad, 0.0], dt)
+        obs.append(plant.observe(xp))
+    return np.array(obs), xp
+
+
+@pytest.mark.parametrize("vehicle", ["ford_escort", "bmw_320i"])
+def test_ks_plant_drives_the_textbook_circle(vehicle):
+    """KS at constant speed and steering: the rear axle on R = L / tan(delta), the centre of
+    gravity on sqrt(R^2 + lr^2), yaw rate v_r tan(delta) / L."""
+    plant = CommonRoadPlant("ks", vehicle)
+    p = plant.p
+    L, lr, delta, v = p.a + p.b, p.b, 0.3, 5.0
+    obs, xp = _steady_circle(plant, v, delta, settle_s=2.0, arc_s=4.0)
+    r_rear = L / math.tan(delta)
+    # RK4 at 0.01 s on a circle of ~8 m at 5 m/s: local error ~ (v h / R)^5 R, far below 1e-9 relative
+    assert 1.0 / _circle_curvature(obs) == pytest.approx(math.hypot(r_rear, lr), rel=1e-6)
+    assert xp[2] == pytest.approx(delta)
+    yaw_rate = (obs[-1, 2] - obs[0, 2]) / 4.0
+    assert yaw_rate == pytest.approx(xp[3] * math.tan(delta) / L, rel=1e-9)
+    # the observed speed is that of the CoG: v_r / cos(beta)
+    assert obs[-1, 3] == pytest.approx(v / math.cos(math.atan(lr / L * math.tan(delta))), rel=1e-12)
+
+
+def test_st_plant_agrees_with_the_dynamic_bicycle_on_a_gentle_circle():
+    """CommonRoad ST and mpcdrive's linear-tyre dynamic bicycle (preset commonroad_bmw_320i, the
+    same tyre coefficients) on a constant-steering circle at 10 m/s, delta = 0.02 rad (lateral
+    acceleration ~0.8 m/s^2, slip angles ~0.01 rad, inside the linear range of both tyre models).
+
+    Expected curvature: the linear single-track steady state kappa = tan(delta) / (L + K_us v^2)
+    (K_us = m / L (lr / C_f - lf / C_r): here 0, both axles have C_S F_z with F_z from the static
+    load split, a neutral-steer car). Tolerance: ST is written with small-angle forms (cos(delta)
+    = 1, slip angles linear in beta), the dynamic bicycle keeps cos(delta) and its vx, vy states:
+    their curvatures differ at order delta^2 + beta^2 ~ 5e-4 relative; we allow 2e-3."""
+    from mpcdrive.models import DynamicBicycle
+    from mpcdrive.models.presets import PRESETS
+    from mpcdrive.sim import Plant
+
+    delta, v = 0.02, 10.0
+    plant = CommonRoadPlant("st", "bmw_320i")
+    obs, xp = _steady_circle(plant, v, delta, settle_s=10.0, arc_s=5.0)
+    kappa_st = _circle_curvature(obs)
+    params = PRESETS["commonroad_bmw_320i"].params
+    dyn = DynamicBicycle(params, tire="linear")
+    x = np.array([0.0, 0.0, 0.0, v, 0.0, 0.0])
+    dp = Plant(dyn, "rk4", 10)
+    for _ in range(100):
+        x = dp.step(x, np.array([delta, 0.0]), 0.1)
+    pts = [x]
+    for _ in range(50):
+        x = dp.step(x, np.array([delta, 0.0]), 0.1)
+        pts.append(x)
+    kappa_dyn = _circle_curvature(np.array(pts))
+    L = params.wheelbase_m
+    kappa_lin = math.tan(delta) / (L + params.understeer_gradient_rad_per_mps2 * v ** 2)
+    assert abs(params.understeer_gradient_rad_per_mps2) < 1e-12  # neutral steer (see docstring)
+    assert kappa_st == pytest.approx(kappa_lin, rel=2e-3)
+    assert kappa_dyn == pytest.approx(kappa_lin, rel=2e-3)
+    assert kappa_st == pytest.approx(kappa_dyn, rel=2e-3)
+    # and the yaw rate is v kappa on the ST plant (steady state)
+    assert xp[5] == pytest.approx(v * kappa_st, rel=1e-9)
+
+
+# ---------------------------------------------------------------- closed loop
+
+from mpcdrive.scenarios import build_experiment, run_experiment  # noqa: E402
+from mpcdrive.sim import compute_metrics  # noqa: E402
+
+
+@pytest.mark.parametrize("plant", ["ks", "st", "mb"])
+def test_scenario_runs_on_a_commonroad_plant_and_logs_the_centre_of_gravity(plant):
+    data = {**ROAD, "duration_s": 6.0, "plant": {"model": f"commonroad_{plant}", "vehicle": "bmw_320i"}}
+    spec = validate_scenario_data(data, "road.yaml")
+    exp = build_experiment(spec)
+    assert isinstance(exp.plant, CommonRoadPlant) and exp.plant.kind == plant
+    res = run_experiment(exp)
+    assert res.meta["termination"] == "completed" and len(res.t_s) == 60
+    assert res.state_names == ("x", "y", "yaw", "v") and res.x.shape == (60, 4)
+    # the logged state is the plant observed at its centre of gravity
+    xp_final = np.array(res.meta["plant_state_final"])
+    assert xp_final.shape == (exp.plant.nx,)
+    assert res.x_final == pytest.approx(exp.plant.observe(xp_final), abs=1e-12)
+    if plant == "ks":  # the rear axle is lr behind the logged centre of gravity
+        lr = exp.plant.p.b
+        assert res.x_final[:2] == pytest.approx(xp_final[:2] + lr * np.array([math.cos(xp_final[4]),
+                                                                              math.sin(xp_final[4])]))
+    # the controller brings the car from 0.5 m off the lane centre onto it and to 10 m/s
+    assert abs(res.e_y_m[-1]) < 0.05 and res.v_mps[-1] == pytest.approx(10.0, abs=0.1)
+    m = compute_metrics(res, exp.footprint)
+    assert m["solver_failures"] == 0
+
+
+def test_missing_extra_is_a_clear_error(monkeypatch):
+    import mpcdrive.adapters.commonroad_vehicles as crv
+
+    monkeypatch.setattr(crv, "available", lambda: False)
+    spec = validate_scenario_data({**ROAD, "plant": {"model": "commonroad_st", "vehicle": "bmw_320i"}}, "f.yaml")
+    with pytest.raises(ValueError, match=r"plant.model commonroad_st needs the commonroad extra"):
+        build_experiment(spec)
+
+
+def test_simulate_refuses_a_state_disturbance_on_an_observed_plant():
+    from mpcdrive.sim import Disturbance, simulate
+
+    exp = build_experiment(validate_scenario_data(
+        {**ROAD, "plant": {"model": "commonroad_ks", "vehicle": "bmw_320i"}}, "f.yaml"))
+    with pytest.raises(ValueError, match="state disturbance needs a Plant"):
+        simulate(exp.controller, exp.plant, exp.path, exp.x0, 0.1, 5,
+                 disturbance=Disturbance("normal", std=np.zeros(4)))
+
+
+@pytest.mark.parametrize("plant", ["st", "mb"])
+def test_commonroad_file_on_a_commonroad_plant_stops_behind_the_parked_car(plant):
+    """ZAM_Tutorial_Urban-3_2: a parked car blocks the lane 12 m ahead at 9 m/s. On CommonRoad's
+    ST / MB model of the Ford Escort the controller stops behind it and holds the stop: judged by
+    CommonRoad's drivability checker (collision-free, on the road), no reversing."""
+    from dataclasses import replace
+    from pathlib import Path
+
+    from mpcdrive.adapters import commonroad as cr
+
+    if not cr.available():
+        pytest.skip("commonroad-io / drivability checker not installed")
+    imp = cr.load_commonroad(Path(__file__).resolve().parent / "data" / "commonroad" / "ZAM_Tutorial_Urban-3_2.xml")
+    spec = apply_vehicle(imp.spec.model_copy(update={"duration_s": 8.0}), "ford_escort", plant)
+    exp = build_experiment(spec)
+    res = run_experiment(exp)
+    rep = cr.check_drive(replace(imp, spec=spec), res)
+    assert rep.collision_free and rep.road_compliant, rep.line()
+    assert rep.goal_step is None  # the goal lies past the parked car
+    assert res.v_mps.min() >= -1e-12 and abs(res.v_mps[-1]) <= 1e-6
+    stopped = res.v_mps <= 1e-6
+    assert stopped[-10:].all()  # the last second: standing
+    assert np.min(res.clearance_m) > 0.3

@@ -20,6 +20,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
+from ..models.kinematic import KinematicBicycle4, KinematicParams
+
 
 
 #: CommonRoad vehicle name -> parameter set number (``parameters_vehicle<N>``)
@@ -27,6 +31,14 @@ VEHICLES: dict[str, int] = {"ford_escort": 1, "bmw_320i": 2, "vw_vanagon": 3}
 #: plant model name (scenario files) -> CommonRoad model
 PLANT_MODELS: dict[str, str] = {"commonroad_ks": "ks", "commonroad_st": "st", "commonroad_mb": "mb"}
 _SHORT = {"ks": "commonroad_ks", "st": "commonroad_st", "mb": "commonroad_mb"}
+_G = 9.81  # [m/s^2], as in vehiclemodels
+#: RK4's stability interval on the negative real axis is |h lambda| <= 2.785; the plant keeps
+#: h rho <= this (rho: spectral radius of the stiff block), leaving room for complex eigenvalues
+_RK4_STABLE = 2.0
+#: default longest substep [s]: MB's pose after a 6 s brake to a stop at full lock is within 2 mm
+#: of a 0.25 ms integration at 1 ms (8 mm at 2 ms, 0.2 m at 5 ms, 1.4 m at 10 ms); KS / ST within
+#: 0.03 mm at 10 ms
+_DEFAULT_STEP_S = {"ks": 0.01, "st": 0.01, "mb": 1e-3}
 
 
 def available() -> bool:
@@ -130,3 +142,164 @@ def apply_vehicle(spec, vehicle: str, plant: str | None = None):
     elif spec.plant.model in PLANT_MODELS:
         data["plant"] = {**spec.plant.model_dump(exclude_unset=True), "vehicle": vehicle}
     return ScenarioSpec.model_validate(data)
+
+
+class CommonRoadPlant:
+    """CommonRoad vehicle model ``model`` (``ks``, ``st``, ``mb``) of ``vehicle`` as the plant of the
+    closed loop (an :class:`mpcdrive.sim.closed_loop.ObservedPlant`).
+
+    **Inputs.** CommonRoad's inputs are the steering *velocity* and the longitudinal acceleration;
+    the controller commands a steering *angle* and an acceleration. A steering servo sits in
+    between: it turns the wheels towards the commanded angle (clipped to the steering limits) at
+    the vehicle's steering-velocity limit, and stops on it (rate-limited, no overshoot: within an
+    integration substep ``h`` the steering velocity is ``clip((delta_cmd - delta) / h, v_min,
+    v_max)``, held constant, so the angle lands exactly on the command). The acceleration command
+    goes to the model as it is; its right-hand side applies CommonRoad's limits (``|a| <= a_max``,
+    forward ``a <= a_max v_switch / v`` above ``v_switch``, the speed range). Brakes stop the car
+    and hold it, never drive it backwards: a negative command is limited to ``-v / h`` within a
+    substep (the speed reaches zero and stays there); the controllers here drive forwards only.
+
+    **States.** KS: ``[x, y, delta, v, yaw]`` at the *rear axle* (``v`` its speed); ST
+    ``[x, y, delta, v, yaw, yaw rate, slip angle]`` and MB (29 states, ``v_x`` at index 3 and
+    ``v_y`` at index 10) at the *centre of gravity*. The loop observes ``[x, y, yaw, v]`` of the
+    centre of gravity (the ``kinematic4`` layout, ``model``): KS ``x_cog = x_r + lr cos(yaw)``,
+    ``v = v_r / cos(beta)`` with ``beta = atan(lr / L tan(delta))``; ST ``v`` as it is; MB
+    ``v = hypot(v_x, v_y)``, below ``|v_x| = 0.1`` m/s ``v = v_x`` (there the model moves its pose
+    kinematically with ``v_x``; its ``v_y`` is left to the suspension equations and may drift at
+    standstill without moving the car). Initial states: the observed pose and speed with the
+    wheels straight and (ST, MB) no yaw rate or slip, through the package's ``init_ks`` /
+    ``init_st`` / ``init_mb``.
+
+    **Integration.** Classical RK4 on substeps with the inputs held (the control period split
+    into equal substeps no longer than ``max_step_s``, default 10 ms for KS and ST, 1 ms for MB),
+    shortened where the model is stiff so
+    that ``h rho <= 2`` (RK4 is stable for ``|h lambda| <= 2.785`` on the negative real axis):
+    ST's yaw-rate / slip-angle block has eigenvalues growing as ``1 / v`` (spectral radius 2160 1/s at
+    0.1 m/s for the BMW 320i), whose spectral radius ``rho`` is computed from the model's
+    coefficients at each substep; below 0.1 m/s CommonRoad's ST switches to its kinematic model
+    itself (not stiff). MB's stiff tyre, wheel-spin and suspension modes are held by its 1 ms step.
+    """
+
+    def __init__(self, model: str, vehicle: str, *, max_step_s: float | None = None):
+        if model not in _SHORT:
+            raise ValueError(f"unknown CommonRoad plant model {model!r} (known: {', '.join(_SHORT)})")
+        if max_step_s is None:
+            max_step_s = _DEFAULT_STEP_S[model]
+        if isinstance(max_step_s, bool) or not (isinstance(max_step_s, (int, float)) and math.isfinite(max_step_s)
+                                               and max_step_s > 0):
+            raise ValueError(f"max_step_s must be a positive number of seconds, got {max_step_s!r}")
+        p = vehicle_parameters(vehicle)
+        import vehiclemodels.vehicle_dynamics_ks as ks
+        import vehiclemodels.vehicle_dynamics_mb as mb
+        import vehiclemodels.vehicle_dynamics_st as st
+
+        self.kind, self.vehicle, self.p = model, vehicle, p
+        self._rhs = {"ks": ks.vehicle_dynamics_ks, "st": st.vehicle_dynamics_st, "mb": mb.vehicle_dynamics_mb}[model]
+        self.max_step_s = float(max_step_s)
+        self.model = KinematicBicycle4(KinematicParams(float(p.a), float(p.b)))
+        self.name = f"CommonRoad {model.upper()} {vehicle}"
+        self._steer = (float(p.steering.min), float(p.steering.max), float(p.steering.v_min), float(p.steering.v_max))
+
+    def __repr__(self) -> str:
+        return f"CommonRoadPlant({self.kind!r}, {self.vehicle!r})"
+
+    @property
+    def nx(self) -> int:
+        """Size of the plant's own state (KS 5, ST 7, MB 29)."""
+        return {"ks": 5, "st": 7, "mb": 29}[self.kind]
+
+    def initial_state(self, x0) -> np.ndarray:
+        """Plant state for the observed ``[x, y, yaw, v]`` (centre of gravity), wheels straight."""
+        x, y, yaw, v = (float(c) for c in np.asarray(x0, float))
+        if self.kind == "ks":
+            from vehiclemodels.init_ks import init_ks
+
+            lr = float(self.p.b)
+            return np.array(init_ks([x - lr * math.cos(yaw), y - lr * math.sin(yaw), 0.0, v, yaw]), float)
+        if self.kind == "st":
+            from vehiclemodels.init_st import init_st
+
+            return np.array(init_st([x, y, 0.0, v, yaw, 0.0, 0.0]), float)
+        from vehiclemodels.init_mb import init_mb
+
+        return np.array(init_mb([x, y, 0.0, v, yaw, 0.0, 0.0], self.p), float)
+
+    def observe(self, xp) -> np.ndarray:
+        """Observed ``[x, y, yaw, v]`` of the centre of gravity of plant state(s) ``xp`` (..., nx)."""
+        xp = np.asarray(xp, float)
+        out = np.empty(xp.shape[:-1] + (4,))
+        if self.kind == "ks":
+            lr, wb = float(self.p.b), float(self.p.a + self.p.b)
+            out[..., 0] = xp[..., 0] + lr * np.cos(xp[..., 4])
+            out[..., 1] = xp[..., 1] + lr * np.sin(xp[..., 4])
+            out[..., 2] = xp[..., 4]
+            out[..., 3] = xp[..., 3] / np.cos(np.arctan(lr / wb * np.tan(xp[..., 2])))
+        elif self.kind == "st":
+            out[..., :2] = xp[..., :2]
+            out[..., 2] = xp[..., 4]
+            out[..., 3] = xp[..., 3]
+        else:
+            out[..., :2] = xp[..., :2]
+            out[..., 2] = xp[..., 4]
+            # the speed the model moves its centre of gravity with: below |v_x| = 0.1 m/s its pose
+            # follows the kinematic model at v_x (v_y is then not coupled to the pose)
+            vx = xp[..., 3]
+            out[..., 3] = np.where(np.abs(vx) < 0.1, vx, np.hypot(vx, xp[..., 10]))
+        return out
+
+    def f(self, xp, u) -> np.ndarray:
+        """CommonRoad's right-hand side at plant state ``xp`` for inputs ``u = [steering velocity
+        rad/s, acceleration m/s^2]`` (the package function, unmodified; its input limits apply)."""
+        return np.array(self._rhs(list(map(float, xp)), [float(u[0]), float(u[1])], self.p), float)
+
+    def stiff_radius(self, xp, accel_mps2: float) -> float:
+        """Spectral radius [1/s] of the ST model's yaw-rate / slip-angle block at plant state ``xp``
+        and acceleration ``accel_mps2`` (0 where the model is kinematic: KS, and ST below 0.1 m/s)."""
+        v = float(xp[3])
+        if self.kind != "st" or abs(v) < 0.1:
+            return 0.0
+        p = self.p
+        mu, cs = float(p.tire.p_dy1), -float(p.tire.p_ky1) / float(p.tire.p_dy1)
+        lf, lr, h, m, iz = float(p.a), float(p.b), float(p.h_s), float(p.m), float(p.I_z)
+        wb = lf + lr
+        a = float(np.clip(accel_mps2, -p.longitudinal.a_max, p.longitudinal.a_max))
+        ff, fr = cs * (_G * lr - a * h), cs * (_G * lf + a * h)  # front / rear load terms
+        j = np.array([
+            [-mu * m / (v * iz * wb) * (lf ** 2 * ff + lr ** 2 * fr), mu * m / (iz * wb) * (lr * fr - lf * ff)],
+            [mu / (v ** 2 * wb) * (fr * lr - ff * lf) - 1.0, -mu / (v * wb) * (fr + ff)],
+        ])
+        tr, det = j[0, 0] + j[1, 1], j[0, 0] * j[1, 1] - j[0, 1] * j[1, 0]
+        disc = tr * tr / 4.0 - det
+        if disc >= 0:
+            return float(abs(tr / 2.0) + math.sqrt(disc))
+        return float(math.sqrt(det))  # complex pair: |lambda| = sqrt(det)
+
+    def step(self, xp, u, dt_s: float) -> np.ndarray:
+        """Plant state after holding the command ``u = [steering angle rad, acceleration m/s^2]``
+        for ``dt_s`` seconds (servo, brakes and substeps as in the class docstring)."""
+        x = np.array(xp, float)
+        s_min, s_max, sv_min, sv_max = self._steer
+        delta_cmd = min(max(float(u[0]), s_min), s_max)
+        a_cmd = float(u[1])
+        n = max(1, math.ceil(dt_s / self.max_step_s - 1e-9))
+        h_max = dt_s / n
+        t = 0.0
+        while t < dt_s * (1.0 - 1e-12):
+            h = min(h_max, dt_s - t)
+            rho = self.stiff_radius(x, a_cmd)
+            if rho * h > _RK4_STABLE:
+                h = _RK4_STABLE / rho
+            sv = min(max((delta_cmd - x[2]) / h, sv_min), sv_max)
+            a = a_cmd
+            if a < 0.0:
+                a = 0.0 if x[3] <= 0.0 else max(a, -x[3] / h)
+            ui = (sv, a)
+            k1 = self.f(x, ui)
+            k2 = self.f(x + 0.5 * h * k1, ui)
+            k3 = self.f(x + 0.5 * h * k2, ui)
+            k4 = self.f(x + h * k3, ui)
+            x = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+            t += h
+            if not np.all(np.isfinite(x)):
+                break
+        return x

@@ -21,7 +21,7 @@ from ..paths import CirclePath, Path, StraightPath, WaypointPath
 from ..paths.speed_profile import SpeedProfile
 from ..paths.tracks import Track, load_track_csv, track_from_text
 from ..sim.actuator import SteeringActuator
-from ..sim.closed_loop import Disturbance, Plant, simulate
+from ..sim.closed_loop import Disturbance, ObservedPlant, Plant, simulate
 from ..ocp.avoidance import AvoidanceConfig
 from ..scene.footprint import Footprint
 from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Polygon, Static, TrajectoryMotion, rectangle
@@ -38,7 +38,7 @@ class Experiment:
     spec: ScenarioSpec
     path: Path
     controller: Controller
-    plant: Plant
+    plant: Plant | ObservedPlant
     x0: np.ndarray
     steps: int
     footprint: Footprint
@@ -117,6 +117,17 @@ def build_speed_profile(spec, path: Path, friction: float) -> SpeedProfile:
     return SpeedProfile(path, a_lat, spec.accel_max_mps2, spec.decel_max_mps2, spec.v_max_mps,
                         v_start_mps=spec.v_start_mps, v_end_mps=spec.v_end_mps,
                         curvature_window_m=spec.curvature_window_m, friction_circle=spec.friction_circle)
+
+
+def commonroad_plant(model: str, vehicle: str) -> ObservedPlant:
+    """The CommonRoad plant ``model`` (``commonroad_ks | commonroad_st | commonroad_mb``) of the
+    CommonRoad ``vehicle``; ValueError naming the extra when it is not installed."""
+    from ..adapters import commonroad_vehicles as crv  # imports vehiclemodels only when used
+
+    if not crv.available():
+        raise ValueError(f"plant.model {model} needs the commonroad extra: pip install 'mpcdrive[commonroad]' "
+                         "(package commonroad-vehicle-models)")
+    return crv.CommonRoadPlant(crv.PLANT_MODELS[model], vehicle)
 
 
 def _noise(spec: NoiseSpec | None) -> Disturbance | None:
@@ -214,13 +225,15 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
                      footprint=footprint, lane_margin_m=lane_margin)
     # the plant: same or another model, parameters scaled, steering through an actuator
     pl = spec.plant
-    if spec.plant_model in COMMONROAD_PLANTS:
-        raise ValueError(f"plant.model {spec.plant_model}: CommonRoad plants are not wired into the closed loop yet")
     # the true vehicle: the controller's unless the plant names other parameters (a model error)
     errors = {k: val for k, val in (("lf_m", pl.lf_m), ("lr_m", pl.lr_m), ("speed_mps", pl.speed_mps)) if val is not None}
     plant_v = v.model_copy(update=errors) if errors else v
     same = pl.model == "same" and pl.param_scale is None and not errors
-    plant_model = model if same else build_model(spec.plant_model, plant_v, pl.param_scale)
+    if spec.plant_model in COMMONROAD_PLANTS:
+        plant = commonroad_plant(spec.plant_model, pl.vehicle)
+        plant_model = plant.model  # observed as kinematic4 (x, y, yaw, v at the centre of gravity)
+    else:
+        plant_model = model if same else build_model(spec.plant_model, plant_v, pl.param_scale)
     actuator = None
     if pl.steering_actuator is not None:
         actuator = SteeringActuator(pl.steering_actuator.time_constant_s, pl.steering_actuator.dead_time_s)
@@ -229,7 +242,8 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         controller = DelayCompensator(mpc, model, actuator, spec.dt_s, path, substeps=pl.substeps)
     if tuple(plant_model.state_names) != tuple(model.state_names):
         controller = StateAdapter(controller, model, plant_model)
-    plant = Plant(plant_model, pl.integrator, pl.substeps, actuator)
+    if spec.plant_model not in COMMONROAD_PLANTS:
+        plant = Plant(plant_model, pl.integrator, pl.substeps, actuator)
     # initial plant state: the pose, the given speed (else the reference / profile speed)
     if init.v_mps is not None:
         v0 = init.v_mps

@@ -6,6 +6,7 @@ import math
 import numbers
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -56,6 +57,27 @@ class Plant:
             ui[0], act = self.actuator.advance(act, t_s + i * h, h)
             x = discrete_step(self.model, x, ui, h, self.method)
         return x, act
+
+
+@runtime_checkable
+class ObservedPlant(Protocol):
+    """A simulated vehicle with a state layout of its own, seen by the closed loop through a
+    mapping onto the layout of ``model`` (the controller's model): the loop logs, measures and
+    judges the observed state, and the plant integrates its own.
+
+    model : the vehicle model whose state layout (names, speed) the plant is observed in.
+    initial_state(x0) : the plant state for the observed initial state ``x0``.
+    step(xp, u, dt_s) : the plant state after holding the command ``u`` for ``dt_s`` seconds.
+    observe(xp) : the observed state ``(model.nx,)`` of the plant state ``xp``.
+    """
+
+    model: VehicleModel
+
+    def initial_state(self, x0: np.ndarray) -> np.ndarray: ...
+
+    def step(self, xp: np.ndarray, u: np.ndarray, dt_s: float) -> np.ndarray: ...
+
+    def observe(self, xp: np.ndarray) -> np.ndarray: ...
 
 
 @dataclass(frozen=True)
@@ -130,7 +152,7 @@ def _check_run_args(dt_s, steps, seed, lane_half_width_m) -> None:
 
 def simulate(
     controller: Controller,
-    plant: Plant,
+    plant: Plant | ObservedPlant,
     path: Path,
     x0,
     dt_s: float,
@@ -163,13 +185,20 @@ def simulate(
     exceeds it (the car left the road; ``goal_reached`` is then False and
     ``meta["aborted_off_path"]`` True).
 
+    An :class:`ObservedPlant` starts from ``initial_state(x0)`` and is seen (by the controller,
+    the log and the metrics) as ``observe(plant state)``; its own state is not logged (the last
+    one is ``meta["plant_state_final"]``); state ``disturbance`` needs a :class:`Plant`.
+
     Invalid arguments raise ValueError naming the argument. A plant state that stops being finite
     ends the run early (``meta["termination"] = "diverged"``, the last finite state as
     ``x_final``); otherwise ``termination`` is ``goal_reached`` or ``completed``.
     """
     _check_run_args(dt_s, steps, seed, lane_half_width_m)
-    if not isinstance(plant, Plant):
-        raise ValueError(f"plant must be a Plant, got {type(plant).__name__}")
+    observed = not isinstance(plant, Plant)
+    if observed and not isinstance(plant, ObservedPlant):
+        raise ValueError(f"plant must be a Plant or an ObservedPlant, got {type(plant).__name__}")
+    if observed and disturbance is not None:
+        raise ValueError("a state disturbance needs a Plant (an ObservedPlant's state has its own layout)")
     if not isinstance(path, Path):
         raise ValueError(f"path must be a Path, got {type(path).__name__}")
     rng = np.random.default_rng(seed)
@@ -202,6 +231,9 @@ def simulate(
     ST = np.empty(steps)
     status: list[str] = []
     fallback: list[str] = []
+    xp = plant.initial_state(x) if observed else None
+    if observed:
+        x = np.asarray(plant.observe(xp), float)
     warm = controller.initial_warm(x)
     goal_reached = False if (stop_at_path_end and not path.closed) else None
     s_goal = None
@@ -211,7 +243,7 @@ def simulate(
         s_goal = warm.s_m + laps * path.length_m
         goal_reached = False
     k_end = steps
-    act = None if plant.actuator is None else plant.actuator.start(0.0)  # wheels start straight
+    act = None if observed or plant.actuator is None else plant.actuator.start(0.0)  # wheels start straight
     aborted = False
     termination = "completed"
     for k in range(steps):
@@ -229,7 +261,10 @@ def simulate(
         XP[k], RF[k], ST[k] = out.X_pred, out.refs, out.solve_time_s
         status.append(out.status)
         fallback.append(out.fallback)
-        if act is None:
+        if observed:
+            xp_next = np.asarray(plant.step(xp, out.u, dt_s), float)
+            x_next = np.asarray(plant.observe(xp_next), float) if np.all(np.isfinite(xp_next)) else xp_next
+        elif act is None:
             x_next = plant.step(x, out.u, dt_s)
         else:
             act = act.issue(k * dt_s, float(out.u[0]))
@@ -243,6 +278,8 @@ def simulate(
             k_end = k + 1
             break
         x = x_next
+        if observed:
+            xp = xp_next
         if goal_reached is not None and s >= (path.length_m if s_goal is None else s_goal):
             goal_reached = True
             termination = "goal_reached"
@@ -255,6 +292,8 @@ def simulate(
             break
     sl = slice(0, k_end)
     meta = dict(meta or {})
+    if observed:
+        meta["plant_state_final"] = [float(c) for c in xp]
     clearance = None
     if obstacles:
         clearance, meta["obstacles"] = _clearances(Xs[sl], T[sl], obstacles, footprint)
