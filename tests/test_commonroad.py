@@ -476,3 +476,24 @@ def test_ramp_start_already_touches_the_solution_checkers_road_boundary():
     body = create_collision_object(Rectangle(v.length_m, v.width_m, center=np.asarray(init.position, float),
                                              orientation=float(init.orientation)))
     assert _construct_boundary_checker(imp.scenario).collide(body)
+
+
+def test_batch_with_a_commonroad_plant_and_vehicle(tmp_path):
+    """``--plant ks --vehicle bmw_320i`` through the batch (the flags' shared with_vehicle): the
+    KS model of the BMW 320i is the plant, the solution names that vehicle and CommonRoad
+    accepts it."""
+    from functools import partial
+
+    from commonroad.common.solution import CommonRoadSolutionReader, VehicleType
+
+    from mpcdrive.adapters.commonroad import with_vehicle
+    from mpcdrive.adapters.commonroad_batch import run_batch
+
+    rows = run_batch([DIR / "USA_Lanker-1_1_T-1.xml"], tmp_path, workers=1,
+                     configure=partial(with_vehicle, vehicle="bmw_320i", plant="ks"))
+    row = rows["USA_Lanker-1_1_T-1.xml"]
+    assert row["error"] is None and row["passed"] and row["solution_valid"], row
+    scen = (tmp_path / "USA_Lanker-1_1_T-1" / "scenario.yaml").read_text()
+    assert "commonroad_ks" in scen and "commonroad_bmw_320i" in scen
+    sol = CommonRoadSolutionReader.open(str(tmp_path / "USA_Lanker-1_1_T-1" / "solution.xml"))
+    assert sol.planning_problem_solutions[0].vehicle_type == VehicleType.BMW_320i
