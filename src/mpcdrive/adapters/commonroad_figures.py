@@ -46,7 +46,7 @@ def write_scene_figure(imp, result, out_dir: Path, last_step: int | None = None)
     pad = 25.0
     lo, hi = xy.min(axis=0) - pad, xy.max(axis=0) + pad
     span = hi - lo
-    wide = span[0] >= span[1]
+    wide = span[0] >= 1.5 * span[1]  # panels stacked for a wide view, side by side otherwise
     aspect = float(span[1] / span[0])  # height / width of one panel
     fig, axes = plt.subplots(len(steps), 1, figsize=(10, len(steps) * min(max(10 * aspect, 2.0), 6.0) + 0.8)) \
         if wide else plt.subplots(1, len(steps), figsize=(len(steps) * min(max(5 / aspect, 2.5), 5.0), 5.8))
