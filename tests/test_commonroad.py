@@ -32,7 +32,8 @@ EXPECTED_IMPORT = {
     "ZAM_Tutorial-1_1_T-1.xml": ((1,), 1),
     "ZAM_Tutorial-1_2_T-1.xml": ((1,), 3),
     "C-DEU_B471-2_1.xml": ((31538, 31540), 0),
-    "FRA_Anglet-1_1_T-1.xml": ((85819,), 8),
+    # time-only goal: 85819's one successor 86413 holds the end of the 3.3 s drive and its braking
+    "FRA_Anglet-1_1_T-1.xml": ((85819, 86413), 8),
 }
 
 _DRIVES: dict = {}
@@ -160,13 +161,34 @@ def test_solution_file_round_trips(tmp_path):
 
 @pytest.mark.slow
 def test_cli_runs_a_commonroad_file(tmp_path):
-    out = tmp_path / "run"
+    """``mpcdrive run FILE --vehicle vw_vanagon`` without --out: the folder is named after the
+    file (not its benchmark id), the solution names the vehicle and CommonRoad accepts it."""
+    import os
+
+    from commonroad.common.solution import CommonRoadSolutionReader, VehicleType
+
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).resolve().parents[1] / "src"),
+                                                         os.environ.get("PYTHONPATH", "")])}
     r = subprocess.run([sys.executable, "-m", "mpcdrive.cli", "run", str(DIR / "ZAM_Tutorial-1_1_T-1.xml"),
-                        "--out", str(out), "-q"], capture_output=True, text=True)
+                        "--vehicle", "vw_vanagon", "-q"], capture_output=True, text=True, cwd=tmp_path, env=env)
     assert r.returncode == 0, r.stderr
+    (out,) = (tmp_path / "runs").iterdir()
+    assert out.name.startswith("ZAM_Tutorial-1_1_T-1-")
     cr = json.loads((out / "metrics.json").read_text())["commonroad"]
     assert cr["goal_reached"] and cr["collision_free"] and cr["road_compliant"] and cr["ks_feasible"]
-    assert (out / "solution.xml").is_file() and (out / "trajectory.csv").is_file()
+    assert cr["vehicle_type"] == "VW_VANAGON" and cr["solution_valid"], cr["solution_check"]
+    sol = CommonRoadSolutionReader.open(str(out / "solution.xml"))
+    assert sol.planning_problem_solutions[0].vehicle_type == VehicleType.VW_VANAGON
+    assert (out / "trajectory.csv").is_file() and (out / "commonroad_scene.png").is_file()
+    html = (out / "report.html").read_text()
+    assert '"lanelets":[[' in html  # the road's lanelets drawn in the replay
+
+
+def test_vehicle_flags_are_checked(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "mpcdrive.cli", "run", str(DIR / "ZAM_Tutorial-1_1_T-1.xml"),
+                        "--vehicle", "audi", "--out", str(tmp_path / "o")], capture_output=True, text=True)
+    assert r.returncode == 2 and "--vehicle" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
 
 
 @pytest.mark.slow
@@ -190,3 +212,288 @@ def test_blocked_lane_stops_behind_the_parked_car(capsys):
     parked = imp.scenario.obstacles[0].initial_state.position
     assert res.x_final[3] < 0.2 and res.x_final[0] < parked[0]
     assert np.min(res.clearance_m) > 0.0
+
+
+# -- import that serves every file --------------------------------------------------------------
+ALL_FILES = sorted(p.name for p in DIR.iterdir() if p.name.endswith((".xml", ".xml.gz")))
+_IMPORTS: dict = {}
+
+
+def imported(name: str):
+    if name not in _IMPORTS:
+        _IMPORTS[name] = load_commonroad(DIR / name)
+    return _IMPORTS[name]
+
+
+def test_every_file_imports():
+    assert len(ALL_FILES) == 14
+    for name in ALL_FILES:
+        imp = imported(name)
+        assert imp.route and len(imp.centerline) >= 2, name
+
+
+def test_interval_valued_obstacle_states_import():
+    """DEU_A9-3_1_T-1 records its vehicles with uncertain states: positions as rectangles and
+    orientations / speeds as intervals. They read as the rectangle's centre and the interval's
+    middle."""
+    imp = imported("DEU_A9-3_1_T-1.xml")
+    assert len(imp.spec.obstacles) == 9
+    for o, entry in zip(imp.scenario.obstacles, imp.spec.obstacles):
+        st = o.initial_state
+        assert entry.position == pytest.approx(tuple(st.position.center))
+        mid = 0.5 * (st.orientation.start + st.orientation.end)
+        assert math.radians(entry.yaw_deg) == pytest.approx(mid)
+        last = o.prediction.trajectory.state_list[-1]
+        assert entry.trajectory.points[-2] == pytest.approx(tuple(last.position.center))
+
+
+# The route to the goal, as commonroad-route-planner plans it: from a lanelet holding the start
+# (pointing the car's way) over successors and same-direction neighbours to the first goal lanelet.
+# Each entry is justified by the lanelet network:
+ROUTES_TO_GOAL = {
+    # the start (6.07, -5.50) lies on 4817 and 4818, the two branches leaving 581 (a fork 0.6 m
+    # behind the car); 4817's successor 616 is the goal lanelet, 4818 leads to 584 (no goal)
+    "DEU_Salzwedel-107_1_T-7.xml.gz": (4817, 616),
+    # the start (0, 0) lies on 43648 and 43634 (both successors of 43834; 43624 holds it too but
+    # crosses at 90 deg); 43648's successor 43616 is a goal lanelet, 43634 has no successor
+    "USA_Peach-4_8_T-1.xml": (43648, 43616),
+    # the goal lanelet 31540 is the successor of the start lanelet 31538
+    "C-DEU_B471-2_1.xml": (31538, 31540),
+    # goal rectangle on 3614; 3630 -> 3650 -> 3614 are successors
+    "USA_Lanker-1_1_T-1.xml": (3630, 3650, 3614),
+    # goal rectangle on 33, the right neighbour (same direction) of the start lanelet 31
+    "USA_US101-3_1_T-1.xml": (31, 33),
+    # goal rectangle over 3, 6 and 10; 6 is the successor of the start lanelet 5
+    "ZAM-Ramp-1_1-T-1.xml": (5, 6),
+    "ZAM_Tutorial-1_1_T-1.xml": (1,),
+    "ZAM_Tutorial_Urban-3_2.xml": (1,),
+}
+
+
+@pytest.mark.parametrize("name", sorted(ROUTES_TO_GOAL))
+def test_route_reaches_the_goal_as_the_network_says(name):
+    from mpcdrive.adapters.commonroad_route import goal_lanelets
+
+    imp = imported(name)
+    net = imp.scenario.lanelet_network
+    goals = goal_lanelets(net, imp.planning_problem)
+    route = list(imp.route)
+    k = next(i for i, lid in enumerate(route) if lid in goals)
+    assert tuple(route[: k + 1]) == ROUTES_TO_GOAL[name]
+    for a, b in zip(route, route[1:]):  # each step a successor or a same-direction neighbour
+        la = net.find_lanelet_by_id(a)
+        assert (b in la.successor or (b == la.adj_left and la.adj_left_same_direction)
+                or (b == la.adj_right and la.adj_right_same_direction)), (a, b)
+    # the reference path passes through (or, for a small region, within a lane of) the goal region
+    if imp.plan.goal_arc_m is not None:
+        shapes = [sh for st in imp.planning_problem.goal.state_list
+                  for sh in (getattr(st.position, "shapes", None) or [st.position])]
+        d = min(float(np.min(np.hypot(*(imp.centerline - sh.center).T))) for sh in shapes)
+        assert d < 1.0
+
+
+def _two_lane_network_with_exit():
+    """Two lanes heading east for 50 m (2 left of 1), then both curving left together (11 left of
+    12... as successors 21 / 22), and on the right lane a straight exit 23."""
+    from commonroad.scenario.lanelet import Lanelet, LaneletNetwork
+
+    def lane(lid, center, **kw):
+        c = np.asarray(center, float)
+        d = np.gradient(c, axis=0)
+        n = np.column_stack([-d[:, 1], d[:, 0]]) / np.hypot(*d.T)[:, None]
+        return Lanelet(c + 1.75 * n, c, c - 1.75 * n, lid, **kw)
+
+    x = np.linspace(0, 50, 26)
+    phi = np.linspace(0, math.pi / 2, 40)
+    r_right = 60.0
+
+    def arc(r, y0):  # left turn of radius r starting at (50, y0) heading east
+        return np.column_stack([50 + r * np.sin(phi), y0 + r * (1 - np.cos(phi))])
+
+    l1 = lane(1, np.column_stack([x, np.zeros_like(x)]), successor=[21, 23], adjacent_left=2,
+              adjacent_left_same_direction=True)
+    l2 = lane(2, np.column_stack([x, np.full_like(x, 3.5)]), successor=[22], adjacent_right=1,
+              adjacent_right_same_direction=True)
+    l21 = lane(21, arc(r_right, 0.0), predecessor=[1], adjacent_left=22, adjacent_left_same_direction=True)
+    l22 = lane(22, arc(r_right - 3.5, 3.5), predecessor=[2],
+               adjacent_right=21, adjacent_right_same_direction=True)
+    xe = np.linspace(50, 150, 51)
+    l23 = lane(23, np.column_stack([xe, np.zeros_like(xe)]), predecessor=[1])
+    return LaneletNetwork.create_from_lanelet_list([l1, l2, l21, l22, l23])
+
+
+def test_time_only_goal_follows_the_lane_not_the_straightest_branch():
+    """Lane 1 goes on as 21, curving left beside 22 (the successor of its neighbour 2); the exit
+    23 goes straight on. A time-only goal follows the lane (21), where the straightest successor
+    would be the exit; and it stops where the lane ends."""
+    from mpcdrive.adapters.commonroad_route import lane_forward
+
+    net = _two_lane_network_with_exit()
+
+    def turn(lid):  # heading change from lanelet 1's end over the successor [rad]
+        cv = net.find_lanelet_by_id(lid).center_vertices
+        return abs(math.atan2(*(cv[-1] - cv[-2])[::-1]))
+
+    assert turn(23) < turn(21)  # the trap: the exit is the straightest successor
+    assert lane_forward(net, [1], 1000.0) == [1, 21]
+    assert lane_forward(net, [2], 1000.0) == [2, 22]  # one successor: forced
+
+
+@pytest.mark.parametrize("name", [n for n in ALL_FILES if n in (
+    "ARG_Carcarana-4_5_T-1.xml", "DEU_A9-3_1_T-1.xml", "DEU_Backnang-9_1_T-1.xml",
+    "DEU_Ibbenbueren-10_2_T-1.xml", "FRA_Anglet-1_1_T-1.xml")])
+def test_time_only_routes_take_no_turn_the_network_does_not_force(name):
+    """Every step of a time-only route is the only successor, the intersection's straight
+    successor or the one continuing the lane beside its neighbours -- never a chosen turn."""
+    from mpcdrive.adapters.commonroad_route import _continues_neighbours, _straight_successors
+
+    imp = imported(name)
+    assert imp.plan.mode == "follow lane"
+    net = imp.scenario.lanelet_network
+    for a, b in zip(imp.route, imp.route[1:]):
+        la = net.find_lanelet_by_id(a)
+        assert (la.successor == [b] or b in _straight_successors(net, a)
+                or _continues_neighbours(net, la, b)), (a, b, la.successor)
+
+
+def _max_abs_curvature(points) -> float:
+    from mpcdrive.paths import WaypointPath
+
+    path = WaypointPath(points, ds_m=0.2)
+    return float(np.max(np.abs(path.curvature(np.linspace(0.0, path.length_m, 4000)))))
+
+
+def test_reference_curvature_is_bounded_on_every_file():
+    """The imported path is drivable: |kappa| stays below the Ford Escort's kinematic limit
+    tan(delta_max) / L (0.54 1/m), the tightest turn its steering can make."""
+    from mpcdrive.models.presets import PRESETS
+
+    pre = PRESETS["commonroad_ford_escort"]
+    limit = math.tan(pre.max_steer_rad) / (pre.params.lf_m + pre.params.lr_m)
+    worst = {name: _max_abs_curvature(imported(name).centerline) for name in ALL_FILES}
+    assert max(worst.values()) < limit, worst
+
+
+def test_smoothing_removes_point_jitter():
+    """A straight lane whose vertices jitter by 5 cm every 0.5 m: the spline through the raw
+    points bends at radii of a few metres; the smoothed reference stays straighter than a 50 m
+    radius (the Gaussian of 1.5 m averages about 20 vertices)."""
+    from mpcdrive.adapters.commonroad_route import smooth
+
+    rng = np.random.default_rng(0)
+    x = np.arange(0.0, 100.0, 0.5)
+    raw = np.column_stack([x, rng.normal(0.0, 0.05, x.size)])
+    assert _max_abs_curvature(raw) > 0.5
+    assert _max_abs_curvature(smooth(raw)) < 1 / 50.0
+
+
+@pytest.mark.parametrize("name", ALL_FILES)
+def test_no_extension_past_the_route_and_speed_ends_at_zero(name):
+    """The path ends on the route's last lanelet (no straight run past it) and the reference
+    speed brakes to 0 there, never faster than the bends allow."""
+    from mpcdrive.adapters.commonroad_goal import LAT_ACCEL_MPS2
+
+    from shapely.geometry import Point
+
+    imp = imported(name)
+    net = imp.scenario.lanelet_network
+    end = Point(*imp.centerline[-1])
+    # on the last route lanelet (its end may be the next lanelet's start: on the boundary)
+    assert net.find_lanelet_by_id(imp.route[-1]).polygon.shapely_object.distance(end) < 1e-6
+    exp = build_experiment(imp.spec)
+    prof = exp.speed_profile
+    assert prof is not None and prof.v_mps[-1] == 0.0
+    assert exp.path.length_m == pytest.approx(float(np.sum(np.hypot(*np.diff(imp.centerline, axis=0).T))), rel=1e-3)
+    # v^2 |kappa| <= a_lat (the profile's curvature is the windowed one it is built on)
+    assert np.max(prof.v_mps ** 2 * prof.abs_kappa) <= LAT_ACCEL_MPS2 * (1 + 1e-9)
+
+
+def test_goal_time_window_sets_the_cruise_speed():
+    """USA_Lanker-1_1_T-1: goal rectangle 3.0 .. 4.0 s ahead, speed 6 .. 12 m/s: the plan drives
+    through it inside that window at a speed in that range."""
+    plan = imported("USA_Lanker-1_1_T-1.xml").plan
+    assert plan.mode == "through goal"
+    assert 6.0 <= plan.v_cruise_mps <= 12.0
+    assert 3.0 <= plan.arrival_s <= 4.0
+
+
+# -- solutions CommonRoad accepts -----------------------------------------------------------------
+@pytest.mark.parametrize("name", ["ZAM_Tutorial-1_1_T-1.xml", "DEU_A9-3_1_T-1.xml"])
+def test_valid_solution_accepts_the_written_solution(name, tmp_path):
+    from commonroad.common.solution import CommonRoadSolutionReader
+    from commonroad_dc.feasibility.solution_checker import valid_solution
+
+    imp, res, _ = drive(name)
+    rep = check_drive(imp, res)
+    assert rep.passed, rep.line()
+    path = write_solution(imp, res, tmp_path, rep.goal_step)
+    ok, _ = valid_solution(imp.scenario, imp.problems, CommonRoadSolutionReader.open(str(path)))
+    assert ok
+
+
+# -- the batch command ------------------------------------------------------------------------------
+@pytest.mark.slow
+def test_batch_writes_a_row_per_file_and_survives_a_broken_one(tmp_path):
+    src = tmp_path / "in"
+    src.mkdir()
+    (src / "broken.xml").write_text("<commonRoad><lanelet")
+    (src / "DEU_A9-3_1_T-1.xml").write_bytes((DIR / "DEU_A9-3_1_T-1.xml").read_bytes())
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "mpcdrive.cli", "commonroad", str(src), "--out", str(out),
+                        "--workers", "1"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    rows = json.loads((out / "summary.json").read_text())
+    assert set(rows) == {"broken.xml", "DEU_A9-3_1_T-1.xml"}
+    assert rows["broken.xml"]["error"] and not rows["broken.xml"]["passed"]
+    assert not (out / "broken").exists()
+    a9 = rows["DEU_A9-3_1_T-1.xml"]
+    assert a9["error"] is None and a9["passed"]
+    for key in ("passed", "collision_free", "road_compliant", "ks_feasible", "goal_reached",
+                "min_obstacle_clearance_m", "solver_failures", "solve_time_us", "wall_s", "error"):
+        assert key in a9
+    assert set(a9["solve_time_us"]) == {"p50", "p99"}
+    for f in ("solution.xml", "trajectory.csv", "metrics.json", "report.html", "commonroad_scene.png"):
+        assert (out / "DEU_A9-3_1_T-1" / f).is_file(), f
+    progress = [ln for ln in r.stderr.splitlines() if ln.startswith("[")]
+    assert len(progress) == 2 and all(ln.startswith(("[1/2] ", "[2/2] ")) for ln in progress)
+    assert "broken.xml error" in r.stderr
+    assert "| `broken.xml` | error |" in (out / "summary.md").read_text()
+
+
+def test_ramp_start_already_touches_the_solution_checkers_road_boundary():
+    """ZAM-Ramp-1_1-T-1 starts the car at x = 0, the road's first metre: its body sticks out
+    behind the road. CommonRoad's solution checker closes the road at its ends (a triangulated
+    boundary), so it rejects any solution from this start; the oriented-rectangle boundary of
+    ``check_drive`` does not close the ends. The batch therefore reports the file as failed with
+    the checker's reason, not as passed."""
+    from commonroad.geometry.shape import Rectangle
+    from commonroad_dc.collision.collision_detection.pycrcc_collision_dispatch import create_collision_object
+    from commonroad_dc.feasibility.solution_checker import _construct_boundary_checker
+
+    imp = imported("ZAM-Ramp-1_1-T-1.xml")
+    init = imp.planning_problem.initial_state
+    v = imp.spec.vehicle
+    body = create_collision_object(Rectangle(v.length_m, v.width_m, center=np.asarray(init.position, float),
+                                             orientation=float(init.orientation)))
+    assert _construct_boundary_checker(imp.scenario).collide(body)
+
+
+def test_batch_with_a_commonroad_plant_and_vehicle(tmp_path):
+    """``--plant ks --vehicle bmw_320i`` through the batch (the flags' shared with_vehicle): the
+    KS model of the BMW 320i is the plant, the solution names that vehicle and CommonRoad
+    accepts it."""
+    from functools import partial
+
+    from commonroad.common.solution import CommonRoadSolutionReader, VehicleType
+
+    from mpcdrive.adapters.commonroad import with_vehicle
+    from mpcdrive.adapters.commonroad_batch import run_batch
+
+    rows = run_batch([DIR / "USA_Lanker-1_1_T-1.xml"], tmp_path, workers=1,
+                     configure=partial(with_vehicle, vehicle="bmw_320i", plant="ks"))
+    row = rows["USA_Lanker-1_1_T-1.xml"]
+    assert row["error"] is None and row["passed"] and row["solution_valid"], row
+    scen = (tmp_path / "USA_Lanker-1_1_T-1" / "scenario.yaml").read_text()
+    assert "commonroad_ks" in scen and "commonroad_bmw_320i" in scen
+    sol = CommonRoadSolutionReader.open(str(tmp_path / "USA_Lanker-1_1_T-1" / "solution.xml"))
+    assert sol.planning_problem_solutions[0].vehicle_type == VehicleType.BMW_320i

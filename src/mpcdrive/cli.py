@@ -87,50 +87,46 @@ def _on_backend(spec, fast: bool):
     return spec.model_copy(update={"controller": spec.controller.model_copy(update={"backend": "fast"})})
 
 
-def _load_commonroad(file: str):
-    from .adapters.commonroad import available, load_commonroad
+def _load_commonroad(file: str, vehicle: str | None = None, plant: str | None = None):
+    from .adapters.commonroad import available, load_commonroad, with_vehicle
 
     if not available():
         raise BadInput(f"{file}: CommonRoad scenarios need the commonroad extra (pip install 'mpcdrive[commonroad]')")
+    _check_vehicle_flags(vehicle, plant)
     try:
-        return load_commonroad(file)
+        return with_vehicle(load_commonroad(file), vehicle, plant)
     except (OSError, ValueError) as e:
         raise BadInput(f"{file}: {e}") from None
 
 
+_CR_VEHICLES = ("ford_escort", "bmw_320i", "vw_vanagon")
+_CR_PLANTS = ("ks", "st", "mb")
+
+
+def _check_vehicle_flags(vehicle: str | None, plant: str | None) -> None:
+    """``--vehicle`` / ``--plant`` of a CommonRoad run: known names, and the vehicle models
+    package where they need it."""
+    if vehicle is not None and vehicle not in _CR_VEHICLES:
+        raise BadInput(f"--vehicle: unknown CommonRoad vehicle {vehicle!r} (known: {', '.join(_CR_VEHICLES)})")
+    if plant is not None and plant not in _CR_PLANTS:
+        raise BadInput(f"--plant: unknown CommonRoad plant model {plant!r} (known: {', '.join(_CR_PLANTS)})")
+    if vehicle is not None or plant is not None:
+        from .adapters.commonroad_vehicles import available
+
+        if not available():
+            raise BadInput("--vehicle/--plant need commonroad-vehicle-models (pip install 'mpcdrive[commonroad]')")
+
+
 def _run_into(spec, out_dir: Path, show_progress: bool, source: str | None = None, extra_outputs=None):
-    """Run one scenario and write its files into ``out_dir`` (with the interactive
-    ``report.html``; ``extra_outputs(result, out_dir)`` writes more); returns (result, metrics,
-    figures, footprint)."""
-    from .io import write_json, write_trajectory_csv
-    from .io.atomic import atomic_write_text
-    from .plots import write_run_figures
-    from .report import write_run_html
-    from .scenarios import build_experiment, dump_scenario, run_experiment
-    from .sim import apply_goal_region, compute_metrics
+    """:func:`mpcdrive.runs.run_into` with a progress bar on stderr; a scenario that does not
+    build is bad input."""
+    from .runs import BuildError, run_into
 
     try:
-        exp = build_experiment(spec)
-    except ValueError as e:
-        raise BadInput(f"{source or spec.id}: {e}") from None
-    with _progress(show_progress, spec.id, exp.steps) as cb:
-        result = run_experiment(exp, progress=cb)
-    metrics = compute_metrics(result, exp.footprint)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    write_trajectory_csv(result, out_dir / "trajectory.csv")
-    write_json(out_dir / "metrics.json", metrics)
-    atomic_write_text(out_dir / "scenario.yaml", dump_scenario(spec))
-    if extra_outputs is not None:
-        metrics.update(extra_outputs(result, out_dir))
-        cr = metrics.get("commonroad")
-        if cr is not None:  # the goal is the planning problem's, the checker's verdicts count too
-            metrics = apply_goal_region(metrics, cr["goal_reached"], collision_free=cr["collision_free"],
-                                        road_compliant=cr["road_compliant"])
-        write_json(out_dir / "metrics.json", metrics)
-    figures = write_run_figures(result, out_dir)
-    write_run_html(out_dir, result, metrics, figures, exp.footprint, run_id=spec.id,
-                   description=spec.description)
-    return result, metrics, figures, exp.footprint
+        return run_into(spec, out_dir, (lambda label, n: _progress(True, label, n)) if show_progress else None,
+                        source=source, extra_outputs=extra_outputs)
+    except BuildError as e:
+        raise BadInput(str(e)) from None
 
 
 class OutputAbandoned(Exception):
@@ -187,14 +183,21 @@ def run(
                               "(controller.backend: fast; same commands as the OSQP reference)"),
     check: bool = typer.Option(False, "--check", help="exit with code 3 when the run collided, left the "
                                "road or missed its goal (outputs are still written)"),
+    plant: str | None = typer.Option(None, "--plant", help="CommonRoad files: the plant, a CommonRoad vehicle "
+                                     "model (ks, st, mb)"),
+    vehicle: str | None = typer.Option(None, "--vehicle", help="CommonRoad files: the vehicle (ford_escort, "
+                                       "bmw_320i, vw_vanagon; default ford_escort)"),
 ) -> None:
     """Run one scenario; write trajectory.csv, metrics.json, figures, the resolved scenario and
     report.html (an interactive replay)."""
     extra = None
-    if scenario.lower().endswith((".xml", ".xml.gz")):
+    is_cr = scenario.lower().endswith((".xml", ".xml.gz"))
+    if not is_cr and (plant is not None or vehicle is not None):
+        raise BadInput("--plant/--vehicle are for CommonRoad files (.xml, .xml.gz)")
+    if is_cr:
         from .scenarios import reject_initial_overlap, warn_suspicious
 
-        imported = _load_commonroad(scenario)
+        imported = _load_commonroad(scenario, vehicle, plant)
         spec, extra = imported.spec, imported.write_outputs
         try:
             warn_suspicious(reject_initial_overlap(spec, scenario), scenario)
@@ -203,7 +206,8 @@ def run(
     else:
         spec = _load(scenario)
     spec = _on_backend(spec, fast)
-    out_dir = out or _default_out(spec.id)
+    # a CommonRoad run is named after the file passed, not the benchmark id inside it
+    out_dir = out or _default_out(_file_stem(scenario) if extra is not None else spec.id)
     with _output_dir(out_dir) as tmp:
         _, metrics, _, _ = _run_into(spec, tmp, not quiet, source=scenario, extra_outputs=extra)
     typer.echo(_summary_line(spec.id, metrics))
@@ -630,6 +634,64 @@ def main() -> None:
             sys.exit(130)
         typer.echo(f"mpcdrive: error: {type(e).__name__}: {e}", err=True)
         sys.exit(1)
+
+
+def _file_stem(file: str) -> str:
+    from .adapters.commonroad_batch import file_stem
+
+    return file_stem(file)
+
+
+@app.command("commonroad")
+def commonroad_cmd(
+    files: list[str] = typer.Argument(..., help="CommonRoad files (.xml, .xml.gz) or folders holding them"),
+    out: Path | None = typer.Option(None, "--out", help="output directory (default runs/commonroad-<timestamp>)"),
+    plant: str | None = typer.Option(None, "--plant", help="the plant, a CommonRoad vehicle model (ks, st, mb)"),
+    vehicle: str | None = typer.Option(None, "--vehicle", help="ford_escort, bmw_320i or vw_vanagon (default "
+                                       "ford_escort)"),
+    workers: int | None = typer.Option(None, "--workers", min=1, help="local processes (default: all cores)"),
+    backend: str = typer.Option("local", "--backend", help="local (process pool) or ray"),
+) -> None:
+    """Drive every CommonRoad file and judge it with CommonRoad's drivability checker; write
+    OUT/summary.json, OUT/summary.md and OUT/<file stem>/ per file (as mpcdrive run writes it)."""
+    from .adapters.commonroad import available
+    from .adapters.commonroad_batch import collect_files, run_batch, verdict
+
+    if not available():
+        raise BadInput("commonroad: CommonRoad scenarios need the commonroad extra (pip install 'mpcdrive[commonroad]')")
+    if backend not in ("local", "ray"):
+        raise BadInput(f"--backend must be 'local' or 'ray', got {backend!r}")
+    if backend == "ray":
+        import importlib.util
+
+        if importlib.util.find_spec("ray") is None:
+            raise BadInput("--backend ray: Ray is not installed (pip install 'mpcdrive[ray]')")
+        if workers is not None:
+            raise BadInput("--workers is only for --backend local (Ray uses the cluster's CPUs)")
+    _check_vehicle_flags(vehicle, plant)
+    try:
+        paths = collect_files(files)
+    except ValueError as e:
+        raise BadInput(str(e)) from None
+    configure = None
+    if vehicle is not None or plant is not None:
+        from functools import partial
+
+        from .adapters.commonroad import with_vehicle
+
+        configure = partial(with_vehicle, vehicle=vehicle, plant=plant)
+    out_dir = out or _default_out("commonroad")
+    t0 = time.perf_counter()
+
+    def progress(k: int, n: int, row: dict) -> None:
+        typer.echo(f"[{k}/{n}] {row['file']} {verdict(row)}", err=True)
+
+    with _output_dir(out_dir) as tmp:
+        rows = run_batch(paths, tmp, workers=workers, backend=backend, configure=configure, progress=progress)
+    passed = sum(1 for r in rows.values() if r["passed"])
+    errors = sum(1 for r in rows.values() if r["error"])
+    typer.echo(f"{passed}/{len(rows)} files passed, {errors} with errors, {time.perf_counter() - t0:.1f} s; "
+               f"summary: {out_dir / 'summary.md'}")
 
 
 if __name__ == "__main__":

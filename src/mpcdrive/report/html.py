@@ -322,7 +322,22 @@ def replay_data(result: SimResult, footprint: Footprint = Footprint(), *, run_id
         "obstacles": obstacles,
         "skipped_obstacles": skipped,
         "max_steer": max_steer,
+        "lanelets": _lanelets(result.meta.get("lanelets"), extent_pts, dec),
     }
+
+
+def _lanelets(polygons, view_pts: np.ndarray, dec: int) -> list:
+    """The road's lanelet polygons (``meta["lanelets"]``: lists of (x, y) [m]) within 30 m of
+    what the replay shows, rounded."""
+    if not polygons or not len(view_pts):
+        return []
+    lo, hi = view_pts.min(axis=0) - 30.0, view_pts.max(axis=0) + 30.0
+    out = []
+    for poly in polygons:
+        p = np.asarray(poly, float).reshape(-1, 2)
+        if len(p) >= 3 and np.all(p.max(axis=0) >= lo) and np.all(p.min(axis=0) <= hi):
+            out.append(_round(p, dec))
+    return out
 
 
 # --------------------------------------------------------------------------- page
@@ -627,6 +642,8 @@ _SCRIPT = r"""<script>
     const [X, Y] = tx(g, w, h);
     g.clearRect(0, 0, w, h); g.fillStyle = "#fff"; g.fillRect(0, 0, w, h);
     g.lineJoin = "round"; g.lineCap = "round";
+    g.fillStyle = "#f6f6f6"; g.strokeStyle = "#c8c8c8"; g.lineWidth = 1;  // the road's lanelets
+    for (const p of run.lanelets || []) { poly(g, p, X, Y, true); g.fill(); g.stroke(); }
     if (run.left && run.right) {  // the lane as a grey band (a ring on a closed path)
       g.fillStyle = "#ececec"; g.beginPath();
       if (run.closed) { trace(g, run.left, X, Y); g.closePath(); trace(g, run.right, X, Y); g.closePath(); g.fill("evenodd"); }

@@ -246,10 +246,10 @@ def _ignore_sigint() -> None:
 Progress = Callable[[int, int, dict], None]
 
 
-def _run_inline(tasks, progress: Progress | None) -> list[dict]:
+def _run_inline(tasks, progress: Progress | None, fn=run_task) -> list[dict]:
     rows = []
     for t in tasks:
-        rows.append(run_task(t))
+        rows.append(fn(t))
         if progress is not None:
             progress(len(rows), len(tasks), rows[-1])
     return rows
@@ -280,17 +280,17 @@ def _signals_deferred():
         raise KeyboardInterrupt
 
 
-def _run_local(tasks, workers: int, progress: Progress | None) -> list[dict]:
+def _run_local(tasks, workers: int, progress: Progress | None, fn=run_task) -> list[dict]:
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
     if workers == 1 or len(tasks) == 1:
-        return _run_inline(tasks, progress)
+        return _run_inline(tasks, progress, fn)
     before = set(multiprocessing.active_children())
     ex = ProcessPoolExecutor(max_workers=workers, mp_context=_mp_context(), initializer=_ignore_sigint)
     rows: list[dict] = []
     try:
         with _signals_deferred():  # workers start inside submit(): never leave one half-started
-            pending = {ex.submit(run_task, t) for t in tasks}
+            pending = {ex.submit(fn, t) for t in tasks}
         while pending:
             done, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
             for f in done:
@@ -316,7 +316,7 @@ def _run_local(tasks, workers: int, progress: Progress | None) -> list[dict]:
     return rows
 
 
-def _run_ray(tasks, address: str | None, progress: Progress | None) -> list[dict]:
+def _run_ray(tasks, address: str | None, progress: Progress | None, fn=run_task) -> list[dict]:
     try:
         import ray
     except ImportError:
@@ -327,7 +327,7 @@ def _run_ray(tasks, address: str | None, progress: Progress | None) -> list[dict
         ray.init(**kwargs, logging_level="ERROR", log_to_driver=False)
         started = True
     try:
-        remote = ray.remote(num_cpus=1, max_retries=0)(run_task)
+        remote = ray.remote(num_cpus=1, max_retries=0)(fn)
         cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
         queue = list(tasks)
         pending, rows = [], []
@@ -362,6 +362,14 @@ def run_sweep(
     backend : ``local`` (a process pool of ``workers`` processes, all cores by default; 1 runs in
     this process) or ``ray`` (tasks on the Ray cluster at ``address``, a new local one when None;
     the cluster's nodes need mpcdrive installed). ``progress(done, total, row)`` after each run."""
+    return sorted(run_parallel(run_task, list(plan.tasks), backend, workers, address, progress),
+                  key=lambda r: r["run_id"])
+
+
+def run_parallel(fn, tasks: list, backend: str = "local", workers: int | None = None, address: str | None = None,
+                 progress: Progress | None = None) -> list:
+    """``fn(task)`` for every task, in completion order, on ``backend`` (as :func:`run_sweep`);
+    ``fn`` must be a top-level function that never raises (its result reports an error)."""
     if backend not in ("local", "ray"):
         raise SweepError(f"--backend must be 'local' or 'ray', got {backend!r}")
     if address is not None and backend != "ray":
@@ -370,9 +378,6 @@ def run_sweep(
         raise SweepError(f"--workers must be an integer >= 1, got {workers!r}")
     if backend == "ray" and workers is not None:
         raise SweepError("--workers is only for --backend local (Ray uses the cluster's CPUs)")
-    tasks = list(plan.tasks)
     if backend == "ray":
-        rows = _run_ray(tasks, address, progress)
-    else:
-        rows = _run_local(tasks, workers or os.cpu_count() or 1, progress)
-    return sorted(rows, key=lambda r: r["run_id"])
+        return _run_ray(tasks, address, progress, fn)
+    return _run_local(tasks, workers or os.cpu_count() or 1, progress, fn)

@@ -1,0 +1,193 @@
+"""Drive many CommonRoad files and judge each with CommonRoad's checkers (``mpcdrive commonroad``).
+
+Each file is imported (:func:`~.commonroad.load_commonroad`), driven, written into
+``OUT/<file stem>/`` exactly as ``mpcdrive run`` writes a run (:func:`mpcdrive.runs.run_into`)
+and checked with the drivability checker; ``OUT/summary.json`` maps each file name to its row
+(:data:`ROW_FIELDS`) and ``OUT/summary.md`` shows them as a table. A file that cannot be read,
+routed or driven is a row with its ``error``, never the end of the batch. Runs go to a local
+process pool or to Ray (:func:`mpcdrive.sweep.runner.run_parallel`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+ROW_FIELDS = ("passed", "collision_free", "road_compliant", "ks_feasible", "goal_reached",
+              "min_obstacle_clearance_m", "solver_failures", "solve_time_us", "wall_s", "error")
+SUFFIXES = (".xml", ".xml.gz")
+
+
+def file_stem(path: str | Path) -> str:
+    """The file name without ``.xml`` / ``.xml.gz`` (the name of its output folder)."""
+    name = Path(path).name
+    for suf in (".xml.gz", ".xml"):
+        if name.lower().endswith(suf):
+            return name[: -len(suf)]
+    return Path(name).stem
+
+
+def collect_files(args) -> list[Path]:
+    """The scenario files named by ``args`` (files, or folders: their ``.xml`` / ``.xml.gz``
+    files, sorted); ValueError for a name that is neither or a folder without any."""
+    files: list[Path] = []
+    for a in args:
+        p = Path(a)
+        if p.is_dir():
+            found = sorted(f for f in p.iterdir() if f.is_file() and f.name.lower().endswith(SUFFIXES))
+            if not found:
+                raise ValueError(f"{p}: no CommonRoad files (.xml, .xml.gz) in this folder")
+            files += found
+        elif p.is_file():
+            files.append(p)
+        else:
+            raise ValueError(f"{p}: no such file or folder")
+    stems = [file_stem(f) for f in files]
+    dup = sorted({s for s in stems if stems.count(s) > 1})
+    if dup:
+        raise ValueError(f"two files would share the output folder {dup[0]!r}: pass one of them")
+    return files
+
+
+@dataclass(frozen=True)
+class BatchTask:
+    """One file to drive into ``out_dir`` (``configure(imp) -> imp`` adapts the import, e.g. the
+    vehicle; a top-level function so a process pool can ship it)."""
+
+    file: str
+    out_dir: str
+    configure: object = None
+
+
+def _empty_row() -> dict:
+    return {"passed": False, "collision_free": None, "road_compliant": None, "ks_feasible": None,
+            "goal_reached": None, "min_obstacle_clearance_m": None, "solver_failures": None,
+            "solve_time_us": {"p50": None, "p99": None}, "wall_s": 0.0, "error": None,
+            "min_obstacle_clearance_whole_run_m": None, "solution_valid": None, "solution_check": None,
+            "plan": None}
+
+
+def drive_file(task: BatchTask) -> dict:
+    """Import, drive, write and check one file; its summary row (with ``file``). Never raises:
+    a failure is the row's ``error``."""
+    from ..runs import run_into
+    from .commonroad import load_commonroad
+
+    t0 = time.perf_counter()
+    row = _empty_row()
+    row["file"] = Path(task.file).name
+    try:
+        imp = load_commonroad(task.file)
+        if task.configure is not None:
+            imp = task.configure(imp)
+        res, m, _, _ = run_into(imp.spec, Path(task.out_dir), source=task.file, extra_outputs=imp.write_outputs)
+        cr = m["commonroad"]
+        st = m.get("solve_time_us") or {}
+        row.update(passed=bool(cr["passed"]), collision_free=cr["collision_free"],
+                   road_compliant=cr["road_compliant"], ks_feasible=cr["ks_feasible"],
+                   goal_reached=cr["goal_reached"],
+                   # over the drive the checker judged (up to the goal), and over the whole run
+                   min_obstacle_clearance_m=_min_clearance(res, cr["states_checked"]),
+                   min_obstacle_clearance_whole_run_m=_min_clearance(res, None),
+                   solver_failures=int(m["solver_failures"]),
+                   solve_time_us={"p50": st.get("p50"), "p99": st.get("p99")},
+                   solution_valid=cr.get("solution_valid"), solution_check=cr.get("solution_check"),
+                   plan=cr.get("plan"))
+    except Exception as e:  # a file's failure is its row; the batch goes on
+        import shutil
+
+        row["error"] = " ".join(f"{type(e).__name__}: {e}".split())[:400]
+        shutil.rmtree(task.out_dir, ignore_errors=True)  # no half-written run folder
+    row["wall_s"] = time.perf_counter() - t0
+    return row
+
+
+def _min_clearance(result, n: int | None) -> float | None:
+    """Smallest footprint-to-obstacle distance [m] over the first ``n`` states (all: None);
+    None without obstacles."""
+    import numpy as np
+
+    c = result.clearance_m
+    if c is None:
+        return None
+    c = np.asarray(c, float)[:n]
+    c = c[np.isfinite(c)]
+    return float(c.min()) if c.size else None
+
+
+def verdict(row: dict) -> str:
+    """One word or phrase for a row: passed, the failed checks, or error."""
+    if row.get("error"):
+        return f"error: {row['error']}"
+    if row["passed"]:
+        return "passed"
+    failed = [name for key, name in (("collision_free", "collision"), ("road_compliant", "off road"),
+                                     ("ks_feasible", "KS-infeasible"), ("goal_reached", "goal missed"))
+              if row.get(key) is False]
+    if not failed and row.get("solution_valid") is False:
+        failed = [f"solution rejected by valid_solution ({row.get('solution_check')})"]
+    return "failed: " + ", ".join(failed or ["unknown"])
+
+
+def _cell(v, fmt="{:.2f}") -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, float):
+        return fmt.format(v)
+    return str(v)
+
+
+def _clearance_cell(r: dict) -> str:
+    c, whole = r["min_obstacle_clearance_m"], r.get("min_obstacle_clearance_whole_run_m")
+    if whole is not None and (c is None or whole < c):
+        return f"{_cell(c)} ({_cell(whole)})"
+    return _cell(c)
+
+
+def summary_markdown(rows: dict, header: str = "") -> str:
+    """``summary.md``: one table row per file, then the errors in words."""
+    n = len(rows)
+    passed = sum(1 for r in rows.values() if r["passed"])
+    lines = ["# CommonRoad batch", "", header, "",
+             f"{passed} of {n} files passed (collision-free, on the road, KS-feasible and at the goal, as "
+             "CommonRoad's drivability checker judges the drive up to the goal, and the solution accepted by "
+             "CommonRoad's solution checker).", "",
+             "Min clearance: footprint to obstacle over the checked drive (whole run in brackets when smaller).", "",
+             "| file | verdict | collision-free | road-compliant | KS-feasible | goal reached | min clearance [m] | "
+             "solver failures | solve p50 / p99 [us] | wall [s] |",
+             "|" + "---|" * 10]
+    for name, r in rows.items():
+        st = r["solve_time_us"]
+        lines.append(f"| `{name}` | {'error' if r.get('error') else verdict(r).split(' (')[0]} | {_cell(r['collision_free'])} | "
+                     f"{_cell(r['road_compliant'])} | {_cell(r['ks_feasible'])} | {_cell(r['goal_reached'])} | "
+                     f"{_clearance_cell(r)} | {_cell(r['solver_failures'])} | "
+                     f"{_cell(st['p50'], '{:.0f}')} / {_cell(st['p99'], '{:.0f}')} | {_cell(r['wall_s'], '{:.1f}')} |")
+    rejected = [(k, r.get("solution_check")) for k, r in rows.items()
+                if not r.get("error") and r.get("solution_valid") is False and verdict(r).startswith("failed: solution")]
+    if rejected:
+        lines += ["", "## Solutions CommonRoad's solution checker rejects", ""] + [f"- `{k}`: {e}" for k, e in rejected]
+    errors = [(k, r["error"]) for k, r in rows.items() if r.get("error")]
+    if errors:
+        lines += ["", "## Errors", ""] + [f"- `{k}`: {e}" for k, e in errors]
+    return "\n".join(lines) + "\n"
+
+
+def run_batch(files, out_dir: Path, *, workers: int | None = None, backend: str = "local", configure=None,
+              progress=None) -> dict:
+    """Drive every file into ``out_dir/<stem>/``, write ``summary.json`` and ``summary.md``, and
+    return the rows by file name (in the order given). ``progress(k, n, row)`` as each finishes."""
+    from ..io import write_json
+    from ..io.atomic import atomic_write_text
+    from ..sweep.runner import run_parallel
+
+    out_dir = Path(out_dir)
+    tasks = [BatchTask(str(f), str(out_dir / file_stem(f)), configure) for f in files]
+    got = run_parallel(drive_file, tasks, backend, workers, progress=progress)
+    by_name = {r["file"]: r for r in got}
+    rows = {Path(f).name: {k: v for k, v in by_name[Path(f).name].items() if k != "file"} for f in files}
+    write_json(out_dir / "summary.json", rows)
+    atomic_write_text(out_dir / "summary.md", summary_markdown(rows, f"{len(rows)} files, backend {backend}."))
+    return rows

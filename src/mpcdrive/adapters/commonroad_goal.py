@@ -1,0 +1,220 @@
+"""The drive a CommonRoad planning problem asks for: route, where to stop, and the speed.
+
+* **Route.** :func:`~.commonroad_route.find_route` to the goal lanelets; a goal without a
+  position follows the lane (:func:`~.commonroad_route.lane_forward`) far enough for the goal
+  time at the cruise speed plus the braking distance.
+* **Where to stop.** The reference speed is a curvature / friction limited
+  :class:`~mpcdrive.paths.speed_profile.SpeedProfile` that ends at 0 where the path ends. With a
+  goal region the path goes on along the lane past it and the car drives through it (a region
+  reaching the route's end holds the car when it stops there); when no cruise speed has the car
+  in the region inside the time window that way and the goal's speed range admits a stop, the path
+  ends in the middle of the route's stretch in the region instead (the car stops inside it, arriving
+  by the window's end).
+* **Speed.** The cruise speed (the profile's top speed) is the goal speed range's middle, else
+  the initial speed (:data:`DEFAULT_SPEED_MPS` for a car starting at rest); with a time window it
+  is the speed closest to that (inside the goal's speed range) whose profile is in the goal region
+  inside the window. When no speed does, the plan's note says so and the run shows what happens.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import commonroad_route as cr
+
+LAT_ACCEL_MPS2 = 4.0  # lateral acceleration the reference speed allows in bends
+COMFORT_ACCEL_MPS2 = 3.0  # largest forward / braking acceleration of the reference speed
+DEFAULT_SPEED_MPS = 8.0  # cruise speed of a car starting (nearly) at rest without a goal speed
+RUN_ON_S = 3.0  # the run ends this long after the reference stops (unless the goal time is later)
+V_SWITCH_MPS = 7.319  # CommonRoad Ford Escort: speed above which the acceleration limit falls as 1/v
+A_MAX_MPS2 = 11.5  # CommonRoad Ford Escort: largest acceleration
+_PLAN_DS_M = 0.25  # grid of the speed profiles compared while planning
+_MISSED = "no cruise speed"  # how the note of a plan that misses the goal window begins
+
+
+def accel_limit(v_max_mps: float) -> float:
+    """CommonRoad's longitudinal limit at speeds up to ``v_max_mps``, with a 10 % margin: a_max,
+    reduced to a_max v_switch / v above v_switch [m/s^2]."""
+    return 0.9 * A_MAX_MPS2 * min(1.0, V_SWITCH_MPS / max(v_max_mps, 1e-9))
+
+
+@dataclass(frozen=True)
+class DrivePlan:
+    """Route, reference polyline and speed of a planning problem (module docstring)."""
+
+    route: tuple[int, ...]
+    centerline: np.ndarray  # (M, 2) [m]
+    mode: str  # "stop in goal", "through goal", "follow lane"
+    v_cruise_mps: float
+    v_start_mps: float
+    accel_mps2: float
+    duration_s: float
+    goal_window_s: tuple[float, float] | None
+    goal_arc_m: tuple[float, float] | None  # the route's stretch inside the goal region [m]
+    arrival_s: float | None  # when the reference speed reaches the goal region [s]
+    note: str
+
+    def speed_profile_spec(self) -> dict:
+        """The ``controller.speed_profile`` entry of the scenario."""
+        return {"lateral_accel_max_mps2": LAT_ACCEL_MPS2, "accel_max_mps2": self.accel_mps2,
+                "decel_max_mps2": self.accel_mps2, "v_max_mps": self.v_cruise_mps,
+                "v_start_mps": self.v_start_mps, "v_end_mps": 0.0, "curvature_window_m": 0.3}
+
+
+def _profile(line: np.ndarray, v_cruise: float, v0: float, accel: float):
+    from ..paths import WaypointPath
+    from ..paths.speed_profile import SpeedProfile
+
+    path = WaypointPath(line, ds_m=0.2)
+    return path, SpeedProfile(path, LAT_ACCEL_MPS2, accel, accel, v_cruise, v_start_mps=v0, v_end_mps=0.0,
+                              ds_m=_PLAN_DS_M, curvature_window_m=0.3)
+
+
+def _cut(line: np.ndarray, s_end: float) -> np.ndarray:
+    s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(line, axis=0).T))]
+    k = int(np.searchsorted(s, s_end))
+    if k >= len(line):
+        return line
+    end = np.array([np.interp(s_end, s, line[:, 0]), np.interp(s_end, s, line[:, 1])])
+    return np.vstack([line[:k], end]) if s_end - s[k - 1] > 1e-3 else line[:k]
+
+
+def _candidates(v_want: float, lo: float, hi: float) -> list[float]:
+    """Cruise speeds to try, closest to ``v_want`` first, within [lo, hi]."""
+    grid = np.unique(np.r_[np.linspace(lo, hi, 25), np.clip(v_want, lo, hi)])
+    return sorted(grid.tolist(), key=lambda v: abs(v - v_want))
+
+
+def plan_drive(net, pp, p0: np.ndarray, yaw0: float, v0: float, dt_s: float) -> DrivePlan:
+    """The route and speed for planning problem ``pp`` from the pose (p0, yaw0) at ``v0``
+    (module docstring); ValueError when no route reaches the goal."""
+    goal = pp.goal.state_list[0]
+    steps = cr.bounds(getattr(goal, "time_step", None))
+    window = None if steps is None else (steps[0] * dt_s, steps[1] * dt_s)
+    v_goal = cr.bounds(getattr(goal, "velocity", None))
+    shapes = [sh for st in pp.goal.state_list for sh in cr.goal_shapes(st)]
+    v_want = (0.5 * (v_goal[0] + v_goal[1]) if v_goal is not None
+              else (v0 if v0 >= 1.0 else DEFAULT_SPEED_MPS))
+    v_lo, v_hi = (max(v_goal[0], 1.0), max(v_goal[1], 1.0)) if v_goal is not None else (1.0, max(v_want, v0) * 1.25)
+    accel = min(COMFORT_ACCEL_MPS2, accel_limit(max(v_hi, v0) + 2.0))
+    pb = _Problem(v0, accel, window, dt_s)
+    t_last = window[1] if window is not None and math.isfinite(window[1]) else 60.0
+    starts = cr.start_lanelets(net, p0, yaw0)
+    goals = cr.goal_lanelets(net, pp)
+    brake_m = max(v_hi, v0) ** 2 / (2 * accel) + 10.0
+    if not goals:
+        first = net.find_lanelet_by_id(starts[0])
+        route = cr.lane_forward(net, [starts[0]], max(v_want, v0) * t_last + brake_m,
+                                from_m=cr._arc_to(first, p0))
+        line = cr.route_centerline(net, route, p0, max(v_want, v0) * t_last + brake_m)
+        route = cr.trim_route(net, route, line)
+        return _finish(route, line, "follow lane", v_want, pb,
+                       note="time-only goal: follows the lane, stops at its end")
+    route = cr.find_route(net, starts, goals)
+    if route is None:
+        raise ValueError(f"no route from lanelet(s) {starts} to the goal lanelets {sorted(goals)}")
+    goal_xy = cr.point(shapes[0].center) if shapes else None
+    line = cr.route_centerline(net, route, p0, goal_xy=goal_xy)
+    # the route's stretch in the goal region (the centre line's point nearest a small region it misses)
+    arc = (cr.arc_inside(line, shapes) or cr.nearest_arc(line, shapes)) if shapes else None
+    if arc is None:  # a goal of lanelets only, or a region the centre line misses: stop at the route's end
+        return _finish(route, line, "stop at route end", v_want, pb,
+                       note="stops at the end of the goal lanelet")
+    ahead = cr.lane_forward(net, route, arc[1] + brake_m)
+    ctx = _GoalDrive(net, route, ahead, line, shapes, arc, p0, v_want, (v_lo, v_hi), v_goal, pb, goal_xy)
+    first = None
+    for way in (_through, _stop):
+        plan = way(ctx)
+        if plan is not None and not plan.note.startswith(_MISSED):
+            return plan
+        first = first or plan
+    return first
+
+
+@dataclass(frozen=True)
+class _GoalDrive:
+    """What the two ways of driving to a goal region compare."""
+
+    net: object
+    route: list
+    ahead: list  # the route continued along the lane past the goal region
+    line: np.ndarray  # the route's centre line [m]
+    shapes: list  # goal region shapes
+    arc: tuple  # the route's stretch in the region [m]
+    p0: np.ndarray
+    v_want: float
+    v_range: tuple
+    v_goal: tuple | None
+    pb: object
+    goal_xy: np.ndarray | None
+
+
+def _stop(g: _GoalDrive):
+    """Stop in the middle of the route's stretch in the goal region, arriving by the window's end."""
+    route, line, arc, v_want, v_range, pb = g.route, g.line, g.arc, g.v_want, g.v_range, g.pb
+    if g.v_goal is not None and g.v_goal[0] > 0.5:
+        return None
+    window = pb.window
+    stop_line = _cut(line, 0.5 * (arc[0] + arc[1]))
+    for v in _candidates(v_want, *v_range):
+        path, prof = _profile(stop_line, v, pb.v0, pb.accel)
+        t_in = float(prof.time_at(min(arc[0] + 1.0, path.length_m)))
+        if window is None or t_in <= window[1] - 0.1 * (window[1] - window[0]) - pb.dt_s:
+            return _finish(route, stop_line, "stop in goal", v, pb, arc=arc, arrival=t_in,
+                           note=f"stops in the goal region (reached at {t_in:.1f} s)")
+    return None
+
+
+def _through(g: _GoalDrive):
+    """Drive through the goal region along the lane to the route's end; in the region inside the
+    time window (a region reaching the route's end holds the stopped car from then on)."""
+    ahead, v_want, v_range, pb = g.ahead, g.v_want, g.v_range, g.pb
+    window = pb.window
+    line = cr.route_centerline(g.net, ahead, g.p0, goal_xy=g.goal_xy)
+    arc = cr.arc_inside(line, g.shapes) or cr.nearest_arc(line, g.shapes)
+    s_end = float(np.sum(np.hypot(*np.diff(line, axis=0).T)))
+    best = None
+    for v in _candidates(v_want, *v_range):
+        path, prof = _profile(line, v, pb.v0, pb.accel)
+        if arc[1] - arc[0] < 2.0:  # a small region (or the point nearest one): passed at one time
+            t_in = t_out = float(prof.time_at(0.5 * (arc[0] + arc[1])))
+        else:
+            t_in = float(prof.time_at(arc[0] + 1.0))
+            t_out = math.inf if arc[1] >= s_end - 1.0 else float(prof.time_at(arc[1] - 1.0))
+        margin = min(0.3, 0.25 * (window[1] - window[0])) if window is not None else 0.0
+        miss = 0.0 if window is None else max(window[0] + margin - min(t_out, 1e9), t_in + margin - window[1], 0.0)
+        if best is None or miss < best[2]:
+            best = (v, t_in, miss)
+        # in the region at some time inside the window (by a margin from its ends)
+        inside = window is None or (t_in <= window[1] - margin and t_out >= window[0] + margin)
+        if inside:
+            stay = " and stops in it" if math.isinf(t_out) else ""
+            return _finish(ahead, line, "through goal", v, pb, arc=arc, arrival=t_in,
+                           note=f"drives into the goal region at {t_in:.1f} s{stay}")
+    v, t_in, _ = best
+    return _finish(ahead, line, "through goal", v, pb, arc=arc, arrival=t_in,
+                   note=f"{_MISSED} in [{v_range[0]:.1f}, {v_range[1]:.1f}] m/s has the car in the goal region "
+                        f"in its time window [{window[0]:.1f}, {window[1]:.1f}] s: drives at {v:.1f} m/s "
+                        f"(in the region at {t_in:.1f} s)")
+
+
+@dataclass(frozen=True)
+class _Problem:
+    v0: float  # initial speed [m/s]
+    accel: float  # forward / braking acceleration of the reference speed [m/s^2]
+    window: tuple[float, float] | None  # goal time window [s]
+    dt_s: float
+
+
+def _finish(route, line, mode: str, v: float, pb: _Problem, *, arc=None, arrival=None, note="") -> DrivePlan:
+    path, prof = _profile(line, v, pb.v0, pb.accel)
+    duration = float(prof.time_at(path.length_m)) + RUN_ON_S
+    if pb.window is not None:
+        # through the goal window's first step (a car waiting in the region must be there then),
+        # never past its last
+        duration = min(max(duration, pb.window[0] + pb.dt_s), pb.window[1] + pb.dt_s)
+    return DrivePlan(tuple(route), line, mode, float(v), float(pb.v0), float(pb.accel), float(duration),
+                     pb.window, arc, arrival, note)

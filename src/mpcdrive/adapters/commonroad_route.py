@@ -1,0 +1,333 @@
+"""Routes through a CommonRoad lanelet network and their reference polylines.
+
+* **Values.** CommonRoad states may hold intervals (``Interval``, ``AngleInterval``) or shapes
+  (an uncertain position) where a number is usual: :func:`scalar` reads an interval as its middle,
+  :func:`point` a shape as its centre.
+* **Start.** Every lanelet holding the initial position whose direction there is within 90 deg
+  of the initial heading, plus -- when the start lies within :data:`FORK_M` of such a lanelet's
+  beginning -- the other successors of its predecessors (the car stands at a fork: which branch it
+  takes is the route's choice); the nearest lanelet when none holds the position.
+* **Goal.** The goal's lanelets, else the lanelets overlapping its position shapes; none for a
+  goal without a position (time, speed or orientation only).
+* **Search.** Dijkstra over successors (cost: the lanelet's length) and same-direction
+  neighbours (cost :data:`LANE_CHANGE_COST_M`) from every start lanelet to any goal lanelet.
+* **Lane forward.** Without goal lanelets, and past the goal when the car must drive on through
+  it, the route follows the lane: a lanelet's only successor, else the intersection's straight
+  successor, else the successor whose neighbours continue the lanelet's neighbours; it stops at a
+  dead end or where the network leaves the choice open (no invented turns).
+* **Centreline.** The lanelets' centre polylines joined (a lane change blends from one centre
+  line to the other over the last :data:`LANE_CHANGE_M` of the lanelet it leaves, or before the
+  goal when that lies beside it), resampled
+  every metre, smoothed with a Gaussian of :data:`SMOOTH_SIGMA_M` along the arc length (lanelet
+  vertices jitter by centimetres, which would be curvature spikes of the spline through them) and
+  cut at the route's end: no extension past it.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+
+import numpy as np
+
+FORK_M = 5.0
+LANE_CHANGE_COST_M = 20.0
+LANE_CHANGE_M = 40.0
+SMOOTH_SIGMA_M = 1.5
+RESAMPLE_M = 1.0
+
+
+# -- values ---------------------------------------------------------------------------------------
+def scalar(v) -> float | None:
+    """A CommonRoad state value as a number: an interval's middle, else the value; None stays."""
+    if v is None:
+        return None
+    if hasattr(v, "start") and hasattr(v, "end"):
+        return 0.5 * (float(v.start) + float(v.end))
+    return float(v)
+
+
+def bounds(v) -> tuple[float, float] | None:
+    """(low, high) of an interval-valued field, (v, v) of a number, None when absent."""
+    if v is None:
+        return None
+    if hasattr(v, "start") and hasattr(v, "end"):
+        return float(v.start), float(v.end)
+    return float(v), float(v)
+
+
+def point(p) -> np.ndarray:
+    """A CommonRoad position as (2,) [m]: a shape's centre (an uncertain position), else the point."""
+    if hasattr(p, "center"):
+        return np.asarray(p.center, float)
+    return np.asarray(p, float).reshape(2)
+
+
+def angle_diff(a: float, b: float) -> float:
+    """|a - b| wrapped to [0, pi] [rad]."""
+    return abs((a - b + math.pi) % (2 * math.pi) - math.pi)
+
+
+# -- lanelets -------------------------------------------------------------------------------------
+def heading_at(lanelet, p: np.ndarray) -> float:
+    """Direction [rad] of the lanelet's centre line at the vertex nearest ``p``."""
+    cv = lanelet.center_vertices
+    i = min(int(np.argmin(np.hypot(*(cv - p).T))), len(cv) - 2)
+    d = cv[i + 1] - cv[i]
+    return math.atan2(d[1], d[0])
+
+
+def _arc_to(lanelet, p: np.ndarray) -> float:
+    """Arc length [m] of the centre vertex nearest ``p`` from the lanelet's start."""
+    cv = lanelet.center_vertices
+    return float(lanelet.distance[int(np.argmin(np.hypot(*(cv - p).T)))])
+
+
+def start_lanelets(net, p0: np.ndarray, yaw0: float) -> list[int]:
+    """Lanelets the route may start on (see the module docstring); ValueError when none is near."""
+    holding = [lid for lst in net.find_lanelet_by_position([p0]) for lid in lst]
+    along = [lid for lid in holding
+             if angle_diff(heading_at(net.find_lanelet_by_id(lid), p0), yaw0) < math.pi / 2]
+    if not along:
+        near = []
+        for ll in net.lanelets:
+            d = float(np.min(np.hypot(*(ll.center_vertices - p0).T)))
+            if d < 3.0 and angle_diff(heading_at(ll, p0), yaw0) < math.pi / 2:
+                near.append((d, ll.lanelet_id))
+        if not near:
+            raise ValueError(f"initial position ({p0[0]:.2f}, {p0[1]:.2f}) m is on no lanelet driving "
+                             "in the initial heading")
+        along = [min(near)[1]]
+    out = list(along)
+    for lid in along:
+        ll = net.find_lanelet_by_id(lid)
+        if _arc_to(ll, p0) < FORK_M:
+            for pre in ll.predecessor:
+                out += [s for s in net.find_lanelet_by_id(pre).successor if s not in out]
+    # the lanelets holding the start best aligned first (ties in the search go to them)
+    return sorted(out, key=lambda i: (i not in along,
+                                      angle_diff(heading_at(net.find_lanelet_by_id(i), p0), yaw0)))
+
+
+def goal_shapes(goal_state) -> list:
+    """The shapes of a goal state's position (a ShapeGroup's members), [] without a position."""
+    pos = getattr(goal_state, "position", None)
+    if pos is None:
+        return []
+    return list(getattr(pos, "shapes", None) or [pos])
+
+
+def goal_lanelets(net, pp) -> set[int]:
+    """The goal's lanelets, else those overlapping its position shapes (empty: no position)."""
+    ids: set[int] = set()
+    if pp.goal.lanelets_of_goal_position:
+        for v in pp.goal.lanelets_of_goal_position.values():
+            ids.update(v)
+        return ids
+    for st in pp.goal.state_list:
+        for shape in goal_shapes(st):
+            ids.update(net.find_lanelet_by_shape(shape))
+    return ids
+
+
+def _edges(net, lid: int):
+    ll = net.find_lanelet_by_id(lid)
+    for s in ll.successor:
+        yield s, float(ll.distance[-1])
+    if ll.adj_left is not None and ll.adj_left_same_direction:
+        yield ll.adj_left, LANE_CHANGE_COST_M
+    if ll.adj_right is not None and ll.adj_right_same_direction:
+        yield ll.adj_right, LANE_CHANGE_COST_M
+
+
+def find_route(net, starts, goals: set[int]) -> list[int] | None:
+    """Cheapest lanelet sequence from any of ``starts`` to any of ``goals`` (Dijkstra over
+    successors and same-direction neighbours), or None when no goal lanelet is reachable."""
+    best: dict[int, float] = {}
+    prev: dict[int, int | None] = {}
+    heap = []
+    for k, s in enumerate(starts):
+        heapq.heappush(heap, (0.0, k, s, None))
+    counter = len(heap)
+    while heap:
+        cost, _, lid, parent = heapq.heappop(heap)
+        if lid in best:
+            continue
+        best[lid] = cost
+        prev[lid] = parent
+        if lid in goals:
+            route = [lid]
+            while prev[route[-1]] is not None:
+                route.append(prev[route[-1]])
+            return route[::-1]
+        for n, c in _edges(net, lid):
+            if n not in best:
+                counter += 1
+                heapq.heappush(heap, (cost + c, counter, n, lid))
+    return None
+
+
+def _straight_successors(net, lid: int) -> set[int]:
+    out: set[int] = set()
+    for inter in getattr(net, "intersections", []) or []:
+        for inc in inter.incomings:
+            if lid in inc.incoming_lanelets:
+                out |= set(inc.successors_straight)
+    return out
+
+
+def _continues_neighbours(net, ll, succ_id: int) -> bool:
+    """The successor lies beside the successors of the lanelet's own neighbours (the lane goes on
+    as part of the same road, not as a branch leaving it)."""
+    s = net.find_lanelet_by_id(succ_id)
+    for mine, theirs in ((ll.adj_left, s.adj_left), (ll.adj_right, s.adj_right)):
+        if mine is not None and theirs is not None and theirs in net.find_lanelet_by_id(mine).successor:
+            return True
+    return False
+
+
+def next_in_lane(net, lid: int, visited) -> int | None:
+    """The successor continuing lanelet ``lid``'s lane, None at a dead end or an open choice."""
+    ll = net.find_lanelet_by_id(lid)
+    succ = [s for s in ll.successor if s not in visited]
+    if len(succ) <= 1:
+        return succ[0] if succ else None
+    straight = [s for s in succ if s in _straight_successors(net, lid)]
+    if len(straight) == 1:
+        return straight[0]
+    cont = [s for s in succ if _continues_neighbours(net, ll, s)]
+    if len(cont) == 1:
+        return cont[0]
+    return None
+
+
+def lane_forward(net, route: list[int], length_m: float, from_m: float = 0.0) -> list[int]:
+    """``route`` continued along its last lanelet's lane until it is ``length_m`` long past
+    ``from_m`` (arc length along the route's first lanelet), a dead end or an open choice."""
+    route = list(route)
+    total = sum(float(net.find_lanelet_by_id(i).distance[-1]) for i in route) - from_m
+    while total < length_m:
+        nxt = next_in_lane(net, route[-1], route)
+        if nxt is None:
+            break
+        route.append(nxt)
+        total += float(net.find_lanelet_by_id(nxt).distance[-1])
+    return route
+
+
+# -- centre line ----------------------------------------------------------------------------------
+def _resample(line: np.ndarray, ds_m: float) -> np.ndarray:
+    line = line[np.r_[True, np.hypot(*np.diff(line, axis=0).T) > 1e-6]]
+    s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(line, axis=0).T))]
+    s_new = np.linspace(0.0, s[-1], max(2, int(math.ceil(s[-1] / ds_m)) + 1))
+    return np.column_stack([np.interp(s_new, s, line[:, 0]), np.interp(s_new, s, line[:, 1])])
+
+
+def _project_onto(poly: np.ndarray, p: np.ndarray) -> np.ndarray:
+    a, b = poly[:-1], poly[1:]
+    d = b - a
+    t = np.clip(np.einsum("ij,ij->i", p - a, d) / np.maximum(np.einsum("ij,ij->i", d, d), 1e-12), 0.0, 1.0)
+    q = a + t[:, None] * d
+    return q[int(np.argmin(np.hypot(*(q - p).T)))]
+
+
+def smooth(line: np.ndarray, sigma_m: float = SMOOTH_SIGMA_M, ds_m: float = RESAMPLE_M) -> np.ndarray:
+    """``line`` resampled every ``ds_m`` and smoothed by a Gaussian of ``sigma_m`` along the arc
+    length; the ends stay put (the line is mirrored through them, which keeps a straight end
+    straight)."""
+    pts = _resample(np.asarray(line, float), ds_m)
+    half = int(math.ceil(3 * sigma_m / ds_m))
+    if len(pts) < 3 or half < 1:
+        return pts
+    h = min(half, len(pts) - 1)
+    head = 2 * pts[0] - pts[h:0:-1]
+    tail = 2 * pts[-1] - pts[-2:-h - 2:-1]
+    padded = np.vstack([head, pts, tail])
+    k = np.arange(-half, half + 1) * ds_m
+    w = np.exp(-0.5 * (k / sigma_m) ** 2)
+    w /= w.sum()
+    out = np.empty_like(pts)
+    for c in range(2):
+        col = np.pad(padded[:, c], (half - h, half - h), mode="edge")
+        out[:, c] = np.convolve(col, w, mode="valid")
+    out[0], out[-1] = pts[0], pts[-1]
+    return out
+
+
+def route_polyline(net, route: list[int], start_xy: np.ndarray, goal_xy: np.ndarray | None = None) -> np.ndarray:
+    """The route's centre line (M, 2) [m] from one metre behind ``start_xy``, unsmoothed:
+    successors joined end to start; a lane change stays on the lanelet it leaves as long as it
+    can and blends to the neighbour over the last :data:`LANE_CHANGE_M` of it -- done
+    :data:`LANE_CHANGE_M` / 2 before the point abreast of ``goal_xy`` when the goal lies ahead on
+    that stretch, and begun no earlier than the start -- then goes on along the neighbour from
+    the point abreast."""
+    pieces: list[np.ndarray] = []
+    for k, lid in enumerate(route):
+        cv = _resample(np.asarray(net.find_lanelet_by_id(lid).center_vertices, float), RESAMPLE_M)
+        if k == 0:
+            j = int(np.argmin(np.hypot(*(cv - start_xy).T)))
+            cv = cv[max(j - 1, 0):]
+        elif lid not in net.find_lanelet_by_id(route[k - 1]).successor:
+            prev = pieces.pop()
+            s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(prev, axis=0).T))]
+            done = s[-1]
+            if goal_xy is not None:
+                g = float(s[int(np.argmin(np.hypot(*(prev - goal_xy).T)))])
+                if g < s[-1] - 1.0:  # the goal is abreast of this lanelet: be across before it
+                    done = min(done, g - 0.5 * LANE_CHANGE_M)
+            done = max(done, min(LANE_CHANGE_M, s[-1]))
+            begin = max(done - LANE_CHANGE_M, 0.0)
+            n = int(np.searchsorted(s, done, side="right"))
+            w = 0.5 - 0.5 * np.cos(math.pi * np.clip((s[:n] - begin) / max(done - begin, 1e-9), 0.0, 1.0))
+            other = np.array([_project_onto(cv, p) for p in prev[:n]])
+            pieces.append((1 - w)[:, None] * prev[:n] + w[:, None] * other)
+            j = int(np.argmin(np.hypot(*(cv - pieces[-1][-1]).T)))
+            cv = cv[min(j + 1, len(cv)):]
+            if len(cv) == 0:
+                continue
+        pieces.append(cv)
+    return np.vstack(pieces)
+
+
+def route_centerline(net, route: list[int], start_xy: np.ndarray, length_m: float | None = None,
+                     goal_xy: np.ndarray | None = None) -> np.ndarray:
+    """Smoothed centre polyline (M, 2) [m] of a route from one metre behind the start to the
+    route's end, or ``length_m`` past the start when shorter; lane changes done before
+    ``goal_xy`` (module docstring)."""
+    line = smooth(route_polyline(net, route, start_xy, goal_xy))
+    if length_m is not None:
+        s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(line, axis=0).T))]
+        line = line[: max(2, int(np.searchsorted(s, length_m + RESAMPLE_M)) + 1)]
+    return line
+
+
+def trim_route(net, route: list[int], line: np.ndarray) -> list[int]:
+    """``route`` without the lanelets past the end of ``line`` (a centre line cut short)."""
+    from shapely.geometry import Point
+
+    end = Point(*line[-1])
+    route = list(route)
+    while len(route) > 1 and net.find_lanelet_by_id(route[-1]).polygon.shapely_object.distance(end) > 1e-6:
+        route.pop()
+    return route
+
+
+def nearest_arc(line: np.ndarray, shapes) -> tuple[float, float] | None:
+    """The arc length [m] along ``line`` closest to the shapes' centres, as a (s, s) stretch;
+    None without shapes."""
+    if not shapes:
+        return None
+    s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(line, axis=0).T))]
+    best = min((float(np.min(np.hypot(*(line - point(sh.center)).T))), int(np.argmin(np.hypot(*(line - point(sh.center)).T))))
+               for sh in shapes)
+    return float(s[best[1]]), float(s[best[1]])
+
+
+def arc_inside(line: np.ndarray, shapes) -> tuple[float, float] | None:
+    """(first, last) arc length [m] along ``line`` of the points inside any of ``shapes``, or None."""
+    s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(line, axis=0).T))]
+    inside = np.array([any(sh.contains_point(p) for sh in shapes) for p in line])
+    if not inside.any():
+        return None
+    idx = np.flatnonzero(inside)
+    return float(s[idx[0]]), float(s[idx[-1]])

@@ -1,0 +1,54 @@
+"""One closed-loop run written into a directory: the pieces every command that drives a scenario
+shares (``mpcdrive run``, ``reproduce``, ``compare-avoidance``, ``commonroad``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class BuildError(ValueError):
+    """The scenario could not be built into an experiment (bad input)."""
+
+
+def run_into(spec, out_dir: Path, progress=None, source: str | None = None, extra_outputs=None):
+    """Run ``spec`` and write its files into ``out_dir``: ``trajectory.csv``, ``metrics.json``,
+    ``scenario.yaml``, the figures and the interactive ``report.html`` (``extra_outputs(result,
+    out_dir)`` writes more and returns entries merged into the metrics, and under ``figures`` the
+    names of figures it wrote). ``progress`` is a
+    context manager factory ``progress(label, steps)`` yielding a step callback (or None).
+    Returns (result, metrics, figures, footprint); BuildError when the scenario does not build."""
+    from contextlib import nullcontext
+
+    from .io import write_json, write_trajectory_csv
+    from .io.atomic import atomic_write_text
+    from .plots import write_run_figures
+    from .report import write_run_html
+    from .scenarios import build_experiment, dump_scenario, run_experiment
+    from .sim import apply_goal_region, compute_metrics
+
+    out_dir = Path(out_dir).resolve()  # figure paths relative to the working directory would not embed
+    try:
+        exp = build_experiment(spec)
+    except ValueError as e:
+        raise BuildError(f"{source or spec.id}: {e}") from None
+    with (progress(spec.id, exp.steps) if progress is not None else nullcontext()) as cb:
+        result = run_experiment(exp, progress=cb)
+    metrics = compute_metrics(result, exp.footprint)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_trajectory_csv(result, out_dir / "trajectory.csv")
+    write_json(out_dir / "metrics.json", metrics)
+    atomic_write_text(out_dir / "scenario.yaml", dump_scenario(spec))
+    extra_figures = []
+    if extra_outputs is not None:
+        extra = dict(extra_outputs(result, out_dir))
+        extra_figures = [Path(out_dir) / f for f in extra.pop("figures", [])]
+        metrics.update(extra)
+        cr = metrics.get("commonroad")
+        if cr is not None:  # the goal is the planning problem's, the checker's verdicts count too
+            metrics = apply_goal_region(metrics, cr["goal_reached"], collision_free=cr["collision_free"],
+                                        road_compliant=cr["road_compliant"])
+        write_json(out_dir / "metrics.json", metrics)
+    figures = list(write_run_figures(result, out_dir)) + extra_figures
+    write_run_html(out_dir, result, metrics, figures, exp.footprint, run_id=spec.id,
+                   description=spec.description)
+    return result, metrics, figures, exp.footprint
