@@ -199,14 +199,10 @@ class Avoidance:
         self._e_ref = np.zeros(N1)
 
     # -- helpers ----------------------------------------------------------------------
-    def relevant(self, t_s: float, xy: np.ndarray, s_m: float | None = None) -> list[int]:
+    def relevant(self, t_s: float, xy: np.ndarray) -> list[int]:
         """Indices of the obstacles a step at time ``t_s`` [s] from position ``xy`` [m] considers:
         those present at some time of the horizon and within the influence distance (centre
-        distance minus bounding radius), nearest first, at most max_obstacles. With the car's arc
-        length ``s_m`` [m] and a constraint formulation (``hard``, ``corridor``), an obstacle that
-        follows the car (wholly behind its rear, in its lane: :meth:`_following`) is not avoided: it
-        is the follower's to keep its distance, and swerving or speeding away from it is what makes
-        a car unpredictable. (The cost formulations, the paper's, keep every obstacle in reach.)"""
+        distance minus bounding radius), nearest first, at most max_obstacles."""
         reach = self.config.influence_m
         t_end = t_s + self.N * self.dt_s
         d = []
@@ -216,8 +212,6 @@ class Avoidance:
             ox, oy, _ = ob.pose_at(t_s)
             dist = math.hypot(ox - xy[0], oy - xy[1]) - ob.shape.bounding_radius_m
             if dist > reach:
-                continue
-            if s_m is not None and self.config.uses_rows and self._following(ob, t_s, xy, s_m):
                 continue
             d.append((dist, j))
         d.sort()
@@ -283,7 +277,11 @@ class Avoidance:
         x : (nx,) measured state; Xlin : (N+1, nx) linearization trajectory (row k for x_k);
         s_arr : (N+1,) horizon reference arc lengths [m]; memory : passing sides, updated."""
         cfg = self.config
-        rel = self.relevant(t_s, x[:2], float(s_arr[0]))
+        rel = self.relevant(t_s, x[:2])
+        # cars following in the lane: kept behind by a longitudinal row only (never swerved or
+        # braked for)
+        following = {j for j in rel if cfg.uses_rows and self._following(self.obstacles[j], t_s, x[:2],
+                                                                             float(s_arr[0]))}
         sides: dict[int, int] = {}
         boxes: dict[int, list[FrenetBox]] = {}
         centers: dict[int, np.ndarray] = {}
@@ -301,11 +299,12 @@ class Avoidance:
         present = {j: np.broadcast_to(self.obstacles[j].present(times), (self.N,)) for j in rel}
         rows_a = rows_b = lo = hi = H = g = e_ref = None
         if cfg.detour == "trapezoid":
-            e_ref = self._detour(s_arr, boxes, sides)
+            e_ref = self._detour(s_arr, {j: b for j, b in boxes.items() if j not in following}, sides)
         if cfg.formulation == "hard":
-            rows_a, rows_b = self._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present)
+            rows_a, rows_b = self._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present, following)
         elif cfg.formulation == "corridor":
-            lo, hi, rows_a, rows_b = self._corridor(Xlin, s_arr, rel, boxes, sides, present)
+            lo, hi, rows_a, rows_b = self._corridor(Xlin, s_arr, [j for j in rel if j not in following], boxes,
+                                                    sides, present)
         else:
             H, g = self._cost(Xlin, rel, boxes, centers, present)
         s_max = None if cfg.follow_gap_s is None else self._stop_lines(s_arr, rel, boxes, sides, gap_s=cfg.follow_gap_s)
@@ -382,7 +381,16 @@ class Avoidance:
         t = np.column_stack([np.cos(h), np.sin(h)])
         return t, self.path.position(s_bar) + t * (s_lo - s_bar)[:, None]
 
-    def _hard_rows(self, Xlin, s_arr, rel, boxes, centers, world, sides, present):
+    def _ahead_plane(self, s_hi: np.ndarray, s_at: np.ndarray, clearance: float) -> tuple[np.ndarray, np.ndarray]:
+        """The keep-ahead constraint ``s(p) >= s_hi + clearance`` linearized at arc length
+        ``max(s_at, s_hi + clearance)``, the mirror of :meth:`_stop_plane`: unit tangents t (K, 2)
+        and points q (K, 2) with the constraint ``t . p >= t . q + clearance``."""
+        s_bar = np.maximum(s_at, s_hi + clearance)
+        h = np.asarray(self.path.heading(s_bar), float)
+        t = np.column_stack([np.cos(h), np.sin(h)])
+        return t, self.path.position(s_bar) + t * (s_hi - s_bar)[:, None]
+
+    def _hard_rows(self, Xlin, s_arr, rel, boxes, centers, world, sides, present, following=frozenset()):
         a, b = self._a, self._b
         a[:] = 0.0
         b[:] = -np.inf
@@ -420,6 +428,13 @@ class Avoidance:
                 # linearization passes it)
                 tb, q = self._stop_plane(np.tile(s_lo, nd), (s_lin + off).ravel(), r_need)
                 n = -tb.reshape(nd, -1, 2)
+                q = q.reshape(nd, -1, 2)
+                active[:] = True
+            elif j in following:
+                # keep ahead of a car following in the lane: the disc's arc length at least its far
+                # end plus the clearance; a longitudinal row only (no swerving, no braking for it)
+                tb, q = self._ahead_plane(np.tile(s_hi, nd), (s_lin + off).ravel(), r_need)
+                n = tb.reshape(nd, -1, 2)
                 q = q.reshape(nd, -1, 2)
                 active[:] = True
             active &= present[j][None, :]  # no row at the steps the obstacle does not exist
