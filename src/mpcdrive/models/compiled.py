@@ -36,7 +36,6 @@ from .dynamic import (
     DYNAMIC_A_ENTRIES,
     DYNAMIC_B_ENTRIES,
     STEADY_ACCEL_TOL_MPS2,
-    STEADY_BISECTION_ITERATIONS,
     STEADY_SECANT_ITERATIONS,
     DynamicBicycle,
     dynamic_parameters,
@@ -395,23 +394,6 @@ def _solve_given_accel(mp, kappa, v, a, beta, delta):
     return n0 / math.cos(delta) * Fzf * math.sin(delta) / m - r * vy, beta, delta
 
 
-@njit(cache=True)
-def _bisect_accel(mp, kappa, v):
-    """``DynamicBicycle._bisect_accel`` at one point: (a [m/s^2], beta [rad], delta [rad])."""
-    L = mp[_LF] + mp[_LR]
-    lo = -mp[_MU] * mp[_G]
-    hi = mp[_MU] * mp[_G]
-    for _ in range(STEADY_BISECTION_ITERATIONS):
-        mid = 0.5 * (lo + hi)
-        if _solve_given_accel(mp, kappa, v, mid, 0.0, L * kappa)[0] - mid > 0.0:
-            lo = mid
-        else:
-            hi = mid
-    a = 0.5 * (lo + hi)
-    _, beta, delta = _solve_given_accel(mp, kappa, v, a, 0.0, L * kappa)
-    return a, beta, delta
-
-
 # columns of the work array of dynamic_steady_states
 _SD, _SB, _SA0, _SG0, _SA1, _SG1, _SAN, _SLEAD = range(8)
 
@@ -433,7 +415,6 @@ def dynamic_steady_states(mp, refs, v, n, ws):
             ws[k, _SA1] = g0
             ws[k, _SB] = beta
             ws[k, _SD] = delta
-    converged = False
     for _ in range(STEADY_SECANT_ITERATIONS):
         converged = True
         for k in range(n):
@@ -444,8 +425,7 @@ def dynamic_steady_states(mp, refs, v, n, ws):
             ws[k, _SB] = beta
             ws[k, _SD] = delta
             res0, res1 = g0 - a0, g1 - a1
-            # m/s^2 (NaN: not converged, as numpy's max)
-            converged = converged and abs(res1) < STEADY_ACCEL_TOL_MPS2
+            converged = converged and abs(res1) < STEADY_ACCEL_TOL_MPS2  # (NaN: not converged, as numpy's max)
             den = res1 - res0
             ws[k, _SG1] = g1
             ws[k, _SAN] = a1 - res1 * (a1 - a0) / den if abs(den) > 1e-14 else g1
@@ -456,13 +436,6 @@ def dynamic_steady_states(mp, refs, v, n, ws):
                 ws[k, _SA0] = ws[k, _SA1]
                 ws[k, _SG0] = ws[k, _SG1]
                 ws[k, _SA1] = ws[k, _SAN]
-    if not converged:  # the points whose last residual is not small: bisection, as numpy's
-        for k in range(n):
-            if ws[k, _SLEAD] != 0.0 and not abs(ws[k, _SG0] - ws[k, _SA0]) < STEADY_ACCEL_TOL_MPS2:
-                a, beta, delta = _bisect_accel(mp, refs[k, 3], v[k])
-                ws[k, _SA1] = a
-                ws[k, _SB] = beta
-                ws[k, _SD] = delta
     lr = mp[_LR]
     for k in range(n):
         if ws[k, _SLEAD] == 0.0:

@@ -201,13 +201,13 @@ def _smoothstep(vx, lo, hi, ns):
 # The equations are module functions of a parameter sequence P (see dynamic_parameters) and a
 # math namespace ns, so that numpy batches, CasADi and the compiled controller (numba, with numpy
 # as ns) run the same definition.
-#: secant iteration of the steady cornering state: it stops when every point's acceleration
-#: residual |G(a) - a| is below STEADY_ACCEL_TOL_MPS2 [m/s^2]; points that have not converged after
-#: STEADY_SECANT_ITERATIONS are solved by STEADY_BISECTION_ITERATIONS halvings of [-mu g, mu g]
-#: (a bracket of 2 mu g / 2**60, below rounding). models.compiled runs the same iteration.
+#: secant iteration of the steady cornering state (``steady_state_full``, and models.compiled's
+#: copy): it stops when every point's acceleration residual |G(a) - a| is below
+#: STEADY_ACCEL_TOL_MPS2 [m/s^2], or after STEADY_SECANT_ITERATIONS. Near the grip limit of the
+#: Pacejka tire it can run out of iterations with a large residual: there the result is where the
+#: iteration stopped, not a fixed point.
 STEADY_ACCEL_TOL_MPS2 = 1e-8
 STEADY_SECANT_ITERATIONS = 12
-STEADY_BISECTION_ITERATIONS = 60
 
 _P_LF, _P_LR, _P_M, _P_IZ, _P_MU, _P_CSF, _P_CSR, _P_H, _P_C, _P_E, _P_VLO, _P_VHI, _P_TAU, _P_G, \
     _P_PACEJKA = range(15)
@@ -474,13 +474,20 @@ class DynamicBicycle:
         return _pacejka_inverse(y, B, p.pacejka_c, p.pacejka_e)
 
     def steady_state_full(self, kappa, v_mps):
+        """Steady cornering (steering, slip, drive acceleration); see :meth:`steady_state_residual`."""
+        delta, beta, a, _ = self.steady_state_residual(kappa, v_mps)
+        return delta, beta, a
+
+    def steady_state_residual(self, kappa, v_mps):
         """Steady cornering of the centre of gravity on curvature kappa [1/m] at speed v [m/s].
 
-        Returns ``(delta [rad], beta [rad], accel [m/s^2])``: steering, body slip angle (velocity
-        direction minus yaw; the yaw trails the path heading by beta) and the drive acceleration
-        that holds the speed (it balances the drag of the front lateral force). Beyond the tires'
-        grip the force demand is clipped at the peak (no steady state exists there). At low speed
-        the result blends into the kinematic steady state like the model does.
+        Returns ``(delta [rad], beta [rad], accel [m/s^2], residual [m/s^2])``: steering, body slip
+        angle (velocity direction minus yaw; the yaw trails the path heading by beta), the drive
+        acceleration that holds the speed (it balances the drag of the front lateral force) and
+        |G(a) - a| of the secant's last evaluation (below STEADY_ACCEL_TOL_MPS2 where the iteration
+        converged). Beyond the tires' grip the force demand is clipped at the peak (no steady state
+        exists there). At low speed the result blends into the kinematic steady state like the
+        model does.
         """
         p = self.params
         kappa = np.asarray(kappa, float)
@@ -517,44 +524,22 @@ class DynamicBicycle:
         a0 = np.zeros_like(kappa)
         g0, beta, delta = solve_given_accel(a0, beta, delta)
         a1 = g0
-        converged = False
         for _ in range(STEADY_SECANT_ITERATIONS):
             g1, beta, delta = solve_given_accel(a1, beta, delta)
             res0, res1 = g0 - a0, g1 - a1
-            if np.max(np.abs(res1), initial=0.0) < STEADY_ACCEL_TOL_MPS2:
-                converged = True
+            if np.max(np.abs(res1), initial=0.0) < STEADY_ACCEL_TOL_MPS2:  # steering then exact to ~1e-10 rad
                 break
             den = res1 - res0
             ok = np.abs(den) > 1e-14
             a_next = np.where(ok, a1 - res1 * (a1 - a0) / np.where(ok, den, 1.0), g1)
             a0, g0, a1 = a1, g1, a_next
         a = a1
-        if not converged:
-            # near and beyond the grip the secant can wander: those points are solved by bisection
-            bad = ~(np.abs(res1) < STEADY_ACCEL_TOL_MPS2)
-            a_b, beta_b, delta_b = self._bisect_accel(solve_given_accel, kappa, L)
-            a, beta, delta = np.where(bad, a_b, a), np.where(bad, beta_b, beta), np.where(bad, delta_b, delta)
+        residual = np.abs(res1)
         # kinematic steady state and the blend
         beta_k = np.arcsin(np.clip(lr * kappa, -0.999, 0.999))
         delta_k = np.arctan(np.tan(beta_k) / p.lq)
         w = self.blend_weight(v * np.cos(beta))
-        return w * delta + (1 - w) * delta_k, w * beta + (1 - w) * beta_k, w * a
-
-    def _bisect_accel(self, solve_given_accel, kappa, L):
-        """(a, beta, delta) from a bisection on h(a) = G(a) - a over a in [-mu g, mu g], each G
-        evaluated from the cold start (beta = 0, delta = L kappa), so that h is a function of a alone;
-        without a sign change (no steady state inside the grip) the bracket closes on an end."""
-        p = self.params
-        lo = np.full_like(kappa, -p.friction * p.g_mps2)
-        hi = np.full_like(kappa, p.friction * p.g_mps2)
-        beta0, delta0 = np.zeros_like(kappa), L * kappa
-        for _ in range(STEADY_BISECTION_ITERATIONS):
-            mid = 0.5 * (lo + hi)
-            up = solve_given_accel(mid, beta0, delta0)[0] - mid > 0.0
-            lo, hi = np.where(up, mid, lo), np.where(up, hi, mid)
-        a = 0.5 * (lo + hi)
-        _, beta, delta = solve_given_accel(a, beta0, delta0)
-        return a, beta, delta
+        return w * delta + (1 - w) * delta_k, w * beta + (1 - w) * beta_k, w * a, residual
 
     def steady_state(self, kappa, v_mps=None):
         """(steering [rad], body slip angle [rad]) of steady cornering; see :meth:`steady_state_full`."""
