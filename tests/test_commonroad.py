@@ -431,6 +431,27 @@ def test_valid_solution_accepts_the_written_solution(name, tmp_path):
     assert ok
 
 
+def test_a_drive_on_the_st_plant_is_written_as_an_st_solution_commonroad_accepts(tmp_path):
+    """On the ST plant the car slips: rebuilt as KS states its drive failed CommonRoad's KS
+    feasibility check on 5 of the 14 files. The solution is the plant's own ST trajectory,
+    declared as ST, checked and accepted as such."""
+    from commonroad.common.solution import CommonRoadSolutionReader, VehicleModel
+    from commonroad_dc.feasibility.solution_checker import valid_solution
+
+    from mpcdrive.adapters.commonroad import solution_model, with_vehicle
+
+    imp = with_vehicle(load_commonroad(DIR / "FRA_Anglet-1_1_T-1.xml"), "bmw_320i", "st")
+    res = run_experiment(build_experiment(imp.spec))
+    assert solution_model(imp, res) == "ST" and res.meta["plant_states"].shape == (len(res.t_s), 7)
+    rep = check_drive(imp, res)
+    assert rep.passed, rep.line()
+    path = write_solution(imp, res, tmp_path, rep.goal_step)
+    sol = CommonRoadSolutionReader.open(str(path))
+    assert sol.planning_problem_solutions[0].vehicle_model == VehicleModel.ST
+    ok, _ = valid_solution(imp.scenario, imp.problems, sol)
+    assert ok
+
+
 # -- the batch command ------------------------------------------------------------------------------
 @pytest.mark.slow
 def test_batch_writes_a_row_per_file_and_survives_a_broken_one(tmp_path):

@@ -88,6 +88,7 @@ class CommonRoadImport:
                                "collision_free": report.collision_free, "road_compliant": report.road_compliant,
                                "ks_feasible": report.feasible, "states_checked": report.steps_checked,
                                "passed": passed, "solution": path.name, "vehicle_type": self.vehicle_type,
+                               "vehicle_model": solution_model(self, result),
                                "solution_valid": valid, "solution_check": why},
                 "figures": [fig.name]}
 
@@ -242,14 +243,41 @@ def solution_trajectory(imp: CommonRoadImport, result, last_step: int | None = N
     return Trajectory(states[0].time_step, states)
 
 
+def solution_model(imp: CommonRoadImport, result) -> str:
+    """``"ST"`` when the drive ran on CommonRoad's single-track plant and logged its states (the
+    solution is then the plant's own ST trajectory), else ``"KS"``."""
+    states = result.meta.get("plant_states")
+    if imp.spec.plant.model == "commonroad_st" and states is not None and len(states) == len(result.t_s):
+        return "ST"
+    return "KS"
+
+
+def st_solution_trajectory(imp: CommonRoadImport, result, last_step: int | None = None):
+    """The drive on the ST plant as CommonRoad ST states, steps 0 to ``last_step``: the plant's own
+    state (centre of gravity, steering angle, speed, yaw, yaw rate, slip angle)."""
+    from commonroad.scenario.state import STState
+    from commonroad.scenario.trajectory import Trajectory
+
+    P = np.asarray(result.meta["plant_states"], float)
+    n = len(result.t_s) if last_step is None else last_step + 1
+    states = [STState(time_step=int(round(result.t_s[k] / imp.spec.dt_s)), position=np.array(P[k, :2]),
+                      steering_angle=float(P[k, 2]), velocity=float(P[k, 3]), orientation=float(P[k, 4]),
+                      yaw_rate=float(P[k, 5]), slip_angle=float(P[k, 6])) for k in range(n)]
+    return Trajectory(states[0].time_step, states)
+
+
 def write_solution(imp: CommonRoadImport, result, out_dir: Path, last_step: int | None = None) -> Path:
-    """Write ``solution.xml`` (CommonRoad solution: KS model, Ford Escort) into ``out_dir``."""
+    """Write ``solution.xml`` into ``out_dir``: a CommonRoad solution with the run's vehicle type
+    and the model it was driven on (ST for the single-track plant, else KS)."""
     from commonroad.common.solution import (CommonRoadSolutionWriter, CostFunction, PlanningProblemSolution,
                                             Solution, VehicleModel, VehicleType)
 
-    traj = solution_trajectory(imp, result, last_step)
+    if solution_model(imp, result) == "ST":
+        traj, model = st_solution_trajectory(imp, result, last_step), VehicleModel.ST
+    else:
+        traj, model = solution_trajectory(imp, result, last_step), VehicleModel.KS
     pps = PlanningProblemSolution(planning_problem_id=imp.planning_problem.planning_problem_id,
-                                  vehicle_type=VehicleType[imp.vehicle_type], vehicle_model=VehicleModel.KS,
+                                  vehicle_type=VehicleType[imp.vehicle_type], vehicle_model=model,
                                   cost_function=CostFunction.SM1, trajectory=traj)
     sol = Solution(imp.scenario.scenario_id, [pps])
     CommonRoadSolutionWriter(sol).write_to_file(output_path=str(out_dir), filename="solution.xml", overwrite=True)
@@ -279,7 +307,8 @@ class CheckReport:
 
 def check_drive(imp: CommonRoadImport, result) -> CheckReport:
     """Check the driven trajectory (up to the goal, else all of it) with the drivability checker:
-    collisions with the scenario's obstacles, road boundary, and KS feasibility (Ford Escort)."""
+    collisions with the scenario's obstacles, road boundary, and feasibility of the solution's
+    trajectory under its model (KS; ST for a drive on the ST plant) with the run's vehicle."""
     from commonroad.geometry.shape import Rectangle
     from commonroad.prediction.prediction import TrajectoryPrediction
     from commonroad.scenario.state import CustomState
@@ -302,8 +331,12 @@ def check_drive(imp: CommonRoadImport, result) -> CheckReport:
     collision_free = not cc.collide(ego)
     _, road = create_road_boundary_obstacle(imp.scenario, method="obb_rectangles")
     road_ok = not road.collide(ego)
-    ks = solution_trajectory(imp, result, last)
-    feasible, _ = trajectory_feasibility(ks, VehicleDynamics.KS(VehicleType[imp.vehicle_type]), imp.spec.dt_s)
+    vtype = VehicleType[imp.vehicle_type]
+    if solution_model(imp, result) == "ST":  # feasible under the model it was driven on
+        traj, dyn = st_solution_trajectory(imp, result, last), VehicleDynamics.ST(vtype)
+    else:
+        traj, dyn = solution_trajectory(imp, result, last), VehicleDynamics.KS(vtype)
+    feasible, _ = trajectory_feasibility(traj, dyn, imp.spec.dt_s)
     return CheckReport(bool(collision_free), bool(road_ok), bool(feasible), g, last + 1)
 
 

@@ -326,6 +326,7 @@ def simulate(
     status: list[str] = []
     fallback: list[str] = []
     xp = plant.initial_state(x) if observed else None
+    plant_log: list[np.ndarray] = []  # an observed plant's own state at each logged step
     if observed:
         x = np.asarray(plant.observe(xp), float)
     warm = controller.initial_warm(x)
@@ -370,6 +371,7 @@ def simulate(
         S[k], EY[k], EPSI[k] = s, ey, epsi
         XP[k], RF[k] = out.X_pred, out.refs
         if observed:
+            plant_log.append(np.array(xp, float))
             xp_next = np.asarray(plant.step(xp, u, dt_s), float)
             x_next = np.asarray(plant.observe(xp_next), float) if np.all(np.isfinite(xp_next)) else xp_next
         elif act is None:
@@ -404,6 +406,8 @@ def simulate(
         meta.update(control_period_s=float(control_period_s), between_solves=between_solves)
     if observed:
         meta["plant_state_final"] = [float(c) for c in xp]
+        #: (K, n) the plant's own state at each logged step (e.g. for a CommonRoad ST solution)
+        meta["plant_states"] = np.array(plant_log[:k_end], float)
     clearance = None
     if obstacles:
         per_obstacle, meta["obstacles"] = _clearances(Xs[sl], T[sl], obstacles, footprint)
