@@ -224,7 +224,7 @@ def run(
 @app.command()
 def reproduce(
     out: Path | None = typer.Option(None, "--out", help="output directory (default runs/reproduce-<timestamp>)"),
-    only: list[str] | None = typer.Option(None, "--only", help="run only these experiment ids"),
+    only: list[str] | None = typer.Option(None, "--only", metavar="ID", help="run only this experiment id (repeatable)"),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
     fast: bool = typer.Option(False, "--fast", help="run the controllers on the compiled fast path"),
 ) -> None:
@@ -285,8 +285,8 @@ def reproduce(
 @app.command("compare-avoidance")
 def compare_avoidance(
     out: Path | None = typer.Option(None, "--out", help="output directory (default runs/avoidance-<timestamp>)"),
-    scenario: list[str] | None = typer.Option(None, "--scenario", help="obstacle scenarios (default: all built-in)"),
-    formulation: list[str] | None = typer.Option(None, "--formulation", help="hard, corridor, potential, gaussian"),
+    scenario: list[str] | None = typer.Option(None, "--scenario", metavar="ID", help="obstacle scenario (repeatable; default: all built-in)"),
+    formulation: list[str] | None = typer.Option(None, "--formulation", metavar="NAME", help="hard, corridor, potential or gaussian (repeatable; default all)"),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
 ) -> None:
     """Run every obstacle scenario with every obstacle formulation; write avoidance.md (one table:
@@ -375,7 +375,7 @@ def _gaussian_cost_map(specs, path: Path):
 
 @app.command()
 def bench(
-    problem: list[str] | None = typer.Option(None, "--problem", help="P1 line, P2 circle with speed, P3 obstacle cost, "
+    problem: list[str] | None = typer.Option(None, "--problem", metavar="P", help="P1 line, P2 circle with speed, P3 obstacle cost, "
                                        "P4 three-lane traffic (repeatable; default all)"),
     baselines: bool = typer.Option(False, "--baselines", help="also time the cvxpy rebuild and CasADi+IPOPT baselines "
                                    "(cvxpy only without obstacles)"),
@@ -438,7 +438,7 @@ def _bench_report(out_dir: Path, results: dict, log) -> None:
 @app.command("compare-models")
 def compare_models_cmd(
     out: Path | None = typer.Option(None, "--out", help="output directory (default runs/compare-models-<timestamp>)"),
-    track: list[str] | None = typer.Option(None, "--track", help="packaged track (repeatable; default all)"),
+    track: list[str] | None = typer.Option(None, "--track", metavar="NAME", help="packaged track (repeatable; default all)"),
     lateral_fraction: float = typer.Option(0.8, "--lateral-fraction", min=0.05, max=1.0,
                                            help="speed profile's lateral acceleration as a fraction of mu g"),
     robustness: bool = typer.Option(True, "--robustness/--no-robustness",
@@ -478,9 +478,9 @@ def sweep(
     runs: int = typer.Option(100, "--runs", min=1, help="number of runs"),
     seed: int = typer.Option(0, "--seed", min=0, help="seed of the whole sweep (each run gets its own from it)"),
     vary: list[str] | None = typer.Option(
-        None, "--vary", help="NAME=DISTRIBUTION (repeatable): uniform(a,b), normal(mu,sigma), offset_uniform, "
+        None, "--vary", metavar="NAME=DIST", help="NAME=DISTRIBUTION (repeatable): uniform(a,b), normal(mu,sigma), offset_uniform, "
         "offset_normal, scale_uniform, scale_normal, choice(v1,...); NAME a dotted path such as initial_state.y_m"),
-    set_: list[str] | None = typer.Option(None, "--set", help="NAME=VALUE fixed for every run (repeatable), e.g. road.lane_width_m=0.8"),
+    set_: list[str] | None = typer.Option(None, "--set", metavar="NAME=VALUE", help="NAME=VALUE fixed for every run (repeatable), e.g. road.lane_width_m=0.8"),
     out: Path | None = typer.Option(None, "--out", help="output directory (default runs/sweep-<id>-<timestamp>)"),
     workers: int | None = typer.Option(None, "--workers", min=1, help="local processes (default: all cores)"),
     backend: str = typer.Option("local", "--backend", help="local (process pool) or ray"),
@@ -644,7 +644,7 @@ def _file_stem(file: str) -> str:
 
 @app.command("commonroad")
 def commonroad_cmd(
-    files: list[str] = typer.Argument(..., help="CommonRoad files (.xml, .xml.gz) or folders holding them"),
+    files: list[str] = typer.Argument(..., metavar="FILE", help="CommonRoad files (.xml, .xml.gz) or folders holding them"),
     out: Path | None = typer.Option(None, "--out", help="output directory (default runs/commonroad-<timestamp>)"),
     plant: str | None = typer.Option(None, "--plant", help="the plant, a CommonRoad vehicle model (ks, st, mb)"),
     vehicle: str | None = typer.Option(None, "--vehicle", help="ford_escort, bmw_320i or vw_vanagon (default "
