@@ -286,7 +286,6 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
     model = build_model(v.model, v)
     track = load_track(spec.path) if spec.path.type == "csv" else None
     path = track.path if track is not None else build_path(spec.path)
-    warn_if_path_too_curved(spec, path)
     profile = None if c.speed_profile is None else build_speed_profile(c.speed_profile, path, v.friction)
     init = spec.initial_state
     pose = [init.x_m, init.y_m, math.radians(init.yaw_deg)]

@@ -120,10 +120,15 @@ def warn_suspicious(spec: ScenarioSpec, source: str) -> ScenarioSpec:
     each) about every legal but suspicious value of ``spec`` (see
     :func:`~mpcdrive.scenarios.build.scenario_warnings`); returns ``spec``."""
     from ..types import ScenarioWarning
-    from .build import scenario_warnings
+    from .build import build_path, load_track, scenario_warnings, warn_if_path_too_curved
 
     for field, problem in scenario_warnings(spec):
         warnings.warn(str(ScenarioError(source, field, problem)), ScenarioWarning, stacklevel=2)
+    try:
+        path = load_track(spec.path).path if spec.path.type == "csv" else build_path(spec.path)
+    except (ValueError, OSError):
+        return spec  # build_experiment reports it
+    warn_if_path_too_curved(spec, path, source)
     return spec
 
 

@@ -51,8 +51,10 @@ def apply_goal_region(metrics: dict, region_reached: bool, *, collision_free: bo
     """``metrics`` with the goal judged on another goal region (a CommonRoad planning problem's):
     ``goal_region_reached`` becomes ``region_reached`` and ``goal_reached`` follows
     :func:`goal_met`, also requiring an external checker's ``collision_free`` and
-    ``road_compliant`` verdicts (the drivability checker's for CommonRoad)."""
-    met = goal_met(region_reached, metrics["max_lane_excess_m"], metrics["collisions"])
+    ``road_compliant`` verdicts (the drivability checker's for CommonRoad). The checker's road
+    is the authority on "inside the road" there: mpcdrive's own lane (one width along the route's
+    centre line) is a proxy that a lane change or a wider lanelet exceeds."""
+    met = goal_met(region_reached, 0.0, metrics["collisions"])
     return {**metrics, "goal_region_reached": bool(region_reached),
             "goal_reached": bool(met and collision_free and road_compliant)}
 

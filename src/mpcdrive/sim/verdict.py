@@ -130,13 +130,19 @@ def run_verdict(m: dict) -> RunVerdict:
     """The verdict of a run with metrics ``m`` (missing keys count as fine)."""
     cr = m.get("commonroad") or {}
     collided = bool(m.get("collisions")) or bool(m.get("collision_events")) or cr.get("collision_free") is False
-    off_road = float(m.get("max_lane_excess_m") or 0.0) > LANE_TOLERANCE_M or cr.get("road_compliant") is False
+    if "road_compliant" in cr:  # an external checker's road (CommonRoad's lanelets) is the authority
+        off_road = cr["road_compliant"] is False
+    else:
+        off_road = float(m.get("max_lane_excess_m") or 0.0) > LANE_TOLERANCE_M
     diverged = m.get("termination") == "diverged"
     findings = []
     if diverged:
         findings.append(f"the simulated state diverged (not finite) after {m.get('steps')} steps")
     for phrase in (collision_phrase(m), lane_phrase(m), goal_phrase(m), solver_phrase(m)):
         if phrase is not None:
+            if phrase.startswith("left the lane") and "road_compliant" in cr:
+                phrase = phrase.replace("left the lane", "left the route lane") + (
+                    " (the CommonRoad checker judges the road)")
             findings.append(phrase)
     if cr:
         findings.append(checker_phrase(cr))
