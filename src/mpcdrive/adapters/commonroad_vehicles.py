@@ -144,6 +144,10 @@ def apply_vehicle(spec, vehicle: str, plant: str | None = None):
     return ScenarioSpec.model_validate(data)
 
 
+
+class PlantModelError(RuntimeError):
+    """A CommonRoad vehicle model's equations cannot be evaluated at the plant's state."""
+
 class CommonRoadPlant:
     """CommonRoad vehicle model ``model`` (``ks``, ``st``, ``mb``) of ``vehicle`` as the plant of the
     closed loop (an :class:`mpcdrive.sim.closed_loop.ObservedPlant`).
@@ -250,7 +254,15 @@ class CommonRoadPlant:
     def f(self, xp, u) -> np.ndarray:
         """CommonRoad's right-hand side at plant state ``xp`` for inputs ``u = [steering velocity
         rad/s, acceleration m/s^2]`` (the package function, unmodified; its input limits apply)."""
-        return np.array(self._rhs(list(map(float, xp)), [float(u[0]), float(u[1])], self.p), float)
+        try:
+            return np.array(self._rhs(list(map(float, xp)), [float(u[0]), float(u[1])], self.p), float)
+        except ZeroDivisionError:
+            # MB divides by a wheel's hub speed, which it clips at 0 when the wheel would roll
+            # backwards (slow, with a yaw rate, above its 0.1 m/s kinematic switch)
+            raise PlantModelError(
+                f"CommonRoad's {self.kind.upper()} model divided by zero at v_x = {float(xp[3]):.3g} m/s, "
+                f"yaw rate {float(xp[5]):.3g} rad/s, steering {float(xp[2]):.3g} rad (a wheel's hub speed "
+                "is 0: a limit of its equations at low speed while turning)") from None
 
     def stiff_radius(self, xp, accel_mps2: float) -> float:
         """Spectral radius [1/s] of the ST model's yaw-rate / slip-angle block at plant state ``xp``
