@@ -367,3 +367,11 @@ def test_report_missing_metrics_render_as_dash(tmp_path):
     text = write_reproduce_report(tmp_path, [ReportEntry("x", "d", {"steps": 3})]).read_text()
     row = next(ln for ln in text.splitlines() if ln.startswith("| `x`"))
     assert "| 3 |" in row and "—" in row and "converged" not in text
+
+
+def test_html_metrics_table_writes_collision_events_in_words():
+    from mpcdrive.report.html import _value_text
+
+    ev = [{"obstacle": 1, "name": "rock", "step": 10, "t_s": 1.0, "steps": 2, "depth_m": 0.435}]
+    assert _value_text("collision_events", ev) == "obstacle 1 (rock) at t = 1 s, 0.435 m deep"
+    assert _value_text("collision_events", []) == "none"

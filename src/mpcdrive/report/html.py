@@ -364,11 +364,21 @@ def _figure_file(fig, base_dir: Path | None) -> Path:
     return p
 
 
+def _event_text(ev: Mapping) -> str:
+    """A collision event (``metrics["collision_events"]``) in words."""
+    who = f"obstacle {ev.get('obstacle')}" + (f" ({ev['name']})" if ev.get("name") else "")
+    return f"{who} at t = {_fmt(ev.get('t_s'))} s, {_fmt(ev.get('depth_m'))} m deep"
+
+
 def _value_text(key: str, value) -> str:
     if value is None:
         return "—"
     if isinstance(value, bool):
         return "yes" if value else "no"
+    if isinstance(value, (list, tuple)) and all(isinstance(v, Mapping) for v in value):
+        return "none" if not value else _e("; ".join(_event_text(v) for v in value))
+    if isinstance(value, Mapping) and "t_s" in value:
+        return _e(_event_text(value))
     f = _num(value)
     if f is None:
         return _e(value)
