@@ -93,6 +93,7 @@ def drive_file(task: BatchTask) -> dict:
                    solver_failures=int(m["solver_failures"]),
                    solve_time_us={"p50": st.get("p50"), "p99": st.get("p99")},
                    solution_valid=cr.get("solution_valid"), solution_check=cr.get("solution_check"),
+                   vehicle_model=cr.get("vehicle_model"),
                    plan=cr.get("plan"))
     except Exception as e:  # a file's failure is its row; the batch goes on
         import shutil
@@ -122,8 +123,9 @@ def verdict(row: dict) -> str:
         return f"error: {row['error']}"
     if row["passed"]:
         return "passed"
+    infeasible = f"{row.get('vehicle_model') or 'KS'}-infeasible"  # under the solution's model
     failed = [name for key, name in (("collision_free", "collision"), ("road_compliant", "off road"),
-                                     ("ks_feasible", "KS-infeasible"), ("goal_reached", "goal missed"))
+                                     ("ks_feasible", infeasible), ("goal_reached", "goal missed"))
               if row.get(key) is False]
     if not failed and row.get("solution_valid") is False:
         failed = [f"solution rejected by valid_solution ({row.get('solution_check')})"]

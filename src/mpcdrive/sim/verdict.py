@@ -117,7 +117,8 @@ def checker_phrase(cr: dict) -> str:
     words = ["collision-free" if cr.get("collision_free") else "COLLISION",
              "road-compliant" if cr.get("road_compliant") else "OFF THE ROAD"]
     if "ks_feasible" in cr:
-        words.append("KS-feasible" if cr["ks_feasible"] else "not KS-feasible")
+        model = cr.get("vehicle_model") or "KS"  # the solution's model (ST for a drive on the ST plant)
+        words.append(f"{model}-feasible" if cr["ks_feasible"] else f"not {model}-feasible")
     goal = cr.get("goal_reached")
     if goal is not None:
         step = cr.get("goal_step")
