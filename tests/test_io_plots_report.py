@@ -22,7 +22,7 @@ from mpcdrive.io import (
     write_trajectory_csv,
 )
 from mpcdrive.plots import figures
-from mpcdrive.plots.common import lane_boundaries
+from mpcdrive.scene.geometry import lane_boundaries
 from mpcdrive.report import ReportEntry, write_reproduce_report
 from mpcdrive.types import STATUS_INFEASIBLE, STATUS_OK, SimResult
 

@@ -16,6 +16,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from mpcdrive.io.atomic import atomic_write_bytes
+from mpcdrive.scene.geometry import lane_boundaries  # noqa: F401  (the figures draw it from here)
 from mpcdrive.types import SimResult
 
 DPI = 120
@@ -85,25 +86,6 @@ def set_suptitle(fig: Figure, text: str) -> None:
 
 
 # --------------------------------------------------------------------------- geometry
-def lane_boundaries(path_xy: np.ndarray, half_width_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Left and right lane boundaries (M, 2) [m]: the polyline offset by +-half width along its
-    unit normals (central-difference tangents; repeated points keep the previous normal)."""
-    p = np.asarray(path_xy, dtype=float)
-    tangent = np.gradient(p, axis=0)
-    norm = np.hypot(tangent[:, 0], tangent[:, 1])
-    good = norm > 1e-12
-    if not good.any():
-        raise ValueError("reference path has no extent; cannot draw lane boundaries")
-    # carry the last valid tangent over degenerate (repeated) points
-    idx = np.where(good, np.arange(len(p)), 0)
-    idx = np.maximum.accumulate(idx)
-    first_good = int(np.argmax(good))
-    idx[: first_good + 1] = first_good
-    unit = tangent[idx] / norm[idx, None]
-    normal = np.column_stack([-unit[:, 1], unit[:, 0]])  # left of the direction of travel
-    return p + half_width_m * normal, p - half_width_m * normal
-
-
 def polyline_coordinates(path_xy: np.ndarray, points: np.ndarray) -> np.ndarray:
     """(P, 2) path coordinates (s, e_y) [m] of ``points`` (P, 2) on the polyline ``path_xy``: the
     arc length of the nearest point and the signed distance to it (left positive)."""

@@ -53,6 +53,7 @@ from mpcdrive.report.markdown import (
     metrics_summary,
     paper_comparison,
 )
+from mpcdrive.scene.geometry import lane_boundaries
 from mpcdrive.sim.metrics import Footprint
 from mpcdrive.types import STATUS_INACCURATE, STATUS_OK, SimResult
 
@@ -108,22 +109,6 @@ def _subsample(n: int, most: int) -> np.ndarray:
     if n <= most:
         return np.arange(n)
     return np.unique(np.round(np.linspace(0, n - 1, most)).astype(int))
-
-
-def _lane_boundaries(path_xy: np.ndarray, half_width_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Left and right boundaries (M, 2) [m]: the polyline offset by +- half width along its
-    unit normals (repeated points reuse the previous normal)."""
-    p = np.asarray(path_xy, dtype=float)
-    tangent = np.gradient(p, axis=0)
-    norm = np.hypot(tangent[:, 0], tangent[:, 1])
-    good = norm > 1e-12
-    if not good.any():
-        raise ValueError("reference path has no extent; cannot place lane boundaries")
-    idx = np.maximum.accumulate(np.where(good, np.arange(len(p)), 0))
-    idx[: int(np.argmax(good)) + 1] = int(np.argmax(good))
-    unit = tangent[idx] / norm[idx, None]
-    normal = np.column_stack([-unit[:, 1], unit[:, 0]])
-    return p + half_width_m * normal, p - half_width_m * normal
 
 
 def _interp_rows(t_frames: np.ndarray, t_src: np.ndarray, values: np.ndarray) -> np.ndarray:
@@ -273,7 +258,7 @@ def replay_data(result: SimResult, footprint: Footprint = Footprint(), *, run_id
     half = result.lane_half_width_m
     left = right = None
     if half is not None and len(path) >= 2:
-        left, right = _lane_boundaries(path, float(half))
+        left, right = lane_boundaries(path, float(half))
     idx = _subsample(K, max_frames)
     t_frames = np.asarray(result.t_s, dtype=float)[idx]
     X = np.asarray(result.X_pred, dtype=float) if result.X_pred is not None else None

@@ -84,3 +84,22 @@ def shape_distance(a: WorldPolygon, b) -> float:
         d, _ = point_polygon(b.center, a.points)
         return d - b.radius_m
     return _polygon_polygon(a.points, b.points)
+
+
+def lane_boundaries(path_xy: np.ndarray, half_width_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Left and right lane boundaries (M, 2) [m]: the polyline offset by +-half width along its
+    unit normals (central-difference tangents; repeated points keep the previous normal)."""
+    p = np.asarray(path_xy, dtype=float)
+    tangent = np.gradient(p, axis=0)
+    norm = np.hypot(tangent[:, 0], tangent[:, 1])
+    good = norm > 1e-12
+    if not good.any():
+        raise ValueError("reference path has no extent; cannot draw lane boundaries")
+    # carry the last valid tangent over degenerate (repeated) points
+    idx = np.where(good, np.arange(len(p)), 0)
+    idx = np.maximum.accumulate(idx)
+    first_good = int(np.argmax(good))
+    idx[: first_good + 1] = first_good
+    unit = tangent[idx] / norm[idx, None]
+    normal = np.column_stack([-unit[:, 1], unit[:, 0]])  # left of the direction of travel
+    return p + half_width_m * normal, p - half_width_m * normal
