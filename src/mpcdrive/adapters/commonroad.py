@@ -28,6 +28,7 @@ states (its checker moves them to the rear axle itself).
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -168,7 +169,8 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
     a_lim = accel_limit(v_max)
     obstacles = [_obstacle_entry(o, dt) for o in scenario.obstacles]
     spec = ScenarioSpec.model_validate({
-        "id": str(scenario.scenario_id),
+        # named after the file the user passed (a file's internal benchmark id can be another's)
+        "id": re.sub(r"[^A-Za-z0-9_.-]", "_", file.name.removesuffix(".gz").removesuffix(".xml")) or "commonroad",
         "description": f"CommonRoad {scenario.scenario_id}: route {list(plan.route)}, {len(obstacles)} obstacles, "
                        f"{plan.note}",
         "dt_s": dt,
