@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mpcdrive.paths import WaypointPath
-from mpcdrive.scenarios import build_experiment, dump_scenario, validate_scenario_data
+from mpcdrive.scenarios import build_experiment, dump_scenario, validate_scenario_data, warn_suspicious
 from mpcdrive.scenarios.loader import ScenarioError
 from mpcdrive.types import ScenarioWarning
 
@@ -89,8 +89,10 @@ def _scenario(path):
 def test_scenario_files_default_to_pchip_and_smoothing_keeps_the_spline():
     spec = validate_scenario_data(_scenario({"type": "waypoints", "points": CORNER}), "s.yaml")
     assert spec.path.interpolation == "pchip"
-    with pytest.warns(ScenarioWarning, match="path.points"):  # the paper car cannot turn this corner
-        exp = build_experiment(spec)
+    # the paper car cannot turn this corner: said where the scenario is loaded, naming the file
+    with pytest.warns(ScenarioWarning, match="s.yaml: path.points"):
+        warn_suspicious(spec, "s.yaml")
+    exp = build_experiment(spec)
     assert exp.path.interpolation == "pchip" and abs(exp.path.heading(1.0)) < 1e-9
     smooth = validate_scenario_data(_scenario({"type": "waypoints", "points": CORNER, "smoothing": 0.5}), "s.yaml")
     assert smooth.path.interpolation == "spline"
