@@ -16,10 +16,10 @@ A ladder is a sequence of rungs tried one after the other until one yields a com
 * ``hold_last``: the last applied input. Always succeeds.
 
 The ``relax`` rung, whose plan comes from a problem without rate limits and with a cheap lane
-slack, is applied only when it is safer than braking: its predicted trajectory keeps the footprint clear of every obstacle at its predicted pose and inside
-the road when the controller has one (``road_half_width_m``), or, where it does not, it does so
-for longer than the braking plan does (a car closing in from behind can make braking the worse
-choice). Otherwise the ladder goes on to the next rung, in the end to braking: a fallback never
+slack, is applied only when it is safer than braking: its predicted trajectory keeps the
+footprint clear of every obstacle at its predicted pose and inside the road when the controller
+has one (``road_half_width_m``), or, where it does not, it does so for longer than the braking
+plan does (a car closing in from behind can make braking the worse choice). Otherwise the ladder goes on to the next rung, in the end to braking: a fallback never
 makes a failed step worse than braking would (``check_plans``). (A shifted plan was solved under
 the full constraints one step before; checking it against recorded traffic that does not react to
 the car made it brake where the plan was safe, measured on CommonRoad scenarios.)
@@ -88,7 +88,7 @@ class FallbackConfig:
     ladder : rungs in order; brake_decel_mps2 : braking deceleration [m/s^2] (> 0; None: the
     vehicle's full braking, the lower bound of the ``accel`` input, 1 m/s^2 if it has none);
     brake_steering : ``hold`` or ``straighten``; relax_slack_factor : how many times cheaper the
-    lane slack is in the relaxed problem (>= 1); check_plans : apply a planning rung only when its
+    lane slack is in the relaxed problem (>= 1); check_plans : apply the ``relax`` rung only when its
     predicted trajectory is collision-free and inside the road, or stays so longer than braking's.
     """
 

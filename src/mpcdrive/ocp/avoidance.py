@@ -197,6 +197,7 @@ class Avoidance:
         self._H = np.zeros((N, 2, 2))
         self._g = np.zeros((N, 2))
         self._e_ref = np.zeros(N1)
+        self._always = np.ones(N, bool)  # the presence of an obstacle without a lifetime
 
     # -- helpers ----------------------------------------------------------------------
     def relevant(self, t_s: float, xy: np.ndarray) -> list[int]:
@@ -211,20 +212,18 @@ class Avoidance:
                 continue
             ox, oy, _ = ob.pose_at(t_s)
             dist = math.hypot(ox - xy[0], oy - xy[1]) - ob.shape.bounding_radius_m
-            if dist > reach:
-                continue
-            d.append((dist, j))
+            if dist <= reach:
+                d.append((dist, j))
         d.sort()
         return [j for _, j in d[: self.config.max_obstacles]]
 
-    def _following(self, ob: Obstacle, t_s: float, xy: np.ndarray, s_m: float) -> bool:
-        """True when obstacle ``ob`` follows the car at arc length ``s_m``, position ``xy``, at time
-        ``t_s``: its Frenet box lies wholly behind the rear of the body and overlaps the body's
-        lateral extent (directly behind, in the car's own lane). A car behind in another lane
-        stays avoided: it may pass beside or cut in ahead."""
+    def _following(self, box: FrenetBox, xy: np.ndarray, s_m: float) -> bool:
+        """True when the obstacle with Frenet box ``box`` (now) follows the car at arc length
+        ``s_m``, position ``xy``: the box lies wholly behind the rear of the body and overlaps the
+        body's lateral extent (directly behind, in the car's own lane). A car behind in another
+        lane stays avoided: it may pass beside or cut in ahead."""
         if not self.path.closed and s_m <= 0.0:
             return False  # no path behind the start to judge on
-        box = frenet_box(self.path, ob.at(t_s), s_m)
         if box.s_hi >= s_m - self.half_length:
             return False
         h = float(self.path.heading(s_m))
@@ -278,10 +277,6 @@ class Avoidance:
         s_arr : (N+1,) horizon reference arc lengths [m]; memory : passing sides, updated."""
         cfg = self.config
         rel = self.relevant(t_s, x[:2])
-        # cars following in the lane: kept behind by a longitudinal row only (never swerved or
-        # braked for)
-        following = {j for j in rel if cfg.uses_rows and self._following(self.obstacles[j], t_s, x[:2],
-                                                                             float(s_arr[0]))}
         sides: dict[int, int] = {}
         boxes: dict[int, list[FrenetBox]] = {}
         centers: dict[int, np.ndarray] = {}
@@ -294,9 +289,13 @@ class Avoidance:
             meet = int(np.argmin([abs(b.s_ref - sk) for b, sk in zip(bx, s_arr)])) if self.obstacles[j].moving else 0
             sides[j] = self._choose_side(j, bx[meet], memory)
         memory.sides.update(sides)
+        # cars following in the lane: kept behind by a longitudinal row only (never swerved or
+        # braked for)
+        following = {j for j in rel if cfg.uses_rows and self._following(boxes[j][0], x[:2], float(s_arr[0]))}
         # horizon steps 1..N at which each obstacle exists (its lifetime)
-        times = t_s + self.dt_s * np.arange(1, self.N + 1)
-        present = {j: np.broadcast_to(self.obstacles[j].present(times), (self.N,)) for j in rel}
+        times = t_s + self.dt_s * np.arange(1, self.N + 1) if any(self.obstacles[j].has_lifetime for j in rel) else None
+        present = {j: self.obstacles[j].present(times) if self.obstacles[j].has_lifetime else self._always
+                   for j in rel}
         rows_a = rows_b = lo = hi = H = g = e_ref = None
         if cfg.detour == "trapezoid":
             e_ref = self._detour(s_arr, {j: b for j, b in boxes.items() if j not in following}, sides)
@@ -369,26 +368,20 @@ class Avoidance:
         distance travelled along it (the car stays near the path)."""
         return s0 + np.cumsum(np.hypot(*np.diff(Xlin[:, :2], axis=0).T))
 
-    def _stop_plane(self, s_lo: np.ndarray, s_at: np.ndarray, clearance: float) -> tuple[np.ndarray, np.ndarray]:
+    def _stop_plane(self, s_lo: np.ndarray, s_at: np.ndarray, clearance: float, *,
+                    ahead: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """The stop constraint ``s(p) <= s_lo - clearance`` linearized at arc length
         ``min(s_at, s_lo - clearance)`` (s_at: where the point is expected): unit tangents t
         (K, 2) and points q (K, 2) with the constraint ``t . p <= t . q - clearance``. Linearizing
         where the car is, not at the obstacle, keeps the half-plane across the car's own road
         where the path bends (a plane through a bend further on would let the car gain ground by
-        moving sideways)."""
-        s_bar = np.minimum(s_at, s_lo - clearance)
+        moving sideways). With ``ahead``, its mirror, the keep-ahead constraint ``s(p) >= s_lo +
+        clearance`` (``s_lo`` then the far end of a car behind) linearized at ``max(s_at, s_lo +
+        clearance)``: ``t . p >= t . q + clearance``."""
+        s_bar = np.maximum(s_at, s_lo + clearance) if ahead else np.minimum(s_at, s_lo - clearance)
         h = np.asarray(self.path.heading(s_bar), float)
         t = np.column_stack([np.cos(h), np.sin(h)])
         return t, self.path.position(s_bar) + t * (s_lo - s_bar)[:, None]
-
-    def _ahead_plane(self, s_hi: np.ndarray, s_at: np.ndarray, clearance: float) -> tuple[np.ndarray, np.ndarray]:
-        """The keep-ahead constraint ``s(p) >= s_hi + clearance`` linearized at arc length
-        ``max(s_at, s_hi + clearance)``, the mirror of :meth:`_stop_plane`: unit tangents t (K, 2)
-        and points q (K, 2) with the constraint ``t . p >= t . q + clearance``."""
-        s_bar = np.maximum(s_at, s_hi + clearance)
-        h = np.asarray(self.path.heading(s_bar), float)
-        t = np.column_stack([np.cos(h), np.sin(h)])
-        return t, self.path.position(s_bar) + t * (s_hi - s_bar)[:, None]
 
     def _hard_rows(self, Xlin, s_arr, rel, boxes, centers, world, sides, present, following=frozenset()):
         a, b = self._a, self._b
@@ -433,7 +426,7 @@ class Avoidance:
             elif j in following:
                 # keep ahead of a car following in the lane: the disc's arc length at least its far
                 # end plus the clearance; a longitudinal row only (no swerving, no braking for it)
-                tb, q = self._ahead_plane(np.tile(s_hi, nd), (s_lin + off).ravel(), r_need)
+                tb, q = self._stop_plane(np.tile(s_hi, nd), (s_lin + off).ravel(), r_need, ahead=True)
                 n = tb.reshape(nd, -1, 2)
                 q = q.reshape(nd, -1, 2)
                 active[:] = True
