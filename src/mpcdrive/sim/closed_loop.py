@@ -273,8 +273,9 @@ def simulate(
     ``meta["aborted_off_path"]`` True).
 
     An :class:`ObservedPlant` starts from ``initial_state(x0)`` and is seen (by the controller,
-    the log and the metrics) as ``observe(plant state)``; its own state is not logged (the last
-    one is ``meta["plant_state_final"]``); state ``disturbance`` needs a :class:`Plant`.
+    the log and the metrics) as ``observe(plant state)``; its own state at each logged step is
+    ``meta["plant_states"]`` (K, n) and the one after the last step ``meta["plant_state_final"]``;
+    state ``disturbance`` needs a :class:`Plant`.
 
     Invalid arguments raise ValueError naming the argument. A plant state that stops being finite
     ends the run early (``meta["termination"] = "diverged"``, the last finite state as

@@ -54,7 +54,7 @@ def apply_goal_region(metrics: dict, region_reached: bool, *, collision_free: bo
     ``road_compliant`` verdicts (the drivability checker's for CommonRoad). The checker's road
     is the authority on "inside the road" there: mpcdrive's own lane (one width along the route's
     centre line) is a proxy that a lane change or a wider lanelet exceeds."""
-    met = goal_met(region_reached, 0.0, metrics["collisions"])
+    met = goal_met(region_reached, 0.0, metrics["collisions"])  # the lane proxy gives way to the checker's road
     return {**metrics, "goal_region_reached": bool(region_reached),
             "goal_reached": bool(met and collision_free and road_compliant)}
 

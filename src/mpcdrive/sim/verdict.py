@@ -14,8 +14,8 @@ class RunVerdict:
     """What happened in a run, judged from its metrics.
 
     collided : the body overlapped an obstacle (or an external checker found a collision);
-    off_road : the body left the lane by more than ``LANE_TOLERANCE_M`` (or an external checker
-    found it off the road); diverged : the simulated state stopped being finite;
+    off_road : the body left the lane by more than ``LANE_TOLERANCE_M`` or, when an external
+    checker judged the road (CommonRoad), that checker found it off the road; diverged : the simulated state stopped being finite;
     goal_reached : the metrics' ``goal_reached`` (None: the run has no goal);
     findings : the outcome as phrases (divergence, collisions, lane, goal, failed solves, the
     external checker)."""
@@ -73,11 +73,15 @@ def collision_phrase(m: dict) -> str | None:
 
 
 def lane_phrase(m: dict) -> str:
-    """``left the lane by 0.82 m``, ``inside the lane (max excess 0 m)`` or ``no lane given``."""
+    """``left the lane by 0.82 m``, ``inside the lane (max excess 0 m)`` or ``no lane given``; for
+    a run an external checker judged on the road (CommonRoad) the lane is the route lane, a proxy
+    the checker's verdict overrides."""
     if "lane_half_width_m" in m and m["lane_half_width_m"] is None:
         return "no lane given"
     e = float(m.get("max_lane_excess_m") or 0.0)
     if e > LANE_TOLERANCE_M:
+        if "road_compliant" in (m.get("commonroad") or {}):
+            return f"left the route lane by {e:.3g} m (the CommonRoad checker judges the road)"
         return f"left the lane by {e:.3g} m"
     return "inside the lane" + (f" (max excess {e:.2g} m)" if e > 0 else "")
 
@@ -141,9 +145,6 @@ def run_verdict(m: dict) -> RunVerdict:
         findings.append(f"the simulated state diverged (not finite) after {m.get('steps')} steps")
     for phrase in (collision_phrase(m), lane_phrase(m), goal_phrase(m), solver_phrase(m)):
         if phrase is not None:
-            if phrase.startswith("left the lane") and "road_compliant" in cr:
-                phrase = phrase.replace("left the lane", "left the route lane") + (
-                    " (the CommonRoad checker judges the road)")
             findings.append(phrase)
     if cr:
         findings.append(checker_phrase(cr))
