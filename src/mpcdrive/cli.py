@@ -99,22 +99,18 @@ def _load_commonroad(file: str, vehicle: str | None = None, plant: str | None = 
         raise BadInput(f"{file}: {e}") from None
 
 
-_CR_VEHICLES = ("ford_escort", "bmw_320i", "vw_vanagon")
-_CR_PLANTS = ("ks", "st", "mb")
-
-
 def _check_vehicle_flags(vehicle: str | None, plant: str | None) -> None:
     """``--vehicle`` / ``--plant`` of a CommonRoad run: known names, and the vehicle models
     package where they need it."""
-    if vehicle is not None and vehicle not in _CR_VEHICLES:
-        raise BadInput(f"--vehicle: unknown CommonRoad vehicle {vehicle!r} (known: {', '.join(_CR_VEHICLES)})")
-    if plant is not None and plant not in _CR_PLANTS:
-        raise BadInput(f"--plant: unknown CommonRoad plant model {plant!r} (known: {', '.join(_CR_PLANTS)})")
-    if vehicle is not None or plant is not None:
-        from .adapters.commonroad_vehicles import available
+    from .adapters.commonroad_vehicles import PLANT_MODELS, VEHICLES, available
 
-        if not available():
-            raise BadInput("--vehicle/--plant need commonroad-vehicle-models (pip install 'mpcdrive[commonroad]')")
+    plants = tuple(PLANT_MODELS.values())
+    if vehicle is not None and vehicle not in VEHICLES:
+        raise BadInput(f"--vehicle: unknown CommonRoad vehicle {vehicle!r} (known: {', '.join(VEHICLES)})")
+    if plant is not None and plant not in plants:
+        raise BadInput(f"--plant: unknown CommonRoad plant model {plant!r} (known: {', '.join(plants)})")
+    if (vehicle is not None or plant is not None) and not available():
+        raise BadInput("--vehicle/--plant need commonroad-vehicle-models (pip install 'mpcdrive[commonroad]')")
 
 
 def _run_into(spec, out_dir: Path, show_progress: bool, source: str | None = None, extra_outputs=None):

@@ -23,14 +23,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..models.presets import PRESETS
 from . import commonroad_route as cr
 
 LAT_ACCEL_MPS2 = 4.0  # lateral acceleration the reference speed allows in bends
 COMFORT_ACCEL_MPS2 = 3.0  # largest forward / braking acceleration of the reference speed
 DEFAULT_SPEED_MPS = 8.0  # cruise speed of a car starting (nearly) at rest without a goal speed
 RUN_ON_S = 3.0  # the run ends this long after the reference stops (unless the goal time is later)
-V_SWITCH_MPS = 7.319  # CommonRoad Ford Escort: speed above which the acceleration limit falls as 1/v
-A_MAX_MPS2 = 11.5  # CommonRoad Ford Escort: largest acceleration
+#: the vehicle whose longitudinal limit the planned speeds keep to (a_max 11.5 m/s^2, v_switch
+#: 7.319 m/s, the BMW 320i's; the default vehicle, the Ford Escort, switches at 4.755 m/s)
+_LIMIT_PRESET = PRESETS["commonroad_bmw_320i"]
 _PLAN_DS_M = 0.25  # grid of the speed profiles compared while planning
 _MISSED = "no cruise speed"  # how the note of a plan that misses the goal window begins
 
@@ -38,7 +40,7 @@ _MISSED = "no cruise speed"  # how the note of a plan that misses the goal windo
 def accel_limit(v_max_mps: float) -> float:
     """CommonRoad's longitudinal limit at speeds up to ``v_max_mps``, with a 10 % margin: a_max,
     reduced to a_max v_switch / v above v_switch [m/s^2]."""
-    return 0.9 * A_MAX_MPS2 * min(1.0, V_SWITCH_MPS / max(v_max_mps, 1e-9))
+    return 0.9 * _LIMIT_PRESET.accel_limit_mps2(v_max_mps)
 
 
 @dataclass(frozen=True)

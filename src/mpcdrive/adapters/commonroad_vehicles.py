@@ -23,6 +23,7 @@ import math
 import numpy as np
 
 from ..models.kinematic import KinematicBicycle4, KinematicParams
+from ..models.presets import get_preset
 
 
 
@@ -30,7 +31,7 @@ from ..models.kinematic import KinematicBicycle4, KinematicParams
 VEHICLES: dict[str, int] = {"ford_escort": 1, "bmw_320i": 2, "vw_vanagon": 3}
 #: plant model name (scenario files) -> CommonRoad model
 PLANT_MODELS: dict[str, str] = {"commonroad_ks": "ks", "commonroad_st": "st", "commonroad_mb": "mb"}
-_SHORT = {"ks": "commonroad_ks", "st": "commonroad_st", "mb": "commonroad_mb"}
+_SHORT = {short: name for name, short in PLANT_MODELS.items()}  # ks -> commonroad_ks, ...
 _G = 9.81  # [m/s^2], as in vehiclemodels
 #: RK4's stability interval on the negative real axis is |h lambda| <= 2.785; the plant keeps
 #: h rho <= this (rho: spectral radius of the stiff block), leaving room for complex eigenvalues
@@ -90,14 +91,6 @@ def solution_vehicle_type(vehicle: str):
     return VehicleType(num)
 
 
-def accel_limit_mps2(vehicle: str, v_max_mps: float) -> float:
-    """The largest forward acceleration [m/s^2] the vehicle reaches at every speed up to
-    ``v_max_mps`` [m/s]: ``a_max`` up to ``v_switch``, ``a_max v_switch / v`` above it (the
-    CommonRoad longitudinal limit), so ``a_max min(1, v_switch / v_max)``."""
-    lon = vehicle_parameters(vehicle).longitudinal
-    return float(lon.a_max * min(1.0, lon.v_switch / max(v_max_mps, 1e-9)))
-
-
 def apply_vehicle(spec, vehicle: str, plant: str | None = None):
     """``spec`` (a :class:`ScenarioSpec`) with the controller's vehicle and limits taken from the
     CommonRoad ``vehicle`` (``ford_escort``, ``bmw_320i``, ``vw_vanagon``) and, with ``plant``
@@ -129,7 +122,7 @@ def apply_vehicle(spec, vehicle: str, plant: str | None = None):
     else:
         s_lo, s_hi = None, None
         v_top = max(v_ref, v0) + 2.0
-    a_hi = float(lon.a_max) * min(1.0, float(lon.v_switch) / v_top)
+    a_hi = get_preset(preset_name(vehicle)).accel_limit_mps2(v_top)  # its numbers are vehiclemodels' (tested)
     ctrl = dict(data["controller"])
     ctrl["max_steer_deg"] = math.degrees(min(float(p.steering.max), -float(p.steering.min)))
     ctrl["max_steer_rate_deg_s"] = math.degrees(min(float(p.steering.v_max), -float(p.steering.v_min)))

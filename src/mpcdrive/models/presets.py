@@ -48,6 +48,12 @@ class VehiclePreset:
     width_m: float
     source: str
 
+    def accel_limit_mps2(self, v_max_mps: float) -> float:
+        """The largest forward acceleration [m/s^2] the vehicle reaches at every speed up to
+        ``v_max_mps`` [m/s]: ``max_accel`` up to ``v_switch``, ``max_accel v_switch / v`` above it
+        (CommonRoad's longitudinal limit), so ``max_accel min(1, v_switch / v_max)``."""
+        return float(self.max_accel_mps2 * min(1.0, self.v_switch_mps / max(v_max_mps, 1e-9)))
+
     @property
     def min_turning_radius_m(self) -> float:
         """Kinematic turning radius of the rear axle at full lock, L / tan(max_steer) [m]."""
