@@ -1,0 +1,230 @@
+"""The road around a reference path: the one owner of the rule "the body stays ``margin_m``
+inside the road".
+
+A :class:`Road` gives, as functions of the path's arc length ``s`` [m], the lateral offsets of
+its left and right edges from the path (``e_y`` [m], positive to the left of the direction of
+travel, so ``left_m > right_m``), linear between knots and constant beyond the ends, and the
+lanes inside it (:class:`Lane`: the route lane, its same-direction neighbours, lanes a scenario
+allows). A constant lane centred on the path, per-side widths, widths per point (a track's CSV,
+a CommonRoad route's lanelets) are all the same object.
+
+The rule (:func:`centre_bounds`): every point of the vehicle's body -- its rectangle at the
+predicted yaw relative to the path, sampled along both long sides -- stays ``margin_m`` inside
+the edges *at the arc length where that point is*, with the path's curvature taken into account
+(a straight body on a curved road: the outer edge comes ``kappa d^2 / 2`` closer at distance
+``d`` ahead or behind). It is turned into bounds ``lo_k <= e_y,k <= hi_k`` on the reference
+point's lateral offset, per horizon step, evaluated at the linearization trajectory (the yaw is
+held at its linearization value, as the obstacle rows are linearized). Where the road is
+narrower than the body needs, both bounds are the middle of what there is: the rows are soft
+(``MpcProblem.lane_slack_weight``), so the car is pulled to the middle and the excess is paid
+for, never an infeasible QP. The same function measures how far a driven body got outside
+(:meth:`Road.body_excess_m`), so the controller and the verdict use one rule.
+
+The functions are numba-compiled and called both from numpy code (the OSQP controller) and from
+the compiled control step.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from .footprint import Footprint
+
+#: points sampled along each long side of the body (rear corner, ..., front corner)
+BODY_SAMPLES = 5
+
+
+@njit(cache=True)
+def _interp(tab_s, tab_v, s):
+    """Piecewise-linear value of the table (tab_s increasing) at s; constant beyond the ends."""
+    n = tab_s.shape[0]
+    if n == 1 or s <= tab_s[0]:
+        return tab_v[0]
+    if s >= tab_s[n - 1]:
+        return tab_v[n - 1]
+    lo, hi = 0, n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if tab_s[mid] <= s:
+            lo = mid
+        else:
+            hi = mid
+    w = (s - tab_s[lo]) / (tab_s[hi] - tab_s[lo])
+    return tab_v[lo] + w * (tab_v[hi] - tab_v[lo])
+
+
+@njit(cache=True)
+def body_bounds(tab_s, tab_left, tab_right, s, kappa, yaw_rel, half_length_m, half_width_m, center_offset_m,
+                margin_m):
+    """(lo, hi): the bounds of the reference point's lateral offset [m] that keep every sampled
+    point of the body ``margin_m`` inside the road edges, for the reference point at arc length
+    ``s`` [m] where the path's curvature is ``kappa`` [1/m], the body yawed ``yaw_rel`` [rad]
+    from the path heading. lo > hi (road too narrow) gives the middle of the two for both."""
+    cs, sn = math.cos(yaw_rel), math.sin(yaw_rel)
+    hi = math.inf
+    lo = -math.inf
+    for i in range(BODY_SAMPLES):
+        dx = center_offset_m - half_length_m + 2.0 * half_length_m * i / (BODY_SAMPLES - 1)
+        for side in range(2):
+            dy = half_width_m if side == 0 else -half_width_m
+            d = dx * cs - dy * sn  # the point's distance along the path
+            y = dx * sn + dy * cs  # its lateral offset from the reference point
+            bend = 0.5 * kappa * d * d  # where the curved path is at d, seen from s
+            left = _interp(tab_s, tab_left, s + d) + bend
+            right = _interp(tab_s, tab_right, s + d) + bend
+            h = left - margin_m - y
+            l_ = right + margin_m - y
+            if h < hi:
+                hi = h
+            if l_ > lo:
+                lo = l_
+    if lo > hi:
+        mid = 0.5 * (lo + hi)
+        return mid, mid
+    return lo, hi
+
+
+@njit(cache=True)
+def centre_bounds(tab_s, tab_left, tab_right, s_arr, kappa_arr, yaw_rel_arr, half_length_m, half_width_m,
+                  center_offset_m, margin_m, lo_out, hi_out):
+    """:func:`body_bounds` for each entry of the (n,) arrays, written to ``lo_out`` / ``hi_out``."""
+    for k in range(s_arr.shape[0]):
+        lo_out[k], hi_out[k] = body_bounds(tab_s, tab_left, tab_right, s_arr[k], kappa_arr[k], yaw_rel_arr[k],
+                                           half_length_m, half_width_m, center_offset_m, margin_m)
+
+
+@dataclass(frozen=True, eq=False)
+class Lane:
+    """One lane of a :class:`Road`, on the road's knots: its centre and edges as lateral offsets
+    [m] from the reference path (positive left). ``name`` identifies it (a lanelet id, "left")."""
+
+    name: str
+    center_m: np.ndarray
+    left_m: np.ndarray
+    right_m: np.ndarray
+
+
+@dataclass(frozen=True, eq=False, init=False)
+class Road:
+    """Left / right road edges ``left_m`` / ``right_m`` [m] (lateral offsets from the reference
+    path, positive left) at arc lengths ``s_m`` [m]; the body stays ``margin_m`` inside them.
+    ``lanes`` (optional) are the lanes between the edges, ``route_lane`` the index of the one the
+    route follows. Build with :meth:`constant`, :meth:`per_side` or :meth:`from_widths`."""
+
+    s_m: np.ndarray
+    left_m: np.ndarray
+    right_m: np.ndarray
+    margin_m: float
+    lanes: tuple[Lane, ...]
+    route_lane: int
+
+    def __init__(self, s_m, left_m, right_m, margin_m: float = 0.05, lanes: tuple[Lane, ...] = (),
+                 route_lane: int = 0):
+        s = np.atleast_1d(np.asarray(s_m, float)).copy()
+        left = np.broadcast_to(np.asarray(left_m, float), s.shape).copy()
+        right = np.broadcast_to(np.asarray(right_m, float), s.shape).copy()
+        if s.ndim != 1 or s.size < 1:
+            raise ValueError("road knots s_m must be a non-empty 1-D array")
+        for name, a in (("s_m", s), ("left_m", left), ("right_m", right)):
+            if not np.all(np.isfinite(a)):
+                raise ValueError(f"road {name} contains non-finite values")
+        if np.any(np.diff(s) <= 0):
+            raise ValueError("road knots s_m must be strictly increasing")
+        if np.any(left <= right):
+            k = int(np.argmax(left <= right))
+            raise ValueError(f"road left edge {left[k]:g} m is not left of its right edge {right[k]:g} m "
+                             f"at s = {s[k]:g} m")
+        if not (math.isfinite(margin_m) and margin_m >= 0):
+            raise ValueError(f"road margin_m must be >= 0, got {margin_m!r}")
+        if lanes and not 0 <= route_lane < len(lanes):
+            raise ValueError(f"route_lane {route_lane} is not one of the {len(lanes)} lanes")
+        for ln in lanes:
+            for name in ("center_m", "left_m", "right_m"):
+                if np.shape(getattr(ln, name)) != s.shape:
+                    raise ValueError(f"lane {ln.name}: {name} must have one value per road knot ({s.size})")
+        for name, value in (("s_m", s), ("left_m", left), ("right_m", right), ("margin_m", float(margin_m)),
+                            ("lanes", tuple(lanes)), ("route_lane", int(route_lane))):
+            object.__setattr__(self, name, value)
+
+    # -- construction -------------------------------------------------------------------------
+    @classmethod
+    def constant(cls, width_m: float, margin_m: float = 0.05) -> Road:
+        """A lane ``width_m`` [m] wide centred on the path."""
+        return cls.per_side(0.5 * width_m, 0.5 * width_m, margin_m)
+
+    @classmethod
+    def per_side(cls, left_width_m: float, right_width_m: float, margin_m: float = 0.05) -> Road:
+        """Edges ``left_width_m`` [m] to the left and ``right_width_m`` [m] to the right of the path."""
+        return cls.from_widths([0.0], [left_width_m], [right_width_m], margin_m)
+
+    @classmethod
+    def from_widths(cls, s_m, left_width_m, right_width_m, margin_m: float = 0.05) -> Road:
+        """Edges at distances ``left_width_m`` / ``right_width_m`` [m] (>= 0, per knot) to either
+        side of the path at arc lengths ``s_m`` [m]; one lane between them."""
+        s = np.atleast_1d(np.asarray(s_m, float))
+        wl = np.broadcast_to(np.asarray(left_width_m, float), s.shape)
+        wr = np.broadcast_to(np.asarray(right_width_m, float), s.shape)
+        if np.any(wl < 0) or np.any(wr < 0):
+            raise ValueError("road widths must be >= 0")
+        return cls(s, wl, -wr, margin_m)
+
+    # -- the rule -------------------------------------------------------------------------------
+    def edges(self, s_m) -> tuple[np.ndarray, np.ndarray]:
+        """(left, right) edge offsets [m] at arc length(s) ``s_m``."""
+        s = np.asarray(s_m, float)
+        return np.interp(s, self.s_m, self.left_m), np.interp(s, self.s_m, self.right_m)
+
+    @property
+    def min_width_m(self) -> float:
+        """The narrowest width of the road [m]."""
+        return float(np.min(self.left_m - self.right_m))
+
+    @property
+    def is_uniform(self) -> bool:
+        """True when both edges are the same everywhere."""
+        return bool(np.ptp(self.left_m) == 0.0 and np.ptp(self.right_m) == 0.0)
+
+    def bounds(self, s_m, kappa, yaw_rel_rad, footprint: Footprint) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi) [m]: the bounds of the reference point's lateral offset that keep ``footprint``
+        ``margin_m`` inside the road (:func:`body_bounds`), for arrays of arc lengths [m],
+        curvatures [1/m] and yaws relative to the path [rad] (broadcast together)."""
+        s, k, y = np.broadcast_arrays(np.asarray(s_m, float), np.asarray(kappa, float),
+                                      np.asarray(yaw_rel_rad, float))
+        s, k, y = (np.ascontiguousarray(a, dtype=float).ravel() for a in (s, k, y))
+        lo, hi = np.empty(s.size), np.empty(s.size)
+        centre_bounds(self.s_m, self.left_m, self.right_m, s, k, y, 0.5 * footprint.length_m,
+                      0.5 * footprint.width_m, footprint.center_offset_m, self.margin_m, lo, hi)
+        shape = np.broadcast(np.asarray(s_m), np.asarray(kappa), np.asarray(yaw_rel_rad)).shape
+        return lo.reshape(shape), hi.reshape(shape)
+
+    def body_excess_m(self, s_m, e_y_m, kappa, yaw_rel_rad, footprint: Footprint) -> np.ndarray:
+        """How far [m] the body is outside the road (0 inside): the rule of :meth:`bounds` with no
+        margin, for the reference point at lateral offset(s) ``e_y_m``."""
+        bare = Road(self.s_m, self.left_m, self.right_m, 0.0)
+        lo, hi = bare.bounds(s_m, kappa, yaw_rel_rad, footprint)
+        e = np.asarray(e_y_m, float)
+        return np.maximum(np.maximum(e - hi, lo - e), 0.0)
+
+    def narrowest_fit_m(self, footprint: Footprint) -> float:
+        """Room [m] left beside the body, aligned with a straight path, where the road is
+        narrowest: negative when the car (plus both margins) does not fit somewhere."""
+        return self.min_width_m - footprint.width_m - 2.0 * self.margin_m
+
+    def with_margin(self, margin_m: float) -> Road:
+        """The same road with another margin."""
+        return Road(self.s_m, self.left_m, self.right_m, margin_m, self.lanes, self.route_lane)
+
+    def boundaries_xy(self, path) -> tuple[np.ndarray, np.ndarray]:
+        """(left, right) edge polylines (M, 2) [m] in the world along ``path`` (any object with
+        ``length_m``, ``position`` and ``heading``), for figures."""
+        s = np.unique(np.concatenate([np.linspace(0.0, path.length_m, max(2, int(path.length_m / 0.5) + 1)),
+                                      np.clip(self.s_m, 0.0, path.length_m)]))
+        p = np.asarray(path.position(s), float)
+        h = np.asarray(path.heading(s), float)
+        n = np.column_stack([-np.sin(h), np.cos(h)])
+        left, right = self.edges(s)
+        return p + left[:, None] * n, p + right[:, None] * n
