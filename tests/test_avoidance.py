@@ -9,6 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mpcdrive.control import LtvMpc, MpcConfig
+from mpcdrive.scene.road import Road
 from mpcdrive.experiments import AVOIDANCE_SCENARIOS
 from mpcdrive.models import KinematicBicycle4, KinematicParams
 from mpcdrive.ocp import MpcProblem
@@ -32,10 +33,12 @@ def test_corridor_never_contains_an_obstacle(obs, x0):
     obstacles = [Obstacle(Circle(r) if circ else rectangle(2 * r, r), (x, y, 0.3)) for x, y, r, circ in obs]
     cfg = AvoidanceConfig("corridor", margin_m=0.1, max_obstacles=3, influence_m=50.0)
     N, lane = 30, 1.5
-    av = Avoidance(cfg, obstacles, path, fp, N, 0.1, lane, 0.05)
+    road = Road.constant(2 * lane, 0.05)
+    av = Avoidance(cfg, obstacles, path, fp, N, 0.1, road)
     s_arr = x0 + 0.2 * np.arange(N + 1)
     Xlin = np.column_stack([s_arr, np.zeros(N + 1), np.zeros(N + 1)])
-    t = av.terms(0.0, Xlin[0], Xlin, s_arr, AvoidanceMemory())
+    lo0, hi0 = road.bounds(s_arr[1:], 0.0, 0.0, fp)  # the road's bounds, which the corridor narrows
+    t = av.terms(0.0, Xlin[0], Xlin, s_arr, AvoidanceMemory(), lo0, hi0)
     half = 0.5 * fp.width_m
     for j, ob in enumerate(obstacles):
         box = frenet_box(path, ob.at(0.0), 0.0)
@@ -108,7 +111,7 @@ def _run(sid, **avoidance):
         spec = ScenarioSpec.model_validate(data)
     exp = build_experiment(spec)
     r = run_experiment(exp)
-    return r, compute_metrics(r, exp.footprint)
+    return r, compute_metrics(r)
 
 
 @pytest.mark.slow
@@ -158,7 +161,7 @@ def test_moving_obstacle_is_avoided_where_a_static_assumption_collides():
 
             c.prepare = prepare
         r = run_experiment(exp)
-        results[variant] = compute_metrics(r, exp.footprint)
+        results[variant] = compute_metrics(r)
     assert results["predicted"]["collisions"] == 0 and results["predicted"]["min_obstacle_clearance_m"] > 0.1
     assert results["static"]["collisions"] >= 1
 
@@ -193,7 +196,7 @@ def test_obstacle_rows_are_separating_half_planes():
     path = StraightPath([0, 0], [20, 0])
     fp = Footprint(0.5, 0.27)
     ob = Obstacle(Circle(0.3), (3.0, 1.2, 0.0))
-    av = Avoidance(AvoidanceConfig("hard", margin_m=0.1), [ob], path, fp, 20, 0.05, 2.0)
+    av = Avoidance(AvoidanceConfig("hard", margin_m=0.1), [ob], path, fp, 20, 0.05, Road.constant(4, 0.0))
     s_arr = 1.0 + 0.05 * np.arange(21)
     Xlin = np.column_stack([s_arr, np.zeros(21), np.zeros(21)])
     t = av.terms(0.0, Xlin[0], Xlin, s_arr, AvoidanceMemory())
@@ -230,7 +233,7 @@ def test_a_gap_narrower_than_the_body_blocks_the_lane():
     path = StraightPath([0, 0], [100, 0])
     for formulation in ("hard", "corridor"):
         av = Avoidance(AvoidanceConfig(formulation, margin_m=0.1, influence_m=30.0), [Obstacle(rectangle(5, 2), (20, 0, 0))],
-                       path, CAR, 10, 0.2, 2.5)
+                       path, CAR, 10, 0.2, Road.constant(5, 0.0))
         needed = av.passing_room_m
         # the body's full width and both margins, plus (hard) the discs' overhang beyond the body
         assert needed == pytest.approx(2.0 + 0.1 + (CAR.disc_radius_m - 1.0 if formulation == "hard" else 0.0))
@@ -247,7 +250,7 @@ def test_a_moving_obstacle_is_judged_where_the_car_meets_it():
     there -- the lane is blocked."""
     path = StraightPath([0, 0], [200, 0])
     cutting_in = Obstacle(rectangle(5, 2), (10.0, -5.0, 0.0), ConstantVelocity(5.0, 2.5))
-    av = Avoidance(AvoidanceConfig("hard", margin_m=0.1, influence_m=40.0), [cutting_in], path, CAR, 15, 0.2, 2.5)
+    av = Avoidance(AvoidanceConfig("hard", margin_m=0.1, influence_m=40.0), [cutting_in], path, CAR, 15, 0.2, Road.constant(5, 0.0))
     s_arr = 2.0 * np.arange(16.0)  # 10 m/s
     Xlin = np.column_stack([s_arr, np.zeros(16), np.zeros(16)])
     assert av.terms(0.0, Xlin[0], Xlin, s_arr, AvoidanceMemory()).sides == {0: SIDE_BLOCKED}
@@ -267,7 +270,7 @@ def test_stop_line_lies_across_the_cars_own_road_in_a_bend():
     th = s_ob / 20.0
     ob = Obstacle(rectangle(5, 2), (20 * math.cos(th), 20 * math.sin(th), th + math.pi / 2))
     N = 10
-    av = Avoidance(cfg, [ob], path, CAR, N, 0.2, 2.5)
+    av = Avoidance(cfg, [ob], path, CAR, N, 0.2, Road.constant(5, 0.0))
     s_arr = 0.7 * np.arange(N + 1.0)  # 3.5 m/s: the front disc passes the stop line at the end
     Xlin = np.column_stack([20 * np.cos(s_arr / 20), 20 * np.sin(s_arr / 20), s_arr / 20 + math.pi / 2])
     t = av.terms(0.0, Xlin[0], Xlin, s_arr, AvoidanceMemory())
@@ -294,7 +297,7 @@ def test_no_stop_line_for_a_car_on_a_stretch_of_road_that_only_passes_near_by():
     ob = Obstacle(rectangle(5, 2), (-15.0, 0.0, -math.pi / 2))
     cfg = AvoidanceConfig("hard", margin_m=0.3, influence_m=40.0, follow_gap_s=1.0)
     N = 10
-    av = Avoidance(cfg, [ob], path, CAR, N, 0.2, 2.5)
+    av = Avoidance(cfg, [ob], path, CAR, N, 0.2, Road.constant(5, 0.0))
     s_arr = 2.0 * np.arange(N + 1.0)
     Xlin = np.column_stack([15 * np.cos(s_arr / 15), 15 * np.sin(s_arr / 15), s_arr / 15 + math.pi / 2])
     t = av.terms(0.0, Xlin[0], Xlin, s_arr, AvoidanceMemory())
@@ -330,14 +333,14 @@ def test_following_a_slower_car_in_a_bend(follow_gap_s):
     dt, N, steps = 0.2, 15, 120
     pb = MpcProblem(4, 2, N, dt, Q=[1.0, 1.0, 2.0, 0.5], R=[1.0, 0.05], Rc=[20.0, 0.05],
                     u_min=[-0.78, -5.0], u_max=[0.78, 5.0], du_max_per_s=[1.0, np.inf],
-                    x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [20.0], lane_half_width_m=2.5)
+                    x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [20.0], road=Road.constant(5.0, 0.0))
     leader = _circle_follower(path, 25.0, 6.0, dt * steps + 10.0)
     cfg = AvoidanceConfig("hard", margin_m=0.3, influence_m=30.0, follow_gap_s=follow_gap_s)
     c = LtvMpc(model, path, pb, MpcConfig(v_ref_mps=10.0, projection_window_m=6.0), obstacles=(leader,),
-               avoidance=cfg, footprint=CAR, lane_margin_m=0.0)
+               avoidance=cfg, footprint=CAR)
     x0 = np.array([20.0, 0.0, math.pi / 2, 10.0])
-    r = simulate(c, Plant(model), path, x0, dt, steps, obstacles=(leader,), footprint=CAR, lane_half_width_m=2.5)
-    m = compute_metrics(r, CAR)
+    r = simulate(c, Plant(model), path, x0, dt, steps, obstacles=(leader,), footprint=CAR, road=pb.road)
+    m = compute_metrics(r)
     assert m["collisions"] == 0 and m["min_obstacle_clearance_m"] > 0.2
     assert m["solver_failures"] == 0 and m["fallbacks"] == 0
     late = slice(steps // 2, None)
@@ -358,11 +361,11 @@ def test_set_obstacles_replaces_what_the_controller_avoids():
     path = StraightPath([0, 0], [300, 0])
     model = KinematicBicycle4(KinematicParams(2.5, 2.5))
     pb = MpcProblem(4, 2, 15, 0.2, Q=[1.0, 1.0, 2.0, 0.5], R=[1.0, 0.05], u_min=[-0.78, -5.0], u_max=[0.78, 5.0],
-                    x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [20.0], lane_half_width_m=2.5)
+                    x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [20.0], road=Road.constant(5.0, 0.0))
     stopped_ahead = Obstacle(rectangle(5, 2), (20.0, 0.0, 0.0), name="stopped")
     cfg = AvoidanceConfig("hard", margin_m=0.3, influence_m=30.0, max_obstacles=2, follow_gap_s=1.0)
     c = LtvMpc(model, path, pb, MpcConfig(v_ref_mps=10.0), obstacles=(stopped_ahead,), avoidance=cfg,
-               footprint=CAR, lane_margin_m=0.0)
+               footprint=CAR)
     x = np.array([0.0, 0.0, 0.0, 10.0])
     rows = c.qp.problem.obstacle_rows
     brake = c.step(x, c.initial_warm(x))

@@ -12,6 +12,7 @@ import pytest
 import yaml
 
 from mpcdrive.cli import main
+from mpcdrive.scene.road import Road
 from mpcdrive.control import DelayCompensator, FallbackConfig, LtvMpc, MpcConfig
 from mpcdrive.models import KinematicBicycle3, KinematicParams
 from mpcdrive.ocp import MpcProblem
@@ -211,7 +212,10 @@ API_CASES = [
     ("MpcProblem: infinite lower bound", lambda: MpcProblem(3, 1, 5, 0.01, Q=1.0, R=1.0, u_min=INF), "impossible"),
     ("MpcProblem: NaN bound", lambda: MpcProblem(3, 1, 5, 0.01, Q=1.0, R=1.0, x_max=NAN), "NaN"),
     ("MpcProblem: zero rate limit", lambda: MpcProblem(3, 1, 5, 0.01, Q=1.0, R=1.0, du_max_per_s=0.0), "du_max_per_s"),
-    ("MpcProblem: negative lane width", lambda: MpcProblem(3, 1, 5, 0.01, Q=1.0, R=1.0, lane_half_width_m=-1), "lane_half_width_m"),
+    ("MpcProblem: a lane width for a road", lambda: MpcProblem(3, 1, 5, 0.01, Q=1.0, R=1.0, road=-1), "road must be"),
+    ("Road: edges swapped", lambda: Road(0.0, -1.0, 1.0), "is not left of its right edge"),
+    ("Road: NaN width", lambda: Road.constant(NAN), "non-finite"),
+    ("Road: knots not increasing", lambda: Road([0.0, 0.0], 1.0, -1.0), "strictly increasing"),
     ("MpcProblem: NaN slack weight", lambda: MpcProblem(3, 1, 5, 0.01, Q=1.0, R=1.0, lane_slack_weight=NAN), "lane_slack_weight"),
     ("MpcProblem: singular input weight, unbounded inputs",
      lambda: MpcProblem(4, 2, 5, 0.01, Q=1.0, R=np.array([[1.0, 0.5], [0.5, 0.25]])), "positive definite"),
@@ -252,7 +256,7 @@ API_CASES = [
     ("simulate: zero steps", lambda: _sim(steps=0), "steps must be an integer >= 1"),
     ("simulate: fractional steps", lambda: _sim(steps=2.5), "steps must be an integer >= 1"),
     ("simulate: negative seed", lambda: _sim(seed=-1), "seed must be an integer >= 0"),
-    ("simulate: negative lane width", lambda: _sim(lane_half_width_m=-1.0), "lane_half_width_m"),
+    ("simulate: a lane width for a road", lambda: _sim(road=-1.0), "road must be"),
     ("simulate: disturbance of the wrong size", lambda: _sim(disturbance=Disturbance("normal", std=[0.1, 0.1])),
      "disturbance.std needs 3 entries"),
     ("simulate: measurement noise not a Disturbance", lambda: _sim(measurement_noise=0.1), "measurement_noise must be"),

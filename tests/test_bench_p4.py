@@ -28,7 +28,8 @@ def test_p4_is_the_three_lane_traffic_problem():
     assert (prob.footprint.length_m, prob.footprint.width_m) == (pre.length_m, pre.width_m)
     assert prob.dt_s == prob.problem.dt_s == 0.1 and prob.problem.N == 30 and prob.steps == 300
     assert prob.x0[3] == 20.0 and prob.x0[1] == 0.0
-    assert prob.problem.lane_half_width_m == 1.5 * 3.5  # the road is the three lanes
+    road = prob.problem.road  # the road is the three lanes, the ego in the middle one
+    assert road.min_width_m == 3 * 3.5 and road.left_m[0] == 1.5 * 3.5 and road.right_m[0] == -1.5 * 3.5
     assert prob.avoidance.formulation == "hard"
     assert prob.path.length_m == 300.0
     cars = prob.obstacles

@@ -71,7 +71,7 @@ def test_obstacle_problem_has_n_obstacles_all_in_play_over_the_drive(n):
     prob = p3_obstacles(n)
     base = p3()
     assert len(prob.obstacles) == n
-    assert prob.problem.lane_half_width_m == base.problem.lane_half_width_m
+    assert repr(prob.problem.road) == repr(base.problem.road)
     assert type(prob.model) is type(base.model) and np.array_equal(prob.x0, base.x0)
     assert prob.problem.N == base.problem.N and np.array_equal(prob.problem.Q, base.problem.Q)
     assert prob.config == base.config

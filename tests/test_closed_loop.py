@@ -22,7 +22,7 @@ pytestmark = pytest.mark.slow
 def run(sid):
     exp = build_experiment(load_scenario(sid))
     result = run_experiment(exp)
-    return result, compute_metrics(result, exp.footprint)
+    return result, compute_metrics(result)
 
 
 @pytest.mark.parametrize("sid", PAPER_EXPERIMENTS)

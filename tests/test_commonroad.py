@@ -45,7 +45,7 @@ def drive(name: str):
         imp = load_commonroad(DIR / name)
         exp = build_experiment(imp.spec)
         res = run_experiment(exp)
-        _DRIVES[name] = (imp, res, compute_metrics(res, exp.footprint))
+        _DRIVES[name] = (imp, res, compute_metrics(res))
     return _DRIVES[name]
 
 
@@ -201,7 +201,7 @@ def test_blocked_lane_stops_behind_the_parked_car(capsys):
     imp = replace(imp, spec=imp.spec.model_copy(update={"duration_s": 6.0}))
     exp = build_experiment(imp.spec)
     res = run_experiment(exp)
-    m = compute_metrics(res, exp.footprint)
+    m = compute_metrics(res)
     rep = check_drive(imp, res)
     with capsys.disabled():
         print(f"\nZAM_Tutorial_Urban-3_2.xml (first 6 s): checker: {rep.line()}; ours: final speed "

@@ -259,7 +259,7 @@ def test_scenario_runs_on_a_commonroad_plant_and_logs_the_centre_of_gravity(plan
                                                                               math.sin(xp_final[4])]))
     # the controller brings the car from 0.5 m off the lane centre onto it and to 10 m/s
     assert abs(res.e_y_m[-1]) < 0.05 and res.v_mps[-1] == pytest.approx(10.0, abs=0.1)
-    m = compute_metrics(res, exp.footprint)
+    m = compute_metrics(res)
     assert m["solver_failures"] == 0
 
 

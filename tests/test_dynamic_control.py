@@ -22,6 +22,7 @@ from mpcdrive.control import (
 )
 from mpcdrive.models import DynamicBicycle, KinematicBicycle4, KinematicParams, get_preset
 from mpcdrive.ocp import MpcProblem
+from mpcdrive.scene.road import Road
 from mpcdrive.paths import SpeedProfile, WaypointPath
 from mpcdrive.scenarios import build_experiment, load_scenario, run_experiment
 from mpcdrive.sim import Footprint, Plant, SteeringActuator, compute_metrics, simulate
@@ -93,7 +94,7 @@ def test_projected_gradient_in_closed_loop_and_its_limits():
     m = compute_metrics(res)
     assert m["solver_failures"] == 0 and m["converged_max_abs_lateral_error_m"] < 0.02
     for bad, words in ((dict(du_max_per_s=[1.0, 1.0]), "rate"), (dict(x_max=[np.inf] * 3 + [5.0]), "state bounds"),
-                       (dict(lane_half_width_m=0.5), "lane")):
+                       (dict(road=Road.constant(1.0)), "road")):
         pb_bad = MpcProblem(nx=4, nu=2, N=5, dt_s=0.05, Q=1.0, R=1.0, u_min=-1, u_max=1, **bad)
         with pytest.raises(ValueError, match=words):
             LtvMpc(model, path, pb_bad, MpcConfig(v_ref_mps=1.0), ProjectedGradientSettings())
@@ -141,7 +142,7 @@ def test_delay_compensation_reduces_tracking_error_under_a_known_delay():
                                     "laps": 0.6})
         exp = build_experiment(s)
         assert isinstance(exp.controller, DelayCompensator) == comp
-        results[comp] = compute_metrics(run_experiment(exp), exp.footprint)
+        results[comp] = compute_metrics(run_experiment(exp))
     off, on = results[False], results[True]
     assert on["solver_failures"] == 0
     assert on["rms_lateral_error_m"] < 0.25 * off["rms_lateral_error_m"]
@@ -236,7 +237,7 @@ def test_full_lap_of_each_packaged_track_on_the_pacejka_plant_stays_on_the_road(
     assert exp.plant.model.tire == "pacejka" and exp.mpc.model.tire == "pacejka"
     t0 = time.perf_counter()
     res = run_experiment(exp)
-    m = compute_metrics(res, exp.footprint)
+    m = compute_metrics(res)
     assert res.goal_reached, f"{sid}: did not complete the lap ({time.perf_counter() - t0:.1f} s)"
     assert road_excess_m(res, exp.track, exp.footprint) == 0.0
     assert m["max_lane_excess_m"] == 0.0 and m["solver_failures"] == 0

@@ -60,10 +60,14 @@ def test_csv_path_relative_to_the_scenario_file(tmp_path):
     spec = load_scenario(write(tmp_path, data))
     assert spec.path.file == str((tmp_path / "tracks" / "loop.csv").resolve())
     exp = build_experiment(spec)
-    assert exp.track.closed and exp.road_half_width_m == pytest.approx(0.9)
-    # the lane is the road; the controller keeps the body (half the car's width) inside it
-    assert exp.mpc.problem.lane_half_width_m == pytest.approx(0.9)
-    assert exp.mpc._lane_hi[0] == pytest.approx(0.9 - 0.31 / 2)
+    # the road is the track's, its widths per side followed as they are (1.1 m left, 0.9 m right);
+    # the controller keeps the body (half the car's width, no margin) inside it
+    assert exp.track.closed and exp.road is exp.mpc.problem.road
+    left, right = exp.road.edges([0.0, 7.0])
+    np.testing.assert_allclose(left, 1.1) and np.testing.assert_allclose(right, -0.9)
+    assert exp.road.period_m == pytest.approx(exp.path.length_m)
+    lo, hi = exp.road.bounds(0.0, 0.0, 0.0, exp.footprint)
+    assert (lo, hi) == (pytest.approx(-0.9 + 0.31 / 2), pytest.approx(1.1 - 0.31 / 2))
     assert exp.x0[3] == pytest.approx(exp.speed_profile.speed(exp.path.project(exp.x0[:2])[0]))
 
 
@@ -125,7 +129,8 @@ def _lap_result(n=60):
                      e_psi_rad=z, yaw_rad=x[:, 2], v_mps=2.4 + 0.1 * np.sin(t), steer_rad=z, accel_mps2=z,
                      X_pred=x[:, None, :], refs=x[:, None, :], status=("ok",) * n, fallback=("",) * n,
                      solve_time_s=z, path_xy=xy, dt_s=0.05, state_names=("x", "y", "yaw", "vx", "vy", "r"),
-                     input_names=("steer", "accel"), lane_half_width_m=0.5, meta={"id": "lap"})
+                     input_names=("steer", "accel"), road_profile=np.array([[0.0, 0.5, -0.5], [20.0, 0.5, -0.5]]),
+                     lane_excess_m=np.zeros(n), meta={"id": "lap"})
 
 
 def test_lap_figures_have_labelled_axes_and_data():

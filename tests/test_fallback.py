@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from mpcdrive.control import FallbackConfig, LtvMpc, MpcConfig
+from mpcdrive.scene.road import Road
 from mpcdrive.control.fallback import check_ladder, relaxed_problem
 from mpcdrive.io import write_trajectory_csv
 from mpcdrive.models import KinematicBicycle3, KinematicBicycle4
@@ -62,13 +63,13 @@ def test_bad_fallback_settings_are_refused(kw, words):
 
 def test_relaxed_problem_drops_rate_limits_and_state_bounds_keeps_input_bounds():
     pb = MpcProblem(4, 2, 5, 0.01, Q=1.0, R=0.1, u_min=[-1, -2], u_max=[1, 2], du_max_per_s=[1, 1],
-                    x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [2.0], lane_half_width_m=0.5)
+                    x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [2.0], road=Road.constant(1.0))
     r = relaxed_problem(pb, 100.0)
     assert not r.has_rate_limit and r.bounded_states.size == 0
     np.testing.assert_array_equal(r.u_min, pb.u_min)
     np.testing.assert_array_equal(r.u_max, pb.u_max)
     assert r.lane_slack_weight == pytest.approx(pb.lane_slack_weight / 100)
-    assert r.lane_half_width_m == pb.lane_half_width_m
+    assert r.road is pb.road
 
 
 def test_ladder_walks_down_relax_shifted_plan_then_brakes_when_the_plan_runs_out():
@@ -171,13 +172,13 @@ def test_scenario_fallback_keys_reach_the_controller_and_the_csv(tmp_path):
     assert counts["brake"] + counts["shifted_plan"] == 30 and counts["brake"] == 3
 
 
-def _straight_speed_controller(obstacles=(), lane_half_width_m=None):
+def _straight_speed_controller(obstacles=(), road=None):
     """KinematicBicycle4 at 5 m/s on a straight road, braking limit 6 m/s^2, main solve failing."""
     from mpcdrive.ocp.avoidance import AvoidanceConfig
 
     model = KinematicBicycle4()
     pb = MpcProblem(4, 2, 10, 0.05, Q=[1, 1, 1, 1], R=0.1, u_min=[-STEER, -6.0], u_max=[STEER, 2.0],
-                    lane_half_width_m=lane_half_width_m)
+                    road=road)
     path = StraightPath([0, 0], [100, 0])
     c = LtvMpc(model, path, pb, MpcConfig(v_ref_mps=5.0), obstacles=tuple(obstacles),
                avoidance=AvoidanceConfig() if obstacles else None)
@@ -211,7 +212,7 @@ def test_relax_plan_into_an_obstacle_is_not_applied_the_car_brakes_at_full_decel
 
 
 def test_relax_plan_leaving_the_road_is_not_applied():
-    c = _straight_speed_controller(lane_half_width_m=1.75)
+    c = _straight_speed_controller(road=Road.constant(3.5))
     x = np.array([0.0, 0.0, 0.0, 5.0])
     # drifting 0.3 m left per step: the body's corner leaves the 1.75 m half-width road
     c.fallback.relax_backend.solve = lambda *a, **k: _plan(_drive_straight(0.0, 5.0, 10, 0.05, 0.3))
@@ -221,7 +222,7 @@ def test_relax_plan_leaving_the_road_is_not_applied():
 
 
 def test_plan_check_can_be_switched_off():
-    c = _straight_speed_controller(lane_half_width_m=1.75)
+    c = _straight_speed_controller(road=Road.constant(3.5))
     c.fallback.config = FallbackConfig(check_plans=False)
     x = np.array([0.0, 0.0, 0.0, 5.0])
     c.fallback.relax_backend.solve = lambda *a, **k: _plan(_drive_straight(0.0, 5.0, 10, 0.05, 0.3))

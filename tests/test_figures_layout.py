@@ -33,7 +33,8 @@ def _run(length_m=230.0, lane=2.0, k=200, obstacles=None, name="long-road", e_y=
         v_mps=np.full(k, 5.0), steer_rad=z, accel_mps2=z, X_pred=None, refs=None,
         status=(STATUS_OK,) * k, fallback=("",) * k, solve_time_s=np.full(k, 1e-4),
         path_xy=np.column_stack([np.linspace(0.0, length_m, 400), np.zeros(400)]), dt_s=dt,
-        state_names=("x", "y", "yaw"), input_names=("steer",), lane_half_width_m=lane / 2,
+        state_names=("x", "y", "yaw"), input_names=("steer",),
+        road_profile=np.array([[0.0, lane / 2, -lane / 2], [length_m, lane / 2, -lane / 2]]), lane_excess_m=np.zeros(k),
         goal_reached=None, meta=meta)
 
 

@@ -100,7 +100,7 @@ def test_no_exception_escapes_and_commands_stay_within_bounds(data):
         assert (fb == "") == ok  # every failure answered by a named fallback, and only failures
         assert fb == "" or fb in FALLBACK_KINDS
         assert fb == "" or fb in spec.controller.fallback
-    m = compute_metrics(r, exp.footprint)
+    m = compute_metrics(r)
     assert m["termination"] in ("completed", "goal_reached", "diverged")
     assert m["fallbacks"] == sum(m["fallback_counts"].values())
     assert m["solver_failures"] == sum(1 for s in r.status if s not in (STATUS_OK, STATUS_INACCURATE))

@@ -177,7 +177,7 @@ def test_mpc_drives_the_empty_racetrack_on_the_road(gym, seed):
     assert r.steps == 300, "the episode ended early (off the road or crashed)"
     assert drive.on_road.all() and not drive.crashed and not drive.terminated
     assert r.s_m[-1] - r.s_m[0] > driver.path.length_m  # more than a lap
-    m = compute_metrics(r, drive.footprint)
+    m = compute_metrics(r)
     assert m["solver_failures"] == 0 and m["fallbacks"] == 0
     assert m["max_abs_lateral_error_m"] < 0.5 and m["max_lane_excess_m"] == 0.0
     assert np.all(np.abs(r.steer_rad) <= driver.scaling.steering_range_rad[1] + 1e-9)
@@ -275,7 +275,7 @@ def test_mpc_drives_among_other_vehicles_without_a_crash(gym, seed):
     assert len(driver.others) >= 4
     assert r.steps == 300, "the episode ended early (off the road or crashed)"
     assert not drive.crashed and drive.on_road.all() and not drive.terminated
-    m = compute_metrics(r, drive.footprint)
+    m = compute_metrics(r)
     assert m["collisions"] == 0 and m["min_obstacle_clearance_m"] == pytest.approx(drive.clearance_m.min())
     assert 0.5 < drive.clearance_m.min() < 3.0  # close, and clear of them
     assert (drive.considered > 0).sum() > 100 and drive.considered.max() >= 2

@@ -22,7 +22,7 @@ from mpcdrive.io import (
     write_trajectory_csv,
 )
 from mpcdrive.plots import figures
-from mpcdrive.scene.geometry import lane_boundaries
+from mpcdrive.scene.geometry import road_edges
 from mpcdrive.report import ReportEntry, write_reproduce_report
 from mpcdrive.types import STATUS_INFEASIBLE, STATUS_OK, SimResult
 
@@ -63,7 +63,8 @@ def make_result(*, nx: int = 3, lane: float | None = 1.75, accel: bool = False,
         status=status, fallback=fallback, solve_time_s=solve,
         path_xy=np.column_stack([np.linspace(-1.0, 60.0, 50), np.zeros(50)]), dt_s=dt,
         state_names=names, input_names=("steer", "accel") if accel else ("steer",),
-        lane_half_width_m=lane, goal_reached=None,
+        road_profile=None if lane is None else np.array([[0.0, lane, -lane], [60.0, lane, -lane]]),
+        lane_excess_m=None if lane is None else np.zeros(K), goal_reached=None,
         meta={"id": "synthetic", "max_steer_rad": math.radians(25.0)} if meta is None else meta,
     )
 
@@ -228,13 +229,17 @@ def test_trajectory_figure_content(result):
     assert 8 <= len(grey) <= 12  # about one predicted horizon per 10 % of the run
 
 
-def test_lane_boundaries_on_circle():
+def test_road_edges_on_circle():
     th = np.linspace(0, 2 * np.pi, 200)
     circle = np.column_stack([10 * np.cos(th), 10 * np.sin(th)])
     circle = np.vstack([circle[:5], circle[4:5], circle[5:]])  # a repeated point
-    left, right = lane_boundaries(circle, 2.0)
+    left, right = road_edges(circle, np.array([[0.0, 2.0, -2.0], [70.0, 2.0, -2.0]]))
     np.testing.assert_allclose(np.hypot(*left.T), 8.0, atol=0.02)  # CCW: left is inside
     np.testing.assert_allclose(np.hypot(*right.T), 12.0, atol=0.02)
+    # per-side widths that change along the path: 1 m to the left at the start, 3 m at the end
+    left, right = road_edges(circle, np.array([[0.0, 1.0, -0.5], [2 * np.pi * 10, 3.0, -0.5]]))
+    assert np.hypot(*left[0]) == pytest.approx(9.0, abs=0.02) and np.hypot(*left[-1]) == pytest.approx(7.0, abs=0.05)
+    np.testing.assert_allclose(np.hypot(*right.T), 10.5, atol=0.02)
 
 
 def test_no_lane_no_meta(tmp_path):

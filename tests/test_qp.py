@@ -18,14 +18,26 @@ from hypothesis import strategies as st
 
 from mpcdrive.models import KinematicBicycle3, KinematicBicycle4, discrete_jacobians, discrete_step
 from mpcdrive.ocp import LtvQp, MpcProblem
+from mpcdrive.scene.road import Road
 from mpcdrive.solvers import OsqpBackend, OsqpSettings
 
 TIGHT = OsqpSettings(eps_abs=1e-9, eps_rel=1e-9, max_iter=100000)
 
 
+def half_width(pb: MpcProblem) -> float | None:
+    """The QP-level tests give the lane as a constant road without margin: its half width is the
+    bound |e_y| <= w of the rows, passed to the QP as lane_lo = -w, lane_hi = w."""
+    return None if pb.road is None else float(pb.road.left_m[0])
+
+
+def lane_rows(pb: MpcProblem):
+    w = half_width(pb)
+    return (None, None) if w is None else (np.full(pb.N, -w), np.full(pb.N, w))
+
+
 def solve_osqp(pb: MpcProblem, x0, Ad, Bd, c, xref, uref, u_prev, lane_normal=None, lane_offset=None):
     qp = LtvQp(pb)
-    qp.update(x0, Ad, Bd, c, xref, uref, u_prev, lane_normal, lane_offset)
+    qp.update(x0, Ad, Bd, c, xref, uref, u_prev, lane_normal, lane_offset, *lane_rows(pb))
     res = OsqpBackend(qp, TIGHT).solve()
     assert res.status == "ok", res.status
     assert res.ok
@@ -159,7 +171,7 @@ def mpc_cost(pb: MpcProblem, X, U, eps, xref, uref, u_prev):
         d = U[k] - up
         J += d @ pb.Rc @ d
         up = U[k]
-    if pb.lane_half_width_m is not None:
+    if pb.road is not None:
         J += pb.lane_slack_weight * np.sum(eps**2) + pb.lane_slack_weight_l1 * np.sum(eps)
     return float(J)
 
@@ -201,10 +213,10 @@ def solve_cvxpy(pb: MpcProblem, x0, Ad, Bd, c, xref, uref, u_prev, lane_normal=N
             if np.isfinite(pb.x_max[i]):
                 cons.append(X[k, i] <= pb.x_max[i])
     eps = None
-    if pb.lane_half_width_m is not None:
+    if pb.road is not None:
         eps = cp.Variable(N)
         cons.append(eps >= 0)
-        w = pb.lane_half_width_m
+        w = half_width(pb)
         for k in range(1, N + 1):
             e_y = lane_normal[k - 1] @ X[k, :2] - lane_offset[k - 1]
             cons += [e_y <= w + eps[k - 1], e_y >= -w - eps[k - 1]]
@@ -283,7 +295,7 @@ def make_instance(seed, *, kind="generic", lane=False, rate=True, xbounds=True, 
         lane_normal = np.column_stack([-np.sin(ang), np.cos(ang)])
         centre = Xn[1:, :2] + 0.1 * rng.normal(size=(N, 2))
         lane_offset = np.einsum("ki,ki->k", lane_normal, centre)
-        lane_kw = dict(lane_half_width_m=rng.uniform(0.05, 0.5), lane_slack_weight=float(rng.choice([5.0, 50.0, 1e3])),
+        lane_kw = dict(road=Road.constant(2.0 * rng.uniform(0.05, 0.5), 0.0), lane_slack_weight=float(rng.choice([5.0, 50.0, 1e3])),
                        lane_slack_weight_l1=float(rng.choice([0.0, 1.0, 20.0])))
     pb = MpcProblem(nx=nx, nu=nu, N=N, dt_s=dt, Q=Q, R=R, QN=QN, Rc=Rc, u_min=u_min, u_max=u_max,
                     du_max_per_s=du, x_min=x_min, x_max=x_max, **lane_kw)
@@ -305,10 +317,10 @@ def check_constraints(pb: MpcProblem, X, U, d, tol=1e-6):
 
 
 def lane_slack(pb, X, d):
-    if pb.lane_half_width_m is None:
+    if pb.road is None:
         return np.zeros(0)
     e_y = np.einsum("ki,ki->k", d["lane_normal"], X[1:, :2]) - d["lane_offset"]
-    return np.maximum(np.abs(e_y) - pb.lane_half_width_m, 0.0)
+    return np.maximum(np.abs(e_y) - half_width(pb), 0.0)
 
 
 def compare_with_cvxpy(pb, d, tol=1e-4):
@@ -417,7 +429,7 @@ def test_ltvqp_pattern_fixed_and_updates_in_place():
         offset = rng.normal(size=N)
         x0 = rng.normal(size=nx)
         u_prev = rng.normal(size=nu)
-        qp.update(x0, Ad, Bd, c, d["xref"], d["uref"], u_prev, normal, offset)
+        qp.update(x0, Ad, Bd, c, d["xref"], d["uref"], u_prev, normal, offset, *lane_rows(pb))
         assert qp.A.shape == shape and qp.A.nnz == nnz
         np.testing.assert_array_equal(qp.A.indices, indices)
         np.testing.assert_array_equal(qp.A.indptr, indptr)
@@ -450,8 +462,8 @@ def test_ltvqp_pattern_fixed_and_updates_in_place():
         ny = np.einsum("ki,ki->k", normal, X[1:, :2])
         np.testing.assert_allclose(Az[qp.r_lane:qp.r_lane + 2 * N:2], ny - eps, atol=1e-12)
         np.testing.assert_allclose(Az[qp.r_lane + 1:qp.r_lane + 2 * N:2], ny + eps, atol=1e-12)
-        np.testing.assert_allclose(qp.u[qp.r_lane:qp.r_lane + 2 * N:2], offset + pb.lane_half_width_m)
-        np.testing.assert_allclose(qp.l[qp.r_lane + 1:qp.r_lane + 2 * N:2], offset - pb.lane_half_width_m)
+        np.testing.assert_allclose(qp.u[qp.r_lane:qp.r_lane + 2 * N:2], offset + half_width(pb))
+        np.testing.assert_allclose(qp.l[qp.r_lane + 1:qp.r_lane + 2 * N:2], offset - half_width(pb))
         # the QP objective equals the MPC cost minus its constant for any z
         obj = 0.5 * z @ (qp.P @ z + qp.P.T @ z - qp.P.diagonal() * z) + qp.q @ z
         J = mpc_cost(pb, X, U, eps, d["xref"], d["uref"], u_prev) - qp_constant(pb, d["xref"], d["uref"], u_prev)
@@ -475,7 +487,7 @@ def test_backend_updates_match_fresh_solves():
         dd["u_prev"] = np.clip(d["u_prev"] + 0.02 * rng.normal(size=pb.nu), pb.u_min, pb.u_max)
         ang = rng.uniform(-3, 3, pb.N)
         dd["lane_normal"] = np.column_stack([-np.sin(ang), np.cos(ang)])
-        qp.update(**dd)
+        qp.update(**dd, **dict(zip(("lane_lo", "lane_hi"), lane_rows(pb))))
         res = backend.solve(*(prev if prev is not None else (None, None)))
         fresh = solve_osqp(pb, **dd)
         assert res.status == "ok"
@@ -517,9 +529,8 @@ BASE = dict(nx=3, nu=1, N=10, dt_s=0.05, Q=np.eye(3), R=np.eye(1))
         dict(x_min=np.zeros(2)),
         dict(du_max_per_s=0.0),
         dict(du_max_per_s=-1.0),
-        dict(lane_half_width_m=0.0),
-        dict(lane_half_width_m=-0.5),
-        dict(lane_half_width_m=0.5, lane_slack_weight=-1.0),
+        dict(road=0.5),
+        dict(road=Road.constant(1.0), lane_slack_weight=-1.0),
         dict(R=0.0),  # R + Rc singular with unbounded inputs
     ],
 )

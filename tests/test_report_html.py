@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from mpcdrive.control import LtvMpc
+from mpcdrive.scene.road import Road
 from mpcdrive.models import KinematicBicycle3
 from mpcdrive.ocp import MpcProblem
 from mpcdrive.paths import CirclePath
@@ -39,10 +40,11 @@ def circle_run(steps: int = 150, radius_m: float = 1.5, lane: float | None = 0.4
     model = KinematicBicycle3(v_mps=1.0)
     path = CirclePath(radius_m=radius_m)
     problem = MpcProblem(nx=3, nu=1, N=N, dt_s=0.02, Q=[1, 1, 1], R=1.0,
-                         u_min=-np.radians(60), u_max=np.radians(60), lane_half_width_m=lane)
+                         u_min=-np.radians(60), u_max=np.radians(60),
+                         road=None if lane is None else Road.constant(2 * lane, 0.0))
     mpc = LtvMpc(model, path, problem)
     return simulate(mpc, Plant(model), path, x0=[radius_m + 0.2, 0.0, np.pi / 2], dt_s=0.02,
-                    steps=steps, lane_half_width_m=lane, meta={"id": "circle", "max_steer_rad": np.radians(60)})
+                    steps=steps, road=problem.road, meta={"id": "circle", "max_steer_rad": np.radians(60)})
 
 
 def tiny_pngs(directory: Path, n: int = 2) -> list[Path]:
@@ -181,7 +183,7 @@ def _page_data(text: str) -> list:
 
 def test_run_page_is_self_contained(tmp_path, run150):
     figs = tiny_pngs(tmp_path, 3)
-    metrics = compute_metrics(run150, FOOTPRINT)
+    metrics = compute_metrics(run150)
     page = write_run_html(tmp_path, run150, metrics, figs, FOOTPRINT, run_id="circle",
                           description="a <b>circle</b> & </script> test")
     assert page == tmp_path / "report.html"
@@ -297,7 +299,7 @@ def test_run_page_plays_in_a_browser(browser, tmp_path, run150):
               {"type": "polygon", "points": [[[-2.2 + 0.01 * k, -2.2], [-1.8 + 0.01 * k, -2.2], [-2.0 + 0.01 * k, -1.8]]
                                              for k in range(run150.steps)]}]
     result = with_obstacles(run150, shapes)
-    write_run_html(tmp_path, result, compute_metrics(result, FOOTPRINT), tiny_pngs(tmp_path), FOOTPRINT,
+    write_run_html(tmp_path, result, compute_metrics(result), tiny_pngs(tmp_path), FOOTPRINT,
                    run_id="circle")
     browser.get((tmp_path / "report.html").as_uri())
     slider = browser.find_element("id", "time-slider")

@@ -131,7 +131,7 @@ def test_outputs_table_summary_figures_and_replayable_failed_runs(tmp_path):
         assert f["reason"] in md and f["reason"] in y.read_text().splitlines()[0]
         # replaying a failed run gives the same numbers (the simulation is deterministic)
         exp = build_experiment(load_scenario(y))
-        m = compute_metrics(run_experiment(exp), exp.footprint)
+        m = compute_metrics(run_experiment(exp))
         assert m["rms_lateral_error_m"] == rows[f["run_id"]]["rms_lateral_error_m"]
     if js["lane"]["runs_outside"]:
         assert "left the lane" in md

@@ -28,7 +28,7 @@ def drive(obstacles, **top):
     spec = validate_scenario_data({**BASE, **top, "obstacles": obstacles}, "traffic.yaml")
     exp = build_experiment(spec)
     r = run_experiment(exp)
-    return r, compute_metrics(r, exp.footprint)
+    return r, compute_metrics(r)
 
 
 def car(x, y, vx, **kw):

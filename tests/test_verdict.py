@@ -118,7 +118,7 @@ def test_goal_is_not_reached_by_a_car_that_left_the_road(tmp_path):
         spec = load_scenario(p)
     exp = build_experiment(spec)
     res = run_experiment(exp)
-    m = compute_metrics(res, exp.footprint)
+    m = compute_metrics(res)
     assert res.goal_reached is True and m["goal_region_reached"] is True
     assert m["max_lane_excess_m"] > 0.1
     assert m["goal_reached"] is False
@@ -129,7 +129,7 @@ def test_goal_is_not_reached_by_a_car_that_left_the_road(tmp_path):
 def test_failed_solves_say_how_they_were_handled(tmp_path):
     p = write(tmp_path, FAILING)
     exp = build_experiment(load_scenario(p))
-    m = compute_metrics(run_experiment(exp), exp.footprint)
+    m = compute_metrics(run_experiment(exp))
     assert m["solver_failures"] == 30 and m["fallbacks"] == 30
     text = run_verdict(m).text()
     assert "30 failed solves: 27 recovered by shifted_plan, 3 by brake" in text, text

@@ -33,7 +33,7 @@ def run_into(spec, out_dir: Path, progress=None, source: str | None = None, extr
         raise BuildError(f"{source or spec.id}: {e}") from None
     with (progress(spec.id, exp.steps) if progress is not None else nullcontext()) as cb:
         result = run_experiment(exp, progress=cb)
-    metrics = compute_metrics(result, exp.footprint)
+    metrics = compute_metrics(result)
     out_dir.mkdir(parents=True, exist_ok=True)
     write_trajectory_csv(result, out_dir / "trajectory.csv")
     write_json(out_dir / "metrics.json", metrics)

@@ -54,7 +54,7 @@ class StudyRun:
 
 
 def _summary(result: SimResult, exp) -> dict:
-    m = compute_metrics(result, exp.footprint)
+    m = compute_metrics(result)
     excess = road_excess_m(result, exp.track, exp.footprint) if exp.track is not None and exp.track.has_widths \
         else m["max_lane_excess_m"]
     ay = lateral_acceleration_mps2(result)

@@ -115,7 +115,10 @@ class SimResult:
     controller runs slower than the plant); fallback : (K,) fallback names ("" if none);
     solve_time_s : (K,) controller step wall time [s] (0 on ``held`` steps);
     path_xy : (M, 2) reference path polyline for plots [m];
-    lane_half_width_m : half lane width or None; state_names/input_names: labels;
+    road_profile : (M, 3) rows ``[s_m, left_m, right_m]``: the road edges' lateral offsets [m]
+    from the path along it (``Road.profile``), or None without a road;
+    lane_excess_m : (K,) how far [m] the body was outside the road at each step (0 inside; the
+    road's own rule), or None without a road; state_names/input_names: labels;
     clearance_m : (K,) smallest footprint-to-obstacle distance per step [m] (None without obstacles).
     """
 
@@ -139,7 +142,8 @@ class SimResult:
     dt_s: float
     state_names: tuple[str, ...]
     input_names: tuple[str, ...]
-    lane_half_width_m: float | None = None
+    road_profile: np.ndarray | None = None
+    lane_excess_m: np.ndarray | None = None
     goal_reached: bool | None = None
     meta: dict = field(default_factory=dict)
     clearance_m: np.ndarray | None = None

@@ -331,3 +331,57 @@ def arc_inside(line: np.ndarray, shapes) -> tuple[float, float] | None:
         return None
     idx = np.flatnonzero(inside)
     return float(s[idx[0]]), float(s[idx[-1]])
+
+
+# -- the road around the route ------------------------------------------------------------------
+#: how far [m] to either side of the centre line the road's edges are looked for, and the step
+#: [m] of the search (an edge is placed at the last step inside the drivable lanelets)
+EDGE_SEARCH_M = 15.0
+EDGE_STEP_M = 0.05
+
+
+def drivable_lanelets(net, route, neighbours: bool = True) -> set[int]:
+    """The route's lanelets and, with ``neighbours``, every lanelet beside them in the same
+    direction (adjacent left / right, repeatedly: all lanes of a motorway's carriageway)."""
+    ids = set(int(i) for i in route)
+    frontier = list(ids) if neighbours else []
+    while frontier:
+        ll = net.find_lanelet_by_id(frontier.pop())
+        for adj, same in ((ll.adj_left, ll.adj_left_same_direction), (ll.adj_right, ll.adj_right_same_direction)):
+            if adj is not None and same and adj not in ids:
+                ids.add(int(adj))
+                frontier.append(int(adj))
+    return ids
+
+
+def route_edges(net, lanelet_ids, line: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(s, left, right) (M,) [m] along the polyline ``line`` (M, 2): the arc length of each point
+    and the distances from it, along the line's left / right normal, to the edge of the union of
+    ``lanelet_ids`` (where the normal leaves it; 0 where the point itself lies outside, filled in
+    from the neighbouring points)."""
+    import shapely
+
+    polys = [net.find_lanelet_by_id(i).polygon.shapely_object.buffer(0.02) for i in lanelet_ids]
+    area = shapely.union_all(polys)
+    shapely.prepare(area)
+    p = np.asarray(line, float)
+    s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(p, axis=0).T))]
+    t = np.gradient(p, axis=0)
+    t /= np.maximum(np.hypot(t[:, 0], t[:, 1]), 1e-12)[:, None]
+    n = np.column_stack([-t[:, 1], t[:, 0]])
+    d = np.arange(0.0, EDGE_SEARCH_M + EDGE_STEP_M / 2, EDGE_STEP_M)
+    out = []
+    for sign in (1.0, -1.0):
+        q = p[:, None, :] + sign * d[None, :, None] * n[:, None, :]
+        inside = shapely.contains_xy(area, q[..., 0], q[..., 1])  # (M, D)
+        # the last offset of the first run inside, starting at the point itself
+        first_out = np.where(inside.all(axis=1), len(d), np.argmin(inside, axis=1))
+        width = np.where(inside[:, 0], d[np.maximum(first_out - 1, 0)], np.nan)
+        out.append(width)
+    left, right = out
+    ok = np.isfinite(left) & np.isfinite(right)
+    if not ok.any():
+        raise ValueError("the route's centre line lies outside its lanelets everywhere")
+    left = np.interp(s, s[ok], left[ok])
+    right = np.interp(s, s[ok], right[ok])
+    return s, left, right

@@ -58,6 +58,7 @@ from ..ocp.avoidance import AvoidanceConfig
 from ..ocp.problem import MpcProblem
 from ..paths.waypoints import WaypointPath
 from ..scene.footprint import Footprint
+from ..scene.road import Road
 from ..scene.geometry import shape_distance
 from ..scene.obstacles import ConstantVelocity, Obstacle, TrajectoryMotion, rectangle
 from ..types import ControlOutput, SimResult
@@ -437,22 +438,23 @@ class HighwayEnvMpcDriver:
             v_ref, nq, nr = float(vehicle.speed), 3, 1
         if len(s.Q) < nq or len(s.R) < nr or len(s.Rc) < nr:
             raise ValueError(f"settings need Q with {nq} and R, Rc with {nr} entries")
-        if self.lane_half_width_m - 0.5 * width_m - s.lane_margin_m <= 0:
+        #: the lane as the road the controller keeps the body inside (scene.road)
+        self.road = Road.constant(2.0 * self.lane_half_width_m, s.lane_margin_m)
+        if self.road.narrowest_fit_m(self.footprint) <= 0:
             raise ValueError(f"lane half width {self.lane_half_width_m} m leaves no room for the "
                              f"vehicle ({width_m} m wide) with a margin of {s.lane_margin_m} m")
-        # the controller keeps the body (half its width plus the margin) inside the lane
         problem = MpcProblem(
             nx=self.model.nx, nu=self.model.nu, N=int(s.horizon), dt_s=self.dt_s,
             Q=np.array(s.Q[:nq]), R=np.array(s.R[:nr]), Rc=np.array(s.Rc[:nr]),
             u_min=np.array(u_min), u_max=np.array(u_max), du_max_per_s=np.array(du),
-            x_min=x_min, x_max=x_max, lane_half_width_m=self.lane_half_width_m,
+            x_min=x_min, x_max=x_max, road=self.road,
         )
         # the projection window must cover the distance driven per step, and more
         window = max(2.0, 3.0 * max(v_ref, float(vehicle.speed)) * self.dt_s)
         config = MpcConfig(v_ref_mps=v_ref, projection_window_m=window)
         self.controller = LtvMpc(self.model, self.path, problem, config,
                                  obstacles=self.obstacles(0.0), avoidance=s.avoidance,
-                                 footprint=self.footprint, lane_margin_m=s.lane_margin_m)
+                                 footprint=self.footprint)
         self.warm = self.controller.initial_warm(self.state())
 
     def state(self) -> np.ndarray:
@@ -578,7 +580,9 @@ def drive_env(env, driver: HighwayEnvMpcDriver, steps: int) -> HighwayDrive:
         X_pred=np.array(XP).reshape(len(X), N + 1, nx), refs=np.array(RF).reshape(len(X), N + 1, nx),
         status=tuple(status), fallback=tuple(fallback), solve_time_s=np.array(ST),
         path_xy=path.polyline(), dt_s=driver.dt_s, state_names=tuple(model.state_names),
-        input_names=tuple(model.input_names), lane_half_width_m=driver.lane_half_width_m,
+        input_names=tuple(model.input_names), road_profile=driver.road.profile(path.length_m),
+        lane_excess_m=driver.road.body_excess_m(np.array(S), np.array(EY), np.asarray(path.curvature(np.array(S))),
+                                                np.array(EPSI), driver.footprint),
         goal_reached=None,
         meta={"id": "highway-env-racetrack", "description": "highway-env racetrack driven by LTV-MPC",
               "max_steer_rad": float(driver.scaling.steering_range_rad[1]),

@@ -137,17 +137,20 @@ class CasadiIpoptMpc:
                     opti.subject_to(X[i, k + 1] >= pb.x_min[i])
                 if np.isfinite(pb.x_max[i]):
                     opti.subject_to(X[i, k + 1] <= pb.x_max[i])
-        # soft lane bound on the centre of gravity, as in the QP: n_k . (p_k - c_k) in [lo, hi] +- eps
+        # soft road bound, as in the QP: n_k . (p_k - c_k) in [lo_k, hi_k] +- eps (the body inside
+        # the road, linearized in the yaw: lo_k + dlo_k (yaw_k - yawbar_k), the same for hi)
         self.lane_n = self.lane_b = None
         if core.qp.lane:
             eps = opti.variable(N)
             self.lane_n = opti.parameter(2, N)
             self.lane_b = opti.parameter(N)
+            self.lane_rows = opti.parameter(5, N)  # lo, hi, dlo, dhi, yawbar
             opti.subject_to(eps >= 0)
             for k in range(N):
                 e = ca.dot(self.lane_n[:, k], X[:2, k + 1]) - self.lane_b[k]
-                opti.subject_to(e <= core._lane_hi[k] + eps[k])
-                opti.subject_to(e >= core._lane_lo[k] - eps[k])
+                dyaw = X[2, k + 1] - self.lane_rows[4, k]
+                opti.subject_to(e <= self.lane_rows[1, k] + self.lane_rows[3, k] * dyaw + eps[k])
+                opti.subject_to(e >= self.lane_rows[0, k] + self.lane_rows[2, k] * dyaw - eps[k])
                 cost += pb.lane_slack_weight * eps[k] ** 2 + pb.lane_slack_weight_l1 * eps[k]
         # hard avoidance: the QP's linearized half-plane rows, one slack per predicted step
         self.rows_a = self.rows_b = None
@@ -194,6 +197,8 @@ class CasadiIpoptMpc:
         if self.lane_n is not None:
             opti.set_value(self.lane_n, d.lane_normal.T)
             opti.set_value(self.lane_b, d.lane_offset)
+            dlo, dhi, yaw = d.lane_slopes
+            opti.set_value(self.lane_rows, np.vstack([d.lane_lo, d.lane_hi, dlo, dhi, yaw]))
         if self.rows_a is not None:
             for k, a in enumerate(self.rows_a):
                 opti.set_value(a, d.rows_a[k])

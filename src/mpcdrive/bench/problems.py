@@ -10,6 +10,7 @@ import numpy as np
 from ..control.mpc import LtvMpc, MpcConfig
 from ..ocp.avoidance import AvoidanceConfig
 from ..scene import Circle, Footprint, Obstacle
+from ..scene.road import Road
 from ..scene.obstacles import ConstantVelocity, rectangle
 from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams
 from ..models.presets import get_preset
@@ -71,7 +72,7 @@ def p3() -> BenchProblem:
     of eq. 56 (sigma = 0.5 m, weight 10) and lane bounds |y| <= 1.75 m; the non-convex cost is
     kept (sequential QP), not linearized away."""
     base = p1()
-    pb = replace(base.problem, lane_half_width_m=1.75)
+    pb = replace(base.problem, road=Road.constant(3.5))
     obstacle = Obstacle(Circle(0.25), (5.0, 0.0, 0.0), name="cone")
     av = AvoidanceConfig("gaussian", weight=10.0, sigma_m=(0.5, 0.5))
     return BenchProblem("P3", "P1 + obstacle with Gaussian cost, lane |y| <= 1.75 m", base.model,
@@ -206,7 +207,7 @@ def p4() -> BenchProblem:
                     u_min=[-pre.max_steer_rad, -6.0], u_max=[pre.max_steer_rad, 3.0],
                     du_max_per_s=[pre.max_steer_rate_rad_s, np.inf],
                     x_min=[-np.inf, -np.inf, -np.inf, 0.0], x_max=[np.inf, np.inf, np.inf, 25.0],
-                    lane_half_width_m=1.5 * P4_LANE_WIDTH_M)
+                    road=Road.constant(3 * P4_LANE_WIDTH_M))
     # the projection window covers the distance driven per step, and more
     cfg = MpcConfig(v_ref_mps=P4_EGO_SPEED_MPS, projection_window_m=3.0 * 25.0 * dt)
     av = AvoidanceConfig("hard", margin_m=0.3, influence_m=70.0, max_obstacles=5)

@@ -5,13 +5,11 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import replace
-from types import SimpleNamespace
 
 import numpy as np
 
 from ..control.factory import BACKENDS, DEFAULT_BACKEND, make_mpc
 from ..sim.closed_loop import Plant
-from ..sim.metrics import lane_excess_per_step
 from ..scene.geometry import shape_distance
 from .problems import PROBLEMS, BenchProblem
 
@@ -40,6 +38,7 @@ def time_closed_loop(controller, prob: BenchProblem, steps: int) -> dict:
     ey = np.empty(steps)
     epsi = np.empty(steps)
     yaw = np.empty(steps)
+    s_m = np.empty(steps)
     failures = 0
     qps = 0
     collisions = 0
@@ -49,7 +48,7 @@ def time_closed_loop(controller, prob: BenchProblem, steps: int) -> dict:
         out = controller.step(x, warm)
         times[k] = time.perf_counter() - t0
         warm = out.warm
-        ey[k], epsi[k], yaw[k] = out.e_y_m, out.e_psi_rad, x[2]
+        ey[k], epsi[k], yaw[k], s_m[k] = out.e_y_m, out.e_psi_rad, x[2], out.s_m
         failures += out.status not in ("ok", "inaccurate")
         qps += out.sqp_iterations
         if prob.obstacles:
@@ -59,11 +58,11 @@ def time_closed_loop(controller, prob: BenchProblem, steps: int) -> dict:
             min_clear = d if min_clear is None else min(min_clear, d)
         x = plant.step(x, out.u, prob.dt_s)
     t = times[min(WARMUP_STEPS, steps - 1):] * 1e6
-    lane = prob.problem.lane_half_width_m
+    road = prob.problem.road
     excess = None
-    if lane is not None:
-        drive = SimpleNamespace(yaw_rad=yaw, e_psi_rad=epsi, e_y_m=ey, lane_half_width_m=lane)
-        excess = float(np.max(lane_excess_per_step(drive, prob.footprint)))
+    if road is not None:  # the road's own rule, as a run's metrics measure it
+        kappa = np.asarray(prob.path.curvature(s_m), float)
+        excess = float(np.max(road.body_excess_m(s_m, ey, kappa, epsi, prob.footprint)))
     return {
         "p50_us": float(np.percentile(t, 50)),
         "p99_us": float(np.percentile(t, 99)),

@@ -22,7 +22,7 @@ class FastPathUnavailable(UserWarning):
 
 def make_mpc(model, path: Path, problem: MpcProblem, config: MpcConfig = MpcConfig(),
              backend: Backend = DEFAULT_BACKEND, osqp_settings: OsqpSettings = OsqpSettings(),
-             fast_settings=None, obstacles=(), avoidance=None, footprint=None, lane_margin_m: float = 0.05):
+             fast_settings=None, obstacles=(), avoidance=None, footprint=None):
     """An LTV-MPC controller solving ``problem`` with ``backend``.
 
     ``osqp``: :class:`~mpcdrive.control.mpc.LtvMpc` (sparse QP updated in place, OSQP), the
@@ -30,33 +30,20 @@ def make_mpc(model, path: Path, problem: MpcProblem, config: MpcConfig = MpcConf
     when it does not cover the problem (see ``fast_unsupported_reason``) the OSQP controller is
     returned and a :class:`FastPathUnavailable` warning names the reason -- no constraint or
     setting is ever dropped. The returned controller's ``backend_name`` tells which one runs.
+    Both keep the body inside ``problem.road`` by the same rule (:mod:`mpcdrive.scene.road`).
     """
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
     if backend == "fast":
-        from .fast import FastLtvMpc, FastSettings, fast_unsupported_reason
-
-        from dataclasses import replace
-
         from ..scene.footprint import Footprint
+        from .fast import FastLtvMpc, FastSettings, fast_unsupported_reason
 
         settings = fast_settings if fast_settings is not None else FastSettings()
         fp = footprint if footprint is not None else Footprint()
-        reason = None
-        fast_problem = problem
-        if reason is None and problem.lane_half_width_m is not None:
-            # the same body-inside-the-lane bound the OSQP controller keeps
-            lim = problem.lane_half_width_m - 0.5 * fp.width_m - lane_margin_m
-            if lim <= 0:
-                reason = "the lane is not wider than the car plus its margin"
-            else:
-                fast_problem = replace(problem, lane_half_width_m=lim)
+        reason = fast_unsupported_reason(model, path, problem, config, settings, obstacles, avoidance)
         if reason is None:
-            reason = fast_unsupported_reason(model, path, fast_problem, config, settings, obstacles, avoidance)
-        if reason is None:
-            return FastLtvMpc(model, path, fast_problem, config, settings, obstacles, avoidance, fp, lane_margin_m)
+            return FastLtvMpc(model, path, problem, config, settings, obstacles, avoidance, fp)
         warnings.warn(f"fast backend not used: {reason}; using the OSQP controller", FastPathUnavailable,
                       stacklevel=2)
     kw = {} if footprint is None else {"footprint": footprint}
-    return LtvMpc(model, path, problem, config, osqp_settings, obstacles=obstacles, avoidance=avoidance,
-                  lane_margin_m=lane_margin_m, **kw)
+    return LtvMpc(model, path, problem, config, osqp_settings, obstacles=obstacles, avoidance=avoidance, **kw)

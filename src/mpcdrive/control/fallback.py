@@ -18,7 +18,7 @@ A ladder is a sequence of rungs tried one after the other until one yields a com
 The ``relax`` rung, whose plan comes from a problem without rate limits and with a cheap lane
 slack, is applied only when it is safer than braking: its predicted trajectory keeps the
 footprint clear of every obstacle at its predicted pose and inside the road when the controller
-has one (``road_half_width_m``), or, where it does not, it does so for longer than the braking
+has one (``road``), or, where it does not, it does so for longer than the braking
 plan does (a car closing in from behind can make braking the worse choice). Otherwise the ladder goes on to the next rung, in the end to braking: a fallback never
 makes a failed step worse than braking would (``check_plans``). (A shifted plan was solved under
 the full constraints one step before; checking it against recorded traffic that does not react to
@@ -42,6 +42,8 @@ import numpy as np
 from ..ocp.problem import MpcProblem
 from ..scene.footprint import Footprint
 from ..scene.geometry import shape_distance
+from ..scene.road import Road
+from ..units import wrap_angle
 from ..solvers.osqp_backend import OsqpBackend, OsqpSettings
 from ..types import (  # noqa: F401  (the rung names are re-exported here, their home for controllers)
     FALLBACK_BRAKE,
@@ -144,12 +146,12 @@ class FallbackLadder:
     """
 
     def __init__(self, controller, config: FallbackConfig, relax=None, *, footprint: Footprint = Footprint(),
-                 road_half_width_m: float | None = None):
+                 road: Road | None = None):
         self.ctrl = controller
         self.config = config
         self._relax_fn = relax
         self.footprint = footprint
-        self.road_half_width_m = road_half_width_m
+        self.road = road
         pb = controller.problem
         model = controller.model
         self._rate = pb.du_max_per_s * pb.dt_s  # (nu,) largest change per step
@@ -199,7 +201,7 @@ class FallbackLadder:
         qp, be = self.relax_qp, self.relax_backend
         assert qp is not None and be is not None  # built in __init__ for the relax rung without relax_fn
         qp.update(d.x, d.Ad, d.Bd, d.c, d.xref, d.uref, warm.u_prev, d.lane_normal, d.lane_offset,
-                  d.lane_lo, d.lane_hi)
+                  d.lane_lo, d.lane_hi, d.lane_slopes)
         # obstacles stay in the relaxed problem (their slacks keep it feasible)
         if d.rows_a is not None and qp.n_obs_rows:
             qp.set_obstacle_rows(d.rows_a, d.rows_b)
@@ -244,15 +246,14 @@ class FallbackLadder:
     def first_unsafe_step(self, X: np.ndarray, t0_s: float) -> float:
         """The first k at which the footprint along the predicted states ``X`` (K, nx) [x m, y m,
         yaw rad, ...] (state k at time ``t0_s + k dt``) touches an obstacle the controller avoids,
-        at the obstacle's predicted pose, or has a corner outside the road (|lateral offset| >
-        ``road_half_width_m`` from the path, when there is one); ``inf`` when it never does."""
+        at the obstacle's predicted pose, or has part of its body outside the road (``road``, by
+        :meth:`Road.body_excess_m`, when there is one); ``inf`` when it never does."""
         X = np.asarray(X, float)
         if X.ndim != 2 or not np.all(np.isfinite(X[:, :3])):
             return 0.0
         av = getattr(self.ctrl, "avoidance", None)
         obstacles = list(av.obstacles) if av is not None else []
         dt = self.ctrl.dt_s
-        corners = self.footprint.corners()
         path = self.ctrl.path
         s_m = None
         for k, x in enumerate(X):
@@ -261,12 +262,10 @@ class FallbackLadder:
                 t = t0_s + k * dt
                 if any(ob.present(t) and shape_distance(body, ob.at(t)) <= 0.0 for ob in obstacles):
                     return float(k)
-            if self.road_half_width_m is not None:
+            if self.road is not None:
                 s_m, e_y = path.project(x[:2], s_guess=s_m)
-                # the corners' offsets from the centre, onto the path's left normal there
-                rel = float(x[2]) - float(path.heading(s_m))
-                lateral = e_y + corners[:, 0] * math.sin(rel) + corners[:, 1] * math.cos(rel)
-                if np.max(np.abs(lateral)) > self.road_half_width_m:
+                rel = wrap_angle(float(x[2]) - float(path.heading(s_m)))
+                if float(self.road.body_excess_m(s_m, e_y, float(path.curvature(s_m)), rel, self.footprint)) > 0.0:
                     return float(k)
         return math.inf
 

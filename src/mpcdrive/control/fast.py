@@ -72,6 +72,7 @@ from ..paths.compiled import path_arrays, path_eval, path_project, wrap_angle
 from ..paths.profile_compiled import profile_arc_lengths, profile_array, profile_speed
 from ..scene.footprint import Footprint
 from ..scene.obstacles import Circle, ConstantVelocity, Polygon, Static
+from ..scene.road import _interp, horizon_bounds
 from ..solvers.dense_qp import STATUS_WORDS, gi_solve, single_nonzero_columns
 from ..types import ControlOutput, WarmStart
 from .base import TrackingWarmStart, checked_obstacles
@@ -109,12 +110,12 @@ _NOB = 8
  _W_LAM, _W_VB, _W_S, _W_T2, _W_GAM, _W_H, _W_G, _W_Z, _W_L, _W_J, _W_RQ, _W_D, _W_ZDIR, _W_R, _W_UQ,
  _W_SQ, _W_ROWN, _W_LAMQ, _W_DW, _W_KG, _W_KF, _W_PA, _W_MG, _W_GG, _W_QV, _W_WE, _W_QT, _W_OBS,
  _W_ODIST, _W_OPROJ, _W_SARR, _W_EREF, _W_ROWA, _W_ROWB, _W_LLO, _W_LHI, _W_XLIN, _W_GSUM, _W_PROF,
- _W_VARR, _W_REFW) = range(67)
-_NW = 67
+ _W_VARR, _W_REFW, _W_RDS, _W_RDL, _W_RDR, _W_LDLO, _W_LDHI) = range(72)
+_NW = 72
 # float parameters (fp)
-_F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_LANEW, _F_SLACK2, _F_SLACK1, _F_TOL, _F_OW, _F_OEPS, _F_OSX, \
-    _F_OSY, _F_OINF, _F_OMARGIN, _F_HW, _F_HL, _F_RAMP, _F_OSLACK2, _F_OSLACK1 = range(19)
-_NFP = 19
+_F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_RMARGIN, _F_SLACK2, _F_SLACK1, _F_TOL, _F_OW, _F_OEPS, _F_OSX, \
+    _F_OSY, _F_OINF, _F_OMARGIN, _F_HW, _F_HL, _F_RAMP, _F_OSLACK2, _F_OSLACK1, _F_BOFF, _F_RPERIOD = range(21)
+_NFP = 21
 # info outputs
 _O_S, _O_EY, _O_EPSI, _O_ITER = range(4)
 
@@ -207,14 +208,14 @@ def fast_unsupported_reason(model, path: Path, problem: MpcProblem, config: MpcC
         return f"problem is sized nx={problem.nx}, nu={problem.nu} but the model has nx={model.nx}, nu={model.nu}"
     if np.linalg.eigvalsh(problem.R + problem.Rc).min() <= 1e-12 * max(1.0, float(np.abs(problem.R).max())):
         return "R + Rc is not positive definite (the condensed QP needs a strictly convex cost in the inputs)"
-    lane = problem.lane_half_width_m is not None
+    lane = problem.lane
     if lane and problem.lane_slack_weight <= 0:
         return "lane_slack_weight is 0 (the slack needs a quadratic weight)"
     rows = bool(obstacles) and (avoidance or AvoidanceConfig()).uses_rows
     if rows and problem.obstacle_slack_weight <= 0:
         return "obstacle_slack_weight is 0 (the slack needs a quadratic weight)"
     if rows and not lane and (avoidance or AvoidanceConfig()).formulation == "corridor":
-        return "the corridor formulation needs a lane (lane_half_width_m)"
+        return "the corridor formulation needs a road (MpcProblem.road)"
     nz = problem.N * problem.nu + (problem.N if lane else 0) + (problem.N if rows else 0)
     if nz > settings.max_variables:
         return f"the condensed QP has {nz} variables, more than max_variables={settings.max_variables}"
@@ -256,7 +257,7 @@ def _constant_rows(problem: MpcProblem, nz: int, n_orow: int = 0):
                 r[k * nu + i], r[(k - 1) * nu + i] = 1.0, -1.0
                 rows += [r, -r]
                 rhs += [-dmax[i], -dmax[i]]
-    lane = problem.lane_half_width_m is not None
+    lane = problem.lane
     n_slack = (N if lane else 0) + (N if n_orow else 0)
     n_state = N * int(np.isfinite(problem.x_min).sum() + np.isfinite(problem.x_max).sum())
     n_var = n_state + (2 * N if lane else 0) + N * n_orow
@@ -428,16 +429,15 @@ def _select_obstacles(nobs, omax, obs, odist, oproj, osel, fp, t_s, x, s0, pkind
 
 
 @njit(cache=True)
-def _detour(nsel, osel, obs, oproj, sides, fp, N, s_arr, refs, xref, e_ref):
+def _detour(nsel, osel, obs, oproj, sides, fp, N, s_arr, refs, xref, e_ref, lane, rd_s, rd_l, rd_r):
     """The paper's trapezoidal detour around the selected (static, circular) obstacles, as
-    ``ocp.avoidance``: pick each one's passing side (kept from ``sides`` while it has room;
-    ``fp[_F_LANEW]`` is the bound of the centre of gravity, so the room needed is the margin
-    plus the body's half width),
+    ``ocp.avoidance``: pick each one's passing side (kept from ``sides`` while it has room
+    between the obstacle and the road's edge beside it, ``lane`` = 1 when there is a road: the
+    body's half width, the road's margin, the obstacle margin and the body's half width again),
     shift the references sideways over the obstacle with ramps before and after it, and turn
     their heading with the slope."""
     margin, hw, hl, ramp = fp[_F_OMARGIN], fp[_F_HW], fp[_F_HL], fp[_F_RAMP]
-    lim = fp[_F_LANEW] if fp[_F_LANEW] > 0.0 else math.inf
-    need = margin + hw  # as Avoidance.passing_room_m for the cost formulations, less lim's share
+    need = margin + hw  # as Avoidance.passing_room_m for the cost formulations, less the edge's share
     for k in range(N + 1):
         e_ref[k] = 0.0
     any_shift = False
@@ -446,7 +446,12 @@ def _detour(nsel, osel, obs, oproj, sides, fp, N, s_arr, refs, xref, e_ref):
         r = obs[j, _OB_RB]
         s_ref, e_c = oproj[j, 0], oproj[j, 1]
         e_lo, e_hi = e_c - r, e_c + r
-        room_left, room_right = lim - e_hi, lim + e_lo
+        if lane == 1:
+            lim_l = _interp(rd_s, rd_l, s_ref, fp[_F_RPERIOD]) - hw - fp[_F_RMARGIN]
+            lim_r = _interp(rd_s, rd_r, s_ref, fp[_F_RPERIOD]) + hw + fp[_F_RMARGIN]
+            room_left, room_right = lim_l - e_hi, e_lo - lim_r
+        else:
+            room_left = room_right = math.inf
         prev = sides[j]
         if prev == _SIDE_LEFT and room_left >= need:
             side = _SIDE_LEFT
@@ -602,6 +607,7 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
     We, qt = _v3(wbuf, fo, fs, _W_WE), _v2(wbuf, fo, fs, _W_QT)
     obs, oproj, s_arr = _v2(wbuf, fo, fs, _W_OBS), _v2(wbuf, fo, fs, _W_OPROJ), _v1(wbuf, fo, _W_SARR)
     lane_lo, lane_hi = _v1(wbuf, fo, _W_LLO), _v1(wbuf, fo, _W_LHI)
+    lane_dlo, lane_dhi = _v1(wbuf, fo, _W_LDLO), _v1(wbuf, fo, _W_LDHI)
     rowa, rowb, nrow = _v3(wbuf, fo, fs, _W_ROWA), _v2(wbuf, fo, fs, _W_ROWB), ip[_I_OROWS]
     prof, v_arr = _v1(wbuf, fo, _W_PROF), _v1(wbuf, fo, _W_VARR)
     mkind, nx, nu, N = ip[_I_MODEL], ip[_I_NX], ip[_I_NU], ip[_I_N]
@@ -659,7 +665,8 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
             nsel = _select_obstacles(ip[_I_NOBS], ip[_I_OMAX], obs, _v1(wbuf, fo, _W_ODIST), oproj, osel, fp, t_s, x,
                                      s0, pkind, geo, tab_s, tab_xy, tab_h, tab_k)
             if ip[_I_DETOUR] == 1:
-                _detour(nsel, osel, obs, oproj, sides, fp, N, s_arr, refs, xref, _v1(wbuf, fo, _W_EREF))
+                _detour(nsel, osel, obs, oproj, sides, fp, N, s_arr, refs, xref, _v1(wbuf, fo, _W_EREF), lane,
+                        _v1(wbuf, fo, _W_RDS), _v1(wbuf, fo, _W_RDL), _v1(wbuf, fo, _W_RDR))
 
         # -- linearization points and discrete model ---------------------------------------------
         if mode == MODE_ITERATE:
@@ -725,13 +732,17 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
                 finite = finite and math.isfinite(uref[k, j])
         if not finite:
             return 3
-        if stage == STAGE_LINEARIZE:
-            Xlin = _v2(wbuf, fo, fs, _W_XLIN)
-            for k in range(N):
-                for i in range(nx):
-                    Xlin[k, i] = Xbar[k, i]
+        Xlin = _v2(wbuf, fo, fs, _W_XLIN)
+        for k in range(N):
             for i in range(nx):
-                Xlin[N, i] = F[N - 1, i]
+                Xlin[k, i] = Xbar[k, i]
+        for i in range(nx):
+            Xlin[N, i] = F[N - 1, i]
+        if lane == 1:  # the body inside the road at the linearization trajectory's yaw (scene.road)
+            horizon_bounds(_v1(wbuf, fo, _W_RDS), _v1(wbuf, fo, _W_RDL), _v1(wbuf, fo, _W_RDR), fp[_F_RPERIOD], s_arr[1:],
+                           refs[1:, 2], refs[1:, 3], Xlin[1:, 2], fp[_F_HL], fp[_F_HW], fp[_F_BOFF],
+                           fp[_F_RMARGIN], lane_lo, lane_hi, lane_dlo, lane_dhi)
+        if stage == STAGE_LINEARIZE:
             return 0
     elif ip[_I_OROWS] > 0:
         e_ref = _v1(wbuf, fo, _W_EREF)
@@ -908,18 +919,24 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
                     m += 1
         if lane == 1:
             m_lane = m
+            Xl = _v2(wbuf, fo, fs, _W_XLIN)
             for k in range(1, N + 1):
+                # n . p - dhi yaw <= lane_b + hi - dhi yawbar (and the same with lo, >=): the
+                # road's bounds linearized in the yaw (scene.road.body_bounds)
                 n0, n1 = lane_n[k - 1, 0], lane_n[k - 1, 1]
+                dh, dl = lane_dhi[k - 1], lane_dlo[k - 1]
                 nxf = n0 * xf[k, 0] + n1 * xf[k, 1]
+                ybar = Xl[k, 2]
                 for jj in range(nzu):
                     gp = n0 * Gam[k - 1, 0, jj] + n1 * Gam[k - 1, 1, jj]
-                    C[m, jj] = -gp
-                    C[m + 1, jj] = gp
+                    gy = Gam[k - 1, 2, jj]
+                    C[m, jj] = -(gp - dh * gy)
+                    C[m + 1, jj] = gp - dl * gy
                 for jj in range(nzu, nz):
                     C[m, jj] = 0.0
                     C[m + 1, jj] = 0.0
-                b[m] = nxf - lane_b[k - 1] - lane_hi[k - 1]
-                b[m + 1] = lane_b[k - 1] + lane_lo[k - 1] - nxf
+                b[m] = nxf - dh * xf[k, 2] - lane_b[k - 1] - lane_hi[k - 1] + dh * ybar
+                b[m + 1] = lane_b[k - 1] + lane_lo[k - 1] - dl * ybar - (nxf - dl * xf[k, 2])
                 rgrp[m] = k - 1
                 rgrp[m + 1] = k - 1
                 rowcol[m] = -1
@@ -1138,10 +1155,8 @@ class FastLtvMpc(TrackingWarmStart):
     as rows built by ``ocp.avoidance`` between two compiled stages, their passing sides kept
     in ``WarmStart.sides`` as ``LtvMpc`` keeps them; ``config.sqp_max_iterations > 1`` re-linearizes and
     re-solves (each iteration one compiled call) until the inputs move less than
-    ``config.sqp_tol``, as ``LtvMpc`` does. The lane bound is ``problem.lane_half_width_m`` as
-    given (the factory subtracts the body's half width and margin, as ``LtvMpc`` does itself);
-    ``lane_margin_m`` is that margin, with which the obstacle rows' side choice recovers the
-    road's half width.
+    ``config.sqp_tol``, as ``LtvMpc`` does. The body stays inside ``problem.road`` by the rule
+    of :mod:`mpcdrive.scene.road`, evaluated in the compiled step on the road's tables.
     """
 
     name = "ltv-mpc-fast"
@@ -1149,7 +1164,7 @@ class FastLtvMpc(TrackingWarmStart):
 
     def __init__(self, model, path: Path, problem: MpcProblem, config: MpcConfig = MpcConfig(),
                  settings: FastSettings = FastSettings(), obstacles=(), avoidance: AvoidanceConfig | None = None,
-                 footprint: Footprint = Footprint(), lane_margin_m: float = 0.05):
+                 footprint: Footprint = Footprint()):
         reason = fast_unsupported_reason(model, path, problem, config, settings, obstacles, avoidance)
         if reason is not None:
             raise ValueError(f"the fast backend cannot solve this problem: {reason}")
@@ -1164,16 +1179,14 @@ class FastLtvMpc(TrackingWarmStart):
         #: the compiled detour (cost formulations; with rows ocp.avoidance shifts the references)
         self._detour = av is not None and av.detour != "none" and not rows
         nx, nu, N = model.nx, model.nu, problem.N
-        lane_w = problem.lane_half_width_m
-        lane = lane_w is not None
+        road = problem.road
+        lane = road is not None
         #: the obstacle terms as LtvMpc keeps them (``avoidance.config``, ``.obstacles``,
-        #: ``.relevant``); its lane is the road's (the problem's bound plus the body's half width and
-        #: margin). With a constraint formulation it builds each step's rows between the two stages.
+        #: ``.relevant``). With a constraint formulation it builds each step's rows between the two
+        #: stages.
         self.avoidance: Avoidance | None = None
         if av is not None:
-            road_half = lane_w + 0.5 * footprint.width_m + lane_margin_m if lane_w is not None else None
-            self.avoidance = Avoidance(av, list(obstacles), path, footprint, N, problem.dt_s, road_half,
-                                       lane_margin_m)
+            self.avoidance = Avoidance(av, list(obstacles), path, footprint, N, problem.dt_s, road)
         self._rows = self.avoidance if rows else None
         n_orow = av.rows_per_step(footprint) if av is not None and rows else 0
         self.nx, self.nu, self.N = nx, nu, N
@@ -1225,13 +1238,14 @@ class FastLtvMpc(TrackingWarmStart):
             ip[_I_OMAX] = av.max_obstacles
             ip[_I_DETOUR] = int(self._detour)
         fp = np.zeros(_NFP)
+        fp[[_F_HW, _F_HL, _F_BOFF]] = (0.5 * footprint.width_m, 0.5 * footprint.length_m, footprint.center_offset_m)
         if av is not None:
             fp[[_F_OW, _F_OEPS, _F_OSX, _F_OSY, _F_OINF]] = (av.weight, av.epsilon_m2, *av.sigma_m, av.influence_m)
-            fp[[_F_OMARGIN, _F_HW, _F_HL, _F_RAMP]] = (av.margin_m, 0.5 * footprint.width_m, 0.5 * footprint.length_m,
-                                                      av.detour_ramp_m)
+            fp[[_F_OMARGIN, _F_RAMP]] = (av.margin_m, av.detour_ramp_m)
         fp[_F_DT], fp[_F_VREF] = problem.dt_s, self.v_ref_mps
         fp[_F_HSTEP], fp[_F_WINDOW] = config.horizon_step_m, config.projection_window_m
-        fp[_F_LANEW] = lane_w if lane_w is not None else 0.0
+        fp[_F_RMARGIN] = road.margin_m if road is not None else 0.0
+        fp[_F_RPERIOD] = road.period_m if road is not None else 0.0
         fp[_F_SLACK2], fp[_F_SLACK1] = problem.lane_slack_weight, problem.lane_slack_weight_l1
         fp[_F_OSLACK2], fp[_F_OSLACK1] = problem.obstacle_slack_weight, problem.obstacle_slack_weight_l1
         fp[_F_TOL] = settings.feasibility_tol
@@ -1256,8 +1270,11 @@ class FastLtvMpc(TrackingWarmStart):
             _W_OBS: _obstacle_table(obstacles), _W_ODIST: (max(len(obstacles), 1),),
             _W_OPROJ: (max(len(obstacles), 1), 2), _W_SARR: (N + 1,), _W_EREF: (N + 1,),
             _W_ROWA: (N, max(n_orow, 1), 3), _W_ROWB: np.full((N, max(n_orow, 1)), -np.inf),
-            _W_LLO: np.full(N, -fp[_F_LANEW]), _W_LHI: np.full(N, fp[_F_LANEW]), _W_XLIN: (N + 1, nx),
+            _W_LLO: (N,), _W_LHI: (N,), _W_LDLO: (N,), _W_LDHI: (N,), _W_XLIN: (N + 1, nx),
             _W_GSUM: (2 * N,), _W_PROF: prof, _W_VARR: (N + 1,), _W_REFW: (N + 1, 8),
+            _W_RDS: road.s_m if road is not None else np.zeros(1),
+            _W_RDL: road.left_m if road is not None else np.zeros(1),
+            _W_RDR: road.right_m if road is not None else np.zeros(1),
         }
         shapes: list[tuple[int, ...]] = [np.shape(a) if isinstance(a, np.ndarray) else a
                                          for a in (arrays[i] for i in range(_NW))]
@@ -1294,12 +1311,10 @@ class FastLtvMpc(TrackingWarmStart):
             self._relaxed = FastLtvMpc(
                 model, path, relaxed_problem(problem, config.fallback.relax_slack_factor),
                 replace(config, sqp_max_iterations=1, fallback=FallbackConfig((FALLBACK_HOLD,))),
-                replace(settings, max_iter=2 * settings.max_iter), obstacles, avoidance, footprint, lane_margin_m)
-        # its problem bounds the centre: the road is that bound plus the body's half width and margin
-        road = lane_w + 0.5 * footprint.width_m + lane_margin_m if lane_w is not None else None
+                replace(settings, max_iter=2 * settings.max_iter), obstacles, avoidance, footprint)
         self.fallback = FallbackLadder(self, config.fallback,
                                        relax=self._relax_step if self._relaxed is not None else None,
-                                       footprint=footprint, road_half_width_m=road)
+                                       footprint=footprint, road=road)
 
     def _warm_up(self) -> None:
         """One discarded step at the path start, so that loading (or, on a first run, compiling)
@@ -1372,10 +1387,13 @@ class FastLtvMpc(TrackingWarmStart):
             return code, warm_sides
         w = self._w
         memory = AvoidanceMemory(dict(warm_sides))
-        terms = self._rows.terms(t_s, x, w[_W_XLIN], w[_W_SARR], memory)
+        terms = self._rows.terms(t_s, x, w[_W_XLIN], w[_W_SARR], memory, w[_W_LLO], w[_W_LHI])
         w[_W_ROWA][...] = terms.rows_a
         w[_W_ROWB][...] = terms.rows_b
-        if terms.lane_lo is not None:
+        if terms.lane_lo is not None and terms.lane_hi is not None:
+            # a corridor's bounds where it narrows the road's, without the road's yaw slope
+            w[_W_LDLO][terms.lane_lo != w[_W_LLO]] = 0.0
+            w[_W_LDHI][terms.lane_hi != w[_W_LHI]] = 0.0
             w[_W_LLO][...] = terms.lane_lo
             w[_W_LHI][...] = terms.lane_hi
         if terms.e_ref is None:

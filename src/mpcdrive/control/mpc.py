@@ -20,6 +20,7 @@ from ..models.base import VehicleModel
 from ..models.discretize import Method, discrete_step_and_jacobians, rollout
 from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory, follow_references
 from ..ocp.problem import MpcProblem
+from ..ocp.road_rows import RoadRows
 from ..paths.base import Path
 from ..scene.footprint import Footprint
 from ..scene.obstacles import Obstacle
@@ -41,7 +42,9 @@ class StepData:
     uref : (N, nu) references; Xbar, Ubar : (N, nx), (N, nu) linearization points; Fbar : (N, nx)
     the model's prediction from them; Ad, Bd, c : the affine model x+ = Ad x + Bd u + c;
     lane_normal : (N, 2), lane_offset : (N,) the lane rows (used when the problem has a lane);
-    Xlin : (N+1, nx) linearization trajectory; lane_lo/hi : (N,) corridor bounds [m];
+    Xlin : (N+1, nx) linearization trajectory; lane_lo/hi : (N,) road bounds [m] (the body
+    inside the road, narrowed by a corridor) with ``lane_slopes`` (their yaw slopes and
+    linearization yaws, :class:`~mpcdrive.ocp.road_rows.RoadRows`);
     rows_a/rows_b : obstacle half-planes; H, g : position cost model; sides : passing sides.
     """
 
@@ -67,6 +70,7 @@ class StepData:
     H: np.ndarray | None = None
     g: np.ndarray | None = None
     sides: tuple = ()
+    lane_slopes: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -146,7 +150,7 @@ class LtvMpc(TrackingWarmStart):
     method gives the reference state of a path point at a speed); the QP is built once here and
     only updated in place in :meth:`step`.
     obstacles / avoidance : the obstacles and how they enter the problem (see ocp.avoidance);
-    footprint : the vehicle body; lane_margin_m : extra room [m] kept between body and lane edge.
+    footprint : the vehicle body, kept inside ``problem.road`` (with the road's margin).
     """
 
     name = "ltv-mpc"
@@ -162,7 +166,6 @@ class LtvMpc(TrackingWarmStart):
         obstacles: tuple[Obstacle, ...] = (),
         avoidance: AvoidanceConfig | None = None,
         footprint: Footprint = Footprint(),
-        lane_margin_m: float = 0.05,
     ):
         if (problem.nx, problem.nu) != (model.nx, model.nu):
             raise ValueError(
@@ -184,13 +187,13 @@ class LtvMpc(TrackingWarmStart):
         self.avoidance: Avoidance | None = None
         if obstacles:
             avoidance = avoidance or AvoidanceConfig()
-            if avoidance.formulation == "corridor" and problem.lane_half_width_m is None:
-                raise ValueError("the corridor formulation needs a lane (lane_half_width_m / road.lane_width_m)")
+            if avoidance.formulation == "corridor" and problem.road is None:
+                raise ValueError("the corridor formulation needs a road (MpcProblem.road / road.lane_width_m)")
             problem = replace(problem, obstacle_rows=avoidance.rows_per_step(footprint),
                               position_cost=avoidance.uses_cost)
             self.problem = problem
             self.avoidance = Avoidance(avoidance, list(obstacles), path, footprint, problem.N, problem.dt_s,
-                                       problem.lane_half_width_m, lane_margin_m)
+                                       problem.road)
         self.qp = LtvQp(problem)
         self.backend: OsqpBackend | ProjectedGradientBackend
         if isinstance(solver_settings, ProjectedGradientSettings):
@@ -208,21 +211,11 @@ class LtvMpc(TrackingWarmStart):
         self._lane_n = np.zeros((N, 2))
         self._lane_b = np.zeros(N)
         self._Xlin = np.zeros((N + 1, nx))
-        # the lane bounds the centre of gravity so that the body (half its width, plus a margin
-        # for the corners swinging out when the car is yawed) stays inside
-        if not (math.isfinite(lane_margin_m) and lane_margin_m >= 0):
-            raise ValueError(f"lane_margin_m must be >= 0, got {lane_margin_m}")
-        self._lane_lo: np.ndarray | None
-        self._lane_hi: np.ndarray | None
-        if problem.lane_half_width_m is not None:
-            lim = max(problem.lane_half_width_m - 0.5 * footprint.width_m - lane_margin_m, 0.0)
-            self._lane_lo = np.full(N, -lim)
-            self._lane_hi = np.full(N, lim)
-        else:
-            self._lane_lo = self._lane_hi = None
+        # the road's bounds of the reference point, per step (the body inside: scene.road)
+        self.footprint = footprint
+        self._road_rows = RoadRows.empty(N)
         self._du_step = problem.du_max_per_s * problem.dt_s  # (nu,) largest input change per step
-        self.fallback = FallbackLadder(self, config.fallback, footprint=footprint,
-                                       road_half_width_m=problem.lane_half_width_m)
+        self.fallback = FallbackLadder(self, config.fallback, footprint=footprint, road=problem.road)
 
     # -- obstacles ----------------------------------------------------------------------------
     @property
@@ -272,7 +265,7 @@ class LtvMpc(TrackingWarmStart):
     def _solve(self, d: StepData, warm: WarmStart) -> SolveResult:
         qp = self.qp
         qp.update(d.x, d.Ad, d.Bd, d.c, d.xref, d.uref, warm.u_prev, d.lane_normal, d.lane_offset,
-                  d.lane_lo, d.lane_hi)
+                  d.lane_lo, d.lane_hi, d.lane_slopes)
         if d.rows_a is not None and d.rows_b is not None:  # set together (AvoidanceTerms)
             qp.set_obstacle_rows(d.rows_a, d.rows_b)
         if d.H is not None and d.g is not None:
@@ -325,9 +318,17 @@ class LtvMpc(TrackingWarmStart):
         Xlin[N] = Fbar[-1]
         terms = None
         sides = warm.sides
+        road = self.problem.road
+        rows = None
+        if road is not None:
+            # the body inside the road, linearized in the yaw at the linearization trajectory
+            rows = self._road_rows.fill(road, self.footprint, s_arr, refs, Xlin)
         if self.avoidance is not None:
             memory = AvoidanceMemory(dict(warm.sides))
-            terms = self.avoidance.terms(warm.t_s, x, Xlin, s_arr, memory)
+            terms = self.avoidance.terms(warm.t_s, x, Xlin, s_arr, memory, None if rows is None else rows.lo,
+                                         None if rows is None else rows.hi)
+            if rows is not None:
+                rows = rows.narrowed(terms.lane_lo, terms.lane_hi)
             sides = tuple(sorted(memory.sides.items()))
             if terms.s_max is not None:
                 # car following: the references approach the stop line behind the obstacle
@@ -352,10 +353,10 @@ class LtvMpc(TrackingWarmStart):
             self._lane_b[:] = np.einsum("ki,ki->k", self._lane_n, refs[1:, :2])
         return StepData(x, float(s0), float(e_y), float(e_psi), xref, uref, Xbar, Ubar, Fbar, Ad, Bd, c,
                         self._lane_n, self._lane_b, Xlin,
-                        self._lane_lo if terms is None or terms.lane_lo is None else terms.lane_lo,
-                        self._lane_hi if terms is None or terms.lane_hi is None else terms.lane_hi,
+                        None if rows is None else rows.lo, None if rows is None else rows.hi,
                         None if terms is None else terms.rows_a, None if terms is None else terms.rows_b,
-                        None if terms is None else terms.H, None if terms is None else terms.g, sides)
+                        None if terms is None else terms.H, None if terms is None else terms.g, sides,
+                        None if rows is None else (rows.dlo, rows.dhi, rows.yaw))
 
     def _references(self, s_arr: np.ndarray, v_arr: np.ndarray, yaw_now: float, accel_ff: bool) -> np.ndarray:
         """Fill the state and input references for path points at arc lengths ``s_arr`` (N+1,)

@@ -28,6 +28,7 @@ import numpy as np
 
 from ..paths.base import Path
 from ..scene.footprint import Footprint
+from ..scene.road import Road
 from ..scene.geometry import points_polygon, points_polygons
 from ..scene.obstacles import Circle, Obstacle, WorldCircle
 
@@ -174,14 +175,13 @@ class Avoidance:
     """Builds the obstacle terms of each step for one controller (sizes fixed at construction)."""
 
     def __init__(self, config: AvoidanceConfig, obstacles: list[Obstacle], path: Path, footprint: Footprint,
-                 N: int, dt_s: float, lane_half_width_m: float | None, lane_margin_m: float = 0.0):
+                 N: int, dt_s: float, road: Road | None):
         self.config = config
         self.obstacles = list(obstacles)
         self.path = path
         self.footprint = footprint
         self.N, self.dt_s = N, dt_s
-        self.lane_half = lane_half_width_m
-        self.lane_margin = lane_margin_m
+        self.road = road
         self.M = config.rows_per_step(footprint)
         self.offsets = footprint.disc_offsets_m
         self.r_disc = footprint.disc_radius_m
@@ -234,17 +234,21 @@ class Avoidance:
     @property
     def passing_room_m(self) -> float:
         """Width [m] of the gap between an obstacle and the lane edge that passing it needs: the
-        body's centre line keeps ``half width + lane margin`` from the lane edge and, from the
+        body's centre line keeps ``half width + the road's margin`` from the road edge and, from the
         obstacle, ``margin`` plus the body's half width (corridor) or the radius of the discs
         that cover the body (hard half-planes act on the disc centres)."""
         obstacle_side = self.r_disc if self.config.formulation == "hard" else self.half_width
-        return self.half_width + self.lane_margin + self.config.margin_m + obstacle_side
+        margin = self.road.margin_m if self.road is not None else 0.0
+        return self.half_width + margin + self.config.margin_m + obstacle_side
 
     def _choose_side(self, j: int, box: FrenetBox, memory: AvoidanceMemory) -> int:
         needed = self.passing_room_m
-        lane = self.lane_half if self.lane_half is not None else np.inf
-        room_left = lane - box.e_hi
-        room_right = lane + box.e_lo
+        if self.road is None:
+            room_left = room_right = np.inf
+        else:  # the road's edges beside the obstacle
+            left, right = self.road.edges(box.s_ref)
+            room_left = float(left) - box.e_hi
+            room_right = box.e_lo - float(right)
         prev = memory.sides.get(j)
         if prev == SIDE_LEFT and room_left >= needed:
             return SIDE_LEFT
@@ -270,11 +274,14 @@ class Avoidance:
             boxes = [frenet_box(self.path, shapes[0], s_arr[0])] * (self.N + 1)
         return boxes, centers, shapes
 
-    def terms(self, t_s: float, x: np.ndarray, Xlin: np.ndarray, s_arr: np.ndarray, memory: AvoidanceMemory) -> AvoidanceTerms:
+    def terms(self, t_s: float, x: np.ndarray, Xlin: np.ndarray, s_arr: np.ndarray, memory: AvoidanceMemory,
+              road_lo: np.ndarray | None = None, road_hi: np.ndarray | None = None) -> AvoidanceTerms:
         """Obstacle terms for the horizon starting at time ``t_s`` [s].
 
         x : (nx,) measured state; Xlin : (N+1, nx) linearization trajectory (row k for x_k);
-        s_arr : (N+1,) horizon reference arc lengths [m]; memory : passing sides, updated."""
+        s_arr : (N+1,) horizon reference arc lengths [m]; memory : passing sides, updated;
+        road_lo, road_hi : (N,) the road's bounds of steps 1..N [m] (``Road.bounds``), which the
+        corridor narrows (None: no road)."""
         cfg = self.config
         rel = self.relevant(t_s, x[:2])
         sides: dict[int, int] = {}
@@ -303,7 +310,7 @@ class Avoidance:
             rows_a, rows_b = self._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present, following)
         elif cfg.formulation == "corridor":
             lo, hi, rows_a, rows_b = self._corridor(Xlin, s_arr, [j for j in rel if j not in following], boxes,
-                                                    sides, present)
+                                                    sides, present, road_lo, road_hi)
         else:
             H, g = self._cost(Xlin, rel, boxes, centers, present)
         s_max = None if cfg.follow_gap_s is None else self._stop_lines(s_arr, rel, boxes, sides, gap_s=cfg.follow_gap_s)
@@ -442,11 +449,12 @@ class Avoidance:
             b[:, rows] = np.where(active, rhs, -np.inf).T
         return a, b
 
-    def _corridor(self, Xlin, s_arr, rel, boxes, sides, present):
-        lane = (self.lane_half if self.lane_half is not None else 1e3) - self.half_width - self.lane_margin
+    def _corridor(self, Xlin, s_arr, rel, boxes, sides, present, road_lo, road_hi):
         lo, hi = self._lo, self._hi
-        lo[:] = -lane
-        hi[:] = lane
+        if road_lo is None or road_hi is None:
+            lo[:], hi[:] = -1e3, 1e3
+        else:
+            lo[:], hi[:] = road_lo, road_hi
         a, b = self._a, self._b
         a[:] = 0.0
         b[:] = -np.inf

@@ -7,6 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from ..scene.road import Road
+
 
 def _as_matrix(w, n: int, name: str) -> np.ndarray:
     w = np.asarray(w, float)
@@ -50,8 +52,10 @@ class MpcProblem:
 
     Constraints: the (linearized) dynamics; ``u_min <= u_k <= u_max``;
     ``|u_k - u_{k-1}| <= du_max_per_s * dt_s``; ``x_min <= x_k <= x_max`` for k >= 1;
-    and, when ``lane_half_width_m`` is set, the soft lane bound ``|e_y,k| <= lane_half_width_m + eps_k``
-    (eq. 53) with ``eps_k >= 0`` -- per step the bounds may be narrowed (a corridor).
+    and, when ``road`` is set, the soft road bound ``lo_k - eps_k <= e_y,k <= hi_k + eps_k`` (eq. 53)
+    with ``eps_k >= 0``, where ``lo_k, hi_k`` keep the body inside the road
+    (:class:`~mpcdrive.scene.road.Road`, the one owner of that rule) -- per step the bounds may be
+    narrowed further (a corridor).
 
     Obstacles: ``obstacle_rows`` half-plane rows per step ``a . (x_k, y_k, yaw_k) + sigma_k >= b``
     with one slack ``sigma_k >= 0`` per step, penalized by ``obstacle_slack_weight`` (quadratic)
@@ -76,7 +80,7 @@ class MpcProblem:
     du_max_per_s: np.ndarray
     x_min: np.ndarray
     x_max: np.ndarray
-    lane_half_width_m: float | None
+    road: Road | None
     lane_slack_weight: float
     lane_slack_weight_l1: float
     obstacle_rows: int
@@ -100,7 +104,7 @@ class MpcProblem:
         du_max_per_s: npt.ArrayLike | None = None,
         x_min: npt.ArrayLike | None = None,
         x_max: npt.ArrayLike | None = None,
-        lane_half_width_m: float | None = None,
+        road: Road | None = None,
         lane_slack_weight: float = 1e4,
         lane_slack_weight_l1: float = 1e3,
         obstacle_rows: int = 0,
@@ -118,7 +122,7 @@ class MpcProblem:
         if not (np.isfinite(dt_s) and dt_s > 0):
             raise ValueError(f"dt_s must be a positive finite number, got {dt_s}")
         for name, value in (("nx", nx), ("nu", nu), ("N", int(N)), ("dt_s", dt_s),
-                            ("lane_half_width_m", lane_half_width_m), ("lane_slack_weight", lane_slack_weight),
+                            ("road", road), ("lane_slack_weight", lane_slack_weight),
                             ("lane_slack_weight_l1", lane_slack_weight_l1), ("obstacle_rows", obstacle_rows),
                             ("obstacle_slack_weight", obstacle_slack_weight),
                             ("obstacle_slack_weight_l1", obstacle_slack_weight_l1), ("position_cost", position_cost)):
@@ -137,8 +141,8 @@ class MpcProblem:
         x_min, x_max = _as_bounds(x_min, x_max, nx, "state")
         object.__setattr__(self, "x_min", x_min)
         object.__setattr__(self, "x_max", x_max)
-        if self.lane_half_width_m is not None and not (np.isfinite(self.lane_half_width_m) and self.lane_half_width_m > 0):
-            raise ValueError(f"lane_half_width_m must be positive, got {self.lane_half_width_m}")
+        if road is not None and not isinstance(road, Road):
+            raise ValueError(f"road must be a mpcdrive.scene.road.Road or None, got {type(road).__name__}")
         for name in ("lane_slack_weight", "lane_slack_weight_l1"):
             w = getattr(self, name)
             if not (np.isfinite(w) and w >= 0):
@@ -155,6 +159,11 @@ class MpcProblem:
             raise ValueError("obstacle slack weights must be >= 0")
         if (self.obstacle_rows or self.position_cost) and nx < 3:
             raise ValueError("obstacle terms need states x, y, yaw")
+
+    @property
+    def lane(self) -> bool:
+        """True when the problem has the soft road rows."""
+        return self.road is not None
 
     @property
     def has_rate_limit(self) -> bool:

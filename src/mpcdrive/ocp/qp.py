@@ -65,7 +65,9 @@ class LtvQp:
         self.problem = pb = problem
         nx, nu, N = pb.nx, pb.nu, pb.N
         self.nx, self.nu, self.N = nx, nu, N
-        self.lane = pb.lane_half_width_m is not None
+        self.lane = pb.lane
+        #: the road rows are linearized in the yaw (state 2) when the model has one
+        self.lane_yaw = self.lane and nx >= 3
         self.n_obs_rows = int(pb.obstacle_rows)
         self.n_x = (N + 1) * nx
         self.n_u = N * nu
@@ -183,13 +185,18 @@ class LtvQp:
         if self.lane:
             self.r_lane = r
             slot_n = []
+            slot_yaw = []
             for k in range(1, N + 1):
                 ra, rb = r + 2 * (k - 1), r + 2 * (k - 1) + 1
                 slot_n.append(pat.add([ra, ra], [self.ix(k), self.ix(k) + 1], 0.0))
                 pat.add([ra], [self.ie(k)], -1.0)
                 slot_n.append(pat.add([rb, rb], [self.ix(k), self.ix(k) + 1], 0.0))
                 pat.add([rb], [self.ie(k)], 1.0)
+                if self.lane_yaw:
+                    slot_yaw.append(pat.add([ra, rb], [self.ix(k) + 2, self.ix(k) + 2], 0.0))
             self._slot_n = np.concatenate(slot_n)  # order: k, row (a, b), (nx, ny)
+            if self.lane_yaw:
+                self._slot_yaw = np.concatenate(slot_yaw)  # order: k, row (a, b)
             lo.append(np.tile([-np.inf, 0.0], N))
             hi.append(np.tile([0.0, np.inf], N))
             r += 2 * N
@@ -226,15 +233,18 @@ class LtvQp:
 
     # -- per-step update --------------------------------------------------------------------
     def update(self, x0, Ad, Bd, c, xref, uref, u_prev, lane_normal=None, lane_offset=None,
-               lane_lo=None, lane_hi=None) -> None:
+               lane_lo=None, lane_hi=None, lane_slopes=None) -> None:
         """Write one step's numbers into ``q``, ``l``, ``u`` and ``A.data`` in place.
 
         x0 : (nx,) measured state; Ad : (N, nx, nx), Bd : (N, nx, nu), c : (N, nx) the affine
         prediction model ``x_{k+1} = Ad_k x_k + Bd_k u_k + c_k``; xref : (N+1, nx) state references
         (row 0 unused); uref : (N, nu) input references; u_prev : (nu,) last applied input;
         lane_normal : (N, 2) unit left normals of the path at steps 1..N; lane_offset : (N,)
-        ``n_k . p_ref,k`` [m] (the lane centre); lane_lo, lane_hi : optional (N,) lateral bounds
-        [m] relative to the centre (default -+ half the lane width).
+        ``n_k . p_ref,k`` [m] (the path); lane_lo, lane_hi : (N,) lateral bounds [m] relative to
+        the path (the road's, possibly narrowed); lane_slopes : optional ``(dlo, dhi, yaw)``
+        (N,) each: the bounds' slopes [m/rad] in the yaw at linearization yaws ``yaw`` [rad],
+        making the rows ``n . p - dhi yaw_k <= offset + hi - dhi yaw`` (and the same for lo);
+        :class:`~mpcdrive.ocp.road_rows.RoadRows`.
         Obstacle rows and cost terms are written separately (:meth:`set_obstacle_rows`,
         :meth:`add_position_cost`) after this call.
         """
@@ -260,14 +270,18 @@ class LtvQp:
             self.l[self.r_rate:self.r_rate + nu] = self._rate_base_lo + u_prev
             self.u[self.r_rate:self.r_rate + nu] = self._rate_base_hi + u_prev
         if self.lane:
-            if lane_normal is None or lane_offset is None:
-                raise ValueError("this problem has a lane bound: pass lane_normal and lane_offset")
+            if lane_normal is None or lane_offset is None or lane_lo is None or lane_hi is None:
+                raise ValueError("this problem has a road: pass lane_normal, lane_offset, lane_lo and lane_hi")
             n2 = np.repeat(lane_normal[:, None, :], 2, axis=1)  # (N, 2 rows, 2)
             self._coo_vals[self._slot_n] = n2.ravel()
-            w = pb.lane_half_width_m
-            assert w is not None  # self.lane is set from it in __init__ (the problem is frozen)
-            self.u[self.r_lane:self.r_lane + 2 * N:2] = lane_offset + (w if lane_hi is None else lane_hi)
-            self.l[self.r_lane + 1:self.r_lane + 2 * N:2] = lane_offset + (-w if lane_lo is None else lane_lo)
+            if self.lane_yaw:
+                dlo, dhi, yaw = (np.zeros(N),) * 3 if lane_slopes is None else lane_slopes
+                self._coo_vals[self._slot_yaw] = np.column_stack([-dhi, -dlo]).ravel()
+                self.u[self.r_lane:self.r_lane + 2 * N:2] = lane_offset + lane_hi - dhi * yaw
+                self.l[self.r_lane + 1:self.r_lane + 2 * N:2] = lane_offset + lane_lo - dlo * yaw
+            else:
+                self.u[self.r_lane:self.r_lane + 2 * N:2] = lane_offset + lane_hi
+                self.l[self.r_lane + 1:self.r_lane + 2 * N:2] = lane_offset + lane_lo
         if self.n_obs_rows:
             self.l[self.r_obs:self.r_obs + N * self.n_obs_rows] = -np.inf
         if self._P_has_terms:

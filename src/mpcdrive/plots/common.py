@@ -16,7 +16,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from mpcdrive.io.atomic import atomic_write_bytes
-from mpcdrive.scene.geometry import lane_boundaries  # noqa: F401  (the figures draw it from here)
+from mpcdrive.scene.geometry import road_edges
 from mpcdrive.types import SimResult
 
 DPI = 120
@@ -202,3 +202,12 @@ def draw_obstacles(ax, result: SimResult, frenet_path_xy: np.ndarray | None = No
                         ha="left" if away[0] > 0.3 else "right" if away[0] < -0.3 else "center",
                         va="bottom" if away[1] > 0.3 else "top" if away[1] < -0.3 else "center")
         first_moving = False
+
+
+def result_road_edges(result) -> tuple[np.ndarray, np.ndarray] | None:
+    """(left, right) road edge polylines (M, 2) [m] of a run (its ``road_profile`` along its
+    ``path_xy``), or None without a road."""
+    path = np.asarray(result.path_xy, dtype=float)
+    if result.road_profile is None or path.ndim != 2 or path.shape[0] < 2:
+        return None
+    return road_edges(path, result.road_profile)

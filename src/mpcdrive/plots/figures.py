@@ -28,7 +28,7 @@ from mpcdrive.plots.common import (
     RUN_COLORS,
     aspect_ratio,
     draw_obstacles,
-    lane_boundaries,
+    result_road_edges,
     new_figure,
     run_label,
     save,
@@ -85,8 +85,9 @@ def _map_extent(result: SimResult) -> tuple[float, bool]:
     """(aspect ratio, wide) of the map: reference path, lane and driven trajectory."""
     path = np.asarray(result.path_xy, dtype=float)
     sets = [path, np.asarray(result.xy, dtype=float)]
-    if result.lane_half_width_m is not None and path.ndim == 2 and path.shape[0] >= 2:
-        sets.extend(lane_boundaries(path, float(result.lane_half_width_m)))
+    edges = result_road_edges(result)
+    if edges is not None:
+        sets.extend(edges)
     return aspect_ratio(*sets)
 
 
@@ -110,8 +111,9 @@ def _draw_trajectory(ax, result: SimResult, title: str | None = None, horizons: 
                         label="predicted horizon" if i == 0 else None)
     if path.ndim == 2 and path.shape[0] >= 1:
         ax.plot(path[:, 0], path[:, 1], color=REF_COLOR, lw=1.5, label="reference path", zorder=2)
-        if result.lane_half_width_m is not None and path.shape[0] >= 2:
-            left, right = lane_boundaries(path, float(result.lane_half_width_m))
+        edges = result_road_edges(result)
+        if edges is not None:
+            left, right = edges
             ax.plot(left[:, 0], left[:, 1], color="k", lw=1.0, ls="--", label="lane boundary")
             ax.plot(right[:, 0], right[:, 1], color="k", lw=1.0, ls="--")
     draw_obstacles(ax, result, time_labels=time_labels)
@@ -138,18 +140,19 @@ def _draw_path_coordinates(ax, result: SimResult, title: str | None = None) -> N
     lo = min(0.0, float(np.nanmin(s))) if s.size else 0.0
     hi = max(float(s_path[-1]) if s_path.size else 0.0, float(np.nanmax(s)) if s.size else 0.0)
     ax.plot([lo, hi], [0.0, 0.0], color=REF_COLOR, lw=1.5, label="reference path (e_y = 0)", zorder=2)
-    half = result.lane_half_width_m
-    if half is not None:
-        for sign in (1.0, -1.0):
-            ax.plot([lo, hi], [sign * half, sign * half], color="k", lw=1.0, ls="--",
-                    label="lane boundary" if sign > 0 else None)
+    prof = result.road_profile
+    if prof is not None:
+        prof = np.asarray(prof, dtype=float)
+        ax.plot(prof[:, 0], prof[:, 1], color="k", lw=1.0, ls="--", label="lane boundary")
+        ax.plot(prof[:, 0], prof[:, 2], color="k", lw=1.0, ls="--")
     if len(path) >= 2:
         draw_obstacles(ax, result, frenet_path_xy=path)
     ax.plot(s, e_y, color=DRIVEN_COLOR, lw=1.5, label="driven trajectory", zorder=3)
     if s.size:
         ax.plot(s[0], e_y[0], "o", color="tab:green", ms=7, label="start", zorder=4)
         ax.plot(s[-1], e_y[-1], "s", color=DRIVEN_COLOR, ms=5, label="end", zorder=4)
-    top = max(abs(half) if half is not None else 0.0, float(np.nanmax(np.abs(e_y))) if e_y.size else 0.0, 0.5)
+    edge = float(np.max(np.abs(prof[:, 1:]))) if prof is not None else 0.0
+    top = max(edge, float(np.nanmax(np.abs(e_y))) if e_y.size else 0.0, 0.5)
     # obstacles that reach within two lane half-widths of the path are shown whole
     near = [np.abs(p.get_xy()[:, 1]) for p in ax.patches if hasattr(p, "get_xy")]
     reach = max([float(a.max()) for a in near if a.size and a.min() < 2.0 * top], default=0.0)
@@ -349,7 +352,7 @@ def _make_steering_comparison(results: Mapping[str, SimResult], title: str | Non
 # --------------------------------------------------------------------------- public API
 def plot_trajectory(result: SimResult, path: str | os.PathLike, title: str | None = None) -> Path:
     """Reference path (blue) vs driven trajectory (red) in x/y [m], equal aspect, start marker,
-    lane boundaries at +-``result.lane_half_width_m`` when set, a few predicted horizons (thin
+    road edges (``result.road_profile``) when set, a few predicted horizons (thin
     grey, about every 10 % of the run), obstacles (moving ones where they were at their closest
     approach, with the time). A map more than ``LONG_ROAD_RATIO`` times longer than wide gets
     a second panel in path coordinates (s, e_y) [m].  Writes a PNG; returns ``path``."""
@@ -450,8 +453,9 @@ def _make_trajectory_overlay(results: Mapping[str, SimResult], title: str | None
     first = next(iter(results.values()))
     path = np.asarray(first.path_xy, dtype=float)
     ax.plot(path[:, 0], path[:, 1], color=REF_COLOR, lw=1.2, ls="-.", label="reference path")
-    if first.lane_half_width_m is not None and len(path) >= 2:
-        left, right = lane_boundaries(path, float(first.lane_half_width_m))
+    edges = result_road_edges(first)
+    if edges is not None:
+        left, right = edges
         ax.plot(left[:, 0], left[:, 1], color="k", lw=1.0, ls="--", label="lane boundary")
         ax.plot(right[:, 0], right[:, 1], color="k", lw=1.0, ls="--")
     draw_obstacles(ax, first)  # moving ones at their closest approach to the first run

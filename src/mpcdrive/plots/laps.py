@@ -21,7 +21,7 @@ from mpcdrive.plots.common import (
     LONG_ROAD_RATIO,
     RUN_COLORS,
     aspect_ratio,
-    lane_boundaries,
+    result_road_edges,
     new_figure,
     save,
     set_title,
@@ -38,10 +38,11 @@ def _draw_road(ax, result: SimResult, track: Track | None) -> None:
     ax.plot(path[:, 0], path[:, 1], color="0.6", lw=0.8, ls=":", label="centre line")
     if track is not None and track.has_widths:
         left, right = track.boundaries()
-    elif result.lane_half_width_m is not None and path.shape[0] >= 2:
-        left, right = lane_boundaries(path, float(result.lane_half_width_m))
     else:
-        return
+        edges = result_road_edges(result)
+        if edges is None:
+            return
+        left, right = edges
     ax.plot(left[:, 0], left[:, 1], color="k", lw=1.0, label="road edge")
     ax.plot(right[:, 0], right[:, 1], color="k", lw=1.0)
 

@@ -5,7 +5,7 @@ the viewer is plain JavaScript drawing on a canvas (no external script, style sh
 it opens offline in any browser. Like the Markdown report it reads finished results and never
 runs a controller or solver.
 
-The replay shows, over time: the reference path, the lane boundaries (``lane_half_width_m``),
+The replay shows, over time: the reference path, the road edges (``road_profile``),
 the driven trajectory, the vehicle footprint (a ``Footprint`` rectangle turned by the yaw), the
 predicted horizon of each step (``SimResult.X_pred``) and, when ``result.meta["obstacles"]``
 lists them, the obstacles. Obstacle shapes (metres, radians)::
@@ -53,8 +53,8 @@ from mpcdrive.report.markdown import (
     metrics_summary,
     paper_comparison,
 )
-from mpcdrive.scene.geometry import lane_boundaries
-from mpcdrive.sim.metrics import Footprint
+from mpcdrive.scene.geometry import road_edges
+from mpcdrive.scene.footprint import Footprint
 from mpcdrive.types import STATUS_INACCURATE, STATUS_OK, SimResult
 
 __all__ = ["HtmlRun", "replay_data", "render_html_report", "write_run_html",
@@ -255,10 +255,9 @@ def replay_data(result: SimResult, footprint: Footprint = Footprint(), *, run_id
     xy = np.asarray(result.xy, dtype=float)
     path = np.asarray(result.path_xy, dtype=float).reshape(-1, 2)
     path = path[_subsample(len(path), MAX_PATH_POINTS)]
-    half = result.lane_half_width_m
     left = right = None
-    if half is not None and len(path) >= 2:
-        left, right = lane_boundaries(path, float(half))
+    if result.road_profile is not None and len(path) >= 2:
+        left, right = road_edges(path, result.road_profile)
     idx = _subsample(K, max_frames)
     t_frames = np.asarray(result.t_s, dtype=float)[idx]
     X = np.asarray(result.X_pred, dtype=float) if result.X_pred is not None else None

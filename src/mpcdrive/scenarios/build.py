@@ -25,6 +25,7 @@ from ..sim.actuator import SteeringActuator
 from ..sim.closed_loop import Disturbance, ObservedPlant, Plant, simulate
 from ..ocp.avoidance import AvoidanceConfig
 from ..scene.footprint import Footprint
+from ..scene.road import Road
 from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Polygon, Static, TrajectoryMotion, rectangle
 from ..solvers.osqp_backend import OsqpSettings
 from ..solvers.projected_gradient import ProjectedGradientSettings
@@ -49,7 +50,7 @@ class Experiment:
     mpc: LtvMpc | None = None
     track: Track | None = None
     speed_profile: SpeedProfile | None = None
-    road_half_width_m: float | None = None
+    road: Road | None = None
 
 
 def load_track(spec) -> Track:
@@ -214,15 +215,32 @@ def _start_outside_lane(spec: ScenarioSpec) -> str | None:
     except ValueError:  # a path that cannot be built: build_experiment says why
         return None
     s, e_y = path.project(np.array([init.x_m, init.y_m], float))
-    if spec.road is not None:
-        right = left = spec.road.lane_width_m / 2.0
-    else:
-        right, left = (float(w) for w in track.widths_at(s))
-    if -right <= e_y <= left:
+    road = build_road(spec.road, path, track)
+    assert road is not None  # a road spec or a track with widths (checked above)
+    left_e, right_e = (float(e) for e in road.edges(s))
+    left, right = left_e, -right_e
+    if right_e <= e_y <= left_e:
         return None
     side, width = ("left", left) if e_y > 0 else ("right", right)
     return (f"the car starts {abs(e_y):.3g} m {side} of the path, outside the lane ({width:.3g} m to its "
             f"{side} edge)")
+
+
+def build_road(spec, path: Path, track: Track | None = None) -> Road | None:
+    """The :class:`~mpcdrive.scene.road.Road` of a ``road`` spec along ``path``, else the road
+    widths of a track (followed exactly, not by their narrowest), else None."""
+    period = path.length_m if path.closed else 0.0
+    if spec is not None:
+        if spec.lane_width_m is not None:
+            return Road.constant(spec.lane_width_m, spec.margin_m)
+        if spec.widths is None:
+            return Road.per_side(spec.left_width_m, spec.right_width_m, spec.margin_m)
+        s, wl, wr = (np.array(c, float) for c in zip(*spec.widths))
+        return Road.from_widths(s, wl, wr, spec.margin_m, period if s[-1] - s[0] < period else 0.0)
+    if track is not None and track.has_widths:
+        assert track.width_left_m is not None and track.width_right_m is not None
+        return Road.from_widths(track.s_points_m, track.width_left_m, track.width_right_m, 0.0, period)
+    return None
 
 
 def dynamic_params(v, scale=None) -> DynamicParams:
@@ -303,14 +321,8 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         x_min[3], x_max[3] = s_lo, s_hi
     if profile is not None and c.reference_speed_mps is None:
         v_ref = None  # the profile gives the reference speed
-    # road: a lane from the scenario, else the track's narrowest half width minus half the car
-    lane_half = road_half = None
-    if spec.road is not None:
-        lane_half = road_half = spec.road.lane_width_m / 2.0
-    elif track is not None and track.has_widths:
-        road_half = track.min_half_width_m
-        # the controller keeps the body (half the car's width) inside this bound itself
-        lane_half = road_half if road_half > 0.5 * v.width_m else None
+    # the road: the scenario's, else the track's widths
+    road = build_road(spec.road, path, track)
     problem = MpcProblem(
         nx=model.nx,
         nu=model.nu,
@@ -325,7 +337,7 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         du_max_per_s=np.array(du),
         x_min=x_min,
         x_max=x_max,
-        lane_half_width_m=lane_half,
+        road=road,
         lane_slack_weight=c.lane_slack_weight,
         lane_slack_weight_l1=c.lane_slack_weight_l1,
     )
@@ -352,13 +364,12 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
     if obstacles:
         config = replace(config, sqp_max_iterations=av.sqp_max_iterations, sqp_tol=av.sqp_tol,
                          sqp_max_time_s=av.sqp_max_time_s)
-    lane_margin = spec.road.margin_m if spec.road is not None else 0.0
     if c.backend == "fast" and c.solver == "osqp":
         mpc = make_mpc(model, path, problem, config, "fast", settings, obstacles=obstacles, avoidance=avoidance,
-                       footprint=footprint, lane_margin_m=lane_margin)
+                       footprint=footprint)
     else:
         mpc = LtvMpc(model, path, problem, config, settings, obstacles=obstacles, avoidance=avoidance,
-                     footprint=footprint, lane_margin_m=lane_margin)
+                     footprint=footprint)
     # the plant: same or another model, parameters scaled, steering through an actuator
     pl = spec.plant
     # the true vehicle: the controller's unless the plant names other parameters (a model error)
@@ -411,7 +422,7 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         mpc=mpc,
         track=track,
         speed_profile=profile,
-        road_half_width_m=road_half,
+        road=road,
     )
 
 
@@ -419,7 +430,7 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
     """Closed-loop run of a built experiment."""
     spec = exp.spec
     pb = (exp.mpc or exp.controller).problem
-    half = exp.road_half_width_m if exp.road_half_width_m is not None else pb.lane_half_width_m
+    road = exp.road
     return simulate(
         exp.controller,
         exp.plant,
@@ -431,7 +442,7 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
         measurement_noise=exp.measurement_noise,
         seed=spec.seed,
         stop_at_path_end=spec.stop_at_path_end,
-        lane_half_width_m=half,
+        road=road,
         progress=progress,
         meta={"id": spec.id, "max_steer_rad": float(pb.u_max[0]), "description": spec.description,
               "backend": getattr(exp.mpc, "backend_name", "")},
@@ -439,7 +450,7 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
         footprint=exp.footprint,
         laps=spec.laps,
         # on a track, a car more than 1 m beyond the road edge has left it for good
-        abort_lateral_error_m=None if exp.track is None or half is None else half + 1.0,
+        abort_lateral_error_m=None if exp.track is None or road is None else road.max_offset_m + 1.0,
         control_period_s=spec.controller.period_s,
         between_solves=spec.controller.between_solves,
     )

@@ -16,6 +16,7 @@ from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from ..models.presets import PRESETS
 from ..control.fallback import DEFAULT_LADDER, check_ladder
+from ..solvers.osqp_backend import OsqpSettings
 from ..sim.closed_loop import solve_interval
 
 Finite = Annotated[float, Field(strict=True, allow_inf_nan=False)]
@@ -261,10 +262,45 @@ class InitialState(_Strict):
 
 
 class RoadSpec(_Strict):
-    """A lane centred on the reference path; the controller keeps the body ``margin_m`` inside it."""
+    """The road around the reference path; the controller keeps the body ``margin_m`` inside it.
+    One of: ``lane_width_m`` (a lane centred on the path), ``left_width_m`` and ``right_width_m``
+    (the edges' distances to either side of the path), or ``widths`` (rows ``[s_m, left_width_m,
+    right_width_m]`` at increasing arc lengths, linear in between: a road that narrows or widens
+    is followed exactly)."""
 
-    lane_width_m: Positive
+    lane_width_m: Positive | None = None
+    left_width_m: NonNeg | None = None
+    right_width_m: NonNeg | None = None
+    widths: list[tuple[NonNeg, NonNeg, NonNeg]] | None = None
     margin_m: NonNeg = 0.05
+
+    @model_validator(mode="after")
+    def _one_form(self):
+        forms = [self.lane_width_m is not None, self.left_width_m is not None or self.right_width_m is not None,
+                 self.widths is not None]
+        if sum(forms) != 1:
+            raise ValueError("give the road as one of: lane_width_m, left_width_m + right_width_m, or widths")
+        if forms[1] and (self.left_width_m is None or self.right_width_m is None):
+            raise ValueError("left_width_m and right_width_m go together")
+        if self.widths is not None:
+            if len(self.widths) < 1:
+                raise ValueError("widths needs at least one row [s_m, left_width_m, right_width_m]")
+            s = [w[0] for w in self.widths]
+            if any(b <= a for a, b in zip(s, s[1:])):
+                raise ValueError("widths: the arc lengths s_m must increase from row to row")
+        if self.min_width_m <= 0:
+            raise ValueError("the road has no width somewhere (left + right width is 0)")
+        return self
+
+    @property
+    def min_width_m(self) -> float:
+        """The narrowest width of the road [m]."""
+        if self.lane_width_m is not None:
+            return self.lane_width_m
+        if self.widths is not None:
+            return min(w[1] + w[2] for w in self.widths)
+        assert self.left_width_m is not None and self.right_width_m is not None
+        return self.left_width_m + self.right_width_m
 
 
 class SpeedProfileSpec(_Strict):
@@ -318,15 +354,14 @@ class ControllerSpec(_Strict):
     feedforward: Literal["curvature", "none"] = "curvature"
     lane_slack_weight: NonNeg = 1e4
     lane_slack_weight_l1: NonNeg = 1e3
-    osqp_eps: Positive = 1e-5
-    osqp_max_iter: int = Field(4000, ge=1)
+    osqp_eps: Positive = OsqpSettings.eps_abs
     speed_profile: SpeedProfileSpec | None = None
     solver: Literal["osqp", "projected_gradient"] = "osqp"
     pg_max_iter: int = Field(2000, ge=1)
     pg_tol: Positive = 1e-6
     pg_accelerated: bool = True
     delay_compensation: bool = False
-    osqp_max_iter: Int = Field(4000, ge=1)
+    osqp_max_iter: Int = Field(OsqpSettings.max_iter, ge=1)
     fallback: list[FallbackName] = Field(default_factory=lambda: list(DEFAULT_LADDER))
     brake_decel_mps2: Positive | None = None  # None: the vehicle's full braking (accel_limits_mps2[0])
     brake_steering: Literal["hold", "straighten"] = "hold"
@@ -535,8 +570,8 @@ class ScenarioSpec(_Strict):
                              f"({self.vehicle.model} has the speed as a state)")
         if self.duration_s < self.dt_s:
             raise ValueError(f"duration_s {self.duration_s} is shorter than one step dt_s {self.dt_s}")
-        if self.road is not None and self.road.lane_width_m <= self.vehicle.width_m:
-            raise ValueError(f"road.lane_width_m {self.road.lane_width_m} m is not wider than the car "
+        if self.road is not None and self.road.min_width_m <= self.vehicle.width_m:
+            raise ValueError(f"the road ({self.road.min_width_m:g} m where narrowest) is not wider than the car "
                              f"(vehicle.width_m {self.vehicle.width_m} m)")
         d = _distance_to_path(self.path, (self.initial_state.x_m, self.initial_state.y_m))
         if d > MAX_INITIAL_DISTANCE_M:

@@ -86,9 +86,22 @@ def shape_distance(a: WorldPolygon, b) -> float:
     return _polygon_polygon(a.points, b.points)
 
 
-def lane_boundaries(path_xy: np.ndarray, half_width_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Left and right lane boundaries (M, 2) [m]: the polyline offset by +-half width along its
-    unit normals (central-difference tangents; repeated points keep the previous normal)."""
+def road_edges(path_xy: np.ndarray, profile: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Left and right road edges (M, 2) [m] along the polyline ``path_xy``, from a road profile
+    (rows ``[s_m, left_m, right_m]``, :meth:`~mpcdrive.scene.road.Road.profile`): each point
+    offset along its unit normal by the edges' lateral offsets at its arc length."""
+    p = np.asarray(path_xy, dtype=float)
+    prof = np.asarray(profile, dtype=float)
+    s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(p, axis=0).T))]
+    normal = _unit_normals(p)
+    left = np.interp(s, prof[:, 0], prof[:, 1])
+    right = np.interp(s, prof[:, 0], prof[:, 2])
+    return p + left[:, None] * normal, p + right[:, None] * normal
+
+
+def _unit_normals(path_xy: np.ndarray) -> np.ndarray:
+    """(M, 2) unit left normals of a polyline (central-difference tangents; repeated points keep
+    the previous normal)."""
     p = np.asarray(path_xy, dtype=float)
     tangent = np.gradient(p, axis=0)
     norm = np.hypot(tangent[:, 0], tangent[:, 1])
@@ -101,5 +114,4 @@ def lane_boundaries(path_xy: np.ndarray, half_width_m: float) -> tuple[np.ndarra
     first_good = int(np.argmax(good))
     idx[: first_good + 1] = first_good
     unit = tangent[idx] / norm[idx, None]
-    normal = np.column_stack([-unit[:, 1], unit[:, 0]])  # left of the direction of travel
-    return p + half_width_m * normal, p - half_width_m * normal
+    return np.column_stack([-unit[:, 1], unit[:, 0]])  # left of the direction of travel

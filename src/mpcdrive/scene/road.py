@@ -39,9 +39,15 @@ BODY_SAMPLES = 5
 
 
 @njit(cache=True)
-def _interp(tab_s, tab_v, s):
-    """Piecewise-linear value of the table (tab_s increasing) at s; constant beyond the ends."""
+def _interp(tab_s, tab_v, s, period):
+    """Piecewise-linear value of the table (tab_s increasing) at s; constant beyond the ends, or
+    periodic with ``period`` [m] when it is > 0 (a closed path; the table spans one period)."""
     n = tab_s.shape[0]
+    if period > 0.0:
+        s = tab_s[0] + (s - tab_s[0]) % period
+        if s > tab_s[n - 1]:  # between the last knot and the first one of the next lap
+            w = (s - tab_s[n - 1]) / (tab_s[0] + period - tab_s[n - 1])
+            return tab_v[n - 1] + w * (tab_v[0] - tab_v[n - 1])
     if n == 1 or s <= tab_s[0]:
         return tab_v[0]
     if s >= tab_s[n - 1]:
@@ -58,15 +64,41 @@ def _interp(tab_s, tab_v, s):
 
 
 @njit(cache=True)
-def body_bounds(tab_s, tab_left, tab_right, s, kappa, yaw_rel, half_length_m, half_width_m, center_offset_m,
-                margin_m):
-    """(lo, hi): the bounds of the reference point's lateral offset [m] that keep every sampled
-    point of the body ``margin_m`` inside the road edges, for the reference point at arc length
-    ``s`` [m] where the path's curvature is ``kappa`` [1/m], the body yawed ``yaw_rel`` [rad]
-    from the path heading. lo > hi (road too narrow) gives the middle of the two for both."""
+def _slope(tab_s, tab_v, s, period):
+    """d/ds of the piecewise-linear table at s (0 beyond the ends of an open table)."""
+    n = tab_s.shape[0]
+    if n == 1:
+        return 0.0
+    if period > 0.0:
+        s = tab_s[0] + (s - tab_s[0]) % period
+        if s > tab_s[n - 1]:
+            return (tab_v[0] - tab_v[n - 1]) / (tab_s[0] + period - tab_s[n - 1])
+    elif s <= tab_s[0] or s >= tab_s[n - 1]:
+        return 0.0
+    lo, hi = 0, n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if tab_s[mid] <= s:
+            lo = mid
+        else:
+            hi = mid
+    return (tab_v[hi] - tab_v[lo]) / (tab_s[hi] - tab_s[lo])
+
+
+@njit(cache=True)
+def body_bounds(tab_s, tab_left, tab_right, period, s, kappa, yaw_rel, half_length_m, half_width_m,
+                center_offset_m, margin_m):
+    """(lo, hi, dlo, dhi): the bounds [m] of the reference point's lateral offset that keep every
+    sampled point of the body ``margin_m`` inside the road edges, for the reference point at arc
+    length ``s`` [m] where the path's curvature is ``kappa`` [1/m], the body yawed ``yaw_rel``
+    [rad] from the path heading, and their slopes d/d(yaw) [m/rad] there (of the sample point
+    that binds), with which the rows are linearized in the yaw. lo > hi (road too narrow) gives
+    the middle of the two for both, with zero slopes."""
     cs, sn = math.cos(yaw_rel), math.sin(yaw_rel)
     hi = math.inf
     lo = -math.inf
+    dhi = 0.0
+    dlo = 0.0
     for i in range(BODY_SAMPLES):
         dx = center_offset_m - half_length_m + 2.0 * half_length_m * i / (BODY_SAMPLES - 1)
         for side in range(2):
@@ -74,27 +106,44 @@ def body_bounds(tab_s, tab_left, tab_right, s, kappa, yaw_rel, half_length_m, ha
             d = dx * cs - dy * sn  # the point's distance along the path
             y = dx * sn + dy * cs  # its lateral offset from the reference point
             bend = 0.5 * kappa * d * d  # where the curved path is at d, seen from s
-            left = _interp(tab_s, tab_left, s + d) + bend
-            right = _interp(tab_s, tab_right, s + d) + bend
+            left = _interp(tab_s, tab_left, s + d, period) + bend
+            right = _interp(tab_s, tab_right, s + d, period) + bend
             h = left - margin_m - y
             l_ = right + margin_m - y
+            # d/dyaw: dd = -y, dy = d
             if h < hi:
                 hi = h
+                dhi = -(_slope(tab_s, tab_left, s + d, period) + kappa * d) * y - d
             if l_ > lo:
                 lo = l_
+                dlo = -(_slope(tab_s, tab_right, s + d, period) + kappa * d) * y - d
     if lo > hi:
         mid = 0.5 * (lo + hi)
-        return mid, mid
-    return lo, hi
+        return mid, mid, 0.0, 0.0
+    return lo, hi, dlo, dhi
 
 
 @njit(cache=True)
-def centre_bounds(tab_s, tab_left, tab_right, s_arr, kappa_arr, yaw_rel_arr, half_length_m, half_width_m,
+def centre_bounds(tab_s, tab_left, tab_right, period, s_arr, kappa_arr, yaw_rel_arr, half_length_m, half_width_m,
                   center_offset_m, margin_m, lo_out, hi_out):
     """:func:`body_bounds` for each entry of the (n,) arrays, written to ``lo_out`` / ``hi_out``."""
     for k in range(s_arr.shape[0]):
-        lo_out[k], hi_out[k] = body_bounds(tab_s, tab_left, tab_right, s_arr[k], kappa_arr[k], yaw_rel_arr[k],
-                                           half_length_m, half_width_m, center_offset_m, margin_m)
+        lo_out[k], hi_out[k], _, _ = body_bounds(tab_s, tab_left, tab_right, period, s_arr[k], kappa_arr[k],
+                                                 yaw_rel_arr[k], half_length_m, half_width_m, center_offset_m,
+                                                 margin_m)
+
+
+@njit(cache=True)
+def horizon_bounds(tab_s, tab_left, tab_right, period, s_arr, heading, kappa, yaw, half_length_m, half_width_m,
+                   center_offset_m, margin_m, lo_out, hi_out, dlo_out, dhi_out):
+    """:func:`body_bounds` per horizon step: the path's heading [rad] and curvature [1/m] at arc
+    lengths ``s_arr`` [m], the linearization trajectory's yaw ``yaw`` [rad] (all (n,)); the
+    relative yaw is wrapped to [-pi, pi). Writes the bounds and their yaw slopes."""
+    for k in range(s_arr.shape[0]):
+        rel = (yaw[k] - heading[k] + math.pi) % (2.0 * math.pi) - math.pi
+        lo_out[k], hi_out[k], dlo_out[k], dhi_out[k] = body_bounds(
+            tab_s, tab_left, tab_right, period, s_arr[k], kappa[k], rel, half_length_m, half_width_m,
+            center_offset_m, margin_m)
 
 
 @dataclass(frozen=True, eq=False)
@@ -113,7 +162,8 @@ class Road:
     """Left / right road edges ``left_m`` / ``right_m`` [m] (lateral offsets from the reference
     path, positive left) at arc lengths ``s_m`` [m]; the body stays ``margin_m`` inside them.
     ``lanes`` (optional) are the lanes between the edges, ``route_lane`` the index of the one the
-    route follows. Build with :meth:`constant`, :meth:`per_side` or :meth:`from_widths`."""
+    route follows; ``period_m`` > 0 makes the tables periodic (a closed path of that length, the
+    knots spanning one lap). Build with :meth:`constant`, :meth:`per_side` or :meth:`from_widths`."""
 
     s_m: np.ndarray
     left_m: np.ndarray
@@ -121,9 +171,10 @@ class Road:
     margin_m: float
     lanes: tuple[Lane, ...]
     route_lane: int
+    period_m: float
 
     def __init__(self, s_m, left_m, right_m, margin_m: float = 0.05, lanes: tuple[Lane, ...] = (),
-                 route_lane: int = 0):
+                 route_lane: int = 0, period_m: float = 0.0):
         s = np.atleast_1d(np.asarray(s_m, float)).copy()
         left = np.broadcast_to(np.asarray(left_m, float), s.shape).copy()
         right = np.broadcast_to(np.asarray(right_m, float), s.shape).copy()
@@ -140,6 +191,10 @@ class Road:
                              f"at s = {s[k]:g} m")
         if not (math.isfinite(margin_m) and margin_m >= 0):
             raise ValueError(f"road margin_m must be >= 0, got {margin_m!r}")
+        if not (math.isfinite(period_m) and period_m >= 0):
+            raise ValueError(f"road period_m must be >= 0, got {period_m!r}")
+        if period_m > 0 and s[-1] - s[0] >= period_m:
+            raise ValueError("a periodic road's knots must span less than one period")
         if lanes and not 0 <= route_lane < len(lanes):
             raise ValueError(f"route_lane {route_lane} is not one of the {len(lanes)} lanes")
         for ln in lanes:
@@ -147,7 +202,8 @@ class Road:
                 if np.shape(getattr(ln, name)) != s.shape:
                     raise ValueError(f"lane {ln.name}: {name} must have one value per road knot ({s.size})")
         for name, value in (("s_m", s), ("left_m", left), ("right_m", right), ("margin_m", float(margin_m)),
-                            ("lanes", tuple(lanes)), ("route_lane", int(route_lane))):
+                            ("lanes", tuple(lanes)), ("route_lane", int(route_lane)),
+                            ("period_m", float(period_m))):
             object.__setattr__(self, name, value)
 
     # -- construction -------------------------------------------------------------------------
@@ -162,7 +218,7 @@ class Road:
         return cls.from_widths([0.0], [left_width_m], [right_width_m], margin_m)
 
     @classmethod
-    def from_widths(cls, s_m, left_width_m, right_width_m, margin_m: float = 0.05) -> Road:
+    def from_widths(cls, s_m, left_width_m, right_width_m, margin_m: float = 0.05, period_m: float = 0.0) -> Road:
         """Edges at distances ``left_width_m`` / ``right_width_m`` [m] (>= 0, per knot) to either
         side of the path at arc lengths ``s_m`` [m]; one lane between them."""
         s = np.atleast_1d(np.asarray(s_m, float))
@@ -170,18 +226,26 @@ class Road:
         wr = np.broadcast_to(np.asarray(right_width_m, float), s.shape)
         if np.any(wl < 0) or np.any(wr < 0):
             raise ValueError("road widths must be >= 0")
-        return cls(s, wl, -wr, margin_m)
+        return cls(s, wl, -wr, margin_m, period_m=period_m)
 
     # -- the rule -------------------------------------------------------------------------------
     def edges(self, s_m) -> tuple[np.ndarray, np.ndarray]:
         """(left, right) edge offsets [m] at arc length(s) ``s_m``."""
         s = np.asarray(s_m, float)
+        if self.period_m > 0:
+            p = self.period_m
+            return (np.interp(s, self.s_m, self.left_m, period=p), np.interp(s, self.s_m, self.right_m, period=p))
         return np.interp(s, self.s_m, self.left_m), np.interp(s, self.s_m, self.right_m)
 
     @property
     def min_width_m(self) -> float:
         """The narrowest width of the road [m]."""
         return float(np.min(self.left_m - self.right_m))
+
+    @property
+    def max_offset_m(self) -> float:
+        """The farthest an edge gets from the path [m]."""
+        return float(max(np.max(self.left_m), -np.min(self.right_m)))
 
     @property
     def is_uniform(self) -> bool:
@@ -192,22 +256,23 @@ class Road:
         """(lo, hi) [m]: the bounds of the reference point's lateral offset that keep ``footprint``
         ``margin_m`` inside the road (:func:`body_bounds`), for arrays of arc lengths [m],
         curvatures [1/m] and yaws relative to the path [rad] (broadcast together)."""
-        s, k, y = np.broadcast_arrays(np.asarray(s_m, float), np.asarray(kappa, float),
-                                      np.asarray(yaw_rel_rad, float))
-        s, k, y = (np.ascontiguousarray(a, dtype=float).ravel() for a in (s, k, y))
-        lo, hi = np.empty(s.size), np.empty(s.size)
-        centre_bounds(self.s_m, self.left_m, self.right_m, s, k, y, 0.5 * footprint.length_m,
-                      0.5 * footprint.width_m, footprint.center_offset_m, self.margin_m, lo, hi)
-        shape = np.broadcast(np.asarray(s_m), np.asarray(kappa), np.asarray(yaw_rel_rad)).shape
-        return lo.reshape(shape), hi.reshape(shape)
+        return self._bounds(s_m, kappa, yaw_rel_rad, footprint, self.margin_m)
 
     def body_excess_m(self, s_m, e_y_m, kappa, yaw_rel_rad, footprint: Footprint) -> np.ndarray:
         """How far [m] the body is outside the road (0 inside): the rule of :meth:`bounds` with no
         margin, for the reference point at lateral offset(s) ``e_y_m``."""
-        bare = Road(self.s_m, self.left_m, self.right_m, 0.0)
-        lo, hi = bare.bounds(s_m, kappa, yaw_rel_rad, footprint)
+        lo, hi = self._bounds(s_m, kappa, yaw_rel_rad, footprint, 0.0)
         e = np.asarray(e_y_m, float)
         return np.maximum(np.maximum(e - hi, lo - e), 0.0)
+
+    def _bounds(self, s_m, kappa, yaw_rel_rad, footprint: Footprint, margin_m: float):
+        b = np.broadcast_arrays(np.asarray(s_m, float), np.asarray(kappa, float), np.asarray(yaw_rel_rad, float))
+        shape = b[0].shape
+        s, k, y = (np.ascontiguousarray(a, dtype=float).ravel() for a in b)
+        lo, hi = np.empty(s.size), np.empty(s.size)
+        centre_bounds(self.s_m, self.left_m, self.right_m, self.period_m, s, k, y, 0.5 * footprint.length_m,
+                      0.5 * footprint.width_m, footprint.center_offset_m, margin_m, lo, hi)
+        return lo.reshape(shape), hi.reshape(shape)
 
     def narrowest_fit_m(self, footprint: Footprint) -> float:
         """Room [m] left beside the body, aligned with a straight path, where the road is
@@ -216,15 +281,12 @@ class Road:
 
     def with_margin(self, margin_m: float) -> Road:
         """The same road with another margin."""
-        return Road(self.s_m, self.left_m, self.right_m, margin_m, self.lanes, self.route_lane)
+        return Road(self.s_m, self.left_m, self.right_m, margin_m, self.lanes, self.route_lane, self.period_m)
 
-    def boundaries_xy(self, path) -> tuple[np.ndarray, np.ndarray]:
-        """(left, right) edge polylines (M, 2) [m] in the world along ``path`` (any object with
-        ``length_m``, ``position`` and ``heading``), for figures."""
-        s = np.unique(np.concatenate([np.linspace(0.0, path.length_m, max(2, int(path.length_m / 0.5) + 1)),
-                                      np.clip(self.s_m, 0.0, path.length_m)]))
-        p = np.asarray(path.position(s), float)
-        h = np.asarray(path.heading(s), float)
-        n = np.column_stack([-np.sin(h), np.cos(h)])
+    def profile(self, length_m: float, ds_m: float = 0.5) -> np.ndarray:
+        """(M, 3) rows ``[s_m, left_m, right_m]`` over arc lengths 0..``length_m`` [m] (every
+        ``ds_m`` and at the knots): the edges along the path, for figures and result files."""
+        n = max(2, int(math.ceil(length_m / ds_m)) + 1)
+        s = np.unique(np.concatenate([np.linspace(0.0, length_m, n), self.s_m[(self.s_m > 0) & (self.s_m < length_m)]]))
         left, right = self.edges(s)
-        return p + left[:, None] * n, p + right[:, None] * n
+        return np.column_stack([s, left, right])

@@ -2,7 +2,8 @@
 
 from .actuator import ActuatorState, SteeringActuator
 from .closed_loop import Disturbance, Plant, simulate
-from .metrics import LANE_TOLERANCE_M, Footprint, apply_goal_region, compute_metrics, goal_met, lane_excess_per_step
+from ..scene.footprint import Footprint
+from .metrics import LANE_TOLERANCE_M, apply_goal_region, compute_metrics, goal_met, lane_excess_per_step
 from .verdict import RunVerdict, run_verdict
 
 __all__ = ["ActuatorState", "SteeringActuator", "Disturbance", "Footprint", "LANE_TOLERANCE_M", "Plant",

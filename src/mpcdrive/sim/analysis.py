@@ -7,7 +7,7 @@ import numpy as np
 
 from ..paths.tracks import Track
 from ..types import SimResult
-from .metrics import Footprint
+from ..scene.footprint import Footprint
 
 
 def lateral_acceleration_mps2(result: SimResult) -> np.ndarray:

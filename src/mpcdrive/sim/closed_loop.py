@@ -15,6 +15,7 @@ from ..models.base import VehicleModel
 from ..models.discretize import Method, discrete_step
 from ..paths.base import Path
 from ..scene.footprint import Footprint
+from ..scene.road import Road
 from ..scene.geometry import shape_distance
 from ..scene.obstacles import Circle, Obstacle
 from ..types import STATUS_HELD, SimResult
@@ -137,17 +138,15 @@ def _finite_array(v, name: str) -> np.ndarray:
     return a
 
 
-def _check_run_args(dt_s, steps, seed, lane_half_width_m) -> None:
+def _check_run_args(dt_s, steps, seed, road) -> None:
     if isinstance(dt_s, bool) or not isinstance(dt_s, numbers.Real) or not (math.isfinite(dt_s) and dt_s > 0):
         raise ValueError(f"dt_s must be a positive finite number, got {dt_s!r}")
     if isinstance(steps, bool) or not isinstance(steps, numbers.Integral) or steps < 1:
         raise ValueError(f"steps must be an integer >= 1, got {steps!r}")
     if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
         raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
-    if lane_half_width_m is not None and not (
-        isinstance(lane_half_width_m, numbers.Real) and math.isfinite(lane_half_width_m) and lane_half_width_m > 0
-    ):
-        raise ValueError(f"lane_half_width_m must be a positive finite number or None, got {lane_half_width_m!r}")
+    if road is not None and not isinstance(road, Road):
+        raise ValueError(f"road must be a mpcdrive.scene.road.Road or None, got {type(road).__name__}")
 
 
 #: ways to drive the plant between two solves of a controller slower than the plant
@@ -224,7 +223,7 @@ def simulate(
     measurement_noise: Disturbance | None = None,
     seed: int = 0,
     stop_at_path_end: bool = True,
-    lane_half_width_m: float | None = None,
+    road: Road | None = None,
     progress: Callable[[int, int], None] | None = None,
     meta: dict | None = None,
     obstacles: tuple[Obstacle, ...] = (),
@@ -261,7 +260,9 @@ def simulate(
     The controller sees the plant state plus ``measurement_noise``; the plant state receives
     ``disturbance`` after every step. On an open path the run ends when the vehicle passes the
     path's end (``stop_at_path_end``), and ``goal_reached`` says whether it did.
-    ``progress(k, steps)`` is called every step when given. With ``obstacles`` the clearance
+    ``progress(k, steps)`` is called every step when given. With a ``road`` the body's excess
+    outside it is measured at each step by the road's own rule (``SimResult.lane_excess_m``,
+    :meth:`Road.body_excess_m`, 0 inside). With ``obstacles`` the clearance
     between the vehicle ``footprint`` and every obstacle is measured at each step
     (``SimResult.clearance_m``; negative = overlap), the obstacles' poses are logged in
     ``meta["obstacles"]``, the number of contacts in ``meta["collisions"]`` and each contact
@@ -281,7 +282,7 @@ def simulate(
     ends the run early (``meta["termination"] = "diverged"``, the last finite state as
     ``x_final``); otherwise ``termination`` is ``goal_reached`` or ``completed``.
     """
-    _check_run_args(dt_s, steps, seed, lane_half_width_m)
+    _check_run_args(dt_s, steps, seed, road)
     m = solve_interval(dt_s, control_period_s)
     if between_solves not in BETWEEN_SOLVES:
         raise ValueError(f"between_solves must be 'hold' or 'plan', got {between_solves!r}")
@@ -417,6 +418,11 @@ def simulate(
         hit = clearance < 0.0
         meta["collisions"] = int(np.count_nonzero(hit[1:] & ~hit[:-1]) + (1 if hit[0] else 0))
         meta["collision_events"] = collision_events(per_obstacle, T[sl], obstacles)
+    lane_excess = profile = None
+    if road is not None:
+        s_k = S[sl]
+        lane_excess = road.body_excess_m(s_k, EY[sl], np.asarray(path.curvature(s_k), float), EPSI[sl], footprint)
+        profile = road.profile(path.length_m)
     v = model.speed(Xs[sl])
     steer = Us[sl, 0]
     accel = Us[sl, list(model.input_names).index("accel")] if "accel" in model.input_names else np.zeros(k_end)
@@ -441,7 +447,8 @@ def simulate(
         dt_s=float(dt_s),
         state_names=tuple(model.state_names),
         input_names=tuple(model.input_names),
-        lane_half_width_m=lane_half_width_m,
+        road_profile=profile,
+        lane_excess_m=lane_excess,
         goal_reached=goal_reached,
         meta={**meta, "termination": termination, **({"aborted_off_path": True} if aborted else {})},
         clearance_m=clearance,

@@ -4,28 +4,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..scene.footprint import Footprint
 from ..types import FALLBACK_KINDS, STATUS_HELD, STATUS_INACCURATE, STATUS_OK, SimResult
 
 
-def lane_excess_per_step(result: SimResult, footprint: Footprint = Footprint()) -> np.ndarray | None:
-    """(K,) distance [m] by which a footprint corner was outside the lane at each step (0 inside);
-    None without a lane."""
-    if result.lane_half_width_m is None:
-        return None
-    h = result.yaw_rad - result.e_psi_rad  # path heading at each step
-    c = footprint.corners()
-    yaw = result.yaw_rad
-    # corner offsets in the world frame, then onto the path's left normal
-    dx = np.cos(yaw)[:, None] * c[:, 0] - np.sin(yaw)[:, None] * c[:, 1]
-    dy = np.sin(yaw)[:, None] * c[:, 0] + np.cos(yaw)[:, None] * c[:, 1]
-    lat = result.e_y_m[:, None] + (-np.sin(h)[:, None] * dx + np.cos(h)[:, None] * dy)
-    return np.maximum(0.0, np.max(np.abs(lat), axis=1) - result.lane_half_width_m)
+def lane_excess_per_step(result: SimResult) -> np.ndarray | None:
+    """(K,) distance [m] by which the body was outside the road at each step (0 inside), measured
+    in the run by the road's rule (:meth:`~mpcdrive.scene.road.Road.body_excess_m`); None
+    without a road."""
+    return result.lane_excess_m
 
 
-def _lane_excess(result: SimResult, footprint: Footprint) -> float:
-    """Largest distance [m] by which a footprint corner left the lane (0 inside)."""
-    e = lane_excess_per_step(result, footprint)
+def _lane_excess(result: SimResult) -> float:
+    """Largest distance [m] by which the body left the road (0 inside)."""
+    e = lane_excess_per_step(result)
     return 0.0 if e is None or e.size == 0 else float(np.max(e))
 
 
@@ -64,7 +55,7 @@ def _rms(a) -> float:
     return float(np.sqrt(np.mean(a * a))) if a.size else float("nan")
 
 
-def compute_metrics(result: SimResult, footprint: Footprint = Footprint()) -> dict:
+def compute_metrics(result: SimResult) -> dict:
     """Metrics of one run (the keys of ``metrics.json``): tracking, steering, obstacle and lane figures plus ``converged_*`` (second half of the run),
     ``steer_total_variation_rad`` (sum of |steering changes|, for the smoothing study),
     ``fallback_counts`` (steps per fallback rung, every rung listed), ``termination`` (why the
@@ -73,8 +64,8 @@ def compute_metrics(result: SimResult, footprint: Footprint = Footprint()) -> di
 
     Safety: ``collisions`` (contacts with obstacles), ``collision_events`` (each contact:
     ``obstacle`` index, ``name``, ``step``, ``t_s``, ``steps``, ``depth_m``; ``[]`` without one),
-    ``first_collision`` (the first event or None), ``lane_half_width_m`` (None: no lane was
-    given), ``max_lane_excess_m``. ``goal_region_reached`` is the raw test (the run reached the
+    ``first_collision`` (the first event or None), ``road_given`` (False: no road or lane was
+    given), ``max_lane_excess_m`` (the body's largest excess outside the road [m]). ``goal_region_reached`` is the raw test (the run reached the
     end of an open path or its laps; ``SimResult.goal_reached``), ``goal_reached`` the
     definition of :func:`goal_met`: region reached, inside the lane and without collision.
 
@@ -95,7 +86,7 @@ def compute_metrics(result: SimResult, footprint: Footprint = Footprint()) -> di
     failures = sum(1 for s in result.status if s not in (STATUS_OK, STATUS_INACCURATE, STATUS_HELD))
     collisions = int(result.meta.get("collisions", 0))
     events = [dict(e) for e in result.meta.get("collision_events", ())]
-    lane_excess = _lane_excess(result, footprint)
+    lane_excess = _lane_excess(result)
     return {
         "steps": int(K),
         "duration_s": float(K * result.dt_s),
@@ -112,7 +103,7 @@ def compute_metrics(result: SimResult, footprint: Footprint = Footprint()) -> di
         "collisions": collisions,
         "collision_events": events,
         "first_collision": events[0] if events else None,
-        "lane_half_width_m": result.lane_half_width_m,
+        "road_given": result.lane_excess_m is not None,
         "max_lane_excess_m": lane_excess,
         "solver_failures": int(failures),
         "fallbacks": int(sum(1 for f in result.fallback if f)),

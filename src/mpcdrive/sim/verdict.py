@@ -76,7 +76,7 @@ def lane_phrase(m: dict) -> str:
     """``left the lane by 0.82 m``, ``inside the lane (max excess 0 m)`` or ``no lane given``; for
     a run an external checker judged on the road (CommonRoad) the lane is the route lane, a proxy
     the checker's verdict overrides."""
-    if "lane_half_width_m" in m and m["lane_half_width_m"] is None:
+    if m.get("road_given") is False:
         return "no lane given"
     e = float(m.get("max_lane_excess_m") or 0.0)
     if e > LANE_TOLERANCE_M:

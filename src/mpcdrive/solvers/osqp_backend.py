@@ -34,11 +34,14 @@ _STATUS_WORDS = {
 
 @dataclass(frozen=True)
 class OsqpSettings:
-    """OSQP options used by mpcdrive (see OSQP's documentation for their meaning)."""
+    """OSQP options used by mpcdrive (see OSQP's documentation for their meaning). ``max_iter``:
+    the road rows linearized in the yaw, with a car starting outside its lane, need up to about
+    8,000 iterations at 1e-5 (measured on P3 without obstacles); 4,000 left such steps to the
+    fallback ladder."""
 
     eps_abs: float = 1e-5
     eps_rel: float = 1e-5
-    max_iter: int = 4000
+    max_iter: int = 20000
     polish: bool = True
     adaptive_rho: bool = True
     time_limit_s: float = 0.0  # 0 = none

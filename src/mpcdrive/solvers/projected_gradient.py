@@ -66,7 +66,7 @@ class ProjectedGradientBackend:
         if pb.bounded_states.size:
             unsupported.append("state bounds (x_min / x_max)")
         if qp.lane:
-            unsupported.append("a lane bound (lane_half_width_m)")
+            unsupported.append("a road bound (MpcProblem.road)")
         if unsupported:
             raise ValueError("the projected gradient solver handles input bounds only; this problem has "
                              + ", ".join(unsupported))

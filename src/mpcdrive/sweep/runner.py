@@ -214,8 +214,8 @@ def run_task(task: RunTask) -> dict:
         spec = ScenarioSpec.model_validate(task.scenario)
         exp = build_experiment(spec)
         result = run_experiment(exp)
-        m = compute_metrics(result, exp.footprint)
-        excess = lane_excess_per_step(result, exp.footprint)
+        m = compute_metrics(result)
+        excess = lane_excess_per_step(result)
         if excess is not None and excess.size:
             m["max_lane_excess_t_s"] = float(result.t_s[int(np.argmax(excess))])
             m["lane_excess_at_start_m"] = float(excess[0])

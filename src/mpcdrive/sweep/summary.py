@@ -88,7 +88,7 @@ def summarize(plan: SweepPlan, rows: list[dict], backend: str = "local") -> dict
         "collisions": {"runs": int(sum(1 for r in ran if r["collisions"])),
                        "total": int(sum(r["collisions"] or 0 for r in ran))},
         "lane": None if not lane else {
-            "lane_width_m": plan.base.road.lane_width_m,
+            "lane_width_m": plan.base.road.min_width_m,
             "runs_outside": int(np.sum(excess > 0)),
             "max_excess_m": _pcts(excess),
         },
