@@ -29,7 +29,7 @@ import numpy as np
 from ..paths.base import Path
 from ..scene.footprint import Footprint
 from ..scene.geometry import points_polygon, points_polygons
-from ..scene.obstacles import Circle, Obstacle, WorldCircle
+from ..scene.obstacles import Circle, Obstacle, Polygon, WorldCircle
 
 Formulation = Literal["hard", "corridor", "potential", "gaussian"]
 SIDE_LEFT, SIDE_RIGHT, SIDE_BLOCKED = 1, -1, 0
@@ -120,24 +120,52 @@ class FrenetBox:
     e_hi: float
 
 
+@dataclass(frozen=True)
+class FrenetBoxes:
+    """An obstacle's Frenet boxes at the K times of a horizon: the fields of :class:`FrenetBox`
+    as arrays (K,) [m]; ``boxes[k]`` is the FrenetBox of time k."""
+
+    s_ref: np.ndarray
+    s_lo: np.ndarray
+    s_hi: np.ndarray
+    e_lo: np.ndarray
+    e_hi: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.s_ref)
+
+    def __getitem__(self, k: int) -> FrenetBox:
+        return FrenetBox(float(self.s_ref[k]), float(self.s_lo[k]), float(self.s_hi[k]), float(self.e_lo[k]),
+                         float(self.e_hi[k]))
+
+
+def frenet_boxes(path: Path, s_guess: np.ndarray, centers: np.ndarray, radius_m: float = 0.0,
+                 points: np.ndarray | None = None) -> FrenetBoxes:
+    """Frenet extents of K world shapes, shape k near arc length ``s_guess[k]`` (K,) [m]: discs of
+    ``radius_m`` around ``centers`` (K, 2) [m], or, given ``points`` (K, M, 2) [m], convex
+    polygons (their vertex mean is projected; ``centers`` unused)."""
+    # the search window reaches the shape however far it is from the path point at s_guess
+    if points is None:
+        far = np.hypot(*(centers - path.position(s_guess)).T)
+        s, e = path.project_many(centers, s_guess, max(2.0, 2 * radius_m) + far)
+        r = radius_m
+        return FrenetBoxes(s, s - r, s + r, e - r, e + r)
+    c = points.mean(axis=1)
+    far = np.hypot(*(c - path.position(s_guess)).T)
+    s, _ = path.project_many(c, s_guess, 2.0 + np.ptp(points, axis=(1, 2)) + far)
+    h = np.asarray(path.heading(s), float)[:, None]
+    d = points - path.position(s)[:, None, :]
+    along = d[..., 0] * np.cos(h) + d[..., 1] * np.sin(h)
+    across = d[..., 1] * np.cos(h) - d[..., 0] * np.sin(h)
+    return FrenetBoxes(s, s + along.min(axis=1), s + along.max(axis=1), across.min(axis=1), across.max(axis=1))
+
+
 def frenet_box(path: Path, shape, s_guess: float) -> FrenetBox:
     """Frenet extent of a world shape near arc length ``s_guess``."""
-    # the search window reaches the shape however far it is from the path point at s_guess
+    g = np.array([s_guess], float)
     if isinstance(shape, WorldCircle):
-        far = float(np.hypot(*(shape.center - path.position(s_guess))))
-        s, e = path.project(shape.center, s_guess, window_m=max(2.0, 2 * shape.radius_m) + far)
-        r = shape.radius_m
-        return FrenetBox(s, s - r, s + r, e - r, e + r)
-    pts = shape.points
-    c = pts.mean(axis=0)
-    far = float(np.hypot(*(c - path.position(s_guess))))
-    s, _ = path.project(c, s_guess, window_m=2.0 + float(np.ptp(pts)) + far)
-    h = float(path.heading(s))
-    t = np.array([math.cos(h), math.sin(h)])
-    n = np.array([-t[1], t[0]])
-    d = pts - path.position(s)
-    along, across = d @ t, d @ n
-    return FrenetBox(s, s + along.min(), s + along.max(), across.min(), across.max())
+        return frenet_boxes(path, g, np.asarray(shape.center, float)[None], shape.radius_m)[0]
+    return frenet_boxes(path, g, np.zeros((1, 2)), points=np.asarray(shape.points, float)[None])[0]
 
 
 @dataclass
@@ -255,20 +283,22 @@ class Avoidance:
         return SIDE_LEFT if room_left >= room_right else SIDE_RIGHT
 
     # -- one step ---------------------------------------------------------------------
-    def _track(self, j: int, t_s: float, s_arr: np.ndarray):
-        """Obstacle j over the horizon: Frenet boxes (N+1), centres (N+1, 2) and world shapes
-        (N+1); a static obstacle is placed and projected once."""
+    def _track(self, j: int, t_s: float, s_arr: np.ndarray) -> tuple[FrenetBoxes, np.ndarray, np.ndarray | None]:
+        """Obstacle j over the horizon: Frenet boxes (N+1), centres (N+1, 2) and, for a polygon,
+        world vertices (N+1, M, 2) (None for a circle); a static obstacle is placed and projected
+        once."""
         ob = self.obstacles[j]
-        if ob.moving:
-            times = t_s + self.dt_s * np.arange(self.N + 1)
-            centers = np.array([ob.pose_at(t)[:2] for t in times])
-            shapes = [ob.at(t) for t in times]
-            boxes = [frenet_box(self.path, sh, s_arr[k]) for k, sh in enumerate(shapes)]
-        else:
-            centers = np.repeat(np.array([ob.pose_at(t_s)[:2]]), self.N + 1, axis=0)
-            shapes = [ob.at(t_s)] * (self.N + 1)
-            boxes = [frenet_box(self.path, shapes[0], s_arr[0])] * (self.N + 1)
-        return boxes, centers, shapes
+        K = self.N + 1
+        times = t_s + self.dt_s * np.arange(K) if ob.moving else np.array([t_s])
+        centers = ob.poses_at(times)[:, :2]
+        outlines = ob.outlines_at(times) if isinstance(ob.shape, Polygon) else None
+        radius = ob.shape.radius_m if isinstance(ob.shape, Circle) else 0.0
+        boxes = frenet_boxes(self.path, s_arr[: len(times)], centers, radius, outlines)
+        if not ob.moving:
+            centers = np.repeat(centers, K, axis=0)
+            outlines = None if outlines is None else np.repeat(outlines, K, axis=0)
+            boxes = FrenetBoxes(*(np.repeat(getattr(boxes, f), K) for f in ("s_ref", "s_lo", "s_hi", "e_lo", "e_hi")))
+        return boxes, centers, outlines
 
     def terms(self, t_s: float, x: np.ndarray, Xlin: np.ndarray, s_arr: np.ndarray, memory: AvoidanceMemory) -> AvoidanceTerms:
         """Obstacle terms for the horizon starting at time ``t_s`` [s].
@@ -278,15 +308,15 @@ class Avoidance:
         cfg = self.config
         rel = self.relevant(t_s, x[:2])
         sides: dict[int, int] = {}
-        boxes: dict[int, list[FrenetBox]] = {}
+        boxes: dict[int, FrenetBoxes] = {}
         centers: dict[int, np.ndarray] = {}
-        world: dict[int, list] = {}
+        world: dict[int, np.ndarray | None] = {}
         for j in rel:
             boxes[j], centers[j], world[j] = self._track(j, t_s, s_arr)
             bx = boxes[j]
             # a moving obstacle is judged where the car meets it: the horizon step at which the
             # car's reference is nearest to it along the path
-            meet = int(np.argmin([abs(b.s_ref - sk) for b, sk in zip(bx, s_arr)])) if self.obstacles[j].moving else 0
+            meet = int(np.argmin(np.abs(bx.s_ref - s_arr))) if self.obstacles[j].moving else 0
             sides[j] = self._choose_side(j, bx[meet], memory)
         memory.sides.update(sides)
         # cars following in the lane: kept behind by a longitudinal row only (never swerved or
@@ -333,7 +363,7 @@ class Avoidance:
         for j in rel:
             if sides[j] != SIDE_BLOCKED or not self._blocks_ahead(boxes[j][0], s_arr):
                 continue
-            s_lo = np.array([b.s_lo for b in boxes[j]])
+            s_lo = boxes[j].s_lo
             v = np.maximum(np.diff(s_lo) / dt, 0.0)
             v = np.append(v, v[-1]) if len(v) else np.zeros(1)
             line = s_lo - self.stop_distance_m - gap * v
@@ -345,9 +375,10 @@ class Avoidance:
         Rm = np.array([[math.cos(heading_rad), -math.sin(heading_rad)], [math.sin(heading_rad), math.cos(heading_rad)]])
         return Rm @ self._Sinv_local @ Rm.T
 
-    def _nearest(self, P: np.ndarray, j: int, centers: np.ndarray, shapes) -> tuple[np.ndarray, np.ndarray]:
+    def _nearest(self, P: np.ndarray, j: int, centers: np.ndarray, outlines) -> tuple[np.ndarray, np.ndarray]:
         """Signed distances (R, K) and nearest boundary points (R, K, 2) of points P (R, K, 2) to
-        obstacle j, point ``P[r, k]`` at horizon time k + 1 (rows 1..N of ``centers``, ``shapes``)."""
+        obstacle j, point ``P[r, k]`` at horizon time k + 1 (rows 1..N of ``centers`` and, for a
+        polygon, of its world vertices ``outlines``)."""
         ob = self.obstacles[j]
         R, K = P.shape[:2]
         if isinstance(ob.shape, Circle):
@@ -357,10 +388,9 @@ class Avoidance:
             return n - ob.shape.radius_m, C + ob.shape.radius_m * v / n[..., None]
         flat = P.reshape(R * K, 2)
         if not ob.moving:
-            d, q = points_polygon(flat, shapes[0].points)
+            d, q = points_polygon(flat, outlines[0])
         else:
-            polys = np.stack([sh.points for sh in shapes[1:]])
-            d, q = points_polygons(flat, np.tile(polys, (R, 1, 1)))
+            d, q = points_polygons(flat, np.tile(outlines[1:], (R, 1, 1)))
         return d.reshape(R, K), q.reshape(R, K, 2)
 
     def _lin_arc_lengths(self, Xlin: np.ndarray, s0: float) -> np.ndarray:
@@ -398,11 +428,9 @@ class Avoidance:
         s_disc = s_arr[None, 1:] + off
         for slot, j in enumerate(rel):
             side = sides[j]
-            bx = boxes[j][1:]
-            s_lo = np.array([bb.s_lo for bb in bx])
-            s_hi = np.array([bb.s_hi for bb in bx])
-            s_ref = np.array([bb.s_ref for bb in bx])
-            e_edge = np.array([bb.e_hi if side == SIDE_LEFT else bb.e_lo for bb in bx])
+            bx = boxes[j]
+            s_lo, s_hi, s_ref = bx.s_lo[1:], bx.s_hi[1:], bx.s_ref[1:]
+            e_edge = (bx.e_hi if side == SIDE_LEFT else bx.e_lo)[1:]
             h = np.asarray(self.path.heading(s_ref), float)
             nl = np.column_stack([-np.sin(h), np.cos(h)])  # path left normal at the obstacle
             q_lat = self.path.position(s_ref) + nl * e_edge[:, None]
