@@ -417,6 +417,8 @@ class Avoidance:
         a, b = self._a, self._b
         a[:] = 0.0
         b[:] = -np.inf
+        if not rel:
+            return a, b
         lin = Xlin[1:, :3]
         c, s = np.cos(lin[:, 2]), np.sin(lin[:, 2])
         nd = len(self.offsets)
@@ -426,48 +428,55 @@ class Avoidance:
         s_lin = self._lin_arc_lengths(Xlin, s_arr[0])
         P = lin[None, :, :2] + off[..., None] * np.column_stack([c, s])[None]  # disc centres (nd, N, 2)
         s_disc = s_arr[None, 1:] + off
-        for slot, j in enumerate(rel):
-            side = sides[j]
-            bx = boxes[j]
-            s_lo, s_hi, s_ref = bx.s_lo[1:], bx.s_hi[1:], bx.s_ref[1:]
-            e_edge = (bx.e_hi if side == SIDE_LEFT else bx.e_lo)[1:]
-            h = np.asarray(self.path.heading(s_ref), float)
-            nl = np.column_stack([-np.sin(h), np.cos(h)])  # path left normal at the obstacle
-            q_lat = self.path.position(s_ref) + nl * e_edge[:, None]
-            dist, q = self._nearest(P, j, centers[j], world[j])
-            v = P - q
-            nv = np.maximum(np.hypot(v[..., 0], v[..., 1]), 1e-12)
-            n = v / nv[..., None] * np.where(dist >= 0, 1.0, -1.0)[..., None]
-            active = dist - self.r_disc <= self.config.influence_m
-            lateral = (side != SIDE_BLOCKED) & (s_lo - reach <= s_disc) & (s_disc <= s_hi + reach)
-            n = np.where(lateral[..., None], side * nl, n)
-            q = np.where(lateral[..., None], q_lat, q)
-            active |= lateral
-            if side == SIDE_BLOCKED and self._blocks_ahead(boxes[j][0], s_arr):
+        # every considered obstacle at once: arrays (n_obs, nd, N[, 2]), obstacle i in row slot i
+        side = np.array([sides[j] for j in rel], float)[:, None, None]
+        s_lo, s_hi, s_ref, e_lo, e_hi = (np.stack([getattr(boxes[j], f)[1:] for j in rel])[:, None, :]
+                                         for f in ("s_lo", "s_hi", "s_ref", "e_lo", "e_hi"))
+        e_edge = np.where(side == SIDE_LEFT, e_hi, e_lo)
+        h = np.asarray(self.path.heading(s_ref), float)
+        nl = np.stack([-np.sin(h), np.cos(h)], axis=-1)  # path left normal at the obstacle
+        q_lat = self.path.position(s_ref) + nl * e_edge[..., None]
+        near = [self._nearest(P, j, centers[j], world[j]) for j in rel]
+        dist = np.stack([d for d, _ in near])
+        q = np.stack([qq for _, qq in near])
+        v = P[None] - q
+        nv = np.maximum(np.hypot(v[..., 0], v[..., 1]), 1e-12)
+        n = v / nv[..., None] * np.where(dist >= 0, 1.0, -1.0)[..., None]
+        active = dist - self.r_disc <= self.config.influence_m
+        lateral = (side != SIDE_BLOCKED) & (s_lo - reach <= s_disc) & (s_disc <= s_hi + reach)
+        n = np.where(lateral[..., None], side[..., None] * nl, n)
+        q = np.where(lateral[..., None], q_lat, q)
+        active |= lateral
+        for i, j in enumerate(rel):
+            if sides[j] == SIDE_BLOCKED and self._blocks_ahead(boxes[j][0], s_arr):
                 # stop behind an obstacle now ahead: the disc's arc length at most its near end
                 # less the clearance (the nearest-point normal points forward once the
                 # linearization passes it)
-                tb, q = self._stop_plane(np.tile(s_lo, nd), (s_lin + off).ravel(), r_need)
-                n = -tb.reshape(nd, -1, 2)
-                q = q.reshape(nd, -1, 2)
-                active[:] = True
+                tb, qs = self._stop_plane(np.tile(s_lo[i, 0], nd), (s_lin + off).ravel(), r_need)
+                n[i] = -tb.reshape(nd, -1, 2)
             elif j in following:
                 # keep ahead of a car following in the lane: the disc's arc length at least its far
                 # end plus the clearance; a longitudinal row only (no swerving, no braking for it)
-                tb, q = self._stop_plane(np.tile(s_hi, nd), (s_lin + off).ravel(), r_need, ahead=True)
-                n = tb.reshape(nd, -1, 2)
-                q = q.reshape(nd, -1, 2)
-                active[:] = True
-            active &= present[j][None, :]  # no row at the steps the obstacle does not exist
-            rows = slice(slot * nd, (slot + 1) * nd)
-            # n . (p + J (x - xbar)) >= n . q + r_need, J = d p / d (x, y, yaw)
-            ay = off * (-n[..., 0] * s + n[..., 1] * c)
-            a[:, rows, 0] = np.where(active, n[..., 0], 0.0).T
-            a[:, rows, 1] = np.where(active, n[..., 1], 0.0).T
-            a[:, rows, 2] = np.where(active, ay, 0.0).T
-            rhs = (np.einsum("dki,dki->dk", n, q) + r_need - np.einsum("dki,dki->dk", n, P)
-                   + n[..., 0] * lin[:, 0] + n[..., 1] * lin[:, 1] + ay * lin[:, 2])
-            b[:, rows] = np.where(active, rhs, -np.inf).T
+                tb, qs = self._stop_plane(np.tile(s_hi[i, 0], nd), (s_lin + off).ravel(), r_need, ahead=True)
+                n[i] = tb.reshape(nd, -1, 2)
+            else:
+                continue
+            q[i] = qs.reshape(nd, -1, 2)
+            active[i] = True
+        active &= np.stack([present[j] for j in rel])[:, None, :]  # no row at the steps the obstacle does not exist
+        # n . (p + J (x - xbar)) >= n . q + r_need, J = d p / d (x, y, yaw)
+        ay = off * (-n[..., 0] * s + n[..., 1] * c)
+        rhs = (np.einsum("odki,odki->odk", n, q) + r_need - np.einsum("odki,dki->odk", n, P)
+               + n[..., 0] * lin[:, 0] + n[..., 1] * lin[:, 1] + ay * lin[:, 2])
+        m = len(rel) * nd  # row slot * nd + disc, as the obstacles come in rel
+
+        def rows(v, fill):
+            return np.where(active, v, fill).reshape(m, -1).T
+
+        a[:, :m, 0] = rows(n[..., 0], 0.0)
+        a[:, :m, 1] = rows(n[..., 1], 0.0)
+        a[:, :m, 2] = rows(ay, 0.0)
+        b[:, :m] = rows(rhs, -np.inf)
         return a, b
 
     def _corridor(self, Xlin, s_arr, rel, boxes, sides, present):
