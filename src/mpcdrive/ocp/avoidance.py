@@ -28,7 +28,7 @@ import numpy as np
 
 from ..paths.base import Path
 from ..scene.footprint import Footprint
-from ..scene.geometry import points_polygon, points_polygons
+from ..scene.geometry import points_polygons
 from ..scene.obstacles import Circle, Obstacle, Polygon, WorldCircle
 
 Formulation = Literal["hard", "corridor", "potential", "gaussian"]
@@ -139,15 +139,15 @@ class FrenetBoxes:
                          float(self.e_hi[k]))
 
 
-def frenet_boxes(path: Path, s_guess: np.ndarray, centers: np.ndarray, radius_m: float = 0.0,
+def frenet_boxes(path: Path, s_guess: np.ndarray, centers: np.ndarray, radius_m: float | np.ndarray = 0.0,
                  points: np.ndarray | None = None) -> FrenetBoxes:
     """Frenet extents of K world shapes, shape k near arc length ``s_guess[k]`` (K,) [m]: discs of
-    ``radius_m`` around ``centers`` (K, 2) [m], or, given ``points`` (K, M, 2) [m], convex
-    polygons (their vertex mean is projected; ``centers`` unused)."""
+    ``radius_m`` (a number or (K,)) around ``centers`` (K, 2) [m], or, given ``points``
+    (K, M, 2) [m], convex polygons (their vertex mean is projected; ``centers`` unused)."""
     # the search window reaches the shape however far it is from the path point at s_guess
     if points is None:
         far = np.hypot(*(centers - path.position(s_guess)).T)
-        s, e = path.project_many(centers, s_guess, max(2.0, 2 * radius_m) + far)
+        s, e = path.project_many(centers, s_guess, np.maximum(2.0, 2 * radius_m) + far)
         r = radius_m
         return FrenetBoxes(s, s - r, s + r, e - r, e + r)
     c = points.mean(axis=1)
@@ -283,21 +283,44 @@ class Avoidance:
         return SIDE_LEFT if room_left >= room_right else SIDE_RIGHT
 
     # -- one step ---------------------------------------------------------------------
-    def _track(self, j: int, t_s: float, s_arr: np.ndarray) -> tuple[FrenetBoxes, np.ndarray, np.ndarray | None]:
-        """Obstacle j over the horizon: Frenet boxes (N+1), centres (N+1, 2) and, for a polygon,
-        world vertices (N+1, M, 2) (None for a circle); a static obstacle is placed and projected
-        once."""
-        ob = self.obstacles[j]
+    def _tracks(self, rel: list[int], t_s: float, s_arr: np.ndarray):
+        """Obstacles ``rel`` over the horizon, dicts by index: Frenet boxes (N+1), centres (N+1, 2)
+        and, for a polygon, world vertices (N+1, M, 2) (None for a circle); a static obstacle is
+        placed and projected once. The shapes of one kind are projected together."""
         K = self.N + 1
-        times = t_s + self.dt_s * np.arange(K) if ob.moving else np.array([t_s])
-        centers = ob.poses_at(times)[:, :2]
-        outlines = ob.outlines_at(times) if isinstance(ob.shape, Polygon) else None
-        radius = ob.shape.radius_m if isinstance(ob.shape, Circle) else 0.0
-        boxes = frenet_boxes(self.path, s_arr[: len(times)], centers, radius, outlines)
-        if not ob.moving:
-            centers = np.repeat(centers, K, axis=0)
-            outlines = None if outlines is None else np.repeat(outlines, K, axis=0)
-            boxes = FrenetBoxes(*(np.repeat(getattr(boxes, f), K) for f in ("s_ref", "s_lo", "s_hi", "e_lo", "e_hi")))
+        times = t_s + self.dt_s * np.arange(K)
+        centers: dict[int, np.ndarray] = {}
+        outlines: dict[int, np.ndarray | None] = {}
+        groups: dict[int, list[int]] = {}  # circles (0) and polygons by vertex count
+        for j in rel:
+            ob = self.obstacles[j]
+            tj = times if ob.moving else times[:1]
+            centers[j] = ob.poses_at(tj)[:, :2]
+            if isinstance(ob.shape, Polygon):
+                outlines[j] = ob.outlines_at(tj)
+                groups.setdefault(len(ob.shape.points), []).append(j)
+            else:
+                outlines[j] = None
+                groups.setdefault(0, []).append(j)
+        boxes: dict[int, FrenetBoxes] = {}
+        for kind, js in groups.items():
+            counts = [len(centers[j]) for j in js]
+            guess = np.concatenate([s_arr[:n] for n in counts])
+            if kind == 0:
+                radius = np.concatenate([np.full(n, _radius(self.obstacles[j])) for j, n in zip(js, counts)])
+                bx = frenet_boxes(self.path, guess, np.concatenate([centers[j] for j in js]), radius)
+            else:
+                bx = frenet_boxes(self.path, guess, np.zeros((len(guess), 2)),
+                                  points=np.concatenate([outlines[j] for j in js]))
+            ends = np.cumsum(counts)
+            for j, n, end in zip(js, counts, ends):
+                fields = (getattr(bx, f)[end - n:end] for f in ("s_ref", "s_lo", "s_hi", "e_lo", "e_hi"))
+                boxes[j] = FrenetBoxes(*(np.repeat(v, K) if n == 1 else v for v in fields))
+        for j in rel:
+            if not self.obstacles[j].moving:
+                centers[j] = np.repeat(centers[j], K, axis=0)
+                o = outlines[j]
+                outlines[j] = None if o is None else np.repeat(o, K, axis=0)
         return boxes, centers, outlines
 
     def terms(self, t_s: float, x: np.ndarray, Xlin: np.ndarray, s_arr: np.ndarray, memory: AvoidanceMemory) -> AvoidanceTerms:
@@ -308,11 +331,8 @@ class Avoidance:
         cfg = self.config
         rel = self.relevant(t_s, x[:2])
         sides: dict[int, int] = {}
-        boxes: dict[int, FrenetBoxes] = {}
-        centers: dict[int, np.ndarray] = {}
-        world: dict[int, np.ndarray | None] = {}
+        boxes, centers, world = self._tracks(rel, t_s, s_arr)
         for j in rel:
-            boxes[j], centers[j], world[j] = self._track(j, t_s, s_arr)
             bx = boxes[j]
             # a moving obstacle is judged where the car meets it: the horizon step at which the
             # car's reference is nearest to it along the path
@@ -375,23 +395,34 @@ class Avoidance:
         Rm = np.array([[math.cos(heading_rad), -math.sin(heading_rad)], [math.sin(heading_rad), math.cos(heading_rad)]])
         return Rm @ self._Sinv_local @ Rm.T
 
-    def _nearest(self, P: np.ndarray, j: int, centers: np.ndarray, outlines) -> tuple[np.ndarray, np.ndarray]:
-        """Signed distances (R, K) and nearest boundary points (R, K, 2) of points P (R, K, 2) to
-        obstacle j, point ``P[r, k]`` at horizon time k + 1 (rows 1..N of ``centers`` and, for a
-        polygon, of its world vertices ``outlines``)."""
-        ob = self.obstacles[j]
+    def _nearest(self, P: np.ndarray, rel: list[int], centers, outlines) -> tuple[np.ndarray, np.ndarray]:
+        """Signed distances (n, R, K) and nearest boundary points (n, R, K, 2) of points P (R, K, 2)
+        to the n obstacles ``rel``, point ``P[r, k]`` at horizon time k + 1 (rows 1..N of
+        ``centers[j]`` and, for a polygon, of its world vertices ``outlines[j]``)."""
         R, K = P.shape[:2]
-        if isinstance(ob.shape, Circle):
-            C = centers[1:][None]
-            v = P - C
-            n = np.maximum(np.hypot(v[..., 0], v[..., 1]), 1e-12)
-            return n - ob.shape.radius_m, C + ob.shape.radius_m * v / n[..., None]
-        flat = P.reshape(R * K, 2)
-        if not ob.moving:
-            d, q = points_polygon(flat, outlines[0])
-        else:
-            d, q = points_polygons(flat, np.tile(outlines[1:], (R, 1, 1)))
-        return d.reshape(R, K), q.reshape(R, K, 2)
+        dist = np.empty((len(rel), R, K))
+        q = np.empty((len(rel), R, K, 2))
+        groups: dict[int, list[int]] = {}  # circles (0) and polygons by vertex count
+        for i, j in enumerate(rel):
+            o = outlines[j]
+            groups.setdefault(0 if o is None else o.shape[1], []).append(i)
+        for kind, idx in groups.items():
+            js = [rel[i] for i in idx]
+            if kind == 0:
+                C = np.stack([centers[j][1:] for j in js])[:, None]
+                r = np.array([_radius(self.obstacles[j]) for j in js])[:, None, None]
+                v = P[None] - C
+                n = np.maximum(np.hypot(v[..., 0], v[..., 1]), 1e-12)
+                dist[idx] = n - r
+                q[idx] = C + r[..., None] * v / n[..., None]
+                continue
+            polys = np.stack([outlines[j][1:] for j in js])[:, None]  # (g, 1, K, M, 2)
+            polys = np.broadcast_to(polys, (len(js), R, K, kind, 2)).reshape(-1, kind, 2)
+            pts = np.broadcast_to(P[None], (len(js), R, K, 2)).reshape(-1, 2)
+            d, qq = points_polygons(pts, polys)
+            dist[idx] = d.reshape(len(js), R, K)
+            q[idx] = qq.reshape(len(js), R, K, 2)
+        return dist, q
 
     def _lin_arc_lengths(self, Xlin: np.ndarray, s0: float) -> np.ndarray:
         """(N,) arc lengths [m] of the linearization trajectory's steps 1..N: ``s0`` plus the
@@ -436,9 +467,7 @@ class Avoidance:
         h = np.asarray(self.path.heading(s_ref), float)
         nl = np.stack([-np.sin(h), np.cos(h)], axis=-1)  # path left normal at the obstacle
         q_lat = self.path.position(s_ref) + nl * e_edge[..., None]
-        near = [self._nearest(P, j, centers[j], world[j]) for j in rel]
-        dist = np.stack([d for d, _ in near])
-        q = np.stack([qq for _, qq in near])
+        dist, q = self._nearest(P, rel, centers, world)
         v = P[None] - q
         nv = np.maximum(np.hypot(v[..., 0], v[..., 1]), 1e-12)
         n = v / nv[..., None] * np.where(dist >= 0, 1.0, -1.0)[..., None]
@@ -561,6 +590,12 @@ class Avoidance:
             cand = shift * f
             e[:] = np.where(np.abs(cand) > np.abs(e), cand, e)
         return e
+
+
+def _radius(ob: Obstacle) -> float:
+    """The radius [m] of a circle obstacle."""
+    assert isinstance(ob.shape, Circle)
+    return ob.shape.radius_m
 
 
 def follow_references(s_arr: np.ndarray, v_arr: np.ndarray, s_max: np.ndarray, v0_mps: float, dt_s: float,

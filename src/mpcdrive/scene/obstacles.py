@@ -177,6 +177,8 @@ class Obstacle:
     def outlines_at(self, t_s: np.ndarray) -> np.ndarray:
         """(K, M, 2) world vertices [m] of a polygon obstacle at the times ``t_s`` (K,) [s], as
         :meth:`at` places them."""
+        if not isinstance(self.shape, Polygon):
+            raise ValueError(f"obstacle {self.name or '?'} is a circle: it has no outline")
         poses = self.poses_at(t_s)
         return placed_points(self.shape.points, poses[:, 0], poses[:, 1], poses[:, 2])
 
