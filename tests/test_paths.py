@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mpcdrive.paths import (
+    Path,
     CirclePath,
     StraightPath,
     WaypointPath,
@@ -536,3 +537,26 @@ def test_polyline():
         assert pl.ndim == 2 and pl.shape[1] == 2 and len(pl) >= 2
         np.testing.assert_allclose(pl[0], p.position(0.0), atol=1e-9)
         np.testing.assert_allclose(pl[-1], p.position(p.length_m), atol=1e-9)
+
+
+@pytest.mark.parametrize("path", [
+    StraightPath([1.0, -2.0], [9.0, 4.0]),
+    CirclePath(center=(1.0, 2.0), radius_m=3.0, ccw=False, start_angle_rad=0.4),
+    WaypointPath(np.array([[0.0, 0.0], [4.0, 1.0], [8.0, -1.0], [12.0, 2.0], [16.0, 0.0]])),
+    WaypointPath(np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]]), closed=True),
+])
+def test_project_many_is_project_point_by_point(path):
+    rng = np.random.default_rng(3)
+    s_guess = rng.uniform(-0.5 * path.length_m, 2.5 * path.length_m, 40)
+    xy = path.position(s_guess) + rng.normal(0.0, 1.5, (40, 2))
+    window = rng.uniform(0.5, 1.5 * path.length_m, 40)
+    s, e = path.project_many(xy, s_guess, window)
+    want = np.array([path.project(p, g, w) for p, g, w in zip(xy, s_guess, window)])
+    np.testing.assert_allclose(s, want[:, 0], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(e, want[:, 1], rtol=0, atol=1e-9)
+    # the generic per-point projection gives the same
+    s2, e2 = Path._project_many_xy(path, xy, s_guess, window)
+    np.testing.assert_array_equal(s2, want[:, 0])
+    np.testing.assert_array_equal(e2, want[:, 1])
+    with pytest.raises(ValueError):
+        path.project_many(np.array([[np.nan, 0.0]]), [0.0], [1.0])

@@ -118,3 +118,13 @@ def test_motion_models():
 def test_bad_shapes_raise_value_error(make):
     with pytest.raises(ValueError):
         make()
+
+
+@pytest.mark.parametrize("motion", [None, ConstantVelocity(2.0, -1.0),
+                                    TrajectoryMotion([0.0, 1.0, 3.0], [0.0, 2.0, 3.0], [0.0, 1.0, -1.0], [0.0, 0.5, 1.0])])
+def test_poses_and_outlines_over_times_are_those_at_each_time(motion):
+    kw = {} if motion is None else {"motion": motion}
+    ob = Obstacle(rectangle(2.0, 1.0), (1.0, 2.0, 0.3), **kw)
+    times = np.linspace(-0.5, 3.5, 9)
+    np.testing.assert_allclose(ob.poses_at(times), [ob.pose_at(t) for t in times], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(ob.outlines_at(times), [ob.at(t).points for t in times], rtol=0, atol=1e-12)

@@ -28,9 +28,9 @@ import numpy as np
 
 from ..paths.base import Path
 from ..scene.footprint import Footprint
+from ..scene.geometry import points_polygons
+from ..scene.obstacles import Circle, Obstacle, Polygon, WorldCircle
 from ..scene.road import Road
-from ..scene.geometry import points_polygon, points_polygons
-from ..scene.obstacles import Circle, Obstacle, WorldCircle
 
 Formulation = Literal["hard", "corridor", "potential", "gaussian"]
 SIDE_LEFT, SIDE_RIGHT, SIDE_BLOCKED = 1, -1, 0
@@ -121,24 +121,52 @@ class FrenetBox:
     e_hi: float
 
 
+@dataclass(frozen=True)
+class FrenetBoxes:
+    """An obstacle's Frenet boxes at the K times of a horizon: the fields of :class:`FrenetBox`
+    as arrays (K,) [m]; ``boxes[k]`` is the FrenetBox of time k."""
+
+    s_ref: np.ndarray
+    s_lo: np.ndarray
+    s_hi: np.ndarray
+    e_lo: np.ndarray
+    e_hi: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.s_ref)
+
+    def __getitem__(self, k: int) -> FrenetBox:
+        return FrenetBox(float(self.s_ref[k]), float(self.s_lo[k]), float(self.s_hi[k]), float(self.e_lo[k]),
+                         float(self.e_hi[k]))
+
+
+def frenet_boxes(path: Path, s_guess: np.ndarray, centers: np.ndarray, radius_m: float | np.ndarray = 0.0,
+                 points: np.ndarray | None = None) -> FrenetBoxes:
+    """Frenet extents of K world shapes, shape k near arc length ``s_guess[k]`` (K,) [m]: discs of
+    ``radius_m`` (a number or (K,)) around ``centers`` (K, 2) [m], or, given ``points``
+    (K, M, 2) [m], convex polygons (their vertex mean is projected; ``centers`` unused)."""
+    # the search window reaches the shape however far it is from the path point at s_guess
+    if points is None:
+        far = np.hypot(*(centers - path.position(s_guess)).T)
+        s, e = path.project_many(centers, s_guess, np.maximum(2.0, 2 * radius_m) + far)
+        r = radius_m
+        return FrenetBoxes(s, s - r, s + r, e - r, e + r)
+    c = points.mean(axis=1)
+    far = np.hypot(*(c - path.position(s_guess)).T)
+    s, _ = path.project_many(c, s_guess, 2.0 + np.ptp(points, axis=(1, 2)) + far)
+    h = np.asarray(path.heading(s), float)[:, None]
+    d = points - path.position(s)[:, None, :]
+    along = d[..., 0] * np.cos(h) + d[..., 1] * np.sin(h)
+    across = d[..., 1] * np.cos(h) - d[..., 0] * np.sin(h)
+    return FrenetBoxes(s, s + along.min(axis=1), s + along.max(axis=1), across.min(axis=1), across.max(axis=1))
+
+
 def frenet_box(path: Path, shape, s_guess: float) -> FrenetBox:
     """Frenet extent of a world shape near arc length ``s_guess``."""
-    # the search window reaches the shape however far it is from the path point at s_guess
+    g = np.array([s_guess], float)
     if isinstance(shape, WorldCircle):
-        far = float(np.hypot(*(shape.center - path.position(s_guess))))
-        s, e = path.project(shape.center, s_guess, window_m=max(2.0, 2 * shape.radius_m) + far)
-        r = shape.radius_m
-        return FrenetBox(s, s - r, s + r, e - r, e + r)
-    pts = shape.points
-    c = pts.mean(axis=0)
-    far = float(np.hypot(*(c - path.position(s_guess))))
-    s, _ = path.project(c, s_guess, window_m=2.0 + float(np.ptp(pts)) + far)
-    h = float(path.heading(s))
-    t = np.array([math.cos(h), math.sin(h)])
-    n = np.array([-t[1], t[0]])
-    d = pts - path.position(s)
-    along, across = d @ t, d @ n
-    return FrenetBox(s, s + along.min(), s + along.max(), across.min(), across.max())
+        return frenet_boxes(path, g, np.asarray(shape.center, float)[None], shape.radius_m)[0]
+    return frenet_boxes(path, g, np.zeros((1, 2)), points=np.asarray(shape.points, float)[None])[0]
 
 
 @dataclass
@@ -259,20 +287,45 @@ class Avoidance:
         return SIDE_LEFT if room_left >= room_right else SIDE_RIGHT
 
     # -- one step ---------------------------------------------------------------------
-    def _track(self, j: int, t_s: float, s_arr: np.ndarray):
-        """Obstacle j over the horizon: Frenet boxes (N+1), centres (N+1, 2) and world shapes
-        (N+1); a static obstacle is placed and projected once."""
-        ob = self.obstacles[j]
-        if ob.moving:
-            times = t_s + self.dt_s * np.arange(self.N + 1)
-            centers = np.array([ob.pose_at(t)[:2] for t in times])
-            shapes = [ob.at(t) for t in times]
-            boxes = [frenet_box(self.path, sh, s_arr[k]) for k, sh in enumerate(shapes)]
-        else:
-            centers = np.repeat(np.array([ob.pose_at(t_s)[:2]]), self.N + 1, axis=0)
-            shapes = [ob.at(t_s)] * (self.N + 1)
-            boxes = [frenet_box(self.path, shapes[0], s_arr[0])] * (self.N + 1)
-        return boxes, centers, shapes
+    def _tracks(self, rel: list[int], t_s: float, s_arr: np.ndarray):
+        """Obstacles ``rel`` over the horizon, dicts by index: Frenet boxes (N+1), centres (N+1, 2)
+        and, for a polygon, world vertices (N+1, M, 2) (None for a circle); a static obstacle is
+        placed and projected once. The shapes of one kind are projected together."""
+        K = self.N + 1
+        times = t_s + self.dt_s * np.arange(K)
+        centers: dict[int, np.ndarray] = {}
+        outlines: dict[int, np.ndarray | None] = {}
+        groups: dict[int, list[int]] = {}  # circles (0) and polygons by vertex count
+        for j in rel:
+            ob = self.obstacles[j]
+            tj = times if ob.moving else times[:1]
+            centers[j] = ob.poses_at(tj)[:, :2]
+            if isinstance(ob.shape, Polygon):
+                outlines[j] = ob.outlines_at(tj)
+                groups.setdefault(len(ob.shape.points), []).append(j)
+            else:
+                outlines[j] = None
+                groups.setdefault(0, []).append(j)
+        boxes: dict[int, FrenetBoxes] = {}
+        for kind, js in groups.items():
+            counts = [len(centers[j]) for j in js]
+            guess = np.concatenate([s_arr[:n] for n in counts])
+            if kind == 0:
+                radius = np.concatenate([np.full(n, _radius(self.obstacles[j])) for j, n in zip(js, counts)])
+                bx = frenet_boxes(self.path, guess, np.concatenate([centers[j] for j in js]), radius)
+            else:
+                bx = frenet_boxes(self.path, guess, np.zeros((len(guess), 2)),
+                                  points=np.concatenate([outlines[j] for j in js]))
+            ends = np.cumsum(counts)
+            for j, n, end in zip(js, counts, ends):
+                fields = (getattr(bx, f)[end - n:end] for f in ("s_ref", "s_lo", "s_hi", "e_lo", "e_hi"))
+                boxes[j] = FrenetBoxes(*(np.repeat(v, K) if n == 1 else v for v in fields))
+        for j in rel:
+            if not self.obstacles[j].moving:
+                centers[j] = np.repeat(centers[j], K, axis=0)
+                o = outlines[j]
+                outlines[j] = None if o is None else np.repeat(o, K, axis=0)
+        return boxes, centers, outlines
 
     def terms(self, t_s: float, x: np.ndarray, Xlin: np.ndarray, s_arr: np.ndarray, memory: AvoidanceMemory,
               road_lo: np.ndarray | None = None, road_hi: np.ndarray | None = None) -> AvoidanceTerms:
@@ -285,15 +338,12 @@ class Avoidance:
         cfg = self.config
         rel = self.relevant(t_s, x[:2])
         sides: dict[int, int] = {}
-        boxes: dict[int, list[FrenetBox]] = {}
-        centers: dict[int, np.ndarray] = {}
-        world: dict[int, list] = {}
+        boxes, centers, world = self._tracks(rel, t_s, s_arr)
         for j in rel:
-            boxes[j], centers[j], world[j] = self._track(j, t_s, s_arr)
             bx = boxes[j]
             # a moving obstacle is judged where the car meets it: the horizon step at which the
             # car's reference is nearest to it along the path
-            meet = int(np.argmin([abs(b.s_ref - sk) for b, sk in zip(bx, s_arr)])) if self.obstacles[j].moving else 0
+            meet = int(np.argmin(np.abs(bx.s_ref - s_arr))) if self.obstacles[j].moving else 0
             sides[j] = self._choose_side(j, bx[meet], memory)
         memory.sides.update(sides)
         # cars following in the lane: kept behind by a longitudinal row only (never swerved or
@@ -340,7 +390,7 @@ class Avoidance:
         for j in rel:
             if sides[j] != SIDE_BLOCKED or not self._blocks_ahead(boxes[j][0], s_arr):
                 continue
-            s_lo = np.array([b.s_lo for b in boxes[j]])
+            s_lo = boxes[j].s_lo
             v = np.maximum(np.diff(s_lo) / dt, 0.0)
             v = np.append(v, v[-1]) if len(v) else np.zeros(1)
             line = s_lo - self.stop_distance_m - gap * v
@@ -352,23 +402,34 @@ class Avoidance:
         Rm = np.array([[math.cos(heading_rad), -math.sin(heading_rad)], [math.sin(heading_rad), math.cos(heading_rad)]])
         return Rm @ self._Sinv_local @ Rm.T
 
-    def _nearest(self, P: np.ndarray, j: int, centers: np.ndarray, shapes) -> tuple[np.ndarray, np.ndarray]:
-        """Signed distances (R, K) and nearest boundary points (R, K, 2) of points P (R, K, 2) to
-        obstacle j, point ``P[r, k]`` at horizon time k + 1 (rows 1..N of ``centers``, ``shapes``)."""
-        ob = self.obstacles[j]
+    def _nearest(self, P: np.ndarray, rel: list[int], centers, outlines) -> tuple[np.ndarray, np.ndarray]:
+        """Signed distances (n, R, K) and nearest boundary points (n, R, K, 2) of points P (R, K, 2)
+        to the n obstacles ``rel``, point ``P[r, k]`` at horizon time k + 1 (rows 1..N of
+        ``centers[j]`` and, for a polygon, of its world vertices ``outlines[j]``)."""
         R, K = P.shape[:2]
-        if isinstance(ob.shape, Circle):
-            C = centers[1:][None]
-            v = P - C
-            n = np.maximum(np.hypot(v[..., 0], v[..., 1]), 1e-12)
-            return n - ob.shape.radius_m, C + ob.shape.radius_m * v / n[..., None]
-        flat = P.reshape(R * K, 2)
-        if not ob.moving:
-            d, q = points_polygon(flat, shapes[0].points)
-        else:
-            polys = np.stack([sh.points for sh in shapes[1:]])
-            d, q = points_polygons(flat, np.tile(polys, (R, 1, 1)))
-        return d.reshape(R, K), q.reshape(R, K, 2)
+        dist = np.empty((len(rel), R, K))
+        q = np.empty((len(rel), R, K, 2))
+        groups: dict[int, list[int]] = {}  # circles (0) and polygons by vertex count
+        for i, j in enumerate(rel):
+            o = outlines[j]
+            groups.setdefault(0 if o is None else o.shape[1], []).append(i)
+        for kind, idx in groups.items():
+            js = [rel[i] for i in idx]
+            if kind == 0:
+                C = np.stack([centers[j][1:] for j in js])[:, None]
+                r = np.array([_radius(self.obstacles[j]) for j in js])[:, None, None]
+                v = P[None] - C
+                n = np.maximum(np.hypot(v[..., 0], v[..., 1]), 1e-12)
+                dist[idx] = n - r
+                q[idx] = C + r[..., None] * v / n[..., None]
+                continue
+            polys = np.stack([outlines[j][1:] for j in js])[:, None]  # (g, 1, K, M, 2)
+            polys = np.broadcast_to(polys, (len(js), R, K, kind, 2)).reshape(-1, kind, 2)
+            pts = np.broadcast_to(P[None], (len(js), R, K, 2)).reshape(-1, 2)
+            d, qq = points_polygons(pts, polys)
+            dist[idx] = d.reshape(len(js), R, K)
+            q[idx] = qq.reshape(len(js), R, K, 2)
+        return dist, q
 
     def _lin_arc_lengths(self, Xlin: np.ndarray, s0: float) -> np.ndarray:
         """(N,) arc lengths [m] of the linearization trajectory's steps 1..N: ``s0`` plus the
@@ -394,6 +455,8 @@ class Avoidance:
         a, b = self._a, self._b
         a[:] = 0.0
         b[:] = -np.inf
+        if not rel:
+            return a, b
         lin = Xlin[1:, :3]
         c, s = np.cos(lin[:, 2]), np.sin(lin[:, 2])
         nd = len(self.offsets)
@@ -403,50 +466,53 @@ class Avoidance:
         s_lin = self._lin_arc_lengths(Xlin, s_arr[0])
         P = lin[None, :, :2] + off[..., None] * np.column_stack([c, s])[None]  # disc centres (nd, N, 2)
         s_disc = s_arr[None, 1:] + off
-        for slot, j in enumerate(rel):
-            side = sides[j]
-            bx = boxes[j][1:]
-            s_lo = np.array([bb.s_lo for bb in bx])
-            s_hi = np.array([bb.s_hi for bb in bx])
-            s_ref = np.array([bb.s_ref for bb in bx])
-            e_edge = np.array([bb.e_hi if side == SIDE_LEFT else bb.e_lo for bb in bx])
-            h = np.asarray(self.path.heading(s_ref), float)
-            nl = np.column_stack([-np.sin(h), np.cos(h)])  # path left normal at the obstacle
-            q_lat = self.path.position(s_ref) + nl * e_edge[:, None]
-            dist, q = self._nearest(P, j, centers[j], world[j])
-            v = P - q
-            nv = np.maximum(np.hypot(v[..., 0], v[..., 1]), 1e-12)
-            n = v / nv[..., None] * np.where(dist >= 0, 1.0, -1.0)[..., None]
-            active = dist - self.r_disc <= self.config.influence_m
-            lateral = (side != SIDE_BLOCKED) & (s_lo - reach <= s_disc) & (s_disc <= s_hi + reach)
-            n = np.where(lateral[..., None], side * nl, n)
-            q = np.where(lateral[..., None], q_lat, q)
-            active |= lateral
-            if side == SIDE_BLOCKED and self._blocks_ahead(boxes[j][0], s_arr):
+        # every considered obstacle at once: arrays (n_obs, nd, N[, 2]), obstacle i in row slot i
+        side = np.array([sides[j] for j in rel], float)[:, None, None]
+        s_lo, s_hi, s_ref, e_lo, e_hi = (np.stack([getattr(boxes[j], f)[1:] for j in rel])[:, None, :]
+                                         for f in ("s_lo", "s_hi", "s_ref", "e_lo", "e_hi"))
+        e_edge = np.where(side == SIDE_LEFT, e_hi, e_lo)
+        h = np.asarray(self.path.heading(s_ref), float)
+        nl = np.stack([-np.sin(h), np.cos(h)], axis=-1)  # path left normal at the obstacle
+        q_lat = self.path.position(s_ref) + nl * e_edge[..., None]
+        dist, q = self._nearest(P, rel, centers, world)
+        v = P[None] - q
+        nv = np.maximum(np.hypot(v[..., 0], v[..., 1]), 1e-12)
+        n = v / nv[..., None] * np.where(dist >= 0, 1.0, -1.0)[..., None]
+        active = dist - self.r_disc <= self.config.influence_m
+        lateral = (side != SIDE_BLOCKED) & (s_lo - reach <= s_disc) & (s_disc <= s_hi + reach)
+        n = np.where(lateral[..., None], side[..., None] * nl, n)
+        q = np.where(lateral[..., None], q_lat, q)
+        active |= lateral
+        for i, j in enumerate(rel):
+            if sides[j] == SIDE_BLOCKED and self._blocks_ahead(boxes[j][0], s_arr):
                 # stop behind an obstacle now ahead: the disc's arc length at most its near end
                 # less the clearance (the nearest-point normal points forward once the
                 # linearization passes it)
-                tb, q = self._stop_plane(np.tile(s_lo, nd), (s_lin + off).ravel(), r_need)
-                n = -tb.reshape(nd, -1, 2)
-                q = q.reshape(nd, -1, 2)
-                active[:] = True
+                tb, qs = self._stop_plane(np.tile(s_lo[i, 0], nd), (s_lin + off).ravel(), r_need)
+                n[i] = -tb.reshape(nd, -1, 2)
             elif j in following:
                 # keep ahead of a car following in the lane: the disc's arc length at least its far
                 # end plus the clearance; a longitudinal row only (no swerving, no braking for it)
-                tb, q = self._stop_plane(np.tile(s_hi, nd), (s_lin + off).ravel(), r_need, ahead=True)
-                n = tb.reshape(nd, -1, 2)
-                q = q.reshape(nd, -1, 2)
-                active[:] = True
-            active &= present[j][None, :]  # no row at the steps the obstacle does not exist
-            rows = slice(slot * nd, (slot + 1) * nd)
-            # n . (p + J (x - xbar)) >= n . q + r_need, J = d p / d (x, y, yaw)
-            ay = off * (-n[..., 0] * s + n[..., 1] * c)
-            a[:, rows, 0] = np.where(active, n[..., 0], 0.0).T
-            a[:, rows, 1] = np.where(active, n[..., 1], 0.0).T
-            a[:, rows, 2] = np.where(active, ay, 0.0).T
-            rhs = (np.einsum("dki,dki->dk", n, q) + r_need - np.einsum("dki,dki->dk", n, P)
-                   + n[..., 0] * lin[:, 0] + n[..., 1] * lin[:, 1] + ay * lin[:, 2])
-            b[:, rows] = np.where(active, rhs, -np.inf).T
+                tb, qs = self._stop_plane(np.tile(s_hi[i, 0], nd), (s_lin + off).ravel(), r_need, ahead=True)
+                n[i] = tb.reshape(nd, -1, 2)
+            else:
+                continue
+            q[i] = qs.reshape(nd, -1, 2)
+            active[i] = True
+        active &= np.stack([present[j] for j in rel])[:, None, :]  # no row at the steps the obstacle does not exist
+        # n . (p + J (x - xbar)) >= n . q + r_need, J = d p / d (x, y, yaw)
+        ay = off * (-n[..., 0] * s + n[..., 1] * c)
+        rhs = (np.einsum("odki,odki->odk", n, q) + r_need - np.einsum("odki,dki->odk", n, P)
+               + n[..., 0] * lin[:, 0] + n[..., 1] * lin[:, 1] + ay * lin[:, 2])
+        m = len(rel) * nd  # row slot * nd + disc, as the obstacles come in rel
+
+        def rows(v, fill):
+            return np.where(active, v, fill).reshape(m, -1).T
+
+        a[:, :m, 0] = rows(n[..., 0], 0.0)
+        a[:, :m, 1] = rows(n[..., 1], 0.0)
+        a[:, :m, 2] = rows(ay, 0.0)
+        b[:, :m] = rows(rhs, -np.inf)
         return a, b
 
     def _corridor(self, Xlin, s_arr, rel, boxes, sides, present, road_lo, road_hi):
@@ -532,6 +598,12 @@ class Avoidance:
             cand = shift * f
             e[:] = np.where(np.abs(cand) > np.abs(e), cand, e)
         return e
+
+
+def _radius(ob: Obstacle) -> float:
+    """The radius [m] of a circle obstacle."""
+    assert isinstance(ob.shape, Circle)
+    return ob.shape.radius_m
 
 
 def follow_references(s_arr: np.ndarray, v_arr: np.ndarray, s_max: np.ndarray, v0_mps: float, dt_s: float,

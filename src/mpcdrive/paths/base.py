@@ -63,6 +63,28 @@ class Path(ABC):
             raise ValueError(f"window_m must be a positive finite number, got {window_m!r}")
         return self._project_xy(xy, s_guess, window_m)
 
+    def project_many(self, xy, s_guess, window_m) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`project` of the points ``xy`` (K, 2) [m], point k searched near its own
+        ``s_guess[k]`` within ``window_m[k]`` [m] (arrays (K,)). Returns arrays ``(s_m, e_y_m)``."""
+        xy = np.asarray(xy, float)
+        K = len(xy)
+        s_guess = np.broadcast_to(np.asarray(s_guess, float), (K,))
+        window_m = np.broadcast_to(np.asarray(window_m, float), (K,))
+        if xy.shape != (K, 2) or not np.all(np.isfinite(xy)):
+            raise ValueError(f"positions must be (K, 2) finite numbers, got shape {xy.shape}")
+        if not np.all(np.isfinite(s_guess)):
+            raise ValueError("s_guess must be finite")
+        if not (np.all(np.isfinite(window_m)) and np.all(window_m > 0)):
+            raise ValueError("window_m must be positive finite numbers")
+        return self._project_many_xy(xy, s_guess, window_m)
+
+    def _project_many_xy(self, xy: np.ndarray, s_guess: np.ndarray, window_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(s, e_y) arrays of :meth:`project_many`, one :meth:`_project_xy` per point unless a
+        path vectorizes it."""
+        out = np.array([self._project_xy(p, float(g), float(w)) for p, g, w in zip(xy, s_guess, window_m)])
+        out = out.reshape(len(xy), 2)
+        return out[:, 0], out[:, 1]
+
     def frenet(self, pose, s_guess: float | None = None, window_m: float = 2.0) -> Projection:
         """(s, e_y, e_psi) of a pose ``(x m, y m, yaw rad)``."""
         pose = np.asarray(pose, float)

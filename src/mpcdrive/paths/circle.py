@@ -55,3 +55,10 @@ class CirclePath(Path):
         s = self._lap_shift(s_local, s_guess)
         e_y = self.sign * (self.radius_m - rho)
         return float(s), float(e_y)
+
+    def _project_many_xy(self, xy, s_guess, window_m):
+        d = xy - self.center
+        rho = np.hypot(d[:, 0], d[:, 1])
+        th = np.arctan2(d[:, 1], d[:, 0])
+        s_local = (self.sign * (th - self.start_angle_rad) * self.radius_m) % self.length_m
+        return self._lap_shift(s_local, s_guess), self.sign * (self.radius_m - rho)

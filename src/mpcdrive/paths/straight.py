@@ -38,3 +38,7 @@ class StraightPath(Path):
     def _project_xy(self, xy, s_guess, window_m):
         d = xy - self.start
         return float(d @ self.t), float(d @ self.n)
+
+    def _project_many_xy(self, xy, s_guess, window_m):
+        d = xy - self.start
+        return d @ self.t, d @ self.n

@@ -201,3 +201,33 @@ class WaypointPath(Path):
         s_loc = self._s[idx[j]] + t[j] * math.sqrt(dd[j])
         e_y = float(seg[0] * r[j, 1] - seg[1] * r[j, 0])
         return float(self._lap_shift(s_loc, s_guess)), e_y
+
+    def _project_many_xy(self, xy, s_guess, window_m):
+        # _project_xy for every point at once: each point's window of segments, in the same order,
+        # padded to the widest with repeats of its last segment (argmin keeps the first of equals)
+        m = len(self._s) - 1
+        s_loc = self._split(s_guess)[0]
+        full = 2 * window_m >= self.length_m
+        i0 = np.where(full, 0, np.floor((s_loc - window_m) / self._ds)).astype(np.int64)
+        i1 = np.where(full, m - 1, np.ceil((s_loc + window_m) / self._ds)).astype(np.int64)
+        idx = i0[:, None] + np.arange(int(np.max(i1 - i0)) + 1)
+        idx = np.minimum(idx, i1[:, None])
+        idx = np.mod(idx, m) if self.closed else np.clip(idx, 0, m - 1)
+        p0 = self._xy[idx]
+        d = self._xy[idx + 1] - p0
+        q = xy[:, None, :] - p0
+        dd = np.einsum("kij,kij->ki", d, d)
+        t_raw = np.einsum("kij,kij->ki", q, d) / dd
+        t = np.clip(t_raw, 0.0, 1.0)
+        if not self.closed:  # the end segments extend along their tangents
+            t = np.where((idx == 0) & (t_raw < 0.0), t_raw, t)
+            t = np.where((idx == m - 1) & (t_raw > 1.0), t_raw, t)
+        r = q - t[..., None] * d
+        dist2 = np.einsum("kij,kij->ki", r, r)
+        k = np.arange(len(xy))
+        j = np.argmin(dist2, axis=1)
+        sd = np.sqrt(dd[k, j])
+        seg = d[k, j] / sd[:, None]
+        s_loc = self._s[idx[k, j]] + t[k, j] * sd
+        e_y = seg[:, 0] * r[k, j, 1] - seg[:, 1] * r[k, j, 0]
+        return self._lap_shift(s_loc, s_guess), e_y

@@ -2,7 +2,8 @@
 
 Poses are ``(x m, y m, yaw rad)``; shapes are defined around the obstacle's reference point.
 Predictions over a horizon are the poses at ``t + k dt`` (constant velocity, or a given
-trajectory interpolated in time; static obstacles never move).
+trajectory interpolated in time; static obstacles never move); the motions' ``offset`` and
+:meth:`Obstacle.poses_at` take a time or an array of times, so a horizon is placed at once.
 """
 
 from __future__ import annotations
@@ -69,7 +70,8 @@ def rectangle(length_m: float, width_m: float) -> Polygon:
 class Static:
     """Never moves."""
 
-    def offset(self, t_s: float) -> tuple[float, float, float]:
+    def offset(self, t_s):
+        """Offset (dx m, dy m, dyaw rad) from the initial pose at time(s) ``t_s`` [s]."""
         return 0.0, 0.0, 0.0
 
 
@@ -80,7 +82,7 @@ class ConstantVelocity:
     vx_mps: float
     vy_mps: float
 
-    def offset(self, t_s: float) -> tuple[float, float, float]:
+    def offset(self, t_s):
         return self.vx_mps * t_s, self.vy_mps * t_s, 0.0
 
 
@@ -105,9 +107,11 @@ class TrajectoryMotion:
             object.__setattr__(self, name, a)
         object.__setattr__(self, "t_s", t)
 
-    def offset(self, t_s: float) -> tuple[float, float, float]:
-        return (float(np.interp(t_s, self.t_s, self.dx_m)), float(np.interp(t_s, self.t_s, self.dy_m)),
-                float(np.interp(t_s, self.t_s, self.dyaw_rad)))
+    def offset(self, t_s):
+        dx, dy, dyaw = (np.interp(t_s, self.t_s, a) for a in (self.dx_m, self.dy_m, self.dyaw_rad))
+        if np.ndim(t_s) == 0:
+            return float(dx), float(dy), float(dyaw)
+        return dx, dy, dyaw
 
 
 @dataclass(frozen=True)
@@ -163,11 +167,33 @@ class Obstacle:
         dx, dy, dyaw = self.motion.offset(t_s)
         return self.pose[0] + dx, self.pose[1] + dy, self.pose[2] + dyaw
 
+    def poses_at(self, t_s: np.ndarray) -> np.ndarray:
+        """(K, 3) poses (x m, y m, yaw rad) at the times ``t_s`` (K,) [s], as :meth:`pose_at`."""
+        t = np.asarray(t_s, float)
+        out = np.empty((len(t), 3))
+        out[:, 0], out[:, 1], out[:, 2] = self.pose_at(t)  # type: ignore[arg-type]
+        return out
+
+    def outlines_at(self, t_s: np.ndarray) -> np.ndarray:
+        """(K, M, 2) world vertices [m] of a polygon obstacle at the times ``t_s`` (K,) [s], as
+        :meth:`at` places them."""
+        if not isinstance(self.shape, Polygon):
+            raise ValueError(f"obstacle {self.name or '?'} is a circle: it has no outline")
+        poses = self.poses_at(t_s)
+        return placed_points(self.shape.points, poses[:, 0], poses[:, 1], poses[:, 2])
+
     def at(self, t_s: float) -> WorldCircle | WorldPolygon:
         """The obstacle's shape in the world at time ``t_s`` [s]."""
         x, y, yaw = self.pose_at(t_s)
         if isinstance(self.shape, Circle):
             return WorldCircle(np.array([x, y]), self.shape.radius_m)
-        c, s = math.cos(yaw), math.sin(yaw)
-        p = self.shape.points
-        return WorldPolygon(np.column_stack([x + c * p[:, 0] - s * p[:, 1], y + s * p[:, 0] + c * p[:, 1]]))
+        return WorldPolygon(placed_points(self.shape.points, x, y, yaw))
+
+
+def placed_points(points: np.ndarray, x, y, yaw) -> np.ndarray:
+    """Points (M, 2) of a body frame placed at pose (x m, y m, yaw rad): (M, 2) [m] for one pose,
+    (K, M, 2) for poses given as arrays (K,)."""
+    x, y, yaw = (np.asarray(v, float)[..., None] for v in (x, y, yaw))
+    c, s = np.cos(yaw), np.sin(yaw)
+    px, py = points[:, 0], points[:, 1]
+    return np.stack([x + c * px - s * py, y + s * px + c * py], axis=-1)
