@@ -125,7 +125,8 @@ def test_plant_brakes_to_a_stop_and_holds_it_with_the_wheels_turned(kind, max_st
     if kind == "st":  # v' = a exactly: stopped within the step in which 10 m/s / |a| ends
         assert t_stop <= 10.0 / abs(accel) + 0.1 + 1e-9
     # (MB brakes through its tyres: at -11.5 m/s^2, beyond the friction mu g = 10.3 m/s^2, the
-    # wheels lock and the car slides to a stop in 1.3 s; the helper asserts a stop within 30 s)
+    # plant's anti-lock brakes hold the wheels near their peak slip; the helper asserts a stop
+    # within 30 s)
     hold = obs[-51:]
     # never reverses (the brakes stop the car), up to rounding of v - a h
     assert obs[:, 3].min() >= -1e-12
@@ -156,6 +157,121 @@ def test_plain_rk4_at_two_substeps_diverges_on_st_when_braking():
     assert diverged
     # the bound the plant uses at that speed: h rho > 2 at 0.3 m/s for h = 0.05 s
     assert plant.stiff_radius(np.r_[0, 0, 0.5, 0.3, 0, 0, 0], 0.0) * h > 2.0
+
+
+def _mb_wheel_ratios(plant: CommonRoadPlant, xp) -> np.ndarray:
+    """R_w omega / u_w per wheel (1: rolling, 0: locked), hub speeds u_w as MB computes them."""
+    p, d, r, vx, vy = plant.p, xp[2], xp[5], xp[3], xp[10]
+    lat = (vy + p.a * r) * math.sin(d)
+    hub = [(vx + 0.5 * p.T_f * r) * math.cos(d) + lat, (vx - 0.5 * p.T_f * r) * math.cos(d) + lat,
+           vx + 0.5 * p.T_r * r, vx - 0.5 * p.T_r * r]
+    return np.array([p.R_w * xp[23 + i] / u for i, u in enumerate(hub)])
+
+
+def test_mb_brakes_hard_in_a_gentle_bend_without_locking_or_spinning():
+    """The DEU_A9 case: at 27 m/s in a gentle bend (steering 0.02 rad, yaw rate 0.21 rad/s) full
+    braking (-11.5 m/s^2) for 3 s, then the brakes released. Before the plant clipped MB's wheel
+    speeds and added anti-lock brakes, the inner wheels locked within 0.5 s and kept a negative
+    speed for good (CommonRoad's clip lives on its own copy of the state), and the car slid on."""
+    plant = CommonRoadPlant("mb", "bmw_320i")
+    xp = plant.initial_state([0.0, 0.0, 0.0, 27.0])
+    for _ in range(20):
+        xp = plant.step(xp, [0.02, 0.0], 0.1)
+    r_steady = xp[5]
+    assert 0.15 < r_steady < 0.3
+    rear, yaw_rate, v_y = [], [], []
+    for _ in range(30):
+        xp = plant.step(xp, [0.02, -11.5], 0.1)
+        rear.append(_mb_wheel_ratios(plant, xp)[2:].min())
+        yaw_rate.append(abs(xp[5]))
+        v_y.append(abs(xp[10]))
+    assert min(rear) > 0.5  # the rear wheels keep rolling (locked: 0)
+    assert max(yaw_rate) < 0.6 and max(v_y) < 2.0  # no spin (A9 spun at 1.4-1.8 rad/s, v_y 11 m/s)
+    assert xp[3] < 27.0 - 3.0 * 3.0  # it does brake: at least 3 m/s^2 on average
+    for _ in range(10):
+        xp = plant.step(xp, [0.02, 0.0], 0.1)
+    assert np.abs(_mb_wheel_ratios(plant, xp) - 1.0).max() < 0.02  # released: every wheel rolls again
+
+
+def test_mb_stops_with_the_wheels_turned_holds_and_drives_off():
+    """Braking to a stop with the wheels turned, holding it, driving off: below 0.1 m/s MB moves
+    kinematically; the plant keeps its yaw rate, lateral speed and wheel speeds at that motion
+    (before, its lateral speed drifted at standstill and its wheels stayed below 0, and the car
+    never got past 0.1 m/s again)."""
+    plant = CommonRoadPlant("mb", "bmw_320i")
+    xp = plant.initial_state([0.0, 0.0, 0.0, 5.0])
+    for _ in range(40):
+        xp = plant.step(xp, [0.3, -3.0], 0.1)
+    held = []
+    for _ in range(10):
+        xp = plant.step(xp, [0.3, 0.0], 0.1)
+        held.append(xp.copy())
+    held = np.array(held)
+    assert np.abs(held[:, [3, 5, 10]]).max() == 0.0 and np.abs(held[:, 23:27]).max() == 0.0
+    assert np.abs(held[:, :3] - held[0, :3]).max() <= 1e-12
+    for _ in range(30):
+        xp = plant.step(xp, [0.3, 1.0], 0.1)
+    # 3 s at 1 m/s^2, less the wheels' inertia and the tyres' scrub at 0.3 rad (2.57 m/s measured)
+    assert 2.3 < plant.observe(xp)[3] < 3.0
+    assert np.abs(_mb_wheel_ratios(plant, xp) - 1.0).max() < 0.05
+
+
+@pytest.mark.parametrize("accel", [1.0, -3.0])
+def test_mb_on_a_straight_agrees_with_ks(accel):
+    """Straight ahead from 15 m/s for 3 s at +1 (rear-wheel drive) and -3 m/s^2 (four-wheel
+    brakes). KS: v' = a. MB turns a into the torque m R_w a on the wheels, which also spins up
+    (or slows) the four wheels of inertia I_y_w: v' = a / (1 + 4 I_y_w / (m R_w^2)) (5.3 % less
+    for the BMW 320i). Tolerance on MB against that: 0.01 m/s (the tyres' slip transient, 0.004
+    measured); MB against KS: the inertia term plus that."""
+    mb, ks = CommonRoadPlant("mb", "bmw_320i"), CommonRoadPlant("ks", "bmw_320i")
+    p = mb.p
+    xm, xk = mb.initial_state([0.0, 0.0, 0.0, 15.0]), ks.initial_state([0.0, 0.0, 0.0, 15.0])
+    for _ in range(30):
+        xm, xk = mb.step(xm, [0.0, accel], 0.1), ks.step(xk, [0.0, accel], 0.1)
+    om, ok = mb.observe(xm), ks.observe(xk)
+    a_eff = accel / (1.0 + 4.0 * p.I_y_w / (p.m * p.R_w ** 2))
+    assert ok[3] == pytest.approx(15.0 + 3.0 * accel, abs=1e-9)
+    assert om[3] == pytest.approx(15.0 + 3.0 * a_eff, abs=0.01)
+    assert abs(om[3] - ok[3]) <= 3.0 * abs(accel - a_eff) + 0.01
+    assert om[0] == pytest.approx(15.0 * 3.0 + 0.5 * a_eff * 9.0, abs=0.05)
+    # sideways: the magic formula's offsets (p_hy1, p_vy1) give a side force at zero slip angle,
+    # which drifts MB ~0.15 m in 3 s; the controller corrects it in the closed loop
+    assert abs(om[1]) < 0.3 and abs(om[2]) < 0.02
+
+
+@pytest.mark.parametrize("v", [27.0, 10.0, 3.0, 1.0, 0.3, 0.12])
+def test_mb_wheel_mode_bound_covers_the_jacobian(v):
+    """The substep bound's spectral radius is at least the numerical Jacobian's (its fastest
+    modes are the wheels' ~4000 / v 1/s), so RK4 at the plant's substep stays stable."""
+    plant = CommonRoadPlant("mb", "bmw_320i")
+    x = plant.initial_state([0.0, 0.0, 0.0, v])
+    x[2] = 0.05
+    u = (0.0, -3.0)
+    jac = np.zeros((29, 29))
+    for j in range(29):
+        d = 1e-6 * max(1.0, abs(x[j]))
+        e = np.zeros(29)
+        e[j] = d
+        jac[:, j] = (plant.f(x + e, u) - plant.f(x - e, u)) / (2 * d)
+    rho_num = np.abs(np.linalg.eigvals(jac)).max()
+    rho = plant.stiff_radius(x, -3.0)
+    assert rho_num <= rho <= 1.5 * rho_num or v > 20.0  # at speed other modes lead, the step is 1 ms
+    h = min(plant.max_step_s, 2.0 / rho)
+    assert h * rho_num <= 2.785
+
+
+def test_mb_plant_model_error_is_named():
+    """Where MB's equations cannot be evaluated (a hub speed <= 0 above 0.1 m/s: the car turns
+    about a point inside its track) the plant raises PlantModelError, not ZeroDivisionError."""
+    from mpcdrive.adapters.commonroad_vehicles import PlantModelError
+
+    plant = CommonRoadPlant("mb", "bmw_320i")
+    x = plant.initial_state([0.0, 0.0, 0.0, 0.5])
+    x[5] = 2.0  # yaw rate: the rear hub on one side moves at 0.5 - 0.68 * 2 < 0
+    with pytest.raises(PlantModelError, match="divided by zero at v_x = 0.5 m/s"):
+        plant.f(x, (0.0, 0.0))
+    with pytest.raises(PlantModelError):
+        plant.step(x, [0.0, 0.0], 0.1)
 
 
 def _circle_curvature(obs: np.ndarray) -> float:

@@ -40,6 +40,13 @@ _RK4_STABLE = 2.0
 #: of a 0.25 ms integration at 1 ms (8 mm at 2 ms, 0.2 m at 5 ms, 1.4 m at 10 ms); KS / ST within
 #: 0.03 mm at 10 ms
 _DEFAULT_STEP_S = {"ks": 0.01, "st": 0.01, "mb": 1e-3}
+#: below this |v_x| [m/s] CommonRoad's ST and MB use their kinematic branch
+_KINEMATIC_BELOW = 0.1
+#: hub speed [m/s] below which MB's wheel-mode bound stops growing (its substeps stop shrinking)
+_MB_MIN_HUB_SPEED = 0.01
+#: MB wheel slip from which the plant's anti-lock / traction control lowers the command, and at
+#: which it takes it away (the longitudinal magic formula peaks near 0.15)
+_MB_SLIP_ON, _MB_SLIP_OFF = 0.10, 0.20
 
 
 def available() -> bool:
@@ -174,7 +181,19 @@ class CommonRoadPlant:
     ST's yaw-rate / slip-angle block has eigenvalues growing as ``1 / v`` (spectral radius 2160 1/s at
     0.1 m/s for the BMW 320i), whose spectral radius ``rho`` is computed from the model's
     coefficients at each substep; below 0.1 m/s CommonRoad's ST switches to its kinematic model
-    itself (not stiff). MB's stiff tyre, wheel-spin and suspension modes are held by its 1 ms step.
+    itself (not stiff). MB's tyre and suspension modes are held by its 1 ms step; its wheel-spin
+    modes, ``~R_w^2 p_kx1 F_z / (I_y_w u_w)`` (~4500 / u_w 1/s for the BMW 320i, past RK4's
+    bound at 1 ms below ~1.6 m/s), bound the substep like ST's block.
+
+    **MB's own constraints and brakes.** After each substep the plant applies what MB's
+    right-hand side asks of its state but cannot enforce on the integrator's copy: no negative
+    wheel speed (clipped at 0; otherwise a wheel that locked under braking keeps a negative speed
+    with derivative 0 and never rolls again), and below 0.1 m/s, where the model moves
+    kinematically, yaw rate, lateral speeds and wheel speeds held at the kinematic motion (they
+    drive nothing there and would drift, and the model would leave its kinematic branch with a
+    hub speed near 0). MB turns its acceleration input into brake and engine torques open loop;
+    the plant adds anti-lock brakes and traction control (:meth:`_mb_slip_control`), as the car
+    has, so that a wheel on which the torque exceeds the grip does not lock or spin up.
     """
 
     def __init__(self, model: str, vehicle: str, *, max_step_s: float | None = None):
@@ -250,19 +269,23 @@ class CommonRoadPlant:
         try:
             return np.array(self._rhs(list(map(float, xp)), [float(u[0]), float(u[1])], self.p), float)
         except ZeroDivisionError:
-            # MB divides by a wheel's hub speed, which it clips at 0 when the wheel would roll
-            # backwards (slow, with a yaw rate, above its 0.1 m/s kinematic switch)
+            # MB divides by each wheel's hub speed, which it clips at 0 when the wheel would roll
+            # backwards: the car slides sideways or spins (above its 0.1 m/s kinematic switch)
             raise PlantModelError(
                 f"CommonRoad's {self.kind.upper()} model divided by zero at v_x = {float(xp[3]):.3g} m/s, "
-                f"yaw rate {float(xp[5]):.3g} rad/s, steering {float(xp[2]):.3g} rad (a wheel's hub speed "
-                "is 0: a limit of its equations at low speed while turning)") from None
+                f"v_y = {float(xp[10]) if len(xp) > 10 else 0.0:.3g} m/s, yaw rate {float(xp[5]):.3g} rad/s, "
+                f"steering {float(xp[2]):.3g} rad (a wheel's hub speed is 0: the car slides sideways or "
+                "spins, outside what its equations cover)") from None
 
     def stiff_radius(self, xp, accel_mps2: float) -> float:
-        """Spectral radius [1/s] of the ST model's yaw-rate / slip-angle block at plant state ``xp``
-        and acceleration ``accel_mps2`` (0 where the model is kinematic: KS, and ST below 0.1 m/s)."""
+        """Spectral radius [1/s] of the stiff block at plant state ``xp`` and acceleration
+        ``accel_mps2``: ST's yaw-rate / slip-angle block, MB's wheel-spin modes (:meth:`_mb_wheel_radius`);
+        0 where the model is kinematic (KS, and ST / MB below 0.1 m/s)."""
         v = float(xp[3])
-        if self.kind != "st" or abs(v) < 0.1:
+        if self.kind == "ks" or abs(v) < _KINEMATIC_BELOW:
             return 0.0
+        if self.kind == "mb":
+            return self._mb_wheel_radius(xp)
         p = self.p
         mu, cs = float(p.tire.p_dy1), -float(p.tire.p_ky1) / float(p.tire.p_dy1)
         lf, lr, h, m, iz = float(p.a), float(p.b), float(p.h_s), float(p.m), float(p.I_z)
@@ -278,6 +301,97 @@ class CommonRoadPlant:
         if disc >= 0:
             return float(abs(tr / 2.0) + math.sqrt(disc))
         return float(math.sqrt(det))  # complex pair: |lambda| = sqrt(det)
+
+    def _mb_hub_speeds(self, x) -> tuple[float, float, float, float]:
+        """MB's wheel-hub speeds (left front, right front, left rear, right rear) [m/s], as its
+        right-hand side computes them (before it clips them at 0)."""
+        p, d, r, vx, vy = self.p, float(x[2]), float(x[5]), float(x[3]), float(x[10])
+        lat = (vy + float(p.a) * r) * math.sin(d)
+        return ((vx + 0.5 * float(p.T_f) * r) * math.cos(d) + lat, (vx - 0.5 * float(p.T_f) * r) * math.cos(d) + lat,
+                vx + 0.5 * float(p.T_r) * r, vx - 0.5 * float(p.T_r) * r)
+
+    def _mb_wheel_radius(self, x) -> float:
+        """Bound [1/s] on the spectral radius of MB's wheel-spin modes at state ``x``.
+
+        A wheel spins as ``I_y_w omega' = -R_w F_x(s) + torque`` with the slip ``s = 1 - R_w
+        omega / u_w`` (``u_w`` the hub speed); ``F_x`` is the magic formula, steepest at ``s = 0``
+        with slope ``K_x = p_kx1 F_z`` (combined slip only lowers it), so ``|d omega' / d omega| <=
+        R_w^2 p_kx1 F_z / (I_y_w u_w)``: ~4500 / u_w 1/s for the BMW 320i (4 s^-1 at 1 m/s per ms),
+        the fastest modes of the model below ~20 m/s (its lateral tyre modes, also ~1 / v, are
+        some 6 times slower). ``F_z`` per wheel as the model computes it (tyre deflection)."""
+        p = self.p
+        kzt, rw, tf, tr = float(p.K_zt), float(p.R_w), float(p.T_f), float(p.T_r)
+        rf, rr = float(x[13]), float(x[18])
+        fz = ((float(x[16]) + rw * (math.cos(rf) - 1.0) - 0.5 * tf * math.sin(rf)) * kzt,
+              (float(x[16]) + rw * (math.cos(rf) - 1.0) + 0.5 * tf * math.sin(rf)) * kzt,
+              (float(x[21]) + rw * (math.cos(rr) - 1.0) - 0.5 * tr * math.sin(rr)) * kzt,
+              (float(x[21]) + rw * (math.cos(rr) - 1.0) + 0.5 * tr * math.sin(rr)) * kzt)
+        gain = rw * rw * abs(float(p.tire.p_kx1)) / float(p.I_y_w)
+        rho = 0.0
+        for f_z, u_w in zip(fz, self._mb_hub_speeds(x)):
+            if f_z > 0.0:
+                rho = max(rho, gain * f_z / max(u_w, _MB_MIN_HUB_SPEED))
+        return rho
+
+    def _mb_slip_control(self, x, accel_mps2: float) -> float:
+        """The acceleration input given to MB for the command ``accel_mps2`` at state ``x``: the
+        command scaled down while a wheel slips beyond the tyre's force peak (anti-lock brakes when
+        braking, traction control when driving), as a car's brake / drive system does.
+
+        MB turns its acceleration input into brake torques (split ``T_sb`` front / rear, the same
+        on left and right) and engine torques (split ``T_se``) on the wheels, open loop: the
+        torque for ``-a_max`` exceeds what a lightly loaded wheel can transmit (inner wheels in a
+        turn, the rear axle under braking), which then locks (slip 1), loses its side force and
+        spins the car. From the slip ``s = 1 - R_w omega / u_w`` of each wheel (counted on the
+        side being used: ``s`` braking, ``-s`` driving) the plant takes ``s_m``, the larger of the
+        front axle's smaller slip and the rear wheels' slips (one input for all wheels: "select
+        low" on the rear axle, which must not lock or the car spins, "select high" on the front, a
+        lightly loaded inner front wheel in a bend does not release the brakes), and scales the
+        command by ``clip((s_off - s_m) / (s_off - s_on), 0, 1)``: unchanged up to ``s_on``
+        (0.10), no torque from ``s_off`` (0.20). The magic formula's longitudinal force peaks at
+        ``s ~ 0.15`` for every parameter set (where ``B_x kappa - E_x (B_x kappa - atan(B_x
+        kappa)) = tan(pi / (2 C_x))``, ``B_x = p_kx1 / (C_x p_dx1)`` independent of the load), so
+        the wheels work near their peak force and keep most of their side force. Below ``|v_x| =
+        0.1`` m/s (the kinematic branch: no slip) the command is passed unchanged."""
+        vx = float(x[3])
+        if accel_mps2 == 0.0 or abs(vx) < _KINEMATIC_BELOW:
+            return accel_mps2
+        rw, sign = float(self.p.R_w), (1.0 if accel_mps2 < 0.0 else -1.0)
+        slip = [sign * (1.0 - rw * float(x[23 + i]) / u_w) if u_w > 0.0 else 0.0
+                for i, u_w in enumerate(self._mb_hub_speeds(x))]
+        s_m = max(min(slip[0], slip[1]), slip[2], slip[3], 0.0)
+        scale = min(max((_MB_SLIP_OFF - s_m) / (_MB_SLIP_OFF - _MB_SLIP_ON), 0.0), 1.0)
+        return accel_mps2 * scale
+
+    def _mb_project(self, x) -> np.ndarray:
+        """MB's state after a substep, held on the constraints its right-hand side states.
+
+        * "Negative wheel spin forbidden": the right-hand side sets a negative wheel speed to 0
+          (and its derivative to 0) on its own copy of the state, which does not reach the
+          integrator; without it a wheel that once crossed 0 under braking stays below 0 for good
+          (derivative 0), locked even after the brakes are released. The plant clips it at 0.
+        * Below ``|v_x| = 0.1`` m/s the model moves kinematically (slip 0 on every tyre, pose
+          from the kinematic single track); its yaw rate, lateral speeds and wheel speeds then
+          drive nothing and drift (its yaw-rate equation there uses the roll angle in place of
+          the slip angle). The plant holds them at the kinematic motion: yaw rate ``v_x tan(delta)
+          / L``, lateral speed ``lr`` times it (``lr``: CoG to rear axle; axles with no slip
+          angle), the unsprung masses moving with the axles and the wheels rolling at their hub
+          speeds. The model leaves its kinematic branch from that consistent state (not from a
+          drifted yaw rate that puts a hub speed at 0)."""
+        for i in range(23, 27):
+            if x[i] < 0.0:
+                x[i] = 0.0
+        vx = float(x[3])
+        if abs(vx) < _KINEMATIC_BELOW:
+            p = self.p
+            a, b = float(p.a), float(p.b)
+            r = vx * math.tan(float(x[2])) / (a + b)
+            x[5], x[10] = r, b * r
+            x[15], x[20] = (a + b) * r, 0.0  # lateral speeds of the front / rear axles
+            rw = float(p.R_w)
+            for i, u_w in enumerate(self._mb_hub_speeds(x)):
+                x[23 + i] = max(u_w, 0.0) / rw
+        return x
 
     def step(self, xp, u, dt_s: float) -> np.ndarray:
         """Plant state after holding the command ``u = [steering angle rad, acceleration m/s^2]``
@@ -295,7 +409,7 @@ class CommonRoadPlant:
             if rho * h > _RK4_STABLE:
                 h = _RK4_STABLE / rho
             sv = min(max((delta_cmd - x[2]) / h, sv_min), sv_max)
-            a = a_cmd
+            a = a_cmd if self.kind != "mb" else self._mb_slip_control(x, a_cmd)
             if a < 0.0:
                 a = 0.0 if x[3] <= 0.0 else max(a, -x[3] / h)
             ui = (sv, a)
@@ -304,6 +418,8 @@ class CommonRoadPlant:
             k3 = self.f(x + 0.5 * h * k2, ui)
             k4 = self.f(x + h * k3, ui)
             x = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+            if self.kind == "mb":
+                x = self._mb_project(x)
             t += h
             if not np.all(np.isfinite(x)):
                 break
