@@ -10,20 +10,24 @@ projected onto that path (``path.project``; an obstacle counts only inside its l
 Per lane it predicts the *free distance* [m]: the smallest gap, over the horizon, between the
 ego (driving its current speed, accelerating at ``accel_mps2`` up to the desired speed) and the
 obstacles ahead of it that are in that lane at that time (an obstacle counts in every lane its
-lateral extent overlaps, so a car changing lanes is in both). A lane is *blocked* when that gap
-falls below ``standstill_m + time_gap_s * v_desired``; a neighbour lane is *free* when it is
-not blocked and the traffic behind the ego in it keeps at least ``standstill_m +
-rear_time_gap_s * v_follower`` of gap over the horizon (a car closing in fast from behind makes
-the lane not free). Traffic behind the ego in its own lane is ignored.
+lateral extent overlaps, so a car changing lanes is in both); negative when the ego would run
+into one at that speed (how far: the more negative, the slower the lane), capped at the
+look-ahead. A lane is *blocked* when that gap falls below ``standstill_m + time_gap_s *
+v_desired``. The ego's own lane is *free* when it is not blocked; a neighbour lane is *free*
+(to change into) when, during the change (the ego at its current speed ``v_ego``), the
+obstacles ahead in it keep ``standstill_m + rear_time_gap_s * v_ego`` of gap and the traffic
+behind the ego in it keeps ``standstill_m + rear_time_gap_s * v_follower`` (a car closing in
+fast from behind makes the lane not free). Traffic behind the ego in its own lane is ignored.
 
 Rules (:func:`decide_lane`):
 
 * keep the current lane unless it is blocked and a free neighbour gives at least
   ``min_gain_m`` more free distance (then ``change`` to the best such neighbour);
 * out of the route lane, return (``change``) towards it as soon as the neighbour towards it is
-  free with ``min_gain_m`` of margin over the blocked threshold;
+  free and at least as free as the current lane (``min_gain_m`` over the blocked threshold when
+  the current lane is not blocked);
 * blocked and no free neighbour: ``stop`` (with the distance ``stop_m`` to ``standstill_m``
-  behind the nearest obstacle ahead now);
+  behind the nearest obstacle ahead now: the car follows or stops in its lane);
 * a change keeps its target until the ego arrives, unless the target stops being free while
   the ego is still in its origin lane (then it returns: the only change not held back by the
   dwell time); no voluntary change starts within ``min_dwell_s`` of the previous one.
@@ -168,11 +172,13 @@ def _tracks(path, obstacles, t_s: float, taus: np.ndarray, s_m: float, range_m: 
         if not present.any():
             continue
         S, E, HL, HW = (np.full(len(taus), np.nan) for _ in range(4))
-        for k in np.flatnonzero(present):
+        for j, k in enumerate(np.flatnonzero(present)):
             x, y, yaw = ob.pose_at(float(t[k]))
             S[k], E[k] = path.project(np.array([x, y]), s_m, range_m)
+            if j == 0 and abs(S[k] - s_m) > range_m:
+                break  # out of range now
             HL[k], HW[k] = _extent(ob, yaw - float(path.heading(S[k])))
-        if np.nanmin(np.abs(S - s_m)) <= range_m:
+        else:
             out.append((S, E, HL, HW, present))
     return out
 
@@ -193,13 +199,24 @@ def decide_lane(road: Road, path, s_m: float, e_y_m: float, speed_mps: float, ob
     t_acc = (v_des - v) / cfg.accel_mps2
     tt = np.minimum(taus, t_acc)
     s_ego = s_m + v * tt + 0.5 * cfg.accel_mps2 * tt ** 2 + v_des * (taus - tt)
+    s_keep = s_m + v * taus  # during a change: at its current speed
     half_l = 0.5 * cfg.ego_length_m
     need = cfg.standstill_m + cfg.time_gap_s * v_des
     look = v_des * cfg.horizon_s + need
     cur = lane_of(road, s_m, e_y_m)
     edges = [(np.interp(s_m, road.s_m, ln.right_m), np.interp(s_m, road.s_m, ln.left_m)) for ln in road.lanes]
+    centres = [float(np.interp(s_m, road.s_m, ln.center_m)) for ln in road.lanes]
+
+    def change_s(lane: int) -> float:
+        """Duration [s] of the ramp to ``lane``: peak lateral acceleration and jerk within bounds."""
+        d = abs(centres[lane] - e_y_m)
+        return max(math.sqrt(_PEAK_ACC * d / cfg.max_lat_accel_mps2),
+                   (_PEAK_JERK * d / cfg.max_lat_jerk_mps3) ** (1.0 / 3.0), cfg.min_change_s)
+
+    during = [taus <= change_s(i) + 1e-9 for i in range(n)]
+    enter_gap = cfg.standstill_m + cfg.rear_time_gap_s * v
     free_m = np.full(n, look)
-    rear_ok = np.ones(n, bool)
+    enter_ok = np.ones(n, bool)
     gap_now = math.inf  # nearest obstacle ahead in the ego's lane now, bumper to bumper
     for S, E, HL, HW, present in _tracks(path, obstacles, t_s, taus, s_m, cfg.range_m):
         k0 = int(np.argmax(present))
@@ -209,28 +226,27 @@ def decide_lane(road: Road, path, s_m: float, e_y_m: float, speed_mps: float, ob
             if not inlane.any():
                 continue
             if ahead:
-                gap = S[inlane] - s_ego[inlane] - HL[inlane] - half_l
-                free_m[i] = min(free_m[i], max(float(gap.min()), 0.0))
+                gap = S - s_ego - HL - half_l
+                free_m[i] = min(free_m[i], float(gap[inlane].min()))
+                if np.any((S - s_keep - HL - half_l)[inlane & during[i]] < enter_gap):
+                    enter_ok[i] = False
                 if i == cur and inlane[0]:
                     gap_now = min(gap_now, float(gap[0]))
             elif i != cur:  # behind, in a neighbour lane: the follower must keep its gap
-                gap = s_ego[inlane] - S[inlane] - HL[inlane] - half_l
+                inlane &= during[i]
+                gap = s_keep[inlane] - S[inlane] - HL[inlane] - half_l
                 k = np.flatnonzero(inlane)
                 v_follow = np.gradient(S, taus)[k] if np.isfinite(S).all() else np.full(len(k), v)
                 if np.any(gap < cfg.standstill_m + cfg.rear_time_gap_s * np.maximum(v_follow, 0.0)):
-                    rear_ok[i] = False
+                    enter_ok[i] = False
     blocked = free_m < need
-    free = ~blocked & (rear_ok | (np.arange(n) == cur))
+    free = np.where(np.arange(n) == cur, ~blocked, enter_ok)
     order = np.argsort([0.5 * (lo + hi) for lo, hi in edges])  # right to left
     pos = int(np.flatnonzero(order == cur)[0])
     neighbours = [int(order[j]) for j in (pos - 1, pos + 1) if 0 <= j < n]
 
     def ramp_to(lane: int) -> LateralRamp:
-        c_now = float(np.interp(s_m, road.s_m, road.lanes[lane].center_m))
-        d = abs(c_now - e_y_m)
-        dur = max(math.sqrt(_PEAK_ACC * d / cfg.max_lat_accel_mps2),
-                  (_PEAK_JERK * d / cfg.max_lat_jerk_mps3) ** (1.0 / 3.0), cfg.min_change_s)
-        return LateralRamp(s_m, s_m + max(v, 1.0) * dur, e_y_m, road.s_m, road.lanes[lane].center_m)
+        return LateralRamp(s_m, s_m + max(v, 1.0) * change_s(lane), e_y_m, road.s_m, road.lanes[lane].center_m)
 
     def result(lane: int, action, ramp=None, stop_m=None) -> LaneDecision:
         changed = previous is None or lane != previous.lane
@@ -252,7 +268,7 @@ def decide_lane(road: Road, path, s_m: float, e_y_m: float, speed_mps: float, ob
     dwell_ok = previous is None or t_s - previous.since_s >= cfg.min_dwell_s - 1e-9
     if cur != road.route_lane and dwell_ok:
         home = int(order[pos + (1 if int(np.flatnonzero(order == road.route_lane)[0]) > pos else -1)])
-        if free[home] and free_m[home] >= need + cfg.min_gain_m:
+        if free[home] and free_m[home] >= min(free_m[cur], need + cfg.min_gain_m):
             return result(home, "change")
     if blocked[cur]:
         options = [j for j in neighbours if free[j]]
