@@ -283,3 +283,40 @@ def test_mpc_drives_among_other_vehicles_without_a_crash(gym, seed):
     assert m["max_abs_lateral_error_m"] < 0.5 and m["max_lane_excess_m"] == 0.0
     assert r.v_mps.min() < 9.0  # slowed down behind a slower car at least once
     assert r.s_m[-1] - r.s_m[0] > 0.9 * driver.path.length_m
+
+
+# --------------------------------------------------------------------------- highway-v0
+def test_highway_road_and_the_shifted_reference(gym):
+    """highway-v0's four straight lanes become a Road along the ego's lane (offsets +-4 m
+    apart), and a lateral ramp to the next lane shifts the controller's path onto its centre."""
+    from highway_env.road.road import RoadNetwork
+
+    from mpcdrive.adapters.highway_env import ramp_path, straight_road
+    from mpcdrive.control.lanes import LateralRamp
+
+    net = RoadNetwork.straight_road_network(4)
+    road, path, paths = straight_road(net, ("0", "1", 1))
+    assert road.route_lane == 1 and len(road.lanes) == 4 and len(paths) == 4
+    np.testing.assert_allclose([ln.center_m[0] for ln in road.lanes], [-4.0, 0.0, 4.0, 8.0])
+    np.testing.assert_allclose(road.edges(100.0), (10.0, -6.0))
+    ramp = LateralRamp(100.0, 200.0, 0.0, road.s_m, road.lanes[2].center_m)
+    p = ramp_path(path, ramp, 100.0)
+    for x, y in [(100.0, 0.0), (150.0, 2.0), (200.0, 4.0), (400.0, 4.0)]:
+        s, e = p.project(np.array([x, 4.0 + y]))  # highway-env's lane 1 lies at y = 4 m
+        assert abs(e) < 0.02, (x, e)
+    assert paths[("0", "1", 3)].project(np.array([50.0, 12.0])) == pytest.approx((50.0, 0.0))
+
+
+@pytest.mark.slow
+def test_highway_v0_overtakes_a_slower_car_without_a_crash(gym):
+    """highway-v0 with its default traffic (50 IDM/MOBIL cars, all slower than the ego wants):
+    the MPC with the lane decision layer stays on the road, never crashes, and in a seed where
+    a slower car is ahead it changes lanes and passes a car that was ahead of it in its lane."""
+    from mpcdrive.adapters.highway_env import highway_config, highway_episode
+
+    env = gym.make("highway-v0", config=highway_config(duration_s=40.0))
+    ep = highway_episode(env, 11)  # a seed with slower cars ahead of the ego in its lane
+    env.close()
+    assert ep.steps == 200 and not ep.crashed and ep.off_road_steps == 0
+    assert ep.lane_changes >= 1 and ep.overtakes >= 1
+    assert ep.mean_speed_mps > 20.0

@@ -47,20 +47,22 @@ Example::
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
 
+from ..control.lanes import LaneConfig, LaneDecision, LateralRamp, decide_lane
 from ..control.mpc import LtvMpc, MpcConfig
 from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams
 from ..ocp.avoidance import AvoidanceConfig
 from ..ocp.problem import MpcProblem
+from ..paths.straight import StraightPath
 from ..paths.waypoints import WaypointPath
 from ..scene.footprint import Footprint
-from ..scene.road import Road
 from ..scene.geometry import shape_distance
 from ..scene.obstacles import ConstantVelocity, Obstacle, TrajectoryMotion, rectangle
+from ..scene.road import Lane, Road
 from ..types import ControlOutput, SimResult
 
 __all__ = [
@@ -124,6 +126,17 @@ def racetrack_config(*, longitudinal: bool = True,
         "simulation_frequency": int(simulation_frequency_hz),
         "duration": float(duration_s),
     }
+
+
+def highway_config(*, duration_s: float = 40.0, policy_frequency_hz: int = 5,
+                   simulation_frequency_hz: int = 15, **env_config) -> dict:
+    """Configuration for ``gym.make("highway-v0", config=...)``: the continuous steering and
+    acceleration of :func:`racetrack_config`, highway-env's own traffic (4 lanes, 50 IDM/MOBIL
+    vehicles, density 1) unless ``env_config`` says otherwise (e.g. ``vehicles_count``)."""
+    cfg = racetrack_config(policy_frequency_hz=policy_frequency_hz, simulation_frequency_hz=simulation_frequency_hz,
+                           duration_s=duration_s)
+    del cfg["other_vehicles"]  # racetrack-v0 only
+    return {**cfg, **env_config}
 
 
 # --------------------------------------------------------------------------- road -> path
@@ -196,6 +209,50 @@ def lane_centerline(network, lane_index, *, ds_m: float = 1.0, smoothing_m: floa
     P = np.vstack(pts)
     path = WaypointPath(P, closed=closed, smoothing=len(P) * smoothing_m ** 2)
     return path, 0.5 * min(widths)
+
+
+def straight_road(network, lane_index) -> tuple[Road, StraightPath, dict]:
+    """highway-v0's road: the lanes of the edge holding ``lane_index`` (straight and parallel,
+    as ``RoadNetwork.straight_road_network`` makes them) as a :class:`~mpcdrive.scene.road.Road`
+    along the centreline of ``lane_index`` (its route lane), that centreline as a path, and a
+    path per lane index (for the other vehicles' predictions)."""
+    fr, to, _ = lane_index
+    lanes = network.graph[fr][to]
+    route = network.get_lane(lane_index)
+    if not all(type(ln).__name__ == "StraightLane" for ln in lanes):
+        raise ValueError("the lane decision layer needs straight lanes (highway-v0)")
+    path = StraightPath(route.start, route.end)
+    out = []
+    for j, ln in enumerate(lanes):
+        d = np.asarray(ln.end, float) - np.asarray(ln.start, float)
+        if abs(float(np.cross(d / np.hypot(*d), path.t))) > 1e-6:
+            raise ValueError(f"lane {j} of edge {fr!r} -> {to!r} is not parallel to the route lane")
+        c, w = float(path.n @ (np.asarray(ln.start, float) - path.start)), 0.5 * float(ln.width)
+        out.append(Lane(str(j), np.full(2, c), np.full(2, c + w), np.full(2, c - w)))
+    s = np.array([0.0, path.length_m])
+    road = Road(s, max(ln.left_m[0] for ln in out), min(ln.right_m[0] for ln in out), 0.0, tuple(out),
+                int(lane_index[2]))
+    paths = {(fr, to, j): StraightPath(ln.start, ln.end) for j, ln in enumerate(lanes)}
+    return road, path, paths
+
+
+def ramp_path(path, ramp: LateralRamp, s_m: float, ds_m: float = 2.0) -> WaypointPath:
+    """The controller's path: ``path`` shifted sideways by the decision layer's lateral
+    reference ``ramp`` [m], from 20 m behind ``s_m`` [m] to 50 m past the ramp's end (beyond,
+    the path goes on straight along its end tangent: the target lane's centre on highway-v0)."""
+    s = np.arange(s_m - 20.0, max(ramp.s1_m, s_m) + 50.0, ds_m)
+    h = np.asarray(path.heading(s), float)
+    n = np.column_stack([-np.sin(h), np.cos(h)])
+    return WaypointPath(np.asarray(path.position(s), float) + ramp.offset(s)[:, None] * n, ds_m=0.5)
+
+
+def lane_problem(nx: int, nu: int, N: int, dt_s: float, Q, R, Rc, u_min, u_max, du_max_per_s, x_min, x_max,
+                 road: Road) -> MpcProblem:
+    """The driver's MPC problem (every one this module builds): weights, input / rate / state
+    bounds, and the body kept inside the lane ``road`` around the path."""
+    return MpcProblem(nx=nx, nu=nu, N=N, dt_s=dt_s, Q=np.array(Q), R=np.array(R), Rc=np.array(Rc),
+                      u_min=np.array(u_min), u_max=np.array(u_max), du_max_per_s=np.array(du_max_per_s),
+                      x_min=x_min, x_max=x_max, road=road)
 
 
 # --------------------------------------------------------------------------- actions
@@ -301,6 +358,7 @@ class DriverSettings:
                                                  follow_gap_s=1.0)
     prediction: Literal["lane", "constant_velocity"] = "lane"
     tau_lateral_s: float = 1.0
+    lanes: LaneConfig | None = None
 
     def __post_init__(self):
         if int(self.horizon) != self.horizon or self.horizon < 1:
@@ -317,6 +375,19 @@ class DriverSettings:
             raise ValueError(f"prediction must be 'lane' or 'constant_velocity', got {self.prediction!r}")
         if not self.tau_lateral_s > 0:
             raise ValueError(f"tau_lateral_s must be positive, got {self.tau_lateral_s}")
+        if self.lanes is not None and not isinstance(self.lanes, LaneConfig):
+            raise ValueError(f"lanes must be a LaneConfig or None, got {type(self.lanes).__name__}")
+
+
+def highway_settings(v_ref_mps: float = 30.0, **overrides) -> DriverSettings:
+    """:class:`DriverSettings` for highway-v0: ``v_ref_mps`` [m/s] (highway-env's speed limit
+    and top of its speed reward is 30 m/s), vehicles considered within 60 m (the nearest 4),
+    and the lane decision layer (:mod:`mpcdrive.control.lanes`) wanting that speed."""
+    base = dict(v_ref_mps=v_ref_mps, speed_limits_mps=(0.0, v_ref_mps + 5.0),
+                avoidance=AvoidanceConfig("hard", margin_m=0.3, influence_m=60.0, max_obstacles=4,
+                                          follow_gap_s=1.0),
+                lanes=LaneConfig(desired_speed_mps=v_ref_mps, standstill_m=6.0, rear_time_gap_s=0.6))
+    return DriverSettings(**{**base, **overrides})
 
 
 def vehicle_obstacle(vehicle, t_s: float = 0.0, name: str = "") -> Obstacle:
@@ -413,10 +484,18 @@ class HighwayEnvMpcDriver:
         self.scaling = ActionScaling.from_env(env)
         self.dt_s = 1.0 / float(cfg["policy_frequency"])
         self.lane_index = tuple(vehicle.lane_index)
-        self.path, self.lane_half_width_m = lane_centerline(
-            u.road.network, self.lane_index, ds_m=settings.centerline_ds_m,
-            smoothing_m=settings.centerline_smoothing_m)
-        self._lane_paths = dict.fromkeys(lane_sequence(u.road.network, self.lane_index)[0], self.path)
+        # highway-v0's straight parallel lanes: a decision layer picks the lane to drive in
+        self.road: Road | None = None
+        self.decision: LaneDecision | None = None
+        self._lane_paths: dict = {}
+        if settings.lanes is not None:
+            self.road, self.path, self._lane_paths = straight_road(u.road.network, self.lane_index)
+            self.lane_half_width_m = 0.5 * float(u.road.network.get_lane(self.lane_index).width)
+        else:
+            self.path, self.lane_half_width_m = lane_centerline(
+                u.road.network, self.lane_index, ds_m=settings.centerline_ds_m,
+                smoothing_m=settings.centerline_smoothing_m)
+            self._lane_paths = dict.fromkeys(lane_sequence(u.road.network, self.lane_index)[0], self.path)
         self._times_s = self.dt_s * np.arange(int(settings.horizon) + 1)
         length_m, width_m = float(vehicle.LENGTH), float(vehicle.WIDTH)
         self.footprint = Footprint(length_m, width_m)
@@ -438,24 +517,44 @@ class HighwayEnvMpcDriver:
             v_ref, nq, nr = float(vehicle.speed), 3, 1
         if len(s.Q) < nq or len(s.R) < nr or len(s.Rc) < nr:
             raise ValueError(f"settings need Q with {nq} and R, Rc with {nr} entries")
-        #: the lane as the road the controller keeps the body inside (scene.road)
-        self.road = Road.constant(2.0 * self.lane_half_width_m, s.lane_margin_m)
-        if self.road.narrowest_fit_m(self.footprint) <= 0:
+        #: the lane around the path as the road the controller keeps the body inside (scene.road)
+        self.lane_road = Road.constant(2.0 * self.lane_half_width_m, s.lane_margin_m)
+        if self.lane_road.narrowest_fit_m(self.footprint) <= 0:
             raise ValueError(f"lane half width {self.lane_half_width_m} m leaves no room for the "
                              f"vehicle ({width_m} m wide) with a margin of {s.lane_margin_m} m")
-        problem = MpcProblem(
-            nx=self.model.nx, nu=self.model.nu, N=int(s.horizon), dt_s=self.dt_s,
-            Q=np.array(s.Q[:nq]), R=np.array(s.R[:nr]), Rc=np.array(s.Rc[:nr]),
-            u_min=np.array(u_min), u_max=np.array(u_max), du_max_per_s=np.array(du),
-            x_min=x_min, x_max=x_max, road=self.road,
-        )
+        self._bounds = (u_min, u_max, du, x_min, x_max)
         # the projection window must cover the distance driven per step, and more
         window = max(2.0, 3.0 * max(v_ref, float(vehicle.speed)) * self.dt_s)
-        config = MpcConfig(v_ref_mps=v_ref, projection_window_m=window)
-        self.controller = LtvMpc(self.model, self.path, problem, config,
-                                 obstacles=self.obstacles(0.0), avoidance=s.avoidance,
-                                 footprint=self.footprint)
+        self._mpc_config = MpcConfig(v_ref_mps=v_ref, projection_window_m=window)
+        obstacles = self.obstacles(0.0)
+        self.controller = self._controller(self.path, obstacles)
         self.warm = self.controller.initial_warm(self.state())
+        if self.road is not None:
+            self._follow_lanes(obstacles)
+
+    def _controller(self, path, obstacles) -> LtvMpc:
+        """The LTV-MPC along ``path`` (the body kept inside the lane around it) avoiding ``obstacles``."""
+        s, (nx, nu) = self.settings, (self.model.nx, self.model.nu)
+        u_min, u_max, du, x_min, x_max = self._bounds
+        problem = lane_problem(nx, nu, int(s.horizon), self.dt_s, s.Q[:nx], s.R[:nu], s.Rc[:nu], u_min, u_max,
+                               du, x_min, x_max, self.lane_road)
+        return LtvMpc(self.model, path, problem, self._mpc_config, obstacles=obstacles, avoidance=s.avoidance,
+                      footprint=self.footprint)
+
+    def _follow_lanes(self, obstacles) -> None:
+        """Ask the decision layer for the lane; on a new lateral reference, retarget the
+        controller: a fresh one along the route lane's centreline shifted by the reference
+        (:func:`ramp_path`), its warm start carried over (the plan is in world coordinates)."""
+        assert self.road is not None and self.settings.lanes is not None
+        x = self.state()
+        s_m, e_y = self.path.project(x[:2])
+        d = decide_lane(self.road, self.path, s_m, e_y, float(self.env.unwrapped.vehicle.speed), obstacles,
+                        self.warm.t_s, self.decision, self.settings.lanes)
+        if self.decision is None or d.ramp is not self.decision.ramp:
+            ctrl = self._controller(ramp_path(self.path, d.ramp, s_m), obstacles)
+            self.warm = replace(self.warm, s_m=ctrl.initial_warm(x).s_m, sides=())
+            self.controller = ctrl
+        self.decision = d
 
     def state(self) -> np.ndarray:
         """(nx,) ego state [x m, y m, yaw rad(, v m/s)] read from the environment."""
@@ -491,9 +590,13 @@ class HighwayEnvMpcDriver:
         return tuple(out)
 
     def act(self) -> tuple[np.ndarray, ControlOutput]:
-        """One control step: (normalized action for ``env.step``, controller output)."""
+        """One control step: (normalized action for ``env.step``, controller output); with
+        ``settings.lanes``, the lane decision first (:attr:`decision`)."""
         if self.others:
-            self.controller.set_obstacles(self.obstacles(self.warm.t_s))
+            obstacles = self.obstacles(self.warm.t_s)
+            if self.road is not None:
+                self._follow_lanes(obstacles)
+            self.controller.set_obstacles(obstacles)
         out = self.controller.step(self.state(), self.warm)
         self.warm = out.warm
         steer = float(out.u[0])
@@ -580,8 +683,8 @@ def drive_env(env, driver: HighwayEnvMpcDriver, steps: int) -> HighwayDrive:
         X_pred=np.array(XP).reshape(len(X), N + 1, nx), refs=np.array(RF).reshape(len(X), N + 1, nx),
         status=tuple(status), fallback=tuple(fallback), solve_time_s=np.array(ST),
         path_xy=path.polyline(), dt_s=driver.dt_s, state_names=tuple(model.state_names),
-        input_names=tuple(model.input_names), road_profile=driver.road.profile(path.length_m),
-        lane_excess_m=driver.road.body_excess_m(np.array(S), np.array(EY), np.asarray(path.curvature(np.array(S))),
+        input_names=tuple(model.input_names), road_profile=driver.lane_road.profile(path.length_m),
+        lane_excess_m=driver.lane_road.body_excess_m(np.array(S), np.array(EY), np.asarray(path.curvature(np.array(S))),
                                                 np.array(EPSI), driver.footprint),
         goal_reached=None,
         meta={"id": "highway-env-racetrack", "description": "highway-env racetrack driven by LTV-MPC",
@@ -592,3 +695,116 @@ def drive_env(env, driver: HighwayEnvMpcDriver, steps: int) -> HighwayDrive:
     return HighwayDrive(result, np.array(on_road, dtype=bool), bool(u.vehicle.crashed),
                         bool(terminated), bool(truncated), np.array(rewards), driver.footprint,
                         clearance, np.array(considered, dtype=int))
+
+
+# --------------------------------------------------------------------------- highway-v0 evaluation
+@dataclass(frozen=True)
+class HighwayEpisode:
+    """One highway-v0 episode of one ego policy (``mpc`` or ``idm``).
+
+    seed; steps : policy steps driven; crashed : the ego crashed; off_road_steps : steps with the
+    ego off every lane; mean_speed_mps : its mean speed [m/s] over the steps; distance_m : how far
+    it got [m]; lane_changes : changes of its highway lane; overtakes : vehicles that were ahead
+    of it in its lane (within 60 m) and later more than a car length behind it."""
+
+    policy: str
+    seed: int
+    steps: int
+    crashed: bool
+    off_road_steps: int
+    mean_speed_mps: float
+    distance_m: float
+    lane_changes: int
+    overtakes: int
+
+
+def _idm_ego(env, target_speed_mps: float):
+    """Replace the ego of a reset highway-env environment by highway-env's own ``IDMVehicle``
+    (IDM car following, MOBIL lane changes) wanting ``target_speed_mps`` [m/s]; it ignores the
+    actions given to ``env.step``."""
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    u = env.unwrapped
+    old = u.vehicle
+    ego = IDMVehicle(u.road, old.position, old.heading, old.speed, target_speed=target_speed_mps)
+    u.road.vehicles[u.road.vehicles.index(old)] = ego
+    u.controlled_vehicles[0] = ego
+    u.action_type.controlled_vehicle = ego
+    return ego
+
+
+def highway_episode(env, seed: int, policy: Literal["mpc", "idm"] = "mpc",
+                    settings: DriverSettings | None = None, steps: int | None = None) -> HighwayEpisode:
+    """Reset ``env`` (a highway-v0 made with :func:`highway_config`) with ``seed`` and drive its
+    ego with ``policy``: ``mpc`` (:class:`HighwayEnvMpcDriver` with ``settings``, by default
+    :func:`highway_settings`) or ``idm`` (highway-env's IDM/MOBIL vehicle wanting the same speed,
+    the baseline), for ``steps`` policy steps (default: the episode's duration)."""
+    settings = settings or highway_settings()
+    env.reset(seed=int(seed))
+    u = env.unwrapped
+    if steps is None:
+        steps = int(round(float(u.config["duration"]) * float(u.config["policy_frequency"])))
+    if policy == "mpc":
+        driver: HighwayEnvMpcDriver | None = HighwayEnvMpcDriver(env, settings)
+    elif policy == "idm":
+        driver = None
+        _idm_ego(env, settings.v_ref_mps)
+    else:
+        raise ValueError(f"policy must be 'mpc' or 'idm', got {policy!r}")
+    idle = np.zeros(env.action_space.shape, dtype=np.float32)
+    x0 = float(u.vehicle.position[0])
+    speeds, off, lanes = [], 0, [u.vehicle.lane_index[2]]
+    was_ahead: set[int] = set()
+    passed: set[int] = set()
+    for _ in range(int(steps)):
+        action = driver.act()[0] if driver is not None else idle
+        _, _, terminated, truncated, _ = env.step(action)
+        ego = u.vehicle
+        speeds.append(float(ego.speed))
+        off += not ego.on_road
+        lanes.append(ego.lane_index[2])
+        for o in u.road.vehicles:
+            if o is ego:
+                continue
+            dx = float(o.position[0] - ego.position[0])
+            if 0.0 < dx < 60.0 and o.lane_index[2] == ego.lane_index[2]:
+                was_ahead.add(id(o))
+            elif dx < -float(o.LENGTH) and id(o) in was_ahead:
+                passed.add(id(o))
+        if terminated or truncated:
+            break
+    return HighwayEpisode(policy, int(seed), len(speeds), bool(u.vehicle.crashed), int(off), float(np.mean(speeds)),
+                          float(u.vehicle.position[0]) - x0, int(np.count_nonzero(np.diff(lanes))), len(passed))
+
+
+def evaluate_highway(seeds=range(20), *, duration_s: float = 40.0, policies=("mpc", "idm"),
+                     settings: DriverSettings | None = None, **env_config) -> dict:
+    """highway-v0 (highway-env's default traffic unless ``env_config`` says otherwise) for each
+    seed and policy (see :func:`highway_episode`): ``{policy: {"episodes": [...],
+    "crashes", "off_road" (episodes with an off-road step), "mean_speed_mps" (over the
+    episodes), "lane_changes", "overtakes"}}``. Needs highway-env."""
+    import gymnasium as gym
+    import highway_env  # noqa: F401  (registers the environments)
+
+    out: dict = {}
+    for policy in policies:
+        env = gym.make("highway-v0", config=highway_config(duration_s=duration_s, **env_config))
+        eps = [highway_episode(env, seed, policy, settings) for seed in seeds]
+        env.close()
+        out[policy] = {"episodes": eps, "crashes": sum(e.crashed for e in eps),
+                       "off_road": sum(e.off_road_steps > 0 for e in eps),
+                       "mean_speed_mps": float(np.mean([e.mean_speed_mps for e in eps])),
+                       "lane_changes": sum(e.lane_changes for e in eps),
+                       "overtakes": sum(e.overtakes for e in eps)}
+    return out
+
+
+if __name__ == "__main__":  # python -m mpcdrive.adapters.highway_env: the 20-seed evaluation
+    import os
+
+    os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+    for name, res in evaluate_highway().items():
+        print(f"{name}: {res['crashes']} crashes, {res['off_road']} off road, mean speed "
+              f"{res['mean_speed_mps']:.2f} m/s, {res['lane_changes']} lane changes, {res['overtakes']} overtakes")
+        for e in res["episodes"]:
+            print("   ", e)

@@ -1,0 +1,281 @@
+"""A small lane decision layer: which lane to drive in, and the lateral reference to get there.
+
+The usual approach of sampling-based reactive planners (CommonRoad's, for one: candidates per
+lane, each checked against the predicted traffic), reduced to one candidate per lane. Every
+call looks at the lanes of a :class:`~mpcdrive.scene.road.Road` (lateral offset tables [m] on
+the road's arc-length knots, positive left; ``route_lane`` the preferred one), the ego's Frenet
+state on the road's reference path and the obstacles' predicted poses over ``horizon_s``,
+projected onto that path (``path.project``; an obstacle counts only inside its lifetime).
+
+Per lane it predicts the *free distance* [m]: the smallest gap, over the horizon, between the
+ego (driving its current speed, accelerating at ``accel_mps2`` up to the desired speed) and the
+obstacles ahead of it that are in that lane at that time (an obstacle counts in every lane its
+lateral extent overlaps, so a car changing lanes is in both); negative when the ego would run
+into one at that speed (how far: the more negative, the slower the lane), capped at the
+look-ahead. A lane is *blocked* when that gap falls below ``standstill_m + time_gap_s *
+v_desired``. The ego's own lane is *free* when it is not blocked; a neighbour lane is *free*
+(to change into) when, during the change (the ego at its current speed ``v_ego``), the
+obstacles ahead in it keep ``standstill_m + rear_time_gap_s * v_ego`` of gap and the traffic
+behind the ego in it keeps ``standstill_m + rear_time_gap_s * v_follower`` (a car closing in
+fast from behind makes the lane not free). Traffic behind the ego in its own lane is ignored.
+
+Rules (:func:`decide_lane`):
+
+* keep the current lane unless it is blocked and a free neighbour gives at least
+  ``min_gain_m`` more free distance (then ``change`` to the best such neighbour);
+* out of the route lane, return (``change``) towards it as soon as the neighbour towards it is
+  free and at least as free as the current lane (``min_gain_m`` over the blocked threshold when
+  the current lane is not blocked);
+* blocked and no free neighbour: ``stop`` (with the distance ``stop_m`` to ``standstill_m``
+  behind the nearest obstacle ahead now: the car follows or stops in its lane);
+* a change keeps its target until the ego arrives, unless the target stops being free while
+  the ego is still in its origin lane (then it returns: the only change not held back by the
+  dwell time); no voluntary change starts within ``min_dwell_s`` of the previous one.
+
+The lateral reference (:class:`LateralRamp`) is a quintic ramp from the ego's offset where the
+decision was taken to the target lane's centre, over the distance driven at the current speed
+in the time that keeps the peak lateral acceleration and jerk within bounds. numpy only.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from ..scene.obstacles import Circle, Obstacle
+from ..scene.road import Road
+
+__all__ = ["LaneConfig", "LaneDecision", "LateralRamp", "decide_lane", "lane_of"]
+
+#: peak |w''| and |w'''| of the quintic smoothstep w(x) = 10x^3 - 15x^4 + 6x^5 on [0, 1]
+_PEAK_ACC, _PEAK_JERK = 10.0 / math.sqrt(3.0), 60.0
+
+
+@dataclass(frozen=True)
+class LaneConfig:
+    """Tuning of :func:`decide_lane` (SI units).
+
+    horizon_s / dt_s : prediction horizon and its sampling [s]; desired_speed_mps : the speed
+    the ego wants to drive [m/s] (None: its current speed); accel_mps2 : acceleration assumed
+    up to it; time_gap_s / standstill_m : the gap ahead a lane must keep free [s, m];
+    rear_time_gap_s : the time gap a follower in the target lane must keep [s];
+    min_gain_m : extra free distance a change must bring [m]; min_dwell_s : least time between
+    two voluntary changes [s]; max_lat_accel_mps2 / max_lat_jerk_mps3 : bounds of the ramp;
+    min_change_s : shortest ramp [s]; arrive_m : |e_y - centre| that ends a change [m];
+    range_m : obstacles further along the path than this are ignored [m];
+    ego_length_m / ego_width_m : the ego's body [m].
+    """
+
+    horizon_s: float = 8.0
+    dt_s: float = 0.5
+    desired_speed_mps: float | None = None
+    accel_mps2: float = 1.0
+    time_gap_s: float = 1.5
+    standstill_m: float = 8.0
+    rear_time_gap_s: float = 1.0
+    min_gain_m: float = 15.0
+    min_dwell_s: float = 3.0
+    max_lat_accel_mps2: float = 2.0
+    max_lat_jerk_mps3: float = 5.0
+    min_change_s: float = 2.0
+    arrive_m: float = 0.4
+    range_m: float = 300.0
+    ego_length_m: float = 5.0
+    ego_width_m: float = 2.0
+
+    def __post_init__(self):
+        for name in ("horizon_s", "dt_s", "time_gap_s", "max_lat_accel_mps2", "max_lat_jerk_mps3",
+                     "min_change_s", "arrive_m", "range_m", "ego_length_m", "ego_width_m", "accel_mps2"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be positive, got {v!r}")
+        for name in ("standstill_m", "rear_time_gap_s", "min_gain_m", "min_dwell_s"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be >= 0, got {v!r}")
+
+
+@dataclass(frozen=True, eq=False)
+class LateralRamp:
+    """Lateral reference e_y(s) [m] on the road's path: ``e0_m`` at ``s0_m`` [m], the target
+    lane's centre (table ``center_m`` on knots ``knots_m``) from ``s1_m`` on, a quintic blend
+    (zero slope and curvature at both ends) between."""
+
+    s0_m: float
+    s1_m: float
+    e0_m: float
+    knots_m: np.ndarray
+    center_m: np.ndarray
+
+    def offset(self, s_m) -> np.ndarray:
+        """e_y [m] of the reference at arc length(s) ``s_m`` [m]."""
+        s = np.asarray(s_m, float)
+        x = np.clip((s - self.s0_m) / (self.s1_m - self.s0_m), 0.0, 1.0)
+        w = x ** 3 * (10.0 - 15.0 * x + 6.0 * x * x)
+        return (1.0 - w) * self.e0_m + w * np.interp(s, self.knots_m, self.center_m)
+
+
+@dataclass(frozen=True, eq=False)
+class LaneDecision:
+    """The result of :func:`decide_lane`.
+
+    lane : target lane index (into ``road.lanes``); current : the lane the ego is in;
+    action : ``keep``, ``change`` (towards ``lane``) or ``stop`` (blocked, no free lane);
+    free_m : (n_lanes,) predicted free distance ahead per lane [m] (capped at the look-ahead);
+    free : (n_lanes,) whether each lane is free (own lane: not blocked ahead);
+    ramp : the lateral reference to track; band : the lanes the body may use now (current and
+    target); band_m : their (right, left) edges at the ego [m]; stop_m : distance [m] to the
+    stop point (``stop`` only, else None); since_s : when the target last changed [s].
+    """
+
+    lane: int
+    current: int
+    action: Literal["keep", "change", "stop"]
+    free_m: tuple[float, ...]
+    free: tuple[bool, ...]
+    ramp: LateralRamp
+    band: tuple[int, ...]
+    band_m: tuple[float, float]
+    stop_m: float | None
+    since_s: float
+
+
+def lane_of(road: Road, s_m: float, e_y_m: float) -> int:
+    """The lane whose edges hold ``e_y_m`` [m] at ``s_m`` [m] (else the one with the nearest centre)."""
+    if not road.lanes:
+        raise ValueError("the road has no lanes")
+    c = [float(np.interp(s_m, road.s_m, ln.center_m)) for ln in road.lanes]
+    inside = [i for i, ln in enumerate(road.lanes)
+              if np.interp(s_m, road.s_m, ln.right_m) <= e_y_m <= np.interp(s_m, road.s_m, ln.left_m)]
+    pool = inside or range(len(c))
+    return min(pool, key=lambda i: abs(c[i] - e_y_m))
+
+
+def _extent(ob: Obstacle, dyaw: float) -> tuple[float, float]:
+    """Half extents (along, across) [m] of the obstacle's shape yawed ``dyaw`` from the path."""
+    if isinstance(ob.shape, Circle):
+        return ob.shape.radius_m, ob.shape.radius_m
+    p = ob.shape.points
+    c, s = math.cos(dyaw), math.sin(dyaw)
+    return float(np.max(np.abs(c * p[:, 0] - s * p[:, 1]))), float(np.max(np.abs(s * p[:, 0] + c * p[:, 1])))
+
+
+def _tracks(path, obstacles, t_s: float, taus: np.ndarray, s_m: float, range_m: float):
+    """Per obstacle within range: (s, e, half length, half width, present) over ``taus``."""
+    out = []
+    for ob in obstacles:
+        t = t_s + taus
+        present = np.asarray(ob.present(t), bool)
+        if not present.any():
+            continue
+        S, E, HL, HW = (np.full(len(taus), np.nan) for _ in range(4))
+        for j, k in enumerate(np.flatnonzero(present)):
+            x, y, yaw = ob.pose_at(float(t[k]))
+            S[k], E[k] = path.project(np.array([x, y]), s_m, range_m)
+            if j == 0 and abs(S[k] - s_m) > range_m:
+                break  # out of range now
+            HL[k], HW[k] = _extent(ob, yaw - float(path.heading(S[k])))
+        else:
+            out.append((S, E, HL, HW, present))
+    return out
+
+
+def decide_lane(road: Road, path, s_m: float, e_y_m: float, speed_mps: float, obstacles, t_s: float,
+                previous: LaneDecision | None = None, config: LaneConfig = LaneConfig()) -> LaneDecision:
+    """Decide the lane for the ego at arc length ``s_m`` [m], lateral offset ``e_y_m`` [m] and
+    speed ``speed_mps`` [m/s] on ``path`` (the road's reference path: ``project``, ``heading``)
+    at time ``t_s`` [s], given ``obstacles`` (:class:`~mpcdrive.scene.obstacles.Obstacle`, their
+    poses on the same clock) and the ``previous`` decision (None at the start): see the module."""
+    if not road.lanes:
+        raise ValueError("the road has no lanes")
+    cfg, n = config, len(road.lanes)
+    v = max(float(speed_mps), 0.0)
+    v_des = max(v, cfg.desired_speed_mps if cfg.desired_speed_mps is not None else v)
+    taus = np.arange(0.0, cfg.horizon_s + 1e-9, cfg.dt_s)
+    # the ego's predicted arc length: current speed, accelerating to the desired speed
+    t_acc = (v_des - v) / cfg.accel_mps2
+    tt = np.minimum(taus, t_acc)
+    s_ego = s_m + v * tt + 0.5 * cfg.accel_mps2 * tt ** 2 + v_des * (taus - tt)
+    s_keep = s_m + v * taus  # during a change: at its current speed
+    half_l = 0.5 * cfg.ego_length_m
+    need = cfg.standstill_m + cfg.time_gap_s * v_des
+    look = v_des * cfg.horizon_s + need
+    cur = lane_of(road, s_m, e_y_m)
+    edges = [(np.interp(s_m, road.s_m, ln.right_m), np.interp(s_m, road.s_m, ln.left_m)) for ln in road.lanes]
+    centres = [float(np.interp(s_m, road.s_m, ln.center_m)) for ln in road.lanes]
+
+    def change_s(lane: int) -> float:
+        """Duration [s] of the ramp to ``lane``: peak lateral acceleration and jerk within bounds."""
+        d = abs(centres[lane] - e_y_m)
+        return max(math.sqrt(_PEAK_ACC * d / cfg.max_lat_accel_mps2),
+                   (_PEAK_JERK * d / cfg.max_lat_jerk_mps3) ** (1.0 / 3.0), cfg.min_change_s)
+
+    during = [taus <= change_s(i) + 1e-9 for i in range(n)]
+    enter_gap = cfg.standstill_m + cfg.rear_time_gap_s * v
+    free_m = np.full(n, look)
+    enter_ok = np.ones(n, bool)
+    gap_now = math.inf  # nearest obstacle ahead in the ego's lane now, bumper to bumper
+    for S, E, HL, HW, present in _tracks(path, obstacles, t_s, taus, s_m, cfg.range_m):
+        k0 = int(np.argmax(present))
+        ahead = S[k0] >= s_ego[k0]
+        for i, (lo, hi) in enumerate(edges):
+            inlane = present & (np.minimum(E + HW, hi) - np.maximum(E - HW, lo) > 0.1)
+            if not inlane.any():
+                continue
+            if ahead:
+                gap = S - s_ego - HL - half_l
+                free_m[i] = min(free_m[i], float(gap[inlane].min()))
+                if np.any((S - s_keep - HL - half_l)[inlane & during[i]] < enter_gap):
+                    enter_ok[i] = False
+                if i == cur and inlane[0]:
+                    gap_now = min(gap_now, float(gap[0]))
+            elif i != cur:  # behind, in a neighbour lane: the follower must keep its gap
+                inlane &= during[i]
+                gap = s_keep[inlane] - S[inlane] - HL[inlane] - half_l
+                k = np.flatnonzero(inlane)
+                v_follow = np.gradient(S, taus)[k] if np.isfinite(S).all() else np.full(len(k), v)
+                if np.any(gap < cfg.standstill_m + cfg.rear_time_gap_s * np.maximum(v_follow, 0.0)):
+                    enter_ok[i] = False
+    blocked = free_m < need
+    free = np.where(np.arange(n) == cur, ~blocked, enter_ok)
+    order = np.argsort([0.5 * (lo + hi) for lo, hi in edges])  # right to left
+    pos = int(np.flatnonzero(order == cur)[0])
+    neighbours = [int(order[j]) for j in (pos - 1, pos + 1) if 0 <= j < n]
+
+    def ramp_to(lane: int) -> LateralRamp:
+        return LateralRamp(s_m, s_m + max(v, 1.0) * change_s(lane), e_y_m, road.s_m, road.lanes[lane].center_m)
+
+    def result(lane: int, action, ramp=None, stop_m=None) -> LaneDecision:
+        changed = previous is None or lane != previous.lane
+        if ramp is None:
+            ramp = ramp_to(lane) if changed else previous.ramp  # type: ignore[union-attr]
+        lo = min(edges[cur][0], edges[lane][0])
+        hi = max(edges[cur][1], edges[lane][1])
+        return LaneDecision(lane, cur, action, tuple(float(f) for f in free_m), tuple(bool(f) for f in free),
+                            ramp, tuple(sorted({cur, lane})), (float(lo), float(hi)), stop_m,
+                            t_s if changed else previous.since_s)  # type: ignore[union-attr]
+
+    if previous is not None and previous.action == "change":
+        tgt = previous.lane
+        c_t = float(np.interp(s_m, road.s_m, road.lanes[tgt].center_m))
+        if not (cur == tgt and abs(e_y_m - c_t) < cfg.arrive_m):
+            if not free[tgt] and cur != tgt:
+                return result(cur, "change")  # the target closed before the ego got there: back
+            return result(tgt, "change")
+    dwell_ok = previous is None or t_s - previous.since_s >= cfg.min_dwell_s - 1e-9
+    if cur != road.route_lane and dwell_ok:
+        home = int(order[pos + (1 if int(np.flatnonzero(order == road.route_lane)[0]) > pos else -1)])
+        if free[home] and free_m[home] >= min(free_m[cur], need + cfg.min_gain_m):
+            return result(home, "change")
+    if blocked[cur]:
+        options = [j for j in neighbours if free[j]]
+        if not options:
+            return result(cur, "stop", stop_m=max(gap_now - cfg.standstill_m, 0.0) if math.isfinite(gap_now)
+                          else float(free_m[cur]))
+        best = max(options, key=lambda j: free_m[j])
+        if dwell_ok and free_m[best] >= free_m[cur] + cfg.min_gain_m:
+            return result(best, "change")
+    return result(cur, "keep")
