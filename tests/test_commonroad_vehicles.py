@@ -400,9 +400,10 @@ def test_simulate_refuses_a_state_disturbance_on_an_observed_plant():
 
 @pytest.mark.parametrize("plant", ["st", "mb"])
 def test_commonroad_file_on_a_commonroad_plant_stops_behind_the_parked_car(plant):
-    """ZAM_Tutorial_Urban-3_2: a parked car blocks the lane 12 m ahead at 9 m/s. On CommonRoad's
-    ST / MB model of the Ford Escort the controller stops behind it and holds the stop: judged by
-    CommonRoad's drivability checker (collision-free, on the road), no reversing."""
+    """ZAM_Tutorial_Urban-3_2 without its neighbour lane: a parked car blocks the lane 12 m ahead
+    at 9 m/s. On CommonRoad's ST / MB model of the Ford Escort the controller stops behind it and
+    holds the stop: judged by CommonRoad's drivability checker (collision-free, on the road), no
+    reversing."""
     from dataclasses import replace
     from pathlib import Path
 
@@ -411,7 +412,8 @@ def test_commonroad_file_on_a_commonroad_plant_stops_behind_the_parked_car(plant
     if not cr.available():
         pytest.skip("commonroad-io / drivability checker not installed")
     imp = cr.load_commonroad(Path(__file__).resolve().parent / "data" / "commonroad" / "ZAM_Tutorial_Urban-3_2.xml")
-    spec = apply_vehicle(imp.spec.model_copy(update={"duration_s": 8.0}), "ford_escort", plant)
+    road = imp.spec.road.model_copy(update={"neighbours": None})
+    spec = apply_vehicle(imp.spec.model_copy(update={"duration_s": 8.0, "road": road}), "ford_escort", plant)
     exp = build_experiment(spec)
     res = run_experiment(exp)
     rep = cr.check_drive(replace(imp, spec=spec), res)

@@ -37,9 +37,14 @@ import numpy as np
 from ..models.presets import PRESETS
 from ..scenarios.schema import ScenarioSpec
 from .commonroad_goal import DrivePlan, accel_limit, plan_drive
-from .commonroad_route import point, scalar
+from .commonroad_route import drivable_lanelets, point, route_edges, scalar
 
 PRESET = "commonroad_ford_escort"
+#: the lanes beside the route that go its way are the road's neighbour lanes: a lane decision
+#: layer opens them to pass a blocked stretch (control.lanes)
+NEIGHBOUR_LANES = True
+#: distance [m] the body keeps from the road's edges
+ROAD_MARGIN_M = 0.1
 _EXTRAPOLATE_S = 10.0  # recorded obstacle trajectories are extended this long at their last velocity
 
 
@@ -160,10 +165,11 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
     yaw0 = scalar(init.orientation)
     v0 = max(0.0, scalar(getattr(init, "velocity", None)) or 0.0)
     plan = plan_drive(net, pp, p0, yaw0, v0, dt)
-    widths = []
-    for lid in plan.route:
-        ll = net.find_lanelet_by_id(lid)
-        widths.append(float(np.min(np.hypot(*(ll.left_vertices - ll.right_vertices).T))))
+    # the road: the route's lanelets and their same-direction neighbours, edge by edge along the
+    # reference (a lane that narrows is followed as it narrows)
+    s_k, left_k, right_k = route_edges(net, drivable_lanelets(net, plan.route, neighbours=False), plan.centerline)
+    _, band_l, band_r = route_edges(net, drivable_lanelets(net, plan.route, neighbours=True), plan.centerline)
+    neighbours = np.column_stack([s_k, np.maximum(band_l - left_k, 0.0), np.maximum(band_r - right_k, 0.0)])
     pre = PRESETS[PRESET]
     v_max = max(plan.v_cruise_mps, v0) + 2.0
     a_lim = accel_limit(v_max)
@@ -178,7 +184,8 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
         "vehicle": {"model": "kinematic4", "preset": PRESET, "speed_mps": max(plan.v_cruise_mps, 0.1),
                     "footprint_discs": 3},
         "path": {"type": "waypoints", "points": [tuple(map(float, p)) for p in plan.centerline], "ds_m": 0.2},
-        "road": {"lane_width_m": min(widths), "margin_m": 0.1},
+        "road": {"widths": [[float(a), float(b), float(c)] for a, b, c in zip(s_k, left_k, right_k)],
+                 "neighbours": neighbours.tolist() if NEIGHBOUR_LANES else None, "margin_m": ROAD_MARGIN_M},
         "initial_state": {"x_m": float(p0[0]), "y_m": float(p0[1]), "yaw_deg": math.degrees(yaw0), "v_mps": v0},
         "obstacles": obstacles,
         "avoidance": {"formulation": "hard", "margin_m": 0.3, "max_obstacles": 4,

@@ -10,6 +10,7 @@ import numpy as np
 from ..models.base import VehicleModel
 from ..paths.base import Path
 from ..scene.obstacles import Obstacle
+from ..scene.road import Road
 from ..types import ControlOutput, WarmStart
 
 A = TypeVar("A")
@@ -59,6 +60,19 @@ class TrackingWarmStart:
 
     def _check_state(self, x) -> np.ndarray:
         return check_state(x, tuple(self.model.state_names))
+
+
+def checked_road(current: Road | None, road: Road) -> Road:
+    """``road`` for a ``set_road`` call: a ValueError when the controller was built without a
+    road (its QP has no road rows) or ``road`` is not a Road with the same knots."""
+    if current is None:
+        raise ValueError("this controller was built without a road, so its QP has no road rows: "
+                         "build it with MpcProblem(road=...)")
+    if not isinstance(road, Road):
+        raise ValueError(f"road must be a mpcdrive.scene.road.Road, got {type(road).__name__}")
+    if road.s_m.shape != current.s_m.shape or road.period_m != current.period_m:
+        raise ValueError("a new road must have the knots (and period) of the controller's road")
+    return road
 
 
 def checked_obstacles(avoidance: A | None, obstacles) -> tuple[A, tuple[Obstacle, ...]]:

@@ -72,10 +72,10 @@ from ..paths.compiled import path_arrays, path_eval, path_project, wrap_angle
 from ..paths.profile_compiled import profile_arc_lengths, profile_array, profile_speed
 from ..scene.footprint import Footprint
 from ..scene.obstacles import Circle, ConstantVelocity, Polygon, Static
-from ..scene.road import _interp, horizon_bounds
+from ..scene.road import Road, _interp, horizon_bounds
 from ..solvers.dense_qp import STATUS_WORDS, gi_solve, single_nonzero_columns
 from ..types import ControlOutput, WarmStart
-from .base import TrackingWarmStart, checked_obstacles
+from .base import TrackingWarmStart, checked_obstacles, checked_road
 from .fallback import FALLBACK_HOLD, FALLBACK_RELAX, FallbackConfig, FallbackLadder, relaxed_problem
 from .mpc import MpcConfig
 
@@ -1180,6 +1180,7 @@ class FastLtvMpc(TrackingWarmStart):
         self._detour = av is not None and av.detour != "none" and not rows
         nx, nu, N = model.nx, model.nu, problem.N
         road = problem.road
+        self._road = road
         lane = road is not None
         #: the obstacle terms as LtvMpc keeps them (``avoidance.config``, ``.obstacles``,
         #: ``.relevant``). With a constraint formulation it builds each step's rows between the two
@@ -1332,6 +1333,23 @@ class FastLtvMpc(TrackingWarmStart):
     def obstacles(self) -> tuple:
         """The obstacles the controller avoids (empty without avoidance)."""
         return () if self.avoidance is None else tuple(self.avoidance.obstacles)
+
+    @property
+    def road(self) -> Road | None:
+        """The road the body is kept inside (``problem.road``, or the last :meth:`set_road`)."""
+        return self._road
+
+    def set_road(self, road: Road) -> None:
+        """As :meth:`LtvMpc.set_road`: the compiled step reads the new edges from its tables."""
+        self._road = checked_road(self._road, road)
+        self._w[_W_RDL][...] = road.left_m
+        self._w[_W_RDR][...] = road.right_m
+        self._w[_W_FP][_F_RMARGIN] = road.margin_m
+        if self.avoidance is not None:
+            self.avoidance.road = road
+        self.fallback.road = road
+        if self._relaxed is not None:
+            self._relaxed.set_road(road)
 
     def set_obstacles(self, obstacles) -> None:
         """Replace the obstacles, as :meth:`LtvMpc.set_obstacles <mpcdrive.control.mpc.LtvMpc.set_obstacles>`

@@ -63,7 +63,9 @@ class LaneConfig:
     up to it; time_gap_s / standstill_m : the gap ahead a lane must keep free [s, m];
     rear_time_gap_s : the time gap a follower in the target lane must keep [s];
     min_gain_m : extra free distance a change must bring [m]; min_dwell_s : least time between
-    two voluntary changes [s]; max_lat_accel_mps2 / max_lat_jerk_mps3 : bounds of the ramp;
+    two voluntary changes [s]; min_return_s : least time in a lane before returning from it
+    to the route lane when that is clear over the whole look-ahead [s] (a pass ends as soon as
+    the obstacle is behind); max_lat_accel_mps2 / max_lat_jerk_mps3 : bounds of the ramp;
     min_change_s : shortest ramp [s]; arrive_m : |e_y - centre| that ends a change [m];
     range_m : obstacles further along the path than this are ignored [m];
     ego_length_m / ego_width_m : the ego's body [m].
@@ -78,6 +80,7 @@ class LaneConfig:
     rear_time_gap_s: float = 1.0
     min_gain_m: float = 15.0
     min_dwell_s: float = 3.0
+    min_return_s: float = 1.0
     max_lat_accel_mps2: float = 2.0
     max_lat_jerk_mps3: float = 5.0
     min_change_s: float = 2.0
@@ -92,7 +95,7 @@ class LaneConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be positive, got {v!r}")
-        for name in ("standstill_m", "rear_time_gap_s", "min_gain_m", "min_dwell_s"):
+        for name in ("standstill_m", "rear_time_gap_s", "min_gain_m", "min_dwell_s", "min_return_s"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"{name} must be >= 0, got {v!r}")
@@ -241,6 +244,8 @@ def decide_lane(road: Road, path, s_m: float, e_y_m: float, speed_mps: float, ob
                     enter_ok[i] = False
     blocked = free_m < need
     free = np.where(np.arange(n) == cur, ~blocked, enter_ok)
+    # a neighbour narrower than the ego here (a lane that has ended or not begun) is not free
+    free &= (np.array([hi - lo for lo, hi in edges]) >= cfg.ego_width_m) | (np.arange(n) == cur)
     order = np.argsort([0.5 * (lo + hi) for lo, hi in edges])  # right to left
     pos = int(np.flatnonzero(order == cur)[0])
     neighbours = [int(order[j]) for j in (pos - 1, pos + 1) if 0 <= j < n]
@@ -266,9 +271,12 @@ def decide_lane(road: Road, path, s_m: float, e_y_m: float, speed_mps: float, ob
                 return result(cur, "change")  # the target closed before the ego got there: back
             return result(tgt, "change")
     dwell_ok = previous is None or t_s - previous.since_s >= cfg.min_dwell_s - 1e-9
-    if cur != road.route_lane and dwell_ok:
+    if cur != road.route_lane:
         home = int(order[pos + (1 if int(np.flatnonzero(order == road.route_lane)[0]) > pos else -1)])
-        if free[home] and free_m[home] >= min(free_m[cur], need + cfg.min_gain_m):
+        # back early (min_return_s) once the lane home is clear over the whole look-ahead: a pass is over
+        early = free_m[home] >= look - 1e-6 and (previous is None
+                                                  or t_s - previous.since_s >= cfg.min_return_s - 1e-9)
+        if (dwell_ok or early) and free[home] and free_m[home] >= min(free_m[cur], need + cfg.min_gain_m):
             return result(home, "change")
     if blocked[cur]:
         options = [j for j in neighbours if free[j]]
@@ -279,3 +287,47 @@ def decide_lane(road: Road, path, s_m: float, e_y_m: float, speed_mps: float, ob
         if dwell_ok and free_m[best] >= free_m[cur] + cfg.min_gain_m:
             return result(best, "change")
     return result(cur, "keep")
+
+
+class LaneChoosingMpc:
+    """An MPC (:class:`~mpcdrive.control.mpc.LtvMpc` or the compiled one, built with
+    ``MpcProblem(road=...)``) driving a road with lanes: before each step :func:`decide_lane`
+    picks the lane, and the MPC's road becomes the lanes the decision lets the body use (the
+    current lane alone when keeping it; the current and the target lane during a change or a
+    pass: :meth:`Road.band`). The MPC keeps tracking its path, the route lane's centre: around
+    a blocked stretch its obstacle rows push the car into the lane the decision opened, and it
+    comes back as the obstacle is passed. Everything else is the MPC's (attributes, warm start).
+
+    ``road`` is the full road with its lanes (``road.lanes``, ``route_lane``), on the knots of the
+    MPC's road. ``decision`` is the last :class:`LaneDecision`."""
+
+    def __init__(self, mpc, road: Road, config: LaneConfig | None = None):
+        if not road.lanes:
+            raise ValueError("LaneChoosingMpc needs a road with lanes")
+        if getattr(mpc, "road", None) is None:
+            raise ValueError("LaneChoosingMpc needs an MPC built with a road (MpcProblem(road=...))")
+        self.mpc = mpc
+        self.road = road
+        fp = mpc.footprint
+        self.config = config or LaneConfig(ego_length_m=fp.length_m, ego_width_m=fp.width_m)
+        self.decision: LaneDecision | None = None
+        self._band: tuple[int, ...] | None = None
+
+    def __getattr__(self, name):  # the MPC's attributes (problem, N, nx, path, obstacles ...)
+        if name == "mpc":
+            raise AttributeError(name)
+        return getattr(self.mpc, name)
+
+    def step(self, x, warm):
+        mpc = self.mpc
+        x = np.asarray(x, float)
+        if np.all(np.isfinite(x[:3])):
+            s_m, e_y = mpc.path.project(x[:2], warm.s_m, mpc.config.projection_window_m)
+            v = float(mpc.model.speed(x))
+            self.decision = decide_lane(self.road, mpc.path, s_m, e_y, v, mpc.obstacles, warm.t_s, self.decision,
+                                        self.config)
+            band = self.decision.band
+            if band != self._band:
+                mpc.set_road(self.road.band(band))
+                self._band = band
+        return mpc.step(x, warm)

@@ -24,6 +24,7 @@ from ..ocp.road_rows import RoadRows
 from ..paths.base import Path
 from ..scene.footprint import Footprint
 from ..scene.obstacles import Obstacle
+from ..scene.road import Road
 from ..paths.reference import HorizonMode, horizon_arc_lengths, horizon_states
 from ..paths.speed_profile import SpeedReference
 from ..solvers.osqp_backend import OsqpBackend, OsqpSettings
@@ -31,7 +32,7 @@ from ..solvers.projected_gradient import ProjectedGradientBackend, ProjectedGrad
 from ..types import ControlOutput, SolveResult, WarmStart
 from ..units import TWO_PI, wrap_angle
 from .fallback import FallbackConfig, FallbackLadder
-from .base import TrackingWarmStart, checked_obstacles
+from .base import TrackingWarmStart, checked_obstacles, checked_road
 
 
 @dataclass(frozen=True)
@@ -215,6 +216,7 @@ class LtvMpc(TrackingWarmStart):
         self.footprint = footprint
         self._road_rows = RoadRows.empty(N)
         self._du_step = problem.du_max_per_s * problem.dt_s  # (nu,) largest input change per step
+        self._road = problem.road
         self.fallback = FallbackLadder(self, config.fallback, footprint=footprint, road=problem.road)
 
     # -- obstacles ----------------------------------------------------------------------------
@@ -222,6 +224,19 @@ class LtvMpc(TrackingWarmStart):
     def obstacles(self) -> tuple[Obstacle, ...]:
         """The obstacles the controller avoids (empty without avoidance)."""
         return () if self.avoidance is None else tuple(self.avoidance.obstacles)
+
+    @property
+    def road(self) -> Road | None:
+        """The road the body is kept inside (``problem.road``, or the last :meth:`set_road`)."""
+        return self._road
+
+    def set_road(self, road: Road) -> None:
+        """Keep the body inside ``road`` from the next step on (e.g. the lanes a decision layer
+        allows now); it must have the knots of the problem's road. The QP is not rebuilt."""
+        self._road = checked_road(self._road, road)
+        if self.avoidance is not None:
+            self.avoidance.road = road
+        self.fallback.road = road
 
     def set_obstacles(self, obstacles) -> None:
         """Replace the obstacles, e.g. with fresh predictions of moving ones each step; the QP is
@@ -318,7 +333,7 @@ class LtvMpc(TrackingWarmStart):
         Xlin[N] = Fbar[-1]
         terms = None
         sides = warm.sides
-        road = self.problem.road
+        road = self._road
         rows = None
         if road is not None:
             # the body inside the road, linearized in the yaw at the linearization trajectory

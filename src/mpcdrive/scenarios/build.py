@@ -13,6 +13,7 @@ from ..control.adapters import StateAdapter
 from ..control.base import Controller
 from ..control.delay import DelayCompensator
 from ..control.fallback import FallbackConfig
+from ..control.lanes import LaneChoosingMpc
 from ..control.mpc import LtvMpc, MpcConfig
 from ..models.dynamic import DynamicBicycle, DynamicParams
 from ..control.factory import make_mpc
@@ -25,7 +26,7 @@ from ..sim.actuator import SteeringActuator
 from ..sim.closed_loop import Disturbance, ObservedPlant, Plant, simulate
 from ..ocp.avoidance import AvoidanceConfig
 from ..scene.footprint import Footprint
-from ..scene.road import Road
+from ..scene.road import Lane, Road
 from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Polygon, Static, TrajectoryMotion, rectangle
 from ..solvers.osqp_backend import OsqpSettings
 from ..solvers.projected_gradient import ProjectedGradientSettings
@@ -232,15 +233,30 @@ def build_road(spec, path: Path, track: Track | None = None) -> Road | None:
     period = path.length_m if path.closed else 0.0
     if spec is not None:
         if spec.lane_width_m is not None:
-            return Road.constant(spec.lane_width_m, spec.margin_m)
-        if spec.widths is None:
-            return Road.per_side(spec.left_width_m, spec.right_width_m, spec.margin_m)
-        s, wl, wr = (np.array(c, float) for c in zip(*spec.widths))
-        return Road.from_widths(s, wl, wr, spec.margin_m, period if s[-1] - s[0] < period else 0.0)
+            road = Road.constant(spec.lane_width_m, spec.margin_m)
+        elif spec.widths is None:
+            road = Road.per_side(spec.left_width_m, spec.right_width_m, spec.margin_m)
+        else:
+            s, wl, wr = (np.array(c, float) for c in zip(*spec.widths))
+            road = Road.from_widths(s, wl, wr, spec.margin_m, period if s[-1] - s[0] < period else 0.0)
+        return road if spec.neighbours is None else _with_neighbours(road, spec.neighbours)
     if track is not None and track.has_widths:
         assert track.width_left_m is not None and track.width_right_m is not None
         return Road.from_widths(track.s_points_m, track.width_left_m, track.width_right_m, 0.0, period)
     return None
+
+
+def _with_neighbours(road: Road, rows) -> Road:
+    """``road`` with three lanes on its knots: the right neighbour, ``road`` itself (the route
+    lane) and the left neighbour, reaching ``rows`` ``[s_m, left_m, right_m]`` beyond its edges."""
+    s_n, ext_l, ext_r = (np.array(c, float) for c in zip(*rows))
+    s = road.s_m
+    el, er = np.interp(s, s_n, ext_l), np.interp(s, s_n, ext_r)
+    left, right = road.left_m, road.right_m
+    lanes = (Lane("right", right - 0.5 * er, right, right - er),
+             Lane("route", 0.5 * (left + right), left, right),
+             Lane("left", left + 0.5 * el, left + el, left))
+    return Road(s, left, right, road.margin_m, lanes, 1, road.period_m)
 
 
 def dynamic_params(v, scale=None) -> DynamicParams:
@@ -385,6 +401,9 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
     if pl.steering_actuator is not None:
         actuator = SteeringActuator(pl.steering_actuator.time_constant_s, pl.steering_actuator.dead_time_s)
     controller: Controller = mpc
+    if road is not None and road.lanes:
+        # neighbour lanes: a decision layer opens them to pass a blocked stretch
+        controller = LaneChoosingMpc(mpc, road)
     if c.delay_compensation:
         # predicts over its own period with the plant's integration step
         period_steps = int(round(spec.control_period_s / spec.dt_s))
@@ -430,7 +449,8 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
     """Closed-loop run of a built experiment."""
     spec = exp.spec
     pb = (exp.mpc or exp.controller).problem
-    road = exp.road
+    # the run is measured against every lane the car may use (a pass through a neighbour is inside)
+    road = exp.road if exp.road is None or not exp.road.lanes else exp.road.band(range(len(exp.road.lanes)))
     return simulate(
         exp.controller,
         exp.plant,

@@ -266,12 +266,16 @@ class RoadSpec(_Strict):
     One of: ``lane_width_m`` (a lane centred on the path), ``left_width_m`` and ``right_width_m``
     (the edges' distances to either side of the path), or ``widths`` (rows ``[s_m, left_width_m,
     right_width_m]`` at increasing arc lengths, linear in between: a road that narrows or widens
-    is followed exactly)."""
+    is followed exactly). ``neighbours`` (rows ``[s_m, left_m, right_m]``): how far lanes going
+    the same way reach beyond the road's left / right edge (0 where there is none); with them a
+    lane decision layer lets the car change into a free neighbour lane to pass a blocked
+    stretch, and come back."""
 
     lane_width_m: Positive | None = None
     left_width_m: NonNeg | None = None
     right_width_m: NonNeg | None = None
     widths: list[tuple[NonNeg, NonNeg, NonNeg]] | None = None
+    neighbours: list[tuple[NonNeg, NonNeg, NonNeg]] | None = None
     margin_m: NonNeg = 0.05
 
     @model_validator(mode="after")
@@ -288,6 +292,10 @@ class RoadSpec(_Strict):
             s = [w[0] for w in self.widths]
             if any(b <= a for a, b in zip(s, s[1:])):
                 raise ValueError("widths: the arc lengths s_m must increase from row to row")
+        if self.neighbours is not None:
+            s = [w[0] for w in self.neighbours]
+            if not s or any(b <= a for a, b in zip(s, s[1:])):
+                raise ValueError("neighbours: rows [s_m, left_m, right_m] with increasing s_m")
         if self.min_width_m <= 0:
             raise ValueError("the road has no width somewhere (left + right width is 0)")
         return self

@@ -279,6 +279,17 @@ class Road:
         narrowest: negative when the car (plus both margins) does not fit somewhere."""
         return self.min_width_m - footprint.width_m - 2.0 * self.margin_m
 
+    def band(self, lanes) -> Road:
+        """The road made of the lanes with indices ``lanes`` (neighbours: their outer edges), its
+        lanes and margin kept: what a decision layer lets the body use now."""
+        idx = sorted(set(int(i) for i in lanes))
+        if not idx or not all(0 <= i < len(self.lanes) for i in idx):
+            raise ValueError(f"lane indices {lanes} are not among the road's {len(self.lanes)} lanes")
+        left = np.max([self.lanes[i].left_m for i in idx], axis=0)
+        right = np.min([self.lanes[i].right_m for i in idx], axis=0)
+        return Road(self.s_m, left, np.minimum(right, left - 1e-6), self.margin_m, self.lanes, self.route_lane,
+                    self.period_m)
+
     def with_margin(self, margin_m: float) -> Road:
         """The same road with another margin."""
         return Road(self.s_m, self.left_m, self.right_m, margin_m, self.lanes, self.route_lane, self.period_m)

@@ -1,0 +1,70 @@
+"""Passing through a neighbour lane (control.lanes.LaneChoosingMpc on a road with
+``neighbours``): a parked car in the route lane with the left lane free is passed and the car
+comes back; with both lanes blocked it stops before the obstacles without contact."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mpcdrive.control.lanes import LaneChoosingMpc
+from mpcdrive.scenarios import build_experiment, run_experiment
+from mpcdrive.scenarios.schema import ScenarioSpec
+from mpcdrive.sim import LANE_TOLERANCE_M, compute_metrics
+
+
+def _spec(obstacles, backend="fast", neighbours=True) -> dict:
+    """A straight two-lane road (3.5 m lanes, the route the right one), a BMW at 10 m/s."""
+    road = {"lane_width_m": 3.5, "margin_m": 0.1}
+    if neighbours:
+        road["neighbours"] = [[0.0, 3.5, 0.0]]
+    return {
+        "id": "pass", "dt_s": 0.1, "duration_s": 14.0,
+        "vehicle": {"model": "kinematic4", "preset": "commonroad_bmw_320i", "speed_mps": 10.0},
+        "path": {"type": "straight", "start": [0.0, 0.0], "end": [160.0, 0.0]},
+        "road": road,
+        "initial_state": {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 0.0, "v_mps": 10.0},
+        "obstacles": obstacles,
+        "avoidance": {"formulation": "hard", "margin_m": 0.3, "max_obstacles": 4, "influence_m": 40.0},
+        "controller": {"horizon": 30, "Q": [1.0, 1.0, 2.0, 1.0], "R": [10.0, 0.1], "Rc": [100.0, 1.0],
+                       "max_steer_deg": 30.0, "max_steer_rate_deg_s": 23.0,
+                       "accel_limits_mps2": [-8.0, 3.0], "speed_limits_mps": [0.0, 12.0],
+                       "horizon_step_m": 0.5, "backend": backend},
+    }
+
+
+PARKED = {"shape": "rectangle", "position": [50.0, 0.0], "length_m": 4.5, "width_m": 1.8, "name": "parked"}
+BESIDE = {"shape": "rectangle", "position": [50.0, 3.5], "length_m": 4.5, "width_m": 1.8, "name": "beside"}
+
+
+@pytest.mark.parametrize("backend", ["fast", "osqp"])
+def test_parked_car_with_a_free_neighbour_lane_is_passed(backend):
+    exp = build_experiment(ScenarioSpec.model_validate(_spec([PARKED], backend)))
+    assert isinstance(exp.controller, LaneChoosingMpc)
+    res = run_experiment(exp)
+    m = compute_metrics(res)
+    assert m["collisions"] == 0 and m["min_obstacle_clearance_m"] > 0.2
+    assert m["max_lane_excess_m"] <= LANE_TOLERANCE_M  # inside the two lanes
+    assert res.x_final[0] > 80.0  # past the parked car, on its way
+    assert res.e_y_m.max() > 1.5  # over in the left lane beside it
+    assert abs(res.e_y_m[-1]) < 0.2  # and back in the route lane
+
+
+def test_without_a_neighbour_lane_it_stops_behind_the_parked_car():
+    res = run_experiment(build_experiment(ScenarioSpec.model_validate(_spec([PARKED], neighbours=False))))
+    m = compute_metrics(res)
+    assert m["collisions"] == 0 and m["min_obstacle_clearance_m"] > 0.0
+    assert res.x_final[0] < 50.0 - 2.25 and res.v_mps[-1] < 0.1
+
+
+@pytest.mark.parametrize("backend", ["fast", "osqp"])
+def test_both_lanes_blocked_stops_before_them_with_clearance(backend):
+    exp = build_experiment(ScenarioSpec.model_validate(_spec([PARKED, BESIDE], backend)))
+    res = run_experiment(exp)
+    m = compute_metrics(res)
+    assert m["collisions"] == 0 and m["min_obstacle_clearance_m"] > 0.0
+    assert res.x_final[0] < 50.0 - 2.25 and res.v_mps[-1] < 0.1
+    assert m["max_lane_excess_m"] <= LANE_TOLERANCE_M
+    # it braked at the vehicle's capability when it had to, never beyond
+    assert np.min(res.accel_mps2) >= -8.0 - 1e-9
+    assert exp.controller.decision.action == "stop"
