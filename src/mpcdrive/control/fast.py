@@ -744,7 +744,7 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
                            fp[_F_RMARGIN], lane_lo, lane_hi, lane_dlo, lane_dhi)
         if stage == STAGE_LINEARIZE:
             return 0
-    elif ip[_I_OROWS] > 0:
+    else:  # the detour of the rows, or a lateral reference, written between the stages
         e_ref = _v1(wbuf, fo, _W_EREF)
         for k in range(N + 1):
             if e_ref[k] != 0.0:
@@ -1181,6 +1181,7 @@ class FastLtvMpc(TrackingWarmStart):
         nx, nu, N = model.nx, model.nu, problem.N
         road = problem.road
         self._road = road
+        self._lateral = None
         lane = road is not None
         #: the obstacle terms as LtvMpc keeps them (``avoidance.config``, ``.obstacles``,
         #: ``.relevant``). With a constraint formulation it builds each step's rows between the two
@@ -1351,6 +1352,17 @@ class FastLtvMpc(TrackingWarmStart):
         if self._relaxed is not None:
             self._relaxed.set_road(road)
 
+    def set_lateral_reference(self, offset) -> None:
+        """As :meth:`LtvMpc.set_lateral_reference` (the step then runs in two stages, the offsets
+        written between them); not with the compiled detour of the cost formulations."""
+        if offset is not None and not callable(offset):
+            raise ValueError("the lateral reference must be a callable of arc length, or None")
+        if offset is not None and self._detour:
+            raise ValueError("a lateral reference does not combine with the compiled detour")
+        self._lateral = offset
+        if self._relaxed is not None:
+            self._relaxed.set_lateral_reference(offset)
+
     def set_obstacles(self, obstacles) -> None:
         """Replace the obstacles, as :meth:`LtvMpc.set_obstacles <mpcdrive.control.mpc.LtvMpc.set_obstacles>`
         does (fresh predictions of moving ones each step; index j keeps naming the same
@@ -1393,7 +1405,7 @@ class FastLtvMpc(TrackingWarmStart):
         """One compiled step (or SQP iteration); with constraint rows, in two stages around
         ``ocp.avoidance``. Returns the status code and the passing sides for the next step."""
         sides = self._load_sides(warm_sides)
-        if self._rows is None:
+        if self._rows is None and self._lateral is None:
             code = _control_step(x, s_guess, t_s, u_prev, X, U, mode, STAGE_ALL, sides, self._wbuf, self._ibuf,
                                  out, self._info)
             if self._detour:
@@ -1404,23 +1416,27 @@ class FastLtvMpc(TrackingWarmStart):
         if code != 0:
             return code, warm_sides
         w = self._w
-        memory = AvoidanceMemory(dict(warm_sides))
-        terms = self._rows.terms(t_s, x, w[_W_XLIN], w[_W_SARR], memory, w[_W_LLO], w[_W_LHI])
-        w[_W_ROWA][...] = terms.rows_a
-        w[_W_ROWB][...] = terms.rows_b
-        if terms.lane_lo is not None and terms.lane_hi is not None:
-            # a corridor's bounds where it narrows the road's, without the road's yaw slope
-            w[_W_LDLO][terms.lane_lo != w[_W_LLO]] = 0.0
-            w[_W_LDHI][terms.lane_hi != w[_W_LHI]] = 0.0
-            w[_W_LLO][...] = terms.lane_lo
-            w[_W_LHI][...] = terms.lane_hi
-        if terms.e_ref is None:
-            w[_W_EREF][...] = 0.0
-        else:
-            w[_W_EREF][...] = terms.e_ref
+        w[_W_EREF][...] = 0.0
+        new_sides = warm_sides
+        if self._rows is not None:
+            memory = AvoidanceMemory(dict(warm_sides))
+            terms = self._rows.terms(t_s, x, w[_W_XLIN], w[_W_SARR], memory, w[_W_LLO], w[_W_LHI])
+            w[_W_ROWA][...] = terms.rows_a
+            w[_W_ROWB][...] = terms.rows_b
+            if terms.lane_lo is not None and terms.lane_hi is not None:
+                # a corridor's bounds where it narrows the road's, without the road's yaw slope
+                w[_W_LDLO][terms.lane_lo != w[_W_LLO]] = 0.0
+                w[_W_LDHI][terms.lane_hi != w[_W_LHI]] = 0.0
+                w[_W_LLO][...] = terms.lane_lo
+                w[_W_LHI][...] = terms.lane_hi
+            if terms.e_ref is not None:
+                w[_W_EREF][...] = terms.e_ref
+            new_sides = tuple(sorted(memory.sides.items()))
+        if self._lateral is not None:
+            w[_W_EREF] += np.asarray(self._lateral(w[_W_SARR]), float)
         code = _control_step(x, s_guess, t_s, u_prev, X, U, mode, STAGE_SOLVE, sides, self._wbuf, self._ibuf,
                              out, self._info)
-        return code, tuple(sorted(memory.sides.items()))
+        return code, new_sides
 
     # -- one control step -----------------------------------------------------------------------
     def step(self, x, warm: WarmStart) -> ControlOutput:

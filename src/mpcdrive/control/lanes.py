@@ -50,6 +50,8 @@ from ..scene.road import Road
 
 __all__ = ["LaneConfig", "LaneDecision", "LateralRamp", "decide_lane", "lane_of"]
 
+#: the gap [m] kept to an obstacle standing behind in a lane changed into (a parked car passed)
+BEHIND_CLEARANCE_M = 1.0
 #: peak |w''| and |w'''| of the quintic smoothstep w(x) = 10x^3 - 15x^4 + 6x^5 on [0, 1]
 _PEAK_ACC, _PEAK_JERK = 10.0 / math.sqrt(3.0), 60.0
 
@@ -81,8 +83,8 @@ class LaneConfig:
     min_gain_m: float = 15.0
     min_dwell_s: float = 3.0
     min_return_s: float = 1.0
-    max_lat_accel_mps2: float = 2.0
-    max_lat_jerk_mps3: float = 5.0
+    max_lat_accel_mps2: float = 3.0
+    max_lat_jerk_mps3: float = 10.0
     min_change_s: float = 2.0
     arrive_m: float = 0.4
     range_m: float = 300.0
@@ -240,7 +242,10 @@ def decide_lane(road: Road, path, s_m: float, e_y_m: float, speed_mps: float, ob
                 gap = s_keep[inlane] - S[inlane] - HL[inlane] - half_l
                 k = np.flatnonzero(inlane)
                 v_follow = np.gradient(S, taus)[k] if np.isfinite(S).all() else np.full(len(k), v)
-                if np.any(gap < cfg.standstill_m + cfg.rear_time_gap_s * np.maximum(v_follow, 0.0)):
+                # a follower keeps its time gap; one standing still (a parked car passed) only
+                # needs the body's clearance
+                vf = np.maximum(v_follow, 0.0)
+                if np.any(gap < np.minimum(cfg.standstill_m, BEHIND_CLEARANCE_M + vf) + cfg.rear_time_gap_s * vf):
                     enter_ok[i] = False
     blocked = free_m < need
     free = np.where(np.arange(n) == cur, ~blocked, enter_ok)
@@ -294,9 +299,9 @@ class LaneChoosingMpc:
     ``MpcProblem(road=...)``) driving a road with lanes: before each step :func:`decide_lane`
     picks the lane, and the MPC's road becomes the lanes the decision lets the body use (the
     current lane alone when keeping it; the current and the target lane during a change or a
-    pass: :meth:`Road.band`). The MPC keeps tracking its path, the route lane's centre: around
-    a blocked stretch its obstacle rows push the car into the lane the decision opened, and it
-    comes back as the obstacle is passed. Everything else is the MPC's (attributes, warm start).
+    pass: :meth:`Road.band`) and its lateral reference the decision's ramp to the target lane's
+    centre (the path itself once the car is home in the route lane). Everything else is the
+    MPC's (attributes, warm start).
 
     ``road`` is the full road with its lanes (``road.lanes``, ``route_lane``), on the knots of the
     MPC's road. ``decision`` is the last :class:`LaneDecision`."""
@@ -312,6 +317,7 @@ class LaneChoosingMpc:
         self.config = config or LaneConfig(ego_length_m=fp.length_m, ego_width_m=fp.width_m)
         self.decision: LaneDecision | None = None
         self._band: tuple[int, ...] | None = None
+        self._ramp: LateralRamp | None = None
 
     def __getattr__(self, name):  # the MPC's attributes (problem, N, nx, path, obstacles ...)
         if name == "mpc":
@@ -330,4 +336,17 @@ class LaneChoosingMpc:
             if band != self._band:
                 mpc.set_road(self.road.band(band))
                 self._band = band
+            # the lateral reference: the decision's ramp to its lane's centre, or the path itself
+            # once the car is home in the route lane
+            d = self.decision
+            home = d.lane == self.road.route_lane and d.action != "change" and s_m >= d.ramp.s1_m
+            ramp = None if home else d.ramp
+            if ramp is not self._ramp:
+                mpc.set_lateral_reference(None if ramp is None else self._offset(ramp))
+                self._ramp = ramp
         return mpc.step(x, warm)
+
+    def _offset(self, ramp: LateralRamp):
+        """The ramp as an offset from the MPC's path: the route lane's centre is the path."""
+        route = self.road.lanes[self.road.route_lane]
+        return lambda s: ramp.offset(s) - np.interp(s, self.road.s_m, route.center_m)

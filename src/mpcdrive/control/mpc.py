@@ -35,6 +35,15 @@ from .fallback import FallbackConfig, FallbackLadder
 from .base import TrackingWarmStart, checked_obstacles, checked_road
 
 
+def _shift_references(xref: np.ndarray, refs: np.ndarray, s_arr: np.ndarray, e: np.ndarray) -> None:
+    """Shift the state references ``xref`` sideways by ``e`` (N+1,) [m] from the path points
+    ``refs`` and turn their heading with the slope of the shift."""
+    h = refs[:, 2]
+    xref[:, 0] -= np.sin(h) * e
+    xref[:, 1] += np.cos(h) * e
+    xref[1:, 2] += np.arctan(np.diff(e) / np.maximum(np.diff(s_arr), 1e-9))
+
+
 @dataclass(frozen=True)
 class StepData:
     """What :meth:`LtvMpc.prepare` computes for one step (arrays in the model's units).
@@ -217,6 +226,7 @@ class LtvMpc(TrackingWarmStart):
         self._road_rows = RoadRows.empty(N)
         self._du_step = problem.du_max_per_s * problem.dt_s  # (nu,) largest input change per step
         self._road = problem.road
+        self._lateral = None
         self.fallback = FallbackLadder(self, config.fallback, footprint=footprint, road=problem.road)
 
     # -- obstacles ----------------------------------------------------------------------------
@@ -237,6 +247,14 @@ class LtvMpc(TrackingWarmStart):
         if self.avoidance is not None:
             self.avoidance.road = road
         self.fallback.road = road
+
+    def set_lateral_reference(self, offset) -> None:
+        """Track the path shifted sideways by ``offset(s)`` [m] (a callable of the arc lengths
+        [m] of the horizon, positive left; e.g. a lane change's ramp), its heading turned with the
+        slope; None: the path itself."""
+        if offset is not None and not callable(offset):
+            raise ValueError("the lateral reference must be a callable of arc length, or None")
+        self._lateral = offset
 
     def set_obstacles(self, obstacles) -> None:
         """Replace the obstacles, e.g. with fresh predictions of moving ones each step; the QP is
@@ -354,12 +372,9 @@ class LtvMpc(TrackingWarmStart):
                     refs = self._references(*follow, x[2], True)
             if terms.e_ref is not None and np.any(terms.e_ref):
                 # the paper's detour: shift the reference sideways, turn its heading with the slope
-                h = refs[:, 2]
-                xref[:, 0] -= np.sin(h) * terms.e_ref
-                xref[:, 1] += np.cos(h) * terms.e_ref
-                ds = np.maximum(np.diff(s_arr), 1e-9)
-                slope = np.diff(terms.e_ref) / ds
-                xref[1:, 2] += np.arctan(slope)
+                _shift_references(xref, refs, s_arr, terms.e_ref)
+        if self._lateral is not None:  # a lateral reference (set_lateral_reference): the same shift
+            _shift_references(xref, refs, s_arr, np.asarray(self._lateral(s_arr), float))
         # lane normals at the (undetoured) centreline at the references
         if self.qp.lane:
             yaw = refs[1:, 2]
