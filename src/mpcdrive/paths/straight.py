@@ -7,6 +7,11 @@ import numpy as np
 from .base import Path
 
 
+#: the shortest straight path [m]: shorter ones are a typo (or a unit slip), and their
+#: arc-length tables would underflow
+MIN_LENGTH_M = 1e-6
+
+
 class StraightPath(Path):
     """Segment from ``start`` to ``end`` (2,) [m], extended along its direction beyond the ends."""
 
@@ -19,8 +24,9 @@ class StraightPath(Path):
             raise ValueError(f"start and end must be points [x m, y m], got {start!r} and {end!r}")
         d = end - self.start
         self.length_m = float(np.hypot(*d))
-        if not np.isfinite(self.length_m) or self.length_m <= 0:
-            raise ValueError(f"a straight path needs two distinct finite points, got {start} and {end}")
+        if not np.isfinite(self.length_m) or self.length_m < MIN_LENGTH_M:
+            raise ValueError(f"a straight path needs two finite points at least {MIN_LENGTH_M:g} m apart, "
+                             f"got {start} and {end}")
         self.t = d / self.length_m
         self.n = np.array([-self.t[1], self.t[0]])
         self._heading = float(np.arctan2(self.t[1], self.t[0]))
