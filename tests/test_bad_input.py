@@ -221,7 +221,7 @@ API_CASES = [
      lambda: MpcProblem(4, 2, 5, 0.01, Q=1.0, R=np.array([[1.0, 0.5], [0.5, 0.25]])), "positive definite"),
     ("OsqpSettings: zero iterations", lambda: OsqpSettings(max_iter=0), "max_iter"),
     ("OsqpSettings: negative tolerance", lambda: OsqpSettings(eps_abs=-1.0), "eps_abs"),
-    ("StraightPath: equal ends", lambda: StraightPath([1, 1], [1, 1]), "two distinct finite points"),
+    ("StraightPath: equal ends", lambda: StraightPath([1, 1], [1, 1]), "two finite points at least"),
     ("StraightPath: 3-D point", lambda: StraightPath([0, 0, 0], [1, 0, 0]), "must be points"),
     ("StraightPath: NaN point", lambda: StraightPath([0, NAN], [1, 0]), "two distinct finite points"),
     ("CirclePath: NaN centre", lambda: CirclePath([NAN, 0], 1.0), "center must be 2 finite"),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from collections.abc import Callable
@@ -366,17 +367,21 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         feedforward=c.feedforward,
         speed_profile=profile,
         prediction_substeps=c.prediction_substeps,
-        fallback=FallbackConfig(tuple(c.fallback), c.brake_decel_mps2, c.brake_steering, c.relax_slack_factor),
+        projection_window_m=c.projection_window_m,
+        fallback=FallbackConfig(ladder=tuple(c.fallback), brake_decel_mps2=c.brake_decel_mps2,
+                                brake_steering=c.brake_steering, relax_slack_factor=c.relax_slack_factor,
+                                check_plans=c.check_plans),
     )
     if c.solver == "projected_gradient":
         settings = ProjectedGradientSettings(max_iter=c.pg_max_iter, tol=c.pg_tol, accelerated=c.pg_accelerated)
     else:
-        settings = OsqpSettings(eps_abs=c.osqp_eps, eps_rel=c.osqp_eps, max_iter=c.osqp_max_iter)
+        settings = OsqpSettings(eps_abs=c.osqp_eps, eps_rel=c.osqp_eps, max_iter=c.osqp_max_iter,
+                                polish=c.osqp_polish, adaptive_rho=c.osqp_adaptive_rho,
+                                time_limit_s=c.osqp_time_limit_s)
     footprint = Footprint(v.length_m, v.width_m, n_discs=v.footprint_discs)
     obstacles = tuple(build_obstacle(o) for o in spec.obstacles)
     av = spec.avoidance or AvoidanceSpec()
-    avoidance = AvoidanceConfig(av.formulation, av.margin_m, av.weight, av.epsilon_m2, tuple(av.sigma_m),
-                                av.influence_m, av.max_obstacles, av.detour, av.detour_ramp_m)
+    avoidance = AvoidanceConfig(**{f.name: getattr(av, f.name) for f in dataclasses.fields(AvoidanceConfig)})
     if obstacles:
         config = replace(config, sqp_max_iterations=av.sqp_max_iterations, sqp_tol=av.sqp_tol,
                          sqp_max_time_s=av.sqp_max_time_s)

@@ -16,8 +16,13 @@ from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from ..models.presets import PRESETS
 from ..control.fallback import DEFAULT_LADDER, check_ladder
-from ..solvers.osqp_backend import OsqpSettings
+from ..control.mpc import MpcConfig
+from ..ocp.avoidance import AvoidanceConfig
 from ..sim.closed_loop import solve_interval
+from ..solvers.osqp_backend import OsqpSettings
+
+#: the core's defaults, which the scenario schema repeats
+_AV = AvoidanceConfig()
 
 Finite = Annotated[float, Field(strict=True, allow_inf_nan=False)]
 Positive = Annotated[float, Field(strict=True, gt=0, allow_inf_nan=False)]
@@ -236,17 +241,22 @@ class ObstacleSpec(_Strict):
 
 
 class AvoidanceSpec(_Strict):
-    """How obstacles enter the MPC (see mpcdrive.ocp.avoidance)."""
+    """How obstacles enter the MPC (see mpcdrive.ocp.avoidance; the defaults are
+    :class:`~mpcdrive.ocp.avoidance.AvoidanceConfig`'s). ``follow_gap_s``: behind an obstacle
+    blocking the lane the references trail it by that time gap (car following; the compiled
+    backend declines it and the OSQP controller runs, with a notice)."""
 
-    formulation: Literal["hard", "corridor", "potential", "gaussian"] = "hard"
-    margin_m: NonNeg = 0.1
-    weight: NonNeg = 10.0
-    epsilon_m2: Positive = 0.05
-    sigma_m: tuple[Positive, Positive] = (0.5, 0.5)
-    influence_m: Positive = 5.0
-    max_obstacles: int = Field(3, ge=1, le=50)
-    detour: Literal["none", "trapezoid"] = "none"
-    detour_ramp_m: Positive = 1.0
+    formulation: Literal["hard", "corridor", "potential", "gaussian"] = _AV.formulation
+    margin_m: NonNeg = _AV.margin_m
+    weight: NonNeg = _AV.weight
+    epsilon_m2: Positive = _AV.epsilon_m2
+    sigma_m: tuple[Positive, Positive] = _AV.sigma_m
+    influence_m: Positive = _AV.influence_m
+    max_obstacles: int = Field(_AV.max_obstacles, ge=1, le=50)
+    detour: Literal["none", "trapezoid"] = _AV.detour
+    detour_ramp_m: Positive = _AV.detour_ramp_m
+    follow_gap_s: Positive | None = _AV.follow_gap_s
+    follow_decel_mps2: Positive = _AV.follow_decel_mps2
     sqp_max_iterations: int = Field(1, ge=1, le=100)
     sqp_tol: Positive = 1e-4
     sqp_max_time_s: Positive = 0.05
@@ -374,6 +384,11 @@ class ControllerSpec(_Strict):
     brake_decel_mps2: Positive | None = None  # None: the vehicle's full braking (accel_limits_mps2[0])
     brake_steering: Literal["hold", "straighten"] = "hold"
     relax_slack_factor: Annotated[float, Field(strict=True, ge=1, allow_inf_nan=False)] = 100.0
+    check_plans: bool = True  # a fallback rung's plan is applied only if it is safer than braking
+    projection_window_m: Positive = MpcConfig.projection_window_m  # how far along the path the car is looked for from the last step [m]
+    osqp_polish: bool = OsqpSettings.polish
+    osqp_adaptive_rho: bool = OsqpSettings.adaptive_rho
+    osqp_time_limit_s: NonNeg = OsqpSettings.time_limit_s  # 0: none
     period_s: Positive | None = None
     between_solves: Literal["hold", "plan"] = "hold"
 
