@@ -223,7 +223,7 @@ API_CASES = [
     ("OsqpSettings: negative tolerance", lambda: OsqpSettings(eps_abs=-1.0), "eps_abs"),
     ("StraightPath: equal ends", lambda: StraightPath([1, 1], [1, 1]), "two finite points at least"),
     ("StraightPath: 3-D point", lambda: StraightPath([0, 0, 0], [1, 0, 0]), "must be points"),
-    ("StraightPath: NaN point", lambda: StraightPath([0, NAN], [1, 0]), "two distinct finite points"),
+    ("StraightPath: NaN point", lambda: StraightPath([0, NAN], [1, 0]), "two finite points at least"),
     ("CirclePath: NaN centre", lambda: CirclePath([NAN, 0], 1.0), "center must be 2 finite"),
     ("CirclePath: zero radius", lambda: CirclePath([0, 0], 0.0), "radius_m"),
     ("CirclePath: NaN start angle", lambda: CirclePath([0, 0], 1.0, start_angle_rad=NAN), "start_angle_rad"),
