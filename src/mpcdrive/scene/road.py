@@ -39,19 +39,20 @@ BODY_SAMPLES = 5
 
 
 @njit(cache=True)
-def _interp(tab_s, tab_v, s, period):
-    """Piecewise-linear value of the table (tab_s increasing) at s; constant beyond the ends, or
-    periodic with ``period`` [m] when it is > 0 (a closed path; the table spans one period)."""
+def _value_slope(tab_s, tab_v, s, period):
+    """(value, d/ds) of the piecewise-linear table (tab_s increasing) at s: constant beyond the
+    ends (slope 0), or periodic with ``period`` [m] when it is > 0 (a closed path; the table
+    spans one period, the last knot joined to the first of the next lap)."""
     n = tab_s.shape[0]
     if period > 0.0:
         s = tab_s[0] + (s - tab_s[0]) % period
         if s > tab_s[n - 1]:  # between the last knot and the first one of the next lap
-            w = (s - tab_s[n - 1]) / (tab_s[0] + period - tab_s[n - 1])
-            return tab_v[n - 1] + w * (tab_v[0] - tab_v[n - 1])
+            slope = (tab_v[0] - tab_v[n - 1]) / (tab_s[0] + period - tab_s[n - 1])
+            return tab_v[n - 1] + slope * (s - tab_s[n - 1]), slope
     if n == 1 or s <= tab_s[0]:
-        return tab_v[0]
+        return tab_v[0], 0.0
     if s >= tab_s[n - 1]:
-        return tab_v[n - 1]
+        return tab_v[n - 1], 0.0
     lo, hi = 0, n - 1
     while hi - lo > 1:
         mid = (lo + hi) // 2
@@ -59,30 +60,14 @@ def _interp(tab_s, tab_v, s, period):
             lo = mid
         else:
             hi = mid
-    w = (s - tab_s[lo]) / (tab_s[hi] - tab_s[lo])
-    return tab_v[lo] + w * (tab_v[hi] - tab_v[lo])
+    slope = (tab_v[hi] - tab_v[lo]) / (tab_s[hi] - tab_s[lo])
+    return tab_v[lo] + slope * (s - tab_s[lo]), slope
 
 
 @njit(cache=True)
-def _slope(tab_s, tab_v, s, period):
-    """d/ds of the piecewise-linear table at s (0 beyond the ends of an open table)."""
-    n = tab_s.shape[0]
-    if n == 1:
-        return 0.0
-    if period > 0.0:
-        s = tab_s[0] + (s - tab_s[0]) % period
-        if s > tab_s[n - 1]:
-            return (tab_v[0] - tab_v[n - 1]) / (tab_s[0] + period - tab_s[n - 1])
-    elif s <= tab_s[0] or s >= tab_s[n - 1]:
-        return 0.0
-    lo, hi = 0, n - 1
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if tab_s[mid] <= s:
-            lo = mid
-        else:
-            hi = mid
-    return (tab_v[hi] - tab_v[lo]) / (tab_s[hi] - tab_s[lo])
+def _interp(tab_s, tab_v, s, period):
+    """The value of :func:`_value_slope`."""
+    return _value_slope(tab_s, tab_v, s, period)[0]
 
 
 @njit(cache=True)
@@ -106,17 +91,19 @@ def body_bounds(tab_s, tab_left, tab_right, period, s, kappa, yaw_rel, half_leng
             d = dx * cs - dy * sn  # the point's distance along the path
             y = dx * sn + dy * cs  # its lateral offset from the reference point
             bend = 0.5 * kappa * d * d  # where the curved path is at d, seen from s
-            left = _interp(tab_s, tab_left, s + d, period) + bend
-            right = _interp(tab_s, tab_right, s + d, period) + bend
+            left, left_slope = _value_slope(tab_s, tab_left, s + d, period)
+            right, right_slope = _value_slope(tab_s, tab_right, s + d, period)
+            left += bend
+            right += bend
             h = left - margin_m - y
             l_ = right + margin_m - y
             # d/dyaw: dd = -y, dy = d
             if h < hi:
                 hi = h
-                dhi = -(_slope(tab_s, tab_left, s + d, period) + kappa * d) * y - d
+                dhi = -(left_slope + kappa * d) * y - d
             if l_ > lo:
                 lo = l_
-                dlo = -(_slope(tab_s, tab_right, s + d, period) + kappa * d) * y - d
+                dlo = -(right_slope + kappa * d) * y - d
     if lo > hi:
         mid = 0.5 * (lo + hi)
         return mid, mid, 0.0, 0.0
