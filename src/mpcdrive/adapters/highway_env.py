@@ -63,6 +63,7 @@ from ..scene.footprint import Footprint
 from ..scene.geometry import shape_distance
 from ..scene.obstacles import ConstantVelocity, Obstacle, TrajectoryMotion, rectangle
 from ..scene.road import Lane, Road
+from ..sim.closed_loop import contact_count
 from ..types import ControlOutput, SimResult
 
 __all__ = [
@@ -670,9 +671,7 @@ def drive_env(env, driver: HighwayEnvMpcDriver, steps: int) -> HighwayDrive:
     clearance = np.array(clearance)
     meta = {}
     if driver.others:
-        hit = clearance < 0.0
-        meta = {"min_obstacle_clearance_m": float(clearance.min()),
-                "collisions": int(np.count_nonzero(hit[1:] & ~hit[:-1]) + (1 if hit[0] else 0))}
+        meta = {"min_obstacle_clearance_m": float(clearance.min()), "collisions": contact_count(clearance)}
     result = SimResult(
         t_s=np.array(T), x=Xa, u=Ua, x_final=driver.state(), s_m=np.array(S),
         e_y_m=np.array(EY), e_psi_rad=np.array(EPSI), yaw_rad=Xa[:, 2].copy(),

@@ -415,8 +415,7 @@ def simulate(
         per_obstacle, meta["obstacles"] = _clearances(Xs[sl], T[sl], obstacles, footprint)
         clearance = per_obstacle.min(axis=0)
         meta["min_obstacle_clearance_m"] = float(clearance.min())
-        hit = clearance < 0.0
-        meta["collisions"] = int(np.count_nonzero(hit[1:] & ~hit[:-1]) + (1 if hit[0] else 0))
+        meta["collisions"] = contact_count(clearance)
         meta["collision_events"] = collision_events(per_obstacle, T[sl], obstacles)
     lane_excess = profile = None
     if road is not None:
@@ -453,6 +452,13 @@ def simulate(
         meta={**meta, "termination": termination, **({"aborted_off_path": True} if aborted else {})},
         clearance_m=clearance,
     )
+
+
+def contact_count(clearance_m: np.ndarray) -> int:
+    """How many contacts a run had: stretches of steps with the smallest footprint-to-obstacle
+    distance ``clearance_m`` (K,) [m] below 0 (one contact lasting many steps counts once)."""
+    hit = np.asarray(clearance_m) < 0.0
+    return int(np.count_nonzero(hit[1:] & ~hit[:-1]) + (1 if hit.size and hit[0] else 0))
 
 
 def collision_events(clearance_m: np.ndarray, t_s: np.ndarray, obstacles) -> list[dict]:
