@@ -16,7 +16,7 @@ by a backward recursion ``P_k = W_k + A_k' P_{k+1} A_k`` (O(N^2) blocks), and th
 solved by the dual active-set method of :mod:`mpcdrive.solvers.dense_qp`, which is exact (no
 tolerance on optimality; feasibility to 1e-9) and costs a single Cholesky factorization when no
 constraint is active. The soft lane's slacks enter that QP only where they can be nonzero
-(:func:`_soft_solve`: first without slacks, checked by the exact-penalty condition), so a car
+(:func:`~mpcdrive.solvers.condensed.soft_solve`: first without slacks, checked by the exact-penalty condition), so a car
 inside its lane pays for N nu variables, not N (nu + 1).
 
 Obstacles with the potential (eq. 55) or Gaussian (eq. 56) cost -- static or at constant
@@ -31,7 +31,7 @@ run the compiled step in two stages: up to the linearization trajectory, then --
 any obstacle shape and motion, linearized rows) has written the step's rows, lane bounds and
 detour offsets into the buffers -- condensing and the solve. Their rows are soft with one
 slack per step, as in ``ocp.qp``, and get the same treatment as the lane rows: slacks only for
-the steps that can need them (:func:`_soft_solve`).
+the steps that can need them (:func:`~mpcdrive.solvers.condensed.soft_solve`).
 
 Models: the kinematic bicycle with 3 and 4 states and the dynamic bicycle (6 states, linear or
 Pacejka tires, low-speed blend), their equations and references compiled in
@@ -73,6 +73,7 @@ from ..paths.profile_compiled import profile_arc_lengths, profile_array, profile
 from ..scene.footprint import Footprint
 from ..scene.obstacles import Circle, ConstantVelocity, Polygon, Static
 from ..scene.road import Road, _interp, horizon_bounds
+from ..solvers.condensed import plan_feasible, riccati, soft_solve
 from ..solvers.dense_qp import STATUS_WORDS, gi_solve, single_nonzero_columns
 from ..types import ControlOutput, WarmStart
 from .base import TrackingWarmStart, checked_obstacles, checked_road
@@ -227,7 +228,7 @@ def _constant_rows(problem: MpcProblem, nz: int, n_orow: int = 0):
     of the first u_0 rate row (its b follows u_prev), how many rows the step adds after them
     (state bounds, lane, ``n_orow`` obstacle rows per step) and how many slack sign rows may
     follow those (one per step for the lane and for the obstacle rows; written per step by
-    ``_soft_solve``)."""
+    ``soft_solve``)."""
     N, nu = problem.N, problem.nu
     rows, rhs = [], []
 
@@ -262,140 +263,6 @@ def _constant_rows(problem: MpcProblem, nz: int, n_orow: int = 0):
     n_state = N * int(np.isfinite(problem.x_min).sum() + np.isfinite(problem.x_max).sum())
     n_var = n_state + (2 * N if lane else 0) + N * n_orow
     return rows, rhs, r_rate0, n_var, n_slack
-
-
-@njit(cache=True)
-def _riccati(N, nx, nu, A, B, c, qt, uref, Wq, Rm, x, P, p, K, kf, PA, M, G, q, z):
-    """Unconstrained minimizer of the tracking cost (no Rc, no slack) by the backward Riccati
-    recursion ``V_k(x) = x'P_k x + 2 p_k'x + const``, ``u_k = K_k x_k + kf_k``: O(N) work.
-    The state cost of x_k is ``x' Wq[k-1] x - 2 qt[k-1]' x``.
-
-    Scratch: PA (nx, nx), M (nu, nx), G (nu, nu), q (nx,). Writes z[:N nu] = U of the minimizer
-    (rolled out from x) and uses p[1:] for the rolled-out states. Returns False if some
-    ``R + B'PB`` is not numerically positive definite."""
-    for i in range(nx):
-        for j in range(nx):
-            P[N, i, j] = Wq[N - 1, i, j]
-        p[N, i] = -qt[N - 1, i]
-    for k in range(N - 1, -1, -1):
-        # q = P c + p ; PA = P A ; M = B'PA ; G = R + B'PB ; h = B'q - R ur (in kf[k])
-        for i in range(nx):
-            t = p[k + 1, i]
-            for j in range(nx):
-                t += P[k + 1, i, j] * c[k, j]
-            q[i] = t
-        for i in range(nx):
-            for j in range(nx):
-                t = 0.0
-                for l in range(nx):
-                    t += P[k + 1, i, l] * A[k, l, j]
-                PA[i, j] = t
-        for a in range(nu):
-            for j in range(nx):
-                t = 0.0
-                for l in range(nx):
-                    t += B[k, l, a] * PA[l, j]
-                M[a, j] = t
-            for e in range(nu):
-                t = Rm[a, e]
-                for l in range(nx):
-                    pb = 0.0
-                    for m_ in range(nx):
-                        pb += P[k + 1, l, m_] * B[k, m_, e]
-                    t += B[k, l, a] * pb
-                G[a, e] = t
-            t = 0.0
-            for l in range(nx):
-                t += B[k, l, a] * q[l]
-            for e in range(nu):
-                t -= Rm[a, e] * uref[k, e]
-            kf[k, a] = t
-        # G = L L' (in place, lower); K = -G^{-1} M ; kf = -G^{-1} h
-        for j in range(nu):
-            t = G[j, j]
-            for l in range(j):
-                t -= G[j, l] * G[j, l]
-            if not (t > 1e-14 * max(1.0, abs(G[j, j]))):
-                return False
-            G[j, j] = math.sqrt(t)
-            for i in range(j + 1, nu):
-                t = G[i, j]
-                for l in range(j):
-                    t -= G[i, l] * G[j, l]
-                G[i, j] = t / G[j, j]
-        for col in range(nx + 1):
-            for a in range(nu):
-                q_a = M[a, col] if col < nx else kf[k, a]
-                for l in range(a):
-                    q_a -= G[a, l] * (K[k, l, col] if col < nx else kf[k, l])
-                if col < nx:
-                    K[k, a, col] = q_a / G[a, a]
-                else:
-                    kf[k, a] = q_a / G[a, a]
-            for a in range(nu - 1, -1, -1):
-                t = K[k, a, col] if col < nx else kf[k, a]
-                for l in range(a + 1, nu):
-                    t -= G[l, a] * (K[k, l, col] if col < nx else kf[k, l])
-                if col < nx:
-                    K[k, a, col] = t / G[a, a]
-                else:
-                    kf[k, a] = t / G[a, a]
-        for a in range(nu):
-            for col in range(nx):
-                K[k, a, col] = -K[k, a, col]
-            kf[k, a] = -kf[k, a]
-        if k >= 1:
-            # P_k = W_k + A'PA + M'K ; p_k = -W_k r_k + A'q + M'kf
-            for i in range(nx):
-                t = -qt[k - 1, i]
-                for l in range(nx):
-                    t += A[k, l, i] * q[l]
-                for a in range(nu):
-                    t += M[a, i] * kf[k, a]
-                p[k, i] = t
-                for j in range(nx):
-                    t = Wq[k - 1, i, j]
-                    for l in range(nx):
-                        t += A[k, l, i] * PA[l, j]
-                    for a in range(nu):
-                        t += M[a, i] * K[k, a, j]
-                    P[k, i, j] = t
-    # roll out u_k = K_k x_k + kf_k from x (states staged in p[k + 1])
-    for k in range(N):
-        for a in range(nu):
-            t = kf[k, a]
-            for j in range(nx):
-                t += K[k, a, j] * (x[j] if k == 0 else p[k, j])
-            z[k * nu + a] = t
-        for i in range(nx):
-            t = c[k, i]
-            for j in range(nx):
-                t += A[k, i, j] * (x[j] if k == 0 else p[k, j])
-            for a in range(nu):
-                t += B[k, i, a] * z[k * nu + a]
-            q[i] = t
-        for i in range(nx):
-            p[k + 1, i] = q[i]
-    return True
-
-
-@njit(cache=True)
-def _plan_feasible(N, nx, nu, z, Xr, u_prev, u_min, u_max, dmax, x_min, x_max, tol):
-    """Whether inputs z (N nu) and states Xr[1..N] satisfy the input, rate and state bounds
-    within tol (NaN never does)."""
-    for k in range(N):
-        for a in range(nu):
-            u = z[k * nu + a]
-            if not (u >= u_min[a] - tol and u <= u_max[a] + tol):
-                return False
-            prev = u_prev[a] if k == 0 else z[(k - 1) * nu + a]
-            if not (abs(u - prev) <= dmax[a] + tol):
-                return False
-        for i in range(nx):
-            v = Xr[k + 1, i]
-            if not (v >= x_min[i] - tol and v <= x_max[i] + tol):
-                return False
-    return True
 
 
 @njit(cache=True)
@@ -774,8 +641,8 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
     # -- no Rc, no lane: try the unconstrained minimizer (Riccati, O(N)); if it satisfies every
     # bound it is the QP's solution ---------------------------------------------------------------
     if ip[_I_RICCATI] == 1:
-        if _riccati(N, nx, nu, A, B, c, qt, uref, We, Rm, x, P, lam, Kg, kf, PA, Mg, Gg, qv, z):
-            if _plan_feasible(N, nx, nu, z, lam, u_prev, u_min, u_max, dmax, x_min, x_max, fp[_F_TOL]):
+        if riccati(N, nx, nu, A, B, c, qt, uref, We, Rm, x, P, lam, Kg, kf, PA, Mg, Gg, qv, z):
+            if plan_feasible(N, nx, nu, z, lam, u_prev, u_min, u_max, dmax, x_min, x_max, fp[_F_TOL]):
                 _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out)
                 return 0
 
@@ -983,10 +850,10 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
             for k in range(N - 1, 0, -1):
                 if kpos[f0 + k - 1] == 1 or (k >= 2 and kpos[f0 + k - 2] == 1) or (k >= 3 and kpos[f0 + k - 3] == 1):
                     kpos[f0 + k] = 1
-        code, iters = _soft_solve(H, g, C, b, m, m_lane, rgrp, N, nzu, kpos, fp[_F_SLACK2], fp[_F_SLACK1],
-                                  fp[_F_OSLACK2], fp[_F_OSLACK1], _v1(wbuf, fo, _W_GSUM), z, lamq,
-                                  active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, ip[_I_MAXITER],
-                                  fp[_F_TOL])
+        code, iters = soft_solve(H, g, C, b, m, m_lane, rgrp, N, nzu, kpos, fp[_F_SLACK2], fp[_F_SLACK1],
+                                 fp[_F_OSLACK2], fp[_F_OSLACK1], _v1(wbuf, fo, _W_GSUM), z, lamq,
+                                 active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, ip[_I_MAXITER],
+                                 fp[_F_TOL])
     else:
         code, iters = gi_solve(H, g, C, b, m, nz, z, lamq, active, isact, rowcol, L, J, Rq, d, zdir, r, uq,
                                sq, rown, ip[_I_MAXITER], fp[_F_TOL])
@@ -995,102 +862,6 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
         return code
     _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out)
     return 0
-
-
-@njit(cache=True)
-def _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, every) -> bool:
-    """Flag (kpos = 1) every slack group (``every``; else every group without a slack, kpos 0)
-    whose rows' multipliers sum to more than its slack's l1 weight; True if none does (zero
-    slacks are then optimal there)."""
-    for grp in range(2 * N):
-        gsum[grp] = 0.0
-    for rr in range(m_soft, m):
-        gsum[rgrp[rr]] += lam[rr]
-    done = True
-    for grp in range(2 * N):
-        if (every or kpos[grp] == 0) and gsum[grp] > (w1l if grp < N else w1o):
-            kpos[grp] = 1
-            done = False
-    return done
-
-
-@njit(cache=True)
-def _soft_solve(H, g, C, b, m, m_soft, rgrp, N, nzu, kpos, w2l, w1l, w2o, w1o, gsum, z, lam, active, isact, rowcol,
-                L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol):
-    """The condensed QP with soft rows, their slacks only where they can be nonzero.
-
-    ``H[:nzu, :nzu]``, ``g[:nzu]`` are the input part; rows ``[0, m)`` of ``C z >= b`` the
-    constraints, of which rows ``[m_soft, m)`` are soft: row ``rr`` belongs to slack group
-    ``rgrp[rr]`` (the lane rows of step k to group k, slack weights ``w2l`` quadratic, ``w1l``
-    linear; the obstacle rows of step k to group N + k, weights ``w2o``, ``w1o``), one slack per
-    group shared by its rows, as in ``ocp.qp``. First the inputs alone, soft rows hard: if that
-    solves and no group's multipliers sum to more than its slack's l1 weight, zero slacks satisfy
-    the optimality conditions of the soft problem (exact penalty), so it is its solution. Else
-    slacks are given to the groups flagged in ``kpos`` (1 = slack; the caller flags those the
-    linearization violates), plus every group whose multipliers exceed the weight, and solved
-    again until no group without a slack exceeds it (or with a slack on every group that has
-    rows: the full problem). The slacks' sign rows follow row m (``rowcol`` names their single
-    nonzero; the other rows written per step are marked dense there). z[:nzu] holds the inputs."""
-    code, iters = gi_solve(H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq,
-                           sq, rown, max_iter, tol)
-    if code == 0 and _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, True):
-        return 0, iters
-    full = False
-    for _round in range(2 * N + 1):
-        nk = 0
-        if full or (code != 0 and _round == 0):
-            # no (useful) flags: a slack on every group that has rows
-            nflag = 0
-            for grp in range(2 * N):
-                nflag += 1 if kpos[grp] != 0 else 0
-            if full or nflag == 0:
-                for grp in range(2 * N):
-                    kpos[grp] = 0
-                for rr in range(m_soft, m):
-                    kpos[rgrp[rr]] = 1
-                full = True
-        for grp in range(2 * N):
-            if kpos[grp] != 0:
-                kpos[grp] = nk + 1  # 1-based slack position
-                nk += 1
-        n2 = nzu + nk
-        for a in range(nk):
-            jj = nzu + a
-            for cc in range(n2):
-                H[jj, cc] = 0.0
-                H[cc, jj] = 0.0
-        for grp in range(2 * N):
-            if kpos[grp] > 0:
-                jj = nzu + kpos[grp] - 1
-                H[jj, jj] = 2.0 * (w2l if grp < N else w2o)
-                g[jj] = w1l if grp < N else w1o
-        for rr in range(m_soft, m):
-            for cc in range(nzu, n2):
-                C[rr, cc] = 0.0
-            grp = rgrp[rr]
-            if kpos[grp] > 0:
-                C[rr, nzu + kpos[grp] - 1] = 1.0
-        for a in range(nk):
-            rr = m + a
-            for cc in range(n2):
-                C[rr, cc] = 0.0
-            C[rr, nzu + a] = 1.0
-            b[rr] = 0.0
-            rowcol[rr] = nzu + a
-        code, it2 = gi_solve(H, g, C, b, m + nk, n2, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq,
-                             sq, rown, max_iter, tol)
-        iters += it2
-        if code != 0:
-            if full:
-                return code, iters
-            full = True
-            continue
-        for grp in range(2 * N):
-            if kpos[grp] > 0:
-                kpos[grp] = 1
-        if _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, False):
-            return 0, iters
-    return 3, iters
 
 
 @njit(cache=True)
@@ -1123,10 +894,11 @@ def _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out):
 from .. import _jitcache  # noqa: E402
 from ..models import compiled as _models_compiled, dynamic as _dynamic, kinematic as _kinematic  # noqa: E402
 from ..paths import compiled as _paths_compiled, profile_compiled as _profile_compiled  # noqa: E402
-from ..solvers import dense_qp as _dense_qp  # noqa: E402
+from ..solvers import condensed as _condensed, dense_qp as _dense_qp  # noqa: E402
 
 _jitcache.refresh(_control_step, [m.__file__ for m in (_kinematic, _dynamic, _models_compiled, _paths_compiled,
-                                                       _profile_compiled, _dense_qp) if m.__file__ is not None])
+                                                       _profile_compiled, _dense_qp, _condensed)
+                                  if m.__file__ is not None])
 _announced = [False]
 
 
