@@ -700,8 +700,9 @@ def _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out):
 from .. import _jitcache  # noqa: E402
 from ..models import compiled as _models_compiled, dynamic as _dynamic, kinematic as _kinematic  # noqa: E402
 from ..paths import compiled as _paths_compiled, profile_compiled as _profile_compiled  # noqa: E402
+from ..scene import road as _road  # noqa: E402
 from ..solvers import condensed as _condensed, dense_qp as _dense_qp  # noqa: E402
 
 _jitcache.refresh(_control_step, [m.__file__ for m in (_kinematic, _dynamic, _models_compiled, _paths_compiled,
-                                                       _profile_compiled, _dense_qp, _condensed)
+                                                       _profile_compiled, _road, _dense_qp, _condensed)
                                   if m.__file__ is not None])
