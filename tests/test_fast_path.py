@@ -416,7 +416,7 @@ def test_a_second_process_loads_the_compiled_step_from_the_cache():
     c = FastLtvMpc(model, StraightPath([0, 0], [5, 0]), MpcProblem(3, 1, 5, 0.01, Q=1.0, R=1.0))
     c.step(np.zeros(3), c.initial_warm(np.zeros(3)))
     cache_dir = Path(fast._control_step.stats.cache_path)
-    assert any(cache_dir.glob("fast._control_step-*.nbi")), f"no cache index in {cache_dir}"
+    assert any(cache_dir.glob("fast_step._control_step-*.nbi")), f"no cache index in {cache_dir}"
     code = (
         "import json, numpy as np\n"
         "from mpcdrive.control import fast\n"

@@ -1,0 +1,708 @@
+"""The compiled step of :class:`~mpcdrive.control.fast.FastLtvMpc` and the layout of its buffers.
+
+:func:`_control_step` is one control step (or one SQP iteration of it) in one numba call:
+projection onto the path, horizon references (constant speed or a speed profile), the compiled
+obstacle cost and detour, linearization points and the discrete model, the road's rows at the
+linearization trajectory, then condensing onto the inputs (Hessian, gradient, constraint rows
+``C z >= b``) and the solve, which it hands to :mod:`mpcdrive.solvers`: the Riccati shortcut
+and the soft-row solve of :mod:`mpcdrive.solvers.condensed`, the dual active-set kernel of
+:mod:`mpcdrive.solvers.dense_qp`. It works in one float buffer (``wbuf``) and one integer
+buffer (``ibuf``) that :class:`~mpcdrive.control.fast.FastLtvMpc` allocates at construction;
+the constants below name their parts (``_I_*``: integer parameters, ``_F_*``: float parameters,
+``_W_*``: the arrays of ``wbuf``, ``_OB_*``: the columns of the obstacle table).
+
+Compiled functions use numba's on-disk cache; numba keys it to this file only, so the cache
+is dropped (by :mod:`mpcdrive._jitcache`) when a file whose code the step links in changes.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..models.compiled import METHOD_EXP, discrete_step_jacobians, model_references, rollout_into
+from ..paths.compiled import path_eval, path_project, wrap_angle
+from ..paths.profile_compiled import profile_arc_lengths, profile_speed
+from ..scene.road import _interp, horizon_bounds
+from ..solvers.condensed import plan_feasible, riccati, soft_solve
+from ..solvers.dense_qp import gi_solve
+
+_TWO_PI = 2.0 * math.pi
+
+#: status code of a non-finite measured state (raised as ValueError by
+#: :meth:`FastLtvMpc.step <mpcdrive.control.fast.FastLtvMpc.step>`)
+_BAD_STATE = 4
+
+# integer parameters (ip)
+_I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH, _I_LIN, _I_METHOD, _I_HORIZON, _I_FF, _I_LANE, \
+    _I_MCONST, _I_RATE0, _I_MAXITER, _I_GAMMA, _I_NZ, _I_RICCATI, _I_MQ, _I_OFORM, _I_NOBS, _I_OMAX, \
+    _I_DETOUR, _I_OROWS, _I_PROFILE, _I_ACCEL = range(24)
+_NIP = 24
+# passing sides (as ocp.avoidance), and "not chosen yet" in the compiled side memory
+_SIDE_LEFT, _SIDE_RIGHT, _SIDE_BLOCKED, _SIDE_NONE = 1, -1, 0, 2
+# obstacle cost formulations (ip[_I_OFORM])
+_OBS_NONE, _OBS_POTENTIAL, _OBS_GAUSSIAN = 0, 1, 2
+# linearization modes of a step: no plan (roll out the references), the previous step's plan
+# shifted by one step (real-time iteration), the current SQP iterate as it is
+MODE_NO_PLAN, MODE_SHIFTED_PLAN, MODE_ITERATE = 0, 1, 2
+# stages of a step: all of it; up to the linearization trajectory (obstacle rows are built from it
+# in Python by ``ocp.avoidance``); the rest, with those rows in the buffers
+STAGE_ALL, STAGE_LINEARIZE, STAGE_SOLVE = 0, 1, 2
+# columns of an obstacle row: pose (x, y) [m] at t = 0, velocity (vx, vy) [m/s], bounding radius
+# [m], offset (x, y) [m] of the point projected for the path heading, projection window extra [m]
+_OB_X, _OB_Y, _OB_VX, _OB_VY, _OB_RB, _OB_OX, _OB_OY, _OB_WIN = range(8)
+_NOB = 8
+# the float arrays of a controller, all views of one buffer (one argument to the compiled step:
+# passing arrays one by one costs about 0.1 us each in the call)
+(_W_FP, _W_MP, _W_BND, _W_GEO, _W_WQ, _W_RM, _W_RC, _W_TABS, _W_TABXY, _W_TABH, _W_TABK, _W_C, _W_B,
+ _W_REFS, _W_XREF, _W_UREF, _W_XBAR, _W_UBAR, _W_F, _W_A, _W_BD, _W_CD, _W_LANEN, _W_LANEB, _W_XF, _W_P,
+ _W_LAM, _W_VB, _W_S, _W_T2, _W_GAM, _W_H, _W_G, _W_Z, _W_L, _W_J, _W_RQ, _W_D, _W_ZDIR, _W_R, _W_UQ,
+ _W_SQ, _W_ROWN, _W_LAMQ, _W_DW, _W_KG, _W_KF, _W_PA, _W_MG, _W_GG, _W_QV, _W_WE, _W_QT, _W_OBS,
+ _W_ODIST, _W_OPROJ, _W_SARR, _W_EREF, _W_ROWA, _W_ROWB, _W_LLO, _W_LHI, _W_XLIN, _W_GSUM, _W_PROF,
+ _W_VARR, _W_REFW, _W_RDS, _W_RDL, _W_RDR, _W_LDLO, _W_LDHI) = range(72)
+_NW = 72
+# float parameters (fp)
+_F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_RMARGIN, _F_SLACK2, _F_SLACK1, _F_TOL, _F_OW, _F_OEPS, _F_OSX, \
+    _F_OSY, _F_OINF, _F_OMARGIN, _F_HW, _F_HL, _F_RAMP, _F_OSLACK2, _F_OSLACK1, _F_BOFF, _F_RPERIOD = range(21)
+_NFP = 21
+# info outputs
+_O_S, _O_EY, _O_EPSI, _O_ITER = range(4)
+
+
+@njit(cache=True)
+def _select_obstacles(nobs, omax, obs, odist, oproj, osel, fp, t_s, x, s0, pkind, geo, tab_s, tab_xy, tab_h,
+                      tab_k):
+    """The ``max_obstacles`` nearest obstacles within the influence distance of the vehicle at time
+    ``t_s`` (nearest first, ties by index, as ``ocp.avoidance``) into osel; returns how many.
+    oproj[j] = (s, e_y) of each one's projected point [m] (its Frenet position now)."""
+    reach = fp[_F_OINF]
+    for j in range(nobs):
+        d = math.hypot(obs[j, _OB_X] + obs[j, _OB_VX] * t_s - x[0], obs[j, _OB_Y] + obs[j, _OB_VY] * t_s - x[1])
+        d -= obs[j, _OB_RB]
+        odist[j] = d if d <= reach else math.inf
+    px0, py0, _h0, _k0 = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s0)
+    nsel = 0
+    for _slot in range(min(omax, nobs)):
+        j, best = -1, math.inf
+        for jj in range(nobs):
+            if odist[jj] < best:
+                j, best = jj, odist[jj]
+        if j < 0:
+            break
+        odist[j] = math.inf
+        osel[nsel] = j
+        nsel += 1
+        cx = obs[j, _OB_X] + obs[j, _OB_VX] * t_s + obs[j, _OB_OX]
+        cy = obs[j, _OB_Y] + obs[j, _OB_VY] * t_s + obs[j, _OB_OY]
+        oproj[j, 0], oproj[j, 1] = path_project(pkind, geo, tab_s, tab_xy, s0,
+                                                obs[j, _OB_WIN] + math.hypot(cx - px0, cy - py0), cx, cy)
+    return nsel
+
+
+@njit(cache=True)
+def _detour(nsel, osel, obs, oproj, sides, fp, N, s_arr, refs, xref, e_ref, lane, rd_s, rd_l, rd_r):
+    """The paper's trapezoidal detour around the selected (static, circular) obstacles, as
+    ``ocp.avoidance``: pick each one's passing side (kept from ``sides`` while it has room
+    between the obstacle and the road's edge beside it, ``lane`` = 1 when there is a road: the
+    body's half width, the road's margin, the obstacle margin and the body's half width again),
+    shift the references sideways over the obstacle with ramps before and after it, and turn
+    their heading with the slope."""
+    margin, hw, hl, ramp = fp[_F_OMARGIN], fp[_F_HW], fp[_F_HL], fp[_F_RAMP]
+    need = margin + hw  # as Avoidance.passing_room_m for the cost formulations, less the edge's share
+    for k in range(N + 1):
+        e_ref[k] = 0.0
+    any_shift = False
+    for a in range(nsel):
+        j = osel[a]
+        r = obs[j, _OB_RB]
+        s_ref, e_c = oproj[j, 0], oproj[j, 1]
+        e_lo, e_hi = e_c - r, e_c + r
+        if lane == 1:
+            lim_l = _interp(rd_s, rd_l, s_ref, fp[_F_RPERIOD]) - hw - fp[_F_RMARGIN]
+            lim_r = _interp(rd_s, rd_r, s_ref, fp[_F_RPERIOD]) + hw + fp[_F_RMARGIN]
+            room_left, room_right = lim_l - e_hi, e_lo - lim_r
+        else:
+            room_left = room_right = math.inf
+        prev = sides[j]
+        if prev == _SIDE_LEFT and room_left >= need:
+            side = _SIDE_LEFT
+        elif prev == _SIDE_RIGHT and room_right >= need:
+            side = _SIDE_RIGHT
+        elif max(room_left, room_right) < need:
+            side = _SIDE_BLOCKED
+        else:
+            side = _SIDE_LEFT if room_left >= room_right else _SIDE_RIGHT
+        sides[j] = side
+        if side == _SIDE_BLOCKED:
+            continue
+        shift = (e_hi + hw + 2.0 * margin) if side == _SIDE_LEFT else (e_lo - hw - 2.0 * margin)
+        lo_s, hi_s = s_ref - r - hl, s_ref + r + hl
+        rr = max(ramp, 1e-9)
+        for k in range(N + 1):
+            f = min(max(min((s_arr[k] - (lo_s - ramp)) / rr, ((hi_s + ramp) - s_arr[k]) / rr), 0.0), 1.0)
+            cand = shift * f
+            if abs(cand) > abs(e_ref[k]):
+                e_ref[k] = cand
+                any_shift = any_shift or cand != 0.0
+    if any_shift:
+        _shift_references(N, s_arr, refs, e_ref, xref)
+
+
+@njit(cache=True)
+def _shift_references(N, s_arr, refs, e_ref, xref):
+    """The detour: shift the state references sideways by ``e_ref`` (N+1,) [m] from the path
+    points ``refs`` and turn their heading with the slope of the shift."""
+    for k in range(N + 1):
+        h = refs[k, 2]
+        xref[k, 0] -= math.sin(h) * e_ref[k]
+        xref[k, 1] += math.cos(h) * e_ref[k]
+    for k in range(1, N + 1):
+        xref[k, 2] += math.atan((e_ref[k] - e_ref[k - 1]) / max(s_arr[k] - s_arr[k - 1], 1e-9))
+
+
+@njit(cache=True)
+def _obstacle_cost(form, nsel, osel, obs, oproj, fp, t_s, dt, Xbar, F, N, pkind, geo, tab_s, tab_xy, tab_h,
+                   tab_k, We, qt):
+    """Add the potential (eq. 55) or Gaussian (eq. 56) cost of the selected obstacles, its
+    second-order model at the linearization trajectory (x_k = Xbar[k], x_N = F[N-1]) with the
+    Hessian projected onto the PSD cone, to the state cost ``x' We x - 2 qt' x`` of x_1..x_N, as
+    ``ocp.avoidance`` does for the OSQP controller: each obstacle predicted at constant velocity,
+    Sigma aligned with the path where the obstacle is now."""
+    w, eps = fp[_F_OW], fp[_F_OEPS]
+    isx2, isy2 = 1.0 / (fp[_F_OSX] * fp[_F_OSX]), 1.0 / (fp[_F_OSY] * fp[_F_OSY])
+    s00, s01, s11 = 0.0, 0.0, 0.0
+    for a in range(nsel):
+        j = osel[a]
+        vx, vy = obs[j, _OB_VX], obs[j, _OB_VY]
+        if form == _OBS_GAUSSIAN:
+            h = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, oproj[j, 0])[2]
+            ch, sh = math.cos(h), math.sin(h)
+            s00 = ch * ch * isx2 + sh * sh * isy2
+            s01 = ch * sh * (isx2 - isy2)
+            s11 = sh * sh * isx2 + ch * ch * isy2
+        for k in range(1, N + 1):
+            if k < N:
+                px, py = Xbar[k, 0], Xbar[k, 1]
+            else:
+                px, py = F[N - 1, 0], F[N - 1, 1]
+            tk = t_s + dt * k
+            dx = px - (obs[j, _OB_X] + vx * tk)
+            dy = py - (obs[j, _OB_Y] + vy * tk)
+            if form == _OBS_POTENTIAL:
+                den = dx * dx + dy * dy + eps
+                d2, d3 = den * den, den * den * den
+                g0, g1 = -2.0 * w * dx / d2, -2.0 * w * dy / d2
+                a = -2.0 * w / d2 + 8.0 * w * dx * dx / d3
+                b = 8.0 * w * dx * dy / d3
+                cc = -2.0 * w / d2 + 8.0 * w * dy * dy / d3
+            else:
+                sd0, sd1 = s00 * dx + s01 * dy, s01 * dx + s11 * dy
+                val = w * math.exp(-0.5 * (dx * sd0 + dy * sd1))
+                g0, g1 = -val * sd0, -val * sd1
+                a, b, cc = val * (sd0 * sd0 - s00), val * (sd0 * sd1 - s01), val * (sd1 * sd1 - s11)
+            # projection of [[a, b], [b, cc]] onto the PSD cone (closed-form 2 x 2 eigen-split)
+            half = 0.5 * (a + cc)
+            rad = math.sqrt(0.25 * (a - cc) * (a - cc) + b * b)
+            l1, l2 = half + rad, half - rad
+            if l2 >= 0.0:
+                h00, h01, h11 = a, b, cc
+            elif l1 <= 0.0:
+                h00, h01, h11 = 0.0, 0.0, 0.0
+            else:
+                f = l1 / (l1 - l2)
+                h00, h01, h11 = f * (a - l2), f * b, f * (cc - l2)
+            We[k - 1, 0, 0] += 0.5 * h00
+            We[k - 1, 0, 1] += 0.5 * h01
+            We[k - 1, 1, 0] += 0.5 * h01
+            We[k - 1, 1, 1] += 0.5 * h11
+            qt[k - 1, 0] -= 0.5 * (g0 - h00 * px - h01 * py)
+            qt[k - 1, 1] -= 0.5 * (g1 - h01 * px - h11 * py)
+
+
+@njit(cache=True, inline="always")
+def _v1(w, fo, i):
+    return w[fo[i]:fo[i + 1]]
+
+
+@njit(cache=True, inline="always")
+def _v2(w, fo, fs, i):
+    return w[fo[i]:fo[i + 1]].reshape((fs[3 * i], fs[3 * i + 1]))
+
+
+@njit(cache=True, inline="always")
+def _v3(w, fo, fs, i):
+    return w[fo[i]:fo[i + 1]].reshape((fs[3 * i], fs[3 * i + 1], fs[3 * i + 2]))
+
+
+@njit(cache=True)
+def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibuf, out, info):
+    """One control step (or one SQP iteration of it) at time ``t_s`` [s]; returns a status code
+    (0 ok, 1 infeasible, 2 max_iter, 3 failed, 4 non-finite state). ``mode`` says what (Xw, Uw)
+    is (``MODE_*``: no plan, the previous step's plan, the current SQP iterate). ``stage``
+    (``STAGE_*``): the whole step; or only up to the linearization trajectory (written to the
+    ``_W_XLIN`` buffer, horizon arc lengths in ``_W_SARR``), after which the caller writes the
+    obstacle rows, lane bounds and detour offsets of the step and runs the rest. Writes
+    ``out = [u (nu), X ((N+1) nx), U (N nu), xref ((N+1) nx)]`` and
+    ``info = [s, e_y, e_psi, iterations]``. ``sides`` : passing side per obstacle (``_SIDE_*``),
+    read and updated by the detour. ``wbuf`` holds every float array (constants and work),
+    ``ibuf`` the integer parameters, the layout of ``wbuf`` and the active-set work."""
+    ip = ibuf[:_NIP]
+    fo = ibuf[_NIP:_NIP + _NW + 1]
+    fs = ibuf[_NIP + _NW + 1:_NIP + 4 * _NW + 1]
+    a0 = _NIP + 4 * _NW + 1
+    active = ibuf[a0:a0 + ip[_I_NZ]]
+    isact = ibuf[a0 + ip[_I_NZ]:a0 + ip[_I_NZ] + ip[_I_MQ]]
+    rowcol = ibuf[a0 + ip[_I_NZ] + ip[_I_MQ]:a0 + ip[_I_NZ] + 2 * ip[_I_MQ]]
+    a1 = a0 + ip[_I_NZ] + 2 * ip[_I_MQ]
+    kpos = ibuf[a1:a1 + 2 * ip[_I_N]]
+    a2 = a1 + 2 * ip[_I_N] + max(ip[_I_NOBS], 1)
+    osel = ibuf[a1 + 2 * ip[_I_N]:a2]
+    rgrp = ibuf[a2:a2 + ip[_I_MQ]]
+    fp, mp, bnd, geo = _v1(wbuf, fo, _W_FP), _v1(wbuf, fo, _W_MP), _v1(wbuf, fo, _W_BND), _v1(wbuf, fo, _W_GEO)
+    Wq, Rm, Rc = _v3(wbuf, fo, fs, _W_WQ), _v2(wbuf, fo, fs, _W_RM), _v2(wbuf, fo, fs, _W_RC)
+    tab_s, tab_xy = _v1(wbuf, fo, _W_TABS), _v2(wbuf, fo, fs, _W_TABXY)
+    tab_h, tab_k = _v1(wbuf, fo, _W_TABH), _v1(wbuf, fo, _W_TABK)
+    C, b = _v2(wbuf, fo, fs, _W_C), _v1(wbuf, fo, _W_B)
+    refs, xref, uref = _v2(wbuf, fo, fs, _W_REFS), _v2(wbuf, fo, fs, _W_XREF), _v2(wbuf, fo, fs, _W_UREF)
+    Xbar, Ubar, F = _v2(wbuf, fo, fs, _W_XBAR), _v2(wbuf, fo, fs, _W_UBAR), _v2(wbuf, fo, fs, _W_F)
+    A, B, c = _v3(wbuf, fo, fs, _W_A), _v3(wbuf, fo, fs, _W_BD), _v2(wbuf, fo, fs, _W_CD)
+    lane_n, lane_b = _v2(wbuf, fo, fs, _W_LANEN), _v1(wbuf, fo, _W_LANEB)
+    xf, P, lam = _v2(wbuf, fo, fs, _W_XF), _v3(wbuf, fo, fs, _W_P), _v2(wbuf, fo, fs, _W_LAM)
+    Vb, S, T2, Gam = _v3(wbuf, fo, fs, _W_VB), _v3(wbuf, fo, fs, _W_S), _v2(wbuf, fo, fs, _W_T2), _v3(wbuf, fo, fs, _W_GAM)
+    H, g, z = _v2(wbuf, fo, fs, _W_H), _v1(wbuf, fo, _W_G), _v1(wbuf, fo, _W_Z)
+    L, J, Rq = _v2(wbuf, fo, fs, _W_L), _v2(wbuf, fo, fs, _W_J), _v2(wbuf, fo, fs, _W_RQ)
+    d, zdir, r, uq = _v1(wbuf, fo, _W_D), _v1(wbuf, fo, _W_ZDIR), _v1(wbuf, fo, _W_R), _v1(wbuf, fo, _W_UQ)
+    sq, rown, lamq = _v1(wbuf, fo, _W_SQ), _v1(wbuf, fo, _W_ROWN), _v1(wbuf, fo, _W_LAMQ)
+    dw, Kg, kf = _v3(wbuf, fo, fs, _W_DW), _v3(wbuf, fo, fs, _W_KG), _v2(wbuf, fo, fs, _W_KF)
+    PA, Mg, Gg, qv = _v2(wbuf, fo, fs, _W_PA), _v2(wbuf, fo, fs, _W_MG), _v2(wbuf, fo, fs, _W_GG), _v1(wbuf, fo, _W_QV)
+    We, qt = _v3(wbuf, fo, fs, _W_WE), _v2(wbuf, fo, fs, _W_QT)
+    obs, oproj, s_arr = _v2(wbuf, fo, fs, _W_OBS), _v2(wbuf, fo, fs, _W_OPROJ), _v1(wbuf, fo, _W_SARR)
+    lane_lo, lane_hi = _v1(wbuf, fo, _W_LLO), _v1(wbuf, fo, _W_LHI)
+    lane_dlo, lane_dhi = _v1(wbuf, fo, _W_LDLO), _v1(wbuf, fo, _W_LDHI)
+    rowa, rowb, nrow = _v3(wbuf, fo, fs, _W_ROWA), _v2(wbuf, fo, fs, _W_ROWB), ip[_I_OROWS]
+    prof, v_arr = _v1(wbuf, fo, _W_PROF), _v1(wbuf, fo, _W_VARR)
+    mkind, nx, nu, N = ip[_I_MODEL], ip[_I_NX], ip[_I_NU], ip[_I_N]
+    pkind, lin, meth, hmode, ff, lane = ip[_I_PATH], ip[_I_LIN], ip[_I_METHOD], ip[_I_HORIZON], ip[_I_FF], ip[_I_LANE]
+    nz = ip[_I_NZ]
+    nzu = N * nu
+    dt, v_ref = fp[_F_DT], fp[_F_VREF]
+    u_min = bnd[0:nu]
+    u_max = bnd[nu:2 * nu]
+    dmax = bnd[2 * nu:3 * nu]
+    x_min = bnd[3 * nu:3 * nu + nx]
+    x_max = bnd[3 * nu + nx:3 * nu + 2 * nx]
+    for i in range(nx):
+        if not math.isfinite(x[i]):
+            return _BAD_STATE
+
+    nsel = 0
+    if stage != STAGE_SOLVE:
+        # -- projection and horizon references -------------------------------------------------
+        s0, e_y = path_project(pkind, geo, tab_s, tab_xy, s_guess, fp[_F_WINDOW], x[0], x[1])
+        h0 = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s0)[2]
+        info[_O_S] = s0
+        info[_O_EY] = e_y
+        info[_O_EPSI] = wrap_angle(x[2] - h0)
+        info[_O_ITER] = 0.0
+        # horizon arc lengths and reference speeds: as the profile moves in time, or the constant
+        # reference speed (or the paper's fixed step)
+        has_prof = ip[_I_PROFILE] == 1
+        if has_prof:
+            profile_arc_lengths(prof, s0, dt, s_arr)
+        acc = 0.0
+        vdt = abs(v_ref) * dt
+        for k in range(N + 1):
+            if has_prof:
+                v_arr[k] = profile_speed(prof, s_arr[k])
+            else:
+                s_arr[k] = s0 + fp[_F_HSTEP] * k if hmode == 1 else s0 + acc
+                acc += vdt
+                v_arr[k] = v_ref
+            px, py, hk, kap = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s_arr[k])
+            refs[k, 0] = px
+            refs[k, 1] = py
+            refs[k, 2] = hk
+            refs[k, 3] = kap
+        shift = _TWO_PI * np.rint((x[2] - refs[0, 2]) / _TWO_PI)
+        for k in range(N + 1):
+            refs[k, 2] += shift
+        # the model's references (model.reference): path pose, speed states, steady-state feedforward
+        model_references(mkind, mp, refs, v_arr, N + 1, ff == 1, xref, uref, _v2(wbuf, fo, fs, _W_REFW))
+        if has_prof and ip[_I_ACCEL] >= 0:  # the profile's speed changes as acceleration reference
+            for k in range(N):
+                uref[k, ip[_I_ACCEL]] += (v_arr[k + 1] - v_arr[k]) / dt
+
+        if ip[_I_OFORM] != _OBS_NONE:
+            nsel = _select_obstacles(ip[_I_NOBS], ip[_I_OMAX], obs, _v1(wbuf, fo, _W_ODIST), oproj, osel, fp, t_s, x,
+                                     s0, pkind, geo, tab_s, tab_xy, tab_h, tab_k)
+            if ip[_I_DETOUR] == 1:
+                _detour(nsel, osel, obs, oproj, sides, fp, N, s_arr, refs, xref, _v1(wbuf, fo, _W_EREF), lane,
+                        _v1(wbuf, fo, _W_RDS), _v1(wbuf, fo, _W_RDL), _v1(wbuf, fo, _W_RDR))
+
+        # -- linearization points and discrete model ---------------------------------------------
+        if mode == MODE_ITERATE:
+            for i in range(nx):
+                Xbar[0, i] = x[i]
+            for k in range(1, N):
+                for i in range(nx):
+                    Xbar[k, i] = Xw[k, i]
+            for k in range(N):
+                for a in range(nu):
+                    Ubar[k, a] = Uw[k, a]
+        elif lin == 1:
+            for k in range(N):
+                for i in range(nx):
+                    Xbar[k, i] = x[i]
+                for a in range(nu):
+                    Ubar[k, a] = u_prev[a]
+        elif mode == MODE_SHIFTED_PLAN:
+            sh = _TWO_PI * np.rint((x[2] - Xw[1, 2]) / _TWO_PI)
+            for i in range(nx):
+                Xbar[0, i] = x[i]
+            for k in range(1, N):
+                for i in range(nx):
+                    Xbar[k, i] = Xw[k + 1, i]
+                Xbar[k, 2] += sh
+            for k in range(N):
+                for a in range(nu):
+                    Ubar[k, a] = Uw[min(k + 1, N - 1), a]
+        else:
+            for k in range(N):
+                for a in range(nu):
+                    Ubar[k, a] = uref[k, a]
+            for i in range(nx):
+                Xbar[0, i] = x[i]
+            if meth == METHOD_EXP:
+                for k in range(N - 1):
+                    discrete_step_jacobians(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
+                    for i in range(nx):
+                        Xbar[k + 1, i] = F[k, i]
+            else:
+                rollout_into(mkind, mp, nx, Xbar, Ubar, N - 1, dt, meth, dw[0])
+        kmax = 1 if lin == 1 and mode != MODE_ITERATE else N
+        for k in range(kmax):
+            discrete_step_jacobians(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
+        for k in range(kmax, N):
+            for i in range(nx):
+                F[k, i] = F[0, i]
+                for j in range(nx):
+                    A[k, i, j] = A[0, i, j]
+                for a in range(nu):
+                    B[k, i, a] = B[0, i, a]
+        finite = True
+        for k in range(N):
+            for i in range(nx):
+                t = F[k, i]
+                for j in range(nx):
+                    t -= A[k, i, j] * Xbar[k, j]
+                for j in range(nu):
+                    t -= B[k, i, j] * Ubar[k, j]
+                c[k, i] = t
+                finite = finite and math.isfinite(t) and math.isfinite(xref[k + 1, i])
+            for j in range(nu):
+                finite = finite and math.isfinite(uref[k, j])
+        if not finite:
+            return 3
+        Xlin = _v2(wbuf, fo, fs, _W_XLIN)
+        for k in range(N):
+            for i in range(nx):
+                Xlin[k, i] = Xbar[k, i]
+        for i in range(nx):
+            Xlin[N, i] = F[N - 1, i]
+        if lane == 1:  # the body inside the road at the linearization trajectory's yaw (scene.road)
+            horizon_bounds(_v1(wbuf, fo, _W_RDS), _v1(wbuf, fo, _W_RDL), _v1(wbuf, fo, _W_RDR), fp[_F_RPERIOD], s_arr[1:],
+                           refs[1:, 2], refs[1:, 3], Xlin[1:, 2], fp[_F_HL], fp[_F_HW], fp[_F_BOFF],
+                           fp[_F_RMARGIN], lane_lo, lane_hi, lane_dlo, lane_dhi)
+        if stage == STAGE_LINEARIZE:
+            return 0
+    else:  # the detour of the rows, or a lateral reference, written between the stages
+        e_ref = _v1(wbuf, fo, _W_EREF)
+        for k in range(N + 1):
+            if e_ref[k] != 0.0:
+                _shift_references(N, s_arr, refs, e_ref, xref)
+                break
+    # -- state cost of x_1..x_N: x' We x - 2 qt' x, with the obstacle cost's convex model ------
+    for k in range(N):
+        for i in range(nx):
+            t = 0.0
+            for j in range(nx):
+                t += Wq[k, i, j] * xref[k + 1, j]
+            qt[k, i] = t
+    if ip[_I_OFORM] != _OBS_NONE:
+        for k in range(N):
+            for i in range(nx):
+                for j in range(nx):
+                    We[k, i, j] = Wq[k, i, j]
+        _obstacle_cost(ip[_I_OFORM], nsel, osel, obs, oproj, fp, t_s, dt, Xbar, F, N, pkind, geo, tab_s, tab_xy,
+                       tab_h, tab_k, We, qt)
+    if lane == 1:
+        for k in range(N):
+            yaw = refs[k + 1, 2]
+            lane_n[k, 0] = -math.sin(yaw)
+            lane_n[k, 1] = math.cos(yaw)
+            lane_b[k] = lane_n[k, 0] * refs[k + 1, 0] + lane_n[k, 1] * refs[k + 1, 1]
+
+    # -- no Rc, no lane: try the unconstrained minimizer (Riccati, O(N)); if it satisfies every
+    # bound it is the QP's solution ---------------------------------------------------------------
+    if ip[_I_RICCATI] == 1:
+        if riccati(N, nx, nu, A, B, c, qt, uref, We, Rm, x, P, lam, Kg, kf, PA, Mg, Gg, qv, z):
+            if plan_feasible(N, nx, nu, z, lam, u_prev, u_min, u_max, dmax, x_min, x_max, fp[_F_TOL]):
+                _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out)
+                return 0
+
+    # -- condensing: x_k = xf_k + sum_j G_kj u_j ----------------------------------------------
+    for i in range(nx):
+        xf[0, i] = x[i]
+    for k in range(N):
+        for i in range(nx):
+            t = c[k, i]
+            for j in range(nx):
+                t += A[k, i, j] * xf[k, j]
+            xf[k + 1, i] = t
+    # P_N = W_N ; P_k = W_k + A_k' P_{k+1} A_k ; lam_k = W_k e_k + A_k' lam_{k+1}
+    for i in range(nx):
+        for j in range(nx):
+            P[N, i, j] = We[N - 1, i, j]
+    for i in range(nx):
+        t = -qt[N - 1, i]
+        for j in range(nx):
+            t += We[N - 1, i, j] * xf[N, j]
+        lam[N, i] = t
+    for k in range(N - 1, 0, -1):
+        for i in range(nx):
+            for j in range(nx):
+                t = 0.0
+                for l in range(nx):
+                    t += P[k + 1, i, l] * A[k, l, j]
+                T2[i, j] = t  # P_{k+1} A_k (T2 is nx x max(nx, nu))
+        for i in range(nx):
+            for j in range(nx):
+                t = We[k - 1, i, j]
+                for l in range(nx):
+                    t += A[k, l, i] * T2[l, j]
+                P[k, i, j] = t
+        for i in range(nx):
+            t = -qt[k - 1, i]
+            for j in range(nx):
+                t += We[k - 1, i, j] * xf[k, j] + A[k, j, i] * lam[k + 1, j]
+            lam[k, i] = t
+    # gradient
+    for k in range(N):
+        for a in range(nu):
+            t = 0.0
+            for i in range(nx):
+                t += B[k, i, a] * lam[k + 1, i]
+            for e in range(nu):
+                t -= Rm[a, e] * uref[k, e]
+            g[k * nu + a] = 2.0 * t
+    for a in range(nu):
+        t = 0.0
+        for e in range(nu):
+            t += Rc[a, e] * u_prev[e]
+        g[a] -= 2.0 * t
+    # Hessian blocks: H_jj = 2 (B_j' V_j + R + Rc terms) with V_j = P_{j+1} B_j, and for i < j
+    # H_ij = 2 B_i' T_ij, T_ij = A_{i+1}' T_{i+1,j}, T_{j-1,j} = A_j' V_j: all T_i. side by side
+    # in S (nx, N nu) so the products run along long rows
+    for j in range(N):
+        for i in range(nx):
+            for a in range(nu):
+                t = 0.0
+                for l in range(nx):
+                    t += P[j + 1, i, l] * B[j, l, a]
+                Vb[j, i, a] = t
+        rcw = 2.0 if j < N - 1 else 1.0
+        for a in range(nu):
+            for e in range(nu):
+                t = 0.0
+                for l in range(nx):
+                    t += B[j, l, a] * Vb[j, l, e]
+                H[j * nu + a, j * nu + e] = 2.0 * (t + Rm[a, e] + rcw * Rc[a, e])
+    cur = 0
+    for i in range(N - 2, -1, -1):
+        c0 = (i + 1) * nu
+        nxt = 1 - cur
+        for l in range(nx):
+            for a in range(nu):
+                S[cur, l, c0 + a] = Vb[i + 1, l, a]
+        for l in range(nx):
+            for cc in range(c0, nzu):
+                S[nxt, l, cc] = 0.0
+            for m_ in range(nx):
+                am = A[i + 1, m_, l]
+                if am != 0.0:
+                    for cc in range(c0, nzu):
+                        S[nxt, l, cc] += am * S[cur, m_, cc]
+        for a in range(nu):
+            row = i * nu + a
+            for cc in range(c0, nzu):
+                H[row, cc] = 0.0
+            for e in range(nu):
+                H[row, c0 + e] = -2.0 * Rc[a, e]
+            for l in range(nx):
+                bl = 2.0 * B[i, l, a]
+                if bl != 0.0:
+                    for cc in range(c0, nzu):
+                        H[row, cc] += bl * S[nxt, l, cc]
+            for cc in range(c0, nzu):
+                H[cc, row] = H[row, cc]
+        cur = nxt
+
+    # -- constraint rows that change each step -------------------------------------------------
+    r0 = ip[_I_RATE0]
+    for a in range(nu):
+        if math.isfinite(dmax[a]):
+            b[r0] = u_prev[a] - dmax[a]
+            b[r0 + 1] = -u_prev[a] - dmax[a]
+            r0 += 2
+    m = ip[_I_MCONST]
+    m_lane = m
+    if ip[_I_GAMMA] == 1:
+        # Gam[k] = d x_{k+1} / d z: Gam[k] = A_k Gam[k-1] in the first k blocks, B_k in block k,
+        # zero after it (never written)
+        for k in range(N):
+            for i in range(nx):
+                for cc in range(k * nu):
+                    Gam[k, i, cc] = 0.0
+                for l in range(nx):
+                    al = A[k, i, l]
+                    if al != 0.0:
+                        for cc in range(k * nu):
+                            Gam[k, i, cc] += al * Gam[k - 1, l, cc]
+                for a in range(nu):
+                    Gam[k, i, k * nu + a] = B[k, i, a]
+        for k in range(1, N + 1):
+            for i in range(nx):
+                if math.isfinite(x_min[i]):
+                    rowcol[m] = -1
+                    for jj in range(nzu):
+                        C[m, jj] = Gam[k - 1, i, jj]
+                    for jj in range(nzu, nz):
+                        C[m, jj] = 0.0
+                    b[m] = x_min[i] - xf[k, i]
+                    m += 1
+                if math.isfinite(x_max[i]):
+                    rowcol[m] = -1
+                    for jj in range(nzu):
+                        C[m, jj] = -Gam[k - 1, i, jj]
+                    for jj in range(nzu, nz):
+                        C[m, jj] = 0.0
+                    b[m] = xf[k, i] - x_max[i]
+                    m += 1
+        if lane == 1:
+            m_lane = m
+            Xl = _v2(wbuf, fo, fs, _W_XLIN)
+            for k in range(1, N + 1):
+                # n . p - dhi yaw <= lane_b + hi - dhi yawbar (and the same with lo, >=): the
+                # road's bounds linearized in the yaw (scene.road.body_bounds)
+                n0, n1 = lane_n[k - 1, 0], lane_n[k - 1, 1]
+                dh, dl = lane_dhi[k - 1], lane_dlo[k - 1]
+                nxf = n0 * xf[k, 0] + n1 * xf[k, 1]
+                ybar = Xl[k, 2]
+                for jj in range(nzu):
+                    gp = n0 * Gam[k - 1, 0, jj] + n1 * Gam[k - 1, 1, jj]
+                    gy = Gam[k - 1, 2, jj]
+                    C[m, jj] = -(gp - dh * gy)
+                    C[m + 1, jj] = gp - dl * gy
+                for jj in range(nzu, nz):
+                    C[m, jj] = 0.0
+                    C[m + 1, jj] = 0.0
+                b[m] = nxf - dh * xf[k, 2] - lane_b[k - 1] - lane_hi[k - 1] + dh * ybar
+                b[m + 1] = lane_b[k - 1] + lane_lo[k - 1] - dl * ybar - (nxf - dl * xf[k, 2])
+                rgrp[m] = k - 1
+                rgrp[m + 1] = k - 1
+                rowcol[m] = -1
+                rowcol[m + 1] = -1
+                m += 2
+        if nrow > 0:
+            # obstacle half-planes a . (x_k, y_k, yaw_k) >= b of this step (b = -inf: unused)
+            if lane == 0:
+                m_lane = m
+            for k in range(1, N + 1):
+                for q in range(nrow):
+                    if not rowb[k - 1, q] > -math.inf:
+                        continue
+                    r0_, r1_, r2_ = rowa[k - 1, q, 0], rowa[k - 1, q, 1], rowa[k - 1, q, 2]
+                    for jj in range(nzu):
+                        C[m, jj] = r0_ * Gam[k - 1, 0, jj] + r1_ * Gam[k - 1, 1, jj] + r2_ * Gam[k - 1, 2, jj]
+                    for jj in range(nzu, nz):
+                        C[m, jj] = 0.0
+                    b[m] = rowb[k - 1, q] - (r0_ * xf[k, 0] + r1_ * xf[k, 1] + r2_ * xf[k, 2])
+                    rgrp[m] = N + k - 1
+                    rowcol[m] = -1
+                    m += 1
+
+    # -- solve, then the plan and the command --------------------------------------------------
+    if lane == 1 or nrow > 0:
+        # soft rows (slack groups: lane rows of step k in group k, obstacle rows in N + k) that
+        # the linearization trajectory is on or beyond (within 1 mm)
+        for k in range(2 * N):
+            kpos[k] = 0
+        if lane == 1:
+            for k in range(N):
+                px, py = (Xbar[k + 1, 0], Xbar[k + 1, 1]) if k < N - 1 else (F[N - 1, 0], F[N - 1, 1])
+                dev = lane_n[k, 0] * px + lane_n[k, 1] * py - lane_b[k]
+                if dev > lane_hi[k] - 1e-3 or dev < lane_lo[k] + 1e-3:
+                    kpos[k] = 1
+        if nrow > 0:
+            for k in range(N):
+                Xl = Xbar[k + 1] if k < N - 1 else F[N - 1]
+                for q in range(nrow):
+                    if rowb[k, q] > -math.inf and (rowa[k, q, 0] * Xl[0] + rowa[k, q, 1] * Xl[1]
+                                                    + rowa[k, q, 2] * Xl[2] < rowb[k, q] + 1e-3):
+                        kpos[N + k] = 1
+        for f0 in range(0, 2 * N, N):  # and the 3 steps after each (RTI plans move a little)
+            for k in range(N - 1, 0, -1):
+                if kpos[f0 + k - 1] == 1 or (k >= 2 and kpos[f0 + k - 2] == 1) or (k >= 3 and kpos[f0 + k - 3] == 1):
+                    kpos[f0 + k] = 1
+        code, iters = soft_solve(H, g, C, b, m, m_lane, rgrp, N, nzu, kpos, fp[_F_SLACK2], fp[_F_SLACK1],
+                                 fp[_F_OSLACK2], fp[_F_OSLACK1], _v1(wbuf, fo, _W_GSUM), z, lamq,
+                                 active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, ip[_I_MAXITER],
+                                 fp[_F_TOL])
+    else:
+        code, iters = gi_solve(H, g, C, b, m, nz, z, lamq, active, isact, rowcol, L, J, Rq, d, zdir, r, uq,
+                               sq, rown, ip[_I_MAXITER], fp[_F_TOL])
+    info[_O_ITER] = iters
+    if code != 0:
+        return code
+    _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out)
+    return 0
+
+
+@njit(cache=True)
+def _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out):
+    """out = [u (nu) = U_0 clipped to the input bounds, X ((N+1) nx) rolled out through the
+    linearized model, U (N nu), xref ((N+1) nx)]."""
+    oX = nu
+    oU = oX + (N + 1) * nx
+    oR = oU + N * nu
+    for i in range(nx):
+        out[oX + i] = x[i]
+    for k in range(N):
+        for i in range(nx):
+            t = c[k, i]
+            for j in range(nx):
+                t += A[k, i, j] * out[oX + k * nx + j]
+            for a in range(nu):
+                t += B[k, i, a] * z[k * nu + a]
+            out[oX + (k + 1) * nx + i] = t
+    for j in range(N * nu):
+        out[oU + j] = z[j]
+    for k in range(N + 1):
+        for i in range(nx):
+            out[oR + k * nx + i] = xref[k, i]
+    for a in range(nu):
+        out[a] = min(max(z[a], u_min[a]), u_max[a])
+
+
+# numba caches _control_step keyed to this file only; it inlines code from these
+from .. import _jitcache  # noqa: E402
+from ..models import compiled as _models_compiled, dynamic as _dynamic, kinematic as _kinematic  # noqa: E402
+from ..paths import compiled as _paths_compiled, profile_compiled as _profile_compiled  # noqa: E402
+from ..scene import road as _road  # noqa: E402
+from ..solvers import condensed as _condensed, dense_qp as _dense_qp  # noqa: E402
+
+_jitcache.refresh(_control_step, [m.__file__ for m in (_kinematic, _dynamic, _models_compiled, _paths_compiled,
+                                                       _profile_compiled, _road, _dense_qp, _condensed)
+                                  if m.__file__ is not None])
