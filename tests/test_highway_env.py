@@ -312,7 +312,8 @@ def test_highway_v0_overtakes_a_slower_car_without_a_crash(gym):
     """highway-v0 with its default traffic (50 IDM/MOBIL cars, all slower than the ego wants):
     the MPC with the lane decision layer stays on the road, never crashes, and in a seed where
     a slower car is ahead it changes lanes and passes a car that was ahead of it in its lane."""
-    from mpcdrive.adapters.highway_env import highway_config, highway_episode
+    from mpcdrive.adapters.highway_env import highway_config
+    from mpcdrive.adapters.highway_eval import highway_episode
 
     env = gym.make("highway-v0", config=highway_config(duration_s=40.0))
     ep = highway_episode(env, 11)  # a seed with slower cars ahead of the ego in its lane
