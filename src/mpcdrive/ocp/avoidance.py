@@ -27,10 +27,12 @@ from typing import Literal
 import numpy as np
 
 from ..paths.base import Path
+from ..paths.compiled import PathArrays, path_arrays
 from ..scene.footprint import Footprint
 from ..scene.geometry import points_polygons
 from ..scene.obstacles import Circle, Obstacle, Polygon, WorldCircle
 from ..scene.road import Road
+from . import avoidance_compiled as _ac
 
 Formulation = Literal["hard", "corridor", "potential", "gaussian"]
 SIDE_LEFT, SIDE_RIGHT, SIDE_BLOCKED = 1, -1, 0
@@ -226,12 +228,44 @@ class Avoidance:
         self._g = np.zeros((N, 2))
         self._e_ref = np.zeros(N1)
         self._always = np.ones(N, bool)  # the presence of an obstacle without a lifetime
+        #: build with the compiled kernels (``ocp.avoidance_compiled``) where they apply: the
+        #: selection when every obstacle is static or at constant velocity, the tracks of such
+        #: obstacles and the hard rows on a path ``path_arrays`` describes; False: the numpy
+        #: code everywhere (the reference the kernels are tested against)
+        self.compiled = True
+        self._table: _ac.ObstacleTable | None = None
+        self._table_ids: tuple = ()
+        self._cpath: PathArrays | None = None
+        self._cpath_of: Path | None = None
+        self._sel = np.empty(config.max_obstacles, np.int64)
+        self._present_all = np.ones((config.max_obstacles, N), bool)
+
+    # -- compiled descriptions (rebuilt when the obstacles or the path are replaced) ---------
+    def _obstacle_table(self) -> _ac.ObstacleTable:
+        ids = tuple(map(id, self.obstacles))
+        if self._table is None or ids != self._table_ids:  # the table holds them: ids stay unique
+            self._table, self._table_ids = _ac.obstacle_table(self.obstacles), ids
+        return self._table
+
+    def _compiled_path(self) -> PathArrays | None:
+        if not self.compiled:
+            return None
+        if self._cpath_of is not self.path:
+            self._cpath, self._cpath_of = path_arrays(self.path), self.path
+        return self._cpath
 
     # -- helpers ----------------------------------------------------------------------
     def relevant(self, t_s: float, xy: np.ndarray) -> list[int]:
         """Indices of the obstacles a step at time ``t_s`` [s] from position ``xy`` [m] considers:
         those present at some time of the horizon and within the influence distance (centre
         distance minus bounding radius), nearest first, at most max_obstacles."""
+        if self.compiled:
+            tab = self._obstacle_table()
+            if tab.all_simple:
+                n = _ac.select(float(t_s), float(xy[0]), float(xy[1]), t_s + self.N * self.dt_s,
+                               self.config.influence_m, tab.pose, tab.vel, tab.bound_r, tab.life, tab.has_life,
+                               self.config.max_obstacles, self._sel)
+                return self._sel[:n].tolist()
         reach = self.config.influence_m
         t_end = t_s + self.N * self.dt_s
         d = []
@@ -290,7 +324,53 @@ class Avoidance:
     def _tracks(self, rel: list[int], t_s: float, s_arr: np.ndarray):
         """Obstacles ``rel`` over the horizon, dicts by index: Frenet boxes (N+1), centres (N+1, 2)
         and, for a polygon, world vertices (N+1, M, 2) (None for a circle); a static obstacle is
-        placed and projected once. The shapes of one kind are projected together."""
+        placed and projected once. The shapes of one kind are projected together. Also returns
+        the tracks packed for the compiled rows (:meth:`_packed`), or None when built in numpy."""
+        cpath = self._compiled_path()
+        if cpath is not None:
+            tab = self._obstacle_table()
+            if tab.all_simple or all(tab.simple[j] for j in rel):
+                return self._tracks_compiled(cpath, tab, rel, t_s, s_arr)
+        return (*self._tracks_numpy(rel, t_s, s_arr), None)
+
+    def _tracks_compiled(self, cpath: PathArrays, tab: _ac.ObstacleTable, rel: list[int], t_s: float,
+                         s_arr: np.ndarray):
+        """:meth:`_tracks` of static and constant-velocity obstacles, compiled."""
+        n, K = len(rel), self.N + 1
+        sel = np.array(rel, np.int64)
+        centers_a = np.empty((n, K, 2))
+        outlines_a = np.empty((n, K, tab.verts.shape[1], 2))
+        box = np.empty((n, 5, K))
+        _ac.tracks(cpath.kind, cpath.geo, cpath.tab_s, cpath.tab_xy, cpath.tab_h, cpath.tab_k, float(t_s),
+                   float(self.dt_s), s_arr, sel, tab.pose, tab.vel, tab.moving, tab.shape, tab.radius, tab.verts,
+                   tab.nverts, centers_a, outlines_a, box)
+        boxes = {j: FrenetBoxes(*box[i]) for i, j in enumerate(rel)}
+        centers = {j: centers_a[i] for i, j in enumerate(rel)}
+        outlines = {j: None if tab.shape[j] == _ac.SHAPE_CIRCLE else outlines_a[i, :, :tab.nverts[j]]
+                    for i, j in enumerate(rel)}
+        packed = (tab.shape[sel], tab.radius[sel], centers_a, outlines_a, tab.nverts[sel], box)
+        return boxes, centers, outlines, packed
+
+    def _packed(self, rel: list[int], boxes, centers, outlines):
+        """The tracks of obstacles ``rel`` as the compiled rows take them: shapes, radii (n,),
+        centres (n, K, 2), vertices (n, K, V, 2), vertex counts (n,), Frenet boxes (n, 5, K)."""
+        n, K = len(rel), self.N + 1
+        V = max([3] + [o.shape[1] for o in (outlines[j] for j in rel) if o is not None])
+        shape, nverts, radius = np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n)
+        outlines_a = np.zeros((n, K, V, 2))
+        for i, j in enumerate(rel):
+            o = outlines[j]
+            if o is None:
+                radius[i] = _radius(self.obstacles[j])
+            else:
+                shape[i], nverts[i] = _ac.SHAPE_POLYGON, o.shape[1]
+                outlines_a[i, :, :o.shape[1]] = o
+        centers_a = np.array([centers[j] for j in rel], float).reshape(n, K, 2)
+        box = np.array([[getattr(boxes[j], f) for f in ("s_ref", "s_lo", "s_hi", "e_lo", "e_hi")] for j in rel],
+                       float).reshape(n, 5, K)
+        return shape, radius, centers_a, outlines_a, nverts, box
+
+    def _tracks_numpy(self, rel: list[int], t_s: float, s_arr: np.ndarray):
         K = self.N + 1
         times = t_s + self.dt_s * np.arange(K)
         centers: dict[int, np.ndarray] = {}
@@ -338,7 +418,7 @@ class Avoidance:
         cfg = self.config
         rel = self.relevant(t_s, x[:2])
         sides: dict[int, int] = {}
-        boxes, centers, world = self._tracks(rel, t_s, s_arr)
+        boxes, centers, world, packed = self._tracks(rel, t_s, s_arr)
         for j in rel:
             bx = boxes[j]
             # a moving obstacle is judged where the car meets it: the horizon step at which the
@@ -357,7 +437,8 @@ class Avoidance:
         if cfg.detour == "trapezoid":
             e_ref = self._detour(s_arr, {j: b for j, b in boxes.items() if j not in following}, sides)
         if cfg.formulation == "hard":
-            rows_a, rows_b = self._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present, following)
+            rows_a, rows_b = self._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present, following,
+                                             packed)
         elif cfg.formulation == "corridor":
             lo, hi, rows_a, rows_b = self._corridor(Xlin, s_arr, [j for j in rel if j not in following], boxes,
                                                     sides, present, road_lo, road_hi)
@@ -451,7 +532,37 @@ class Avoidance:
         t = np.column_stack([np.cos(h), np.sin(h)])
         return t, self.path.position(s_bar) + t * (s_lo - s_bar)[:, None]
 
-    def _hard_rows(self, Xlin, s_arr, rel, boxes, centers, world, sides, present, following=frozenset()):
+    def _hard_rows(self, Xlin, s_arr, rel, boxes, centers, world, sides, present, following=frozenset(),
+                   packed=None):
+        """The hard rows (N, M, 3), (N, M) of the obstacles ``rel``: compiled on a path
+        ``path_arrays`` describes (``packed``: the tracks as :meth:`_packed` gives them, made
+        from the others when None), else :meth:`_hard_rows_numpy`."""
+        cpath = self._compiled_path()
+        if cpath is None:
+            return self._hard_rows_numpy(Xlin, s_arr, rel, boxes, centers, world, sides, present, following)
+        a, b = self._a, self._b
+        if packed is None:
+            packed = self._packed(rel, boxes, centers, world)
+        n = len(rel)
+        side = np.array([sides[j] for j in rel], np.int64)
+        mode = np.zeros(n, np.int64)
+        for i, j in enumerate(rel):  # the stop and keep-ahead rows, as _hard_rows_numpy picks them
+            if sides[j] == SIDE_BLOCKED and self._blocks_ahead(boxes[j][0], s_arr):
+                mode[i] = _ac.MODE_STOP
+            elif j in following:
+                mode[i] = _ac.MODE_AHEAD
+        if all(present[j] is self._always for j in rel):
+            pres = self._present_all[:n]
+        else:
+            pres = np.array([present[j] for j in rel], bool).reshape(n, self.N)
+        shape, radius, centers_a, outlines_a, nverts, box = packed
+        _ac.hard_rows(cpath.kind, cpath.geo, cpath.tab_s, cpath.tab_xy, cpath.tab_h, cpath.tab_k, Xlin, s_arr,
+                      np.asarray(self.offsets, float), float(self.r_disc), float(self.config.margin_m),
+                      float(self.half_length), float(self.config.influence_m), shape, radius, centers_a, outlines_a,
+                      nverts, box, side, mode, pres, a, b)
+        return a, b
+
+    def _hard_rows_numpy(self, Xlin, s_arr, rel, boxes, centers, world, sides, present, following=frozenset()):
         a, b = self._a, self._b
         a[:] = 0.0
         b[:] = -np.inf

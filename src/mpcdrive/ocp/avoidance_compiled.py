@@ -1,0 +1,305 @@
+"""Compiled (numba) kernels of :mod:`mpcdrive.ocp.avoidance` for its hot, per-step part: the
+obstacle selection, the horizon tracks (placement and Frenet boxes) of static and
+constant-velocity obstacles, and the hard avoidance rows, on the paths
+:func:`mpcdrive.paths.compiled.path_arrays` describes (straight, circle, waypoints).
+
+They are the compiled form of the numpy code kept in ``ocp.avoidance`` (``Avoidance.relevant``,
+``Avoidance._tracks``, ``Avoidance._hard_rows``), which still serves every other case (recorded
+trajectories, other path types) and is the reference they are tested against; the rules (which
+obstacle, which side, which row) are decided in one place, ``Avoidance.terms``, and these
+kernels only compute the numbers. Obstacles are described by arrays (see :class:`ObstacleTable`),
+the considered ones in the order of ``relevant``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ..paths.compiled import path_eval, path_project
+from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Static
+
+SHAPE_CIRCLE, SHAPE_POLYGON = 0, 1
+#: the row of an obstacle: avoid it (nearest-point or lateral half-plane), stop behind it
+#: (blocked lane ahead), keep ahead of it (a car following in the lane)
+MODE_AVOID, MODE_STOP, MODE_AHEAD = 0, 1, 2
+#: the fields of a Frenet box, in the order of ``box`` arrays (n, 5, K)
+BOX_S_REF, BOX_S_LO, BOX_S_HI, BOX_E_LO, BOX_E_HI = 0, 1, 2, 3, 4
+
+
+@dataclass(frozen=True, eq=False)
+class ObstacleTable:
+    """The obstacles of a list as arrays, obstacle j in row j: ``pose`` (n, 3) at t = 0, ``vel``
+    (n, 2) world velocity [m/s] (0 when static), ``moving`` (n,), ``simple`` (n,) (static or
+    constant velocity: the compiled tracks place it), ``shape`` (n,) (SHAPE_*), ``radius`` (n,)
+    (circles), ``verts`` (n, V, 2) body-frame vertices of polygons (the first ``nverts`` (n,) of
+    V), ``bound_r`` (n,) bounding radii, ``life`` (n, 2) lifetimes, ``has_life`` (n,).
+    ``all_simple``: every obstacle is simple. ``obstacles`` keeps the list it was made of."""
+
+    obstacles: tuple
+    pose: np.ndarray
+    vel: np.ndarray
+    moving: np.ndarray
+    simple: np.ndarray
+    shape: np.ndarray
+    radius: np.ndarray
+    verts: np.ndarray
+    nverts: np.ndarray
+    bound_r: np.ndarray
+    life: np.ndarray
+    has_life: np.ndarray
+    all_simple: bool
+
+
+def obstacle_table(obstacles: list[Obstacle]) -> ObstacleTable:
+    """The :class:`ObstacleTable` of ``obstacles``."""
+    n = len(obstacles)
+    V = max([3] + [len(ob.shape.points) for ob in obstacles if not isinstance(ob.shape, Circle)])
+    pose, vel, verts, life = np.zeros((n, 3)), np.zeros((n, 2)), np.zeros((n, V, 2)), np.zeros((n, 2))
+    moving, simple, has_life = np.zeros(n, np.bool_), np.zeros(n, np.bool_), np.zeros(n, np.bool_)
+    shape, nverts = np.zeros(n, np.int64), np.zeros(n, np.int64)
+    radius, bound_r = np.zeros(n), np.zeros(n)
+    for j, ob in enumerate(obstacles):
+        pose[j] = ob.pose
+        moving[j] = ob.moving
+        if type(ob.motion) is ConstantVelocity:
+            vel[j] = ob.motion.vx_mps, ob.motion.vy_mps
+        simple[j] = type(ob.motion) in (Static, ConstantVelocity)
+        if isinstance(ob.shape, Circle):
+            shape[j], radius[j] = SHAPE_CIRCLE, ob.shape.radius_m
+        else:
+            pts = np.asarray(ob.shape.points, float)
+            shape[j], nverts[j] = SHAPE_POLYGON, len(pts)
+            verts[j, : len(pts)] = pts
+        bound_r[j] = ob.shape.bounding_radius_m
+        life[j] = ob.t_start_s, ob.t_end_s
+        has_life[j] = ob.has_lifetime
+    return ObstacleTable(tuple(obstacles), pose, vel, moving, simple, shape, radius, verts, nverts, bound_r, life,
+                         has_life, bool(simple.all()))
+
+
+@njit(cache=True)
+def select(t_s, x, y, t_end, reach, pose, vel, bound_r, life, has_life, max_n, out):
+    """``Avoidance.relevant``: indices of the obstacles present at some time of [t_s, t_end] [s]
+    whose pose at ``t_s`` minus the bounding radius ``bound_r`` (n,) lies within ``reach`` [m]
+    of (x, y), nearest first (ties by index), at most ``max_n``, into ``out``; returns how many.
+    pose (n, 3) at t = 0 and vel (n, 2) world velocity [m/s] (0 for a static obstacle);
+    life (n, 2) lifetimes [s], used where ``has_life``."""
+    n = pose.shape[0]
+    dist = np.empty(n)
+    ok = np.zeros(n, np.bool_)
+    for j in range(n):
+        if has_life[j] and (life[j, 1] < t_s or life[j, 0] > t_end):
+            continue
+        ox = pose[j, 0] + vel[j, 0] * t_s
+        oy = pose[j, 1] + vel[j, 1] * t_s
+        d = math.hypot(ox - x, oy - y) - bound_r[j]
+        if d <= reach:
+            dist[j] = d
+            ok[j] = True
+    count = 0
+    while count < max_n:
+        best = -1
+        for j in range(n):
+            if ok[j] and (best < 0 or dist[j] < dist[best]):
+                best = j
+        if best < 0:
+            break
+        ok[best] = False
+        out[count] = best
+        count += 1
+    return count
+
+
+@njit(cache=True)
+def tracks(kind, geo, tab_s, tab_xy, tab_h, tab_k, t_s, dt_s, s_arr, sel, pose, vel, moving, shape, radius,
+           verts, nverts, centers, outlines, box):
+    """``Avoidance._tracks`` of static and constant-velocity obstacles ``sel`` (n,) over the K =
+    len(s_arr) horizon times ``t_s + k dt_s``: centres (n, K, 2), world vertices (n, K, V, 2) of
+    polygons (the first ``nverts`` of V) and Frenet boxes (n, 5, K) (``frenet_boxes``: a disc's
+    centre, a polygon's vertex mean projected near ``s_arr[k]``), into those arrays. A static
+    obstacle is placed and projected once, near ``s_arr[0]``, and repeated."""
+    K = s_arr.shape[0]
+    for i in range(sel.shape[0]):
+        j = sel[i]
+        nk = K if moving[j] else 1
+        nv = nverts[j]
+        for k in range(nk):
+            t = t_s + dt_s * k
+            if moving[j]:
+                x = pose[j, 0] + vel[j, 0] * t
+                y = pose[j, 1] + vel[j, 1] * t
+            else:
+                x = pose[j, 0] + 0.0
+                y = pose[j, 1] + 0.0
+            yaw = pose[j, 2] + 0.0
+            centers[i, k, 0] = x
+            centers[i, k, 1] = y
+            g = s_arr[k]
+            gx, gy, _, _ = path_eval(kind, geo, tab_s, tab_xy, tab_h, tab_k, g)
+            if shape[j] == SHAPE_CIRCLE:
+                r = radius[j]
+                far = math.hypot(x - gx, y - gy)
+                s, e = path_project(kind, geo, tab_s, tab_xy, g, max(2.0, 2 * r) + far, x, y)
+                box[i, BOX_S_REF, k] = s
+                box[i, BOX_S_LO, k] = s - r
+                box[i, BOX_S_HI, k] = s + r
+                box[i, BOX_E_LO, k] = e - r
+                box[i, BOX_E_HI, k] = e + r
+                continue
+            c, sn = math.cos(yaw), math.sin(yaw)
+            mx, my = 0.0, 0.0
+            lo, hi = math.inf, -math.inf
+            for m in range(nv):
+                px, py = verts[j, m, 0], verts[j, m, 1]
+                wx = x + c * px - sn * py
+                wy = y + sn * px + c * py
+                outlines[i, k, m, 0] = wx
+                outlines[i, k, m, 1] = wy
+                mx += wx
+                my += wy
+                lo = min(lo, wx, wy)
+                hi = max(hi, wx, wy)
+            mx /= nv
+            my /= nv
+            far = math.hypot(mx - gx, my - gy)
+            s, _ = path_project(kind, geo, tab_s, tab_xy, g, 2.0 + (hi - lo) + far, mx, my)
+            qx, qy, h, _ = path_eval(kind, geo, tab_s, tab_xy, tab_h, tab_k, s)
+            ch, sh = math.cos(h), math.sin(h)
+            a_lo, a_hi, e_lo, e_hi = math.inf, -math.inf, math.inf, -math.inf
+            for m in range(nv):
+                dx = outlines[i, k, m, 0] - qx
+                dy = outlines[i, k, m, 1] - qy
+                along = dx * ch + dy * sh
+                across = dy * ch - dx * sh
+                a_lo = min(a_lo, along)
+                a_hi = max(a_hi, along)
+                e_lo = min(e_lo, across)
+                e_hi = max(e_hi, across)
+            box[i, BOX_S_REF, k] = s
+            box[i, BOX_S_LO, k] = s + a_lo
+            box[i, BOX_S_HI, k] = s + a_hi
+            box[i, BOX_E_LO, k] = e_lo
+            box[i, BOX_E_HI, k] = e_hi
+        for k in range(nk, K):  # a static obstacle: the same at every time
+            centers[i, k, 0] = centers[i, 0, 0]
+            centers[i, k, 1] = centers[i, 0, 1]
+            for m in range(nv):
+                outlines[i, k, m, 0] = outlines[i, 0, m, 0]
+                outlines[i, k, m, 1] = outlines[i, 0, m, 1]
+            for f in range(5):
+                box[i, f, k] = box[i, f, 0]
+
+
+@njit(cache=True)
+def _nearest(px, py, shape, radius, centers, outlines, nv, i, k):
+    """Signed distance [m] and nearest boundary point of (px, py) to obstacle i at time k
+    (``Avoidance._nearest``: a disc, or a convex ccw polygon as ``points_polygons``)."""
+    if shape == SHAPE_CIRCLE:
+        cx, cy = centers[i, k, 0], centers[i, k, 1]
+        vx, vy = px - cx, py - cy
+        n = max(math.hypot(vx, vy), 1e-12)
+        return n - radius, cx + radius * vx / n, cy + radius * vy / n
+    best, qx, qy = math.inf, 0.0, 0.0
+    inside = True
+    for m in range(nv):
+        ax, ay = outlines[i, k, m, 0], outlines[i, k, m, 1]
+        m1 = m + 1 if m + 1 < nv else 0
+        dx, dy = outlines[i, k, m1, 0] - ax, outlines[i, k, m1, 1] - ay
+        rx, ry = px - ax, py - ay
+        t = min(max((rx * dx + ry * dy) / (dx * dx + dy * dy), 0.0), 1.0)
+        cx, cy = ax + t * dx, ay + t * dy
+        d = math.hypot(px - cx, py - cy)
+        if d < best:
+            best, qx, qy = d, cx, cy
+        if not (dx * ry - dy * rx >= 0.0):
+            inside = False
+    return (-best if inside else best), qx, qy
+
+
+@njit(cache=True)
+def hard_rows(kind, geo, tab_s, tab_xy, tab_h, tab_k, Xlin, s_arr, offsets, r_disc, margin, half_length, influence,
+              shape, radius, centers, outlines, nverts, box, side, mode, present, a, b):
+    """``Avoidance._hard_rows``: the hard half-plane rows of the n considered obstacles (in row
+    slots 0..n-1, disc d of slot i in row ``i * len(offsets) + d``) at steps 1..N, into a (N, M, 3)
+    and b (N, M) (unused rows: 0 and -inf). Obstacle i: ``shape``, ``radius`` (n,), centres
+    (n, N+1, 2), vertices (n, N+1, V, 2) (``nverts`` (n,) of them), Frenet boxes (n, 5, N+1),
+    passing ``side`` (n,) (SIDE_*), ``mode`` (n,) (MODE_*) and ``present`` (n, N)."""
+    N = a.shape[0]
+    nd = offsets.shape[0]
+    for k in range(N):
+        for r in range(a.shape[1]):
+            a[k, r, 0] = 0.0
+            a[k, r, 1] = 0.0
+            a[k, r, 2] = 0.0
+            b[k, r] = -math.inf
+    n_obs = shape.shape[0]
+    if n_obs == 0:
+        return
+    r_need = r_disc + margin
+    reach = r_need + half_length
+    acc = 0.0
+    for k in range(N):
+        x0, y0, th = Xlin[k + 1, 0], Xlin[k + 1, 1], Xlin[k + 1, 2]
+        acc += math.hypot(x0 - Xlin[k, 0], y0 - Xlin[k, 1])
+        s_lin = s_arr[0] + acc
+        c, s = math.cos(th), math.sin(th)
+        for i in range(n_obs):
+            sd = side[i]
+            s_lo, s_hi, s_ref = box[i, BOX_S_LO, k + 1], box[i, BOX_S_HI, k + 1], box[i, BOX_S_REF, k + 1]
+            e_edge = box[i, BOX_E_HI, k + 1] if sd == 1 else box[i, BOX_E_LO, k + 1]
+            rx, ry, h, _ = path_eval(kind, geo, tab_s, tab_xy, tab_h, tab_k, s_ref)
+            nlx, nly = -math.sin(h), math.cos(h)
+            qlx, qly = rx + nlx * e_edge, ry + nly * e_edge
+            for d in range(nd):
+                off = offsets[d]
+                px, py = x0 + off * c, y0 + off * s
+                s_disc = s_arr[k + 1] + off
+                dist, qx, qy = _nearest(px, py, shape[i], radius[i], centers, outlines, nverts[i], i, k + 1)
+                vx, vy = px - qx, py - qy
+                nv = max(math.hypot(vx, vy), 1e-12)
+                sg = 1.0 if dist >= 0 else -1.0
+                nx, ny = vx / nv * sg, vy / nv * sg
+                active = dist - r_disc <= influence
+                if sd != 0 and s_lo - reach <= s_disc and s_disc <= s_hi + reach:
+                    nx, ny = sd * nlx, sd * nly
+                    qx, qy = qlx, qly
+                    active = True
+                if mode[i] != MODE_AVOID:
+                    s_at = s_lin + off
+                    if mode[i] == MODE_STOP:  # behind its near end at that step
+                        s_bar = min(s_at, s_lo - r_need)
+                        s_end = s_lo
+                    else:  # ahead of its far end
+                        s_bar = max(s_at, s_hi + r_need)
+                        s_end = s_hi
+                    bx, by, bh, _ = path_eval(kind, geo, tab_s, tab_xy, tab_h, tab_k, s_bar)
+                    tx, ty = math.cos(bh), math.sin(bh)
+                    qx, qy = bx + tx * (s_end - s_bar), by + ty * (s_end - s_bar)
+                    if mode[i] == MODE_STOP:
+                        nx, ny = -tx, -ty
+                    else:
+                        nx, ny = tx, ty
+                    active = True
+                if not (active and present[i, k]):
+                    continue
+                ay = off * (-nx * s + ny * c)
+                rhs = (nx * qx + ny * qy) + r_need - (nx * px + ny * py) + nx * x0 + ny * y0 + ay * th
+                row = i * nd + d
+                a[k, row, 0] = nx
+                a[k, row, 1] = ny
+                a[k, row, 2] = ay
+                b[k, row] = rhs
+
+
+def _refresh_cache() -> None:
+    from .. import _jitcache
+    from ..paths import compiled as _paths_compiled
+
+    _jitcache.refresh(hard_rows, [_paths_compiled.__file__])  # one file: one fingerprint for all
+
+
+_refresh_cache()

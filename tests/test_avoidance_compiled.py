@@ -1,0 +1,221 @@
+"""The compiled obstacle kernels (ocp.avoidance_compiled) against the numpy reference kept in
+ocp.avoidance: selection, tracks and hard rows on random instances, and the terms of a recorded
+P4 drive."""
+
+import copy
+
+import numpy as np
+import pytest
+
+from mpcdrive.bench.problems import PROBLEMS
+from mpcdrive.bench.runner import make_controller
+from mpcdrive.ocp.avoidance import SIDE_BLOCKED, SIDE_LEFT, SIDE_RIGHT, Avoidance, AvoidanceConfig, AvoidanceMemory
+from mpcdrive.paths import CirclePath, StraightPath
+from mpcdrive.paths.waypoints import WaypointPath
+from mpcdrive.scene import Circle, ConstantVelocity, Footprint, Obstacle, TrajectoryMotion, rectangle
+from mpcdrive.scene.obstacles import Polygon
+from mpcdrive.scene.road import Road
+from mpcdrive.sim import Plant
+
+TOL = 1e-12
+N, DT = 20, 0.1
+
+
+def _paths():
+    t = np.linspace(0.0, 60.0, 40)
+    return {"straight": StraightPath([0.0, 0.0], [80.0, 5.0]),
+            "circle": CirclePath((0.0, 0.0), 25.0, ccw=True),
+            "waypoints": WaypointPath(np.column_stack([t, 4.0 * np.sin(t / 9.0)]))}
+
+
+def _scene(rng, path, n_obs, lifetimes, trajectories=False):
+    """Random circles, rectangles and pentagons near the first 40 m of ``path``, static or at
+    constant velocity (or on a recorded trajectory), some with lifetimes."""
+    obstacles = []
+    for j in range(n_obs):
+        s = rng.uniform(0.0, 40.0)
+        p = path.position(s) + rng.normal(0.0, 2.0, 2)
+        yaw = float(path.heading(s)) + rng.normal(0.0, 0.3)
+        kind = rng.integers(3)
+        if kind == 0:
+            shape = Circle(float(rng.uniform(0.3, 1.5)))
+        elif kind == 1:
+            shape = rectangle(float(rng.uniform(1.0, 5.0)), float(rng.uniform(0.5, 2.0)))
+        else:
+            a = np.sort(rng.uniform(0.0, 2 * np.pi, 5))
+            shape = Polygon(np.column_stack([np.cos(a), np.sin(a)]) * rng.uniform(0.5, 1.5))
+        motion = rng.integers(3 if trajectories else 2)
+        if motion == 0:
+            m = None
+        elif motion == 1:
+            m = ConstantVelocity(float(rng.uniform(-3.0, 8.0)), float(rng.uniform(-1.0, 1.0)))
+        else:
+            ts = np.linspace(0.0, 5.0, 11)
+            m = TrajectoryMotion(ts, 3.0 * ts, 0.2 * ts, 0.05 * ts)
+        life = {}
+        if lifetimes and rng.random() < 0.4:
+            t0 = float(rng.uniform(-1.0, 1.5))
+            life = {"t_start_s": t0, "t_end_s": t0 + float(rng.uniform(0.0, 2.0))}
+        kw = {} if m is None else {"motion": m}
+        obstacles.append(Obstacle(shape, (*p, yaw), name=f"o{j}", **kw, **life))
+    return obstacles
+
+
+def _state(rng, path):
+    """A horizon along ``path``: reference arc lengths (N+1,) and a linearization (N+1, 4) near
+    them."""
+    s0 = rng.uniform(0.0, 20.0)
+    s_arr = s0 + rng.uniform(0.5, 2.0) * np.arange(N + 1)
+    h = np.asarray(path.heading(s_arr), float)
+    xy = path.position(s_arr) + rng.normal(0.0, 0.5, (N + 1, 2))
+    Xlin = np.column_stack([xy, h + rng.normal(0.0, 0.1, N + 1), np.full(N + 1, 10.0)])
+    return s_arr, Xlin
+
+
+def _pair(obstacles, path, cfg, road=None, fp=None):
+    fp = fp or Footprint(4.5, 1.8, n_discs=3)
+    comp = Avoidance(cfg, obstacles, path, fp, N, DT, road)
+    ref = Avoidance(cfg, obstacles, path, fp, N, DT, road)
+    ref.compiled = False
+    return comp, ref
+
+
+def _same_terms(t1, t2):
+    assert t1.sides == t2.sides
+    np.testing.assert_allclose(t1.rows_a, t2.rows_a, rtol=0, atol=TOL)
+    assert np.array_equal(np.isinf(t1.rows_b), np.isinf(t2.rows_b))
+    fin = np.isfinite(t2.rows_b)
+    np.testing.assert_allclose(t1.rows_b[fin], t2.rows_b[fin], rtol=0, atol=TOL)
+
+
+@pytest.mark.parametrize("name", ["straight", "circle", "waypoints"])
+def test_compiled_terms_match_numpy_on_random_scenes(name):
+    rng = np.random.default_rng(7)
+    path = _paths()[name]
+    cfg = AvoidanceConfig("hard", margin_m=0.3, influence_m=30.0, max_obstacles=4)
+    for trial in range(30):
+        obstacles = _scene(rng, path, int(rng.integers(1, 9)), lifetimes=trial % 2 == 1)
+        road = Road.constant(float(rng.uniform(4.0, 12.0))) if trial % 3 else None
+        comp, ref = _pair(obstacles, path, cfg, road)
+        mem1, mem2 = AvoidanceMemory(), AvoidanceMemory()
+        for step in range(3):
+            t_s = 0.3 * step
+            s_arr, Xlin = _state(rng, path)
+            assert comp.relevant(t_s, Xlin[0, :2]) == ref.relevant(t_s, Xlin[0, :2])
+            t1 = comp.terms(t_s, Xlin[0], Xlin, s_arr, mem1)
+            t2 = ref.terms(t_s, Xlin[0], Xlin, s_arr, mem2)
+            _same_terms(t1, t2)
+            assert mem1.sides == mem2.sides
+
+
+@pytest.mark.parametrize("name", ["straight", "circle", "waypoints"])
+def test_compiled_tracks_match_numpy(name):
+    rng = np.random.default_rng(11)
+    path = _paths()[name]
+    cfg = AvoidanceConfig("hard", margin_m=0.2, influence_m=50.0, max_obstacles=6)
+    for _ in range(20):
+        obstacles = _scene(rng, path, 6, lifetimes=False)
+        comp, ref = _pair(obstacles, path, cfg)
+        s_arr, _ = _state(rng, path)
+        rel = list(rng.permutation(6)[: int(rng.integers(0, 7))])
+        b1, c1, o1, packed = comp._tracks(rel, 0.7, s_arr)
+        b2, c2, o2, none = ref._tracks(rel, 0.7, s_arr)
+        assert packed is not None and none is None
+        for j in rel:
+            np.testing.assert_allclose(c1[j], c2[j], rtol=0, atol=TOL)
+            assert (o1[j] is None) == (o2[j] is None)
+            if o1[j] is not None:
+                np.testing.assert_allclose(o1[j], o2[j], rtol=0, atol=TOL)
+            for f in ("s_ref", "s_lo", "s_hi", "e_lo", "e_hi"):
+                np.testing.assert_allclose(getattr(b1[j], f), getattr(b2[j], f), rtol=0, atol=TOL)
+
+
+@pytest.mark.parametrize("name", ["straight", "circle", "waypoints"])
+def test_compiled_rows_match_numpy_for_every_side_and_mode(name):
+    """The rows kernel for random sides, followers and lifetimes (terms picks them by rule; here
+    every combination), from compiled tracks and from numpy tracks (recorded trajectories)."""
+    rng = np.random.default_rng(5)
+    path = _paths()[name]
+    cfg = AvoidanceConfig("hard", margin_m=0.25, influence_m=float(rng.uniform(2.0, 30.0)), max_obstacles=5)
+    for trial in range(40):
+        obstacles = _scene(rng, path, 5, lifetimes=True, trajectories=trial % 2 == 0)
+        comp, ref = _pair(obstacles, path, cfg, fp=Footprint(4.0, 1.7, 1.0, n_discs=int(rng.integers(1, 4))))
+        s_arr, Xlin = _state(rng, path)
+        t_s = float(rng.uniform(0.0, 1.0))
+        rel = list(rng.permutation(5)[: int(rng.integers(0, 6))])
+        sides = {j: int(rng.choice([SIDE_LEFT, SIDE_RIGHT, SIDE_BLOCKED])) for j in rel}
+        following = {j for j in rel if rng.random() < 0.3}
+        times = t_s + DT * np.arange(1, N + 1)
+        present = {j: obstacles[j].present(times) if obstacles[j].has_lifetime else ref._always for j in rel}
+        boxes, centers, world, packed = comp._tracks(rel, t_s, s_arr)
+        assert (packed is None) == any(isinstance(obstacles[j].motion, TrajectoryMotion) for j in rel)
+        a1, b1 = (v.copy() for v in comp._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present,
+                                                    following, packed))
+        a3, b3 = (v.copy() for v in comp._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present,
+                                                    following))
+        boxes, centers, world, _ = ref._tracks(rel, t_s, s_arr)
+        a2, b2 = ref._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present, following)
+        for a, b in ((a1, b1), (a3, b3)):
+            np.testing.assert_allclose(a, a2, rtol=0, atol=TOL)
+            assert np.array_equal(np.isinf(b), np.isinf(b2))
+            np.testing.assert_allclose(b[np.isfinite(b2)], b2[np.isfinite(b2)], rtol=0, atol=TOL)
+
+
+def test_recorded_trajectories_keep_the_numpy_selection_and_tracks():
+    rng = np.random.default_rng(3)
+    path = _paths()["straight"]
+    obstacles = _scene(rng, path, 6, lifetimes=True, trajectories=True)
+    obstacles.append(Obstacle(Circle(1.0), (10.0, 0.0, 0.0), TrajectoryMotion(np.array([0.0, 1.0]), np.zeros(2),
+                                                                             np.zeros(2), np.zeros(2))))
+    comp, ref = _pair(obstacles, path, AvoidanceConfig("hard", influence_m=40.0, max_obstacles=7))
+    assert not comp._obstacle_table().all_simple
+    for _ in range(5):
+        s_arr, Xlin = _state(rng, path)
+        _same_terms(comp.terms(0.4, Xlin[0], Xlin, s_arr, AvoidanceMemory()),
+                    ref.terms(0.4, Xlin[0], Xlin, s_arr, AvoidanceMemory()))
+
+
+def test_obstacle_table_follows_replaced_obstacles():
+    path = _paths()["straight"]
+    comp, _ = _pair([Obstacle(Circle(1.0), (5.0, 0.0, 0.0))], path, AvoidanceConfig("hard", influence_m=50.0))
+    assert comp.relevant(0.0, np.zeros(2)) == [0]
+    comp.obstacles = [Obstacle(Circle(1.0), (90.0, 0.0, 0.0)), Obstacle(Circle(1.0), (4.0, 0.0, 0.0))]
+    assert comp.relevant(0.0, np.zeros(2)) == [1]
+
+
+@pytest.mark.parametrize("backend", ["fast", "osqp"])
+def test_p4_drive_rows_compiled_equal_numpy(backend):
+    """On a recorded P4 drive (the first 60 steps, the controller's own inputs), the compiled
+    terms equal the numpy reference's to 1e-12: rows, sides and the side memory."""
+    prob = PROBLEMS["P4"]()
+    c = make_controller(prob, backend)
+    av = c.avoidance
+    assert av.compiled and av._compiled_path() is not None and av._obstacle_table().all_simple
+    ref = copy.copy(av)
+    ref.compiled = False
+    ref._a, ref._b = av._a.copy(), av._b.copy()
+    checked = []
+    real = av.terms
+
+    def recording(t_s, x, Xlin, s_arr, memory, *rest):
+        before = copy.deepcopy(memory)
+        out = real(t_s, x, Xlin, s_arr, memory, *rest)
+        got = (out.rows_a.copy(), out.rows_b.copy(), dict(out.sides), dict(memory.sides))
+        want = ref.terms(t_s, x, Xlin, s_arr, before, *rest)
+        checked.append((got, (want.rows_a.copy(), want.rows_b.copy(), dict(want.sides), dict(before.sides))))
+        return out
+
+    av.terms = recording
+    plant = Plant(prob.model)
+    x = prob.x0.copy()
+    warm = c.initial_warm(x)
+    for _ in range(60):
+        out = c.step(x, warm)
+        warm = out.warm
+        x = plant.step(x, out.u, prob.dt_s)
+    assert len(checked) >= 60
+    for (a1, b1, s1, m1), (a2, b2, s2, m2) in checked:
+        assert s1 == s2 and m1 == m2
+        np.testing.assert_allclose(a1, a2, rtol=0, atol=TOL)
+        assert np.array_equal(np.isinf(b1), np.isinf(b2))
+        np.testing.assert_allclose(b1[np.isfinite(b2)], b2[np.isfinite(b2)], rtol=0, atol=TOL)
