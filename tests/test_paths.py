@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mpcdrive.paths import (
-    Path,
+    ReferencePath,
     CirclePath,
     StraightPath,
     WaypointPath,
@@ -555,7 +555,7 @@ def test_project_many_is_project_point_by_point(path):
     np.testing.assert_allclose(s, want[:, 0], rtol=0, atol=1e-9)
     np.testing.assert_allclose(e, want[:, 1], rtol=0, atol=1e-9)
     # the generic per-point projection gives the same
-    s2, e2 = Path._project_many_xy(path, xy, s_guess, window)
+    s2, e2 = ReferencePath._project_many_xy(path, xy, s_guess, window)
     np.testing.assert_array_equal(s2, want[:, 0])
     np.testing.assert_array_equal(e2, want[:, 1])
     with pytest.raises(ValueError):

@@ -412,7 +412,7 @@ def lane_following_obstacle(vehicle, path, times_s, t_s: float = 0.0, *, s_guess
                             tau_lateral_s: float = 1.0, name: str = "") -> Obstacle:
     """A highway-env vehicle as an obstacle that follows its lane: the ``LENGTH`` x ``WIDTH``
     rectangle [m] starts at the vehicle's pose and moves along ``path`` (the lane's centreline,
-    a :class:`~mpcdrive.paths.Path`) at its current speed [m/s], its lateral offset [m] and
+    a :class:`~mpcdrive.paths.ReferencePath`) at its current speed [m/s], its lateral offset [m] and
     heading offset [rad] from the lane decaying with time constant ``tau_lateral_s`` [s] (the
     vehicle steers back to the lane centre; ``math.inf`` keeps the offsets).
 

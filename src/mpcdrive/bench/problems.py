@@ -15,7 +15,7 @@ from ..scene.obstacles import ConstantVelocity, rectangle
 from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams
 from ..models.presets import get_preset
 from ..ocp.problem import MpcProblem
-from ..paths import CirclePath, Path, StraightPath
+from ..paths import CirclePath, ReferencePath, StraightPath
 
 
 @dataclass(frozen=True)
@@ -25,7 +25,7 @@ class BenchProblem:
     name: str
     description: str
     model: object
-    path: Path
+    path: ReferencePath
     problem: MpcProblem
     config: MpcConfig
     x0: np.ndarray

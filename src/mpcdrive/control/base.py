@@ -8,7 +8,7 @@ from typing import Protocol, TypeVar
 import numpy as np
 
 from ..models.base import VehicleModel
-from ..paths.base import Path
+from ..paths.base import ReferencePath
 from ..scene.obstacles import Obstacle
 from ..scene.road import Road
 from ..types import ControlOutput, WarmStart
@@ -49,7 +49,7 @@ class TrackingWarmStart:
     ``path`` and ``nu`` on the instance)."""
 
     model: VehicleModel
-    path: Path
+    path: ReferencePath
     nu: int
 
     def initial_warm(self, x0) -> WarmStart:

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..models.base import VehicleModel
-from ..paths.base import Path
+from ..paths.base import ReferencePath
 from ..types import STATUS_OK, ControlOutput, WarmStart
 from ..units import wrap_angle
 
@@ -46,7 +46,7 @@ class BaselineLimits:
 class _GeometricTracker:
     name = "geometric"
 
-    def __init__(self, model: VehicleModel, path: Path, dt_s: float, speed_ref, limits: BaselineLimits,
+    def __init__(self, model: VehicleModel, path: ReferencePath, dt_s: float, speed_ref, limits: BaselineLimits,
                  *, wheelbase_m: float, lr_m: float, speed_gain_per_s: float = 2.0,
                  projection_window_m: float = 2.0):
         if not (math.isfinite(dt_s) and dt_s > 0):

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..models.base import VehicleModel
 from ..models.discretize import Method, discrete_step
-from ..paths.base import Path
+from ..paths.base import ReferencePath
 from ..types import ControlOutput, WarmStart
 from .base import Controller
 
@@ -72,7 +72,7 @@ class DelayCompensator:
     substeps : integration steps per control period for the prediction.
     """
 
-    def __init__(self, inner: Controller, model: VehicleModel, actuator: DelayedActuator[Any], dt_s: float, path: Path,
+    def __init__(self, inner: Controller, model: VehicleModel, actuator: DelayedActuator[Any], dt_s: float, path: ReferencePath,
                  *, method: Method = "rk4", substeps: int = 5, projection_window_m: float = 2.0):
         if (inner.nx, inner.nu) != (model.nx, model.nu):
             raise ValueError("the delay compensator's model must match the wrapped controller's (nx, nu)")

@@ -7,7 +7,7 @@ import warnings
 from typing import Literal
 
 from ..ocp.problem import MpcProblem
-from ..paths.base import Path
+from ..paths.base import ReferencePath
 from ..solvers.osqp_backend import OsqpSettings
 from .mpc import LtvMpc, MpcConfig
 
@@ -20,7 +20,7 @@ class FastPathUnavailable(UserWarning):
     """The fast backend was asked for but does not cover the problem; OSQP is used instead."""
 
 
-def make_mpc(model, path: Path, problem: MpcProblem, config: MpcConfig = MpcConfig(),
+def make_mpc(model, path: ReferencePath, problem: MpcProblem, config: MpcConfig = MpcConfig(),
              backend: Backend = DEFAULT_BACKEND, osqp_settings: OsqpSettings = OsqpSettings(),
              fast_settings=None, obstacles=(), avoidance=None, footprint=None):
     """An LTV-MPC controller solving ``problem`` with ``backend``.

@@ -60,7 +60,7 @@ from .. import _jitcache
 from ..models.compiled import METHOD_EULER, METHOD_EXP, METHOD_RK4, model_code
 from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory
 from ..ocp.problem import MpcProblem
-from ..paths.base import Path
+from ..paths.base import ReferencePath
 from ..paths.compiled import path_arrays
 from ..paths.profile_compiled import profile_array
 from ..scene.footprint import Footprint
@@ -154,7 +154,7 @@ def _obstacle_table(obstacles) -> np.ndarray:
     return tab
 
 
-def fast_unsupported_reason(model, path: Path, problem: MpcProblem, config: MpcConfig = MpcConfig(),
+def fast_unsupported_reason(model, path: ReferencePath, problem: MpcProblem, config: MpcConfig = MpcConfig(),
                             settings: FastSettings = FastSettings(), obstacles=(),
                             avoidance: AvoidanceConfig | None = None) -> str | None:
     """Why the compiled step cannot solve this problem exactly as ``LtvMpc`` would, or None."""
@@ -268,7 +268,7 @@ class FastLtvMpc(TrackingWarmStart):
     name = "ltv-mpc-fast"
     backend_name = "fast"
 
-    def __init__(self, model, path: Path, problem: MpcProblem, config: MpcConfig = MpcConfig(),
+    def __init__(self, model, path: ReferencePath, problem: MpcProblem, config: MpcConfig = MpcConfig(),
                  settings: FastSettings = FastSettings(), obstacles=(), avoidance: AvoidanceConfig | None = None,
                  footprint: Footprint = Footprint()):
         reason = fast_unsupported_reason(model, path, problem, config, settings, obstacles, avoidance)

@@ -21,7 +21,7 @@ from ..models.discretize import Method, discrete_step_and_jacobians, rollout
 from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory, follow_references
 from ..ocp.problem import MpcProblem
 from ..ocp.road_rows import RoadRows
-from ..paths.base import Path
+from ..paths.base import ReferencePath
 from ..scene.footprint import Footprint
 from ..scene.obstacles import Obstacle
 from ..scene.road import Road
@@ -169,7 +169,7 @@ class LtvMpc(TrackingWarmStart):
     def __init__(
         self,
         model: VehicleModel,
-        path: Path,
+        path: ReferencePath,
         problem: MpcProblem,
         config: MpcConfig = MpcConfig(),
         solver_settings: OsqpSettings | ProjectedGradientSettings = OsqpSettings(),

@@ -26,7 +26,7 @@ from typing import Literal
 
 import numpy as np
 
-from ..paths.base import Path
+from ..paths.base import ReferencePath
 from ..paths.compiled import PathArrays, path_arrays
 from ..scene.footprint import Footprint
 from ..scene.geometry import points_polygons
@@ -142,7 +142,7 @@ class FrenetBoxes:
                          float(self.e_hi[k]))
 
 
-def frenet_boxes(path: Path, s_guess: np.ndarray, centers: np.ndarray, radius_m: float | np.ndarray = 0.0,
+def frenet_boxes(path: ReferencePath, s_guess: np.ndarray, centers: np.ndarray, radius_m: float | np.ndarray = 0.0,
                  points: np.ndarray | None = None) -> FrenetBoxes:
     """Frenet extents of K world shapes, shape k near arc length ``s_guess[k]`` (K,) [m]: discs of
     ``radius_m`` (a number or (K,)) around ``centers`` (K, 2) [m], or, given ``points``
@@ -163,7 +163,7 @@ def frenet_boxes(path: Path, s_guess: np.ndarray, centers: np.ndarray, radius_m:
     return FrenetBoxes(s, s + along.min(axis=1), s + along.max(axis=1), across.min(axis=1), across.max(axis=1))
 
 
-def frenet_box(path: Path, shape, s_guess: float) -> FrenetBox:
+def frenet_box(path: ReferencePath, shape, s_guess: float) -> FrenetBox:
     """Frenet extent of a world shape near arc length ``s_guess``."""
     g = np.array([s_guess], float)
     if isinstance(shape, WorldCircle):
@@ -204,7 +204,7 @@ class AvoidanceTerms:
 class Avoidance:
     """Builds the obstacle terms of each step for one controller (sizes fixed at construction)."""
 
-    def __init__(self, config: AvoidanceConfig, obstacles: list[Obstacle], path: Path, footprint: Footprint,
+    def __init__(self, config: AvoidanceConfig, obstacles: list[Obstacle], path: ReferencePath, footprint: Footprint,
                  N: int, dt_s: float, road: Road | None):
         self.config = config
         self.obstacles = list(obstacles)
@@ -236,7 +236,7 @@ class Avoidance:
         self._table: _ac.ObstacleTable | None = None
         self._table_ids: tuple = ()
         self._cpath: PathArrays | None = None
-        self._cpath_of: Path | None = None
+        self._cpath_of: ReferencePath | None = None
         self._sel = np.empty(config.max_obstacles, np.int64)
         self._present_all = np.ones((config.max_obstacles, N), bool)
 

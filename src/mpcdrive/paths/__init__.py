@@ -1,6 +1,6 @@
 """Reference paths: pose and curvature at arc length s, projection to (s, e_y, e_psi)."""
 
-from .base import Path, Projection
+from .base import ReferencePath, Projection
 from .circle import CirclePath
 from .reference import horizon_arc_lengths, horizon_states
 from .speed_profile import ConstantSpeed, SpeedProfile, SpeedReference
@@ -17,7 +17,7 @@ __all__ = [
     "load_track_csv",
     "track_from_text",
     "write_track_csv",
-    "Path",
+    "ReferencePath",
     "Projection",
     "StraightPath",
     "WaypointPath",

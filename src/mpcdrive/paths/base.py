@@ -25,7 +25,7 @@ class Projection:
     e_psi_rad: float
 
 
-class Path(ABC):
+class ReferencePath(ABC):
     """A planar reference path parameterized by arc length."""
 
     length_m: float

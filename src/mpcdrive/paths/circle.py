@@ -6,10 +6,10 @@ import math
 
 import numpy as np
 
-from .base import Path
+from .base import ReferencePath
 
 
-class CirclePath(Path):
+class CirclePath(ReferencePath):
     """Circle of ``radius_m`` around ``center`` (2,) [m].
 
     Starts at polar angle ``start_angle_rad`` and runs counter-clockwise when ``ccw`` (left turn,

@@ -15,7 +15,7 @@ from typing import Literal
 import numpy as np
 
 from ..units import unwrap_near
-from .base import Path
+from .base import ReferencePath
 
 HorizonMode = Literal["paper", "arc_length"]
 
@@ -36,7 +36,7 @@ def horizon_arc_lengths(
     raise ValueError(f"unknown horizon mode {mode!r}; use 'paper' or 'arc_length'")
 
 
-def horizon_states(path: Path, s_m: np.ndarray, yaw_now_rad: float) -> np.ndarray:
+def horizon_states(path: ReferencePath, s_m: np.ndarray, yaw_now_rad: float) -> np.ndarray:
     """(N+1, 4) references ``[x m, y m, yaw rad, kappa 1/m]`` at arc lengths ``s_m``.
 
     The heading sequence is continuous and shifted by a multiple of 2*pi so that its first

@@ -18,7 +18,7 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
-from .base import Path
+from .base import ReferencePath
 
 
 class SpeedReference(Protocol):
@@ -66,7 +66,7 @@ class SpeedProfile:
 
     def __init__(
         self,
-        path: Path,
+        path: ReferencePath,
         lateral_accel_max_mps2: float,
         accel_max_mps2: float,
         decel_max_mps2: float,
@@ -163,7 +163,7 @@ class SpeedProfile:
         return out
 
     @classmethod
-    def from_friction(cls, path: Path, friction: float, *, lateral_fraction: float = 0.8, g_mps2: float = 9.81,
+    def from_friction(cls, path: ReferencePath, friction: float, *, lateral_fraction: float = 0.8, g_mps2: float = 9.81,
                       **kw) -> SpeedProfile:
         """Profile with ``lateral_accel_max = lateral_fraction * friction * g``; other arguments as
         for the constructor."""

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Path
+from .base import ReferencePath
 
 
 #: the shortest straight path [m]: shorter ones are a typo (or a unit slip), and their
@@ -12,7 +12,7 @@ from .base import Path
 MIN_LENGTH_M = 1e-6
 
 
-class StraightPath(Path):
+class StraightPath(ReferencePath):
     """Segment from ``start`` to ``end`` (2,) [m], extended along its direction beyond the ends."""
 
     closed = False

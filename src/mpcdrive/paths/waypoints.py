@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from .base import Path
+from .base import ReferencePath
 
 
 #: the curves a :class:`WaypointPath` can draw through its points
@@ -51,8 +51,8 @@ def _pchip_curve(pts: np.ndarray, closed: bool):
     return curve
 
 
-class WaypointPath(Path):
-    """Path through waypoints ``points`` (M, 2) [m].
+class WaypointPath(ReferencePath):
+    """ReferencePath through waypoints ``points`` (M, 2) [m].
 
     ``interpolation`` chooses the curve, a function of the cumulative chord length t [m]:
 

@@ -20,7 +20,7 @@ from ..models.dynamic import DynamicBicycle, DynamicParams
 from ..control.factory import make_mpc
 from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams, slip_terms
 from ..ocp.problem import MpcProblem
-from ..paths import CirclePath, Path, StraightPath, WaypointPath
+from ..paths import CirclePath, ReferencePath, StraightPath, WaypointPath
 from ..paths.speed_profile import SpeedProfile
 from ..paths.tracks import Track, load_track_csv, track_from_text
 from ..sim.actuator import SteeringActuator
@@ -40,7 +40,7 @@ class Experiment:
     """Everything a run needs, built from a scenario."""
 
     spec: ScenarioSpec
-    path: Path
+    path: ReferencePath
     controller: Controller
     plant: Plant | ObservedPlant
     x0: np.ndarray
@@ -65,7 +65,7 @@ def load_track(spec) -> Track:
     return load_track_csv(spec.file, closed=spec.closed, smoothing=spec.smoothing)
 
 
-def build_path(spec) -> Path:
+def build_path(spec) -> ReferencePath:
     if spec.type == "straight":
         return StraightPath(spec.start, spec.end)
     if spec.type == "circle":
@@ -76,7 +76,7 @@ def build_path(spec) -> Path:
                         interpolation=spec.interpolation)
 
 
-def warn_if_path_too_curved(spec: ScenarioSpec, path: Path, source: str | None = None) -> float | None:
+def warn_if_path_too_curved(spec: ScenarioSpec, path: ReferencePath, source: str | None = None) -> float | None:
     """Warn (:class:`~mpcdrive.types.ScenarioWarning`) when the path turns tighter than the
     vehicle can at full steering; returns the worst mean curvature found [1/m], or None when
     the vehicle can follow the whole path.
@@ -228,7 +228,7 @@ def _start_outside_lane(spec: ScenarioSpec) -> str | None:
             f"{side} edge)")
 
 
-def build_road(spec, path: Path, track: Track | None = None) -> Road | None:
+def build_road(spec, path: ReferencePath, track: Track | None = None) -> Road | None:
     """The :class:`~mpcdrive.scene.road.Road` of a ``road`` spec along ``path``, else the road
     widths of a track (followed exactly, not by their narrowest), else None."""
     period = path.length_m if path.closed else 0.0
@@ -282,7 +282,7 @@ def build_model(name: str, v, scale=None):
     return DynamicBicycle(dynamic_params(v, scale), tire="linear" if name == "dynamic_linear" else "pacejka")
 
 
-def build_speed_profile(spec, path: Path, friction: float) -> SpeedProfile:
+def build_speed_profile(spec, path: ReferencePath, friction: float) -> SpeedProfile:
     """The speed profile of a ``controller.speed_profile`` spec along ``path``."""
     a_lat = spec.lateral_accel_max_mps2 or spec.lateral_accel_fraction * friction * 9.81
     return SpeedProfile(path, a_lat, spec.accel_max_mps2, spec.decel_max_mps2, spec.v_max_mps,

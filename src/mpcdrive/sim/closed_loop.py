@@ -13,7 +13,7 @@ import numpy as np
 from ..control.base import Controller
 from ..models.base import VehicleModel
 from ..models.discretize import Method, discrete_step
-from ..paths.base import Path
+from ..paths.base import ReferencePath
 from ..scene.footprint import Footprint
 from ..scene.road import Road
 from ..scene.geometry import shape_distance
@@ -214,7 +214,7 @@ def _plan_slope(controller, out, nu: int) -> np.ndarray | None:
 def simulate(
     controller: Controller,
     plant: Plant | ObservedPlant,
-    path: Path,
+    path: ReferencePath,
     x0,
     dt_s: float,
     steps: int,
@@ -295,8 +295,8 @@ def simulate(
         raise ValueError(f"plant must be a Plant or an ObservedPlant, got {type(plant).__name__}")
     if observed and disturbance is not None:
         raise ValueError("a state disturbance needs a Plant (an ObservedPlant's state has its own layout)")
-    if not isinstance(path, Path):
-        raise ValueError(f"path must be a Path, got {type(path).__name__}")
+    if not isinstance(path, ReferencePath):
+        raise ValueError(f"path must be a ReferencePath, got {type(path).__name__}")
     rng = np.random.default_rng(seed)
     nx, nu, N = controller.nx, controller.nu, controller.N
     model = plant.model
