@@ -61,14 +61,14 @@ def test_run_writes_the_contract_files(tmp_path):
     assert page.startswith("<!DOCTYPE html>") and '"steps":30' in page and '"left":[[' in page
     assert page.count("data:image/png;base64,") == len(list(out.glob("*.png")))
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
-    assert metrics["controller_backend"] == "osqp"
+    assert metrics["controller_backend"] == "fast"  # compiled by default
 
 
 def test_run_fast_uses_the_compiled_controller_with_the_same_commands(tmp_path):
     """``--fast`` runs the scenario on the fast path (recorded in metrics.json and the resolved
     scenario) and steers as the OSQP reference does."""
     runs = {}
-    for name, extra in (("ref", ()), ("fast", ("--fast",))):
+    for name, extra in (("ref", ("--osqp",)), ("fast", ("--fast",))):
         out = tmp_path / name
         r = cli("run", str(short_scenario(tmp_path)), "--out", str(out), "-q", *extra)
         assert r.returncode == 0, r.stderr

@@ -100,7 +100,8 @@ def test_runs_that_fail_are_explained_and_the_sweep_goes_on():
 
 
 def test_solver_failures_in_a_sweep_are_counted_per_fallback_kind():
-    p = plan(3, set_=SHORT + ["controller.osqp_max_iter=3", "controller.fallback=[shifted_plan, brake]"])
+    p = plan(3, set_=SHORT + ["controller.backend=osqp", "controller.osqp_max_iter=3",
+                              "controller.fallback=[shifted_plan, brake]"])
     rows = run_sweep(p, "local", workers=1)
     s = summarize(p, rows)
     assert s["solver_failures"]["total"] > 0

@@ -67,7 +67,7 @@ duration_s: 0.3
 path: {type: circle, radius_m: 1.5}
 initial_state: {x_m: 1.6, y_m: 0.0, yaw_deg: 80}
 road: {lane_width_m: 1.0}
-controller: {horizon: 10, Q: [1, 1, 1], R: [1], osqp_max_iter: 1}
+controller: {horizon: 10, Q: [1, 1, 1], R: [1], osqp_max_iter: 1, backend: osqp}
 """
 
 CR = Path(__file__).resolve().parent / "data" / "commonroad"

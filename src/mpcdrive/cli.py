@@ -80,11 +80,15 @@ def _load(name: str):
         raise BadInput(str(e)) from None
 
 
-def _on_backend(spec, fast: bool):
-    """``spec`` with its controller on the compiled fast path when ``fast`` (else as written)."""
-    if not fast:
+def _on_backend(spec, fast: bool, osqp: bool = False):
+    """``spec`` with its controller on the compiled fast path when ``fast``, on the OSQP reference
+    when ``osqp`` (else as written: ``controller.backend``, compiled by default)."""
+    if fast and osqp:
+        raise BadInput("--fast and --osqp exclude each other")
+    if not (fast or osqp):
         return spec
-    return spec.model_copy(update={"controller": spec.controller.model_copy(update={"backend": "fast"})})
+    backend = "fast" if fast else "osqp"
+    return spec.model_copy(update={"controller": spec.controller.model_copy(update={"backend": backend})})
 
 
 def _load_commonroad(file: str, vehicle: str | None = None, plant: str | None = None):
@@ -176,7 +180,9 @@ def run(
     out: Path | None = typer.Option(None, "--out", metavar="DIR", help="output directory (default runs/<id>-<timestamp>)"),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
     fast: bool = typer.Option(False, "--fast", help="run the controller on the compiled fast path "
-                              "(controller.backend: fast; same commands as the OSQP reference)"),
+                              "(controller.backend: fast, the default; same commands as the OSQP reference)"),
+    osqp: bool = typer.Option(False, "--osqp", help="run the controller on the OSQP reference solver "
+                              "(controller.backend: osqp)"),
     check: bool = typer.Option(False, "--check", help="exit with code 3 when the run collided, left the "
                                "road or missed its goal (outputs are still written)"),
     plant: str | None = typer.Option(None, "--plant", help="CommonRoad files: the plant, a CommonRoad vehicle "
@@ -201,7 +207,7 @@ def run(
             raise BadInput(str(e)) from None
     else:
         spec = _load(scenario)
-    spec = _on_backend(spec, fast)
+    spec = _on_backend(spec, fast, osqp)
     # a CommonRoad run is named after the file passed, not the benchmark id inside it
     out_dir = out or _default_out(_file_stem(scenario) if extra is not None else spec.id)
     with _output_dir(out_dir) as tmp:
@@ -222,7 +228,8 @@ def reproduce(
     out: Path | None = typer.Option(None, "--out", help="output directory (default runs/reproduce-<timestamp>)"),
     only: list[str] | None = typer.Option(None, "--only", metavar="ID", help="run only this experiment id (repeatable)"),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
-    fast: bool = typer.Option(False, "--fast", help="run the controllers on the compiled fast path"),
+    fast: bool = typer.Option(False, "--fast", help="run the controllers on the compiled fast path (the default)"),
+    osqp: bool = typer.Option(False, "--osqp", help="run the controllers on the OSQP reference solver"),
 ) -> None:
     """Run every paper experiment; write DIR/<id>/, DIR/metrics.json, DIR/report.md and
     DIR/report.html (every experiment's replay, metrics and figures in one page)."""
@@ -237,7 +244,7 @@ def reproduce(
         if unknown:
             raise BadInput(f"--only: unknown experiment id(s) {', '.join(unknown)} (known: {', '.join(ids)})")
         ids = [i for i in ids if i in only]
-    specs = [_on_backend(_load(i), fast) for i in ids]
+    specs = [_on_backend(_load(i), fast, osqp) for i in ids]
     out_dir = out or _default_out("reproduce")
     all_metrics, entries, results, html_runs = {}, [], {}, []
     t0 = time.perf_counter()

@@ -397,7 +397,7 @@ class ControllerSpec(_Strict):
     def _ladder(cls, v):
         check_ladder(v)
         return v
-    backend: Literal["osqp", "fast"] = "osqp"
+    backend: Literal["osqp", "fast"] = "fast"
 
     @field_validator("max_steer_deg")
     @classmethod
