@@ -13,7 +13,15 @@ from mpcdrive.scene.road import Road
 from mpcdrive.experiments import AVOIDANCE_SCENARIOS
 from mpcdrive.models import KinematicBicycle4, KinematicParams
 from mpcdrive.ocp import MpcProblem
-from mpcdrive.ocp.avoidance import SIDE_BLOCKED, SIDE_LEFT, SIDE_RIGHT, Avoidance, AvoidanceConfig, AvoidanceMemory, frenet_box
+from mpcdrive.ocp.avoidance import (
+    SIDE_BLOCKED,
+    SIDE_LEFT,
+    SIDE_RIGHT,
+    Avoidance,
+    AvoidanceConfig,
+    AvoidanceMemory,
+    frenet_box,
+)
 from mpcdrive.paths import CirclePath, StraightPath
 from mpcdrive.scenarios import ScenarioSpec, build_experiment, load_scenario, run_experiment
 from mpcdrive.scene import Circle, ConstantVelocity, Footprint, Obstacle, TrajectoryMotion, rectangle
@@ -23,8 +31,9 @@ from mpcdrive.solvers.osqp_backend import OsqpSettings
 
 @settings(max_examples=60, deadline=None)
 @given(
-    obs=st.lists(st.tuples(st.floats(1.0, 6.0), st.floats(-1.2, 1.2), st.floats(0.1, 0.6), st.booleans()),
-                 min_size=1, max_size=3),
+    obs=st.lists(
+        st.tuples(st.floats(1.0, 6.0), st.floats(-1.2, 1.2), st.floats(0.1, 0.6), st.booleans()), min_size=1, max_size=3
+    ),
     x0=st.floats(0.0, 2.0),
 )
 def test_corridor_never_contains_an_obstacle(obs, x0):
@@ -76,8 +85,16 @@ def _p3_controllers():
 
     prob = p3()
     cfg = dataclasses.replace(prob.config, sqp_max_iterations=300, sqp_tol=1e-9, sqp_max_time_s=60.0)
-    sqp = LtvMpc(prob.model, prob.path, prob.problem, cfg, OsqpSettings(eps_abs=1e-9, eps_rel=1e-9, max_iter=100000),
-                 obstacles=prob.obstacles, avoidance=prob.avoidance, footprint=prob.footprint)
+    sqp = LtvMpc(
+        prob.model,
+        prob.path,
+        prob.problem,
+        cfg,
+        OsqpSettings(eps_abs=1e-9, eps_rel=1e-9, max_iter=100000),
+        obstacles=prob.obstacles,
+        avoidance=prob.avoidance,
+        footprint=prob.footprint,
+    )
     return sqp, CasadiIpoptMpc(prob)
 
 
@@ -125,7 +142,9 @@ def test_hard_and_corridor_are_safe_in_every_obstacle_scenario(sid, formulation)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("sid", ["paper-exp5-potential", "paper-exp5-gaussian", "paper-exp5-hard", "paper-exp5-corridor"])
+@pytest.mark.parametrize(
+    "sid", ["paper-exp5-potential", "paper-exp5-gaussian", "paper-exp5-hard", "paper-exp5-corridor"]
+)
 def test_paper_experiment5_is_passed_safely(sid):
     r, m = _run(sid)
     assert m["collisions"] == 0 and m["min_obstacle_clearance_m"] > 0.1
@@ -179,12 +198,25 @@ def test_corridor_requires_a_lane():
 
     prob = p1()
     with pytest.raises(ValueError, match="corridor"):
-        LtvMpc(prob.model, path, prob.problem, obstacles=(Obstacle(Circle(0.2), (3, 0, 0)),),
-               avoidance=AvoidanceConfig("corridor"))
+        LtvMpc(
+            prob.model,
+            path,
+            prob.problem,
+            obstacles=(Obstacle(Circle(0.2), (3, 0, 0)),),
+            avoidance=AvoidanceConfig("corridor"),
+        )
 
 
-@pytest.mark.parametrize("bad", [dict(formulation="cone"), dict(margin_m=-1), dict(sigma_m=(0.0, 1.0)),
-                                 dict(max_obstacles=0), dict(detour="triangle")])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        dict(formulation="cone"),
+        dict(margin_m=-1),
+        dict(sigma_m=(0.0, 1.0)),
+        dict(max_obstacles=0),
+        dict(detour="triangle"),
+    ],
+)
 def test_avoidance_config_rejects_bad_values(bad):
     with pytest.raises(ValueError):
         AvoidanceConfig(**bad)
@@ -232,8 +264,15 @@ def test_a_gap_narrower_than_the_body_blocks_the_lane():
     the lane is blocked (stop behind it), not passed on a side that would need the lane slack."""
     path = StraightPath([0, 0], [100, 0])
     for formulation in ("hard", "corridor"):
-        av = Avoidance(AvoidanceConfig(formulation, margin_m=0.1, influence_m=30.0), [Obstacle(rectangle(5, 2), (20, 0, 0))],
-                       path, CAR, 10, 0.2, Road.constant(5, 0.0))
+        av = Avoidance(
+            AvoidanceConfig(formulation, margin_m=0.1, influence_m=30.0),
+            [Obstacle(rectangle(5, 2), (20, 0, 0))],
+            path,
+            CAR,
+            10,
+            0.2,
+            Road.constant(5, 0.0),
+        )
         needed = av.passing_room_m
         # the body's full width and both margins, plus (hard) the discs' overhang beyond the body
         assert needed == pytest.approx(2.0 + 0.1 + (CAR.disc_radius_m - 1.0 if formulation == "hard" else 0.0))
@@ -250,7 +289,9 @@ def test_a_moving_obstacle_is_judged_where_the_car_meets_it():
     there -- the lane is blocked."""
     path = StraightPath([0, 0], [200, 0])
     cutting_in = Obstacle(rectangle(5, 2), (10.0, -5.0, 0.0), ConstantVelocity(5.0, 2.5))
-    av = Avoidance(AvoidanceConfig("hard", margin_m=0.1, influence_m=40.0), [cutting_in], path, CAR, 15, 0.2, Road.constant(5, 0.0))
+    av = Avoidance(
+        AvoidanceConfig("hard", margin_m=0.1, influence_m=40.0), [cutting_in], path, CAR, 15, 0.2, Road.constant(5, 0.0)
+    )
     s_arr = 2.0 * np.arange(16.0)  # 10 m/s
     Xlin = np.column_stack([s_arr, np.zeros(16), np.zeros(16)])
     assert av.terms(0.0, Xlin[0], Xlin, s_arr, AvoidanceMemory()).sides == {0: SIDE_BLOCKED}
@@ -318,8 +359,12 @@ def _circle_follower(path: CirclePath, s0: float, v: float, t_end: float) -> Obs
     s = s0 + v * t
     P = path.position(s)
     yaw = np.asarray(path.heading(s))
-    return Obstacle(rectangle(5, 2), (P[0, 0], P[0, 1], yaw[0]),
-                    TrajectoryMotion(t, P[:, 0] - P[0, 0], P[:, 1] - P[0, 1], yaw - yaw[0]), "leader")
+    return Obstacle(
+        rectangle(5, 2),
+        (P[0, 0], P[0, 1], yaw[0]),
+        TrajectoryMotion(t, P[:, 0] - P[0, 0], P[:, 1] - P[0, 1], yaw - yaw[0]),
+        "leader",
+    )
 
 
 @pytest.mark.parametrize("follow_gap_s", [None, 1.0])
@@ -331,13 +376,32 @@ def test_following_a_slower_car_in_a_bend(follow_gap_s):
     path = CirclePath((0.0, 0.0), 20.0)
     model = KinematicBicycle4(KinematicParams(2.5, 2.5))
     dt, N, steps = 0.2, 15, 120
-    pb = MpcProblem(4, 2, N, dt, Q=[1.0, 1.0, 2.0, 0.5], R=[1.0, 0.05], Rc=[20.0, 0.05],
-                    u_min=[-0.78, -5.0], u_max=[0.78, 5.0], du_max_per_s=[1.0, np.inf],
-                    x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [20.0], road=Road.constant(5.0, 0.0))
+    pb = MpcProblem(
+        4,
+        2,
+        N,
+        dt,
+        Q=[1.0, 1.0, 2.0, 0.5],
+        R=[1.0, 0.05],
+        Rc=[20.0, 0.05],
+        u_min=[-0.78, -5.0],
+        u_max=[0.78, 5.0],
+        du_max_per_s=[1.0, np.inf],
+        x_min=[-np.inf] * 3 + [0.0],
+        x_max=[np.inf] * 3 + [20.0],
+        road=Road.constant(5.0, 0.0),
+    )
     leader = _circle_follower(path, 25.0, 6.0, dt * steps + 10.0)
     cfg = AvoidanceConfig("hard", margin_m=0.3, influence_m=30.0, follow_gap_s=follow_gap_s)
-    c = LtvMpc(model, path, pb, MpcConfig(v_ref_mps=10.0, projection_window_m=6.0), obstacles=(leader,),
-               avoidance=cfg, footprint=CAR)
+    c = LtvMpc(
+        model,
+        path,
+        pb,
+        MpcConfig(v_ref_mps=10.0, projection_window_m=6.0),
+        obstacles=(leader,),
+        avoidance=cfg,
+        footprint=CAR,
+    )
     x0 = np.array([20.0, 0.0, math.pi / 2, 10.0])
     r = simulate(c, Plant(model), path, x0, dt, steps, obstacles=(leader,), footprint=CAR, road=pb.road)
     m = compute_metrics(r)
@@ -360,12 +424,22 @@ def test_set_obstacles_replaces_what_the_controller_avoids():
     """Moving obstacles handed over afresh each step: the QP keeps its size, the plan follows."""
     path = StraightPath([0, 0], [300, 0])
     model = KinematicBicycle4(KinematicParams(2.5, 2.5))
-    pb = MpcProblem(4, 2, 15, 0.2, Q=[1.0, 1.0, 2.0, 0.5], R=[1.0, 0.05], u_min=[-0.78, -5.0], u_max=[0.78, 5.0],
-                    x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [20.0], road=Road.constant(5.0, 0.0))
+    pb = MpcProblem(
+        4,
+        2,
+        15,
+        0.2,
+        Q=[1.0, 1.0, 2.0, 0.5],
+        R=[1.0, 0.05],
+        u_min=[-0.78, -5.0],
+        u_max=[0.78, 5.0],
+        x_min=[-np.inf] * 3 + [0.0],
+        x_max=[np.inf] * 3 + [20.0],
+        road=Road.constant(5.0, 0.0),
+    )
     stopped_ahead = Obstacle(rectangle(5, 2), (20.0, 0.0, 0.0), name="stopped")
     cfg = AvoidanceConfig("hard", margin_m=0.3, influence_m=30.0, max_obstacles=2, follow_gap_s=1.0)
-    c = LtvMpc(model, path, pb, MpcConfig(v_ref_mps=10.0), obstacles=(stopped_ahead,), avoidance=cfg,
-               footprint=CAR)
+    c = LtvMpc(model, path, pb, MpcConfig(v_ref_mps=10.0), obstacles=(stopped_ahead,), avoidance=cfg, footprint=CAR)
     x = np.array([0.0, 0.0, 0.0, 10.0])
     rows = c.qp.problem.obstacle_rows
     brake = c.step(x, c.initial_warm(x))

@@ -23,9 +23,11 @@ N, DT = 20, 0.1
 
 def _paths():
     t = np.linspace(0.0, 60.0, 40)
-    return {"straight": StraightPath([0.0, 0.0], [80.0, 5.0]),
-            "circle": CirclePath((0.0, 0.0), 25.0, ccw=True),
-            "waypoints": WaypointPath(np.column_stack([t, 4.0 * np.sin(t / 9.0)]))}
+    return {
+        "straight": StraightPath([0.0, 0.0], [80.0, 5.0]),
+        "circle": CirclePath((0.0, 0.0), 25.0, ccw=True),
+        "waypoints": WaypointPath(np.column_stack([t, 4.0 * np.sin(t / 9.0)])),
+    }
 
 
 def _scene(rng, path, n_obs, lifetimes, trajectories=False):
@@ -149,10 +151,11 @@ def test_compiled_rows_match_numpy_for_every_side_and_mode(name):
         present = {j: obstacles[j].present(times) if obstacles[j].has_lifetime else ref._always for j in rel}
         boxes, centers, world, packed = comp._tracks(rel, t_s, s_arr)
         assert (packed is None) == any(isinstance(obstacles[j].motion, TrajectoryMotion) for j in rel)
-        a1, b1 = (v.copy() for v in comp._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present,
-                                                    following, packed))
-        a3, b3 = (v.copy() for v in comp._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present,
-                                                    following))
+        a1, b1 = (
+            v.copy()
+            for v in comp._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present, following, packed)
+        )
+        a3, b3 = (v.copy() for v in comp._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present, following))
         boxes, centers, world, _ = ref._tracks(rel, t_s, s_arr)
         a2, b2 = ref._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present, following)
         for a, b in ((a1, b1), (a3, b3)):
@@ -165,14 +168,19 @@ def test_recorded_trajectories_keep_the_numpy_selection_and_tracks():
     rng = np.random.default_rng(3)
     path = _paths()["straight"]
     obstacles = _scene(rng, path, 6, lifetimes=True, trajectories=True)
-    obstacles.append(Obstacle(Circle(1.0), (10.0, 0.0, 0.0), TrajectoryMotion(np.array([0.0, 1.0]), np.zeros(2),
-                                                                             np.zeros(2), np.zeros(2))))
+    obstacles.append(
+        Obstacle(
+            Circle(1.0), (10.0, 0.0, 0.0), TrajectoryMotion(np.array([0.0, 1.0]), np.zeros(2), np.zeros(2), np.zeros(2))
+        )
+    )
     comp, ref = _pair(obstacles, path, AvoidanceConfig("hard", influence_m=40.0, max_obstacles=7))
     assert not comp._obstacle_table().all_simple
     for _ in range(5):
         s_arr, Xlin = _state(rng, path)
-        _same_terms(comp.terms(0.4, Xlin[0], Xlin, s_arr, AvoidanceMemory()),
-                    ref.terms(0.4, Xlin[0], Xlin, s_arr, AvoidanceMemory()))
+        _same_terms(
+            comp.terms(0.4, Xlin[0], Xlin, s_arr, AvoidanceMemory()),
+            ref.terms(0.4, Xlin[0], Xlin, s_arr, AvoidanceMemory()),
+        )
 
 
 def test_obstacle_table_follows_replaced_obstacles():

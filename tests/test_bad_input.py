@@ -38,6 +38,7 @@ def _set(path, value):
         for k in path[:-1]:
             node = node.setdefault(k, {})
         node[path[-1]] = value
+
     return f
 
 
@@ -45,6 +46,7 @@ def _k4(extra_path, value):
     def f(d):
         d.update(yaml.safe_load(yaml.safe_dump(K4)))
         _set(extra_path, value)(d)
+
     return f
 
 
@@ -57,12 +59,21 @@ SCENARIO_CASES = [
     ("wrong type: text for a number", _set(["duration_s"], "long"), "duration_s", "valid number"),
     ("wrong type: quoted number", _set(["duration_s"], "10"), "duration_s", "valid number"),
     ("wrong type: boolean for a number", _set(["dt_s"], True), "dt_s", "valid number"),
-    ("wrong type: fraction for an integer", _set(["controller", "horizon"], 10.5), "controller.horizon", "valid integer"),
+    (
+        "wrong type: fraction for an integer",
+        _set(["controller", "horizon"], 10.5),
+        "controller.horizon",
+        "valid integer",
+    ),
     ("wrong type: mapping for a list", _set(["controller", "Q"], {"a": 1}), "controller.Q", "valid list"),
     ("non-finite number (.nan)", _set(["dt_s"], float("nan")), "dt_s", "finite"),
     ("non-finite number (.inf)", _set(["initial_state", "x_m"], float("inf")), "initial_state.x_m", "finite"),
-    ("non-finite number (1e400)", "id: t\nduration_s: 1e400\npath: {type: circle, radius_m: 1}\n"
-     "controller: {Q: [1, 1, 1], R: [1]}\n", "duration_s", "finite"),
+    (
+        "non-finite number (1e400)",
+        "id: t\nduration_s: 1e400\npath: {type: circle, radius_m: 1}\ncontroller: {Q: [1, 1, 1], R: [1]}\n",
+        "duration_s",
+        "finite",
+    ),
     ("negative horizon", _set(["controller", "horizon"], -3), "controller.horizon", "greater than or equal to 1"),
     ("zero horizon", _set(["controller", "horizon"], 0), "controller.horizon", "greater than or equal to 1"),
     ("negative duration", _set(["duration_s"], -1.0), "duration_s", "greater than 0"),
@@ -71,39 +82,152 @@ SCENARIO_CASES = [
     ("bad id", _set(["id"], "a b/c"), "id", "pattern"),
     ("weights of the wrong length", _set(["controller", "Q"], [1, 1]), "", "Q needs 3 entries"),
     ("negative weight", _set(["controller", "R"], [-1]), "controller.R.0", "greater than or equal to 0"),
-    ("impossible: steering limit >= 90 deg", _set(["controller", "max_steer_deg"], 95), "controller.max_steer_deg", "below 90"),
-    ("impossible: speed limits reversed", _set(["controller", "speed_limits_mps"], [2, 0]), "controller.speed_limits_mps", "exceeds"),
-    ("impossible: accel limits reversed", _set(["controller", "accel_limits_mps2"], [1, -1]), "controller.accel_limits_mps2", "exceeds"),
-    ("impossible: accel limits exclude 0", _set(["controller", "accel_limits_mps2"], [0.5, 1]), "controller.accel_limits_mps2", "must include 0"),
-    ("impossible: no forward speed allowed", _set(["controller", "speed_limits_mps"], [-1, 0]), "controller.speed_limits_mps", "must be positive"),
+    (
+        "impossible: steering limit >= 90 deg",
+        _set(["controller", "max_steer_deg"], 95),
+        "controller.max_steer_deg",
+        "below 90",
+    ),
+    (
+        "impossible: speed limits reversed",
+        _set(["controller", "speed_limits_mps"], [2, 0]),
+        "controller.speed_limits_mps",
+        "exceeds",
+    ),
+    (
+        "impossible: accel limits reversed",
+        _set(["controller", "accel_limits_mps2"], [1, -1]),
+        "controller.accel_limits_mps2",
+        "exceeds",
+    ),
+    (
+        "impossible: accel limits exclude 0",
+        _set(["controller", "accel_limits_mps2"], [0.5, 1]),
+        "controller.accel_limits_mps2",
+        "must include 0",
+    ),
+    (
+        "impossible: no forward speed allowed",
+        _set(["controller", "speed_limits_mps"], [-1, 0]),
+        "controller.speed_limits_mps",
+        "must be positive",
+    ),
     ("impossible: lane narrower than the car", _set(["road"], {"lane_width_m": 0.2}), "", "not wider than the car"),
     ("impossible: zero vehicle speed", _set(["vehicle", "speed_mps"], 0.0), "vehicle.speed_mps", "greater than 0"),
     ("path: straight with equal ends", _set(["path", "end"], [0, 0]), "path", "differ"),
-    ("path: fewer than two points", _set(["path"], {"type": "waypoints", "points": [[0, 0]]}), "path.points", "at least 2"),
-    ("path: two points, one distinct", _set(["path"], {"type": "waypoints", "points": [[1, 1], [1, 1]]}), "path", "at least 2 distinct"),
-    ("path: closed with two points", _set(["path"], {"type": "waypoints", "points": [[0, 0], [1, 0]], "closed": True}), "path", "at least 3 distinct"),
+    (
+        "path: fewer than two points",
+        _set(["path"], {"type": "waypoints", "points": [[0, 0]]}),
+        "path.points",
+        "at least 2",
+    ),
+    (
+        "path: two points, one distinct",
+        _set(["path"], {"type": "waypoints", "points": [[1, 1], [1, 1]]}),
+        "path",
+        "at least 2 distinct",
+    ),
+    (
+        "path: closed with two points",
+        _set(["path"], {"type": "waypoints", "points": [[0, 0], [1, 0]], "closed": True}),
+        "path",
+        "at least 3 distinct",
+    ),
     ("path: zero radius", _set(["path"], {"type": "circle", "radius_m": 0}), "path.radius_m", "greater than 0"),
     ("path: unknown type", _set(["path", "type"], "spiral"), "path", "spiral"),
     ("path: point with three numbers", _set(["path", "start"], [0, 0, 0]), "path.start", "at most 2"),
-    ("initial state: coordinates out of range", _set(["initial_state", "x_m"], 1e9), "initial_state.x_m", "less than or equal to 1000000"),
+    (
+        "initial state: coordinates out of range",
+        _set(["initial_state", "x_m"], 1e9),
+        "initial_state.x_m",
+        "less than or equal to 1000000",
+    ),
     ("initial state: far from the path", _set(["initial_state", "y_m"], 5000.0), "", "from the path"),
-    ("initial state: absurd yaw", _set(["initial_state", "yaw_deg"], 1e6), "initial_state.yaw_deg", "less than or equal to 3600"),
-    ("initial state: negative speed", _k4(["initial_state", "v_mps"], -1.0), "initial_state.v_mps", "greater than or equal to 0"),
-    ("initial state: absurd speed", _k4(["initial_state", "v_mps"], 1000.0), "initial_state.v_mps", "less than or equal to 100"),
-    ("noise: negative std", _set(["disturbance"], {"distribution": "normal", "std": [-1, 0, 0]}), "disturbance.std.0", "greater than or equal to 0"),
-    ("noise: low above high", _set(["disturbance"], {"distribution": "uniform", "low": [1, 0, 0], "high": [0, 0, 0]}), "disturbance", "low exceeds high"),
-    ("noise: wrong length", _set(["measurement_noise"], {"distribution": "normal", "std": [1, 1]}), "", "needs 3 entries"),
+    (
+        "initial state: absurd yaw",
+        _set(["initial_state", "yaw_deg"], 1e6),
+        "initial_state.yaw_deg",
+        "less than or equal to 3600",
+    ),
+    (
+        "initial state: negative speed",
+        _k4(["initial_state", "v_mps"], -1.0),
+        "initial_state.v_mps",
+        "greater than or equal to 0",
+    ),
+    (
+        "initial state: absurd speed",
+        _k4(["initial_state", "v_mps"], 1000.0),
+        "initial_state.v_mps",
+        "less than or equal to 100",
+    ),
+    (
+        "noise: negative std",
+        _set(["disturbance"], {"distribution": "normal", "std": [-1, 0, 0]}),
+        "disturbance.std.0",
+        "greater than or equal to 0",
+    ),
+    (
+        "noise: low above high",
+        _set(["disturbance"], {"distribution": "uniform", "low": [1, 0, 0], "high": [0, 0, 0]}),
+        "disturbance",
+        "low exceeds high",
+    ),
+    (
+        "noise: wrong length",
+        _set(["measurement_noise"], {"distribution": "normal", "std": [1, 1]}),
+        "",
+        "needs 3 entries",
+    ),
     ("fallback: unknown rung", _set(["controller", "fallback"], ["relax", "pray"]), "controller.fallback.1", "relax"),
-    ("fallback: ladder without a terminal rung", _set(["controller", "fallback"], ["relax"]), "controller.fallback", "must end with"),
-    ("fallback: zero braking", _set(["controller", "brake_decel_mps2"], 0.0), "controller.brake_decel_mps2", "greater than 0"),
-    ("plant: speed error on a speed-state model", _k4(["plant", "speed_mps"], 1.2), "", "only for the constant-speed model"),
+    (
+        "fallback: ladder without a terminal rung",
+        _set(["controller", "fallback"], ["relax"]),
+        "controller.fallback",
+        "must end with",
+    ),
+    (
+        "fallback: zero braking",
+        _set(["controller", "brake_decel_mps2"], 0.0),
+        "controller.brake_decel_mps2",
+        "greater than 0",
+    ),
+    (
+        "plant: speed error on a speed-state model",
+        _k4(["plant", "speed_mps"], 1.2),
+        "",
+        "only for the constant-speed model",
+    ),
     ("plant: negative axle distance", _set(["plant", "lr_m"], -0.1), "plant.lr_m", "greater than 0"),
-    ("obstacle on the start", _set(["obstacles"], [{"shape": "circle", "position": [3, 1], "radius_m": 0.1},
-                                                   {"shape": "circle", "position": [0.3, 0.1], "radius_m": 0.1}]),
-     "obstacles.1", "overlaps the car's footprint at the start"),
-    ("moving obstacle on the start", _set(["obstacles"], [{"shape": "rectangle", "position": [0.5, 0.0], "length_m": 0.6,
-                                                           "width_m": 0.3, "velocity_mps": [-1.0, 0.0]}]),
-     "obstacles.0", "overlaps the car's footprint at the start"),
+    (
+        "obstacle on the start",
+        _set(
+            ["obstacles"],
+            [
+                {"shape": "circle", "position": [3, 1], "radius_m": 0.1},
+                {"shape": "circle", "position": [0.3, 0.1], "radius_m": 0.1},
+            ],
+        ),
+        "obstacles.1",
+        "overlaps the car's footprint at the start",
+    ),
+    (
+        "moving obstacle on the start",
+        _set(
+            ["obstacles"],
+            [
+                {
+                    "shape": "rectangle",
+                    "position": [0.5, 0.0],
+                    "length_m": 0.6,
+                    "width_m": 0.3,
+                    "velocity_mps": [-1.0, 0.0],
+                }
+            ],
+        ),
+        "obstacles.0",
+        "overlaps the car's footprint at the start",
+    ),
     ("YAML: duplicate key", "id: t\nid: u\n", "line 2", "duplicate key 'id'"),
     ("YAML: malformed", "id: [unclosed\n", "line", "not valid YAML"),
     ("YAML: two documents", "id: t\n---\nid: u\n", "", "not valid YAML"),
@@ -192,10 +316,16 @@ API_CASES = [
     ("controller: NaN state", lambda: _step_state([0, NAN, 0]), "state field(s) y not finite"),
     ("controller: state of the wrong size", lambda: _step_state([0, 0]), "state must have shape (3,)"),
     ("controller: NaN previous input", lambda: _step_warm([NAN]), "warm.u_prev must be 1 finite"),
-    ("controller: model/problem size mismatch",
-     lambda: LtvMpc(KinematicBicycle3(), StraightPath([0, 0], [1, 0]), MpcProblem(4, 2, 5, 0.01, Q=1.0, R=1.0)), "problem is sized"),
-    ("DelayCompensator: warm start of the inner controller", _step_delay_foreign_warm,
-     "warm must come from this DelayCompensator"),
+    (
+        "controller: model/problem size mismatch",
+        lambda: LtvMpc(KinematicBicycle3(), StraightPath([0, 0], [1, 0]), MpcProblem(4, 2, 5, 0.01, Q=1.0, R=1.0)),
+        "problem is sized",
+    ),
+    (
+        "DelayCompensator: warm start of the inner controller",
+        _step_delay_foreign_warm,
+        "warm must come from this DelayCompensator",
+    ),
     ("MpcConfig: zero horizon step", lambda: MpcConfig(horizon_step_m=0.0), "horizon_step_m"),
     ("MpcConfig: NaN projection window", lambda: MpcConfig(projection_window_m=NAN), "projection_window_m"),
     ("MpcConfig: infinite reference speed", lambda: MpcConfig(v_ref_mps=INF), "v_ref_mps"),
@@ -208,7 +338,11 @@ API_CASES = [
     ("MpcProblem: NaN weight", lambda: MpcProblem(3, 1, 5, 0.01, Q=[1, NAN, 1], R=1.0), "Q contains non-finite"),
     ("MpcProblem: weight of the wrong size", lambda: MpcProblem(3, 1, 5, 0.01, Q=[1, 1], R=1.0), "Q must have 3"),
     ("MpcProblem: negative definite weight", lambda: MpcProblem(3, 1, 5, 0.01, Q=-1.0, R=1.0), "positive semidefinite"),
-    ("MpcProblem: bounds reversed", lambda: MpcProblem(3, 1, 5, 0.01, Q=1.0, R=1.0, u_min=1, u_max=-1), "lower bound exceeds"),
+    (
+        "MpcProblem: bounds reversed",
+        lambda: MpcProblem(3, 1, 5, 0.01, Q=1.0, R=1.0, u_min=1, u_max=-1),
+        "lower bound exceeds",
+    ),
     ("MpcProblem: infinite lower bound", lambda: MpcProblem(3, 1, 5, 0.01, Q=1.0, R=1.0, u_min=INF), "impossible"),
     ("MpcProblem: NaN bound", lambda: MpcProblem(3, 1, 5, 0.01, Q=1.0, R=1.0, x_max=NAN), "NaN"),
     ("MpcProblem: zero rate limit", lambda: MpcProblem(3, 1, 5, 0.01, Q=1.0, R=1.0, du_max_per_s=0.0), "du_max_per_s"),
@@ -216,9 +350,16 @@ API_CASES = [
     ("Road: edges swapped", lambda: Road(0.0, -1.0, 1.0), "is not left of its right edge"),
     ("Road: NaN width", lambda: Road.constant(NAN), "non-finite"),
     ("Road: knots not increasing", lambda: Road([0.0, 0.0], 1.0, -1.0), "strictly increasing"),
-    ("MpcProblem: NaN slack weight", lambda: MpcProblem(3, 1, 5, 0.01, Q=1.0, R=1.0, lane_slack_weight=NAN), "lane_slack_weight"),
-    ("MpcProblem: singular input weight, unbounded inputs",
-     lambda: MpcProblem(4, 2, 5, 0.01, Q=1.0, R=np.array([[1.0, 0.5], [0.5, 0.25]])), "positive definite"),
+    (
+        "MpcProblem: NaN slack weight",
+        lambda: MpcProblem(3, 1, 5, 0.01, Q=1.0, R=1.0, lane_slack_weight=NAN),
+        "lane_slack_weight",
+    ),
+    (
+        "MpcProblem: singular input weight, unbounded inputs",
+        lambda: MpcProblem(4, 2, 5, 0.01, Q=1.0, R=np.array([[1.0, 0.5], [0.5, 0.25]])),
+        "positive definite",
+    ),
     ("OsqpSettings: zero iterations", lambda: OsqpSettings(max_iter=0), "max_iter"),
     ("OsqpSettings: negative tolerance", lambda: OsqpSettings(eps_abs=-1.0), "eps_abs"),
     ("StraightPath: equal ends", lambda: StraightPath([1, 1], [1, 1]), "two finite points at least"),
@@ -229,7 +370,11 @@ API_CASES = [
     ("CirclePath: NaN start angle", lambda: CirclePath([0, 0], 1.0, start_angle_rad=NAN), "start_angle_rad"),
     ("WaypointPath: one point", lambda: WaypointPath([[0, 0]]), "at least 2 distinct"),
     ("WaypointPath: repeated point", lambda: WaypointPath([[0, 0], [0, 0]]), "at least 2 distinct"),
-    ("WaypointPath: closed with two points", lambda: WaypointPath([[0, 0], [1, 0]], closed=True), "at least 3 distinct"),
+    (
+        "WaypointPath: closed with two points",
+        lambda: WaypointPath([[0, 0], [1, 0]], closed=True),
+        "at least 3 distinct",
+    ),
     ("WaypointPath: infinite point", lambda: WaypointPath([[0, 0], [INF, 0]]), "non-finite"),
     ("WaypointPath: wrong shape", lambda: WaypointPath([[0, 0, 0], [1, 0, 0]]), "shape (M, 2)"),
     ("WaypointPath: zero table step", lambda: WaypointPath([[0, 0], [1, 0]], ds_m=0.0), "ds_m"),
@@ -257,8 +402,11 @@ API_CASES = [
     ("simulate: fractional steps", lambda: _sim(steps=2.5), "steps must be an integer >= 1"),
     ("simulate: negative seed", lambda: _sim(seed=-1), "seed must be an integer >= 0"),
     ("simulate: a lane width for a road", lambda: _sim(road=-1.0), "road must be"),
-    ("simulate: disturbance of the wrong size", lambda: _sim(disturbance=Disturbance("normal", std=[0.1, 0.1])),
-     "disturbance.std needs 3 entries"),
+    (
+        "simulate: disturbance of the wrong size",
+        lambda: _sim(disturbance=Disturbance("normal", std=[0.1, 0.1])),
+        "disturbance.std needs 3 entries",
+    ),
     ("simulate: measurement noise not a Disturbance", lambda: _sim(measurement_noise=0.1), "measurement_noise must be"),
 ]
 
@@ -281,7 +429,11 @@ SWEEP_CASES = [
     ("--vary without =", lambda: _plan(["initial_state.y_m"]), "expected NAME=VALUE"),
     ("--vary bad name", lambda: _plan(["initial state=uniform(0,1)"]), "dotted path"),
     ("--vary unknown field", lambda: _plan(["initial_state.z_m=uniform(0,1)"]), "initial_state has no key 'z_m'"),
-    ("--vary unknown section", lambda: _plan(["obstacles.0.center.0=uniform(0,1)"]), "obstacles has no item 0 (it is a list of 0 items)"),
+    (
+        "--vary unknown section",
+        lambda: _plan(["obstacles.0.center.0=uniform(0,1)"]),
+        "obstacles has no item 0 (it is a list of 0 items)",
+    ),
     ("--vary list index out of range", lambda: _plan(["path.center.5=uniform(0,1)"]), "path.center has no item 5"),
     ("--vary not a number", lambda: _plan(["path.center=uniform(0,1)"]), "not a number; vary one of its numbers"),
     ("--vary text field", lambda: _plan(["vehicle.model=uniform(0,1)"]), "not a number"),
@@ -290,9 +442,17 @@ SWEEP_CASES = [
     ("--vary wrong parameter count", lambda: _plan(["initial_state.y_m=uniform(0)"]), "takes 2 parameters"),
     ("--vary non-numeric parameter", lambda: _plan(["initial_state.y_m=uniform(a,1)"]), "'a' is not a number"),
     ("--vary non-finite parameter", lambda: _plan(["initial_state.y_m=normal(0,inf)"]), "not finite"),
-    ("--vary reversed bounds", lambda: _plan(["initial_state.y_m=uniform(1,0)"]), "lower bound 1 exceeds upper bound 0"),
+    (
+        "--vary reversed bounds",
+        lambda: _plan(["initial_state.y_m=uniform(1,0)"]),
+        "lower bound 1 exceeds upper bound 0",
+    ),
     ("--vary negative sigma", lambda: _plan(["initial_state.y_m=normal(0,-1)"]), "standard deviation -1 is negative"),
-    ("--vary scale of an unset value", lambda: _plan(["initial_state.v_mps=scale_uniform(0.8,1.2)"]), "is not set in this scenario"),
+    (
+        "--vary scale of an unset value",
+        lambda: _plan(["initial_state.v_mps=scale_uniform(0.8,1.2)"]),
+        "is not set in this scenario",
+    ),
     ("--vary the seed", lambda: _plan(["seed=uniform(0,9)"]), "gives every run its own seed"),
     ("--vary twice", lambda: _plan(["initial_state.y_m=uniform(0,1)", "initial_state.y_m=normal(0,1)"]), "given twice"),
     ("--vary invalid at its centre", lambda: _plan(["vehicle.lr_m=uniform(-2,-1)"]), "invalid scenario at its centre"),
@@ -302,9 +462,17 @@ SWEEP_CASES = [
     ("--runs zero", lambda: _plan(runs=0), "--runs must be an integer >= 1"),
     ("--seed negative", lambda: _plan(seed=-1), "--seed must be an integer >= 0"),
     ("--backend unknown", lambda: run_sweep(_plan(), backend="dask"), "--backend must be 'local' or 'ray'"),
-    ("--address without ray", lambda: run_sweep(_plan(), address="127.0.0.1:6379"), "--address is only for --backend ray"),
+    (
+        "--address without ray",
+        lambda: run_sweep(_plan(), address="127.0.0.1:6379"),
+        "--address is only for --backend ray",
+    ),
     ("--workers zero", lambda: run_sweep(_plan(), workers=0), "--workers must be an integer >= 1"),
-    ("criteria: negative tolerance", lambda: SuccessCriteria(max_final_lateral_error_m=-1.0), "max_final_lateral_error_m"),
+    (
+        "criteria: negative tolerance",
+        lambda: SuccessCriteria(max_final_lateral_error_m=-1.0),
+        "max_final_lateral_error_m",
+    ),
 ]
 
 
@@ -318,8 +486,21 @@ def test_bad_sweep_options_are_one_line_sweep_errors(cls, call, words):
 
 
 def test_bad_sweep_option_from_the_cli_exits_2_with_one_line(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(sys, "argv", ["mpcdrive", "sweep", "paper-exp3", "--runs", "2",
-                                      "--vary", "initial_state.q=uniform(0,1)", "--out", str(tmp_path / "o")])
+    monkeypatch.setattr(
+        sys,
+        "argv",
+        [
+            "mpcdrive",
+            "sweep",
+            "paper-exp3",
+            "--runs",
+            "2",
+            "--vary",
+            "initial_state.q=uniform(0,1)",
+            "--out",
+            str(tmp_path / "o"),
+        ],
+    )
     with pytest.raises(SystemExit) as ex:
         main()
     assert ex.value.code == 2
@@ -348,8 +529,9 @@ def test_commonroad_obstacle_on_the_start_is_rejected():
     f = Path(__file__).resolve().parent / "data" / "commonroad" / "ZAM_Tutorial-1_2_T-1.xml"
     spec = load_commonroad(f).spec
     init = spec.initial_state
-    parked = spec.obstacles[0].model_copy(update={"position": (init.x_m + 1.0, init.y_m), "velocity_mps": None,
-                                                  "trajectory": None})
+    parked = spec.obstacles[0].model_copy(
+        update={"position": (init.x_m + 1.0, init.y_m), "velocity_mps": None, "trajectory": None}
+    )
     bad = spec.model_copy(update={"obstacles": [*spec.obstacles, parked]})
     with pytest.raises(ScenarioError) as e:
         reject_initial_overlap(bad, str(f))
@@ -361,13 +543,25 @@ def test_commonroad_obstacle_on_the_start_is_rejected():
 WARNING_CASES = [
     ("speed far beyond the model", _set(["vehicle", "speed_mps"], 100.0), "vehicle.speed_mps", "far beyond"),
     ("initial speed far beyond the model", _k4(["initial_state", "v_mps"], 60.0), "initial_state.v_mps", "far beyond"),
-    ("steering limit in radians", _set(["controller", "max_steer_deg"], 0.7), "controller.max_steer_deg",
-     "looks like radians"),
-    ("steering rate in radians", _set(["controller", "max_steer_rate_deg_s"], 1.5), "controller.max_steer_rate_deg_s",
-     "looks like radians"),
+    (
+        "steering limit in radians",
+        _set(["controller", "max_steer_deg"], 0.7),
+        "controller.max_steer_deg",
+        "looks like radians",
+    ),
+    (
+        "steering rate in radians",
+        _set(["controller", "max_steer_rate_deg_s"], 1.5),
+        "controller.max_steer_rate_deg_s",
+        "looks like radians",
+    ),
     ("dt in milliseconds", lambda d: d.update(dt_s=10, duration_s=20.0), "dt_s", "looks like milliseconds"),
-    ("start outside the lane", lambda d: d.update(road={"lane_width_m": 1.0}, initial_state={"y_m": -0.8}),
-     "initial_state", "outside the lane"),
+    (
+        "start outside the lane",
+        lambda d: d.update(road={"lane_width_m": 1.0}, initial_state={"y_m": -0.8}),
+        "initial_state",
+        "outside the lane",
+    ),
 ]
 
 

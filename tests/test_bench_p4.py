@@ -16,8 +16,17 @@ from mpcdrive.scene.geometry import shape_distance
 from mpcdrive.scene.obstacles import ConstantVelocity
 from mpcdrive.sim.closed_loop import Plant
 
-KEYS = {"p50_us", "p99_us", "max_us", "steps", "rms_lateral_error_m", "collision_steps",
-        "min_obstacle_clearance_m", "max_lane_excess_m", "solver_failures"}
+KEYS = {
+    "p50_us",
+    "p99_us",
+    "max_us",
+    "steps",
+    "rms_lateral_error_m",
+    "collision_steps",
+    "min_obstacle_clearance_m",
+    "max_lane_excess_m",
+    "solver_failures",
+}
 
 
 def test_p4_is_the_three_lane_traffic_problem():
@@ -75,7 +84,8 @@ def test_p4_bench_entries_run_without_collision_and_its_length_caps_the_steps(mo
     assert res["mpcdrive_fast"]["backend"] == "fast"  # the compiled path covers P4
     # both backends drove the same closed loop
     assert res["mpcdrive_fast"]["rms_lateral_error_m"] == pytest.approx(
-        res["mpcdrive_osqp"]["rms_lateral_error_m"], rel=1e-3, abs=1e-5)
+        res["mpcdrive_osqp"]["rms_lateral_error_m"], rel=1e-3, abs=1e-5
+    )
 
 
 def test_p4_ego_overtakes_the_slower_car_without_touching_anything():

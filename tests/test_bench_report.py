@@ -34,7 +34,8 @@ def test_bench_has_an_entry_per_backend_and_the_default(results):
         assert impls["mpcdrive"] == impls["mpcdrive_fast"]  # the bench headline is the fast path
         # both backends drove the same closed loop
         assert impls["mpcdrive_fast"]["rms_lateral_error_m"] == pytest.approx(
-            impls["mpcdrive_osqp"]["rms_lateral_error_m"], rel=1e-4, abs=1e-6)
+            impls["mpcdrive_osqp"]["rms_lateral_error_m"], rel=1e-4, abs=1e-6
+        )
 
 
 def test_horizon_sweep_report_and_figure(results, tmp_path):
@@ -88,8 +89,9 @@ def test_obstacle_problem_has_n_obstacles_all_in_play_over_the_drive(n):
     # path from its start to 3 m past its end (more than a 1000-step drive covers at 1 m/s)
     s = np.linspace(0.0, prob.path.length_m + 3.0, 60)
     drive = np.vstack([prob.x0[:2], prob.path.position(s)])
-    far = max(math.hypot(*(c - p)) - ob.shape.bounding_radius_m
-              for p in drive for c, ob in zip(centres, prob.obstacles))
+    far = max(
+        math.hypot(*(c - p)) - ob.shape.bounding_radius_m for p in drive for c, ob in zip(centres, prob.obstacles)
+    )
     assert far <= av.influence_m
     # and the controller puts all of them in the problem, at the start and at the end
     ctrl = prob.controller()
@@ -133,7 +135,8 @@ def test_obstacle_sweep_structure(obstacles):
                 assert r["min_obstacle_clearance_m"] > 0
     # the same problem whichever backend ran
     assert obstacles[2]["fast"]["rms_lateral_error_m"] == pytest.approx(
-        obstacles[2]["osqp"]["rms_lateral_error_m"], rel=1e-3, abs=1e-5)
+        obstacles[2]["osqp"]["rms_lateral_error_m"], rel=1e-3, abs=1e-5
+    )
 
 
 def test_obstacle_sweep_report_and_figure(results, obstacles, tmp_path):

@@ -9,9 +9,21 @@ import pytest
 
 REQUIRED_COLUMNS = ["t", "x", "y", "yaw", "v", "steer", "accel", "s", "e_y", "e_psi", "solve_time_us", "status"]
 REQUIRED_METRICS = [
-    "steps", "duration_s", "rms_lateral_error_m", "max_abs_lateral_error_m", "final_lateral_error_m",
-    "rms_heading_error_rad", "max_abs_steer_rad", "max_abs_steer_rate_rad_s", "min_obstacle_clearance_m",
-    "collisions", "max_lane_excess_m", "solver_failures", "fallbacks", "solve_time_us", "goal_reached",
+    "steps",
+    "duration_s",
+    "rms_lateral_error_m",
+    "max_abs_lateral_error_m",
+    "final_lateral_error_m",
+    "rms_heading_error_rad",
+    "max_abs_steer_rad",
+    "max_abs_steer_rate_rad_s",
+    "min_obstacle_clearance_m",
+    "collisions",
+    "max_lane_excess_m",
+    "solver_failures",
+    "fallbacks",
+    "solve_time_us",
+    "goal_reached",
 ]
 
 
@@ -36,8 +48,15 @@ def test_list_names_every_paper_experiment():
     r = cli("list")
     assert r.returncode == 0
     ids = [line.split("\t")[0] for line in r.stdout.splitlines()]
-    for sid in ("paper-exp1", "paper-exp2", "paper-exp3", "paper-exp4", "paper-disturbance-v1",
-                "paper-disturbance-v4", "paper-smoothing"):
+    for sid in (
+        "paper-exp1",
+        "paper-exp2",
+        "paper-exp3",
+        "paper-exp4",
+        "paper-disturbance-v1",
+        "paper-disturbance-v4",
+        "paper-smoothing",
+    ):
         assert sid in ids
 
 
@@ -72,7 +91,10 @@ def test_run_fast_uses_the_compiled_controller_with_the_same_commands(tmp_path):
         out = tmp_path / name
         r = cli("run", str(short_scenario(tmp_path)), "--out", str(out), "-q", *extra)
         assert r.returncode == 0, r.stderr
-        runs[name] = (json.loads((out / "metrics.json").read_text()), list(csv.DictReader((out / "trajectory.csv").read_text().splitlines())))
+        runs[name] = (
+            json.loads((out / "metrics.json").read_text()),
+            list(csv.DictReader((out / "trajectory.csv").read_text().splitlines())),
+        )
     assert runs["fast"][0]["controller_backend"] == "fast" and runs["ref"][0]["controller_backend"] == "osqp"
     assert "backend: fast" in (tmp_path / "fast" / "scenario.yaml").read_text()
     steer = {k: [float(row["steer"]) for row in v[1]] for k, v in runs.items()}
@@ -153,8 +175,18 @@ def test_usage_errors_are_one_line(tmp_path):
 @pytest.mark.slow
 def test_compare_avoidance_table(tmp_path):
     out = tmp_path / "cmp"
-    r = cli("compare-avoidance", "--out", str(out), "--scenario", "paper-exp5-hard",
-            "--formulation", "hard", "--formulation", "gaussian", "-q")
+    r = cli(
+        "compare-avoidance",
+        "--out",
+        str(out),
+        "--scenario",
+        "paper-exp5-hard",
+        "--formulation",
+        "hard",
+        "--formulation",
+        "gaussian",
+        "-q",
+    )
     assert r.returncode == 0, r.stderr
     text = (out / "avoidance.md").read_text()
     assert "| `paper-exp5-hard` | hard |" in text and "| `paper-exp5-hard` | gaussian |" in text
@@ -168,7 +200,9 @@ def test_compare_avoidance_table(tmp_path):
 def test_reproduce_fast_runs_every_selected_experiment_compiled(tmp_path):
     """``reproduce --fast``, including the Gaussian cost map that reads the controller's obstacles."""
     out = tmp_path / "rep"
-    r = cli("reproduce", "--out", str(out), "--only", "paper-exp5-gaussian", "--only", "paper-exp5-hard", "--fast", "-q")
+    r = cli(
+        "reproduce", "--out", str(out), "--only", "paper-exp5-gaussian", "--only", "paper-exp5-hard", "--fast", "-q"
+    )
     assert r.returncode == 0, r.stderr
     metrics = json.loads((out / "metrics.json").read_text())
     assert {m["controller_backend"] for m in metrics.values()} == {"fast"}
@@ -182,9 +216,13 @@ def test_scenario_warning_is_one_line_on_stderr_and_the_run_goes_on(tmp_path):
     assert r.returncode == 0, r.stderr
     lines = [ln for ln in r.stderr.splitlines() if "warning" in ln]
     # 0.7 deg of steering cannot turn the 1.5 m circle either: that is the second warning
-    assert lines[0] == (f"mpcdrive: warning: {p}: controller.max_steer_deg: 0.7 looks like radians "
-                        "(0.7 rad = 40.11 deg); this field is in degrees"), r.stderr
-    assert len(lines) == 2 and lines[1].startswith(f"mpcdrive: warning: {p}: path: ") and "cannot follow" in lines[1], r.stderr
+    assert lines[0] == (
+        f"mpcdrive: warning: {p}: controller.max_steer_deg: 0.7 looks like radians "
+        "(0.7 rad = 40.11 deg); this field is in degrees"
+    ), r.stderr
+    assert len(lines) == 2 and lines[1].startswith(f"mpcdrive: warning: {p}: path: ") and "cannot follow" in lines[1], (
+        r.stderr
+    )
     assert (tmp_path / "out" / "metrics.json").is_file()
 
 

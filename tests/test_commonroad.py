@@ -17,8 +17,9 @@ import pytest
 from mpcdrive.adapters.commonroad import available
 
 if not available():
-    pytest.skip("the commonroad extra (commonroad-io, commonroad-drivability-checker) is not installed",
-                allow_module_level=True)
+    pytest.skip(
+        "the commonroad extra (commonroad-io, commonroad-drivability-checker) is not installed", allow_module_level=True
+    )
 
 from mpcdrive.adapters.commonroad import check_drive, load_commonroad, write_solution  # noqa: E402
 from mpcdrive.scenarios import build_experiment, run_experiment  # noqa: E402
@@ -90,8 +91,11 @@ def test_import_maps_route_obstacles_and_initial_state(name):
 def test_bad_xml_exits_2_with_one_line(tmp_path):
     bad = tmp_path / "broken.xml"
     bad.write_text("<commonRoad><lanelet")
-    r = subprocess.run([sys.executable, "-m", "mpcdrive.cli", "run", str(bad), "--out", str(tmp_path / "o")],
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        [sys.executable, "-m", "mpcdrive.cli", "run", str(bad), "--out", str(tmp_path / "o")],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 2
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "broken.xml" in lines[0] and "CommonRoad" in lines[0]
@@ -115,9 +119,11 @@ def test_drive_is_judged_safe_by_the_drivability_checker(name, capsys):
     n = rep.steps_checked
     clearance = None if res.clearance_m is None else float(np.min(res.clearance_m[:n]))
     with capsys.disabled():
-        print(f"\n{name}: checker: {rep.line()}; ours: rms |e_y| {m['rms_lateral_error_m']:.3f} m, "
-              f"max |e_y| {np.max(np.abs(res.e_y_m[:n])):.3f} m, min clearance "
-              f"{'-' if clearance is None else f'{clearance:.2f} m'}, solver failures {m['solver_failures']}")
+        print(
+            f"\n{name}: checker: {rep.line()}; ours: rms |e_y| {m['rms_lateral_error_m']:.3f} m, "
+            f"max |e_y| {np.max(np.abs(res.e_y_m[:n])):.3f} m, min clearance "
+            f"{'-' if clearance is None else f'{clearance:.2f} m'}, solver failures {m['solver_failures']}"
+        )
     assert (rep.collision_free, rep.road_compliant, rep.feasible, rep.goal_step is not None) == EXPECTED_VERDICTS[name]
     # our own metric agrees with the checker: no footprint overlap up to the goal
     if clearance is not None:
@@ -170,10 +176,28 @@ def test_cli_runs_a_commonroad_file(tmp_path):
 
     from commonroad.common.solution import CommonRoadSolutionReader, VehicleType
 
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).resolve().parents[1] / "src"),
-                                                         os.environ.get("PYTHONPATH", "")])}
-    r = subprocess.run([sys.executable, "-m", "mpcdrive.cli", "run", str(DIR / "ZAM_Tutorial-1_1_T-1.xml"),
-                        "--vehicle", "vw_vanagon", "-q"], capture_output=True, text=True, cwd=tmp_path, env=env)
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join(
+            [str(Path(__file__).resolve().parents[1] / "src"), os.environ.get("PYTHONPATH", "")]
+        ),
+    }
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "mpcdrive.cli",
+            "run",
+            str(DIR / "ZAM_Tutorial-1_1_T-1.xml"),
+            "--vehicle",
+            "vw_vanagon",
+            "-q",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env=env,
+    )
     assert r.returncode == 0, r.stderr
     (out,) = (tmp_path / "runs").iterdir()
     assert out.name.startswith("ZAM_Tutorial-1_1_T-1-")
@@ -188,8 +212,21 @@ def test_cli_runs_a_commonroad_file(tmp_path):
 
 
 def test_vehicle_flags_are_checked(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "mpcdrive.cli", "run", str(DIR / "ZAM_Tutorial-1_1_T-1.xml"),
-                        "--vehicle", "audi", "--out", str(tmp_path / "o")], capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "mpcdrive.cli",
+            "run",
+            str(DIR / "ZAM_Tutorial-1_1_T-1.xml"),
+            "--vehicle",
+            "audi",
+            "--out",
+            str(tmp_path / "o"),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 2 and "--vehicle" in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "o").exists()
 
@@ -206,8 +243,10 @@ def test_parked_car_is_passed_through_the_free_neighbour_lane(capsys):
     m = compute_metrics(res)
     rep = check_drive(imp, res)
     with capsys.disabled():
-        print(f"\nZAM_Tutorial_Urban-3_2.xml: checker: {rep.line()}; ours: max e_y {res.e_y_m.max():.2f} m, "
-              f"min clearance {np.min(res.clearance_m):.2f} m, solver failures {m['solver_failures']}")
+        print(
+            f"\nZAM_Tutorial_Urban-3_2.xml: checker: {rep.line()}; ours: max e_y {res.e_y_m.max():.2f} m, "
+            f"min clearance {np.min(res.clearance_m):.2f} m, solver failures {m['solver_failures']}"
+        )
     assert rep.collision_free and rep.road_compliant and rep.feasible and rep.goal_step is not None
     assert res.e_y_m.max() > 1.0  # over in the neighbour lane beside the parked car
     assert np.min(res.clearance_m) > 0.3
@@ -289,12 +328,18 @@ def test_route_reaches_the_goal_as_the_network_says(name):
     assert tuple(route[: k + 1]) == ROUTES_TO_GOAL[name]
     for a, b in zip(route, route[1:]):  # each step a successor or a same-direction neighbour
         la = net.find_lanelet_by_id(a)
-        assert (b in la.successor or (b == la.adj_left and la.adj_left_same_direction)
-                or (b == la.adj_right and la.adj_right_same_direction)), (a, b)
+        assert (
+            b in la.successor
+            or (b == la.adj_left and la.adj_left_same_direction)
+            or (b == la.adj_right and la.adj_right_same_direction)
+        ), (a, b)
     # the reference path passes through (or, for a small region, within a lane of) the goal region
     if imp.plan.goal_arc_m is not None:
-        shapes = [sh for st in imp.planning_problem.goal.state_list
-                  for sh in (getattr(st.position, "shapes", None) or [st.position])]
+        shapes = [
+            sh
+            for st in imp.planning_problem.goal.state_list
+            for sh in (getattr(st.position, "shapes", None) or [st.position])
+        ]
         d = min(float(np.min(np.hypot(*(imp.centerline - sh.center).T))) for sh in shapes)
         assert d < 1.0
 
@@ -317,13 +362,22 @@ def _two_lane_network_with_exit():
     def arc(r, y0):  # left turn of radius r starting at (50, y0) heading east
         return np.column_stack([50 + r * np.sin(phi), y0 + r * (1 - np.cos(phi))])
 
-    l1 = lane(1, np.column_stack([x, np.zeros_like(x)]), successor=[21, 23], adjacent_left=2,
-              adjacent_left_same_direction=True)
-    l2 = lane(2, np.column_stack([x, np.full_like(x, 3.5)]), successor=[22], adjacent_right=1,
-              adjacent_right_same_direction=True)
+    l1 = lane(
+        1,
+        np.column_stack([x, np.zeros_like(x)]),
+        successor=[21, 23],
+        adjacent_left=2,
+        adjacent_left_same_direction=True,
+    )
+    l2 = lane(
+        2,
+        np.column_stack([x, np.full_like(x, 3.5)]),
+        successor=[22],
+        adjacent_right=1,
+        adjacent_right_same_direction=True,
+    )
     l21 = lane(21, arc(r_right, 0.0), predecessor=[1], adjacent_left=22, adjacent_left_same_direction=True)
-    l22 = lane(22, arc(r_right - 3.5, 3.5), predecessor=[2],
-               adjacent_right=21, adjacent_right_same_direction=True)
+    l22 = lane(22, arc(r_right - 3.5, 3.5), predecessor=[2], adjacent_right=21, adjacent_right_same_direction=True)
     xe = np.linspace(50, 150, 51)
     l23 = lane(23, np.column_stack([xe, np.zeros_like(xe)]), predecessor=[1])
     return LaneletNetwork.create_from_lanelet_list([l1, l2, l21, l22, l23])
@@ -346,9 +400,21 @@ def test_time_only_goal_follows_the_lane_not_the_straightest_branch():
     assert lane_forward(net, [2], 1000.0) == [2, 22]  # one successor: forced
 
 
-@pytest.mark.parametrize("name", [n for n in ALL_FILES if n in (
-    "ARG_Carcarana-4_5_T-1.xml", "DEU_A9-3_1_T-1.xml", "DEU_Backnang-9_1_T-1.xml",
-    "DEU_Ibbenbueren-10_2_T-1.xml", "FRA_Anglet-1_1_T-1.xml")])
+@pytest.mark.parametrize(
+    "name",
+    [
+        n
+        for n in ALL_FILES
+        if n
+        in (
+            "ARG_Carcarana-4_5_T-1.xml",
+            "DEU_A9-3_1_T-1.xml",
+            "DEU_Backnang-9_1_T-1.xml",
+            "DEU_Ibbenbueren-10_2_T-1.xml",
+            "FRA_Anglet-1_1_T-1.xml",
+        )
+    ],
+)
 def test_time_only_routes_take_no_turn_the_network_does_not_force(name):
     """Every step of a time-only route is the only successor, the intersection's straight
     successor or the one continuing the lane beside its neighbours -- never a chosen turn."""
@@ -359,8 +425,11 @@ def test_time_only_routes_take_no_turn_the_network_does_not_force(name):
     net = imp.scenario.lanelet_network
     for a, b in zip(imp.route, imp.route[1:]):
         la = net.find_lanelet_by_id(a)
-        assert (la.successor == [b] or b in _straight_successors(net, a)
-                or _continues_neighbours(net, la, b)), (a, b, la.successor)
+        assert la.successor == [b] or b in _straight_successors(net, a) or _continues_neighbours(net, la, b), (
+            a,
+            b,
+            la.successor,
+        )
 
 
 def _max_abs_curvature(points) -> float:
@@ -412,7 +481,7 @@ def test_no_extension_past_the_route_and_speed_ends_at_zero(name):
     assert prof is not None and prof.v_mps[-1] == 0.0
     assert exp.path.length_m == pytest.approx(float(np.sum(np.hypot(*np.diff(imp.centerline, axis=0).T))), rel=1e-3)
     # v^2 |kappa| <= a_lat (the profile's curvature is the windowed one it is built on)
-    assert np.max(prof.v_mps ** 2 * prof.abs_kappa) <= LAT_ACCEL_MPS2 * (1 + 1e-9)
+    assert np.max(prof.v_mps**2 * prof.abs_kappa) <= LAT_ACCEL_MPS2 * (1 + 1e-9)
 
 
 def test_goal_time_window_sets_the_cruise_speed():
@@ -467,8 +536,11 @@ def test_batch_writes_a_row_per_file_and_survives_a_broken_one(tmp_path):
     (src / "broken.xml").write_text("<commonRoad><lanelet")
     (src / "DEU_A9-3_1_T-1.xml").write_bytes((DIR / "DEU_A9-3_1_T-1.xml").read_bytes())
     out = tmp_path / "out"
-    r = subprocess.run([sys.executable, "-m", "mpcdrive.cli", "commonroad", str(src), "--out", str(out),
-                        "--workers", "1"], capture_output=True, text=True)
+    r = subprocess.run(
+        [sys.executable, "-m", "mpcdrive.cli", "commonroad", str(src), "--out", str(out), "--workers", "1"],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stderr
     rows = json.loads((out / "summary.json").read_text())
     assert set(rows) == {"broken.xml", "DEU_A9-3_1_T-1.xml"}
@@ -476,8 +548,18 @@ def test_batch_writes_a_row_per_file_and_survives_a_broken_one(tmp_path):
     assert not (out / "broken").exists()
     a9 = rows["DEU_A9-3_1_T-1.xml"]
     assert a9["error"] is None and a9["passed"]
-    for key in ("passed", "collision_free", "road_compliant", "ks_feasible", "goal_reached",
-                "min_obstacle_clearance_m", "solver_failures", "solve_time_us", "wall_s", "error"):
+    for key in (
+        "passed",
+        "collision_free",
+        "road_compliant",
+        "ks_feasible",
+        "goal_reached",
+        "min_obstacle_clearance_m",
+        "solver_failures",
+        "solve_time_us",
+        "wall_s",
+        "error",
+    ):
         assert key in a9
     assert set(a9["solve_time_us"]) == {"p50", "p99"}
     for f in ("solution.xml", "trajectory.csv", "metrics.json", "report.html", "commonroad_scene.png"):
@@ -501,8 +583,9 @@ def test_ramp_start_already_touches_the_solution_checkers_road_boundary():
     imp = imported("ZAM-Ramp-1_1-T-1.xml")
     init = imp.planning_problem.initial_state
     v = imp.spec.vehicle
-    body = create_collision_object(Rectangle(v.length_m, v.width_m, center=np.asarray(init.position, float),
-                                             orientation=float(init.orientation)))
+    body = create_collision_object(
+        Rectangle(v.length_m, v.width_m, center=np.asarray(init.position, float), orientation=float(init.orientation))
+    )
     assert _construct_boundary_checker(imp.scenario).collide(body)
 
 
@@ -517,8 +600,12 @@ def test_batch_with_a_commonroad_plant_and_vehicle(tmp_path):
     from mpcdrive.adapters.commonroad import with_vehicle
     from mpcdrive.adapters.commonroad_batch import run_batch
 
-    rows = run_batch([DIR / "USA_Lanker-1_1_T-1.xml"], tmp_path, workers=1,
-                     configure=partial(with_vehicle, vehicle="bmw_320i", plant="ks"))
+    rows = run_batch(
+        [DIR / "USA_Lanker-1_1_T-1.xml"],
+        tmp_path,
+        workers=1,
+        configure=partial(with_vehicle, vehicle="bmw_320i", plant="ks"),
+    )
     row = rows["USA_Lanker-1_1_T-1.xml"]
     assert row["error"] is None and row["passed"] and row["solution_valid"], row
     scen = (tmp_path / "USA_Lanker-1_1_T-1" / "scenario.yaml").read_text()

@@ -13,7 +13,10 @@ if not available():
     pytest.skip("the commonroad extra (commonroad-vehicle-models) is not installed", allow_module_level=True)
 
 from mpcdrive.adapters.commonroad_vehicles import (  # noqa: E402
-    apply_vehicle, solution_vehicle_type, vehicle_parameters)
+    apply_vehicle,
+    solution_vehicle_type,
+    vehicle_parameters,
+)
 from mpcdrive.models.presets import PRESETS  # noqa: E402
 from mpcdrive.scenarios.loader import ScenarioError, validate_scenario_data  # noqa: E402
 from mpcdrive.scenarios.schema import ScenarioSpec  # noqa: E402
@@ -26,8 +29,15 @@ ROAD = {
     "path": {"type": "straight", "start": [0.0, 0.0], "end": [200.0, 0.0]},
     "road": {"lane_width_m": 3.5},
     "initial_state": {"x_m": 0.0, "y_m": 0.5, "yaw_deg": 0.0, "v_mps": 8.0},
-    "controller": {"horizon": 20, "Q": [1, 1, 2, 1], "R": [10, 0.1], "Rc": [100, 1],
-                   "speed_limits_mps": [0.0, 15.0], "reference_speed_mps": 10.0, "horizon_step_m": 0.5},
+    "controller": {
+        "horizon": 20,
+        "Q": [1, 1, 2, 1],
+        "R": [10, 0.1],
+        "Rc": [100, 1],
+        "speed_limits_mps": [0.0, 15.0],
+        "reference_speed_mps": 10.0,
+        "horizon_step_m": 0.5,
+    },
 }
 
 
@@ -40,7 +50,8 @@ def test_presets_are_the_commonroad_parameter_sets(vehicle, num):
     assert q.friction == pytest.approx(p.tire.p_dy1)
     assert q.cs_front_per_rad == pytest.approx(-p.tire.p_ky1 / p.tire.p_dy1)
     assert (pre.max_steer_rad, pre.max_steer_rate_rad_s, pre.max_accel_mps2) == pytest.approx(
-        (p.steering.max, p.steering.v_max, p.longitudinal.a_max))
+        (p.steering.max, p.steering.v_max, p.longitudinal.a_max)
+    )
     assert (pre.length_m, pre.width_m) == pytest.approx((p.l, p.w))
     assert pre.v_switch_mps == pytest.approx(p.longitudinal.v_switch)
     assert solution_vehicle_type(vehicle).value == num
@@ -55,13 +66,19 @@ def test_apply_vehicle_sets_controller_limits_and_plant():
     assert math.radians(c.max_steer_deg) == pytest.approx(p.steering.max)
     assert math.radians(c.max_steer_rate_deg_s) == pytest.approx(p.steering.v_max)
     # above v_switch the acceleration limit falls as a_max v_switch / v: the bound holds up to 15 m/s
-    assert c.accel_limits_mps2 == pytest.approx((-p.longitudinal.a_max, p.longitudinal.a_max * p.longitudinal.v_switch / 15.0))
+    assert c.accel_limits_mps2 == pytest.approx(
+        (-p.longitudinal.a_max, p.longitudinal.a_max * p.longitudinal.v_switch / 15.0)
+    )
     assert c.speed_limits_mps == (0.0, 15.0)
     assert (spec.plant.model, spec.plant.vehicle) == ("commonroad_st", "bmw_320i")
     # the rest of the scenario is untouched
     assert (spec.path, spec.road, spec.initial_state, c.Q, c.R) == (
-        ScenarioSpec.model_validate(ROAD).path, ScenarioSpec.model_validate(ROAD).road,
-        ScenarioSpec.model_validate(ROAD).initial_state, [1, 1, 2, 1], [10, 0.1])
+        ScenarioSpec.model_validate(ROAD).path,
+        ScenarioSpec.model_validate(ROAD).road,
+        ScenarioSpec.model_validate(ROAD).initial_state,
+        [1, 1, 2, 1],
+        [10, 0.1],
+    )
     # without a plant the plant stays the controller's model
     assert apply_vehicle(ScenarioSpec.model_validate(ROAD), "vw_vanagon").plant.model == "same"
 
@@ -74,17 +91,35 @@ def test_apply_vehicle_rejects_unknown_names():
         apply_vehicle(spec, "bmw_320i", "dyn")
 
 
-@pytest.mark.parametrize("change, field, message", [
-    ({"plant": {"model": "commonroad_st"}}, "plant", "needs plant.vehicle"),
-    ({"plant": {"model": "commonroad_ks", "vehicle": "bmw_320i", "substeps": 4}}, "plant",
-     "plant.substeps does not apply"),
-    ({"plant": {"model": "same", "vehicle": "bmw_320i"}}, "plant", "plant.vehicle needs a CommonRoad plant model"),
-    ({"plant": {"model": "commonroad_st", "vehicle": "bmw_320i"},
-      "vehicle": {"model": "kinematic3", "speed_mps": 10.0},
-      "controller": {"horizon": 20, "Q": [1, 1, 2], "R": [10]}}, "(top level)", "observed as kinematic4"),
-    ({"plant": {"model": "commonroad_st", "vehicle": "bmw_320i"},
-      "disturbance": {"distribution": "normal", "std": [0.0, 0.0, 0.0, 0.0]}}, "(top level)", "use measurement_noise"),
-])
+@pytest.mark.parametrize(
+    "change, field, message",
+    [
+        ({"plant": {"model": "commonroad_st"}}, "plant", "needs plant.vehicle"),
+        (
+            {"plant": {"model": "commonroad_ks", "vehicle": "bmw_320i", "substeps": 4}},
+            "plant",
+            "plant.substeps does not apply",
+        ),
+        ({"plant": {"model": "same", "vehicle": "bmw_320i"}}, "plant", "plant.vehicle needs a CommonRoad plant model"),
+        (
+            {
+                "plant": {"model": "commonroad_st", "vehicle": "bmw_320i"},
+                "vehicle": {"model": "kinematic3", "speed_mps": 10.0},
+                "controller": {"horizon": 20, "Q": [1, 1, 2], "R": [10]},
+            },
+            "(top level)",
+            "observed as kinematic4",
+        ),
+        (
+            {
+                "plant": {"model": "commonroad_st", "vehicle": "bmw_320i"},
+                "disturbance": {"distribution": "normal", "std": [0.0, 0.0, 0.0, 0.0]},
+            },
+            "(top level)",
+            "use measurement_noise",
+        ),
+    ],
+)
 def test_bad_commonroad_plant_is_one_clear_line(change, field, message):
     with pytest.raises(ScenarioError) as e:
         validate_scenario_data({**ROAD, **change}, "f.yaml")
@@ -163,8 +198,12 @@ def _mb_wheel_ratios(plant: CommonRoadPlant, xp) -> np.ndarray:
     """R_w omega / u_w per wheel (1: rolling, 0: locked), hub speeds u_w as MB computes them."""
     p, d, r, vx, vy = plant.p, xp[2], xp[5], xp[3], xp[10]
     lat = (vy + p.a * r) * math.sin(d)
-    hub = [(vx + 0.5 * p.T_f * r) * math.cos(d) + lat, (vx - 0.5 * p.T_f * r) * math.cos(d) + lat,
-           vx + 0.5 * p.T_r * r, vx - 0.5 * p.T_r * r]
+    hub = [
+        (vx + 0.5 * p.T_f * r) * math.cos(d) + lat,
+        (vx - 0.5 * p.T_f * r) * math.cos(d) + lat,
+        vx + 0.5 * p.T_r * r,
+        vx - 0.5 * p.T_r * r,
+    ]
     return np.array([p.R_w * xp[23 + i] / u for i, u in enumerate(hub)])
 
 
@@ -229,7 +268,7 @@ def test_mb_on_a_straight_agrees_with_ks(accel):
     for _ in range(30):
         xm, xk = mb.step(xm, [0.0, accel], 0.1), ks.step(xk, [0.0, accel], 0.1)
     om, ok = mb.observe(xm), ks.observe(xk)
-    a_eff = accel / (1.0 + 4.0 * p.I_y_w / (p.m * p.R_w ** 2))
+    a_eff = accel / (1.0 + 4.0 * p.I_y_w / (p.m * p.R_w**2))
     assert ok[3] == pytest.approx(15.0 + 3.0 * accel, abs=1e-9)
     assert om[3] == pytest.approx(15.0 + 3.0 * a_eff, abs=0.01)
     assert abs(om[3] - ok[3]) <= 3.0 * abs(accel - a_eff) + 0.01
@@ -341,7 +380,7 @@ def test_st_plant_agrees_with_the_dynamic_bicycle_on_a_gentle_circle():
         pts.append(x)
     kappa_dyn = _circle_curvature(np.array(pts))
     L = params.wheelbase_m
-    kappa_lin = math.tan(delta) / (L + params.understeer_gradient_rad_per_mps2 * v ** 2)
+    kappa_lin = math.tan(delta) / (L + params.understeer_gradient_rad_per_mps2 * v**2)
     assert abs(params.understeer_gradient_rad_per_mps2) < 1e-12  # neutral steer (see docstring)
     assert kappa_st == pytest.approx(kappa_lin, rel=2e-3)
     assert kappa_dyn == pytest.approx(kappa_lin, rel=2e-3)
@@ -371,8 +410,9 @@ def test_scenario_runs_on_a_commonroad_plant_and_logs_the_centre_of_gravity(plan
     assert res.x_final == pytest.approx(exp.plant.observe(xp_final), abs=1e-12)
     if plant == "ks":  # the rear axle is lr behind the logged centre of gravity
         lr = exp.plant.p.b
-        assert res.x_final[:2] == pytest.approx(xp_final[:2] + lr * np.array([math.cos(xp_final[4]),
-                                                                              math.sin(xp_final[4])]))
+        assert res.x_final[:2] == pytest.approx(
+            xp_final[:2] + lr * np.array([math.cos(xp_final[4]), math.sin(xp_final[4])])
+        )
     # the controller brings the car from 0.5 m off the lane centre onto it and to 10 m/s
     assert abs(res.e_y_m[-1]) < 0.05 and res.v_mps[-1] == pytest.approx(10.0, abs=0.1)
     m = compute_metrics(res)
@@ -391,11 +431,13 @@ def test_missing_extra_is_a_clear_error(monkeypatch):
 def test_simulate_refuses_a_state_disturbance_on_an_observed_plant():
     from mpcdrive.sim import Disturbance, simulate
 
-    exp = build_experiment(validate_scenario_data(
-        {**ROAD, "plant": {"model": "commonroad_ks", "vehicle": "bmw_320i"}}, "f.yaml"))
+    exp = build_experiment(
+        validate_scenario_data({**ROAD, "plant": {"model": "commonroad_ks", "vehicle": "bmw_320i"}}, "f.yaml")
+    )
     with pytest.raises(ValueError, match="state disturbance needs a Plant"):
-        simulate(exp.controller, exp.plant, exp.path, exp.x0, 0.1, 5,
-                 disturbance=Disturbance("normal", std=np.zeros(4)))
+        simulate(
+            exp.controller, exp.plant, exp.path, exp.x0, 0.1, 5, disturbance=Disturbance("normal", std=np.zeros(4))
+        )
 
 
 @pytest.mark.parametrize("plant", ["st", "mb"])

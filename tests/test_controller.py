@@ -35,7 +35,10 @@ def test_non_finite_state_is_a_clear_value_error(bad, field):
 
 @settings(max_examples=40, deadline=None)
 @given(
-    x=st.floats(-3, 12), y=st.floats(-3, 3), yaw=st.floats(-math.pi, math.pi), u_prev=st.floats(-STEER, STEER),
+    x=st.floats(-3, 12),
+    y=st.floats(-3, 3),
+    yaw=st.floats(-math.pi, math.pi),
+    u_prev=st.floats(-STEER, STEER),
     lin=st.sampled_from(["trajectory", "paper"]),
 )
 def test_commands_respect_steering_and_rate_bounds_from_random_states(x, y, yaw, u_prev, lin):
@@ -53,8 +56,18 @@ def test_infeasible_problem_falls_back_deliberately_and_is_counted():
     """Speed bounds [0, 1] with the car at 3 m/s and braking limited to 0.1 m/s^2: every QP is
     infeasible. The controller must report it, never output NaN, and count the fallbacks."""
     model = KinematicBicycle4()
-    pb = MpcProblem(4, 2, 10, 0.01, Q=[1, 1, 1, 1], R=0.1, u_min=[-STEER, -0.1], u_max=[STEER, 0.1],
-                    x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [1.0])
+    pb = MpcProblem(
+        4,
+        2,
+        10,
+        0.01,
+        Q=[1, 1, 1, 1],
+        R=0.1,
+        u_min=[-STEER, -0.1],
+        u_max=[STEER, 0.1],
+        x_min=[-np.inf] * 3 + [0.0],
+        x_max=[np.inf] * 3 + [1.0],
+    )
     path = StraightPath([0, 0], [50, 0])
     # the default ladder: the relaxed problem (no hard speed bounds) solves every step
     c = LtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0))

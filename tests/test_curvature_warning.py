@@ -15,11 +15,18 @@ DIR = Path(__file__).resolve().parent / "data" / "commonroad"
 
 
 def _spec(path, **controller):
-    return validate_scenario_data({
-        "id": "c", "duration_s": 0.05, "dt_s": 0.01, "path": path,
-        "vehicle": {"model": "kinematic3", "lf_m": 0.17, "lr_m": 0.16},
-        "initial_state": {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 90.0},
-        "controller": {"horizon": 5, "Q": [1, 1, 1], "R": [1], **controller}}, "c.yaml")
+    return validate_scenario_data(
+        {
+            "id": "c",
+            "duration_s": 0.05,
+            "dt_s": 0.01,
+            "path": path,
+            "vehicle": {"model": "kinematic3", "lf_m": 0.17, "lr_m": 0.16},
+            "initial_state": {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 90.0},
+            "controller": {"horizon": 5, "Q": [1, 1, 1], "R": [1], **controller},
+        },
+        "c.yaml",
+    )
 
 
 def _path_of(spec):

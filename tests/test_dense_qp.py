@@ -133,8 +133,18 @@ def test_larger_mixed_qps_are_exact_and_agree_with_osqp(seed):
         assert stat <= EXACT_TOL * scale and feas <= EXACT_TOL and comp <= 1e-8 * scale
         assert r.lam.min() >= 0.0
         o = osqp.OSQP()
-        o.setup(sp.csc_matrix(np.triu(H)), g, sp.csc_matrix(C), b, np.full(m, np.inf), eps_abs=1e-10,
-                eps_rel=1e-10, max_iter=200000, verbose=False, polishing=True)
+        o.setup(
+            sp.csc_matrix(np.triu(H)),
+            g,
+            sp.csc_matrix(C),
+            b,
+            np.full(m, np.inf),
+            eps_abs=1e-10,
+            eps_rel=1e-10,
+            max_iter=200000,
+            verbose=False,
+            polishing=True,
+        )
         zo = o.solve(raise_error=False).x
         assert np.abs(r.z - zo).max() <= OSQP_TOL * (1 + np.abs(zo).max())
 
@@ -207,7 +217,17 @@ def test_soft_lane_shaped_qps_are_exact_and_agree_with_osqp():
         stat, feas, comp = _kkt(H, g, C, b, r)
         assert stat <= EXACT_TOL * scale and feas <= EXACT_TOL and comp <= 1e-8 * scale, trial
         o = osqp.OSQP()
-        o.setup(sp.csc_matrix(np.triu(H)), g, sp.csc_matrix(C), b, np.full(b.size, np.inf), eps_abs=1e-10,
-                eps_rel=1e-10, max_iter=200000, verbose=False, polishing=True)
+        o.setup(
+            sp.csc_matrix(np.triu(H)),
+            g,
+            sp.csc_matrix(C),
+            b,
+            np.full(b.size, np.inf),
+            eps_abs=1e-10,
+            eps_rel=1e-10,
+            max_iter=200000,
+            verbose=False,
+            polishing=True,
+        )
         zo = o.solve(raise_error=False).x
         assert np.abs(r.z - zo).max() <= OSQP_TOL * (1 + np.abs(zo).max()), trial

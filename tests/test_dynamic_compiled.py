@@ -12,8 +12,18 @@ import numpy as np
 import pytest
 
 from mpcdrive.models import DynamicBicycle
-from mpcdrive.models.compiled import (KIND_DYNAMIC, METHOD_EULER, METHOD_EXP, METHOD_RK4, discrete_step_jacobians,
-                                      model_code, model_f, model_jacobians, model_references, rollout_into)
+from mpcdrive.models.compiled import (
+    KIND_DYNAMIC,
+    METHOD_EULER,
+    METHOD_EXP,
+    METHOD_RK4,
+    discrete_step_jacobians,
+    model_code,
+    model_f,
+    model_jacobians,
+    model_references,
+    rollout_into,
+)
 from mpcdrive.models.discretize import discrete_step, discrete_step_and_jacobians
 from mpcdrive.models.dynamic import STEADY_ACCEL_TOL_MPS2
 from mpcdrive.models.presets import get_preset
@@ -42,8 +52,16 @@ def _model(tire):
 
 def _states(n, seed):
     rng = np.random.default_rng(seed)
-    X = np.column_stack([rng.normal(size=n), rng.normal(size=n), rng.uniform(-3, 3, n),
-                         rng.choice(SPEEDS, n), rng.uniform(-0.5, 0.5, n), rng.uniform(-2, 2, n)])
+    X = np.column_stack(
+        [
+            rng.normal(size=n),
+            rng.normal(size=n),
+            rng.uniform(-3, 3, n),
+            rng.choice(SPEEDS, n),
+            rng.uniform(-0.5, 0.5, n),
+            rng.uniform(-2, 2, n),
+        ]
+    )
     U = np.column_stack([rng.uniform(-0.4, 0.4, n), rng.uniform(-5, 5, n)])
     return X, U
 
@@ -162,6 +180,4 @@ def test_compiled_references_equal_the_model(tire, feedforward, horizon):
         # ('beyond-grip' asks for up to 1.5 times the grip: no steady state exists at most points)
         assert horizon == "beyond-grip" or converged.mean() >= 0.5, np.flatnonzero(~converged)
     np.testing.assert_allclose(xref[converged], xr0[converged], rtol=0, atol=REF_TOL)
-    np.testing.assert_allclose(uref[converged[:n - 1]], ur0[:n - 1][converged[:n - 1]], rtol=0, atol=REF_TOL)
-
-
+    np.testing.assert_allclose(uref[converged[: n - 1]], ur0[: n - 1][converged[: n - 1]], rtol=0, atol=REF_TOL)

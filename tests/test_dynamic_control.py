@@ -33,8 +33,18 @@ PRE = get_preset("f1tenth")
 
 
 def _dyn_problem(N=20, dt=0.05, **kw):
-    return MpcProblem(nx=6, nu=2, N=N, dt_s=dt, Q=[10, 10, 2, 1, 0.1, 0.1], R=[1.0, 0.01], Rc=[1.0, 0.0],
-                      u_min=[-PRE.max_steer_rad, -9.51], u_max=[PRE.max_steer_rad, 9.51], **kw)
+    return MpcProblem(
+        nx=6,
+        nu=2,
+        N=N,
+        dt_s=dt,
+        Q=[10, 10, 2, 1, 0.1, 0.1],
+        R=[1.0, 0.01],
+        Rc=[1.0, 0.0],
+        u_min=[-PRE.max_steer_rad, -9.51],
+        u_max=[PRE.max_steer_rad, 9.51],
+        **kw,
+    )
 
 
 def _objective(qp, X, U):
@@ -52,8 +62,13 @@ def test_projected_gradient_reaches_the_osqp_optimum_on_the_dynamic_ltv_problem(
     path, prof = exp.path, exp.speed_profile
     model = DynamicBicycle(PRE.params)
     pb = _dyn_problem()
-    mpc = LtvMpc(model, path, pb, MpcConfig(speed_profile=prof, discretization="exp"),
-                 OsqpSettings(eps_abs=1e-9, eps_rel=1e-9, max_iter=20000))
+    mpc = LtvMpc(
+        model,
+        path,
+        pb,
+        MpcConfig(speed_profile=prof, discretization="exp"),
+        OsqpSettings(eps_abs=1e-9, eps_rel=1e-9, max_iter=20000),
+    )
     # a state off the line entering a bend, steering saturating in the optimum
     s = 6.0
     p, h = path.position(s), float(path.heading(s))
@@ -93,8 +108,11 @@ def test_projected_gradient_in_closed_loop_and_its_limits():
     res = simulate(mpc, Plant(model), path, [0.0, 0.3, 0.0, 2.0], 0.05, 120)
     m = compute_metrics(res)
     assert m["solver_failures"] == 0 and m["converged_max_abs_lateral_error_m"] < 0.02
-    for bad, words in ((dict(du_max_per_s=[1.0, 1.0]), "rate"), (dict(x_max=[np.inf] * 3 + [5.0]), "state bounds"),
-                       (dict(road=Road.constant(1.0)), "road")):
+    for bad, words in (
+        (dict(du_max_per_s=[1.0, 1.0]), "rate"),
+        (dict(x_max=[np.inf] * 3 + [5.0]), "state bounds"),
+        (dict(road=Road.constant(1.0)), "road"),
+    ):
         pb_bad = MpcProblem(nx=4, nu=2, N=5, dt_s=0.05, Q=1.0, R=1.0, u_min=-1, u_max=1, **bad)
         with pytest.raises(ValueError, match=words):
             LtvMpc(model, path, pb_bad, MpcConfig(v_ref_mps=1.0), ProjectedGradientSettings())
@@ -138,8 +156,9 @@ def test_delay_compensation_reduces_tracking_error_under_a_known_delay():
     spec = load_scenario("delay-uncompensated")
     results = {}
     for comp in (False, True):
-        s = spec.model_copy(update={"controller": spec.controller.model_copy(update={"delay_compensation": comp}),
-                                    "laps": 0.6})
+        s = spec.model_copy(
+            update={"controller": spec.controller.model_copy(update={"delay_compensation": comp}), "laps": 0.6}
+        )
         exp = build_experiment(s)
         assert isinstance(exp.controller, DelayCompensator) == comp
         results[comp] = compute_metrics(run_experiment(exp))
@@ -162,15 +181,27 @@ def test_delay_compensator_predicts_the_plant_exactly_without_model_error():
 
         def initial_warm(self, x0):
             from mpcdrive.types import WarmStart
+
             return WarmStart(s_m=0.0, u_prev=np.zeros(2))
 
         def step(self, x, warm):
             from mpcdrive.types import ControlOutput, WarmStart
+
             log.append(x.copy())
             k = len(log)
             u = np.array([0.2 * math.sin(0.3 * k), 0.5 * math.cos(0.2 * k)])
-            return ControlOutput(u=u, status="ok", fallback="", solve_time_s=0.0, s_m=0.0, e_y_m=0.0, e_psi_rad=0.0,
-                                 X_pred=x[None].copy(), refs=x[None].copy(), warm=WarmStart(0.0, u))
+            return ControlOutput(
+                u=u,
+                status="ok",
+                fallback="",
+                solve_time_s=0.0,
+                s_m=0.0,
+                e_y_m=0.0,
+                e_psi_rad=0.0,
+                X_pred=x[None].copy(),
+                refs=x[None].copy(),
+                warm=WarmStart(0.0, u),
+            )
 
     ctl = DelayCompensator(Recorder(), model, act, 0.05, path, substeps=5)
     res = simulate(ctl, Plant(model, "rk4", 5, act), path, [0, 0, 0, 3.0, 0, 0], 0.05, 40, stop_at_path_end=False)
@@ -183,8 +214,9 @@ def test_delay_compensator_predicts_the_plant_exactly_without_model_error():
 def test_baselines_track_a_bend_within_limits(cls):
     model = DynamicBicycle(PRE.params)
     path = WaypointPath([(0, 0), (4, 0), (7, 1.5), (9, 4), (10, 7)])
-    prof = SpeedProfile.from_friction(path, 1.0489, lateral_fraction=0.5, accel_max_mps2=3, decel_max_mps2=3,
-                                      v_max_mps=4.0, v_start_mps=2.0)
+    prof = SpeedProfile.from_friction(
+        path, 1.0489, lateral_fraction=0.5, accel_max_mps2=3, decel_max_mps2=3, v_max_mps=4.0, v_start_mps=2.0
+    )
     lim = BaselineLimits(PRE.max_steer_rad, 3.2, -5.0, 5.0)
     ctl = cls(model, path, 0.05, prof, lim, wheelbase_m=PRE.params.wheelbase_m, lr_m=PRE.params.lr_m)
     res = simulate(ctl, Plant(model, "rk4", 5), path, [0, 0.2, 0, 2.0, 0, 0], 0.05, 200)
@@ -208,6 +240,7 @@ def test_state_adapter_runs_a_kinematic_controller_on_the_dynamic_plant():
     assert compute_metrics(res)["converged_max_abs_lateral_error_m"] < 0.05
     with pytest.raises(ValueError, match="inputs"):
         from mpcdrive.models import KinematicBicycle3
+
         StateAdapter(ctl.inner, KinematicBicycle3(), dyn)
 
 
@@ -217,8 +250,16 @@ def test_stop_and_go_with_dynamic_mpc_never_produces_nan():
     """Start at rest, accelerate through the kinematic blend, stop at the end of the road."""
     model = DynamicBicycle(PRE.params)
     path = WaypointPath([(0, 0), (3, 0), (6, 1), (8, 3), (9, 6)])
-    prof = SpeedProfile.from_friction(path, 1.0489, lateral_fraction=0.6, accel_max_mps2=2.0, decel_max_mps2=2.0,
-                                      v_max_mps=3.0, v_start_mps=0.0, v_end_mps=0.0)
+    prof = SpeedProfile.from_friction(
+        path,
+        1.0489,
+        lateral_fraction=0.6,
+        accel_max_mps2=2.0,
+        decel_max_mps2=2.0,
+        v_max_mps=3.0,
+        v_start_mps=0.0,
+        v_end_mps=0.0,
+    )
     pb = _dyn_problem(N=15, du_max_per_s=[3.2, np.inf], x_min=[-np.inf] * 3 + [0.0] + [-np.inf] * 2)
     mpc = LtvMpc(model, path, pb, MpcConfig(speed_profile=prof, discretization="exp"))
     res = simulate(mpc, Plant(model, "rk4", 5), path, np.zeros(6), 0.05, 160, stop_at_path_end=False)

@@ -97,8 +97,11 @@ def test_f_components_is_the_single_definition_for_casadi_too(tire):
     xs, us = ca.SX.sym("x", 6), ca.SX.sym("u", 2)
     expr = ca.vertcat(*m.f_components([xs[i] for i in range(6)], [us[i] for i in range(2)], ca))
     fun = ca.Function("f", [xs, us], [expr, ca.jacobian(expr, xs), ca.jacobian(expr, us)])
-    for x, u in (([1, 2, 0.3, 4.0, 0.2, 0.7], [0.1, 1.0]), ([0, 0, 0, 0.7, -0.1, 0.3], [-0.2, -2.0]),
-                 ([0, 0, 1, 0.0, 0.0, 0.0], [0.3, 0.0])):
+    for x, u in (
+        ([1, 2, 0.3, 4.0, 0.2, 0.7], [0.1, 1.0]),
+        ([0, 0, 0, 0.7, -0.1, 0.3], [-0.2, -2.0]),
+        ([0, 0, 1, 0.0, 0.0, 0.0], [0.3, 0.0]),
+    ):
         fx, Ax, Bx = (np.array(v) for v in fun(x, u))
         np.testing.assert_allclose(fx.ravel(), m.f(np.array(x, float), np.array(u, float)), atol=1e-12)
         A, B = m.jacobians(np.array(x, float), np.array(u, float))
@@ -114,8 +117,12 @@ def test_no_nan_at_zero_and_negative_speed(tire):
         for u in ([0.0, 0.0], [0.4, 0.0], [-0.4, -3.0], [0.2, 5.0]):
             x = np.array([1.0, -2.0, 0.5, vx, 0.05, -0.1])
             u = np.array(u)
-            for out in (m.f(x, u), *m.jacobians(x, u), *discrete_step_and_jacobians(m, x, u, 0.05, "exp"),
-                        discrete_step(m, x, u, 0.05, "rk4", 10)):
+            for out in (
+                m.f(x, u),
+                *m.jacobians(x, u),
+                *discrete_step_and_jacobians(m, x, u, 0.05, "exp"),
+                discrete_step(m, x, u, 0.05, "rk4", 10),
+            ):
                 assert np.all(np.isfinite(out))
     d, b, a = m.steady_state_full(np.array([0.0, 0.5, -1.0]), np.array([0.0, 0.0, 0.0]))
     assert np.all(np.isfinite(d)) and np.all(np.isfinite(b)) and np.all(np.isfinite(a))
@@ -215,11 +222,14 @@ def test_f1tenth_preset_is_the_f1tenth_gym_car():
     assert p.cornering_stiffness_front_n_per_rad == pytest.approx(1.0489 * 4.718 * 3.74 * 9.81 * 0.17145 / 0.3302)
 
 
-@pytest.mark.parametrize("name, mass, iz, lf, lr, steer", [
-    ("commonroad_ford_escort", 1225.887, 1538.853, 0.88392, 1.50876, 0.910),
-    ("commonroad_bmw_320i", 1093.295, 1791.600, 1.15620, 1.42272, 1.066),
-    ("commonroad_vw_vanagon", 1478.898, 2473.118, 1.15079, 1.32114, 1.023),
-])
+@pytest.mark.parametrize(
+    "name, mass, iz, lf, lr, steer",
+    [
+        ("commonroad_ford_escort", 1225.887, 1538.853, 0.88392, 1.50876, 0.910),
+        ("commonroad_bmw_320i", 1093.295, 1791.600, 1.15620, 1.42272, 1.066),
+        ("commonroad_vw_vanagon", 1478.898, 2473.118, 1.15079, 1.32114, 1.023),
+    ],
+)
 def test_commonroad_presets(name, mass, iz, lf, lr, steer):
     pre = PRESETS[name]
     p = pre.params
@@ -231,9 +241,18 @@ def test_commonroad_presets(name, mass, iz, lf, lr, steer):
     DynamicBicycle(p).f(np.array([0, 0, 0, 20.0, 0, 0]), np.array([0.02, 0.0]))
 
 
-@pytest.mark.parametrize("bad", [dict(mass_kg=0.0), dict(lf_m=-0.1), dict(friction=float("nan")),
-                                 dict(v_blend_low_mps=2.0, v_blend_high_mps=1.0), dict(pacejka_c=2.5),
-                                 dict(h_cg_m=-0.1), dict(pacejka_e=1.0)])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        dict(mass_kg=0.0),
+        dict(lf_m=-0.1),
+        dict(friction=float("nan")),
+        dict(v_blend_low_mps=2.0, v_blend_high_mps=1.0),
+        dict(pacejka_c=2.5),
+        dict(h_cg_m=-0.1),
+        dict(pacejka_e=1.0),
+    ],
+)
 def test_bad_parameters_are_rejected_naming_the_field(bad):
     with pytest.raises(ValueError, match=next(iter(bad)).split("_")[0]):
         DynamicParams(**bad)
@@ -266,8 +285,9 @@ def test_exp_discretization_is_the_exact_zero_order_hold_of_the_linearization():
         np.testing.assert_allclose(Bd, E[:6, 6:8], rtol=1e-10, atol=1e-12)
         np.testing.assert_allclose(F, x + E[:6, 8], rtol=1e-10, atol=1e-12)
         # second order (exponential Rosenbrock-Euler): local error ~ dt^3
-        errs = [np.abs(discrete_step(m, x, u, h, "exp") - discrete_step(m, x, u, h, "rk4", 50)).max()
-                for h in (0.02, 0.01)]
+        errs = [
+            np.abs(discrete_step(m, x, u, h, "exp") - discrete_step(m, x, u, h, "rk4", 50)).max() for h in (0.02, 0.01)
+        ]
         assert 5.0 < errs[0] / errs[1] < 11.0
 
 

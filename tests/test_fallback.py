@@ -27,8 +27,19 @@ def failing(N, nx, nu, status="max_iter"):
 
 def speed_controller(ladder, **fb):
     model = KinematicBicycle4()
-    pb = MpcProblem(4, 2, 10, 0.01, Q=[1, 1, 1, 1], R=0.1, u_min=[-STEER, -3.0], u_max=[STEER, 3.0],
-                    du_max_per_s=[RATE, np.inf], x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [2.0])
+    pb = MpcProblem(
+        4,
+        2,
+        10,
+        0.01,
+        Q=[1, 1, 1, 1],
+        R=0.1,
+        u_min=[-STEER, -3.0],
+        u_max=[STEER, 3.0],
+        du_max_per_s=[RATE, np.inf],
+        x_min=[-np.inf] * 3 + [0.0],
+        x_max=[np.inf] * 3 + [2.0],
+    )
     path = CirclePath(radius_m=1.5)
     cfg = MpcConfig(v_ref_mps=1.0, fallback=FallbackConfig(tuple(ladder), **fb))
     return model, path, LtvMpc(model, path, pb, cfg)
@@ -52,18 +63,35 @@ def test_bad_ladders_are_refused_with_the_reason(ladder, words):
         FallbackConfig(ladder)
 
 
-@pytest.mark.parametrize("kw, words", [({"brake_decel_mps2": 0.0}, "brake_decel_mps2"),
-                                       ({"brake_decel_mps2": float("nan")}, "brake_decel_mps2"),
-                                       ({"brake_steering": "left"}, "brake_steering"),
-                                       ({"relax_slack_factor": 0.5}, "relax_slack_factor")])
+@pytest.mark.parametrize(
+    "kw, words",
+    [
+        ({"brake_decel_mps2": 0.0}, "brake_decel_mps2"),
+        ({"brake_decel_mps2": float("nan")}, "brake_decel_mps2"),
+        ({"brake_steering": "left"}, "brake_steering"),
+        ({"relax_slack_factor": 0.5}, "relax_slack_factor"),
+    ],
+)
 def test_bad_fallback_settings_are_refused(kw, words):
     with pytest.raises(ValueError, match=words):
         FallbackConfig(**kw)
 
 
 def test_relaxed_problem_drops_rate_limits_and_state_bounds_keeps_input_bounds():
-    pb = MpcProblem(4, 2, 5, 0.01, Q=1.0, R=0.1, u_min=[-1, -2], u_max=[1, 2], du_max_per_s=[1, 1],
-                    x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [2.0], road=Road.constant(1.0))
+    pb = MpcProblem(
+        4,
+        2,
+        5,
+        0.01,
+        Q=1.0,
+        R=0.1,
+        u_min=[-1, -2],
+        u_max=[1, 2],
+        du_max_per_s=[1, 1],
+        x_min=[-np.inf] * 3 + [0.0],
+        x_max=[np.inf] * 3 + [2.0],
+        road=Road.constant(1.0),
+    )
     r = relaxed_problem(pb, 100.0)
     assert not r.has_rate_limit and r.bounded_states.size == 0
     np.testing.assert_array_equal(r.u_min, pb.u_min)
@@ -150,12 +178,21 @@ def test_relax_rescues_a_solver_that_runs_out_of_iterations():
 
 def test_scenario_fallback_keys_reach_the_controller_and_the_csv(tmp_path):
     data = {
-        "id": "fb", "duration_s": 0.3, "vehicle": {"model": "kinematic4"},
+        "id": "fb",
+        "duration_s": 0.3,
+        "vehicle": {"model": "kinematic4"},
         "path": {"type": "straight", "start": [0, 0], "end": [20, 0]},
         "initial_state": {"y_m": 0.2, "v_mps": 3.0},
-        "controller": {"horizon": 10, "Q": [1, 1, 1, 1], "R": [0.1, 0.1], "speed_limits_mps": [0, 1],
-                       "accel_limits_mps2": [-0.1, 0.1], "fallback": ["shifted_plan", "brake"],
-                       "brake_decel_mps2": 0.05, "brake_steering": "straighten"},
+        "controller": {
+            "horizon": 10,
+            "Q": [1, 1, 1, 1],
+            "R": [0.1, 0.1],
+            "speed_limits_mps": [0, 1],
+            "accel_limits_mps2": [-0.1, 0.1],
+            "fallback": ["shifted_plan", "brake"],
+            "brake_decel_mps2": 0.05,
+            "brake_steering": "straighten",
+        },
     }
     spec = validate_scenario_data(data, "test")
     exp = build_experiment(spec)
@@ -177,11 +214,16 @@ def _straight_speed_controller(obstacles=(), road=None):
     from mpcdrive.ocp.avoidance import AvoidanceConfig
 
     model = KinematicBicycle4()
-    pb = MpcProblem(4, 2, 10, 0.05, Q=[1, 1, 1, 1], R=0.1, u_min=[-STEER, -6.0], u_max=[STEER, 2.0],
-                    road=road)
+    pb = MpcProblem(4, 2, 10, 0.05, Q=[1, 1, 1, 1], R=0.1, u_min=[-STEER, -6.0], u_max=[STEER, 2.0], road=road)
     path = StraightPath([0, 0], [100, 0])
-    c = LtvMpc(model, path, pb, MpcConfig(v_ref_mps=5.0), obstacles=tuple(obstacles),
-               avoidance=AvoidanceConfig() if obstacles else None)
+    c = LtvMpc(
+        model,
+        path,
+        pb,
+        MpcConfig(v_ref_mps=5.0),
+        obstacles=tuple(obstacles),
+        avoidance=AvoidanceConfig() if obstacles else None,
+    )
     c.backend.solve = lambda *a, **k: failing(10, 4, 2)
     return c
 

@@ -48,10 +48,22 @@ def _with_backend(spec, backend):
 # ------------------------------------------------------------------------------ built-in scenarios
 #: built-in scenarios the fast path covers (kinematic and dynamic models, obstacle costs, speed
 #: profiles, the kinematic MPC on a dynamic plant, actuator delay, parameter mismatch)
-FAST_SCENARIOS = ["paper-exp1", "paper-exp2", "paper-exp3", "paper-exp4", "paper-disturbance-v1",
-                  "paper-disturbance-v4", "paper-smoothing", "paper-exp5-potential", "paper-exp5-gaussian",
-                  "paper-exp5-hard", "paper-exp5-corridor", "mismatch-kinematic-mpc", "track-hairpins",
-                  "delay-compensated"]
+FAST_SCENARIOS = [
+    "paper-exp1",
+    "paper-exp2",
+    "paper-exp3",
+    "paper-exp4",
+    "paper-disturbance-v1",
+    "paper-disturbance-v4",
+    "paper-smoothing",
+    "paper-exp5-potential",
+    "paper-exp5-gaussian",
+    "paper-exp5-hard",
+    "paper-exp5-corridor",
+    "mismatch-kinematic-mpc",
+    "track-hairpins",
+    "delay-compensated",
+]
 #: dynamic-model scenarios checked against OSQP at 1e-10 instead (test_fast_dynamic_scenarios_match_tight_osqp):
 #: on delay-uncompensated OSQP at its scenario tolerance (1e-5) stops short on some steps (status
 #: ok, acceleration off by 0.05 m/s^2 at step 163; at 1e-10 it agrees with the fast path); the
@@ -80,8 +92,15 @@ def test_unsupported_scenarios_fall_back_to_osqp():
 
     b = build_experiment(_with_backend(load_scenario("paper-exp5-hard"), "osqp")).mpc
     with pytest.warns(FastPathUnavailable, match="car following"):
-        ctrl = make_mpc(b.model, b.path, b.problem, b.config, "fast", obstacles=b.obstacles,
-                        avoidance=AvoidanceConfig("hard", follow_gap_s=1.0))
+        ctrl = make_mpc(
+            b.model,
+            b.path,
+            b.problem,
+            b.config,
+            "fast",
+            obstacles=b.obstacles,
+            avoidance=AvoidanceConfig("hard", follow_gap_s=1.0),
+        )
     assert ctrl.backend_name == "osqp"
 
 
@@ -116,7 +135,10 @@ def test_fast_closed_loop_metrics_match_osqp(builtin_pair):
     m_ref = compute_metrics(ref_result)
     m_fast = compute_metrics(fast_result)
     assert m_fast["steps"] == m_ref["steps"]
-    assert abs(m_fast["rms_lateral_error_m"] - m_ref["rms_lateral_error_m"]) <= METRIC_TOL_M + 0.01 * m_ref["rms_lateral_error_m"]
+    assert (
+        abs(m_fast["rms_lateral_error_m"] - m_ref["rms_lateral_error_m"])
+        <= METRIC_TOL_M + 0.01 * m_ref["rms_lateral_error_m"]
+    )
     assert abs(m_fast["max_abs_steer_rad"] - m_ref["max_abs_steer_rad"]) <= COMMAND_TOL_RAD
     assert (m_fast["solver_failures"], m_fast["fallbacks"]) == (m_ref["solver_failures"], m_ref["fallbacks"])
     assert fast_result.meta["backend"] == "fast" and ref_result.meta["backend"] == "osqp"
@@ -133,38 +155,86 @@ def _feature_cases():
     wp = WaypointPath([[0, 0], [3, 1], [6, -1], [9, 0.5], [12, 0]], smoothing=0.0)
     loop = WaypointPath([[0, 0], [4, 0], [5, 3], [2, 5], [-1, 3]], closed=True)
     m3, m4 = KinematicBicycle3(1.5, KinematicParams(0.2, 0.14)), KinematicBicycle4()
-    p4 = dict(Q=[5, 5, 10, 2], R=[0.1, 0.05], u_min=[-STEER, -2.0], u_max=[STEER, 1.5],
-              x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [1.4])
+    p4 = dict(
+        Q=[5, 5, 10, 2],
+        R=[0.1, 0.05],
+        u_min=[-STEER, -2.0],
+        u_max=[STEER, 1.5],
+        x_min=[-np.inf] * 3 + [0.0],
+        x_max=[np.inf] * 3 + [1.4],
+    )
     return {
-        "rate+Rc+lane, waypoints, rk4": (m3, wp, MpcProblem(3, 1, 15, 0.02, Q=[1, 4, 1], R=0.5, Rc=2.0,
-                                         u_min=-STEER, u_max=STEER, du_max_per_s=math.radians(120),
-                                         road=_lane(0.15)), MpcConfig(), np.array([0.5, 0.4, 0.3])),
+        "rate+Rc+lane, waypoints, rk4": (
+            m3,
+            wp,
+            MpcProblem(
+                3,
+                1,
+                15,
+                0.02,
+                Q=[1, 4, 1],
+                R=0.5,
+                Rc=2.0,
+                u_min=-STEER,
+                u_max=STEER,
+                du_max_per_s=math.radians(120),
+                road=_lane(0.15),
+            ),
+            MpcConfig(),
+            np.array([0.5, 0.4, 0.3]),
+        ),
         "lane+speed bounds, closed waypoints, euler, paper horizon": (
-            m4, loop, MpcProblem(4, 2, 12, 0.05, road=_lane(0.2), lane_slack_weight=50.0,
-                                 lane_slack_weight_l1=5.0, **p4),
+            m4,
+            loop,
+            MpcProblem(4, 2, 12, 0.05, road=_lane(0.2), lane_slack_weight=50.0, lane_slack_weight_l1=5.0, **p4),
             MpcConfig(discretization="euler", horizon="paper", horizon_step_m=0.05, v_ref_mps=1.2),
-            np.array([0.3, -0.5, 0.4, 1.3])),
+            np.array([0.3, -0.5, 0.4, 1.3]),
+        ),
         "paper linearization, no feedforward, circle": (
-            m4, CirclePath((1.0, -1.0), 2.0, ccw=False), MpcProblem(4, 2, 20, 0.02, du_max_per_s=[1.0, 3.0], **p4),
-            MpcConfig(linearization="paper", feedforward="none", v_ref_mps=1.0), np.array([1.0, 1.2, -0.2, 0.8])),
+            m4,
+            CirclePath((1.0, -1.0), 2.0, ccw=False),
+            MpcProblem(4, 2, 20, 0.02, du_max_per_s=[1.0, 3.0], **p4),
+            MpcConfig(linearization="paper", feedforward="none", v_ref_mps=1.0),
+            np.array([1.0, 1.2, -0.2, 0.8]),
+        ),
         "speed profile from rest, closed waypoints, accel feedforward": (
-            m4, loop, MpcProblem(4, 2, 15, 0.05, du_max_per_s=[3.0, 20.0], **p4),
-            MpcConfig(speed_profile=SpeedProfile(loop, 3.0, 1.5, 2.0, 1.4)), np.array([0.3, -0.2, 0.1, 0.0])),
+            m4,
+            loop,
+            MpcProblem(4, 2, 15, 0.05, du_max_per_s=[3.0, 20.0], **p4),
+            MpcConfig(speed_profile=SpeedProfile(loop, 3.0, 1.5, 2.0, 1.4)),
+            np.array([0.3, -0.2, 0.1, 0.0]),
+        ),
         "speed profile, exp discretization": (
-            m4, loop, MpcProblem(4, 2, 15, 0.05, **p4),
+            m4,
+            loop,
+            MpcProblem(4, 2, 15, 0.05, **p4),
             MpcConfig(discretization="exp", speed_profile=SpeedProfile(loop, 3.0, 1.5, 2.0, 1.4)),
-            np.array([0.2, 0.1, 0.05, 0.8])),
+            np.array([0.2, 0.1, 0.05, 0.8]),
+        ),
         "speed profile to a stop, open waypoints, euler, lane": (
-            m4, wp, MpcProblem(4, 2, 12, 0.05, road=_lane(0.3), **p4),
-            MpcConfig(discretization="euler",
-                      speed_profile=SpeedProfile(wp, 2.0, 1.0, 1.5, 1.3, v_start_mps=0.5, v_end_mps=0.0)),
-            np.array([0.1, 0.05, 0.3, 0.6])),
+            m4,
+            wp,
+            MpcProblem(4, 2, 12, 0.05, road=_lane(0.3), **p4),
+            MpcConfig(
+                discretization="euler",
+                speed_profile=SpeedProfile(wp, 2.0, 1.0, 1.5, 1.3, v_start_mps=0.5, v_end_mps=0.0),
+            ),
+            np.array([0.1, 0.05, 0.3, 0.6]),
+        ),
         "speed profile, three-state model": (
-            m3, wp, MpcProblem(3, 1, 15, 0.02, Q=[1, 4, 1], R=0.5, u_min=-STEER, u_max=STEER),
-            MpcConfig(speed_profile=SpeedProfile(wp, 3.0, 2.0, 2.0, 1.5)), np.array([0.2, 0.3, 0.4])),
+            m3,
+            wp,
+            MpcProblem(3, 1, 15, 0.02, Q=[1, 4, 1], R=0.5, u_min=-STEER, u_max=STEER),
+            MpcConfig(speed_profile=SpeedProfile(wp, 3.0, 2.0, 2.0, 1.5)),
+            np.array([0.2, 0.3, 0.4]),
+        ),
         "constant-speed profile": (
-            m4, CirclePath((1.0, -1.0), 2.0), MpcProblem(4, 2, 20, 0.02, **p4),
-            MpcConfig(speed_profile=ConstantSpeed(0.9)), np.array([1.0, -3.1, 0.1, 0.5])),
+            m4,
+            CirclePath((1.0, -1.0), 2.0),
+            MpcProblem(4, 2, 20, 0.02, **p4),
+            MpcConfig(speed_profile=ConstantSpeed(0.9)),
+            np.array([1.0, -3.1, 0.1, 0.5]),
+        ),
     }
 
 
@@ -226,14 +296,25 @@ def test_dense_qp_solutions_are_exact_and_agree_with_clarabel_and_osqp():
         if C.shape[0]:
             st = clarabel.DefaultSettings()
             st.verbose = False
-            cl = clarabel.DefaultSolver(sp.csc_matrix(np.triu(H)), g, sp.csc_matrix(-C), -b,
-                                        [clarabel.NonnegativeConeT(C.shape[0])], st).solve()
+            cl = clarabel.DefaultSolver(
+                sp.csc_matrix(np.triu(H)), g, sp.csc_matrix(-C), -b, [clarabel.NonnegativeConeT(C.shape[0])], st
+            ).solve()
             zc = np.array(cl.x)
             assert r.objective <= 0.5 * zc @ H @ zc + g @ zc + 1e-7 * scale
             assert np.abs(r.z - zc).max() <= 1e-5 * (1 + np.abs(zc).max())
             o = osqp.OSQP()
-            o.setup(sp.csc_matrix(np.triu(H)), g, sp.csc_matrix(C), b, np.full(C.shape[0], np.inf),
-                    eps_abs=1e-9, eps_rel=1e-9, max_iter=100000, verbose=False, polishing=True)
+            o.setup(
+                sp.csc_matrix(np.triu(H)),
+                g,
+                sp.csc_matrix(C),
+                b,
+                np.full(C.shape[0], np.inf),
+                eps_abs=1e-9,
+                eps_rel=1e-9,
+                max_iter=100000,
+                verbose=False,
+                polishing=True,
+            )
             zo = o.solve(raise_error=False).x
             assert np.abs(r.z - zo).max() <= 1e-5 * (1 + np.abs(zo).max())
 
@@ -257,11 +338,24 @@ def test_infeasible_controller_problem_is_reported_and_falls_back_counted():
     """Speed bounds [0, 1] with the car at 3 m/s and braking limited: every QP is infeasible;
     both backends say so, never output NaN, and count the same fallbacks."""
     model = KinematicBicycle4()
-    pb = MpcProblem(4, 2, 10, 0.01, Q=[1, 1, 1, 1], R=0.1, u_min=[-STEER, -0.1], u_max=[STEER, 0.1],
-                    x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [1.0])
+    pb = MpcProblem(
+        4,
+        2,
+        10,
+        0.01,
+        Q=[1, 1, 1, 1],
+        R=0.1,
+        u_min=[-STEER, -0.1],
+        u_max=[STEER, 0.1],
+        x_min=[-np.inf] * 3 + [0.0],
+        x_max=[np.inf] * 3 + [1.0],
+    )
     path = StraightPath([0, 0], [50, 0])
-    for ladder, rung in ((("shifted_plan", "hold_last"), None), (("relax", "shifted_plan", "brake"), "relax"),
-                         (("brake",), "brake")):
+    for ladder, rung in (
+        (("shifted_plan", "hold_last"), None),
+        (("relax", "shifted_plan", "brake"), "relax"),
+        (("brake",), "brake"),
+    ):
         cfg = MpcConfig(v_ref_mps=1.0, fallback=FallbackConfig(ladder))
         runs = {}
         for ctrl in (FastLtvMpc(model, path, pb, cfg), LtvMpc(model, path, pb, cfg)):
@@ -355,8 +449,14 @@ def test_speed_profiles_the_fast_path_declines_are_named():
 @pytest.mark.parametrize("model", [KinematicBicycle3(2.0, KinematicParams(0.2, 0.1)), KinematicBicycle4()])
 @pytest.mark.parametrize("method", ["rk4", "euler", "exp"])
 def test_compiled_discretization_equals_numpy(model, method):
-    from mpcdrive.models.compiled import (METHOD_EULER, METHOD_EXP, METHOD_RK4, discrete_step_jacobians, model_code,
-                                          rollout_into)
+    from mpcdrive.models.compiled import (
+        METHOD_EULER,
+        METHOD_EXP,
+        METHOD_RK4,
+        discrete_step_jacobians,
+        model_code,
+        rollout_into,
+    )
 
     kind, mp = model_code(model)
     rng = np.random.default_rng(0)
@@ -381,12 +481,16 @@ def test_compiled_discretization_equals_numpy(model, method):
         np.testing.assert_allclose(Xr[k + 1], discrete_step(model, Xr[k], U[k], 0.05, method), atol=1e-13)
 
 
-@pytest.mark.parametrize("path", [
-    StraightPath([1.0, -2.0], [4.0, 2.0]),
-    CirclePath((0.5, 0.2), 1.5, ccw=False, start_angle_rad=0.7),
-    WaypointPath([[0, 0], [2, 1], [4, 0], [6, 2]]),
-    WaypointPath([[0, 0], [4, 0], [5, 3], [2, 5], [-1, 3]], closed=True),
-], ids=["straight", "circle", "waypoints", "closed-waypoints"])
+@pytest.mark.parametrize(
+    "path",
+    [
+        StraightPath([1.0, -2.0], [4.0, 2.0]),
+        CirclePath((0.5, 0.2), 1.5, ccw=False, start_angle_rad=0.7),
+        WaypointPath([[0, 0], [2, 1], [4, 0], [6, 2]]),
+        WaypointPath([[0, 0], [4, 0], [5, 3], [2, 5], [-1, 3]], closed=True),
+    ],
+    ids=["straight", "circle", "waypoints", "closed-waypoints"],
+)
 def test_compiled_path_geometry_equals_the_path_objects(path):
     from mpcdrive.paths.compiled import path_arrays, path_eval, path_project
 
@@ -432,8 +536,13 @@ def test_a_second_process_loads_the_compiled_step_from_the_cache():
         "                  'sparse': 'scipy.sparse' in sys.modules}))\n"
     )
     src = str(Path(fast.__file__).resolve().parents[2])
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                          env={**__import__("os").environ, "PYTHONPATH": src})
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        check=True,
+        env={**__import__("os").environ, "PYTHONPATH": src},
+    )
     stats = json.loads(proc.stdout.strip().splitlines()[-1])
     # the machine code came from the cache, and the process never loaded the sparse QP stack
     # (scipy.sparse is for the OSQP controller; it would add a few tenths of a second to start-up)
@@ -473,22 +582,54 @@ def _obstacle_cases():
 
     b3 = p3()
     m4 = KinematicBicycle4()
-    pb4 = MpcProblem(4, 2, 25, 0.02, Q=[5, 5, 10, 2], R=[0.1, 0.05], u_min=[-STEER, -2.0], u_max=[STEER, 1.5],
-                     x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [1.4], road=_lane(0.9),
-                     du_max_per_s=[3.0, 5.0])
+    pb4 = MpcProblem(
+        4,
+        2,
+        25,
+        0.02,
+        Q=[5, 5, 10, 2],
+        R=[0.1, 0.05],
+        u_min=[-STEER, -2.0],
+        u_max=[STEER, 1.5],
+        x_min=[-np.inf] * 3 + [0.0],
+        x_max=[np.inf] * 3 + [1.4],
+        road=_lane(0.9),
+        du_max_per_s=[3.0, 5.0],
+    )
     crossing = Obstacle(rectangle(0.4, 0.3), (3.0, -1.5, 0.3), ConstantVelocity(0.0, 0.5), name="crossing")
     cone = Obstacle(Circle(0.2), (5.5, 0.15, 0.0), name="cone")
     far = Obstacle(Circle(0.2), (40.0, 0.0, 0.0), name="far away")
     return {
-        "P3: gaussian, lane, start outside the lane": (b3.model, b3.path, b3.problem, b3.config, b3.x0,
-                                                       b3.obstacles, b3.avoidance, 1),
+        "P3: gaussian, lane, start outside the lane": (
+            b3.model,
+            b3.path,
+            b3.problem,
+            b3.config,
+            b3.x0,
+            b3.obstacles,
+            b3.avoidance,
+            1,
+        ),
         "potential, moving rectangle + cone + far, speed, rates, waypoints": (
-            m4, WaypointPath([[0, 0], [4, 0.3], [8, -0.2], [12, 0]]), pb4, MpcConfig(v_ref_mps=1.0),
-            np.array([0.0, 0.2, 0.0, 0.8]), (crossing, cone, far),
-            AvoidanceConfig("potential", weight=0.5, epsilon_m2=0.05, max_obstacles=2, influence_m=4.0), 1),
-        "gaussian, SQP to convergence": (b3.model, b3.path, b3.problem, replace(b3.config, sqp_max_iterations=8,
-                                          sqp_tol=1e-6, sqp_max_time_s=10.0), np.array([2.0, 0.3, 0.0]),
-                                         b3.obstacles, b3.avoidance, 8),
+            m4,
+            WaypointPath([[0, 0], [4, 0.3], [8, -0.2], [12, 0]]),
+            pb4,
+            MpcConfig(v_ref_mps=1.0),
+            np.array([0.0, 0.2, 0.0, 0.8]),
+            (crossing, cone, far),
+            AvoidanceConfig("potential", weight=0.5, epsilon_m2=0.05, max_obstacles=2, influence_m=4.0),
+            1,
+        ),
+        "gaussian, SQP to convergence": (
+            b3.model,
+            b3.path,
+            b3.problem,
+            replace(b3.config, sqp_max_iterations=8, sqp_tol=1e-6, sqp_max_time_s=10.0),
+            np.array([2.0, 0.3, 0.0]),
+            b3.obstacles,
+            b3.avoidance,
+            8,
+        ),
     }
 
 
@@ -554,8 +695,9 @@ def test_obstacle_formulations_the_fast_path_declines_are_named():
     assert "car following" in obstacles_unsupported_reason((ob,), AvoidanceConfig("hard", follow_gap_s=0.5))
     m4 = KinematicBicycle4()
     pb = MpcProblem(4, 2, 10, 0.05, Q=[1, 1, 1, 1], R=[1, 1])
-    assert "needs a road" in fast_unsupported_reason(m4, StraightPath((0, 0), (5, 0)), pb, obstacles=(ob,),
-                                                     avoidance=AvoidanceConfig("corridor"))
+    assert "needs a road" in fast_unsupported_reason(
+        m4, StraightPath((0, 0), (5, 0)), pb, obstacles=(ob,), avoidance=AvoidanceConfig("corridor")
+    )
     rec = Obstacle(Circle(0.2), (1.0, 0.0, 0.0), TrajectoryMotion([0.0, 1.0], [0.0, 1.0], [0.0, 0.0], [0.0, 0.0]))
     assert "TrajectoryMotion" in obstacles_unsupported_reason((rec,), AvoidanceConfig("potential"))
 
@@ -715,8 +857,18 @@ def test_the_relax_rung_avoids_the_obstacles_set_last():
     model = KinematicBicycle4()
     # speed bound [0, 1] with the car at 3 m/s and braking limited: every QP is infeasible and
     # the relaxed problem (no state bounds) solves
-    pb = MpcProblem(4, 2, 10, 0.05, Q=[1, 1, 1, 1], R=0.1, u_min=[-STEER, -0.1], u_max=[STEER, 0.1],
-                    x_min=[-np.inf] * 3 + [0.0], x_max=[np.inf] * 3 + [1.0])
+    pb = MpcProblem(
+        4,
+        2,
+        10,
+        0.05,
+        Q=[1, 1, 1, 1],
+        R=0.1,
+        u_min=[-STEER, -0.1],
+        u_max=[STEER, 0.1],
+        x_min=[-np.inf] * 3 + [0.0],
+        x_max=[np.inf] * 3 + [1.0],
+    )
     path = StraightPath([0, 0], [50, 0])
     far, near = Obstacle(Circle(0.3), (40.0, 0.0, 0.0)), Obstacle(Circle(0.3), (1.5, 0.1, 0.0))
     av = AvoidanceConfig("hard", influence_m=3.0)

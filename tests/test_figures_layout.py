@@ -29,13 +29,31 @@ def _run(length_m=230.0, lane=2.0, k=200, obstacles=None, name="long-road", e_y=
     if obstacles is not None:
         meta["obstacles"] = obstacles
     return SimResult(
-        t_s=t, x=X, u=z[:, None], x_final=X[-1].copy(), s_m=x.copy(), e_y_m=e, e_psi_rad=z, yaw_rad=z,
-        v_mps=np.full(k, 5.0), steer_rad=z, accel_mps2=z, X_pred=None, refs=None,
-        status=(STATUS_OK,) * k, fallback=("",) * k, solve_time_s=np.full(k, 1e-4),
-        path_xy=np.column_stack([np.linspace(0.0, length_m, 400), np.zeros(400)]), dt_s=dt,
-        state_names=("x", "y", "yaw"), input_names=("steer",),
-        road_profile=np.array([[0.0, lane / 2, -lane / 2], [length_m, lane / 2, -lane / 2]]), lane_excess_m=np.zeros(k),
-        goal_reached=None, meta=meta)
+        t_s=t,
+        x=X,
+        u=z[:, None],
+        x_final=X[-1].copy(),
+        s_m=x.copy(),
+        e_y_m=e,
+        e_psi_rad=z,
+        yaw_rad=z,
+        v_mps=np.full(k, 5.0),
+        steer_rad=z,
+        accel_mps2=z,
+        X_pred=None,
+        refs=None,
+        status=(STATUS_OK,) * k,
+        fallback=("",) * k,
+        solve_time_s=np.full(k, 1e-4),
+        path_xy=np.column_stack([np.linspace(0.0, length_m, 400), np.zeros(400)]),
+        dt_s=dt,
+        state_names=("x", "y", "yaw"),
+        input_names=("steer",),
+        road_profile=np.array([[0.0, lane / 2, -lane / 2], [length_m, lane / 2, -lane / 2]]),
+        lane_excess_m=np.zeros(k),
+        goal_reached=None,
+        meta=meta,
+    )
 
 
 def _crossing(k=200):
@@ -113,21 +131,28 @@ def test_reference_and_runs_never_share_a_colour():
     assert len(set(colours)) == len(colours)
     assert to_rgba(REF_COLOR) not in {to_rgba(c) for c in RUN_COLORS}
     # the single-run figure: reference blue, driven red
-    one = {ln.get_label(): to_rgba(ln.get_color()) for ln in figures._make_trajectory(runs["formulation 0"]).get_axes()[0].get_lines()}
+    one = {
+        ln.get_label(): to_rgba(ln.get_color())
+        for ln in figures._make_trajectory(runs["formulation 0"]).get_axes()[0].get_lines()
+    }
     assert one["reference path"] != one["driven trajectory"]
 
 
 LONG_NAME = "USA_US101-3_1_T-1_with_a_very_long_scenario_identifier_that_goes_on_and_on"
 
 
-@pytest.mark.parametrize("make", [
-    lambda r: figures._make_overview(r),
-    lambda r: figures._make_trajectory(r),
-    lambda r: figures._make_steering(r),
-    lambda r: figures._make_lateral_deviation(r),
-    lambda r: laps._make_speed_map(r),
-    lambda r: laps._make_lateral_acceleration(r),
-], ids=["overview", "trajectory", "steering", "lateral", "speed_map", "lateral_acceleration"])
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda r: figures._make_overview(r),
+        lambda r: figures._make_trajectory(r),
+        lambda r: figures._make_steering(r),
+        lambda r: figures._make_lateral_deviation(r),
+        lambda r: laps._make_speed_map(r),
+        lambda r: laps._make_lateral_acceleration(r),
+    ],
+    ids=["overview", "trajectory", "steering", "lateral", "speed_map", "lateral_acceleration"],
+)
 @pytest.mark.parametrize("length_m", [8.0, 230.0])
 def test_titles_are_inside_the_figure(make, length_m):
     fig = make(_run(length_m=length_m, name=LONG_NAME))
@@ -142,8 +167,11 @@ def test_titles_are_inside_the_figure(make, length_m):
         ext = t.get_window_extent(renderer)
         assert box.x0 - 0.5 <= ext.x0 and ext.x1 <= box.x1 + 0.5, t.get_text()
         assert box.y0 - 0.5 <= ext.y0 and ext.y1 <= box.y1 + 0.5, t.get_text()
-        assert LONG_NAME.replace("_", "") in t.get_text().replace("\n", "").replace("_", "").replace(" ", "") \
-            or "Acceleration" in t.get_text() or "Speed along" in t.get_text()
+        assert (
+            LONG_NAME.replace("_", "") in t.get_text().replace("\n", "").replace("_", "").replace(" ", "")
+            or "Acceleration" in t.get_text()
+            or "Speed along" in t.get_text()
+        )
 
 
 def _imports(module) -> set[str]:

@@ -23,17 +23,32 @@ def paths(draw):
     if kind == "straight":
         return {"type": "straight", "start": [draw(coord), draw(coord)], "end": [draw(coord), draw(coord)]}
     if kind == "circle":
-        return {"type": "circle", "center": [draw(coord), draw(coord)], "radius_m": draw(st.floats(0.2, 10)),
-                "ccw": draw(st.booleans()), "start_angle_deg": draw(st.floats(-360, 360))}
+        return {
+            "type": "circle",
+            "center": [draw(coord), draw(coord)],
+            "radius_m": draw(st.floats(0.2, 10)),
+            "ccw": draw(st.booleans()),
+            "start_angle_deg": draw(st.floats(-360, 360)),
+        }
     pts = draw(st.lists(st.tuples(coord, coord), min_size=2, max_size=6))
-    return {"type": "waypoints", "points": [list(p) for p in pts], "closed": draw(st.booleans()),
-            "smoothing": draw(st.sampled_from([0.0, 0.0, 0.1, 2.0]))}
+    return {
+        "type": "waypoints",
+        "points": [list(p) for p in pts],
+        "closed": draw(st.booleans()),
+        "smoothing": draw(st.sampled_from([0.0, 0.0, 0.1, 2.0])),
+    }
 
 
-ladders = st.sampled_from([
-    ["relax", "shifted_plan", "brake"], ["shifted_plan", "hold_last"], ["brake"], ["relax", "hold_last"],
-    ["hold_last"], ["shifted_plan", "relax", "brake"],
-])
+ladders = st.sampled_from(
+    [
+        ["relax", "shifted_plan", "brake"],
+        ["shifted_plan", "hold_last"],
+        ["brake"],
+        ["relax", "hold_last"],
+        ["hold_last"],
+        ["shifted_plan", "relax", "brake"],
+    ]
+)
 
 
 @st.composite
@@ -55,27 +70,41 @@ def scenarios(draw):
     }
     if draw(st.booleans()):
         c["max_steer_rate_deg_s"] = draw(st.floats(10, 600))
-    init = {"x_m": draw(st.floats(-spread, spread)), "y_m": draw(st.floats(-spread, spread)),
-            # any heading: facing backwards included
-            "yaw_deg": draw(st.floats(-720, 720))}
-    vehicle = {"model": model, "lf_m": draw(st.floats(0.05, 0.5)), "lr_m": draw(st.floats(0.05, 0.5)),
-               "speed_mps": draw(st.floats(0.1, 5))}
+    init = {
+        "x_m": draw(st.floats(-spread, spread)),
+        "y_m": draw(st.floats(-spread, spread)),
+        # any heading: facing backwards included
+        "yaw_deg": draw(st.floats(-720, 720)),
+    }
+    vehicle = {
+        "model": model,
+        "lf_m": draw(st.floats(0.05, 0.5)),
+        "lr_m": draw(st.floats(0.05, 0.5)),
+        "speed_mps": draw(st.floats(0.1, 5)),
+    }
     if model == "kinematic4":
         init["v_mps"] = draw(st.sampled_from([0.0, 0.0, 0.5, 3.0, 6.0]))  # standstill, above the limit
         c["speed_limits_mps"] = [0.0, draw(st.floats(0.5, 4))]
         if draw(st.booleans()):
             c["accel_limits_mps2"] = [-draw(st.floats(0.05, 5)), draw(st.floats(0.05, 5))]
     data = {
-        "id": "fuzz", "dt_s": draw(st.sampled_from([0.01, 0.05, 0.1])), "duration_s": 0.4,
-        "seed": draw(st.integers(0, 2**31)), "vehicle": vehicle, "path": draw(paths()),
-        "initial_state": init, "controller": c,
+        "id": "fuzz",
+        "dt_s": draw(st.sampled_from([0.01, 0.05, 0.1])),
+        "duration_s": 0.4,
+        "seed": draw(st.integers(0, 2**31)),
+        "vehicle": vehicle,
+        "path": draw(paths()),
+        "initial_state": init,
+        "controller": c,
         "plant": {"lr_m": vehicle["lr_m"] * draw(st.floats(0.8, 1.2))},
     }
     if draw(st.booleans()):
         data["road"] = {"lane_width_m": draw(st.floats(0.3, 3))}
     if draw(st.booleans()):
-        data["disturbance"] = {"distribution": "normal", "std": [0.01] * (nx - 1) + [0.05] if nx == 3
-                               else [0.01, 0.01, 0.05, 0.05]}
+        data["disturbance"] = {
+            "distribution": "normal",
+            "std": [0.01] * (nx - 1) + [0.05] if nx == 3 else [0.01, 0.01, 0.05, 0.05],
+        }
     return data
 
 
@@ -109,13 +138,19 @@ def test_no_exception_escapes_and_commands_stay_within_bounds(data):
 
 
 @settings(max_examples=25, deadline=None)
-@given(pts=st.lists(st.tuples(st.floats(-1e3, 1e3), st.floats(-1e3, 1e3)), min_size=0, max_size=5),
-       closed=st.booleans(), smoothing=st.floats(-1, 1e3))
+@given(
+    pts=st.lists(st.tuples(st.floats(-1e3, 1e3), st.floats(-1e3, 1e3)), min_size=0, max_size=5),
+    closed=st.booleans(),
+    smoothing=st.floats(-1, 1e3),
+)
 def test_waypoint_scenarios_are_valid_or_refused_with_a_scenario_error(pts, closed, smoothing):
-    data = {"id": "w", "duration_s": 0.05, "path": {"type": "waypoints", "points": [list(p) for p in pts],
-                                                     "closed": closed, "smoothing": smoothing},
-            "initial_state": {"x_m": pts[0][0] if pts else 0.0, "y_m": pts[0][1] if pts else 0.0},
-            "controller": {"horizon": 3, "Q": [1, 1, 1], "R": [1]}}
+    data = {
+        "id": "w",
+        "duration_s": 0.05,
+        "path": {"type": "waypoints", "points": [list(p) for p in pts], "closed": closed, "smoothing": smoothing},
+        "initial_state": {"x_m": pts[0][0] if pts else 0.0, "y_m": pts[0][1] if pts else 0.0},
+        "controller": {"horizon": 3, "Q": [1, 1, 1], "R": [1]},
+    }
     try:
         spec = validate_scenario_data(data, "w")
     except ScenarioError as e:

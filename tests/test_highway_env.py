@@ -43,10 +43,13 @@ def test_action_scaling_maps_ranges_to_unit_interval():
     assert lat.from_action([0.5]) == pytest.approx((math.pi / 8, 0.0))
 
 
-@pytest.mark.parametrize("kwargs, field", [
-    ({"steering_range_rad": (0.5, -0.5)}, "steering_range_rad"),
-    ({"acceleration_range_mps2": (1.0, float("nan"))}, "acceleration_range_mps2"),
-])
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        ({"steering_range_rad": (0.5, -0.5)}, "steering_range_rad"),
+        ({"acceleration_range_mps2": (1.0, float("nan"))}, "acceleration_range_mps2"),
+    ],
+)
 def test_action_scaling_rejects_bad_ranges(kwargs, field):
     with pytest.raises(ValueError, match=field):
         ActionScaling(**kwargs)
@@ -65,8 +68,13 @@ def test_lane_following_prediction_on_a_circle():
 
     path = CirclePath((0.0, 0.0), 20.0)  # counter-clockwise: the centre is on the left
     th = 0.3
-    car = SimpleNamespace(position=np.array([20.8 * math.cos(th), 20.8 * math.sin(th)]),
-                          heading=th + math.pi / 2 + 0.1, speed=8.0, LENGTH=5.0, WIDTH=2.0)
+    car = SimpleNamespace(
+        position=np.array([20.8 * math.cos(th), 20.8 * math.sin(th)]),
+        heading=th + math.pi / 2 + 0.1,
+        speed=8.0,
+        LENGTH=5.0,
+        WIDTH=2.0,
+    )
     ob = lane_following_obstacle(car, path, np.arange(0.0, 3.01, 0.2), t_s=1.0, tau_lateral_s=0.5)
     assert ob.pose_at(1.0) == pytest.approx((*car.position, car.heading), abs=1e-12)
     assert ob.pose_at(0.0) == ob.pose_at(1.0)  # held before now
@@ -135,8 +143,7 @@ def test_centerline_follows_the_racetrack_lane(gym, lane_id):
     assert total - 9.0 < path.length_m < total + 0.5
     s = np.linspace(0.0, path.length_m, 700, endpoint=False)
     # every point of the path lies on the centre of one of the lanes (a few cm at the joins)
-    lateral = [min(abs(lane.local_coordinates(p)[1]) for lane in lanes if lane.on_lane(p))
-               for p in path.position(s)]
+    lateral = [min(abs(lane.local_coordinates(p)[1]) for lane in lanes if lane.on_lane(p)) for p in path.position(s)]
     assert max(lateral) < 0.1
     # curvature: the tightest bend has a 15 m radius; the joins add no spikes
     kappa = np.abs(path.curvature(s))
@@ -153,8 +160,17 @@ def test_centerline_follows_the_racetrack_lane(gym, lane_id):
 
 @pytest.mark.slow
 def test_action_scaling_matches_the_environment(gym):
-    env = make_env(gym, 0, action={"type": "ContinuousAction", "longitudinal": True, "lateral": True,
-                                   "steering_range": [-0.6, 0.6], "acceleration_range": [-3.0, 4.0]})
+    env = make_env(
+        gym,
+        0,
+        action={
+            "type": "ContinuousAction",
+            "longitudinal": True,
+            "lateral": True,
+            "steering_range": [-0.6, 0.6],
+            "acceleration_range": [-3.0, 4.0],
+        },
+    )
     sc = ActionScaling.from_env(env)
     assert sc.steering_range_rad == (-0.6, 0.6) and sc.acceleration_range_mps2 == (-3.0, 4.0)
     at = env.unwrapped.action_type
@@ -191,8 +207,9 @@ def test_mpc_drives_the_empty_racetrack_on_the_road(gym, seed):
 
 @pytest.mark.slow
 def test_steering_only_keeps_the_speed_and_the_road(gym):
-    env = make_env(gym, 2, other_vehicles=0,
-                   action={"type": "ContinuousAction", "longitudinal": False, "lateral": True})
+    env = make_env(
+        gym, 2, other_vehicles=0, action={"type": "ContinuousAction", "longitudinal": False, "lateral": True}
+    )
     driver = HighwayEnvMpcDriver(env)
     assert driver.model.nx == 3 and not driver.scaling.longitudinal
     drive = drive_env(env, driver, 150)

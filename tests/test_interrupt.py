@@ -26,9 +26,14 @@ def _start(tmp_path, *args):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     # a shell's background job ignores SIGINT and children inherit that: restore the default, as
     # in a terminal, so that Python turns SIGINT into KeyboardInterrupt
-    return subprocess.Popen([sys.executable, "-m", "mpcdrive.cli", *[str(scen) if a == "SCEN" else a for a in args]],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    return subprocess.Popen(
+        [sys.executable, "-m", "mpcdrive.cli", *[str(scen) if a == "SCEN" else a for a in args]],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
 
 
 def _wait_for_temp_dir(tmp_path, proc, timeout_s=60.0):
@@ -87,12 +92,17 @@ def _fail_after(n_steps):
         def boom(k, total):
             if k >= n_steps:
                 raise RuntimeError("simulated crash mid-run")
+
         return real(exp, progress=boom)
+
     return run
 
 
-@pytest.mark.parametrize("args", [["run", "paper-exp3"], ["reproduce", "--only", "paper-exp3", "--only", "paper-exp4"]],
-                         ids=["run", "reproduce"])
+@pytest.mark.parametrize(
+    "args",
+    [["run", "paper-exp3"], ["reproduce", "--only", "paper-exp3", "--only", "paper-exp4"]],
+    ids=["run", "reproduce"],
+)
 def test_exception_mid_run_leaves_no_output_and_says_so(tmp_path, capsys, monkeypatch, args):
     calls = []
     failing = _fail_after(50)

@@ -27,13 +27,25 @@ from mpcdrive.report import ReportEntry, write_reproduce_report
 from mpcdrive.types import STATUS_INFEASIBLE, STATUS_OK, SimResult
 
 K, N = 200, 10
-REQUIRED_PREFIX = ["t", "x", "y", "yaw", "v", "steer", "accel", "s", "e_y", "e_psi",
-                   "solve_time_us", "status", "fallback"]
+REQUIRED_PREFIX = [
+    "t",
+    "x",
+    "y",
+    "yaw",
+    "v",
+    "steer",
+    "accel",
+    "s",
+    "e_y",
+    "e_psi",
+    "solve_time_us",
+    "status",
+    "fallback",
+]
 UNIT_RE = re.compile(r"[\[(][^\])]+[\])]")
 
 
-def make_result(*, nx: int = 3, lane: float | None = 1.75, accel: bool = False,
-                meta: dict | None = None) -> SimResult:
+def make_result(*, nx: int = 3, lane: float | None = 1.75, accel: bool = False, meta: dict | None = None) -> SimResult:
     """Synthetic run: a car converging onto the line y = 0 from y = 1 m at 5 m/s."""
     dt = 0.05
     t = np.arange(K) * dt
@@ -58,13 +70,29 @@ def make_result(*, nx: int = 3, lane: float | None = 1.75, accel: bool = False,
     solve = np.full(K, 250e-6)
     solve[7] = np.nan  # a missing timing must survive the CSV
     return SimResult(
-        t_s=t, x=X, u=U, x_final=X[-1].copy(), s_m=x_pos.copy(), e_y_m=e_y, e_psi_rad=yaw,
-        yaw_rad=yaw, v_mps=v, steer_rad=steer, accel_mps2=accel_u, X_pred=X_pred, refs=refs,
-        status=status, fallback=fallback, solve_time_s=solve,
-        path_xy=np.column_stack([np.linspace(-1.0, 60.0, 50), np.zeros(50)]), dt_s=dt,
-        state_names=names, input_names=("steer", "accel") if accel else ("steer",),
+        t_s=t,
+        x=X,
+        u=U,
+        x_final=X[-1].copy(),
+        s_m=x_pos.copy(),
+        e_y_m=e_y,
+        e_psi_rad=yaw,
+        yaw_rad=yaw,
+        v_mps=v,
+        steer_rad=steer,
+        accel_mps2=accel_u,
+        X_pred=X_pred,
+        refs=refs,
+        status=status,
+        fallback=fallback,
+        solve_time_s=solve,
+        path_xy=np.column_stack([np.linspace(-1.0, 60.0, 50), np.zeros(50)]),
+        dt_s=dt,
+        state_names=names,
+        input_names=("steer", "accel") if accel else ("steer",),
         road_profile=None if lane is None else np.array([[0.0, lane, -lane], [60.0, lane, -lane]]),
-        lane_excess_m=None if lane is None else np.zeros(K), goal_reached=None,
+        lane_excess_m=None if lane is None else np.zeros(K),
+        goal_reached=None,
         meta={"id": "synthetic", "max_steer_rad": math.radians(25.0)} if meta is None else meta,
     )
 
@@ -114,10 +142,16 @@ def test_csv_written_atomically_leaves_no_temp_files(result, tmp_path):
 # ------------------------------------------------------------------ JSON
 def test_write_json_numpy_and_nan(tmp_path):
     obj = {
-        "steps": np.int64(200), "rms": np.float32(0.5), "flag": np.bool_(True),
-        "nan": float("nan"), "inf": np.float64(np.inf), "arr": np.array([1.0, np.nan, 3.0]),
+        "steps": np.int64(200),
+        "rms": np.float32(0.5),
+        "flag": np.bool_(True),
+        "nan": float("nan"),
+        "inf": np.float64(np.inf),
+        "arr": np.array([1.0, np.nan, 3.0]),
         "nested": {"solve_time_us": {"p50": np.float64(12.5), "p99": None}},
-        "tuple": (1, 2), 3: "int key", "path": Path("a/b"),
+        "tuple": (1, 2),
+        3: "int key",
+        "path": Path("a/b"),
     }
     path = write_json(tmp_path / "metrics.json", obj)
     text = path.read_text()
@@ -290,8 +324,13 @@ def test_steering_comparison(result, tmp_path):
 
 def test_write_run_figures(tmp_path):
     names = {p.name for p in figures.write_run_figures(make_result(), tmp_path / "a")}
-    assert names == {"trajectory.png", "lateral_deviation.png", "heading_deviation.png",
-                     "steering.png", "overview.png"}  # constant speed, no accel input
+    assert names == {
+        "trajectory.png",
+        "lateral_deviation.png",
+        "heading_deviation.png",
+        "steering.png",
+        "overview.png",
+    }  # constant speed, no accel input
     paths = figures.write_run_figures(make_result(nx=5, accel=True), tmp_path / "b")
     assert "speed.png" in {p.name for p in paths}
     assert all(p.exists() and p.stat().st_size > 0 for p in paths)
@@ -309,12 +348,21 @@ def test_figures_do_not_touch_pyplot(result):
 # ------------------------------------------------------------------ report
 def _metrics(rms: float, converged: float | None = None) -> dict:
     m = {
-        "steps": 200, "duration_s": 10.0, "rms_lateral_error_m": rms,
-        "max_abs_lateral_error_m": 1.0, "final_lateral_error_m": -0.0123,
-        "rms_heading_error_rad": 0.01, "max_abs_steer_rad": math.radians(20.0),
-        "max_abs_steer_rate_rad_s": math.radians(30.0), "min_obstacle_clearance_m": None,
-        "collisions": 0, "max_lane_excess_m": 0.0, "solver_failures": 1, "fallbacks": 2,
-        "solve_time_us": {"p50": 210.4, "p99": 512.7, "max": 900.0}, "goal_reached": None,
+        "steps": 200,
+        "duration_s": 10.0,
+        "rms_lateral_error_m": rms,
+        "max_abs_lateral_error_m": 1.0,
+        "final_lateral_error_m": -0.0123,
+        "rms_heading_error_rad": 0.01,
+        "max_abs_steer_rad": math.radians(20.0),
+        "max_abs_steer_rate_rad_s": math.radians(30.0),
+        "min_obstacle_clearance_m": None,
+        "collisions": 0,
+        "max_lane_excess_m": 0.0,
+        "solver_failures": 1,
+        "fallbacks": 2,
+        "solve_time_us": {"p50": 210.4, "p99": 512.7, "max": 900.0},
+        "goal_reached": None,
     }
     if converged is not None:
         m["converged_rms_lateral_error_m"] = converged
@@ -323,16 +371,25 @@ def _metrics(rms: float, converged: float | None = None) -> dict:
 
 def test_report(tmp_path):
     entries = [
-        ReportEntry("paper-exp1", "Straight line, N = 20.", _metrics(0.1234, 0.0042),
-                    ["paper-exp1/trajectory.png", "paper-exp1/lateral_deviation.png"]),
-        {"id": "paper-exp3", "description": "Circle, N = 10.", "metrics": _metrics(0.5),
-         "figures": ["paper-exp3/overview.png"]},
+        ReportEntry(
+            "paper-exp1",
+            "Straight line, N = 20.",
+            _metrics(0.1234, 0.0042),
+            ["paper-exp1/trajectory.png", "paper-exp1/lateral_deviation.png"],
+        ),
+        {
+            "id": "paper-exp3",
+            "description": "Circle, N = 10.",
+            "metrics": _metrics(0.5),
+            "figures": ["paper-exp3/overview.png"],
+        },
     ]
     paper = {
-        "paper-exp1": [("max |e_y| [m]", "about 1 m at start", "max_abs_lateral_error_m"),
-                       ("p99 solve [µs]", "n/a", "solve_time_us.p99")],
-        "paper-exp3": [("max steer [deg]", "< 25 deg",
-                        lambda m: math.degrees(m["max_abs_steer_rad"]))],
+        "paper-exp1": [
+            ("max |e_y| [m]", "about 1 m at start", "max_abs_lateral_error_m"),
+            ("p99 solve [µs]", "n/a", "solve_time_us.p99"),
+        ],
+        "paper-exp3": [("max steer [deg]", "< 25 deg", lambda m: math.degrees(m["max_abs_steer_rad"]))],
         "paper-exp4": [("rms e_y [m]", "small", "rms_lateral_error_m")],
     }
     path = write_reproduce_report(tmp_path, entries, paper)
@@ -344,8 +401,7 @@ def test_report(tmp_path):
     assert "`paper-exp1`" in rows and "`paper-exp3`" in rows
     row1 = [c.strip() for c in rows["`paper-exp1`"].strip("|").split("|")]
     # experiment, steps, rms, max, final, converged, steer, rate, failures, fallbacks, p50, p99
-    assert row1 == ["`paper-exp1`", "200", "0.1234", "1", "0.0123", "0.0042", "20", "30",
-                    "1", "2", "210", "513"]
+    assert row1 == ["`paper-exp1`", "200", "0.1234", "1", "0.0123", "0.0042", "20", "30", "1", "2", "210", "513"]
     assert "converged RMS e_y [m]" in text and "solve p99 [µs]" in text
     assert "max \\|e_y\\| [m]" in text  # pipes escaped inside table cells
     assert "## Ours vs paper" in text
@@ -353,8 +409,7 @@ def test_report(tmp_path):
     assert "| `paper-exp1` | p99 solve [µs] | n/a | 512.7 |" in text
     assert "| `paper-exp3` | max steer [deg] | < 25 deg | 20 |" in text
     assert "| `paper-exp4` | rms e_y [m] | small | not run |" in text
-    for fig in ("paper-exp1/trajectory.png", "paper-exp1/lateral_deviation.png",
-                "paper-exp3/overview.png"):
+    for fig in ("paper-exp1/trajectory.png", "paper-exp1/lateral_deviation.png", "paper-exp3/overview.png"):
         assert f"]({fig})" in text
     assert "## `paper-exp1`" in text and "Straight line, N = 20." in text
     assert not [p for p in tmp_path.iterdir() if p.name != "report.md"]

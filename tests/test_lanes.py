@@ -20,8 +20,10 @@ CFG = LaneConfig(desired_speed_mps=30.0)
 def road(n_lanes: int = 3, route: int = 0) -> Road:
     """Lanes 0, 1, 2 ... centred at 0, +4, +8 m (left of the path), the route lane ``route``."""
     s = np.array([0.0, 5000.0])
-    lanes = tuple(Lane(f"lane-{i}", np.full(2, i * W), np.full(2, i * W + W / 2), np.full(2, i * W - W / 2))
-                  for i in range(n_lanes))
+    lanes = tuple(
+        Lane(f"lane-{i}", np.full(2, i * W), np.full(2, i * W + W / 2), np.full(2, i * W - W / 2))
+        for i in range(n_lanes)
+    )
     return Road(s, (n_lanes - 0.5) * W, -W / 2, lanes=lanes, route_lane=route)
 
 
@@ -54,7 +56,7 @@ def test_slow_car_ahead_and_free_neighbour_changes_to_it():
     s = np.linspace(r.s0_m, r.s1_m, 2001)
     e = r.offset(s)
     assert np.all(np.diff(e) >= 0)
-    acc = np.gradient(np.gradient(e, s), s) * 30.0 ** 2  # d2e/dt2 at 30 m/s
+    acc = np.gradient(np.gradient(e, s), s) * 30.0**2  # d2e/dt2 at 30 m/s
     assert np.abs(acc).max() <= CFG.max_lat_accel_mps2 * 1.01
     assert np.gradient(e, s)[[0, -1]] == pytest.approx([0.0, 0.0], abs=1e-3)
 
@@ -90,9 +92,16 @@ def test_fast_car_from_behind_in_the_neighbour_lane_prevents_the_change():
 
 
 def test_the_better_of_two_free_neighbours_wins():
-    rd = Road(np.array([0.0, 5000.0]), 1.5 * W + W, -1.5 * W,
-              lanes=tuple(Lane(str(i), np.full(2, c), np.full(2, c + W / 2), np.full(2, c - W / 2))
-                          for i, c in enumerate((-W, 0.0, W))), route_lane=1)
+    rd = Road(
+        np.array([0.0, 5000.0]),
+        1.5 * W + W,
+        -1.5 * W,
+        lanes=tuple(
+            Lane(str(i), np.full(2, c), np.full(2, c + W / 2), np.full(2, c - W / 2))
+            for i, c in enumerate((-W, 0.0, W))
+        ),
+        route_lane=1,
+    )
     obs = [car(160.0, 0, 20.0), car(230.0, -1, 25.0)]  # ego's lane blocked; right lane less free
     d = decide(obs, rd=rd)
     assert d.action == "change" and d.lane == 2 and d.free_m[2] > d.free_m[0]
@@ -142,6 +151,7 @@ def test_hysteresis_alternating_marginal_gains_do_not_flip_every_step():
         e_y = rd.lanes[d.lane].center_m[0]  # the ego gets there at once
     assert times[0] == 0.0 and 2 <= len(times) <= 1 + 6.0 / CFG.min_dwell_s
     assert np.all(np.diff(times) >= CFG.min_dwell_s - 1e-9)
+
 
 def test_a_change_needs_min_gain_more_free_distance():
     """Own lane blocked (50 m free, 53 m needed), the neighbour free: 10 m more is not enough

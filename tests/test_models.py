@@ -37,6 +37,7 @@ else:  # pragma: no cover - older API
     def model_steer(model, kappa, v=None):
         return model.steer_for_curvature(kappa, v)
 
+
 SETTINGS = settings(max_examples=60, deadline=None)
 
 finite = dict(allow_nan=False, allow_infinity=False)
@@ -331,8 +332,10 @@ def test_steer_for_curvature_array_and_sign():
 @pytest.mark.parametrize("n", [1, 7])
 def test_rollout_shapes_and_consistency(method, n):
     rng = np.random.default_rng(3)
-    for model, x0 in ((KinematicBicycle3(v_mps=2.0), np.array([0.0, 1.0, 0.2])),
-                      (KinematicBicycle4(), np.array([0.0, 1.0, 0.2, 1.0]))):
+    for model, x0 in (
+        (KinematicBicycle3(v_mps=2.0), np.array([0.0, 1.0, 0.2])),
+        (KinematicBicycle4(), np.array([0.0, 1.0, 0.2, 1.0])),
+    ):
         U = rng.uniform(-0.3, 0.3, size=(n, model.nu))
         X = rollout(model, x0, U, 0.05, method)
         assert X.shape == (n + 1, model.nx)

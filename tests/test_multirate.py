@@ -56,8 +56,11 @@ def run(ctrl, steps=600, path=CIRCLE, x0=X0_CIRCLE, **kw):
 
 
 def test_period_equal_to_dt_is_the_one_solve_per_step_loop_bit_for_bit():
-    noise = dict(disturbance=Disturbance("normal", std=np.array([1e-4, 1e-4, 1e-3])),
-                 measurement_noise=Disturbance("normal", std=np.array([1e-4, 1e-4, 1e-3])), seed=3)
+    noise = dict(
+        disturbance=Disturbance("normal", std=np.array([1e-4, 1e-4, 1e-3])),
+        measurement_noise=Disturbance("normal", std=np.array([1e-4, 1e-4, 1e-3])),
+        seed=3,
+    )
     base = run(mpc(PLANT_DT_S), steps=300, **noise)
     for mode in ("hold", "plan"):
         r = run(mpc(PLANT_DT_S), steps=300, control_period_s=PLANT_DT_S, between_solves=mode, **noise)
@@ -87,9 +90,9 @@ def test_hold_keeps_the_input_constant_between_solves_and_logs_every_plant_step(
         block = slice(i * M, (i + 1) * M)
         assert np.array_equal(r.u[block], np.repeat(out.u[None], M, axis=0))
         assert r.status[i * M] == out.status and r.solve_time_s[i * M] == out.solve_time_s > 0
-        assert r.status[i * M + 1:(i + 1) * M] == (STATUS_HELD,) * (M - 1)
-        assert r.fallback[i * M + 1:(i + 1) * M] == ("",) * (M - 1)
-        assert np.all(r.solve_time_s[i * M + 1:(i + 1) * M] == 0.0)
+        assert r.status[i * M + 1 : (i + 1) * M] == (STATUS_HELD,) * (M - 1)
+        assert r.fallback[i * M + 1 : (i + 1) * M] == ("",) * (M - 1)
+        assert np.all(r.solve_time_s[i * M + 1 : (i + 1) * M] == 0.0)
         assert np.array_equal(r.X_pred[block], np.repeat(out.X_pred[None], M, axis=0))
     assert len({float(u) for u in r.u[::M, 0]}) > 10  # the solves do change the command
     assert r.meta["control_period_s"] == PERIOD_S and r.meta["between_solves"] == "hold"
@@ -112,7 +115,7 @@ def test_plan_applies_the_plans_inputs_interpolated_between_solves():
         assert r.u[i * M] == u0  # the solve's command at the solve
         for j in range(1, M):
             np.testing.assert_allclose(r.u[i * M + j], u0 + (j / M) * (u1 - u0), rtol=0, atol=1e-15)
-        assert r.status[i * M + 1:(i + 1) * M] == (STATUS_HELD,) * (M - 1)
+        assert r.status[i * M + 1 : (i + 1) * M] == (STATUS_HELD,) * (M - 1)
     # it is not the hold: the steering moves between solves
     assert not np.array_equal(r.u[1:M], hold.u[1:M])
     assert np.max(np.abs(np.diff(r.u[:M, 0]))) > 0
@@ -132,8 +135,14 @@ def test_ten_hz_controller_on_hundred_hz_plant_tracks_a_circle(mode):
 @pytest.mark.parametrize("mode", ["hold", "plan"])
 def test_ten_hz_controller_on_hundred_hz_plant_tracks_a_straight_line(mode):
     line = StraightPath((0.0, 0.0), (30.0, 0.0))
-    r = run(mpc(PERIOD_S, path=line), steps=1000, path=line, x0=[0.5, 0.3, 0.0], control_period_s=PERIOD_S,
-            between_solves=mode)
+    r = run(
+        mpc(PERIOD_S, path=line),
+        steps=1000,
+        path=line,
+        x0=[0.5, 0.3, 0.0],
+        control_period_s=PERIOD_S,
+        between_solves=mode,
+    )
     ey = np.abs(r.e_y_m)
     assert ey.max() <= 0.3 + 1e-9
     assert ey[-200:].max() < 0.01 * 0.3  # the last 2 s: within 1 % of the 0.3 m start offset
@@ -158,8 +167,9 @@ def test_metrics_count_only_real_solves():
     assert bad["solver_failures"] == 1 and bad["fallbacks"] == 1 and bad["fallback_counts"]["shifted_plan"] == 1
 
 
-@pytest.mark.parametrize("period, words", [(0.015, "whole multiple"), (0.005, "shorter than"), (0.0, "positive"),
-                                           (float("nan"), "positive")])
+@pytest.mark.parametrize(
+    "period, words", [(0.015, "whole multiple"), (0.005, "shorter than"), (0.0, "positive"), (float("nan"), "positive")]
+)
 def test_bad_period_is_a_clear_error(period, words):
     with pytest.raises(ValueError, match=words) as e:
         run(mpc(PLANT_DT_S), steps=10, control_period_s=period)
@@ -176,10 +186,15 @@ def test_controller_built_for_another_step_or_unknown_mode_is_an_error():
 
 
 def scenario(**controller):
-    return {"id": "mr", "dt_s": PLANT_DT_S, "duration_s": 3.0,
-            "path": {"type": "circle", "radius_m": 1.5}, "road": {"lane_width_m": 1.0},
-            "initial_state": {"x_m": 1.5, "y_m": 0.0, "yaw_deg": 90},
-            "controller": {"horizon": 10, "Q": [1, 1, 1], "R": [1], **controller}}
+    return {
+        "id": "mr",
+        "dt_s": PLANT_DT_S,
+        "duration_s": 3.0,
+        "path": {"type": "circle", "radius_m": 1.5},
+        "road": {"lane_width_m": 1.0},
+        "initial_state": {"x_m": 1.5, "y_m": 0.0, "yaw_deg": 90},
+        "controller": {"horizon": 10, "Q": [1, 1, 1], "R": [1], **controller},
+    }
 
 
 @pytest.mark.parametrize("mode", ["hold", "plan"])
@@ -201,12 +216,15 @@ def test_yaml_default_period_is_the_plant_step():
     assert build_experiment(spec).mpc.problem.dt_s == PLANT_DT_S
 
 
-@pytest.mark.parametrize("controller, field, words", [
-    ({"period_s": 0.015}, "controller.period_s", "0.015 s is not a whole multiple of the plant step dt_s 0.01 s"),
-    ({"period_s": 0.005}, "controller.period_s", "0.005 s is shorter than the plant step dt_s 0.01 s"),
-    ({"period_s": -0.1}, "controller.period_s", "greater than 0"),
-    ({"between_solves": "zoh"}, "controller.between_solves", "'hold' or 'plan'"),
-])
+@pytest.mark.parametrize(
+    "controller, field, words",
+    [
+        ({"period_s": 0.015}, "controller.period_s", "0.015 s is not a whole multiple of the plant step dt_s 0.01 s"),
+        ({"period_s": 0.005}, "controller.period_s", "0.005 s is shorter than the plant step dt_s 0.01 s"),
+        ({"period_s": -0.1}, "controller.period_s", "greater than 0"),
+        ({"between_solves": "zoh"}, "controller.between_solves", "'hold' or 'plan'"),
+    ],
+)
 def test_yaml_bad_period_names_file_field_and_problem(controller, field, words):
     with pytest.raises(ScenarioError) as e:
         validate_scenario_data(scenario(**controller), "mr.yaml")
@@ -228,8 +246,9 @@ def test_cli_bad_period_exits_2_and_writes_nothing(tmp_path):
     f = tmp_path / "mr.yaml"
     f.write_text(yaml.safe_dump(scenario(period_s=0.015)))
     out = tmp_path / "out"
-    p = subprocess.run([sys.executable, "-m", "mpcdrive.cli", "run", str(f), "--out", str(out)],
-                       capture_output=True, text=True)
+    p = subprocess.run(
+        [sys.executable, "-m", "mpcdrive.cli", "run", str(f), "--out", str(out)], capture_output=True, text=True
+    )
     assert p.returncode == 2
     assert "controller.period_s" in p.stderr and "whole multiple" in p.stderr
     assert len(p.stderr.strip().splitlines()) == 1
@@ -257,4 +276,4 @@ class NoPlan(Recorder):
 def test_plan_holds_a_command_that_comes_without_a_plan():
     r = run(NoPlan(mpc(PERIOD_S)), steps=100, control_period_s=PERIOD_S, between_solves="plan")
     for i in range(10):
-        assert np.all(r.u[i * M:(i + 1) * M] == r.u[i * M])
+        assert np.all(r.u[i * M : (i + 1) * M] == r.u[i * M])

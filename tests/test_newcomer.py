@@ -13,15 +13,18 @@ from mpcdrive import __version__
 
 
 def cli(*args, cwd, env=None):
-    return subprocess.run([sys.executable, "-m", "mpcdrive.cli", *args], capture_output=True, text=True,
-                          cwd=cwd, env=env)
+    return subprocess.run(
+        [sys.executable, "-m", "mpcdrive.cli", *args], capture_output=True, text=True, cwd=cwd, env=env
+    )
 
 
 def _short(tmp_path):
     p = tmp_path / "short.yaml"
-    p.write_text("id: short\nduration_s: 0.3\npath: {type: circle, radius_m: 1.5}\n"
-                 "initial_state: {x_m: 1.5, y_m: 0.0, yaw_deg: 90}\nroad: {lane_width_m: 1.0}\n"
-                 "controller: {horizon: 10, Q: [1, 1, 1], R: [1]}\n")
+    p.write_text(
+        "id: short\nduration_s: 0.3\npath: {type: circle, radius_m: 1.5}\n"
+        "initial_state: {x_m: 1.5, y_m: 0.0, yaw_deg: 90}\nroad: {lane_width_m: 1.0}\n"
+        "controller: {horizon: 10, Q: [1, 1, 1], R: [1]}\n"
+    )
     return p
 
 
@@ -43,7 +46,7 @@ def test_run_with_the_default_output_folder_from_another_directory(tmp_path):
     assert out.name.startswith("short-")
     for name in ("trajectory.csv", "metrics.json", "scenario.yaml", "report.html", "trajectory.png"):
         assert (out / name).is_file(), name
-    assert '<img' in (out / "report.html").read_text(encoding="utf-8")
+    assert "<img" in (out / "report.html").read_text(encoding="utf-8")
 
 
 def test_relative_out_for_run_and_reproduce(tmp_path):
@@ -58,8 +61,19 @@ def test_relative_out_for_run_and_reproduce(tmp_path):
 
 @pytest.mark.slow
 def test_compare_avoidance_with_a_relative_out_counts_its_runs(tmp_path):
-    r = cli("compare-avoidance", "--scenario", "paper-exp5-hard", "--formulation", "hard", "--formulation",
-            "gaussian", "--out", "cmp", "-q", cwd=tmp_path)
+    r = cli(
+        "compare-avoidance",
+        "--scenario",
+        "paper-exp5-hard",
+        "--formulation",
+        "hard",
+        "--formulation",
+        "gaussian",
+        "--out",
+        "cmp",
+        "-q",
+        cwd=tmp_path,
+    )
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "cmp" / "avoidance.md").is_file()
     assert "[1/2] paper-exp5-hard / hard" in r.stderr and "[2/2] paper-exp5-hard / gaussian" in r.stderr
@@ -68,10 +82,13 @@ def test_compare_avoidance_with_a_relative_out_counts_its_runs(tmp_path):
 def test_outputs_are_created_as_the_umask_says(tmp_path):
     """Results are readable like any file the user writes (temporary names made them 0600/0700)."""
     env = dict(os.environ)
-    script = ("import os, sys; os.umask(0o022); sys.argv = ['mpcdrive', 'run', sys.argv[1], '--out', 'o', '-q'];"
-              "from mpcdrive.cli import main; main()")
-    r = subprocess.run([sys.executable, "-c", script, str(_short(tmp_path))], capture_output=True, text=True,
-                       cwd=tmp_path, env=env)
+    script = (
+        "import os, sys; os.umask(0o022); sys.argv = ['mpcdrive', 'run', sys.argv[1], '--out', 'o', '-q'];"
+        "from mpcdrive.cli import main; main()"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", script, str(_short(tmp_path))], capture_output=True, text=True, cwd=tmp_path, env=env
+    )
     assert r.returncode == 0, r.stderr
     out = tmp_path / "o"
     assert stat.S_IMODE(out.stat().st_mode) == 0o755
@@ -101,8 +118,21 @@ def test_flags_have_no_bool_metavar(tmp_path):
 
 
 def test_sweep_reports_progress_when_stderr_is_not_a_terminal(tmp_path):
-    r = cli("sweep", str(_short(tmp_path)), "--runs", "4", "--seed", "1", "--workers", "1", "--out", "sw",
-            "--vary", "initial_state.y_m=offset_uniform(-0.05, 0.05)", cwd=tmp_path)
+    r = cli(
+        "sweep",
+        str(_short(tmp_path)),
+        "--runs",
+        "4",
+        "--seed",
+        "1",
+        "--workers",
+        "1",
+        "--out",
+        "sw",
+        "--vary",
+        "initial_state.y_m=offset_uniform(-0.05, 0.05)",
+        cwd=tmp_path,
+    )
     assert r.returncode == 0, r.stderr
     lines = [ln for ln in r.stderr.splitlines() if ln.startswith("sweep: ")]
     assert lines and lines[-1].startswith("sweep: 4/4 runs"), r.stderr
@@ -139,9 +169,11 @@ def test_first_compile_is_announced_once(tmp_path):
 def test_has_cache_finds_numba_index_files(tmp_path):
     mod = tmp_path / "tinyjit.py"
     mod.write_text("from numba import njit\n\n@njit(cache=True)\ndef twice(x):\n    return 2 * x\n")
-    code = ("import sys; sys.path.insert(0, sys.argv[1]); import tinyjit; from mpcdrive import _jitcache;"
-            "before = _jitcache.has_cache(tinyjit.twice); tinyjit.twice(1.0);"
-            "print(before, _jitcache.has_cache(tinyjit.twice))")
+    code = (
+        "import sys; sys.path.insert(0, sys.argv[1]); import tinyjit; from mpcdrive import _jitcache;"
+        "before = _jitcache.has_cache(tinyjit.twice); tinyjit.twice(1.0);"
+        "print(before, _jitcache.has_cache(tinyjit.twice))"
+    )
     r = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert r.stdout.split() == ["False", "True"]

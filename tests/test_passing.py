@@ -19,17 +19,27 @@ def _spec(obstacles, backend="fast", neighbours=True) -> dict:
     if neighbours:
         road["neighbours"] = [[0.0, 3.5, 0.0]]
     return {
-        "id": "pass", "dt_s": 0.1, "duration_s": 14.0,
+        "id": "pass",
+        "dt_s": 0.1,
+        "duration_s": 14.0,
         "vehicle": {"model": "kinematic4", "preset": "commonroad_bmw_320i", "speed_mps": 10.0},
         "path": {"type": "straight", "start": [0.0, 0.0], "end": [160.0, 0.0]},
         "road": road,
         "initial_state": {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 0.0, "v_mps": 10.0},
         "obstacles": obstacles,
         "avoidance": {"formulation": "hard", "margin_m": 0.3, "max_obstacles": 4, "influence_m": 40.0},
-        "controller": {"horizon": 30, "Q": [1.0, 1.0, 2.0, 1.0], "R": [10.0, 0.1], "Rc": [100.0, 1.0],
-                       "max_steer_deg": 30.0, "max_steer_rate_deg_s": 23.0,
-                       "accel_limits_mps2": [-8.0, 3.0], "speed_limits_mps": [0.0, 12.0],
-                       "horizon_step_m": 0.5, "backend": backend},
+        "controller": {
+            "horizon": 30,
+            "Q": [1.0, 1.0, 2.0, 1.0],
+            "R": [10.0, 0.1],
+            "Rc": [100.0, 1.0],
+            "max_steer_deg": 30.0,
+            "max_steer_rate_deg_s": 23.0,
+            "accel_limits_mps2": [-8.0, 3.0],
+            "speed_limits_mps": [0.0, 12.0],
+            "horizon_step_m": 0.5,
+            "backend": backend,
+        },
     }
 
 
@@ -78,9 +88,10 @@ def test_lateral_reference_is_tracked_the_same_by_both_solvers():
 
     spec = ScenarioSpec.model_validate(_spec([], backend="fast", neighbours=True))
     fast = build_experiment(spec).mpc
-    spec_osqp = ScenarioSpec.model_validate(_spec([], backend="osqp", neighbours=True)
-                                            | {"controller": {**_spec([])["controller"], "backend": "osqp",
-                                                              "osqp_eps": 1e-9}})
+    spec_osqp = ScenarioSpec.model_validate(
+        _spec([], backend="osqp", neighbours=True)
+        | {"controller": {**_spec([])["controller"], "backend": "osqp", "osqp_eps": 1e-9}}
+    )
     osqp = build_experiment(spec_osqp).mpc
     road = build_experiment(spec).road
     for c in (fast, osqp):

@@ -241,7 +241,9 @@ CLOSED_IDS = ["circle_ccw", "circle_cw", "wavy", "wavy_cw"]
 
 @pytest.mark.parametrize("path", CLOSED, ids=CLOSED_IDS)
 @settings(max_examples=40, deadline=None)
-@given(st.floats(0.0, 1.0, **finite), st.integers(-3, 5), st.floats(-0.2, 0.2, **finite), st.floats(-0.3, 0.3, **finite))
+@given(
+    st.floats(0.0, 1.0, **finite), st.integers(-3, 5), st.floats(-0.2, 0.2, **finite), st.floats(-0.3, 0.3, **finite)
+)
 def test_closed_path_s_counts_laps(path, frac, k, ey, dguess):
     L = path.length_m
     s = frac * L
@@ -359,7 +361,9 @@ def test_waypoint_circle_matches_circle_path(repeat_first):
 # --------------------------------------------------------------------------------------
 # open path extension beyond the ends
 # --------------------------------------------------------------------------------------
-@pytest.mark.parametrize("path", [S_CURVE, HAIRPIN, StraightPath((1.0, 1.0), (4.0, 5.0))], ids=["s_curve", "hairpin", "straight"])
+@pytest.mark.parametrize(
+    "path", [S_CURVE, HAIRPIN, StraightPath((1.0, 1.0), (4.0, 5.0))], ids=["s_curve", "hairpin", "straight"]
+)
 @pytest.mark.parametrize("d", [0.05, 0.7, 3.0])
 @pytest.mark.parametrize("e_y", [0.0, 0.1, -0.15])
 def test_open_path_extension(path, d, e_y):
@@ -393,7 +397,9 @@ def test_open_path_extension(path, d, e_y):
 # horizon references
 # --------------------------------------------------------------------------------------
 @SETTINGS
-@given(st.floats(-10, 100, **finite), st.integers(1, 50), st.floats(0.001, 0.2, **finite), st.floats(0.001, 0.5, **finite))
+@given(
+    st.floats(-10, 100, **finite), st.integers(1, 50), st.floats(0.001, 0.2, **finite), st.floats(0.001, 0.5, **finite)
+)
 def test_horizon_arc_lengths_paper(s0, N, dt, step):
     s = horizon_arc_lengths(s0, N, "paper", dt, speed_mps=123.0, step_m=step)
     assert s.shape == (N + 1,)
@@ -512,7 +518,9 @@ def test_two_point_waypoint_path_is_a_segment():
     assert s == pytest.approx(2.5, abs=1e-9) and e_y == pytest.approx(1.0, abs=1e-9)
 
 
-@pytest.mark.parametrize("start,end", [((0.0, 0.0), (0.0, 0.0)), ((1.0, 2.0), (1.0, 2.0)), ((0.0, float("nan")), (1.0, 1.0))])
+@pytest.mark.parametrize(
+    "start,end", [((0.0, 0.0), (0.0, 0.0)), ((1.0, 2.0), (1.0, 2.0)), ((0.0, float("nan")), (1.0, 1.0))]
+)
 def test_straight_path_bad(start, end):
     with pytest.raises(ValueError):
         StraightPath(start, end)
@@ -525,7 +533,9 @@ def test_circle_path_bad_radius(r):
 
 
 @pytest.mark.parametrize("xy", [[float("nan"), 0.0], [0.0, float("inf")], [1.0, 2.0, 3.0], [1.0]])
-@pytest.mark.parametrize("path", [StraightPath((0, 0), (1, 0)), CirclePath(), S_CURVE], ids=["straight", "circle", "wp"])
+@pytest.mark.parametrize(
+    "path", [StraightPath((0, 0), (1, 0)), CirclePath(), S_CURVE], ids=["straight", "circle", "wp"]
+)
 def test_project_rejects_bad_points(path, xy):
     with pytest.raises(ValueError):
         path.project(np.array(xy))
@@ -539,12 +549,15 @@ def test_polyline():
         np.testing.assert_allclose(pl[-1], p.position(p.length_m), atol=1e-9)
 
 
-@pytest.mark.parametrize("path", [
-    StraightPath([1.0, -2.0], [9.0, 4.0]),
-    CirclePath(center=(1.0, 2.0), radius_m=3.0, ccw=False, start_angle_rad=0.4),
-    WaypointPath(np.array([[0.0, 0.0], [4.0, 1.0], [8.0, -1.0], [12.0, 2.0], [16.0, 0.0]])),
-    WaypointPath(np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]]), closed=True),
-])
+@pytest.mark.parametrize(
+    "path",
+    [
+        StraightPath([1.0, -2.0], [9.0, 4.0]),
+        CirclePath(center=(1.0, 2.0), radius_m=3.0, ccw=False, start_angle_rad=0.4),
+        WaypointPath(np.array([[0.0, 0.0], [4.0, 1.0], [8.0, -1.0], [12.0, 2.0], [16.0, 0.0]])),
+        WaypointPath(np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]]), closed=True),
+    ],
+)
 def test_project_many_is_project_point_by_point(path):
     rng = np.random.default_rng(3)
     s_guess = rng.uniform(-0.5 * path.length_m, 2.5 * path.length_m, 40)

@@ -19,7 +19,7 @@ def _with_standstill(prof: SpeedProfile, i0: int, i1: int) -> SpeedProfile:
     """``prof`` with zero speed on grid points i0..i1 and its time table rebuilt as the
     constructor builds it (segments between two stops take forever)."""
     prof.v_mps = prof.v_mps.copy()
-    prof.v_mps[i0:i1 + 1] = 0.0
+    prof.v_mps[i0 : i1 + 1] = 0.0
     v = np.r_[prof.v_mps, prof.v_mps[0]] if prof.closed else prof.v_mps
     vs = v[1:] + v[:-1]
     seg_t = np.where(vs > 0, 2.0 * prof.ds_m / np.maximum(vs, 1e-300), np.inf)
@@ -33,11 +33,13 @@ def _profiles():
     return {
         "closed circle": SpeedProfile(CirclePath((0.0, 0.0), 3.0), 6.0, 2.0, 3.0, 5.0),
         "closed waypoints": SpeedProfile(loop, 4.0, 2.0, 3.0, 3.0, curvature_window_m=0.3),
-        "open from rest to a stop": SpeedProfile(StraightPath([0, 0], [6, 0]), 5.0, 2.0, 4.0, 8.0,
-                                                 v_start_mps=0.0, v_end_mps=0.0),
+        "open from rest to a stop": SpeedProfile(
+            StraightPath([0, 0], [6, 0]), 5.0, 2.0, 4.0, 8.0, v_start_mps=0.0, v_end_mps=0.0
+        ),
         "open, going on past the end": SpeedProfile(wiggle, 3.0, 1.5, 2.0, 2.5, v_start_mps=0.0),
         "open with a standstill": _with_standstill(
-            SpeedProfile(StraightPath([0, 0], [8, 0]), 5.0, 2.0, 4.0, 3.0, ds_m=0.05), 60, 70),
+            SpeedProfile(StraightPath([0, 0], [8, 0]), 5.0, 2.0, 4.0, 3.0, ds_m=0.05), 60, 70
+        ),
     }
 
 

@@ -109,8 +109,16 @@ def test_unconstrained_mpc_equals_lqr(name, N):
     nx, nu = B.shape
     P, K = dare_gain(A, B, Q, R)
     pb = MpcProblem(nx=nx, nu=nu, N=N, dt_s=0.05, Q=Q, R=R, QN=P)
-    res = solve_osqp(pb, x0, np.repeat(A[None], N, 0), np.repeat(B[None], N, 0), np.zeros((N, nx)),
-                     np.zeros((N + 1, nx)), np.zeros((N, nu)), np.zeros(nu))
+    res = solve_osqp(
+        pb,
+        x0,
+        np.repeat(A[None], N, 0),
+        np.repeat(B[None], N, 0),
+        np.zeros((N, nx)),
+        np.zeros((N + 1, nx)),
+        np.zeros((N, nu)),
+        np.zeros(nu),
+    )
     assert res.X.shape == (N + 1, nx) and res.U.shape == (N, nu)
     np.testing.assert_allclose(res.U[0], -K @ x0, atol=1e-5)
     # the whole prediction is the LQR closed loop
@@ -226,8 +234,9 @@ def solve_cvxpy(pb: MpcProblem, x0, Ad, Bd, c, xref, uref, u_prev, lane_normal=N
     # ~1e3 leaves inputs off by ~1e-4); Clarabel occasionally stalls short of the tightest level.
     for tol in (1e-10, 1e-9, 1e-8):
         try:
-            prob.solve(solver=cp.CLARABEL, tol_gap_abs=tol, tol_gap_rel=1e-3 * tol, tol_feas=tol,
-                       tol_ktratio=tol, max_iter=500)
+            prob.solve(
+                solver=cp.CLARABEL, tol_gap_abs=tol, tol_gap_rel=1e-3 * tol, tol_feas=tol, tol_ktratio=tol, max_iter=500
+            )
         except cp.error.SolverError:
             continue
         if prob.status == cp.OPTIMAL:
@@ -295,12 +304,30 @@ def make_instance(seed, *, kind="generic", lane=False, rate=True, xbounds=True, 
         lane_normal = np.column_stack([-np.sin(ang), np.cos(ang)])
         centre = Xn[1:, :2] + 0.1 * rng.normal(size=(N, 2))
         lane_offset = np.einsum("ki,ki->k", lane_normal, centre)
-        lane_kw = dict(road=Road.constant(2.0 * rng.uniform(0.05, 0.5), 0.0), lane_slack_weight=float(rng.choice([5.0, 50.0, 1e3])),
-                       lane_slack_weight_l1=float(rng.choice([0.0, 1.0, 20.0])))
-    pb = MpcProblem(nx=nx, nu=nu, N=N, dt_s=dt, Q=Q, R=R, QN=QN, Rc=Rc, u_min=u_min, u_max=u_max,
-                    du_max_per_s=du, x_min=x_min, x_max=x_max, **lane_kw)
-    data = dict(x0=x0, Ad=Ad, Bd=Bd, c=c, xref=xref, uref=uref, u_prev=u_prev,
-                lane_normal=lane_normal, lane_offset=lane_offset)
+        lane_kw = dict(
+            road=Road.constant(2.0 * rng.uniform(0.05, 0.5), 0.0),
+            lane_slack_weight=float(rng.choice([5.0, 50.0, 1e3])),
+            lane_slack_weight_l1=float(rng.choice([0.0, 1.0, 20.0])),
+        )
+    pb = MpcProblem(
+        nx=nx,
+        nu=nu,
+        N=N,
+        dt_s=dt,
+        Q=Q,
+        R=R,
+        QN=QN,
+        Rc=Rc,
+        u_min=u_min,
+        u_max=u_max,
+        du_max_per_s=du,
+        x_min=x_min,
+        x_max=x_max,
+        **lane_kw,
+    )
+    data = dict(
+        x0=x0, Ad=Ad, Bd=Bd, c=c, xref=xref, uref=uref, u_prev=u_prev, lane_normal=lane_normal, lane_offset=lane_offset
+    )
     return pb, data
 
 
@@ -308,8 +335,9 @@ def check_constraints(pb: MpcProblem, X, U, d, tol=1e-6):
     N = pb.N
     np.testing.assert_allclose(X[0], d["x0"], atol=tol)
     for k in range(N):
-        np.testing.assert_allclose(X[k + 1], d["Ad"][k] @ X[k] + d["Bd"][k] @ U[k] + d["c"][k],
-                                   atol=tol * (1 + np.abs(X[k + 1]).max()))
+        np.testing.assert_allclose(
+            X[k + 1], d["Ad"][k] @ X[k] + d["Bd"][k] @ U[k] + d["c"][k], atol=tol * (1 + np.abs(X[k + 1]).max())
+        )
     assert np.all(U >= pb.u_min - tol) and np.all(U <= pb.u_max + tol)
     dU = np.diff(np.vstack([d["u_prev"], U]), axis=0)
     assert np.all(np.abs(dU) <= pb.du_max_per_s * pb.dt_s + tol)
@@ -382,8 +410,15 @@ def test_rate_limit_binds_from_u_prev():
     A = np.eye(1)
     B = np.ones((1, 1)) * dt
     pb = MpcProblem(nx=1, nu=1, N=N, dt_s=dt, Q=0.0, R=1.0, QN=0.0, u_min=-1.0, u_max=1.0, du_max_per_s=2.0)
-    d = dict(x0=np.zeros(1), Ad=np.repeat(A[None], N, 0), Bd=np.repeat(B[None], N, 0), c=np.zeros((N, 1)),
-             xref=np.zeros((N + 1, 1)), uref=np.full((N, 1), 5.0), u_prev=np.array([-0.5]))
+    d = dict(
+        x0=np.zeros(1),
+        Ad=np.repeat(A[None], N, 0),
+        Bd=np.repeat(B[None], N, 0),
+        c=np.zeros((N, 1)),
+        xref=np.zeros((N + 1, 1)),
+        uref=np.full((N, 1), 5.0),
+        u_prev=np.array([-0.5]),
+    )
     res = solve_osqp(pb, **d)
     # u_k = min(-0.5 + 0.2 (k+1), 1)
     expected = np.minimum(-0.5 + 0.2 * np.arange(1, N + 1), 1.0)
@@ -396,8 +431,15 @@ def test_rc_smoothing_uses_u_prev():
     """With only Rc (and a tiny R) the optimal input stays at u_prev."""
     N = 6
     pb = MpcProblem(nx=1, nu=1, N=N, dt_s=0.1, Q=0.0, R=1e-6, QN=0.0, Rc=10.0)
-    d = dict(x0=np.ones(1), Ad=np.ones((N, 1, 1)), Bd=np.ones((N, 1, 1)), c=np.zeros((N, 1)),
-             xref=np.zeros((N + 1, 1)), uref=np.zeros((N, 1)), u_prev=np.array([0.7]))
+    d = dict(
+        x0=np.ones(1),
+        Ad=np.ones((N, 1, 1)),
+        Bd=np.ones((N, 1, 1)),
+        c=np.zeros((N, 1)),
+        xref=np.zeros((N + 1, 1)),
+        uref=np.zeros((N, 1)),
+        u_prev=np.array([0.7]),
+    )
     res = solve_osqp(pb, **d)
     # closed form: minimize 1e-6 sum u^2 + 10 sum (u_k - u_{k-1})^2 -> close to 0.7 everywhere
     np.testing.assert_allclose(res.U[:, 0], 0.7, atol=1e-4)
@@ -442,28 +484,29 @@ def test_ltvqp_pattern_fixed_and_updates_in_place():
         U = rng.normal(size=(N, nu))
         eps = rng.uniform(0, 1, N)
         z = qp.pack(X, U)
-        z[qp.n_x + qp.n_u:] = eps
+        z[qp.n_x + qp.n_u :] = eps
         Xz, Uz, ez = qp.unpack(z)
         np.testing.assert_array_equal(Xz, X)
         np.testing.assert_array_equal(Uz, U)
         np.testing.assert_array_equal(ez, eps)
         Az = qp.A @ z
-        np.testing.assert_allclose(Az[qp.r_init:qp.r_init + nx], X[0], atol=1e-12)
+        np.testing.assert_allclose(Az[qp.r_init : qp.r_init + nx], X[0], atol=1e-12)
         dyn = X[1:] - np.einsum("kij,kj->ki", Ad, X[:-1]) - np.einsum("kij,kj->ki", Bd, U)
-        np.testing.assert_allclose(Az[qp.r_dyn:qp.r_dyn + N * nx], dyn.ravel(), atol=1e-12)
-        np.testing.assert_allclose(qp.l[qp.r_dyn:qp.r_dyn + N * nx], c.ravel())
-        np.testing.assert_allclose(qp.u[qp.r_dyn:qp.r_dyn + N * nx], c.ravel())
-        np.testing.assert_allclose(qp.l[qp.r_init:qp.r_init + nx], x0)
-        np.testing.assert_allclose(Az[qp.r_ubound:qp.r_ubound + N * nu], U.ravel(), atol=1e-12)
-        np.testing.assert_allclose(Az[qp.r_rate:qp.r_rate + N * nu],
-                                   np.r_[U[0], np.diff(U, axis=0).ravel()], atol=1e-12)
-        np.testing.assert_allclose(qp.l[qp.r_rate:qp.r_rate + nu], u_prev - pb.du_max_per_s * pb.dt_s)
-        np.testing.assert_allclose(qp.u[qp.r_rate:qp.r_rate + nu], u_prev + pb.du_max_per_s * pb.dt_s)
+        np.testing.assert_allclose(Az[qp.r_dyn : qp.r_dyn + N * nx], dyn.ravel(), atol=1e-12)
+        np.testing.assert_allclose(qp.l[qp.r_dyn : qp.r_dyn + N * nx], c.ravel())
+        np.testing.assert_allclose(qp.u[qp.r_dyn : qp.r_dyn + N * nx], c.ravel())
+        np.testing.assert_allclose(qp.l[qp.r_init : qp.r_init + nx], x0)
+        np.testing.assert_allclose(Az[qp.r_ubound : qp.r_ubound + N * nu], U.ravel(), atol=1e-12)
+        np.testing.assert_allclose(
+            Az[qp.r_rate : qp.r_rate + N * nu], np.r_[U[0], np.diff(U, axis=0).ravel()], atol=1e-12
+        )
+        np.testing.assert_allclose(qp.l[qp.r_rate : qp.r_rate + nu], u_prev - pb.du_max_per_s * pb.dt_s)
+        np.testing.assert_allclose(qp.u[qp.r_rate : qp.r_rate + nu], u_prev + pb.du_max_per_s * pb.dt_s)
         ny = np.einsum("ki,ki->k", normal, X[1:, :2])
-        np.testing.assert_allclose(Az[qp.r_lane:qp.r_lane + 2 * N:2], ny - eps, atol=1e-12)
-        np.testing.assert_allclose(Az[qp.r_lane + 1:qp.r_lane + 2 * N:2], ny + eps, atol=1e-12)
-        np.testing.assert_allclose(qp.u[qp.r_lane:qp.r_lane + 2 * N:2], offset + half_width(pb))
-        np.testing.assert_allclose(qp.l[qp.r_lane + 1:qp.r_lane + 2 * N:2], offset - half_width(pb))
+        np.testing.assert_allclose(Az[qp.r_lane : qp.r_lane + 2 * N : 2], ny - eps, atol=1e-12)
+        np.testing.assert_allclose(Az[qp.r_lane + 1 : qp.r_lane + 2 * N : 2], ny + eps, atol=1e-12)
+        np.testing.assert_allclose(qp.u[qp.r_lane : qp.r_lane + 2 * N : 2], offset + half_width(pb))
+        np.testing.assert_allclose(qp.l[qp.r_lane + 1 : qp.r_lane + 2 * N : 2], offset - half_width(pb))
         # the QP objective equals the MPC cost minus its constant for any z
         obj = 0.5 * z @ (qp.P @ z + qp.P.T @ z - qp.P.diagonal() * z) + qp.q @ z
         J = mpc_cost(pb, X, U, eps, d["xref"], d["uref"], u_prev) - qp_constant(pb, d["xref"], d["uref"], u_prev)
@@ -558,8 +601,9 @@ def test_mpc_problem_rejects_singular_input_weight_when_unbounded(R):
 
 
 def test_mpc_problem_normalizes_inputs():
-    pb = MpcProblem(nx=3, nu=2, N=4, dt_s=0.1, Q=2.0, R=[1.0, 3.0], u_min=-1.0, u_max=[1.0, 2.0],
-                    x_max=[np.inf, 1.0, np.inf])
+    pb = MpcProblem(
+        nx=3, nu=2, N=4, dt_s=0.1, Q=2.0, R=[1.0, 3.0], u_min=-1.0, u_max=[1.0, 2.0], x_max=[np.inf, 1.0, np.inf]
+    )
     np.testing.assert_array_equal(pb.Q, 2.0 * np.eye(3))
     np.testing.assert_array_equal(pb.QN, pb.Q)  # QN defaults to Q
     np.testing.assert_array_equal(pb.R, np.diag([1.0, 3.0]))

@@ -64,8 +64,9 @@ def test_commands_table_matches_the_help(usage):
     missing = [f for f in sorted(flags) if not re.search(rf"(?<![\w-]){re.escape(f)}(?![\w-])", text)]
     assert not missing, f"README shows {missing} for 'mpcdrive {cmd}', its --help does not"
     for token in re.findall(r"(--[a-z-]+) [A-Z_]+ \.\.\.", usage):
-        pytest.fail(f"README shows '{token} X ...' (several values after one flag); the flag takes one: "
-                    f"write '[{token} X]...'")
+        pytest.fail(
+            f"README shows '{token} X ...' (several values after one flag); the flag takes one: write '[{token} X]...'"
+        )
 
 
 def test_commands_table_lists_every_command():
@@ -104,8 +105,13 @@ def test_python_snippets_run(index, tmp_path):
         code = code.replace(a, b)
     if "highway_env" in code:
         pytest.importorskip("highway_env")
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path,
-                       env={**__import__("os").environ, "SDL_VIDEODRIVER": "dummy"})
+    r = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env={**__import__("os").environ, "SDL_VIDEODRIVER": "dummy"},
+    )
     assert r.returncode == 0, r.stderr
     assert "DeprecationWarning" not in r.stderr and "is out of date" not in r.stderr, r.stderr
 

@@ -39,12 +39,28 @@ def circle_run(steps: int = 150, radius_m: float = 1.5, lane: float | None = 0.4
     """A real closed loop: a car starting 0.2 m outside a circle of ``radius_m`` at 1 m/s."""
     model = KinematicBicycle3(v_mps=1.0)
     path = CirclePath(radius_m=radius_m)
-    problem = MpcProblem(nx=3, nu=1, N=N, dt_s=0.02, Q=[1, 1, 1], R=1.0,
-                         u_min=-np.radians(60), u_max=np.radians(60),
-                         road=None if lane is None else Road.constant(2 * lane, 0.0))
+    problem = MpcProblem(
+        nx=3,
+        nu=1,
+        N=N,
+        dt_s=0.02,
+        Q=[1, 1, 1],
+        R=1.0,
+        u_min=-np.radians(60),
+        u_max=np.radians(60),
+        road=None if lane is None else Road.constant(2 * lane, 0.0),
+    )
     mpc = LtvMpc(model, path, problem)
-    return simulate(mpc, Plant(model), path, x0=[radius_m + 0.2, 0.0, np.pi / 2], dt_s=0.02,
-                    steps=steps, road=problem.road, meta={"id": "circle", "max_steer_rad": np.radians(60)})
+    return simulate(
+        mpc,
+        Plant(model),
+        path,
+        x0=[radius_m + 0.2, 0.0, np.pi / 2],
+        dt_s=0.02,
+        steps=steps,
+        road=problem.road,
+        meta={"id": "circle", "max_steer_rad": np.radians(60)},
+    )
 
 
 def tiny_pngs(directory: Path, n: int = 2) -> list[Path]:
@@ -159,17 +175,20 @@ def test_replay_obstacles_static_moving_and_unknown(run150):
     assert replay_data(run150, FOOTPRINT)["obstacles"] == []
 
 
-@pytest.mark.parametrize("shape, field", [
-    ({"type": "circle", "center": [0, 0]}, r"obstacles\[0\]\.radius_m"),
-    ({"type": "circle", "center": [0, 0], "radius_m": -1}, r"obstacles\[0\]\.radius_m"),
-    ({"type": "circle", "center": [0, 0, 1], "radius_m": 1}, r"obstacles\[0\]\.center"),
-    ({"type": "circle", "center": [[0, 0], [1, 1]], "radius_m": 1}, r"obstacles\[0\]: 2 positions"),
-    ({"type": "circle", "center": [[0, 0], [1, 1]], "t_s": [1.0, 0.0], "radius_m": 1}, r"obstacles\[0\]\.t_s"),
-    ({"type": "polygon", "points": [[0, 0], [1, 1]]}, r"obstacles\[0\]\.points"),
-    ({"type": "polygon", "points": [[0, 0], [1, np.nan], [2, 0]]}, r"obstacles\[0\]\.points"),
-    ({"type": "rectangle", "center": [0, 0], "length_m": 1.0}, r"obstacles\[0\]\.width_m"),
-    ("a circle", r"obstacles\[0\]: expected a mapping"),
-])
+@pytest.mark.parametrize(
+    "shape, field",
+    [
+        ({"type": "circle", "center": [0, 0]}, r"obstacles\[0\]\.radius_m"),
+        ({"type": "circle", "center": [0, 0], "radius_m": -1}, r"obstacles\[0\]\.radius_m"),
+        ({"type": "circle", "center": [0, 0, 1], "radius_m": 1}, r"obstacles\[0\]\.center"),
+        ({"type": "circle", "center": [[0, 0], [1, 1]], "radius_m": 1}, r"obstacles\[0\]: 2 positions"),
+        ({"type": "circle", "center": [[0, 0], [1, 1]], "t_s": [1.0, 0.0], "radius_m": 1}, r"obstacles\[0\]\.t_s"),
+        ({"type": "polygon", "points": [[0, 0], [1, 1]]}, r"obstacles\[0\]\.points"),
+        ({"type": "polygon", "points": [[0, 0], [1, np.nan], [2, 0]]}, r"obstacles\[0\]\.points"),
+        ({"type": "rectangle", "center": [0, 0], "length_m": 1.0}, r"obstacles\[0\]\.width_m"),
+        ("a circle", r"obstacles\[0\]: expected a mapping"),
+    ],
+)
 def test_replay_rejects_malformed_obstacles(run150, shape, field):
     with pytest.raises(ValueError, match=field):
         replay_data(with_obstacles(run150, [shape]), FOOTPRINT)
@@ -184,8 +203,9 @@ def _page_data(text: str) -> list:
 def test_run_page_is_self_contained(tmp_path, run150):
     figs = tiny_pngs(tmp_path, 3)
     metrics = compute_metrics(run150)
-    page = write_run_html(tmp_path, run150, metrics, figs, FOOTPRINT, run_id="circle",
-                          description="a <b>circle</b> & </script> test")
+    page = write_run_html(
+        tmp_path, run150, metrics, figs, FOOTPRINT, run_id="circle", description="a <b>circle</b> & </script> test"
+    )
     assert page == tmp_path / "report.html"
     text = page.read_text(encoding="utf-8")
     assert text.startswith("<!DOCTYPE html>")
@@ -209,15 +229,17 @@ def test_reproduce_page_has_every_experiment(tmp_path, run150):
     short = circle_run(40, radius_m=2.0)
     (tmp_path / "a").mkdir()
     figs = [f"a/{p.name}" for p in tiny_pngs(tmp_path / "a")]
-    runs = [HtmlRun("exp-a", "first", compute_metrics(run150), figs, run150, FOOTPRINT),
-            HtmlRun("exp-b", "second", compute_metrics(short), [], short, Footprint(0.4, 0.2)),
-            {"id": "comparison", "description": "figure only", "metrics": {}, "figures": [figs[0]]}]
+    runs = [
+        HtmlRun("exp-a", "first", compute_metrics(run150), figs, run150, FOOTPRINT),
+        HtmlRun("exp-b", "second", compute_metrics(short), [], short, Footprint(0.4, 0.2)),
+        {"id": "comparison", "description": "figure only", "metrics": {}, "figures": [figs[0]]},
+    ]
     paper = {"exp-a": [("max |e_y| [m]", "about 0.2", "max_abs_lateral_error_m")]}
     text = write_reproduce_html(tmp_path, runs, paper).read_text(encoding="utf-8")
     data = _page_data(text)
     assert [d["id"] for d in data] == ["exp-a", "exp-b"]
     assert len(data[1]["frames"]["k"]) == 40 and data[1]["footprint"]["length"] == 0.4
-    assert '<select id="experiment">' in text and text.count("<option value=\"exp-") == 2
+    assert '<select id="experiment">' in text and text.count('<option value="exp-') == 2
     for rid in ("exp-a", "exp-b", "comparison"):
         assert f'data-run="{rid}"' in text
     assert "<h2>Summary</h2>" in text and "<h2>Ours vs paper</h2>" in text
@@ -230,9 +252,18 @@ def test_reproduce_page_has_every_experiment(tmp_path, run150):
 
 
 # --------------------------------------------------------------------------- in a browser
-CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                  "--disable-dev-shm-usage", "--window-size=1280,1000"]
+CHROMIUM_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--disable-dev-shm-usage",
+    "--window-size=1280,1000",
+]
 
 
 def _find(*names: str) -> str | None:
@@ -246,11 +277,12 @@ def _find(*names: str) -> str | None:
 @pytest.fixture(scope="module")
 def browser():
     chromium = _find("chromium", "chromium-browser")
-    driver_bin = _find("chromedriver") or (
-        "/usr/bin/chromedriver" if Path("/usr/bin/chromedriver").exists() else None)
+    driver_bin = _find("chromedriver") or ("/usr/bin/chromedriver" if Path("/usr/bin/chromedriver").exists() else None)
     if chromium is None or driver_bin is None:
-        pytest.skip("headless browser test needs Chromium and its driver; not installed here "
-                    "(Debian: apt-get install chromium chromium-driver)")
+        pytest.skip(
+            "headless browser test needs Chromium and its driver; not installed here "
+            "(Debian: apt-get install chromium chromium-driver)"
+        )
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
@@ -295,12 +327,17 @@ def _count_near(img: np.ndarray, rgb, tol: float = 40.0) -> int:
 
 
 def test_run_page_plays_in_a_browser(browser, tmp_path, run150):
-    shapes = [{"type": "circle", "center": [0.0, 0.0], "radius_m": 0.4},
-              {"type": "polygon", "points": [[[-2.2 + 0.01 * k, -2.2], [-1.8 + 0.01 * k, -2.2], [-2.0 + 0.01 * k, -1.8]]
-                                             for k in range(run150.steps)]}]
+    shapes = [
+        {"type": "circle", "center": [0.0, 0.0], "radius_m": 0.4},
+        {
+            "type": "polygon",
+            "points": [
+                [[-2.2 + 0.01 * k, -2.2], [-1.8 + 0.01 * k, -2.2], [-2.0 + 0.01 * k, -1.8]] for k in range(run150.steps)
+            ],
+        },
+    ]
     result = with_obstacles(run150, shapes)
-    write_run_html(tmp_path, result, compute_metrics(result), tiny_pngs(tmp_path), FOOTPRINT,
-                   run_id="circle")
+    write_run_html(tmp_path, result, compute_metrics(result), tiny_pngs(tmp_path), FOOTPRINT, run_id="circle")
     browser.get((tmp_path / "report.html").as_uri())
     slider = browser.find_element("id", "time-slider")
     label = browser.find_element("id", "frame-label")
@@ -310,6 +347,7 @@ def test_run_page_plays_in_a_browser(browser, tmp_path, run150):
 
     before = _canvas_image(browser, "view")
     from selenium.webdriver.support.ui import Select
+
     Select(browser.find_element("id", "speed")).select_by_value("0.5")  # 3 s of driving in 6 s
     play = browser.find_element("id", "play")
     play.click()
@@ -327,7 +365,7 @@ def test_run_page_plays_in_a_browser(browser, tmp_path, run150):
     non_white = np.mean(np.any(img < 245, axis=-1))
     assert 0.02 < non_white < 0.9, non_white
     assert len(np.unique((img[..., 0] << 16) | (img[..., 1] << 8) | img[..., 2])) > 50  # colours
-    assert _count_near(img, (31, 119, 180)) > 100     # reference path
+    assert _count_near(img, (31, 119, 180)) > 100  # reference path
     assert _count_near(img, (148, 103, 189), 60) > 50  # obstacles (fill and outline)
     assert _count_near(img, (236, 236, 236), 6) > 1000  # the lane band
     assert np.any(np.abs(img - before).sum(axis=-1) > 60), "the picture did not change while playing"
@@ -335,6 +373,7 @@ def test_run_page_plays_in_a_browser(browser, tmp_path, run150):
     # the lower plot seeks; arrow keys step
     series = browser.find_element("id", "series")
     from selenium.webdriver.common.action_chains import ActionChains
+
     ActionChains(browser).move_to_element_with_offset(series, 0, 0).click().perform()
     assert _wait(lambda: abs(int(slider.get_attribute("value")) - frozen) > 5)
     assert _severe(browser.get_log("browser")) == []
@@ -345,8 +384,10 @@ def test_run_page_plays_in_a_browser(browser, tmp_path, run150):
 
 def test_reproduce_page_switches_experiments_in_a_browser(browser, tmp_path, run150):
     short = circle_run(40, radius_m=2.0)
-    runs = [HtmlRun("exp-a", "first", compute_metrics(run150), [], run150, FOOTPRINT),
-            HtmlRun("exp-b", "second", compute_metrics(short), [], short, FOOTPRINT)]
+    runs = [
+        HtmlRun("exp-a", "first", compute_metrics(run150), [], run150, FOOTPRINT),
+        HtmlRun("exp-b", "second", compute_metrics(short), [], short, FOOTPRINT),
+    ]
     write_reproduce_html(tmp_path, runs)
     browser.get((tmp_path / "report.html").as_uri())
     label = browser.find_element("id", "frame-label")
@@ -355,8 +396,9 @@ def test_reproduce_page_switches_experiments_in_a_browser(browser, tmp_path, run
 
     Select(browser.find_element("id", "experiment")).select_by_value("exp-b")
     assert _wait(lambda: label.text.startswith("frame 1/40")), label.text
-    sections = {s.get_attribute("data-run"): s.is_displayed()
-                for s in browser.find_elements("css selector", "section.run")}
+    sections = {
+        s.get_attribute("data-run"): s.is_displayed() for s in browser.find_elements("css selector", "section.run")
+    }
     assert sections == {"exp-a": False, "exp-b": True}
     # the summary table's links pick an experiment too
     browser.find_element("css selector", 'a.pick[data-run="exp-a"]').click()

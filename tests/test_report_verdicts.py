@@ -11,20 +11,23 @@ from mpcdrive.report.html import write_reproduce_html
 from mpcdrive.report.markdown import PaperFigure, paper_comparison, verdict
 
 
-@pytest.mark.parametrize("ours, figure, reference, word", [
-    (1.00, PaperFigure(1.047, "about", lower_is_better=False), None, "matches"),  # 4.5 % off
-    (0.90, PaperFigure(1.047, "about", lower_is_better=False), None, "differs"),  # 14 % off
-    (0.03, PaperFigure(0.04, "about"), None, "better"),  # an error 25 % below the paper's
-    (0.05, PaperFigure(0.04, "about"), None, "differs"),
-    (0.0087, PaperFigure(0.008, "at_most"), None, "matches"),  # within 10 % of the bound
-    (0.0089, PaperFigure(0.008, "at_most"), None, "differs"),
-    (0.0, PaperFigure(0.0, "at_least"), None, "matches"),
-    (-0.01, PaperFigure(0.0, "at_least"), None, "differs"),
-    (0.07, PaperFigure(kind="lower_than", relative_to="a"), 0.10, "matches"),
-    (0.11, PaperFigure(kind="lower_than", relative_to="a"), 0.10, "differs"),
-    (0.11, None, None, "no number"),
-    (None, PaperFigure(0.04, "about"), None, "not run"),
-])
+@pytest.mark.parametrize(
+    "ours, figure, reference, word",
+    [
+        (1.00, PaperFigure(1.047, "about", lower_is_better=False), None, "matches"),  # 4.5 % off
+        (0.90, PaperFigure(1.047, "about", lower_is_better=False), None, "differs"),  # 14 % off
+        (0.03, PaperFigure(0.04, "about"), None, "better"),  # an error 25 % below the paper's
+        (0.05, PaperFigure(0.04, "about"), None, "differs"),
+        (0.0087, PaperFigure(0.008, "at_most"), None, "matches"),  # within 10 % of the bound
+        (0.0089, PaperFigure(0.008, "at_most"), None, "differs"),
+        (0.0, PaperFigure(0.0, "at_least"), None, "matches"),
+        (-0.01, PaperFigure(0.0, "at_least"), None, "differs"),
+        (0.07, PaperFigure(kind="lower_than", relative_to="a"), 0.10, "matches"),
+        (0.11, PaperFigure(kind="lower_than", relative_to="a"), 0.10, "differs"),
+        (0.11, None, None, "no number"),
+        (None, PaperFigure(0.04, "about"), None, "not run"),
+    ],
+)
 def test_verdict_rules(ours, figure, reference, word):
     got, reason = verdict(ours, figure, reference)
     assert got == word
@@ -41,17 +44,26 @@ def test_bad_paper_figures_are_refused():
 
 
 PAPER = {
-    "a": [("max |e_y| [m]", "up to 0.04", "max_abs_lateral_error_m",
-           PaperFigure(0.04, "about", note="the noise models differ")),
-          ("max |steer| [rad]", "1.047", "max_abs_steer_rad", PaperFigure(1.047, "about", lower_is_better=False)),
-          ("final [m]", "converges", "final_lateral_error_m")],
-    "b": [("max |e_y| [m]", "below 0.01", "max_abs_lateral_error_m", PaperFigure(0.01, "at_most")),
-          ("final [m]", "better than a", "final_lateral_error_m", PaperFigure(kind="lower_than", relative_to="a"))],
+    "a": [
+        (
+            "max |e_y| [m]",
+            "up to 0.04",
+            "max_abs_lateral_error_m",
+            PaperFigure(0.04, "about", note="the noise models differ"),
+        ),
+        ("max |steer| [rad]", "1.047", "max_abs_steer_rad", PaperFigure(1.047, "about", lower_is_better=False)),
+        ("final [m]", "converges", "final_lateral_error_m"),
+    ],
+    "b": [
+        ("max |e_y| [m]", "below 0.01", "max_abs_lateral_error_m", PaperFigure(0.01, "at_most")),
+        ("final [m]", "better than a", "final_lateral_error_m", PaperFigure(kind="lower_than", relative_to="a")),
+    ],
     "c": [("max |e_y| [m]", "small", "max_abs_lateral_error_m", PaperFigure(0.01, "at_most"))],
 }
-ENTRIES = [ReportEntry("a", "", {"max_abs_lateral_error_m": 0.28, "max_abs_steer_rad": 1.0,
-                                 "final_lateral_error_m": 0.1}),
-           ReportEntry("b", "", {"max_abs_lateral_error_m": 0.02, "final_lateral_error_m": 0.05})]
+ENTRIES = [
+    ReportEntry("a", "", {"max_abs_lateral_error_m": 0.28, "max_abs_steer_rad": 1.0, "final_lateral_error_m": 0.1}),
+    ReportEntry("b", "", {"max_abs_lateral_error_m": 0.02, "final_lateral_error_m": 0.05}),
+]
 
 
 def test_table_has_a_verdict_column_and_footnotes():
@@ -72,8 +84,9 @@ def test_markdown_and_html_show_the_verdicts_and_the_footnotes(tmp_path):
     assert "| experiment | quantity | paper | ours | verdict |" in md
     assert "| `a` | max \\|e_y\\| [m] | up to 0.04 | 0.28 | differs [1] |" in md
     assert "[1] the noise models differ" in md and "within 10 %" in md
-    html = write_reproduce_html(tmp_path, [{"id": e.id, "description": "", "metrics": e.metrics, "figures": []}
-                                           for e in ENTRIES], PAPER).read_text(encoding="utf-8")
+    html = write_reproduce_html(
+        tmp_path, [{"id": e.id, "description": "", "metrics": e.metrics, "figures": []} for e in ENTRIES], PAPER
+    ).read_text(encoding="utf-8")
     assert "<th>verdict</th>" in html and "<td>differs [1]</td>" in html
     assert re.search(r'<p class="note">\[1\] the noise models differ</p>', html)
 
@@ -84,8 +97,11 @@ def test_every_paper_experiment_has_rows_and_the_disturbance_rows_say_why():
         (row,) = PAPER_VALUES[exp_id]
         assert row[3] is not None and "Not comparable" in row[3].note
     # the verdicts of the stored closed-loop tolerances' worst case: the disturbance runs differ
-    entries = [ReportEntry("paper-disturbance-v1", "", {"max_abs_lateral_error_m": 0.28}),
-               ReportEntry("paper-disturbance-v4", "", {"max_abs_lateral_error_m": 0.12})]
-    _, rows, notes = paper_comparison(entries, {k: PAPER_VALUES[k] for k in ("paper-disturbance-v1",
-                                                                            "paper-disturbance-v4")})
+    entries = [
+        ReportEntry("paper-disturbance-v1", "", {"max_abs_lateral_error_m": 0.28}),
+        ReportEntry("paper-disturbance-v4", "", {"max_abs_lateral_error_m": 0.12}),
+    ]
+    _, rows, notes = paper_comparison(
+        entries, {k: PAPER_VALUES[k] for k in ("paper-disturbance-v1", "paper-disturbance-v4")}
+    )
     assert [r[-1] for r in rows] == ["differs [1]", "differs [1]"] and len(notes) == 1

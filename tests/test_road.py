@@ -44,7 +44,7 @@ def test_body_bounds_keep_every_point_inside_a_curved_lane(R, yaw_rel):
     road = Road.constant(3.5, 0.0)
     lo, hi = road.bounds(0.0, 1.0 / R, yaw_rel, CAR)
     d = CAR.length_m / 2 + 0.5
-    tol = (1 / R) ** 3 * d ** 4 / 8 + (1 / R) * (CAR.length_m / 8) ** 2 / 2 + 1e-9
+    tol = (1 / R) ** 3 * d**4 / 8 + (1 / R) * (CAR.length_m / 8) ** 2 / 2 + 1e-9
     for e, side in ((float(hi), "left"), (float(lo), "right")):
         r_in, r_out = _corners_on_circle(R, e, yaw_rel, CAR)
         if side == "left":  # the inner edge: radius R - 1.75
@@ -119,13 +119,22 @@ def _curve_spec(road: dict, radius_m: float = 12.0) -> dict:
     pts = [(radius_m * math.sin(a), radius_m * (1 - math.cos(a))) for a in np.linspace(0, math.pi / 2, 40)]
     pts += [(radius_m + 0.0, radius_m + d) for d in np.linspace(2.0, 30.0, 15)]
     return {
-        "id": "curve", "dt_s": 0.05, "duration_s": 9.0,
+        "id": "curve",
+        "dt_s": 0.05,
+        "duration_s": 9.0,
         "vehicle": {"model": "kinematic4", "preset": "commonroad_bmw_320i", "speed_mps": 6.0},
         "path": {"type": "waypoints", "points": [list(p) for p in pts], "ds_m": 0.2},
         "road": road,
         "initial_state": {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 0.0, "v_mps": 6.0},
-        "controller": {"horizon": 25, "Q": [1.0, 1.0, 2.0, 1.0], "R": [10.0, 0.1], "Rc": [100.0, 1.0],
-                       "accel_limits_mps2": [-6.0, 3.0], "speed_limits_mps": [0.0, 10.0], "backend": "fast"},
+        "controller": {
+            "horizon": 25,
+            "Q": [1.0, 1.0, 2.0, 1.0],
+            "R": [10.0, 0.1],
+            "Rc": [100.0, 1.0],
+            "accel_limits_mps2": [-6.0, 3.0],
+            "speed_limits_mps": [0.0, 10.0],
+            "backend": "fast",
+        },
     }
 
 
@@ -134,8 +143,9 @@ def test_body_stays_inside_a_lane_that_narrows_in_a_tight_curve(backend):
     """A lane that narrows from 3.7 m to 2.6 m in a 12 m-radius curve, the 1.8 m wide, 4.7 m long
     BMW through it, the reference not on the lane's centre: the body stays inside the road
     (the road's own measurement, no margin), on both solvers."""
-    spec = _curve_spec({"widths": [[0.0, 1.85, 1.85], [8.0, 1.85, 1.85], [14.0, 1.1, 1.5], [60.0, 1.1, 1.5]],
-                        "margin_m": 0.05})
+    spec = _curve_spec(
+        {"widths": [[0.0, 1.85, 1.85], [8.0, 1.85, 1.85], [14.0, 1.1, 1.5], [60.0, 1.1, 1.5]], "margin_m": 0.05}
+    )
     spec["controller"]["backend"] = backend
     exp = build_experiment(ScenarioSpec.model_validate(spec))
     m = compute_metrics(run_experiment(exp))

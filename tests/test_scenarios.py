@@ -32,8 +32,15 @@ def write(tmp_path, data, name="s.yaml"):
 
 def test_builtins_load_and_build():
     ids = builtin_ids()
-    for required in ("paper-exp1", "paper-exp2", "paper-exp3", "paper-exp4", "paper-disturbance-v1",
-                     "paper-disturbance-v4", "paper-smoothing"):
+    for required in (
+        "paper-exp1",
+        "paper-exp2",
+        "paper-exp3",
+        "paper-exp4",
+        "paper-disturbance-v1",
+        "paper-disturbance-v4",
+        "paper-smoothing",
+    ):
         assert required in ids
     for sid in ids:
         spec = load_scenario(sid)

@@ -7,7 +7,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mpcdrive.scene import Circle, ConstantVelocity, Footprint, Obstacle, Polygon, TrajectoryMotion, rectangle, shape_distance
+from mpcdrive.scene import (
+    Circle,
+    ConstantVelocity,
+    Footprint,
+    Obstacle,
+    Polygon,
+    TrajectoryMotion,
+    rectangle,
+    shape_distance,
+)
 from mpcdrive.scene.geometry import point_polygon, points_polygon, points_polygons
 
 coord = st.floats(-5, 5, allow_nan=False)
@@ -56,8 +65,11 @@ def test_footprint_to_rectangle_clearance_matches_brute_force(x, y, yaw, ox, oy,
         assert d == pytest.approx(ref, abs=2e-3)
     else:
         # touching or overlapping: some vertex of one lies in (or on) the other, or edges cross
-        assert ref < 5e-3 or min(point_polygon(p, box.points)[0] for p in car.points) <= 1e-9 \
+        assert (
+            ref < 5e-3
+            or min(point_polygon(p, box.points)[0] for p in car.points) <= 1e-9
             or min(point_polygon(p, car.points)[0] for p in box.points) <= 1e-9
+        )
 
 
 @settings(max_examples=40, deadline=None)
@@ -88,7 +100,9 @@ def test_vectorized_point_polygon_agrees():
 def test_point_to_its_own_polygon_agrees():
     """A moving obstacle: point k against the polygon at time k (inside, outside, on corners)."""
     rng = np.random.default_rng(1)
-    turning = TrajectoryMotion(np.array([0.0, 20.0]), np.array([0.0, 16.0]), np.array([0.0, -6.0]), np.array([0.0, 10.0]))
+    turning = TrajectoryMotion(
+        np.array([0.0, 20.0]), np.array([0.0, 16.0]), np.array([0.0, -6.0]), np.array([0.0, 10.0])
+    )
     ob = Obstacle(rectangle(1.0, 0.5), (0.3, -0.2, 0.7), turning)
     polys = np.stack([ob.at(0.1 * k).points for k in range(200)])
     P = polys.mean(axis=1) + rng.uniform(-1.2, 1.2, size=(200, 2))
@@ -109,19 +123,35 @@ def test_motion_models():
     assert ob2.moving and not Obstacle(Circle(1), (0, 0, 0)).moving
 
 
-@pytest.mark.parametrize("make", [
-    lambda: Circle(0.0), lambda: Circle(float("nan")), lambda: rectangle(0, 1),
-    lambda: Polygon(np.array([[0, 0], [1, 0]])), lambda: Polygon(np.array([[0, 0], [2, 0], [1, 0.2], [1, 2]]) * [1, 1] + [[0, 0], [0, 0], [0, 0.5], [0, 0]] * 0 + np.array([[0, 0], [0, 0], [0, 1.5], [0, 0]])),
-    lambda: Obstacle(Circle(1), (0, float("inf"), 0)),
-    lambda: TrajectoryMotion(np.array([0.0, 0.0]), np.zeros(2), np.zeros(2), np.zeros(2)),
-])
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: Circle(0.0),
+        lambda: Circle(float("nan")),
+        lambda: rectangle(0, 1),
+        lambda: Polygon(np.array([[0, 0], [1, 0]])),
+        lambda: Polygon(
+            np.array([[0, 0], [2, 0], [1, 0.2], [1, 2]]) * [1, 1]
+            + [[0, 0], [0, 0], [0, 0.5], [0, 0]] * 0
+            + np.array([[0, 0], [0, 0], [0, 1.5], [0, 0]])
+        ),
+        lambda: Obstacle(Circle(1), (0, float("inf"), 0)),
+        lambda: TrajectoryMotion(np.array([0.0, 0.0]), np.zeros(2), np.zeros(2), np.zeros(2)),
+    ],
+)
 def test_bad_shapes_raise_value_error(make):
     with pytest.raises(ValueError):
         make()
 
 
-@pytest.mark.parametrize("motion", [None, ConstantVelocity(2.0, -1.0),
-                                    TrajectoryMotion([0.0, 1.0, 3.0], [0.0, 2.0, 3.0], [0.0, 1.0, -1.0], [0.0, 0.5, 1.0])])
+@pytest.mark.parametrize(
+    "motion",
+    [
+        None,
+        ConstantVelocity(2.0, -1.0),
+        TrajectoryMotion([0.0, 1.0, 3.0], [0.0, 2.0, 3.0], [0.0, 1.0, -1.0], [0.0, 0.5, 1.0]),
+    ],
+)
 def test_poses_and_outlines_over_times_are_those_at_each_time(motion):
     kw = {} if motion is None else {"motion": motion}
     ob = Obstacle(rectangle(2.0, 1.0), (1.0, 2.0, 0.3), **kw)

@@ -33,7 +33,7 @@ def _check_limits(prof: SpeedProfile, a_lat, a_max, b_max):
     v = prof.v_mps
     assert np.all(v >= 0) and np.all(v <= prof.v_max_mps + 1e-12)
     # lateral acceleration on the (windowed) curvature
-    assert np.all(v ** 2 * prof.abs_kappa <= a_lat * (1 + 1e-9))
+    assert np.all(v**2 * prof.abs_kappa <= a_lat * (1 + 1e-9))
     acc = prof.longitudinal_accel()
     assert acc.max() <= a_max * (1 + 1e-9)
     assert acc.min() >= -b_max * (1 + 1e-9)
@@ -42,18 +42,25 @@ def _check_limits(prof: SpeedProfile, a_lat, a_max, b_max):
         # the start of an accelerating segment and at the end of a braking one
         vv = np.r_[v, v[0]] if prof.closed else v
         kk = np.r_[prof.abs_kappa, prof.abs_kappa[0]] if prof.closed else prof.abs_kappa
-        lat = vv ** 2 * kk / a_lat
+        lat = vv**2 * kk / a_lat
         lat_seg = np.where(acc > 0, lat[:-1], lat[1:])
         lim = np.where(acc > 0, a_max, b_max)
-        assert np.all((acc / lim) ** 2 + lat_seg ** 2 <= 1.0 + 1e-6)
+        assert np.all((acc / lim) ** 2 + lat_seg**2 <= 1.0 + 1e-6)
 
 
 @pytest.mark.parametrize("name", ["raceway", "hairpins"])
 @pytest.mark.parametrize("frac", [0.5, 0.8, 1.0])
 def test_profile_respects_friction_and_acceleration_limits(name, frac):
     tr = _track(name)
-    prof = SpeedProfile.from_friction(tr.path, 1.0489, lateral_fraction=frac, accel_max_mps2=4.0,
-                                      decel_max_mps2=6.0, v_max_mps=9.0, curvature_window_m=0.3)
+    prof = SpeedProfile.from_friction(
+        tr.path,
+        1.0489,
+        lateral_fraction=frac,
+        accel_max_mps2=4.0,
+        decel_max_mps2=6.0,
+        v_max_mps=9.0,
+        curvature_window_m=0.3,
+    )
     _check_limits(prof, frac * MU_G, 4.0, 6.0)
     # the lateral-acceleration limit is reached in the tightest bend
     assert np.max(prof.lateral_accel()) == pytest.approx(frac * MU_G, rel=0.02)
@@ -70,12 +77,12 @@ def test_car_slows_before_a_bend():
     s_bend = 20.0
     v_bend = math.sqrt(MU_G * 2.0)
     assert prof.speed(s_bend + 2.0) == pytest.approx(v_bend, rel=0.03)
-    brake_dist = (12.0 ** 2 - v_bend ** 2) / (2 * 5.0)
+    brake_dist = (12.0**2 - v_bend**2) / (2 * 5.0)
     s = np.linspace(s_bend - brake_dist + 0.5, s_bend - 0.3, 50)
     v = prof.speed(s)
     assert np.all(np.diff(v) < 0)
     # v^2 = v_bend^2 + 2 b (s_bend - s) before the bend (up to the spline's curvature onset)
-    np.testing.assert_allclose(v[:20] ** 2, v_bend ** 2 + 2 * 5.0 * (s_bend - s[:20]), rtol=0.05)
+    np.testing.assert_allclose(v[:20] ** 2, v_bend**2 + 2 * 5.0 * (s_bend - s[:20]), rtol=0.05)
     assert prof.speed(0.0) == pytest.approx(12.0)
 
 
@@ -93,8 +100,15 @@ def test_closed_profile_is_periodic_and_open_ends_can_be_pinned():
     assert ConstantSpeed(3.0).speed(np.arange(3.0)).tolist() == [3.0, 3.0, 3.0]
 
 
-@pytest.mark.parametrize("kw", [dict(lateral_accel_max_mps2=0.0), dict(accel_max_mps2=-1.0),
-                                dict(v_max_mps=float("nan")), dict(decel_max_mps2=float("inf"))])
+@pytest.mark.parametrize(
+    "kw",
+    [
+        dict(lateral_accel_max_mps2=0.0),
+        dict(accel_max_mps2=-1.0),
+        dict(v_max_mps=float("nan")),
+        dict(decel_max_mps2=float("inf")),
+    ],
+)
 def test_profile_rejects_bad_limits_naming_them(kw):
     args = dict(lateral_accel_max_mps2=5.0, accel_max_mps2=2.0, decel_max_mps2=2.0, v_max_mps=5.0)
     args.update(kw)
@@ -160,19 +174,24 @@ def test_csv_round_trip_and_f1tenth_style_headers(tmp_path):
     assert not load_track_csv(h, closed=False).closed
 
 
-@pytest.mark.parametrize("text, words", [
-    ("", "empty file"),
-    ("# a, b\n1, 2\n", "x_m, y_m"),
-    ("x_m, y_m\n0, 0\n1, 1\n", "at least 3 waypoints"),
-    ("x_m, y_m\n0, 0\n1, abc\n2, 2\n", "line 3: column y_m: not a number"),
-    ("x_m, y_m\n0, 0\n1, nan\n2, 2\n", "line 3: column y_m: not finite"),
-    ("x_m, y_m, w_tr_right_m\n0, 0, 1\n1, 1, 1\n2, 2, 1\n", "both"),
-    ("x_m, y_m, w_tr_right_m, w_tr_left_m\n0, 0, 1, 1\n1, 1, -1, 1\n2, 2, 1, 1\n",
-     "line 3: column w_tr_right_m: road width must be positive"),
-    ("x_m, y_m\n0, 0\n1, 1, 7\n2, 2\n", "line 3: expected 2 values"),
-    ("x_m, y_m\n0, 0\n1, 1\n1, 1\n2, 2\n", "line 4: waypoint repeats"),
-    ("x_m, x_m, y_m\n0, 0, 0\n", "duplicate column"),
-])
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("", "empty file"),
+        ("# a, b\n1, 2\n", "x_m, y_m"),
+        ("x_m, y_m\n0, 0\n1, 1\n", "at least 3 waypoints"),
+        ("x_m, y_m\n0, 0\n1, abc\n2, 2\n", "line 3: column y_m: not a number"),
+        ("x_m, y_m\n0, 0\n1, nan\n2, 2\n", "line 3: column y_m: not finite"),
+        ("x_m, y_m, w_tr_right_m\n0, 0, 1\n1, 1, 1\n2, 2, 1\n", "both"),
+        (
+            "x_m, y_m, w_tr_right_m, w_tr_left_m\n0, 0, 1, 1\n1, 1, -1, 1\n2, 2, 1, 1\n",
+            "line 3: column w_tr_right_m: road width must be positive",
+        ),
+        ("x_m, y_m\n0, 0\n1, 1, 7\n2, 2\n", "line 3: expected 2 values"),
+        ("x_m, y_m\n0, 0\n1, 1\n1, 1\n2, 2\n", "line 4: waypoint repeats"),
+        ("x_m, x_m, y_m\n0, 0, 0\n", "duplicate column"),
+    ],
+)
 def test_bad_csv_files_give_clear_errors(tmp_path, text, words):
     f = tmp_path / "bad.csv"
     f.write_text(text)

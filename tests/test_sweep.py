@@ -24,8 +24,11 @@ from mpcdrive.sweep import (
 )
 
 SHORT = ["duration_s=0.3"]
-VARY = ["initial_state.y_m=uniform(-0.3, 0.3)", "initial_state.yaw_deg=offset_normal(0, 10)",
-        "vehicle.lr_m=scale_uniform(0.8, 1.2)"]
+VARY = [
+    "initial_state.y_m=uniform(-0.3, 0.3)",
+    "initial_state.yaw_deg=offset_normal(0, 10)",
+    "vehicle.lr_m=scale_uniform(0.8, 1.2)",
+]
 
 
 def plan(runs=4, seed=7, vary=VARY, set_=SHORT, scenario="paper-exp3", **kw):
@@ -100,8 +103,11 @@ def test_runs_that_fail_are_explained_and_the_sweep_goes_on():
 
 
 def test_solver_failures_in_a_sweep_are_counted_per_fallback_kind():
-    p = plan(3, set_=SHORT + ["controller.backend=osqp", "controller.osqp_max_iter=3",
-                              "controller.fallback=[shifted_plan, brake]"])
+    p = plan(
+        3,
+        set_=SHORT
+        + ["controller.backend=osqp", "controller.osqp_max_iter=3", "controller.fallback=[shifted_plan, brake]"],
+    )
     rows = run_sweep(p, "local", workers=1)
     s = summarize(p, rows)
     assert s["solver_failures"]["total"] > 0
@@ -114,7 +120,9 @@ def test_solver_failures_in_a_sweep_are_counted_per_fallback_kind():
 
 def test_outputs_table_summary_figures_and_replayable_failed_runs(tmp_path):
     # a narrow lane and large initial offsets: some runs leave the lane
-    p = plan(6, seed=1, vary=["initial_state.y_m=uniform(-0.45, 0.45)"], set_=["duration_s=1.0", "road.lane_width_m=0.8"])
+    p = plan(
+        6, seed=1, vary=["initial_state.y_m=uniform(-0.45, 0.45)"], set_=["duration_s=1.0", "road.lane_width_m=0.8"]
+    )
     rows = run_sweep(p, "local", workers=1)
     s = write_sweep_outputs(p, rows, tmp_path)
     with open(tmp_path / "runs.csv") as f:
@@ -146,16 +154,35 @@ def test_outputs_table_summary_figures_and_replayable_failed_runs(tmp_path):
 
 def test_cli_sweep(tmp_path):
     out = tmp_path / "sw"
-    r = subprocess.run([sys.executable, "-m", "mpcdrive.cli", "sweep", "paper-exp3", "--runs", "3", "--seed", "2",
-                        "--set", "duration_s=0.2", "--vary", "initial_state.y_m=uniform(-0.1,0.1)", "--workers", "1",
-                        "--out", str(out), "-q"], capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "mpcdrive.cli",
+            "sweep",
+            "paper-exp3",
+            "--runs",
+            "3",
+            "--seed",
+            "2",
+            "--set",
+            "duration_s=0.2",
+            "--vary",
+            "initial_state.y_m=uniform(-0.1,0.1)",
+            "--workers",
+            "1",
+            "--out",
+            str(out),
+            "-q",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stderr
     assert "runs successful" in r.stdout and str(out) in r.stdout
     js = json.loads((out / "summary.json").read_text())
     assert js["runs"] == 3 and js["vary"] == ["initial_state.y_m=uniform(-0.1, 0.1)"]
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
-
-
 
 
 @pytest.mark.slow
@@ -177,9 +204,20 @@ def test_ray_backend_gives_the_same_rows_as_the_local_pool():
 def test_sweep_figures_have_labelled_axes_with_units_and_data():
     from mpcdrive.plots.sweep import make_sweep_histograms, make_sweep_varied
 
-    rows = [{"run_id": i, "success": i % 3 != 0, "rms_lateral_error_m": 0.01 * i, "final_lateral_error_m": 0.001 * i,
-             "max_abs_steer_rad": 0.5, "max_lane_excess_m": 0.0, "fallbacks": i % 2, "solve_time_p99_us": 300.0 + i,
-             "initial_state.y_m": 0.1 * i - 0.5} for i in range(10)]
+    rows = [
+        {
+            "run_id": i,
+            "success": i % 3 != 0,
+            "rms_lateral_error_m": 0.01 * i,
+            "final_lateral_error_m": 0.001 * i,
+            "max_abs_steer_rad": 0.5,
+            "max_lane_excess_m": 0.0,
+            "fallbacks": i % 2,
+            "solve_time_p99_us": 300.0 + i,
+            "initial_state.y_m": 0.1 * i - 0.5,
+        }
+        for i in range(10)
+    ]
     rows.append({"run_id": 10, "success": False, "rms_lateral_error_m": None})  # a run that did not run
     fig = make_sweep_histograms(rows, lane=False)
     axes = [a for a in fig.axes if a.get_visible()]

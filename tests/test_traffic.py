@@ -1,7 +1,6 @@
 """Traffic rules of the obstacle terms: lifetimes (an obstacle exists only over its time span) and
 traffic behind (a car following in the ego's lane is not avoided as if it were ahead)."""
 
-
 import numpy as np
 import pytest
 
@@ -18,9 +17,17 @@ BASE = {
     "road": {"lane_width_m": 3.5, "margin_m": 0.1},
     "initial_state": {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 0, "v_mps": 10.0},
     "avoidance": {"formulation": "hard", "margin_m": 0.3, "influence_m": 40.0},
-    "controller": {"horizon": 30, "Q": [1, 1, 2, 1], "R": [10, 0.1], "Rc": [100, 1], "max_steer_deg": 30,
-                   "accel_limits_mps2": [-6, 3], "speed_limits_mps": [0, 15], "reference_speed_mps": 10.0,
-                   "horizon_step_m": 1.0},
+    "controller": {
+        "horizon": 30,
+        "Q": [1, 1, 2, 1],
+        "R": [10, 0.1],
+        "Rc": [100, 1],
+        "max_steer_deg": 30,
+        "accel_limits_mps2": [-6, 3],
+        "speed_limits_mps": [0, 15],
+        "reference_speed_mps": 10.0,
+        "horizon_step_m": 1.0,
+    },
 }
 
 

@@ -135,15 +135,27 @@ def test_failed_solves_say_how_they_were_handled(tmp_path):
     assert "30 failed solves: 27 recovered by shifted_plan, 3 by brake" in text, text
 
 
-@pytest.mark.parametrize("counts, failures, words", [
-    ({"relax": 5, "shifted_plan": 0, "brake": 0, "hold_last": 0}, 5, "5 failed solves, all recovered by relax"),
-    ({"relax": 0, "shifted_plan": 3, "brake": 2, "hold_last": 0}, 5, "5 failed solves: 3 recovered by shifted_plan, 2 by brake"),
-    ({"relax": 1, "shifted_plan": 0, "brake": 0, "hold_last": 0}, 1, "1 failed solve, recovered by relax"),
-    ({"relax": 0, "shifted_plan": 0, "brake": 0, "hold_last": 0}, 0, "no failed solves"),
-])
+@pytest.mark.parametrize(
+    "counts, failures, words",
+    [
+        ({"relax": 5, "shifted_plan": 0, "brake": 0, "hold_last": 0}, 5, "5 failed solves, all recovered by relax"),
+        (
+            {"relax": 0, "shifted_plan": 3, "brake": 2, "hold_last": 0},
+            5,
+            "5 failed solves: 3 recovered by shifted_plan, 2 by brake",
+        ),
+        ({"relax": 1, "shifted_plan": 0, "brake": 0, "hold_last": 0}, 1, "1 failed solve, recovered by relax"),
+        ({"relax": 0, "shifted_plan": 0, "brake": 0, "hold_last": 0}, 0, "no failed solves"),
+    ],
+)
 def test_fallback_phrases(counts, failures, words):
-    m = {"solver_failures": failures, "fallback_counts": counts, "collisions": 0, "max_lane_excess_m": 0.0,
-         "goal_reached": True}
+    m = {
+        "solver_failures": failures,
+        "fallback_counts": counts,
+        "collisions": 0,
+        "max_lane_excess_m": 0.0,
+        "goal_reached": True,
+    }
     assert words in run_verdict(m).text()
 
 
@@ -157,9 +169,19 @@ def test_goal_definition_needs_region_lane_and_no_collision():
 
 
 def test_commonroad_checker_verdicts_make_a_run_unsafe():
-    m = {"collisions": 0, "max_lane_excess_m": 0.0, "goal_reached": False, "solver_failures": 0,
-         "commonroad": {"collision_free": False, "road_compliant": True, "ks_feasible": True,
-                        "goal_reached": True, "goal_step": 12}}
+    m = {
+        "collisions": 0,
+        "max_lane_excess_m": 0.0,
+        "goal_reached": False,
+        "solver_failures": 0,
+        "commonroad": {
+            "collision_free": False,
+            "road_compliant": True,
+            "ks_feasible": True,
+            "goal_reached": True,
+            "goal_step": 12,
+        },
+    }
     v = run_verdict(m)
     assert v.collided and v.unsafe
     assert "CommonRoad checker: COLLISION, road-compliant, KS-feasible, goal reached at step 12" in v.text()

@@ -41,12 +41,15 @@ def test_corner_stays_on_the_polyline_and_the_first_leg_is_straight():
     assert abs(spline.heading(0.0)) > math.radians(10)
 
 
-@pytest.mark.parametrize("pts, closed", [
-    (CORNER, False),
-    ([[0, 0], [3, 1], [6, -1], [9, 0.5], [12, 0]], False),
-    ([[0, 0], [4, 0], [5, 3], [2, 5], [-1, 3]], True),
-    ([[0, 0], [10, 0], [10, 10], [0, 10]], True),
-])
+@pytest.mark.parametrize(
+    "pts, closed",
+    [
+        (CORNER, False),
+        ([[0, 0], [3, 1], [6, -1], [9, 0.5], [12, 0]], False),
+        ([[0, 0], [4, 0], [5, 3], [2, 5], [-1, 3]], True),
+        ([[0, 0], [10, 0], [10, 10], [0, 10]], True),
+    ],
+)
 def test_pchip_passes_through_every_waypoint(pts, closed):
     p = WaypointPath(pts, closed=closed, interpolation="pchip")
     xy = _samples(p, 20001)
@@ -81,9 +84,14 @@ def test_pchip_refuses_smoothing():
 
 
 def _scenario(path):
-    return {"id": "w", "duration_s": 0.05, "dt_s": 0.01, "path": path,
-            "initial_state": {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 0.0},
-            "controller": {"horizon": 5, "Q": [1, 1, 1], "R": [1]}}
+    return {
+        "id": "w",
+        "duration_s": 0.05,
+        "dt_s": 0.01,
+        "path": path,
+        "initial_state": {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 0.0},
+        "controller": {"horizon": 5, "Q": [1, 1, 1], "R": [1]},
+    }
 
 
 def test_scenario_files_default_to_pchip_and_smoothing_keeps_the_spline():
@@ -96,17 +104,21 @@ def test_scenario_files_default_to_pchip_and_smoothing_keeps_the_spline():
     assert exp.path.interpolation == "pchip" and abs(exp.path.heading(1.0)) < 1e-9
     smooth = validate_scenario_data(_scenario({"type": "waypoints", "points": CORNER, "smoothing": 0.5}), "s.yaml")
     assert smooth.path.interpolation == "spline"
-    named = validate_scenario_data(_scenario({"type": "waypoints", "points": CORNER, "interpolation": "spline"}),
-                                   "s.yaml")
+    named = validate_scenario_data(
+        _scenario({"type": "waypoints", "points": CORNER, "interpolation": "spline"}), "s.yaml"
+    )
     assert build_experiment(named).path.interpolation == "spline"  # a wide arc: drivable, no warning
     # the resolved choice is written out, so a dumped scenario rebuilds the same path
     assert "interpolation: pchip" in dump_scenario(spec)
 
 
-@pytest.mark.parametrize("path, field, words", [
-    ({"type": "waypoints", "points": CORNER, "smoothing": 0.5, "interpolation": "pchip"}, "path", "smoothing"),
-    ({"type": "waypoints", "points": CORNER, "interpolation": "akima"}, "path.interpolation", "pchip"),
-])
+@pytest.mark.parametrize(
+    "path, field, words",
+    [
+        ({"type": "waypoints", "points": CORNER, "smoothing": 0.5, "interpolation": "pchip"}, "path", "smoothing"),
+        ({"type": "waypoints", "points": CORNER, "interpolation": "akima"}, "path.interpolation", "pchip"),
+    ],
+)
 def test_bad_interpolation_is_one_line(path, field, words):
     with pytest.raises(ScenarioError) as e:
         validate_scenario_data(_scenario(path), "s.yaml")

@@ -33,8 +33,9 @@ def _print_version(value: bool) -> None:
 
 @app.callback()
 def _root(
-    version: bool = typer.Option(False, "--version", callback=_print_version, is_eager=True,
-                                 help="print the version and exit"),
+    version: bool = typer.Option(
+        False, "--version", callback=_print_version, is_eager=True, help="print the version and exit"
+    ),
 ) -> None:
     """mpcdrive: safe autonomous driving with Model Predictive Control."""
 
@@ -52,8 +53,12 @@ def _progress(enabled: bool, label: str, total: int):
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
     with Progress(
-        TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} steps"),
-        TimeRemainingColumn(), transient=True, console=_stderr_console(),
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total} steps"),
+        TimeRemainingColumn(),
+        transient=True,
+        console=_stderr_console(),
     ) as prog:
         task = prog.add_task(label, total=total)
         last = [0.0]
@@ -123,8 +128,13 @@ def _run_into(spec, out_dir: Path, show_progress: bool, source: str | None = Non
     from .runs import BuildError, run_into
 
     try:
-        return run_into(spec, out_dir, (lambda label, n: _progress(True, label, n)) if show_progress else None,
-                        source=source, extra_outputs=extra_outputs)
+        return run_into(
+            spec,
+            out_dir,
+            (lambda label, n: _progress(True, label, n)) if show_progress else None,
+            source=source,
+            extra_outputs=extra_outputs,
+        )
     except BuildError as e:
         raise BadInput(str(e)) from None
 
@@ -145,7 +155,9 @@ def _output_dir(out_dir: Path):
             raise
         except Exception as e:
             msg = " ".join(str(e).split())
-            raise OutputAbandoned(f"{type(e).__name__}: {msg}; no partial output was kept ({out_dir} not written)") from e
+            raise OutputAbandoned(
+                f"{type(e).__name__}: {msg}; no partial output was kept ({out_dir} not written)"
+            ) from e
 
 
 def _default_out(stem: str) -> Path:
@@ -175,20 +187,33 @@ def list_cmd() -> None:
 
 @app.command()
 def run(
-    scenario: str = typer.Argument(..., metavar="SCENARIO",
-                                   help="built-in scenario id, a YAML scenario file or a CommonRoad .xml"),
-    out: Path | None = typer.Option(None, "--out", metavar="DIR", help="output directory (default runs/<id>-<timestamp>)"),
+    scenario: str = typer.Argument(
+        ..., metavar="SCENARIO", help="built-in scenario id, a YAML scenario file or a CommonRoad .xml"
+    ),
+    out: Path | None = typer.Option(
+        None, "--out", metavar="DIR", help="output directory (default runs/<id>-<timestamp>)"
+    ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
-    fast: bool = typer.Option(False, "--fast", help="run the controller on the compiled fast path "
-                              "(controller.backend: fast, the default; same commands as the OSQP reference)"),
-    osqp: bool = typer.Option(False, "--osqp", help="run the controller on the OSQP reference solver "
-                              "(controller.backend: osqp)"),
-    check: bool = typer.Option(False, "--check", help="exit with code 3 when the run collided, left the "
-                               "road or missed its goal (outputs are still written)"),
-    plant: str | None = typer.Option(None, "--plant", help="CommonRoad files: the plant, a CommonRoad vehicle "
-                                     "model (ks, st, mb)"),
-    vehicle: str | None = typer.Option(None, "--vehicle", help="CommonRoad files: the vehicle (ford_escort, "
-                                       "bmw_320i, vw_vanagon; default ford_escort)"),
+    fast: bool = typer.Option(
+        False,
+        "--fast",
+        help="run the controller on the compiled fast path "
+        "(controller.backend: fast, the default; same commands as the OSQP reference)",
+    ),
+    osqp: bool = typer.Option(
+        False, "--osqp", help="run the controller on the OSQP reference solver (controller.backend: osqp)"
+    ),
+    check: bool = typer.Option(
+        False,
+        "--check",
+        help="exit with code 3 when the run collided, left the road or missed its goal (outputs are still written)",
+    ),
+    plant: str | None = typer.Option(
+        None, "--plant", help="CommonRoad files: the plant, a CommonRoad vehicle model (ks, st, mb)"
+    ),
+    vehicle: str | None = typer.Option(
+        None, "--vehicle", help="CommonRoad files: the vehicle (ford_escort, bmw_320i, vw_vanagon; default ford_escort)"
+    ),
 ) -> None:
     """Run one scenario; write trajectory.csv, metrics.json, figures, the resolved scenario and
     report.html (an interactive replay)."""
@@ -226,7 +251,9 @@ def run(
 @app.command()
 def reproduce(
     out: Path | None = typer.Option(None, "--out", help="output directory (default runs/reproduce-<timestamp>)"),
-    only: list[str] | None = typer.Option(None, "--only", metavar="ID", help="run only this experiment id (repeatable)"),
+    only: list[str] | None = typer.Option(
+        None, "--only", metavar="ID", help="run only this experiment id (repeatable)"
+    ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
     fast: bool = typer.Option(False, "--fast", help="run the controllers on the compiled fast path (the default)"),
     osqp: bool = typer.Option(False, "--osqp", help="run the controllers on the OSQP reference solver"),
@@ -254,42 +281,57 @@ def reproduce(
             result, metrics, figures, footprint = _run_into(spec, tmp / spec.id, not quiet)
             results[spec.id] = result
             all_metrics[spec.id] = metrics
-            entries.append(ReportEntry(spec.id, spec.description, metrics,
-                                       [f"{spec.id}/{Path(f).name}" for f in figures]))
-            html_runs.append(HtmlRun(spec.id, spec.description, metrics, entries[-1].figures,
-                                     result, footprint))
+            entries.append(
+                ReportEntry(spec.id, spec.description, metrics, [f"{spec.id}/{Path(f).name}" for f in figures])
+            )
+            html_runs.append(HtmlRun(spec.id, spec.description, metrics, entries[-1].figures, result, footprint))
             typer.echo("  " + _summary_line(spec.id, metrics), err=True)
         for name, (a, b) in STEERING_COMPARISONS.items():
             if a in results and b in results:
-                fig = plot_steering_comparison({a: results[a], b: results[b]}, tmp / f"steering_{name}.png",
-                                               title=f"Steering: {a} vs {b}")
-                entries.append(ReportEntry(f"{name} comparison", f"steering of {a} and {b} overlaid",
-                                           {}, [Path(fig).name]))
+                fig = plot_steering_comparison(
+                    {a: results[a], b: results[b]}, tmp / f"steering_{name}.png", title=f"Steering: {a} vs {b}"
+                )
+                entries.append(
+                    ReportEntry(f"{name} comparison", f"steering of {a} and {b} overlaid", {}, [Path(fig).name])
+                )
                 html_runs.append(HtmlRun(entries[-1].id, entries[-1].description, {}, entries[-1].figures))
         for name, ids_ in TRAJECTORY_OVERLAYS.items():
             have = {i: results[i] for i in ids_ if i in results}
             if len(have) >= 2:
-                fig = plot_trajectory_overlay(have, tmp / f"trajectories_{name}.png",
-                                              title=f"Trajectories: {', '.join(have)}")
+                fig = plot_trajectory_overlay(
+                    have, tmp / f"trajectories_{name}.png", title=f"Trajectories: {', '.join(have)}"
+                )
                 entries.append(ReportEntry(f"{name} trajectories", "trajectories overlaid", {}, [Path(fig).name]))
                 html_runs.append(HtmlRun(entries[-1].id, entries[-1].description, {}, entries[-1].figures))
         if "paper-exp5-gaussian" in results:
             fig = _gaussian_cost_map(specs, tmp / "gaussian_cost_map.png")
-            entries.append(ReportEntry("Gaussian cost map", "the Gaussian obstacle cost of paper-exp5-gaussian "
-                                       "(the paper's Fig. 14)", {}, [Path(fig).name]))
+            entries.append(
+                ReportEntry(
+                    "Gaussian cost map",
+                    "the Gaussian obstacle cost of paper-exp5-gaussian (the paper's Fig. 14)",
+                    {},
+                    [Path(fig).name],
+                )
+            )
             html_runs.append(HtmlRun(entries[-1].id, entries[-1].description, {}, entries[-1].figures))
         write_json(tmp / "metrics.json", all_metrics)
         write_reproduce_report(tmp, entries, PAPER_VALUES)
         write_reproduce_html(tmp, html_runs, PAPER_VALUES)
-    typer.echo(f"{len(specs)} experiments in {time.perf_counter() - t0:.1f} s; report: "
-               f"{out_dir / 'report.md'}, {out_dir / 'report.html'}")
+    typer.echo(
+        f"{len(specs)} experiments in {time.perf_counter() - t0:.1f} s; report: "
+        f"{out_dir / 'report.md'}, {out_dir / 'report.html'}"
+    )
 
 
 @app.command("compare-avoidance")
 def compare_avoidance(
     out: Path | None = typer.Option(None, "--out", help="output directory (default runs/avoidance-<timestamp>)"),
-    scenario: list[str] | None = typer.Option(None, "--scenario", metavar="ID", help="obstacle scenario (repeatable; default: all built-in)"),
-    formulation: list[str] | None = typer.Option(None, "--formulation", metavar="NAME", help="hard, corridor, potential or gaussian (repeatable; default all)"),
+    scenario: list[str] | None = typer.Option(
+        None, "--scenario", metavar="ID", help="obstacle scenario (repeatable; default: all built-in)"
+    ),
+    formulation: list[str] | None = typer.Option(
+        None, "--formulation", metavar="NAME", help="hard, corridor, potential or gaussian (repeatable; default all)"
+    ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
 ) -> None:
     """Run every obstacle scenario with every obstacle formulation; write avoidance.md (one table:
@@ -327,31 +369,46 @@ def compare_avoidance(
                 runs[f] = result
                 table.setdefault(sp.id, {})[f] = m
                 st = m["solve_time_us"]
-                rows.append(f"| `{sp.id}` | {f} | {m['min_obstacle_clearance_m']:.3f} | {m['collisions']} | "
-                            f"{m['max_lane_excess_m']:.3f} | {math.degrees(m['max_abs_steer_rad']):.1f} | "
-                            f"{math.degrees(m['max_abs_steer_rate_rad_s']):.0f} | {m['rms_lateral_error_m']:.3f} | "
-                            f"{m['solver_failures']} | {m['fallbacks']} | {'yes' if m['goal_reached'] else 'no'} | "
-                            f"{st['p50']:.0f} / {st['p99']:.0f} |")
+                rows.append(
+                    f"| `{sp.id}` | {f} | {m['min_obstacle_clearance_m']:.3f} | {m['collisions']} | "
+                    f"{m['max_lane_excess_m']:.3f} | {math.degrees(m['max_abs_steer_rad']):.1f} | "
+                    f"{math.degrees(m['max_abs_steer_rate_rad_s']):.0f} | {m['rms_lateral_error_m']:.3f} | "
+                    f"{m['solver_failures']} | {m['fallbacks']} | {'yes' if m['goal_reached'] else 'no'} | "
+                    f"{st['p50']:.0f} / {st['p99']:.0f} |"
+                )
             plot_trajectory_overlay(runs, tmp / f"{sp.id}.png", title=f"{sp.id}: every formulation")
         maps = []
         for f in ("potential", "gaussian"):
             if f in forms:
                 import numpy as np
 
-                cfg = AvoidanceConfig(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in FORMULATION_TUNING[f].items()})
+                cfg = AvoidanceConfig(
+                    **{k: (tuple(v) if isinstance(v, list) else v) for k, v in FORMULATION_TUNING[f].items()}
+                )
                 X, Y = np.meshgrid(np.linspace(-2, 2, 161), np.linspace(-1.5, 1.5, 121))
                 C = np.minimum(obstacle_cost(cfg, X, Y), 20.0)
-                plot_cost_map(X, Y, C, tmp / f"cost_map_{f}.png", title=f"{f} cost around an obstacle at (0, 0) (clipped at 20)")
+                plot_cost_map(
+                    X, Y, C, tmp / f"cost_map_{f}.png", title=f"{f} cost around an obstacle at (0, 0) (clipped at 20)"
+                )
                 maps.append(f"cost_map_{f}.png")
         write_json(tmp / "metrics.json", table)
-        head = ("| scenario | formulation | min clearance [m] | collisions | lane excess [m] | peak steer [deg] | "
-                "peak steer rate [deg/s] | RMS e_y [m] | solver failures | fallbacks | goal reached | solve p50 / p99 [µs] |")
-        text = ["# Obstacle formulations compared", "",
-                "Every obstacle scenario driven with each formulation (``hard``: the paper's keep-out constraint as "
-                "half-planes on footprint discs; ``corridor``: a convex obstacle-free tube; ``potential`` and "
-                "``gaussian``: the paper's soft costs, solved by SQP). Clearance is footprint-to-obstacle; lane excess "
-                "is how far the body left the lane. Soft costs give no guarantee: their rows say what happened.", "",
-                head, "|" + "---|" * 12, *rows, ""]
+        head = (
+            "| scenario | formulation | min clearance [m] | collisions | lane excess [m] | peak steer [deg] | "
+            "peak steer rate [deg/s] | RMS e_y [m] | solver failures | fallbacks | goal reached | solve p50 / p99 [µs] |"
+        )
+        text = [
+            "# Obstacle formulations compared",
+            "",
+            "Every obstacle scenario driven with each formulation (``hard``: the paper's keep-out constraint as "
+            "half-planes on footprint discs; ``corridor``: a convex obstacle-free tube; ``potential`` and "
+            "``gaussian``: the paper's soft costs, solved by SQP). Clearance is footprint-to-obstacle; lane excess "
+            "is how far the body left the lane. Soft costs give no guarantee: their rows say what happened.",
+            "",
+            head,
+            "|" + "---|" * 12,
+            *rows,
+            "",
+        ]
         text += [f"## {sp.id}\n\n{sp.description}\n\n![{sp.id}]({sp.id}.png)\n" for sp in specs]
         text += [f"![{m}]({m})\n" for m in maps]
         atomic_write_text(tmp / "avoidance.md", "\n".join(text))
@@ -378,17 +435,29 @@ def _gaussian_cost_map(specs, path: Path):
 
 @app.command()
 def bench(
-    problem: list[str] | None = typer.Option(None, "--problem", metavar="P", help="P1 line, P2 circle with speed, P3 obstacle cost, "
-                                       "P4 three-lane traffic (repeatable; default all)"),
-    baselines: bool = typer.Option(False, "--baselines", help="also time the cvxpy rebuild and CasADi+IPOPT baselines "
-                                   "(cvxpy only without obstacles)"),
+    problem: list[str] | None = typer.Option(
+        None,
+        "--problem",
+        metavar="P",
+        help="P1 line, P2 circle with speed, P3 obstacle cost, P4 three-lane traffic (repeatable; default all)",
+    ),
+    baselines: bool = typer.Option(
+        False,
+        "--baselines",
+        help="also time the cvxpy rebuild and CasADi+IPOPT baselines (cvxpy only without obstacles)",
+    ),
     json_file: Path | None = typer.Option(None, "--json", help="write the results as JSON"),
     steps: int = typer.Option(1000, "--steps", min=20, help="closed-loop steps per problem (P4: at most its 300)"),
-    baseline_steps: int = typer.Option(200, "--baseline-steps", min=20, help="closed-loop steps for the slow baselines "
-                                       "(P4: at most its 300)"),
-    report: Path | None = typer.Option(None, "--report", help="also measure per-step time against the horizon "
-                                       "(P1, N = 10..100) and the obstacle count (P3, 0..20 obstacles), cold start "
-                                       "and memory; write DIR/bench.md, figures and JSON"),
+    baseline_steps: int = typer.Option(
+        200, "--baseline-steps", min=20, help="closed-loop steps for the slow baselines (P4: at most its 300)"
+    ),
+    report: Path | None = typer.Option(
+        None,
+        "--report",
+        help="also measure per-step time against the horizon "
+        "(P1, N = 10..100) and the obstacle count (P3, 0..20 obstacles), cold start "
+        "and memory; write DIR/bench.md, figures and JSON",
+    ),
 ) -> None:
     """Per-step latency of the benchmark problems P1-P4 of docs/benchmarks.md (median, p99, max;
     warm-up excluded), with collisions and clearance where there are obstacles."""
@@ -426,26 +495,49 @@ def _bench_report(out_dir: Path, results: dict, log) -> None:
         log(f"cold start and memory: {b}")
         cold[b] = cold_start(b)
         alloc[b] = step_allocations(b)
-    note = ("Timings on a shared machine vary from run to run: compare ratios measured in one run, and "
-            "the medians of repeated runs.")
+    note = (
+        "Timings on a shared machine vary from run to run: compare ratios measured in one run, and "
+        "the medians of repeated runs."
+    )
     with atomic_output_dir(out_dir) as tmp:
         plot_horizon_scaling(sweep, tmp / "horizon.png")
         plot_obstacle_scaling(obstacles, tmp / "obstacles.png")
-        write_json(tmp / "bench.json", {"latency": results, "horizon_sweep_P1": sweep,
-                                        "obstacle_sweep_P3": obstacles, "cold_start": cold, "allocations": alloc})
-        write_bench_report(tmp, results, sweep, cold, alloc, figure="horizon.png", note=note,
-                           obstacles=obstacles, obstacle_figure="obstacles.png")
+        write_json(
+            tmp / "bench.json",
+            {
+                "latency": results,
+                "horizon_sweep_P1": sweep,
+                "obstacle_sweep_P3": obstacles,
+                "cold_start": cold,
+                "allocations": alloc,
+            },
+        )
+        write_bench_report(
+            tmp,
+            results,
+            sweep,
+            cold,
+            alloc,
+            figure="horizon.png",
+            note=note,
+            obstacles=obstacles,
+            obstacle_figure="obstacles.png",
+        )
     typer.echo(f"wrote {out_dir / 'bench.md'}")
 
 
 @app.command("compare-models")
 def compare_models_cmd(
     out: Path | None = typer.Option(None, "--out", help="output directory (default runs/compare-models-<timestamp>)"),
-    track: list[str] | None = typer.Option(None, "--track", metavar="NAME", help="packaged track (repeatable; default all)"),
-    lateral_fraction: float = typer.Option(0.8, "--lateral-fraction", min=0.05, max=1.0,
-                                           help="speed profile's lateral acceleration as a fraction of mu g"),
-    robustness: bool = typer.Option(True, "--robustness/--no-robustness",
-                                    help="also run the parameter-mismatch and steering-delay studies"),
+    track: list[str] | None = typer.Option(
+        None, "--track", metavar="NAME", help="packaged track (repeatable; default all)"
+    ),
+    lateral_fraction: float = typer.Option(
+        0.8, "--lateral-fraction", min=0.05, max=1.0, help="speed profile's lateral acceleration as a fraction of mu g"
+    ),
+    robustness: bool = typer.Option(
+        True, "--robustness/--no-robustness", help="also run the parameter-mismatch and steering-delay studies"
+    ),
 ) -> None:
     """Dynamic- vs kinematic-model MPC vs pure pursuit / Stanley on the Pacejka dynamic plant at high
     lateral acceleration (plus parameter mismatch and steering delay); writes report.md, study.json
@@ -456,23 +548,33 @@ def compare_models_cmd(
     tracks = list(track or ["raceway", "hairpins"])
     unknown = [t for t in tracks if t not in packaged_track_names()]
     if unknown:
-        raise BadInput(f"--track: unknown track(s) {', '.join(unknown)} (packaged: {', '.join(packaged_track_names())})")
+        raise BadInput(
+            f"--track: unknown track(s) {', '.join(unknown)} (packaged: {', '.join(packaged_track_names())})"
+        )
     out_dir = out or _default_out("compare-models")
     log = lambda msg: typer.echo(msg, err=True)  # noqa: E731
     t0 = time.perf_counter()
-    sections = {f"Controllers on the Pacejka dynamic plant at {lateral_fraction:g} mu g":
-                compare_models(tracks, lateral_fraction, log=log)}
+    sections = {
+        f"Controllers on the Pacejka dynamic plant at {lateral_fraction:g} mu g": compare_models(
+            tracks, lateral_fraction, log=log
+        )
+    }
     if robustness:
-        sections[f"Parameter mismatch (dynamic MPC, {tracks[0]}, {lateral_fraction:g} mu g)"] = \
-            mismatch_study(tracks[0], lateral_fraction, log=log)
+        sections[f"Parameter mismatch (dynamic MPC, {tracks[0]}, {lateral_fraction:g} mu g)"] = mismatch_study(
+            tracks[0], lateral_fraction, log=log
+        )
         sections[f"Steering delay (dynamic MPC, {tracks[0]}, 0.7 mu g, 0.05 s lag)"] = delay_study(tracks[0], log=log)
-    intro = ("F1TENTH car (F1TENTH gym parameters) on the Pacejka dynamic bicycle plant, speed profile limited "
-             "by curvature and friction, 0.05 s control period. Road excess: how far the footprint left the "
-             "road (0 = stayed on it). Produced by `mpcdrive compare-models`.")
+    intro = (
+        "F1TENTH car (F1TENTH gym parameters) on the Pacejka dynamic bicycle plant, speed profile limited "
+        "by curvature and friction, 0.05 s control period. Road excess: how far the footprint left the "
+        "road (0 = stayed on it). Produced by `mpcdrive compare-models`."
+    )
     with _output_dir(out_dir) as tmp:
         write_study(tmp, sections, intro)
-    typer.echo(f"{sum(len(r) for r in sections.values())} runs in {time.perf_counter() - t0:.1f} s; "
-               f"report: {out_dir / 'report.md'}")
+    typer.echo(
+        f"{sum(len(r) for r in sections.values())} runs in {time.perf_counter() - t0:.1f} s; "
+        f"report: {out_dir / 'report.md'}"
+    )
 
 
 @app.command()
@@ -481,14 +583,25 @@ def sweep(
     runs: int = typer.Option(100, "--runs", min=1, help="number of runs"),
     seed: int = typer.Option(0, "--seed", min=0, help="seed of the whole sweep (each run gets its own from it)"),
     vary: list[str] | None = typer.Option(
-        None, "--vary", metavar="NAME=DIST", help="NAME=DISTRIBUTION (repeatable): uniform(a,b), normal(mu,sigma), offset_uniform, "
-        "offset_normal, scale_uniform, scale_normal, choice(v1,...); NAME a dotted path such as initial_state.y_m"),
-    set_: list[str] | None = typer.Option(None, "--set", metavar="NAME=VALUE", help="NAME=VALUE fixed for every run (repeatable), e.g. road.lane_width_m=0.8"),
+        None,
+        "--vary",
+        metavar="NAME=DIST",
+        help="NAME=DISTRIBUTION (repeatable): uniform(a,b), normal(mu,sigma), offset_uniform, "
+        "offset_normal, scale_uniform, scale_normal, choice(v1,...); NAME a dotted path such as initial_state.y_m",
+    ),
+    set_: list[str] | None = typer.Option(
+        None,
+        "--set",
+        metavar="NAME=VALUE",
+        help="NAME=VALUE fixed for every run (repeatable), e.g. road.lane_width_m=0.8",
+    ),
     out: Path | None = typer.Option(None, "--out", help="output directory (default runs/sweep-<id>-<timestamp>)"),
     workers: int | None = typer.Option(None, "--workers", min=1, help="local processes (default: all cores)"),
     backend: str = typer.Option("local", "--backend", help="local (process pool) or ray"),
     address: str | None = typer.Option(None, "--address", help="Ray cluster address (default: a new local Ray)"),
-    max_final_error: float = typer.Option(0.1, "--max-final-error", help="largest final |lateral error| of a successful run [m]"),
+    max_final_error: float = typer.Option(
+        0.1, "--max-final-error", help="largest final |lateral error| of a successful run [m]"
+    ),
     max_lane_excess: float = typer.Option(0.0, "--max-lane-excess", help="largest lane excess of a successful run [m]"),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
 ) -> None:
@@ -546,9 +659,16 @@ def _sweep_progress(enabled: bool, total: int):
         return
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("runs"),
-                  TextColumn("{task.fields[failed]} failed"), TimeRemainingColumn(), transient=True,
-                  console=_stderr_console()) as prog:
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("runs"),
+        TextColumn("{task.fields[failed]} failed"),
+        TimeRemainingColumn(),
+        transient=True,
+        console=_stderr_console(),
+    ) as prog:
         task = prog.add_task("sweep", total=total, failed=0)
         failed = [0]
 
@@ -647,11 +767,14 @@ def _file_stem(file: str) -> str:
 
 @app.command("commonroad")
 def commonroad_cmd(
-    files: list[str] = typer.Argument(..., metavar="FILE", help="CommonRoad files (.xml, .xml.gz) or folders holding them"),
+    files: list[str] = typer.Argument(
+        ..., metavar="FILE", help="CommonRoad files (.xml, .xml.gz) or folders holding them"
+    ),
     out: Path | None = typer.Option(None, "--out", help="output directory (default runs/commonroad-<timestamp>)"),
     plant: str | None = typer.Option(None, "--plant", help="the plant, a CommonRoad vehicle model (ks, st, mb)"),
-    vehicle: str | None = typer.Option(None, "--vehicle", help="ford_escort, bmw_320i or vw_vanagon (default "
-                                       "ford_escort)"),
+    vehicle: str | None = typer.Option(
+        None, "--vehicle", help="ford_escort, bmw_320i or vw_vanagon (default ford_escort)"
+    ),
     workers: int | None = typer.Option(None, "--workers", min=1, help="local processes (default: all cores)"),
     backend: str = typer.Option("local", "--backend", help="local (process pool) or ray"),
 ) -> None:
@@ -661,7 +784,9 @@ def commonroad_cmd(
     from .adapters.commonroad_batch import collect_files, run_batch, verdict
 
     if not available():
-        raise BadInput("commonroad: CommonRoad scenarios need the commonroad extra (pip install 'mpcdrive[commonroad]')")
+        raise BadInput(
+            "commonroad: CommonRoad scenarios need the commonroad extra (pip install 'mpcdrive[commonroad]')"
+        )
     if backend not in ("local", "ray"):
         raise BadInput(f"--backend must be 'local' or 'ray', got {backend!r}")
     if backend == "ray":
@@ -693,8 +818,10 @@ def commonroad_cmd(
         rows = run_batch(paths, tmp, workers=workers, backend=backend, configure=configure, progress=progress)
     passed = sum(1 for r in rows.values() if r["passed"])
     errors = sum(1 for r in rows.values() if r["error"])
-    typer.echo(f"{passed}/{len(rows)} files passed, {errors} with errors, {time.perf_counter() - t0:.1f} s; "
-               f"summary: {out_dir / 'summary.md'}")
+    typer.echo(
+        f"{passed}/{len(rows)} files passed, {errors} with errors, {time.perf_counter() - t0:.1f} s; "
+        f"summary: {out_dir / 'summary.md'}"
+    )
 
 
 if __name__ == "__main__":

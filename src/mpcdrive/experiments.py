@@ -48,67 +48,125 @@ _NOISE_NOTE = (
     "to 0.01 m in a single step, 22 times the paper's whole max |e_y| of 4.5e-4 m at 4 m/s, and "
     "the yaw kicks add a heading random walk that the controller corrects only over the following "
     "steps; the paper's figures must come from a smaller, rarer or model-only noise that it does "
-    "not state.")
+    "not state."
+)
 _CIRCLE_STEER_NOTE = (
     "Starting on the circle (R = 1.5 m) and tangent to it, the car needs only the steady steering "
     "of the circle, atan(tan(asin(lr / R)) (lf + lr) / lr) = 0.217 rad (12.4 deg), which ours "
     "holds; 50 deg would turn the car on a circle of about 0.32 m. The paper's peak is not "
-    "explained by its stated set-up.")
+    "explained by its stated set-up."
+)
 
 #: per experiment: (quantity, what the paper shows, metrics key of ours, the paper's number for
 #: the verdict or None where it states none)
 PAPER_VALUES: dict[str, list[tuple[str, str, str, PaperFigure | None]]] = {
     "paper-exp1": [
-        ("final |lateral error| [m]", "converges slowly to the line within 1000 iterations (Fig. 17)",
-         "final_lateral_error_m", None),
-        ("max |steering| [rad]", "saturates at the 60 deg bound, 1.047 (Fig. 18)", "max_abs_steer_rad",
-         PaperFigure(1.0471976, "about", lower_is_better=False)),
+        (
+            "final |lateral error| [m]",
+            "converges slowly to the line within 1000 iterations (Fig. 17)",
+            "final_lateral_error_m",
+            None,
+        ),
+        (
+            "max |steering| [rad]",
+            "saturates at the 60 deg bound, 1.047 (Fig. 18)",
+            "max_abs_steer_rad",
+            PaperFigure(1.0471976, "about", lower_is_better=False),
+        ),
     ],
     "paper-exp2": [
-        ("final |lateral error| [m]", "converges, better than N = 20 (Figs. 7, 15)", "final_lateral_error_m",
-         PaperFigure(kind="lower_than", relative_to="paper-exp1")),
-        ("max |steering| [rad]", "saturates at the 60 deg bound, 1.047 (Fig. 16)", "max_abs_steer_rad",
-         PaperFigure(1.0471976, "about", lower_is_better=False)),
+        (
+            "final |lateral error| [m]",
+            "converges, better than N = 20 (Figs. 7, 15)",
+            "final_lateral_error_m",
+            PaperFigure(kind="lower_than", relative_to="paper-exp1"),
+        ),
+        (
+            "max |steering| [rad]",
+            "saturates at the 60 deg bound, 1.047 (Fig. 16)",
+            "max_abs_steer_rad",
+            PaperFigure(1.0471976, "about", lower_is_better=False),
+        ),
     ],
     "paper-exp3": [
-        ("converged max |lateral error| [m]", "below 0.008 (Fig. 19, 'x10^-3' axis)",
-         "converged_max_abs_lateral_error_m", PaperFigure(0.008, "at_most")),
-        ("max |steering| [rad]", "up to about 50 deg, 0.87 (Fig. 20)", "max_abs_steer_rad",
-         PaperFigure(0.87, "about", lower_is_better=False, note=_CIRCLE_STEER_NOTE)),
+        (
+            "converged max |lateral error| [m]",
+            "below 0.008 (Fig. 19, 'x10^-3' axis)",
+            "converged_max_abs_lateral_error_m",
+            PaperFigure(0.008, "at_most"),
+        ),
+        (
+            "max |steering| [rad]",
+            "up to about 50 deg, 0.87 (Fig. 20)",
+            "max_abs_steer_rad",
+            PaperFigure(0.87, "about", lower_is_better=False, note=_CIRCLE_STEER_NOTE),
+        ),
     ],
     "paper-exp4": [
-        ("converged max |lateral error| [m]", "below 0.012 (Fig. 22)", "converged_max_abs_lateral_error_m",
-         PaperFigure(0.012, "at_most")),
+        (
+            "converged max |lateral error| [m]",
+            "below 0.012 (Fig. 22)",
+            "converged_max_abs_lateral_error_m",
+            PaperFigure(0.012, "at_most"),
+        ),
     ],
     "paper-disturbance-v1": [
-        ("max |lateral error| [m]", "up to 0.04, visible deviation (Figs. 11, 26)", "max_abs_lateral_error_m",
-         PaperFigure(0.04, "about", note=_NOISE_NOTE)),
+        (
+            "max |lateral error| [m]",
+            "up to 0.04, visible deviation (Figs. 11, 26)",
+            "max_abs_lateral_error_m",
+            PaperFigure(0.04, "about", note=_NOISE_NOTE),
+        ),
     ],
     "paper-disturbance-v4": [
-        ("max |lateral error| [m]", "below 4.5e-4, tracked accurately (Figs. 10, 23)", "max_abs_lateral_error_m",
-         PaperFigure(4.5e-4, "at_most", note=_NOISE_NOTE)),
+        (
+            "max |lateral error| [m]",
+            "below 4.5e-4, tracked accurately (Figs. 10, 23)",
+            "max_abs_lateral_error_m",
+            PaperFigure(4.5e-4, "at_most", note=_NOISE_NOTE),
+        ),
     ],
     "paper-exp5-hard": [
-        ("min clearance [m]", "obstacle avoided, no clearance figure given (Fig. 13)", "min_obstacle_clearance_m",
-         PaperFigure(0.0, "at_least")),
-        ("max |steering| [rad]", "harsh steering near the obstacle, up to about 50 deg, 0.87 (Fig. 21)",
-         "max_abs_steer_rad", PaperFigure(0.87, "about", lower_is_better=False)),
+        (
+            "min clearance [m]",
+            "obstacle avoided, no clearance figure given (Fig. 13)",
+            "min_obstacle_clearance_m",
+            PaperFigure(0.0, "at_least"),
+        ),
+        (
+            "max |steering| [rad]",
+            "harsh steering near the obstacle, up to about 50 deg, 0.87 (Fig. 21)",
+            "max_abs_steer_rad",
+            PaperFigure(0.87, "about", lower_is_better=False),
+        ),
     ],
     "paper-exp5-potential": [
         ("min clearance [m]", "could not be implemented in YALMIP", "min_obstacle_clearance_m", None),
     ],
     "paper-exp5-gaussian": [
-        ("min clearance [m]", "could not be implemented in YALMIP (cost map only, Fig. 14)",
-         "min_obstacle_clearance_m", None),
+        (
+            "min clearance [m]",
+            "could not be implemented in YALMIP (cost map only, Fig. 14)",
+            "min_obstacle_clearance_m",
+            None,
+        ),
     ],
     "paper-exp5-corridor": [
         ("min clearance [m]", "future work ('safe driving envelopes')", "min_obstacle_clearance_m", None),
     ],
     "paper-smoothing": [
-        ("max |steering| [rad]", "smoother steering than without Rc (Fig. 12)", "max_abs_steer_rad",
-         PaperFigure(kind="lower_than", relative_to="paper-exp2")),
-        ("steering total variation [rad]", "reduced (Fig. 12)", "steer_total_variation_rad",
-         PaperFigure(kind="lower_than", relative_to="paper-exp2")),
+        (
+            "max |steering| [rad]",
+            "smoother steering than without Rc (Fig. 12)",
+            "max_abs_steer_rad",
+            PaperFigure(kind="lower_than", relative_to="paper-exp2"),
+        ),
+        (
+            "steering total variation [rad]",
+            "reduced (Fig. 12)",
+            "steer_total_variation_rad",
+            PaperFigure(kind="lower_than", relative_to="paper-exp2"),
+        ),
     ],
 }
 

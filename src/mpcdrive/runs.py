@@ -31,7 +31,7 @@ def run_into(spec, out_dir: Path, progress=None, source: str | None = None, extr
         exp = build_experiment(spec)
     except ValueError as e:
         raise BuildError(f"{source or spec.id}: {e}") from None
-    with (progress(spec.id, exp.steps) if progress is not None else nullcontext()) as cb:
+    with progress(spec.id, exp.steps) if progress is not None else nullcontext() as cb:
         result = run_experiment(exp, progress=cb)
     metrics = compute_metrics(result)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -45,10 +45,10 @@ def run_into(spec, out_dir: Path, progress=None, source: str | None = None, extr
         metrics.update(extra)
         cr = metrics.get("commonroad")
         if cr is not None:  # the goal is the planning problem's, the checker's verdicts count too
-            metrics = apply_goal_region(metrics, cr["goal_reached"], collision_free=cr["collision_free"],
-                                        road_compliant=cr["road_compliant"])
+            metrics = apply_goal_region(
+                metrics, cr["goal_reached"], collision_free=cr["collision_free"], road_compliant=cr["road_compliant"]
+            )
         write_json(out_dir / "metrics.json", metrics)
     figures = list(write_run_figures(result, out_dir)) + extra_figures
-    write_run_html(out_dir, result, metrics, figures, exp.footprint, run_id=spec.id,
-                   description=spec.description)
+    write_run_html(out_dir, result, metrics, figures, exp.footprint, run_id=spec.id, description=spec.description)
     return result, metrics, figures, exp.footprint

@@ -55,8 +55,11 @@ class StudyRun:
 
 def _summary(result: SimResult, exp) -> dict:
     m = compute_metrics(result)
-    excess = road_excess_m(result, exp.track, exp.footprint) if exp.track is not None and exp.track.has_widths \
+    excess = (
+        road_excess_m(result, exp.track, exp.footprint)
+        if exp.track is not None and exp.track.has_widths
         else m["max_lane_excess_m"]
+    )
     ay = lateral_acceleration_mps2(result)
     inner = ay[2:-2] if ay.size > 6 else ay  # central differences are one-sided at the ends
     return {
@@ -68,7 +71,8 @@ def _summary(result: SimResult, exp) -> dict:
         "road_excess_m": excess,
         # after leaving the road the car spins: its accelerations say nothing about the controller
         "max_abs_lateral_accel_mps2": (float(np.max(np.abs(inner))) if inner.size else 0.0)
-        if result.goal_reached else None,
+        if result.goal_reached
+        else None,
         "solver_failures": m["solver_failures"],
         "step_p50_us": m["solve_time_us"]["p50"],
     }
@@ -124,13 +128,20 @@ def _baseline(kind: str):
 def _kinematic_spec(spec: ScenarioSpec) -> ScenarioSpec:
     """The same run with kinematic-model MPC (4 states) on the scenario's dynamic plant."""
     c = spec.controller
-    return _with(spec, vehicle={"model": "kinematic4"},
-                 plant={"model": spec.plant_model},
-                 controller={"Q": c.Q[:4], "QN": None if c.QN is None else c.QN[:4]})
+    return _with(
+        spec,
+        vehicle={"model": "kinematic4"},
+        plant={"model": spec.plant_model},
+        controller={"Q": c.Q[:4], "QN": None if c.QN is None else c.QN[:4]},
+    )
 
 
-def compare_models(tracks: Sequence[str] = TRACKS, lateral_fraction: float = 0.8,
-                   controllers: Sequence[str] = CONTROLLERS, log: Log | None = None) -> list[StudyRun]:
+def compare_models(
+    tracks: Sequence[str] = TRACKS,
+    lateral_fraction: float = 0.8,
+    controllers: Sequence[str] = CONTROLLERS,
+    log: Log | None = None,
+) -> list[StudyRun]:
     """Dynamic MPC, kinematic MPC, pure pursuit and Stanley on the Pacejka plant of each track."""
     unknown = [c for c in controllers if c not in CONTROLLERS]
     if unknown:
@@ -161,13 +172,18 @@ PARAMETER_ERRORS: dict[str, dict] = {
     "cornering stiffness +20 %": {"cornering_stiffness_front": 1.2, "cornering_stiffness_rear": 1.2},
     "cornering stiffness -20 %": {"cornering_stiffness_front": 0.8, "cornering_stiffness_rear": 0.8},
     "friction -20 %": {"friction": 0.8},
-    "mass, inertia +20 %, stiffness -20 %": {"mass": 1.2, "yaw_inertia": 1.2, "cornering_stiffness_front": 0.8,
-                                            "cornering_stiffness_rear": 0.8},
+    "mass, inertia +20 %, stiffness -20 %": {
+        "mass": 1.2,
+        "yaw_inertia": 1.2,
+        "cornering_stiffness_front": 0.8,
+        "cornering_stiffness_rear": 0.8,
+    },
 }
 
 
-def mismatch_study(track: str = "raceway", lateral_fraction: float = 0.8,
-                   errors: Iterable[str] | None = None, log: Log | None = None) -> list[StudyRun]:
+def mismatch_study(
+    track: str = "raceway", lateral_fraction: float = 0.8, errors: Iterable[str] | None = None, log: Log | None = None
+) -> list[StudyRun]:
     """Dynamic (Pacejka) MPC with the nominal parameters on a plant whose parameters are off
     (``PARAMETER_ERRORS``), the nominal case, and kinematic MPC (a model error of another kind)."""
     base = track_spec(track, lateral_fraction)
@@ -184,15 +200,23 @@ def mismatch_study(track: str = "raceway", lateral_fraction: float = 0.8,
     return runs
 
 
-def delay_study(track: str = "raceway", lateral_fraction: float = 0.7, dead_times_s: Sequence[float] = (0.05, 0.1, 0.15),
-                time_constant_s: float = 0.05, log: Log | None = None) -> list[StudyRun]:
+def delay_study(
+    track: str = "raceway",
+    lateral_fraction: float = 0.7,
+    dead_times_s: Sequence[float] = (0.05, 0.1, 0.15),
+    time_constant_s: float = 0.05,
+    log: Log | None = None,
+) -> list[StudyRun]:
     """Dynamic MPC with the steering actuator's dead time (and lag), without and with compensation."""
     base = track_spec(track, lateral_fraction)
     runs = []
     for dead in dead_times_s:
         for comp in (False, True):
-            spec = _with(base, plant={"steering_actuator": {"dead_time_s": dead, "time_constant_s": time_constant_s}},
-                         controller={"delay_compensation": comp})
+            spec = _with(
+                base,
+                plant={"steering_actuator": {"dead_time_s": dead, "time_constant_s": time_constant_s}},
+                controller={"delay_compensation": comp},
+            )
             label = f"dead time {dead:g} s, {'compensated' if comp else 'uncompensated'}"
             runs.append(_run(label, track, spec))
             if log:
@@ -205,18 +229,32 @@ def format_summary(s: dict) -> str:
     """One line of a run's figures of merit."""
     lap = "did not finish" if not s["finished"] else f"time {s['lap_time_s']:.2f} s"
     ay = s["max_abs_lateral_accel_mps2"]
-    return (f"{lap}, RMS e_y {s['rms_e_y_m']:.4f} m, max |e_y| {s['max_abs_e_y_m']:.3f} m, road excess "
-            f"{s['road_excess_m']:.3f} m" + ("" if ay is None else f", max |a_y| {ay:.2f} m/s^2"))
+    return (
+        f"{lap}, RMS e_y {s['rms_e_y_m']:.4f} m, max |e_y| {s['max_abs_e_y_m']:.3f} m, road excess "
+        f"{s['road_excess_m']:.3f} m" + ("" if ay is None else f", max |a_y| {ay:.2f} m/s^2")
+    )
 
 
-_COLUMNS = [("finished", "finished"), ("lap / road time [s]", "lap_time_s"), ("RMS e_y [m]", "rms_e_y_m"),
-            ("max abs e_y [m]", "max_abs_e_y_m"), ("road excess [m]", "road_excess_m"),
-            ("max abs a_y [m/s^2]", "max_abs_lateral_accel_mps2"), ("solver failures", "solver_failures"),
-            ("step p50 [us]", "step_p50_us")]
+_COLUMNS = [
+    ("finished", "finished"),
+    ("lap / road time [s]", "lap_time_s"),
+    ("RMS e_y [m]", "rms_e_y_m"),
+    ("max abs e_y [m]", "max_abs_e_y_m"),
+    ("road excess [m]", "road_excess_m"),
+    ("max abs a_y [m/s^2]", "max_abs_lateral_accel_mps2"),
+    ("solver failures", "solver_failures"),
+    ("step p50 [us]", "step_p50_us"),
+]
 
 
-_FORMATS = {"lap_time_s": "{:.2f}", "rms_e_y_m": "{:.4f}", "max_abs_e_y_m": "{:.3f}", "road_excess_m": "{:.3f}",
-            "max_abs_lateral_accel_mps2": "{:.2f}", "step_p50_us": "{:.0f}"}
+_FORMATS = {
+    "lap_time_s": "{:.2f}",
+    "rms_e_y_m": "{:.4f}",
+    "max_abs_e_y_m": "{:.3f}",
+    "road_excess_m": "{:.3f}",
+    "max_abs_lateral_accel_mps2": "{:.2f}",
+    "step_p50_us": "{:.0f}",
+}
 
 
 def _cell(key: str, v) -> str:
@@ -228,8 +266,7 @@ def _cell(key: str, v) -> str:
 
 
 def _table(runs: Sequence[StudyRun], first: str = "run") -> list[str]:
-    lines = ["| " + " | ".join([first] + [c for c, _ in _COLUMNS]) + " |",
-             "|" + "---|" * (len(_COLUMNS) + 1)]
+    lines = ["| " + " | ".join([first] + [c for c, _ in _COLUMNS]) + " |", "|" + "---|" * (len(_COLUMNS) + 1)]
     for r in runs:
         cells = [r.label] + [_cell(k, r.summary[k]) for _, k in _COLUMNS]
         lines.append("| " + " | ".join(cells) + " |")
@@ -257,14 +294,20 @@ def write_study(out_dir: str | os.PathLike, sections: dict[str, list[StudyRun]],
             data[title][track] = {r.label: r.summary for r in tr}
             lines += [f"### {track}", ""] + _table(tr) + [""]
             stem = f"s{n}_{track}"
-            fig = plot_tracking_comparison({r.label: r.result for r in tr}, out / f"{stem}_tracking.png",
-                                           title=f"{title} — {track}: tracking error and speed")
+            fig = plot_tracking_comparison(
+                {r.label: r.result for r in tr},
+                out / f"{stem}_tracking.png",
+                title=f"{title} — {track}: tracking error and speed",
+            )
             lines += [f"![tracking error along the track]({fig.name})", ""]
             for i, r in enumerate(tr):
                 if i == 0 or n == 1:
                     safe = "".join(ch if ch.isalnum() else "_" for ch in r.label).strip("_")
-                    f1 = plot_speed_map(r.result, out / f"{stem}_{safe}_speed_map.png",
-                                        title=f"{track}: {r.label} — trajectory coloured by speed")
+                    f1 = plot_speed_map(
+                        r.result,
+                        out / f"{stem}_{safe}_speed_map.png",
+                        title=f"{track}: {r.label} — trajectory coloured by speed",
+                    )
                     f2 = plot_lateral_acceleration(r.result, out / f"{stem}_{safe}_lateral_acceleration.png")
                     lines += [f"![{r.label}: speed]({f1.name}) ![{r.label}: lateral acceleration]({f2.name})", ""]
     write_json(out / "study.json", data)

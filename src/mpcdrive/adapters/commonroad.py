@@ -88,15 +88,26 @@ class CommonRoadImport:
         fig = write_scene_figure(self, result, Path(out_dir), report.goal_step)
         result.meta["lanelets"] = lanelet_polygons(self.scenario)
         plan = self.plan
-        return {"commonroad": {"file": self.file.name, "route_lanelets": list(self.route),
-                               "plan": None if plan is None else plan.note,
-                               "goal_reached": report.goal_step is not None, "goal_step": report.goal_step,
-                               "collision_free": report.collision_free, "road_compliant": report.road_compliant,
-                               "ks_feasible": report.feasible, "states_checked": report.steps_checked,
-                               "passed": passed, "solution": path.name, "vehicle_type": self.vehicle_type,
-                               "vehicle_model": solution_model(self, result),
-                               "solution_valid": valid, "solution_check": why},
-                "figures": [fig.name]}
+        return {
+            "commonroad": {
+                "file": self.file.name,
+                "route_lanelets": list(self.route),
+                "plan": None if plan is None else plan.note,
+                "goal_reached": report.goal_step is not None,
+                "goal_step": report.goal_step,
+                "collision_free": report.collision_free,
+                "road_compliant": report.road_compliant,
+                "ks_feasible": report.feasible,
+                "states_checked": report.steps_checked,
+                "passed": passed,
+                "solution": path.name,
+                "vehicle_type": self.vehicle_type,
+                "vehicle_model": solution_model(self, result),
+                "solution_valid": valid,
+                "solution_check": why,
+            },
+            "figures": [fig.name],
+        }
 
 
 def _obstacle_entry(o, dt: float) -> dict:
@@ -174,39 +185,52 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
     v_max = max(plan.v_cruise_mps, v0) + 2.0
     a_lim = accel_limit(v_max)
     obstacles = [_obstacle_entry(o, dt) for o in scenario.obstacles]
-    spec = ScenarioSpec.model_validate({
-        # named after the file the user passed (a file's internal benchmark id can be another's)
-        "id": re.sub(r"[^A-Za-z0-9_.-]", "_", file.name.removesuffix(".gz").removesuffix(".xml")) or "commonroad",
-        "description": f"CommonRoad {scenario.scenario_id}: route {list(plan.route)}, {len(obstacles)} obstacles, "
-                       f"{plan.note}",
-        "dt_s": dt,
-        "duration_s": plan.duration_s,
-        "vehicle": {"model": "kinematic4", "preset": PRESET, "speed_mps": max(plan.v_cruise_mps, 0.1),
-                    "footprint_discs": 3},
-        "path": {"type": "waypoints", "points": [tuple(map(float, p)) for p in plan.centerline], "ds_m": 0.2},
-        "road": {"widths": [[float(a), float(b), float(c)] for a, b, c in zip(s_k, left_k, right_k)],
-                 "neighbours": neighbours.tolist() if NEIGHBOUR_LANES else None, "margin_m": ROAD_MARGIN_M},
-        "initial_state": {"x_m": float(p0[0]), "y_m": float(p0[1]), "yaw_deg": math.degrees(yaw0), "v_mps": v0},
-        "obstacles": obstacles,
-        "avoidance": {"formulation": "hard", "margin_m": 0.3, "max_obstacles": 4,
-                      "influence_m": max(20.0, v_max * 30 * dt + 10.0)},
-        "controller": {
-            "horizon": 30,
-            "Q": [1.0, 1.0, 2.0, 1.0],
-            "R": [10.0, 0.1],
-            "Rc": [100.0, 1.0],
-            "max_steer_deg": math.degrees(pre.max_steer_rad),
-            "max_steer_rate_deg_s": math.degrees(pre.max_steer_rate_rad_s) * 0.95,
-            "accel_limits_mps2": (-a_lim, a_lim),
-            "speed_limits_mps": (0.0, v_max),
-            "speed_profile": plan.speed_profile_spec(),
-            "horizon_step_m": 0.5,
-            # no relax rung: it drops the speed bound and the rate limits and makes leaving the
-            # lane cheap, which in dense recorded traffic gave commands KS rejects and road departures
-            "fallback": ["shifted_plan", "brake"],
-            "brake_decel_mps2": plan.accel_mps2,
-        },
-    })
+    spec = ScenarioSpec.model_validate(
+        {
+            # named after the file the user passed (a file's internal benchmark id can be another's)
+            "id": re.sub(r"[^A-Za-z0-9_.-]", "_", file.name.removesuffix(".gz").removesuffix(".xml")) or "commonroad",
+            "description": f"CommonRoad {scenario.scenario_id}: route {list(plan.route)}, {len(obstacles)} obstacles, "
+            f"{plan.note}",
+            "dt_s": dt,
+            "duration_s": plan.duration_s,
+            "vehicle": {
+                "model": "kinematic4",
+                "preset": PRESET,
+                "speed_mps": max(plan.v_cruise_mps, 0.1),
+                "footprint_discs": 3,
+            },
+            "path": {"type": "waypoints", "points": [tuple(map(float, p)) for p in plan.centerline], "ds_m": 0.2},
+            "road": {
+                "widths": [[float(a), float(b), float(c)] for a, b, c in zip(s_k, left_k, right_k)],
+                "neighbours": neighbours.tolist() if NEIGHBOUR_LANES else None,
+                "margin_m": ROAD_MARGIN_M,
+            },
+            "initial_state": {"x_m": float(p0[0]), "y_m": float(p0[1]), "yaw_deg": math.degrees(yaw0), "v_mps": v0},
+            "obstacles": obstacles,
+            "avoidance": {
+                "formulation": "hard",
+                "margin_m": 0.3,
+                "max_obstacles": 4,
+                "influence_m": max(20.0, v_max * 30 * dt + 10.0),
+            },
+            "controller": {
+                "horizon": 30,
+                "Q": [1.0, 1.0, 2.0, 1.0],
+                "R": [10.0, 0.1],
+                "Rc": [100.0, 1.0],
+                "max_steer_deg": math.degrees(pre.max_steer_rad),
+                "max_steer_rate_deg_s": math.degrees(pre.max_steer_rate_rad_s) * 0.95,
+                "accel_limits_mps2": (-a_lim, a_lim),
+                "speed_limits_mps": (0.0, v_max),
+                "speed_profile": plan.speed_profile_spec(),
+                "horizon_step_m": 0.5,
+                # no relax rung: it drops the speed bound and the rate limits and makes leaving the
+                # lane cheap, which in dense recorded traffic gave commands KS rejects and road departures
+                "fallback": ["shifted_plan", "brake"],
+                "brake_decel_mps2": plan.accel_mps2,
+            },
+        }
+    )
     return CommonRoadImport(file, scenario, pp, spec, tuple(plan.route), plan.centerline, plan, pps)
 
 
@@ -217,8 +241,12 @@ def goal_step(imp: CommonRoadImport, result) -> int | None:
 
     for k in range(min(1, len(result.t_s) - 1), len(result.t_s)):
         x = result.x[k]
-        st = CustomState(position=np.array([x[0], x[1]]), orientation=float(x[2]), velocity=float(x[3]),
-                         time_step=int(round(result.t_s[k] / imp.spec.dt_s)))
+        st = CustomState(
+            position=np.array([x[0], x[1]]),
+            orientation=float(x[2]),
+            velocity=float(x[3]),
+            time_step=int(round(result.t_s[k] / imp.spec.dt_s)),
+        )
         if imp.planning_problem.goal.is_reached(st):
             return k
     return None
@@ -245,10 +273,15 @@ def solution_trajectory(imp: CommonRoadImport, result, last_step: int | None = N
         x = result.x[k]
         before = steer[k - 1] if k > 0 else steer[0]
         beta = math.atan(lr / wheelbase * math.tan(steer[k]))
-        states.append(KSState(time_step=int(round(result.t_s[k] / imp.spec.dt_s)),
-                              position=np.array([x[0], x[1]], float),
-                              steering_angle=float(0.5 * (before + steer[k])),
-                              velocity=float(x[3] * math.cos(beta)), orientation=float(x[2])))
+        states.append(
+            KSState(
+                time_step=int(round(result.t_s[k] / imp.spec.dt_s)),
+                position=np.array([x[0], x[1]], float),
+                steering_angle=float(0.5 * (before + steer[k])),
+                velocity=float(x[3] * math.cos(beta)),
+                orientation=float(x[2]),
+            )
+        )
     return Trajectory(states[0].time_step, states)
 
 
@@ -269,25 +302,44 @@ def st_solution_trajectory(imp: CommonRoadImport, result, last_step: int | None 
 
     P = np.asarray(result.meta["plant_states"], float)
     n = len(result.t_s) if last_step is None else last_step + 1
-    states = [STState(time_step=int(round(result.t_s[k] / imp.spec.dt_s)), position=np.array(P[k, :2]),
-                      steering_angle=float(P[k, 2]), velocity=float(P[k, 3]), orientation=float(P[k, 4]),
-                      yaw_rate=float(P[k, 5]), slip_angle=float(P[k, 6])) for k in range(n)]
+    states = [
+        STState(
+            time_step=int(round(result.t_s[k] / imp.spec.dt_s)),
+            position=np.array(P[k, :2]),
+            steering_angle=float(P[k, 2]),
+            velocity=float(P[k, 3]),
+            orientation=float(P[k, 4]),
+            yaw_rate=float(P[k, 5]),
+            slip_angle=float(P[k, 6]),
+        )
+        for k in range(n)
+    ]
     return Trajectory(states[0].time_step, states)
 
 
 def write_solution(imp: CommonRoadImport, result, out_dir: Path, last_step: int | None = None) -> Path:
     """Write ``solution.xml`` into ``out_dir``: a CommonRoad solution with the run's vehicle type
     and the model it was driven on (ST for the single-track plant, else KS)."""
-    from commonroad.common.solution import (CommonRoadSolutionWriter, CostFunction, PlanningProblemSolution,
-                                            Solution, VehicleModel, VehicleType)
+    from commonroad.common.solution import (
+        CommonRoadSolutionWriter,
+        CostFunction,
+        PlanningProblemSolution,
+        Solution,
+        VehicleModel,
+        VehicleType,
+    )
 
     if solution_model(imp, result) == "ST":
         traj, model = st_solution_trajectory(imp, result, last_step), VehicleModel.ST
     else:
         traj, model = solution_trajectory(imp, result, last_step), VehicleModel.KS
-    pps = PlanningProblemSolution(planning_problem_id=imp.planning_problem.planning_problem_id,
-                                  vehicle_type=VehicleType[imp.vehicle_type], vehicle_model=model,
-                                  cost_function=CostFunction.SM1, trajectory=traj)
+    pps = PlanningProblemSolution(
+        planning_problem_id=imp.planning_problem.planning_problem_id,
+        vehicle_type=VehicleType[imp.vehicle_type],
+        vehicle_model=model,
+        cost_function=CostFunction.SM1,
+        trajectory=traj,
+    )
     sol = Solution(imp.scenario.scenario_id, [pps])
     CommonRoadSolutionWriter(sol).write_to_file(output_path=str(out_dir), filename="solution.xml", overwrite=True)
     return Path(out_dir) / "solution.xml"
@@ -310,8 +362,10 @@ class CheckReport:
 
     def line(self) -> str:
         goal = "not reached" if self.goal_step is None else f"reached at step {self.goal_step}"
-        return (f"collision-free {self.collision_free}, road-compliant {self.road_compliant}, "
-                f"KS-feasible {self.feasible}, goal {goal}, {self.steps_checked} states")
+        return (
+            f"collision-free {self.collision_free}, road-compliant {self.road_compliant}, "
+            f"KS-feasible {self.feasible}, goal {goal}, {self.steps_checked} states"
+        )
 
 
 def check_drive(imp: CommonRoadImport, result) -> CheckReport:
@@ -323,17 +377,24 @@ def check_drive(imp: CommonRoadImport, result) -> CheckReport:
     from commonroad.scenario.state import CustomState
     from commonroad.scenario.trajectory import Trajectory
     from commonroad_dc.boundary.boundary import create_road_boundary_obstacle
-    from commonroad_dc.collision.collision_detection.pycrcc_collision_dispatch import (create_collision_checker,
-                                                                                       create_collision_object)
+    from commonroad_dc.collision.collision_detection.pycrcc_collision_dispatch import (
+        create_collision_checker,
+        create_collision_object,
+    )
     from commonroad_dc.feasibility.feasibility_checker import trajectory_feasibility
     from commonroad_dc.feasibility.vehicle_dynamics import VehicleDynamics, VehicleType
 
     g = goal_step(imp, result)
     last = g if g is not None else len(result.t_s) - 1
     v = imp.spec.vehicle
-    centre_states = [CustomState(time_step=int(round(result.t_s[k] / imp.spec.dt_s)),
-                                 position=np.array(result.x[k][:2], float), orientation=float(result.x[k][2]))
-                     for k in range(last + 1)]
+    centre_states = [
+        CustomState(
+            time_step=int(round(result.t_s[k] / imp.spec.dt_s)),
+            position=np.array(result.x[k][:2], float),
+            orientation=float(result.x[k][2]),
+        )
+        for k in range(last + 1)
+    ]
     ego_traj = Trajectory(centre_states[0].time_step, centre_states)
     ego = create_collision_object(TrajectoryPrediction(ego_traj, Rectangle(v.length_m, v.width_m)))
     cc = create_collision_checker(imp.scenario)

@@ -14,8 +14,18 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-ROW_FIELDS = ("passed", "collision_free", "road_compliant", "ks_feasible", "goal_reached",
-              "min_obstacle_clearance_m", "solver_failures", "solve_time_us", "wall_s", "error")
+ROW_FIELDS = (
+    "passed",
+    "collision_free",
+    "road_compliant",
+    "ks_feasible",
+    "goal_reached",
+    "min_obstacle_clearance_m",
+    "solver_failures",
+    "solve_time_us",
+    "wall_s",
+    "error",
+)
 SUFFIXES = (".xml", ".xml.gz")
 
 
@@ -61,11 +71,22 @@ class BatchTask:
 
 
 def _empty_row() -> dict:
-    return {"passed": False, "collision_free": None, "road_compliant": None, "ks_feasible": None,
-            "goal_reached": None, "min_obstacle_clearance_m": None, "solver_failures": None,
-            "solve_time_us": {"p50": None, "p99": None}, "wall_s": 0.0, "error": None,
-            "min_obstacle_clearance_whole_run_m": None, "solution_valid": None, "solution_check": None,
-            "plan": None}
+    return {
+        "passed": False,
+        "collision_free": None,
+        "road_compliant": None,
+        "ks_feasible": None,
+        "goal_reached": None,
+        "min_obstacle_clearance_m": None,
+        "solver_failures": None,
+        "solve_time_us": {"p50": None, "p99": None},
+        "wall_s": 0.0,
+        "error": None,
+        "min_obstacle_clearance_whole_run_m": None,
+        "solution_valid": None,
+        "solution_check": None,
+        "plan": None,
+    }
 
 
 def drive_file(task: BatchTask) -> dict:
@@ -84,17 +105,22 @@ def drive_file(task: BatchTask) -> dict:
         res, m, _, _ = run_into(imp.spec, Path(task.out_dir), source=task.file, extra_outputs=imp.write_outputs)
         cr = m["commonroad"]
         st = m.get("solve_time_us") or {}
-        row.update(passed=bool(cr["passed"]), collision_free=cr["collision_free"],
-                   road_compliant=cr["road_compliant"], ks_feasible=cr["ks_feasible"],
-                   goal_reached=cr["goal_reached"],
-                   # over the drive the checker judged (up to the goal), and over the whole run
-                   min_obstacle_clearance_m=_min_clearance(res, cr["states_checked"]),
-                   min_obstacle_clearance_whole_run_m=_min_clearance(res, None),
-                   solver_failures=int(m["solver_failures"]),
-                   solve_time_us={"p50": st.get("p50"), "p99": st.get("p99")},
-                   solution_valid=cr.get("solution_valid"), solution_check=cr.get("solution_check"),
-                   vehicle_model=cr.get("vehicle_model"),
-                   plan=cr.get("plan"))
+        row.update(
+            passed=bool(cr["passed"]),
+            collision_free=cr["collision_free"],
+            road_compliant=cr["road_compliant"],
+            ks_feasible=cr["ks_feasible"],
+            goal_reached=cr["goal_reached"],
+            # over the drive the checker judged (up to the goal), and over the whole run
+            min_obstacle_clearance_m=_min_clearance(res, cr["states_checked"]),
+            min_obstacle_clearance_whole_run_m=_min_clearance(res, None),
+            solver_failures=int(m["solver_failures"]),
+            solve_time_us={"p50": st.get("p50"), "p99": st.get("p99")},
+            solution_valid=cr.get("solution_valid"),
+            solution_check=cr.get("solution_check"),
+            vehicle_model=cr.get("vehicle_model"),
+            plan=cr.get("plan"),
+        )
     except Exception as e:  # a file's failure is its row; the batch goes on
         import shutil
 
@@ -124,9 +150,16 @@ def verdict(row: dict) -> str:
     if row["passed"]:
         return "passed"
     infeasible = f"{row.get('vehicle_model') or 'KS'}-infeasible"  # under the solution's model
-    failed = [name for key, name in (("collision_free", "collision"), ("road_compliant", "off road"),
-                                     ("ks_feasible", infeasible), ("goal_reached", "goal missed"))
-              if row.get(key) is False]
+    failed = [
+        name
+        for key, name in (
+            ("collision_free", "collision"),
+            ("road_compliant", "off road"),
+            ("ks_feasible", infeasible),
+            ("goal_reached", "goal missed"),
+        )
+        if row.get(key) is False
+    ]
     if not failed and row.get("solution_valid") is False:
         failed = [f"solution rejected by valid_solution ({row.get('solution_check')})"]
     return "failed: " + ", ".join(failed or ["unknown"])
@@ -153,22 +186,34 @@ def summary_markdown(rows: dict, header: str = "") -> str:
     """``summary.md``: one table row per file, then the errors in words."""
     n = len(rows)
     passed = sum(1 for r in rows.values() if r["passed"])
-    lines = ["# CommonRoad batch", "", header, "",
-             f"{passed} of {n} files passed (collision-free, on the road, KS-feasible and at the goal, as "
-             "CommonRoad's drivability checker judges the drive up to the goal, and the solution accepted by "
-             "CommonRoad's solution checker).", "",
-             "Min clearance: footprint to obstacle over the checked drive (whole run in brackets when smaller).", "",
-             "| file | verdict | collision-free | road-compliant | KS-feasible | goal reached | min clearance [m] | "
-             "solver failures | solve p50 / p99 [us] | wall [s] |",
-             "|" + "---|" * 10]
+    lines = [
+        "# CommonRoad batch",
+        "",
+        header,
+        "",
+        f"{passed} of {n} files passed (collision-free, on the road, KS-feasible and at the goal, as "
+        "CommonRoad's drivability checker judges the drive up to the goal, and the solution accepted by "
+        "CommonRoad's solution checker).",
+        "",
+        "Min clearance: footprint to obstacle over the checked drive (whole run in brackets when smaller).",
+        "",
+        "| file | verdict | collision-free | road-compliant | KS-feasible | goal reached | min clearance [m] | "
+        "solver failures | solve p50 / p99 [us] | wall [s] |",
+        "|" + "---|" * 10,
+    ]
     for name, r in rows.items():
         st = r["solve_time_us"]
-        lines.append(f"| `{name}` | {'error' if r.get('error') else verdict(r).split(' (')[0]} | {_cell(r['collision_free'])} | "
-                     f"{_cell(r['road_compliant'])} | {_cell(r['ks_feasible'])} | {_cell(r['goal_reached'])} | "
-                     f"{_clearance_cell(r)} | {_cell(r['solver_failures'])} | "
-                     f"{_cell(st['p50'], '{:.0f}')} / {_cell(st['p99'], '{:.0f}')} | {_cell(r['wall_s'], '{:.1f}')} |")
-    rejected = [(k, r.get("solution_check")) for k, r in rows.items()
-                if not r.get("error") and r.get("solution_valid") is False and verdict(r).startswith("failed: solution")]
+        lines.append(
+            f"| `{name}` | {'error' if r.get('error') else verdict(r).split(' (')[0]} | {_cell(r['collision_free'])} | "
+            f"{_cell(r['road_compliant'])} | {_cell(r['ks_feasible'])} | {_cell(r['goal_reached'])} | "
+            f"{_clearance_cell(r)} | {_cell(r['solver_failures'])} | "
+            f"{_cell(st['p50'], '{:.0f}')} / {_cell(st['p99'], '{:.0f}')} | {_cell(r['wall_s'], '{:.1f}')} |"
+        )
+    rejected = [
+        (k, r.get("solution_check"))
+        for k, r in rows.items()
+        if not r.get("error") and r.get("solution_valid") is False and verdict(r).startswith("failed: solution")
+    ]
     if rejected:
         lines += ["", "## Solutions CommonRoad's solution checker rejects", ""] + [f"- `{k}`: {e}" for k, e in rejected]
     errors = [(k, r["error"]) for k, r in rows.items() if r.get("error")]
@@ -177,8 +222,9 @@ def summary_markdown(rows: dict, header: str = "") -> str:
     return "\n".join(lines) + "\n"
 
 
-def run_batch(files, out_dir: Path, *, workers: int | None = None, backend: str = "local", configure=None,
-              progress=None) -> dict:
+def run_batch(
+    files, out_dir: Path, *, workers: int | None = None, backend: str = "local", configure=None, progress=None
+) -> dict:
     """Drive every file into ``out_dir/<stem>/``, write ``summary.json`` and ``summary.md``, and
     return the rows by file name (in the order given). ``progress(k, n, row)`` as each finishes."""
     from ..io import write_json

@@ -23,8 +23,15 @@ def lanelet_polygons(scenario) -> list[list[tuple[float, float]]]:
 
 def _car_outline(x: float, y: float, yaw: float, length: float, width: float) -> np.ndarray:
     c, s = np.cos(yaw), np.sin(yaw)
-    corners = np.array([[length / 2, width / 2], [length / 2, -width / 2], [-length / 2, -width / 2],
-                        [-length / 2, width / 2], [length / 2, width / 2]])
+    corners = np.array(
+        [
+            [length / 2, width / 2],
+            [length / 2, -width / 2],
+            [-length / 2, -width / 2],
+            [-length / 2, width / 2],
+            [length / 2, width / 2],
+        ]
+    )
     return np.column_stack([x + c * corners[:, 0] - s * corners[:, 1], y + s * corners[:, 0] + c * corners[:, 1]])
 
 
@@ -48,8 +55,11 @@ def write_scene_figure(imp, result, out_dir: Path, last_step: int | None = None)
     span = hi - lo
     wide = span[0] >= 1.5 * span[1]  # panels stacked for a wide view, side by side otherwise
     aspect = float(span[1] / span[0])  # height / width of one panel
-    fig, axes = plt.subplots(len(steps), 1, figsize=(10, len(steps) * min(max(10 * aspect, 2.0), 6.0) + 0.8)) \
-        if wide else plt.subplots(1, len(steps), figsize=(len(steps) * min(max(5 / aspect, 2.5), 5.0), 5.8))
+    fig, axes = (
+        plt.subplots(len(steps), 1, figsize=(10, len(steps) * min(max(10 * aspect, 2.0), 6.0) + 0.8))
+        if wide
+        else plt.subplots(1, len(steps), figsize=(len(steps) * min(max(5 / aspect, 2.5), 5.0), 5.8))
+    )
     axes = np.atleast_1d(axes)
     dt = imp.spec.dt_s
     for ax, k in zip(axes, steps):
@@ -68,13 +78,12 @@ def write_scene_figure(imp, result, out_dir: Path, last_step: int | None = None)
         imp.planning_problem.draw(rnd)
         rnd.render()
         ax.plot(xy[:, 0], xy[:, 1], color="#d62728", lw=1.0, alpha=0.3, zorder=40)
-        ax.plot(xy[:k + 1, 0], xy[:k + 1, 1], color="#d62728", lw=1.8, zorder=40, label="driven")
+        ax.plot(xy[: k + 1, 0], xy[: k + 1, 1], color="#d62728", lw=1.8, zorder=40, label="driven")
         car = _car_outline(*result.x[k, :3], v.length_m, v.width_m)
         ax.fill(car[:, 0], car[:, 1], color="#ff7f0e", alpha=0.9, zorder=41, label="ego")
         ax.set_title(f"t = {result.t_s[k]:.1f} s (step {ts})", fontsize=9)
     axes[0].legend(loc="upper right", fontsize=8)
-    fig.suptitle(f"{imp.scenario.scenario_id}: lanelets, obstacles and goal as CommonRoad draws them",
-                 fontsize=10)
+    fig.suptitle(f"{imp.scenario.scenario_id}: lanelets, obstacles and goal as CommonRoad draws them", fontsize=10)
     fig.subplots_adjust(left=0.07, right=0.98, bottom=0.05, top=0.92, hspace=0.3, wspace=0.2)
     path = Path(out_dir) / FIGURE
     fig.savefig(path, dpi=110)

@@ -61,9 +61,15 @@ class DrivePlan:
 
     def speed_profile_spec(self) -> dict:
         """The ``controller.speed_profile`` entry of the scenario."""
-        return {"lateral_accel_max_mps2": LAT_ACCEL_MPS2, "accel_max_mps2": self.accel_mps2,
-                "decel_max_mps2": self.accel_mps2, "v_max_mps": self.v_cruise_mps,
-                "v_start_mps": self.v_start_mps, "v_end_mps": 0.0, "curvature_window_m": 0.3}
+        return {
+            "lateral_accel_max_mps2": LAT_ACCEL_MPS2,
+            "accel_max_mps2": self.accel_mps2,
+            "decel_max_mps2": self.accel_mps2,
+            "v_max_mps": self.v_cruise_mps,
+            "v_start_mps": self.v_start_mps,
+            "v_end_mps": 0.0,
+            "curvature_window_m": 0.3,
+        }
 
 
 def _profile(line: np.ndarray, v_cruise: float, v0: float, accel: float):
@@ -71,8 +77,17 @@ def _profile(line: np.ndarray, v_cruise: float, v0: float, accel: float):
     from ..paths.speed_profile import SpeedProfile
 
     path = WaypointPath(line, ds_m=0.2)
-    return path, SpeedProfile(path, LAT_ACCEL_MPS2, accel, accel, v_cruise, v_start_mps=v0, v_end_mps=0.0,
-                              ds_m=_PLAN_DS_M, curvature_window_m=0.3)
+    return path, SpeedProfile(
+        path,
+        LAT_ACCEL_MPS2,
+        accel,
+        accel,
+        v_cruise,
+        v_start_mps=v0,
+        v_end_mps=0.0,
+        ds_m=_PLAN_DS_M,
+        curvature_window_m=0.3,
+    )
 
 
 def _cut(line: np.ndarray, s_end: float) -> np.ndarray:
@@ -98,8 +113,7 @@ def plan_drive(net, pp, p0: np.ndarray, yaw0: float, v0: float, dt_s: float) -> 
     window = None if steps is None else (steps[0] * dt_s, steps[1] * dt_s)
     v_goal = cr.bounds(getattr(goal, "velocity", None))
     shapes = [sh for st in pp.goal.state_list for sh in cr.goal_shapes(st)]
-    v_want = (0.5 * (v_goal[0] + v_goal[1]) if v_goal is not None
-              else (v0 if v0 >= 1.0 else DEFAULT_SPEED_MPS))
+    v_want = 0.5 * (v_goal[0] + v_goal[1]) if v_goal is not None else (v0 if v0 >= 1.0 else DEFAULT_SPEED_MPS)
     v_lo, v_hi = (max(v_goal[0], 1.0), max(v_goal[1], 1.0)) if v_goal is not None else (1.0, max(v_want, v0) * 1.25)
     accel = min(COMFORT_ACCEL_MPS2, accel_limit(max(v_hi, v0) + 2.0))
     pb = _Problem(v0, accel, window, dt_s)
@@ -109,12 +123,12 @@ def plan_drive(net, pp, p0: np.ndarray, yaw0: float, v0: float, dt_s: float) -> 
     brake_m = max(v_hi, v0) ** 2 / (2 * accel) + 10.0
     if not goals:
         first = net.find_lanelet_by_id(starts[0])
-        route = cr.lane_forward(net, [starts[0]], max(v_want, v0) * t_last + brake_m,
-                                from_m=cr._arc_to(first, p0))
+        route = cr.lane_forward(net, [starts[0]], max(v_want, v0) * t_last + brake_m, from_m=cr._arc_to(first, p0))
         line = cr.route_centerline(net, route, p0, max(v_want, v0) * t_last + brake_m)
         route = cr.trim_route(net, route, line)
-        return _finish(route, line, "follow lane", v_want, pb,
-                       note="time-only goal: follows the lane, stops at its end")
+        return _finish(
+            route, line, "follow lane", v_want, pb, note="time-only goal: follows the lane, stops at its end"
+        )
     route = cr.find_route(net, starts, goals)
     if route is None:
         raise ValueError(f"no route from lanelet(s) {starts} to the goal lanelets {sorted(goals)}")
@@ -123,8 +137,7 @@ def plan_drive(net, pp, p0: np.ndarray, yaw0: float, v0: float, dt_s: float) -> 
     # the route's stretch in the goal region (the centre line's point nearest a small region it misses)
     arc = (cr.arc_inside(line, shapes) or cr.nearest_arc(line, shapes)) if shapes else None
     if arc is None:  # a goal of lanelets only, or a region the centre line misses: stop at the route's end
-        return _finish(route, line, "stop at route end", v_want, pb,
-                       note="stops at the end of the goal lanelet")
+        return _finish(route, line, "stop at route end", v_want, pb, note="stops at the end of the goal lanelet")
     ahead = cr.lane_forward(net, route, arc[1] + brake_m)
     ctx = _GoalDrive(net, route, ahead, line, shapes, arc, p0, v_want, (v_lo, v_hi), v_goal, pb, goal_xy)
     first = None
@@ -165,8 +178,16 @@ def _stop(g: _GoalDrive):
         path, prof = _profile(stop_line, v, pb.v0, pb.accel)
         t_in = float(prof.time_at(min(arc[0] + 1.0, path.length_m)))
         if window is None or t_in <= window[1] - 0.1 * (window[1] - window[0]) - pb.dt_s:
-            return _finish(route, stop_line, "stop in goal", v, pb, arc=arc, arrival=t_in,
-                           note=f"stops in the goal region (reached at {t_in:.1f} s)")
+            return _finish(
+                route,
+                stop_line,
+                "stop in goal",
+                v,
+                pb,
+                arc=arc,
+                arrival=t_in,
+                note=f"stops in the goal region (reached at {t_in:.1f} s)",
+            )
     return None
 
 
@@ -194,13 +215,29 @@ def _through(g: _GoalDrive):
         inside = window is None or (t_in <= window[1] - margin and t_out >= window[0] + margin)
         if inside:
             stay = " and stops in it" if math.isinf(t_out) else ""
-            return _finish(ahead, line, "through goal", v, pb, arc=arc, arrival=t_in,
-                           note=f"drives into the goal region at {t_in:.1f} s{stay}")
+            return _finish(
+                ahead,
+                line,
+                "through goal",
+                v,
+                pb,
+                arc=arc,
+                arrival=t_in,
+                note=f"drives into the goal region at {t_in:.1f} s{stay}",
+            )
     v, t_in, _ = best
-    return _finish(ahead, line, "through goal", v, pb, arc=arc, arrival=t_in,
-                   note=f"{_MISSED} in [{v_range[0]:.1f}, {v_range[1]:.1f}] m/s has the car in the goal region "
-                        f"in its time window [{window[0]:.1f}, {window[1]:.1f}] s: drives at {v:.1f} m/s "
-                        f"(in the region at {t_in:.1f} s)")
+    return _finish(
+        ahead,
+        line,
+        "through goal",
+        v,
+        pb,
+        arc=arc,
+        arrival=t_in,
+        note=f"{_MISSED} in [{v_range[0]:.1f}, {v_range[1]:.1f}] m/s has the car in the goal region "
+        f"in its time window [{window[0]:.1f}, {window[1]:.1f}] s: drives at {v:.1f} m/s "
+        f"(in the region at {t_in:.1f} s)",
+    )
 
 
 @dataclass(frozen=True)
@@ -218,5 +255,16 @@ def _finish(route, line, mode: str, v: float, pb: _Problem, *, arc=None, arrival
         # through the goal window's first step (a car waiting in the region must be there then),
         # never past its last
         duration = min(max(duration, pb.window[0] + pb.dt_s), pb.window[1] + pb.dt_s)
-    return DrivePlan(tuple(route), line, mode, float(v), float(pb.v0), float(pb.accel), float(duration),
-                     pb.window, arc, arrival, note)
+    return DrivePlan(
+        tuple(route),
+        line,
+        mode,
+        float(v),
+        float(pb.v0),
+        float(pb.accel),
+        float(duration),
+        pb.window,
+        arc,
+        arrival,
+        note,
+    )

@@ -86,8 +86,7 @@ def _arc_to(lanelet, p: np.ndarray) -> float:
 def start_lanelets(net, p0: np.ndarray, yaw0: float) -> list[int]:
     """Lanelets the route may start on (see the module docstring); ValueError when none is near."""
     holding = [lid for lst in net.find_lanelet_by_position([p0]) for lid in lst]
-    along = [lid for lid in holding
-             if angle_diff(heading_at(net.find_lanelet_by_id(lid), p0), yaw0) < math.pi / 2]
+    along = [lid for lid in holding if angle_diff(heading_at(net.find_lanelet_by_id(lid), p0), yaw0) < math.pi / 2]
     if not along:
         near = []
         for ll in net.lanelets:
@@ -95,8 +94,9 @@ def start_lanelets(net, p0: np.ndarray, yaw0: float) -> list[int]:
             if d < 3.0 and angle_diff(heading_at(ll, p0), yaw0) < math.pi / 2:
                 near.append((d, ll.lanelet_id))
         if not near:
-            raise ValueError(f"initial position ({p0[0]:.2f}, {p0[1]:.2f}) m is on no lanelet driving "
-                             "in the initial heading")
+            raise ValueError(
+                f"initial position ({p0[0]:.2f}, {p0[1]:.2f}) m is on no lanelet driving in the initial heading"
+            )
         along = [min(near)[1]]
     out = list(along)
     for lid in along:
@@ -105,8 +105,7 @@ def start_lanelets(net, p0: np.ndarray, yaw0: float) -> list[int]:
             for pre in ll.predecessor:
                 out += [s for s in net.find_lanelet_by_id(pre).successor if s not in out]
     # the lanelets holding the start best aligned first (ties in the search go to them)
-    return sorted(out, key=lambda i: (i not in along,
-                                      angle_diff(heading_at(net.find_lanelet_by_id(i), p0), yaw0)))
+    return sorted(out, key=lambda i: (i not in along, angle_diff(heading_at(net.find_lanelet_by_id(i), p0), yaw0)))
 
 
 def goal_shapes(goal_state) -> list:
@@ -241,7 +240,7 @@ def smooth(line: np.ndarray, sigma_m: float = SMOOTH_SIGMA_M, ds_m: float = RESA
         return pts
     h = min(half, len(pts) - 1)
     head = 2 * pts[0] - pts[h:0:-1]
-    tail = 2 * pts[-1] - pts[-2:-h - 2:-1]
+    tail = 2 * pts[-1] - pts[-2 : -h - 2 : -1]
     padded = np.vstack([head, pts, tail])
     k = np.arange(-half, half + 1) * ds_m
     w = np.exp(-0.5 * (k / sigma_m) ** 2)
@@ -266,7 +265,7 @@ def route_polyline(net, route: list[int], start_xy: np.ndarray, goal_xy: np.ndar
         cv = _resample(np.asarray(net.find_lanelet_by_id(lid).center_vertices, float), RESAMPLE_M)
         if k == 0:
             j = int(np.argmin(np.hypot(*(cv - start_xy).T)))
-            cv = cv[max(j - 1, 0):]
+            cv = cv[max(j - 1, 0) :]
         elif lid not in net.find_lanelet_by_id(route[k - 1]).successor:
             prev = pieces.pop()
             s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(prev, axis=0).T))]
@@ -282,15 +281,16 @@ def route_polyline(net, route: list[int], start_xy: np.ndarray, goal_xy: np.ndar
             other = np.array([_project_onto(cv, p) for p in prev[:n]])
             pieces.append((1 - w)[:, None] * prev[:n] + w[:, None] * other)
             j = int(np.argmin(np.hypot(*(cv - pieces[-1][-1]).T)))
-            cv = cv[min(j + 1, len(cv)):]
+            cv = cv[min(j + 1, len(cv)) :]
             if len(cv) == 0:
                 continue
         pieces.append(cv)
     return np.vstack(pieces)
 
 
-def route_centerline(net, route: list[int], start_xy: np.ndarray, length_m: float | None = None,
-                     goal_xy: np.ndarray | None = None) -> np.ndarray:
+def route_centerline(
+    net, route: list[int], start_xy: np.ndarray, length_m: float | None = None, goal_xy: np.ndarray | None = None
+) -> np.ndarray:
     """Smoothed centre polyline (M, 2) [m] of a route from one metre behind the start to the
     route's end, or ``length_m`` past the start when shorter; lane changes done before
     ``goal_xy`` (module docstring)."""
@@ -318,8 +318,10 @@ def nearest_arc(line: np.ndarray, shapes) -> tuple[float, float] | None:
     if not shapes:
         return None
     s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(line, axis=0).T))]
-    best = min((float(np.min(np.hypot(*(line - point(sh.center)).T))), int(np.argmin(np.hypot(*(line - point(sh.center)).T))))
-               for sh in shapes)
+    best = min(
+        (float(np.min(np.hypot(*(line - point(sh.center)).T))), int(np.argmin(np.hypot(*(line - point(sh.center)).T))))
+        for sh in shapes
+    )
     return float(s[best[1]]), float(s[best[1]])
 
 

@@ -26,7 +26,6 @@ from ..models.kinematic import KinematicBicycle4, KinematicParams
 from ..models.presets import get_preset
 
 
-
 #: CommonRoad vehicle name -> parameter set number (``parameters_vehicle<N>``)
 VEHICLES: dict[str, int] = {"ford_escort": 1, "bmw_320i": 2, "vw_vanagon": 3}
 #: plant model name (scenario files) -> CommonRoad model
@@ -62,8 +61,10 @@ def _require():
     try:
         import vehiclemodels  # noqa: F401
     except ImportError:
-        raise ValueError("CommonRoad vehicle models need the commonroad extra: "
-                         "pip install 'mpcdrive[commonroad]' (package commonroad-vehicle-models)") from None
+        raise ValueError(
+            "CommonRoad vehicle models need the commonroad extra: "
+            "pip install 'mpcdrive[commonroad]' (package commonroad-vehicle-models)"
+        ) from None
 
 
 def _check_vehicle(vehicle: str) -> int:
@@ -94,7 +95,9 @@ def solution_vehicle_type(vehicle: str):
     try:
         from commonroad.common.solution import VehicleType
     except ImportError:
-        raise ValueError("CommonRoad solution files need the commonroad extra: pip install 'mpcdrive[commonroad]'") from None
+        raise ValueError(
+            "CommonRoad solution files need the commonroad extra: pip install 'mpcdrive[commonroad]'"
+        ) from None
     return VehicleType(num)
 
 
@@ -115,8 +118,11 @@ def apply_vehicle(spec, vehicle: str, plant: str | None = None):
     if plant is not None and plant not in _SHORT:
         raise ValueError(f"unknown CommonRoad plant model {plant!r} (known: {', '.join(_SHORT)})")
     data = spec.model_dump(mode="python", exclude_unset=True)
-    veh = {k: v for k, v in spec.vehicle.model_dump(exclude_unset=True).items()
-           if k in ("model", "speed_mps", "footprint_discs", "v_blend_low_mps", "v_blend_high_mps")}
+    veh = {
+        k: v
+        for k, v in spec.vehicle.model_dump(exclude_unset=True).items()
+        if k in ("model", "speed_mps", "footprint_discs", "v_blend_low_mps", "v_blend_high_mps")
+    }
     veh["preset"] = preset_name(vehicle)
     data["vehicle"] = veh
     c = spec.controller
@@ -144,9 +150,9 @@ def apply_vehicle(spec, vehicle: str, plant: str | None = None):
     return ScenarioSpec.model_validate(data)
 
 
-
 class PlantModelError(RuntimeError):
     """A CommonRoad vehicle model's equations cannot be evaluated at the plant's state."""
+
 
 class CommonRoadPlant:
     """CommonRoad vehicle model ``model`` (``ks``, ``st``, ``mb``) of ``vehicle`` as the plant of the
@@ -201,8 +207,9 @@ class CommonRoadPlant:
             raise ValueError(f"unknown CommonRoad plant model {model!r} (known: {', '.join(_SHORT)})")
         if max_step_s is None:
             max_step_s = _DEFAULT_STEP_S[model]
-        if isinstance(max_step_s, bool) or not (isinstance(max_step_s, (int, float)) and math.isfinite(max_step_s)
-                                               and max_step_s > 0):
+        if isinstance(max_step_s, bool) or not (
+            isinstance(max_step_s, (int, float)) and math.isfinite(max_step_s) and max_step_s > 0
+        ):
             raise ValueError(f"max_step_s must be a positive number of seconds, got {max_step_s!r}")
         p = vehicle_parameters(vehicle)
         import vehiclemodels.vehicle_dynamics_ks as ks
@@ -275,7 +282,8 @@ class CommonRoadPlant:
                 f"CommonRoad's {self.kind.upper()} model divided by zero at v_x = {float(xp[3]):.3g} m/s, "
                 f"v_y = {float(xp[10]) if len(xp) > 10 else 0.0:.3g} m/s, yaw rate {float(xp[5]):.3g} rad/s, "
                 f"steering {float(xp[2]):.3g} rad (a wheel's hub speed is 0: the car slides sideways or "
-                "spins, outside what its equations cover)") from None
+                "spins, outside what its equations cover)"
+            ) from None
 
     def stiff_radius(self, xp, accel_mps2: float) -> float:
         """Spectral radius [1/s] of the stiff block at plant state ``xp`` and acceleration
@@ -292,10 +300,12 @@ class CommonRoadPlant:
         wb = lf + lr
         a = float(np.clip(accel_mps2, -p.longitudinal.a_max, p.longitudinal.a_max))
         ff, fr = cs * (_G * lr - a * h), cs * (_G * lf + a * h)  # front / rear load terms
-        j = np.array([
-            [-mu * m / (v * iz * wb) * (lf ** 2 * ff + lr ** 2 * fr), mu * m / (iz * wb) * (lr * fr - lf * ff)],
-            [mu / (v ** 2 * wb) * (fr * lr - ff * lf) - 1.0, -mu / (v * wb) * (fr + ff)],
-        ])
+        j = np.array(
+            [
+                [-mu * m / (v * iz * wb) * (lf**2 * ff + lr**2 * fr), mu * m / (iz * wb) * (lr * fr - lf * ff)],
+                [mu / (v**2 * wb) * (fr * lr - ff * lf) - 1.0, -mu / (v * wb) * (fr + ff)],
+            ]
+        )
         tr, det = j[0, 0] + j[1, 1], j[0, 0] * j[1, 1] - j[0, 1] * j[1, 0]
         disc = tr * tr / 4.0 - det
         if disc >= 0:
@@ -307,8 +317,12 @@ class CommonRoadPlant:
         right-hand side computes them (before it clips them at 0)."""
         p, d, r, vx, vy = self.p, float(x[2]), float(x[5]), float(x[3]), float(x[10])
         lat = (vy + float(p.a) * r) * math.sin(d)
-        return ((vx + 0.5 * float(p.T_f) * r) * math.cos(d) + lat, (vx - 0.5 * float(p.T_f) * r) * math.cos(d) + lat,
-                vx + 0.5 * float(p.T_r) * r, vx - 0.5 * float(p.T_r) * r)
+        return (
+            (vx + 0.5 * float(p.T_f) * r) * math.cos(d) + lat,
+            (vx - 0.5 * float(p.T_f) * r) * math.cos(d) + lat,
+            vx + 0.5 * float(p.T_r) * r,
+            vx - 0.5 * float(p.T_r) * r,
+        )
 
     def _mb_wheel_radius(self, x) -> float:
         """Bound [1/s] on the spectral radius of MB's wheel-spin modes at state ``x``.
@@ -322,10 +336,12 @@ class CommonRoadPlant:
         p = self.p
         kzt, rw, tf, tr = float(p.K_zt), float(p.R_w), float(p.T_f), float(p.T_r)
         rf, rr = float(x[13]), float(x[18])
-        fz = ((float(x[16]) + rw * (math.cos(rf) - 1.0) - 0.5 * tf * math.sin(rf)) * kzt,
-              (float(x[16]) + rw * (math.cos(rf) - 1.0) + 0.5 * tf * math.sin(rf)) * kzt,
-              (float(x[21]) + rw * (math.cos(rr) - 1.0) - 0.5 * tr * math.sin(rr)) * kzt,
-              (float(x[21]) + rw * (math.cos(rr) - 1.0) + 0.5 * tr * math.sin(rr)) * kzt)
+        fz = (
+            (float(x[16]) + rw * (math.cos(rf) - 1.0) - 0.5 * tf * math.sin(rf)) * kzt,
+            (float(x[16]) + rw * (math.cos(rf) - 1.0) + 0.5 * tf * math.sin(rf)) * kzt,
+            (float(x[21]) + rw * (math.cos(rr) - 1.0) - 0.5 * tr * math.sin(rr)) * kzt,
+            (float(x[21]) + rw * (math.cos(rr) - 1.0) + 0.5 * tr * math.sin(rr)) * kzt,
+        )
         gain = rw * rw * abs(float(p.tire.p_kx1)) / float(p.I_y_w)
         rho = 0.0
         for f_z, u_w in zip(fz, self._mb_hub_speeds(x)):
@@ -357,8 +373,10 @@ class CommonRoadPlant:
         if accel_mps2 == 0.0 or abs(vx) < _KINEMATIC_BELOW:
             return accel_mps2
         rw, sign = float(self.p.R_w), (1.0 if accel_mps2 < 0.0 else -1.0)
-        slip = [sign * (1.0 - rw * float(x[23 + i]) / u_w) if u_w > 0.0 else 0.0
-                for i, u_w in enumerate(self._mb_hub_speeds(x))]
+        slip = [
+            sign * (1.0 - rw * float(x[23 + i]) / u_w) if u_w > 0.0 else 0.0
+            for i, u_w in enumerate(self._mb_hub_speeds(x))
+        ]
         s_m = max(min(slip[0], slip[1]), slip[2], slip[3], 0.0)
         scale = min(max((_MB_SLIP_OFF - s_m) / (_MB_SLIP_OFF - _MB_SLIP_ON), 0.0), 1.0)
         return accel_mps2 * scale

@@ -84,11 +84,16 @@ DEFAULT_STEERING_RANGE_RAD = (-math.pi / 4, math.pi / 4)
 DEFAULT_ACCELERATION_RANGE_MPS2 = (-5.0, 5.0)
 
 
-def racetrack_config(*, longitudinal: bool = True,
-                     steering_range_rad: tuple[float, float] = DEFAULT_STEERING_RANGE_RAD,
-                     acceleration_range_mps2: tuple[float, float] = DEFAULT_ACCELERATION_RANGE_MPS2,
-                     policy_frequency_hz: int = 5, simulation_frequency_hz: int = 15,
-                     duration_s: float = 300.0, other_vehicles: int = 1) -> dict:
+def racetrack_config(
+    *,
+    longitudinal: bool = True,
+    steering_range_rad: tuple[float, float] = DEFAULT_STEERING_RANGE_RAD,
+    acceleration_range_mps2: tuple[float, float] = DEFAULT_ACCELERATION_RANGE_MPS2,
+    policy_frequency_hz: int = 5,
+    simulation_frequency_hz: int = 15,
+    duration_s: float = 300.0,
+    other_vehicles: int = 1,
+) -> dict:
     """Configuration for ``gym.make("racetrack-v0", config=...)``: continuous steering (and
     acceleration when ``longitudinal``) and a cheap kinematics observation (the driver reads the
     vehicle states itself).
@@ -98,17 +103,17 @@ def racetrack_config(*, longitudinal: bool = True,
     meaning -- 0 is an empty track; n >= 1 places one car ahead in the ego's lane (6-9 m/s) and
     up to n - 1 more at random places (highway-env drops those within 20 m of another car);
     highway-env's default is 1."""
-    for name, rng in (("steering_range_rad", steering_range_rad),
-                      ("acceleration_range_mps2", acceleration_range_mps2)):
+    for name, rng in (("steering_range_rad", steering_range_rad), ("acceleration_range_mps2", acceleration_range_mps2)):
         lo, hi = (float(v) for v in rng)
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
             raise ValueError(f"{name} must be two finite numbers, low < high, got {rng}")
     if int(policy_frequency_hz) != policy_frequency_hz or policy_frequency_hz < 1:
         raise ValueError(f"policy_frequency_hz must be a positive integer, got {policy_frequency_hz}")
-    if (int(simulation_frequency_hz) != simulation_frequency_hz
-            or simulation_frequency_hz % policy_frequency_hz):
-        raise ValueError(f"simulation_frequency_hz must be a multiple of policy_frequency_hz "
-                         f"({policy_frequency_hz}), got {simulation_frequency_hz}")
+    if int(simulation_frequency_hz) != simulation_frequency_hz or simulation_frequency_hz % policy_frequency_hz:
+        raise ValueError(
+            f"simulation_frequency_hz must be a multiple of policy_frequency_hz "
+            f"({policy_frequency_hz}), got {simulation_frequency_hz}"
+        )
     if not (math.isfinite(duration_s) and duration_s > 0):
         raise ValueError(f"duration_s must be positive, got {duration_s}")
     if isinstance(other_vehicles, bool) or int(other_vehicles) != other_vehicles or other_vehicles < 0:
@@ -129,13 +134,15 @@ def racetrack_config(*, longitudinal: bool = True,
     }
 
 
-def highway_config(*, duration_s: float = 40.0, policy_frequency_hz: int = 5,
-                   simulation_frequency_hz: int = 15, **env_config) -> dict:
+def highway_config(
+    *, duration_s: float = 40.0, policy_frequency_hz: int = 5, simulation_frequency_hz: int = 15, **env_config
+) -> dict:
     """Configuration for ``gym.make("highway-v0", config=...)``: the continuous steering and
     acceleration of :func:`racetrack_config`, highway-env's own traffic (4 lanes, 50 IDM/MOBIL
     vehicles, density 1) unless ``env_config`` says otherwise (e.g. ``vehicles_count``)."""
-    cfg = racetrack_config(policy_frequency_hz=policy_frequency_hz, simulation_frequency_hz=simulation_frequency_hz,
-                           duration_s=duration_s)
+    cfg = racetrack_config(
+        policy_frequency_hz=policy_frequency_hz, simulation_frequency_hz=simulation_frequency_hz, duration_s=duration_s
+    )
     del cfg["other_vehicles"]  # racetrack-v0 only
     return {**cfg, **env_config}
 
@@ -169,14 +176,14 @@ def lane_sequence(network, start_index) -> tuple[list, bool]:
         if cur == seq[0]:
             return seq, True
         if cur in seq:
-            raise ValueError(f"the lanes from {start_index!r} run into a loop that does not "
-                             f"return to the start (at {cur!r})")
+            raise ValueError(
+                f"the lanes from {start_index!r} run into a loop that does not return to the start (at {cur!r})"
+            )
         seq.append(cur)
     raise ValueError(f"could not follow the lanes from {start_index!r}")
 
 
-def lane_centerline(network, lane_index, *, ds_m: float = 1.0, smoothing_m: float = 0.02
-                    ) -> tuple[WaypointPath, float]:
+def lane_centerline(network, lane_index, *, ds_m: float = 1.0, smoothing_m: float = 0.02) -> tuple[WaypointPath, float]:
     """The centreline of the lane ``lane_index`` and its successors as a path, and the lane
     half width [m] (the narrowest along the way).
 
@@ -208,7 +215,7 @@ def lane_centerline(network, lane_index, *, ds_m: float = 1.0, smoothing_m: floa
             P = P[~(near_end & (along > -0.25 * ds_m))]
         pts.append(P)
     P = np.vstack(pts)
-    path = WaypointPath(P, closed=closed, smoothing=len(P) * smoothing_m ** 2)
+    path = WaypointPath(P, closed=closed, smoothing=len(P) * smoothing_m**2)
     return path, 0.5 * min(widths)
 
 
@@ -231,8 +238,9 @@ def straight_road(network, lane_index) -> tuple[Road, StraightPath, dict]:
         c, w = float(path.n @ (np.asarray(ln.start, float) - path.start)), 0.5 * float(ln.width)
         out.append(Lane(str(j), np.full(2, c), np.full(2, c + w), np.full(2, c - w)))
     s = np.array([0.0, path.length_m])
-    road = Road(s, max(ln.left_m[0] for ln in out), min(ln.right_m[0] for ln in out), 0.0, tuple(out),
-                int(lane_index[2]))
+    road = Road(
+        s, max(ln.left_m[0] for ln in out), min(ln.right_m[0] for ln in out), 0.0, tuple(out), int(lane_index[2])
+    )
     paths = {(fr, to, j): StraightPath(ln.start, ln.end) for j, ln in enumerate(lanes)}
     return road, path, paths
 
@@ -247,13 +255,26 @@ def ramp_path(path, ramp: LateralRamp, s_m: float, ds_m: float = 2.0) -> Waypoin
     return WaypointPath(np.asarray(path.position(s), float) + ramp.offset(s)[:, None] * n, ds_m=0.5)
 
 
-def lane_problem(nx: int, nu: int, N: int, dt_s: float, Q, R, Rc, u_min, u_max, du_max_per_s, x_min, x_max,
-                 road: Road) -> MpcProblem:
+def lane_problem(
+    nx: int, nu: int, N: int, dt_s: float, Q, R, Rc, u_min, u_max, du_max_per_s, x_min, x_max, road: Road
+) -> MpcProblem:
     """The driver's MPC problem (every one this module builds): weights, input / rate / state
     bounds, and the body kept inside the lane ``road`` around the path."""
-    return MpcProblem(nx=nx, nu=nu, N=N, dt_s=dt_s, Q=np.array(Q), R=np.array(R), Rc=np.array(Rc),
-                      u_min=np.array(u_min), u_max=np.array(u_max), du_max_per_s=np.array(du_max_per_s),
-                      x_min=x_min, x_max=x_max, road=road)
+    return MpcProblem(
+        nx=nx,
+        nu=nu,
+        N=N,
+        dt_s=dt_s,
+        Q=np.array(Q),
+        R=np.array(R),
+        Rc=np.array(Rc),
+        u_min=np.array(u_min),
+        u_max=np.array(u_max),
+        du_max_per_s=np.array(du_max_per_s),
+        x_min=x_min,
+        x_max=x_max,
+        road=road,
+    )
 
 
 # --------------------------------------------------------------------------- actions
@@ -287,8 +308,7 @@ class ActionScaling:
             raise ValueError(f"action.type must be ContinuousAction, got {type(at).__name__}")
         if not at.lateral:
             raise ValueError("action.lateral must be true: the driver steers")
-        return cls(tuple(at.steering_range),
-                   tuple(at.acceleration_range) if at.longitudinal else None)
+        return cls(tuple(at.steering_range), tuple(at.acceleration_range) if at.longitudinal else None)
 
     @property
     def longitudinal(self) -> bool:
@@ -321,8 +341,7 @@ class ActionScaling:
             raise ValueError(f"action must have {n} component(s), got shape {a.shape}")
         if not self.longitudinal:
             return self._from_unit(a[0], self.steering_range_rad), 0.0
-        return (self._from_unit(a[1], self.steering_range_rad),
-                self._from_unit(a[0], self.acceleration_range_mps2))
+        return (self._from_unit(a[1], self.steering_range_rad), self._from_unit(a[0], self.acceleration_range_mps2))
 
 
 # --------------------------------------------------------------------------- driver
@@ -355,8 +374,9 @@ class DriverSettings:
     lane_margin_m: float = 0.0
     centerline_ds_m: float = 1.0
     centerline_smoothing_m: float = 0.02
-    avoidance: AvoidanceConfig = AvoidanceConfig("hard", margin_m=0.3, influence_m=20.0, max_obstacles=3,
-                                                 follow_gap_s=1.0)
+    avoidance: AvoidanceConfig = AvoidanceConfig(
+        "hard", margin_m=0.3, influence_m=20.0, max_obstacles=3, follow_gap_s=1.0
+    )
     prediction: Literal["lane", "constant_velocity"] = "lane"
     tau_lateral_s: float = 1.0
     lanes: LaneConfig | None = None
@@ -384,10 +404,12 @@ def highway_settings(v_ref_mps: float = 30.0, **overrides) -> DriverSettings:
     """:class:`DriverSettings` for highway-v0: ``v_ref_mps`` [m/s] (highway-env's speed limit
     and top of its speed reward is 30 m/s), vehicles considered within 60 m (the nearest 4),
     and the lane decision layer (:mod:`mpcdrive.control.lanes`) wanting that speed."""
-    base = dict(v_ref_mps=v_ref_mps, speed_limits_mps=(0.0, v_ref_mps + 5.0),
-                avoidance=AvoidanceConfig("hard", margin_m=0.3, influence_m=60.0, max_obstacles=4,
-                                          follow_gap_s=1.0),
-                lanes=LaneConfig(desired_speed_mps=v_ref_mps, standstill_m=6.0, rear_time_gap_s=0.6))
+    base = dict(
+        v_ref_mps=v_ref_mps,
+        speed_limits_mps=(0.0, v_ref_mps + 5.0),
+        avoidance=AvoidanceConfig("hard", margin_m=0.3, influence_m=60.0, max_obstacles=4, follow_gap_s=1.0),
+        lanes=LaneConfig(desired_speed_mps=v_ref_mps, standstill_m=6.0, rear_time_gap_s=0.6),
+    )
     return DriverSettings(**{**base, **overrides})
 
 
@@ -404,12 +426,24 @@ def vehicle_obstacle(vehicle, t_s: float = 0.0, name: str = "") -> Obstacle:
     x, y = (float(v) for v in vehicle.position)
     heading, speed = float(vehicle.heading), float(getattr(vehicle, "speed", 0.0))
     vx, vy = speed * math.cos(heading), speed * math.sin(heading)
-    return Obstacle(rectangle(float(vehicle.LENGTH), float(vehicle.WIDTH)),
-                    (x - vx * t_s, y - vy * t_s, heading), ConstantVelocity(vx, vy), name)
+    return Obstacle(
+        rectangle(float(vehicle.LENGTH), float(vehicle.WIDTH)),
+        (x - vx * t_s, y - vy * t_s, heading),
+        ConstantVelocity(vx, vy),
+        name,
+    )
 
 
-def lane_following_obstacle(vehicle, path, times_s, t_s: float = 0.0, *, s_guess: float | None = None,
-                            tau_lateral_s: float = 1.0, name: str = "") -> Obstacle:
+def lane_following_obstacle(
+    vehicle,
+    path,
+    times_s,
+    t_s: float = 0.0,
+    *,
+    s_guess: float | None = None,
+    tau_lateral_s: float = 1.0,
+    name: str = "",
+) -> Obstacle:
     """A highway-env vehicle as an obstacle that follows its lane: the ``LENGTH`` x ``WIDTH``
     rectangle [m] starts at the vehicle's pose and moves along ``path`` (the lane's centreline,
     a :class:`~mpcdrive.paths.ReferencePath`) at its current speed [m/s], its lateral offset [m] and
@@ -443,8 +477,7 @@ def lane_following_obstacle(vehicle, path, times_s, t_s: float = 0.0, *, s_guess
     yaw = np.unwrap(h + dpsi * decay)
     yaw += heading - yaw[0]
     motion = TrajectoryMotion(t_s + times, P[:, 0] - xy[0], P[:, 1] - xy[1], yaw - heading)
-    return Obstacle(rectangle(float(vehicle.LENGTH), float(vehicle.WIDTH)), (xy[0], xy[1], heading),
-                    motion, name)
+    return Obstacle(rectangle(float(vehicle.LENGTH), float(vehicle.WIDTH)), (xy[0], xy[1], heading), motion, name)
 
 
 def _vehicle_state(vehicle, nx: int) -> np.ndarray:
@@ -474,12 +507,16 @@ class HighwayEnvMpcDriver:
             raise ValueError("the environment has no ego vehicle: call env.reset() first")
         cfg = u.config
         if cfg["action"].get("dynamical", False):
-            raise ValueError("action.dynamical must be false: the driver models highway-env's "
-                             "kinematic Vehicle, not the dynamical BicycleVehicle")
+            raise ValueError(
+                "action.dynamical must be false: the driver models highway-env's "
+                "kinematic Vehicle, not the dynamical BicycleVehicle"
+            )
         # everything the ego can collide with, in a fixed order (index = obstacle identity)
-        self.others = tuple(o for o in [*u.road.vehicles, *getattr(u.road, "objects", [])]
-                            if o is not vehicle and getattr(o, "collidable", True)
-                            and getattr(o, "solid", True))
+        self.others = tuple(
+            o
+            for o in [*u.road.vehicles, *getattr(u.road, "objects", [])]
+            if o is not vehicle and getattr(o, "collidable", True) and getattr(o, "solid", True)
+        )
         self.env = env
         self.settings = settings
         self.scaling = ActionScaling.from_env(env)
@@ -494,8 +531,11 @@ class HighwayEnvMpcDriver:
             self.lane_half_width_m = 0.5 * float(u.road.network.get_lane(self.lane_index).width)
         else:
             self.path, self.lane_half_width_m = lane_centerline(
-                u.road.network, self.lane_index, ds_m=settings.centerline_ds_m,
-                smoothing_m=settings.centerline_smoothing_m)
+                u.road.network,
+                self.lane_index,
+                ds_m=settings.centerline_ds_m,
+                smoothing_m=settings.centerline_smoothing_m,
+            )
             self._lane_paths = dict.fromkeys(lane_sequence(u.road.network, self.lane_index)[0], self.path)
         self._times_s = self.dt_s * np.arange(int(settings.horizon) + 1)
         length_m, width_m = float(vehicle.LENGTH), float(vehicle.WIDTH)
@@ -521,8 +561,10 @@ class HighwayEnvMpcDriver:
         #: the lane around the path as the road the controller keeps the body inside (scene.road)
         self.lane_road = Road.constant(2.0 * self.lane_half_width_m, s.lane_margin_m)
         if self.lane_road.narrowest_fit_m(self.footprint) <= 0:
-            raise ValueError(f"lane half width {self.lane_half_width_m} m leaves no room for the "
-                             f"vehicle ({width_m} m wide) with a margin of {s.lane_margin_m} m")
+            raise ValueError(
+                f"lane half width {self.lane_half_width_m} m leaves no room for the "
+                f"vehicle ({width_m} m wide) with a margin of {s.lane_margin_m} m"
+            )
         self._bounds = (u_min, u_max, du, x_min, x_max)
         # the projection window must cover the distance driven per step, and more
         window = max(2.0, 3.0 * max(v_ref, float(vehicle.speed)) * self.dt_s)
@@ -537,10 +579,30 @@ class HighwayEnvMpcDriver:
         """The LTV-MPC along ``path`` (the body kept inside the lane around it) avoiding ``obstacles``."""
         s, (nx, nu) = self.settings, (self.model.nx, self.model.nu)
         u_min, u_max, du, x_min, x_max = self._bounds
-        problem = lane_problem(nx, nu, int(s.horizon), self.dt_s, s.Q[:nx], s.R[:nu], s.Rc[:nu], u_min, u_max,
-                               du, x_min, x_max, self.lane_road)
-        return LtvMpc(self.model, path, problem, self._mpc_config, obstacles=obstacles, avoidance=s.avoidance,
-                      footprint=self.footprint)
+        problem = lane_problem(
+            nx,
+            nu,
+            int(s.horizon),
+            self.dt_s,
+            s.Q[:nx],
+            s.R[:nu],
+            s.Rc[:nu],
+            u_min,
+            u_max,
+            du,
+            x_min,
+            x_max,
+            self.lane_road,
+        )
+        return LtvMpc(
+            self.model,
+            path,
+            problem,
+            self._mpc_config,
+            obstacles=obstacles,
+            avoidance=s.avoidance,
+            footprint=self.footprint,
+        )
 
     def _follow_lanes(self, obstacles) -> None:
         """Ask the decision layer for the lane; on a new lateral reference, retarget the
@@ -549,8 +611,17 @@ class HighwayEnvMpcDriver:
         assert self.road is not None and self.settings.lanes is not None
         x = self.state()
         s_m, e_y = self.path.project(x[:2])
-        d = decide_lane(self.road, self.path, s_m, e_y, float(self.env.unwrapped.vehicle.speed), obstacles,
-                        self.warm.t_s, self.decision, self.settings.lanes)
+        d = decide_lane(
+            self.road,
+            self.path,
+            s_m,
+            e_y,
+            float(self.env.unwrapped.vehicle.speed),
+            obstacles,
+            self.warm.t_s,
+            self.decision,
+            self.settings.lanes,
+        )
         if self.decision is None or d.ramp is not self.decision.ramp:
             ctrl = self._controller(ramp_path(self.path, d.ramp, s_m), obstacles)
             self.warm = replace(self.warm, s_m=ctrl.initial_warm(x).s_m, sides=())
@@ -566,9 +637,12 @@ class HighwayEnvMpcDriver:
         lane_index = tuple(lane_index)
         if lane_index not in self._lane_paths:
             seq, _ = lane_sequence(self.env.unwrapped.road.network, lane_index)
-            path, _ = lane_centerline(self.env.unwrapped.road.network, lane_index,
-                                      ds_m=self.settings.centerline_ds_m,
-                                      smoothing_m=self.settings.centerline_smoothing_m)
+            path, _ = lane_centerline(
+                self.env.unwrapped.road.network,
+                lane_index,
+                ds_m=self.settings.centerline_ds_m,
+                smoothing_m=self.settings.centerline_smoothing_m,
+            )
             for ix in seq:
                 self._lane_paths.setdefault(ix, path)
         return self._lane_paths[lane_index]
@@ -584,8 +658,11 @@ class HighwayEnvMpcDriver:
             name = f"{type(o).__name__}-{j}"
             lane = getattr(o, "target_lane_index", None) or getattr(o, "lane_index", None)
             if s.prediction == "lane" and lane is not None and float(getattr(o, "speed", 0.0)) != 0.0:
-                out.append(lane_following_obstacle(o, self.lane_path(lane), self._times_s, t_s,
-                                                   tau_lateral_s=s.tau_lateral_s, name=name))
+                out.append(
+                    lane_following_obstacle(
+                        o, self.lane_path(lane), self._times_s, t_s, tau_lateral_s=s.tau_lateral_s, name=name
+                    )
+                )
             else:
                 out.append(vehicle_obstacle(o, t_s, name))
         return tuple(out)
@@ -644,8 +721,9 @@ def drive_env(env, driver: HighwayEnvMpcDriver, steps: int) -> HighwayDrive:
         x = driver.state()
         t_s = driver.warm.t_s
         body = driver.footprint.polygon(*x[:3])
-        clearance.append(min((shape_distance(body, vehicle_obstacle(o).at(0.0)) for o in driver.others),
-                             default=np.inf))
+        clearance.append(
+            min((shape_distance(body, vehicle_obstacle(o).at(0.0)) for o in driver.others), default=np.inf)
+        )
         action, out = driver.act()
         avoidance = driver.controller.avoidance
         considered.append(0 if avoidance is None else len(avoidance.relevant(t_s, x[:2])))
@@ -673,24 +751,49 @@ def drive_env(env, driver: HighwayEnvMpcDriver, steps: int) -> HighwayDrive:
     if driver.others:
         meta = {"min_obstacle_clearance_m": float(clearance.min()), "collisions": contact_count(clearance)}
     result = SimResult(
-        t_s=np.array(T), x=Xa, u=Ua, x_final=driver.state(), s_m=np.array(S),
-        e_y_m=np.array(EY), e_psi_rad=np.array(EPSI), yaw_rad=Xa[:, 2].copy(),
-        v_mps=np.asarray(model.speed(Xa), dtype=float).copy() if nx == 4
-        else np.full(len(Xa), float(model.v_mps)),
+        t_s=np.array(T),
+        x=Xa,
+        u=Ua,
+        x_final=driver.state(),
+        s_m=np.array(S),
+        e_y_m=np.array(EY),
+        e_psi_rad=np.array(EPSI),
+        yaw_rad=Xa[:, 2].copy(),
+        v_mps=np.asarray(model.speed(Xa), dtype=float).copy() if nx == 4 else np.full(len(Xa), float(model.v_mps)),
         steer_rad=Ua[:, 0].copy(),
         accel_mps2=Ua[:, 1].copy() if model.nu > 1 else np.zeros(len(Xa)),
-        X_pred=np.array(XP).reshape(len(X), N + 1, nx), refs=np.array(RF).reshape(len(X), N + 1, nx),
-        status=tuple(status), fallback=tuple(fallback), solve_time_s=np.array(ST),
-        path_xy=path.polyline(), dt_s=driver.dt_s, state_names=tuple(model.state_names),
-        input_names=tuple(model.input_names), road_profile=driver.lane_road.profile(path.length_m),
-        lane_excess_m=driver.lane_road.body_excess_m(np.array(S), np.array(EY), np.asarray(path.curvature(np.array(S))),
-                                                np.array(EPSI), driver.footprint),
+        X_pred=np.array(XP).reshape(len(X), N + 1, nx),
+        refs=np.array(RF).reshape(len(X), N + 1, nx),
+        status=tuple(status),
+        fallback=tuple(fallback),
+        solve_time_s=np.array(ST),
+        path_xy=path.polyline(),
+        dt_s=driver.dt_s,
+        state_names=tuple(model.state_names),
+        input_names=tuple(model.input_names),
+        road_profile=driver.lane_road.profile(path.length_m),
+        lane_excess_m=driver.lane_road.body_excess_m(
+            np.array(S), np.array(EY), np.asarray(path.curvature(np.array(S))), np.array(EPSI), driver.footprint
+        ),
         goal_reached=None,
-        meta={"id": "highway-env-racetrack", "description": "highway-env racetrack driven by LTV-MPC",
-              "max_steer_rad": float(driver.scaling.steering_range_rad[1]),
-              "lane_index": list(driver.lane_index), "on_road_steps": int(sum(on_road)),
-              "other_vehicles": len(driver.others), **meta},
+        meta={
+            "id": "highway-env-racetrack",
+            "description": "highway-env racetrack driven by LTV-MPC",
+            "max_steer_rad": float(driver.scaling.steering_range_rad[1]),
+            "lane_index": list(driver.lane_index),
+            "on_road_steps": int(sum(on_road)),
+            "other_vehicles": len(driver.others),
+            **meta,
+        },
     )
-    return HighwayDrive(result, np.array(on_road, dtype=bool), bool(u.vehicle.crashed),
-                        bool(terminated), bool(truncated), np.array(rewards), driver.footprint,
-                        clearance, np.array(considered, dtype=int))
+    return HighwayDrive(
+        result,
+        np.array(on_road, dtype=bool),
+        bool(u.vehicle.crashed),
+        bool(terminated),
+        bool(truncated),
+        np.array(rewards),
+        driver.footprint,
+        clearance,
+        np.array(considered, dtype=int),
+    )

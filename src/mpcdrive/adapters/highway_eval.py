@@ -49,8 +49,13 @@ def _idm_ego(env, target_speed_mps: float):
     return ego
 
 
-def highway_episode(env, seed: int, policy: Literal["mpc", "idm"] = "mpc",
-                    settings: DriverSettings | None = None, steps: int | None = None) -> HighwayEpisode:
+def highway_episode(
+    env,
+    seed: int,
+    policy: Literal["mpc", "idm"] = "mpc",
+    settings: DriverSettings | None = None,
+    steps: int | None = None,
+) -> HighwayEpisode:
     """Reset ``env`` (a highway-v0 made with :func:`highway_config`) with ``seed`` and drive its
     ego with ``policy``: ``mpc`` (:class:`HighwayEnvMpcDriver` with ``settings``, by default
     :func:`highway_settings`) or ``idm`` (highway-env's IDM/MOBIL vehicle wanting the same speed,
@@ -89,12 +94,27 @@ def highway_episode(env, seed: int, policy: Literal["mpc", "idm"] = "mpc",
                 passed.add(id(o))
         if terminated or truncated:
             break
-    return HighwayEpisode(policy, int(seed), len(speeds), bool(u.vehicle.crashed), int(off), float(np.mean(speeds)),
-                          float(u.vehicle.position[0]) - x0, int(np.count_nonzero(np.diff(lanes))), len(passed))
+    return HighwayEpisode(
+        policy,
+        int(seed),
+        len(speeds),
+        bool(u.vehicle.crashed),
+        int(off),
+        float(np.mean(speeds)),
+        float(u.vehicle.position[0]) - x0,
+        int(np.count_nonzero(np.diff(lanes))),
+        len(passed),
+    )
 
 
-def evaluate_highway(seeds=range(20), *, duration_s: float = 40.0, policies=("mpc", "idm"),
-                     settings: DriverSettings | None = None, **env_config) -> dict:
+def evaluate_highway(
+    seeds=range(20),
+    *,
+    duration_s: float = 40.0,
+    policies=("mpc", "idm"),
+    settings: DriverSettings | None = None,
+    **env_config,
+) -> dict:
     """highway-v0 (highway-env's default traffic unless ``env_config`` says otherwise) for each
     seed and policy (see :func:`highway_episode`): ``{policy: {"episodes": [...],
     "crashes", "off_road" (episodes with an off-road step), "mean_speed_mps" (over the
@@ -107,11 +127,14 @@ def evaluate_highway(seeds=range(20), *, duration_s: float = 40.0, policies=("mp
         env = gym.make("highway-v0", config=highway_config(duration_s=duration_s, **env_config))
         eps = [highway_episode(env, seed, policy, settings) for seed in seeds]
         env.close()
-        out[policy] = {"episodes": eps, "crashes": sum(e.crashed for e in eps),
-                       "off_road": sum(e.off_road_steps > 0 for e in eps),
-                       "mean_speed_mps": float(np.mean([e.mean_speed_mps for e in eps])),
-                       "lane_changes": sum(e.lane_changes for e in eps),
-                       "overtakes": sum(e.overtakes for e in eps)}
+        out[policy] = {
+            "episodes": eps,
+            "crashes": sum(e.crashed for e in eps),
+            "off_road": sum(e.off_road_steps > 0 for e in eps),
+            "mean_speed_mps": float(np.mean([e.mean_speed_mps for e in eps])),
+            "lane_changes": sum(e.lane_changes for e in eps),
+            "overtakes": sum(e.overtakes for e in eps),
+        }
     return out
 
 
@@ -120,7 +143,9 @@ if __name__ == "__main__":  # python -m mpcdrive.adapters.highway_eval: the 20-s
 
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
     for name, res in evaluate_highway().items():
-        print(f"{name}: {res['crashes']} crashes, {res['off_road']} off road, mean speed "
-              f"{res['mean_speed_mps']:.2f} m/s, {res['lane_changes']} lane changes, {res['overtakes']} overtakes")
+        print(
+            f"{name}: {res['crashes']} crashes, {res['off_road']} off road, mean speed "
+            f"{res['mean_speed_mps']:.2f} m/s, {res['lane_changes']} lane changes, {res['overtakes']} overtakes"
+        )
         for e in res["episodes"]:
             print("   ", e)

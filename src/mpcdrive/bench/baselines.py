@@ -81,10 +81,14 @@ class CvxpyRebuildMpc:
             ok = prob.status in ("optimal", "optimal_inaccurate") and U.value is not None
         except cp.error.SolverError:
             ok = False
-        res = SolveResult(STATUS_OK if ok else STATUS_FAILED,
-                          X.value if ok else np.full((N + 1, nx), np.nan),
-                          U.value if ok else np.full((N, nu), np.nan),
-                          float(prob.value) if ok else float("nan"), 0, time.perf_counter() - t0)
+        res = SolveResult(
+            STATUS_OK if ok else STATUS_FAILED,
+            X.value if ok else np.full((N + 1, nx), np.nan),
+            U.value if ok else np.full((N, nu), np.nan),
+            float(prob.value) if ok else float("nan"),
+            0,
+            time.perf_counter() - t0,
+        )
         return self.core.finish(d, warm, res, t0)
 
 
@@ -100,8 +104,11 @@ class CasadiIpoptMpc:
         N, nx, nu, dt = self.N, self.nx, self.nu, pb.dt_s
         ns = SimpleNamespace(cos=ca.cos, sin=ca.sin, tan=ca.tan, arctan=ca.atan, sqrt=ca.sqrt)
         xs, us = ca.SX.sym("x", nx), ca.SX.sym("u", nu)
-        f = ca.Function("f", [xs, us], [ca.vertcat(*prob.model.f_components([xs[i] for i in range(nx)],
-                                                                          [us[i] for i in range(nu)], ns))])
+        f = ca.Function(
+            "f",
+            [xs, us],
+            [ca.vertcat(*prob.model.f_components([xs[i] for i in range(nx)], [us[i] for i in range(nu)], ns))],
+        )
         k1 = f(xs, us)
         k2 = f(xs + dt / 2 * k1, us)
         k3 = f(xs + dt / 2 * k2, us)
@@ -212,12 +219,19 @@ class CasadiIpoptMpc:
             sol = opti.solve()
             Xv = np.asarray(sol.value(self.X)).reshape(self.nx, -1).T
             Uv = np.asarray(sol.value(self.U)).reshape(self.nu, -1).T
-            res = SolveResult(STATUS_OK, Xv, Uv, float(sol.value(opti.f)),
-                              int(sol.stats()["iter_count"]), time.perf_counter() - t0)
+            res = SolveResult(
+                STATUS_OK, Xv, Uv, float(sol.value(opti.f)), int(sol.stats()["iter_count"]), time.perf_counter() - t0
+            )
         except RuntimeError:
             nan = float("nan")
-            res = SolveResult(STATUS_FAILED, np.full((self.N + 1, self.nx), nan), np.full((self.N, self.nu), nan),
-                              nan, 0, time.perf_counter() - t0)
+            res = SolveResult(
+                STATUS_FAILED,
+                np.full((self.N + 1, self.nx), nan),
+                np.full((self.N, self.nu), nan),
+                nan,
+                0,
+                time.perf_counter() - t0,
+            )
         return self.core.finish(d, warm, res, t0)
 
 

@@ -24,8 +24,12 @@ HORIZONS = (10, 20, 30, 50, 100)
 OBSTACLE_COUNTS = (0, 1, 2, 5, 10, 20)
 
 
-def horizon_sweep(horizons: Sequence[int] = HORIZONS, steps: int = 300, backends: Sequence[str] = BACKENDS,
-                  log: Callable[[str], None] = lambda m: None) -> dict:
+def horizon_sweep(
+    horizons: Sequence[int] = HORIZONS,
+    steps: int = 300,
+    backends: Sequence[str] = BACKENDS,
+    log: Callable[[str], None] = lambda m: None,
+) -> dict:
     """``{N: {backend: figures}}``: P1 with horizon N, each backend timed on the same closed loop."""
     out: dict[int, dict] = {}
     for N in horizons:
@@ -38,8 +42,12 @@ def horizon_sweep(horizons: Sequence[int] = HORIZONS, steps: int = 300, backends
     return out
 
 
-def obstacle_sweep(counts: Sequence[int] = OBSTACLE_COUNTS, steps: int = 1000, backends: Sequence[str] = BACKENDS,
-                   log: Callable[[str], None] = lambda m: None) -> dict:
+def obstacle_sweep(
+    counts: Sequence[int] = OBSTACLE_COUNTS,
+    steps: int = 1000,
+    backends: Sequence[str] = BACKENDS,
+    log: Callable[[str], None] = lambda m: None,
+) -> dict:
     """``{n: {backend: figures}}``: P3 with n obstacles (:func:`~mpcdrive.bench.problems.p3_obstacles`),
     each backend timed on the same closed loop.
 
@@ -69,8 +77,11 @@ def obstacle_sweep(counts: Sequence[int] = OBSTACLE_COUNTS, steps: int = 1000, b
                 told.add(fallback)
                 log(f"{backend}: {fallback} (recorded in the sweep's 'fallback' field)")
             log(f"P3 with {n} obstacle(s): {backend} (runs {ctrl.backend_name}), {steps} steps")
-            out[int(n)][backend] = {**time_closed_loop(ctrl, prob, steps), "backend": ctrl.backend_name,
-                                    "fallback": fallback}
+            out[int(n)][backend] = {
+                **time_closed_loop(ctrl, prob, steps),
+                "backend": ctrl.backend_name,
+                "fallback": fallback,
+            }
     return out
 
 
@@ -163,5 +174,8 @@ def step_allocations(backend: str, steps: int = 200) -> dict:
         cur, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()
-    return {"peak_extra_bytes": int(peak - base), "retained_bytes_per_step": max(0.0, (cur - base) / steps),
-            "backend": ctrl.backend_name}
+    return {
+        "peak_extra_bytes": int(peak - base),
+        "retained_bytes_per_step": max(0.0, (cur - base) / steps),
+        "backend": ctrl.backend_name,
+    }

@@ -39,8 +39,15 @@ class BenchProblem:
     def controller(self, **config_changes) -> LtvMpc:
         """mpcdrive's controller for this problem (config fields may be overridden)."""
         cfg = replace(self.config, **config_changes) if config_changes else self.config
-        return LtvMpc(self.model, self.path, self.problem, cfg, obstacles=self.obstacles,
-                      avoidance=self.avoidance, footprint=self.footprint)
+        return LtvMpc(
+            self.model,
+            self.path,
+            self.problem,
+            cfg,
+            obstacles=self.obstacles,
+            avoidance=self.avoidance,
+            footprint=self.footprint,
+        )
 
 
 def p1(N: int = 30) -> BenchProblem:
@@ -49,9 +56,15 @@ def p1(N: int = 30) -> BenchProblem:
     model = KinematicBicycle3(1.0)
     steer = math.radians(60.0)
     pb = MpcProblem(3, 1, N, 0.01, Q=np.ones(3), R=1.0, u_min=-steer, u_max=steer)
-    return BenchProblem("P1" if N == 30 else f"P1-N{N}", f"straight line, 3 states / 1 input, N = {N}", model,
-                        StraightPath([1.0, 0.0], [11.0, 0.0]), pb, MpcConfig(v_ref_mps=1.0),
-                        np.array([2.0, -2.0, math.pi / 2]))
+    return BenchProblem(
+        "P1" if N == 30 else f"P1-N{N}",
+        f"straight line, 3 states / 1 input, N = {N}",
+        model,
+        StraightPath([1.0, 0.0], [11.0, 0.0]),
+        pb,
+        MpcConfig(v_ref_mps=1.0),
+        np.array([2.0, -2.0, math.pi / 2]),
+    )
 
 
 def p2() -> BenchProblem:
@@ -59,12 +72,27 @@ def p2() -> BenchProblem:
     R = 0.01 I, N = 30, v in [0, 2] m/s (the paper's Experiment 4)."""
     model = KinematicBicycle4()
     steer = math.radians(60.0)
-    pb = MpcProblem(4, 2, 30, 0.01, Q=[20.0, 20.0, 20.0, 30.0], R=0.01,
-                    u_min=[-steer, -np.inf], u_max=[steer, np.inf],
-                    x_min=[-np.inf, -np.inf, -np.inf, 0.0], x_max=[np.inf, np.inf, np.inf, 2.0])
-    return BenchProblem("P2", "circle r = 1.5 m with speed, 4 states / 2 inputs, N = 30", model,
-                        CirclePath(radius_m=1.5), pb, MpcConfig(v_ref_mps=1.0),
-                        np.array([0.0, 1.6, math.pi, 1.0]))
+    pb = MpcProblem(
+        4,
+        2,
+        30,
+        0.01,
+        Q=[20.0, 20.0, 20.0, 30.0],
+        R=0.01,
+        u_min=[-steer, -np.inf],
+        u_max=[steer, np.inf],
+        x_min=[-np.inf, -np.inf, -np.inf, 0.0],
+        x_max=[np.inf, np.inf, np.inf, 2.0],
+    )
+    return BenchProblem(
+        "P2",
+        "circle r = 1.5 m with speed, 4 states / 2 inputs, N = 30",
+        model,
+        CirclePath(radius_m=1.5),
+        pb,
+        MpcConfig(v_ref_mps=1.0),
+        np.array([0.0, 1.6, math.pi, 1.0]),
+    )
 
 
 def p3() -> BenchProblem:
@@ -75,9 +103,17 @@ def p3() -> BenchProblem:
     pb = replace(base.problem, road=Road.constant(3.5))
     obstacle = Obstacle(Circle(0.25), (5.0, 0.0, 0.0), name="cone")
     av = AvoidanceConfig("gaussian", weight=10.0, sigma_m=(0.5, 0.5))
-    return BenchProblem("P3", "P1 + obstacle with Gaussian cost, lane |y| <= 1.75 m", base.model,
-                        StraightPath([1.0, 0.0], [11.0, 0.0]), pb, base.config, base.x0,
-                        obstacles=(obstacle,), avoidance=av)
+    return BenchProblem(
+        "P3",
+        "P1 + obstacle with Gaussian cost, lane |y| <= 1.75 m",
+        base.model,
+        StraightPath([1.0, 0.0], [11.0, 0.0]),
+        pb,
+        base.config,
+        base.x0,
+        obstacles=(obstacle,),
+        avoidance=av,
+    )
 
 
 #: obstacle sweep geometry: centres spread over x in [3, 10] m, alternating this far right / left
@@ -108,8 +144,13 @@ def p3_obstacles(n: int) -> BenchProblem:
         raise ValueError(f"the obstacle count must be >= 0, got {n}")
     base = p3()
     if n == 0:
-        return replace(base, name="P3-0obs", description="P1 with P3's lane |y| <= 1.75 m, no obstacles",
-                       obstacles=(), avoidance=None)
+        return replace(
+            base,
+            name="P3-0obs",
+            description="P1 with P3's lane |y| <= 1.75 m, no obstacles",
+            obstacles=(),
+            avoidance=None,
+        )
     if n == 1:
         poses = [base.obstacles[0].pose]
     else:
@@ -117,8 +158,13 @@ def p3_obstacles(n: int) -> BenchProblem:
         poses = [(float(x), OBSTACLE_OFFSET_M * (1.0 if i % 2 else -1.0), 0.0) for i, x in enumerate(xs)]
     obstacles = tuple(Obstacle(Circle(0.25), pose, name=f"cone{i}") for i, pose in enumerate(poses))
     av = replace(base.avoidance, max_obstacles=n, influence_m=OBSTACLE_INFLUENCE_M)
-    return replace(base, name=f"P3-{n}obs", obstacles=obstacles, avoidance=av,
-                   description=f"P3 with {n} obstacle(s) with Gaussian cost, lane |y| <= 1.75 m")
+    return replace(
+        base,
+        name=f"P3-{n}obs",
+        obstacles=obstacles,
+        avoidance=av,
+        description=f"P3 with {n} obstacle(s) with Gaussian cost, lane |y| <= 1.75 m",
+    )
 
 
 #: P4 geometry and traffic: lanes [m], road length [m], cars [m], their speed range [m/s], seed
@@ -186,8 +232,10 @@ def p4_traffic(seed: int = P4_SEED) -> tuple[Obstacle, ...]:
     lanes = ((-P4_LANE_WIDTH_M, "right", right), (P4_LANE_WIDTH_M, "left", left), (0.0, "ego-lane", ahead))
     cars = [Obstacle(shape, (lead_x, 0.0, 0.0), ConstantVelocity(P4_LEAD_SPEED_MPS, 0.0), name="lead")]
     for y, lane, entries in lanes:
-        cars += [Obstacle(shape, (x, y, 0.0), ConstantVelocity(v, 0.0), name=f"{lane}{i}")
-                 for i, (x, v) in enumerate(entries)]
+        cars += [
+            Obstacle(shape, (x, y, 0.0), ConstantVelocity(v, 0.0), name=f"{lane}{i}")
+            for i, (x, v) in enumerate(entries)
+        ]
     return tuple(cars)
 
 
@@ -203,18 +251,38 @@ def p4() -> BenchProblem:
     pre = get_preset("commonroad_bmw_320i")
     model = KinematicBicycle4(KinematicParams(pre.params.lf_m, pre.params.lr_m))
     dt = 0.1
-    pb = MpcProblem(4, 2, 30, dt, Q=[1.0, 1.0, 2.0, 1.0], R=[10.0, 0.1], Rc=[100.0, 1.0],
-                    u_min=[-pre.max_steer_rad, -6.0], u_max=[pre.max_steer_rad, 3.0],
-                    du_max_per_s=[pre.max_steer_rate_rad_s, np.inf],
-                    x_min=[-np.inf, -np.inf, -np.inf, 0.0], x_max=[np.inf, np.inf, np.inf, 25.0],
-                    road=Road.constant(3 * P4_LANE_WIDTH_M))
+    pb = MpcProblem(
+        4,
+        2,
+        30,
+        dt,
+        Q=[1.0, 1.0, 2.0, 1.0],
+        R=[10.0, 0.1],
+        Rc=[100.0, 1.0],
+        u_min=[-pre.max_steer_rad, -6.0],
+        u_max=[pre.max_steer_rad, 3.0],
+        du_max_per_s=[pre.max_steer_rate_rad_s, np.inf],
+        x_min=[-np.inf, -np.inf, -np.inf, 0.0],
+        x_max=[np.inf, np.inf, np.inf, 25.0],
+        road=Road.constant(3 * P4_LANE_WIDTH_M),
+    )
     # the projection window covers the distance driven per step, and more
     cfg = MpcConfig(v_ref_mps=P4_EGO_SPEED_MPS, projection_window_m=3.0 * 25.0 * dt)
     av = AvoidanceConfig("hard", margin_m=0.3, influence_m=70.0, max_obstacles=5)
-    return BenchProblem("P4", "three-lane road, 20 cars, kinematic4 BMW 320i at 20 m/s, N = 30, dt = 0.1 s",
-                        model, StraightPath([0.0, 0.0], [P4_ROAD_LENGTH_M, 0.0]), pb, cfg,
-                        np.array([P4_EGO_X_M, 0.0, 0.0, P4_EGO_SPEED_MPS]), dt_s=dt, obstacles=p4_traffic(),
-                        avoidance=av, footprint=Footprint(pre.length_m, pre.width_m, n_discs=3), steps=300)
+    return BenchProblem(
+        "P4",
+        "three-lane road, 20 cars, kinematic4 BMW 320i at 20 m/s, N = 30, dt = 0.1 s",
+        model,
+        StraightPath([0.0, 0.0], [P4_ROAD_LENGTH_M, 0.0]),
+        pb,
+        cfg,
+        np.array([P4_EGO_X_M, 0.0, 0.0, P4_EGO_SPEED_MPS]),
+        dt_s=dt,
+        obstacles=p4_traffic(),
+        avoidance=av,
+        footprint=Footprint(pre.length_m, pre.width_m, n_discs=3),
+        steps=300,
+    )
 
 
 PROBLEMS = {"P1": p1, "P2": p2, "P3": p3, "P4": p4}

@@ -57,7 +57,7 @@ def time_closed_loop(controller, prob: BenchProblem, steps: int) -> dict:
             collisions += d <= 0.0
             min_clear = d if min_clear is None else min(min_clear, d)
         x = plant.step(x, out.u, prob.dt_s)
-    t = times[min(WARMUP_STEPS, steps - 1):] * 1e6
+    t = times[min(WARMUP_STEPS, steps - 1) :] * 1e6
     road = prob.problem.road
     excess = None
     if road is not None:  # the road's own rule, as a run's metrics measure it
@@ -68,7 +68,7 @@ def time_closed_loop(controller, prob: BenchProblem, steps: int) -> dict:
         "p99_us": float(np.percentile(t, 99)),
         "max_us": float(t.max()),
         "steps": int(steps),
-        "rms_lateral_error_m": float(np.sqrt(np.mean(ey ** 2))),
+        "rms_lateral_error_m": float(np.sqrt(np.mean(ey**2))),
         "solver_failures": int(failures),
         "min_obstacle_clearance_m": min_clear,
         "collision_steps": int(collisions),
@@ -79,12 +79,25 @@ def time_closed_loop(controller, prob: BenchProblem, steps: int) -> dict:
 
 def make_controller(prob: BenchProblem, backend: str = DEFAULT_BACKEND):
     """mpcdrive's controller of a bench problem with ``backend`` (``osqp`` or ``fast``)."""
-    return make_mpc(prob.model, prob.path, prob.problem, prob.config, backend, obstacles=prob.obstacles,
-                    avoidance=prob.avoidance, footprint=prob.footprint)
+    return make_mpc(
+        prob.model,
+        prob.path,
+        prob.problem,
+        prob.config,
+        backend,
+        obstacles=prob.obstacles,
+        avoidance=prob.avoidance,
+        footprint=prob.footprint,
+    )
 
 
-def run_bench(names, baselines: bool = False, steps: int = 1000, baseline_steps: int = 200,
-              log: Callable[[str], None] = lambda m: None) -> dict:
+def run_bench(
+    names,
+    baselines: bool = False,
+    steps: int = 1000,
+    baseline_steps: int = 200,
+    log: Callable[[str], None] = lambda m: None,
+) -> dict:
     """``{problem: {implementation: figures}}`` for the named problems (docs/benchmarks.md).
 
     A problem with its own closed-loop length (P4: 300 steps) runs at most that many steps
@@ -104,14 +117,22 @@ def run_bench(names, baselines: bool = False, steps: int = 1000, baseline_steps:
             res[f"mpcdrive_{backend}"] = {**time_closed_loop(ctrl, prob, steps_p), "backend": ctrl.backend_name}
         res = {"mpcdrive": dict(res[f"mpcdrive_{BENCH_HEADLINE}"]), **res}
         if prob.avoidance is not None and prob.avoidance.uses_cost:
-            converged = replace(prob, config=replace(prob.config, sqp_max_iterations=SQP_MAX_ITERATIONS,
-                                                     sqp_tol=SQP_TOL, sqp_max_time_s=SQP_MAX_TIME_S))
+            converged = replace(
+                prob,
+                config=replace(
+                    prob.config, sqp_max_iterations=SQP_MAX_ITERATIONS, sqp_tol=SQP_TOL, sqp_max_time_s=SQP_MAX_TIME_S
+                ),
+            )
             for backend in BACKENDS:
-                log(f"{name}: mpcdrive ({backend} backend), SQP to convergence (<= {SQP_MAX_ITERATIONS} QPs, "
-                    f"{SQP_MAX_TIME_S * 1e3:g} ms cap), {steps_p} steps")
+                log(
+                    f"{name}: mpcdrive ({backend} backend), SQP to convergence (<= {SQP_MAX_ITERATIONS} QPs, "
+                    f"{SQP_MAX_TIME_S * 1e3:g} ms cap), {steps_p} steps"
+                )
                 ctrl = make_controller(converged, backend)
-                res[f"mpcdrive_sqp_converged_{backend}"] = {**time_closed_loop(ctrl, converged, steps_p),
-                                                            "backend": ctrl.backend_name}
+                res[f"mpcdrive_sqp_converged_{backend}"] = {
+                    **time_closed_loop(ctrl, converged, steps_p),
+                    "backend": ctrl.backend_name,
+                }
             res["mpcdrive_sqp_converged"] = dict(res[f"mpcdrive_sqp_converged_{BENCH_HEADLINE}"])
         if baselines:
             from .baselines import available_baselines
@@ -128,13 +149,17 @@ def run_bench(names, baselines: bool = False, steps: int = 1000, baseline_steps:
 def format_table(results: dict) -> str:
     """A plain-text table of the bench results; with obstacles, the least clearance [m] and the
     steps in collision of each implementation (``—`` without obstacles)."""
-    lines = [f"{'problem':<8}{'implementation':<30}{'p50 [us]':>12}{'p99 [us]':>12}{'max [us]':>12}{'steps':>8}"
-             f"{'rms e_y [m]':>14}{'min clear [m]':>15}{'collisions':>12}"]
+    lines = [
+        f"{'problem':<8}{'implementation':<30}{'p50 [us]':>12}{'p99 [us]':>12}{'max [us]':>12}{'steps':>8}"
+        f"{'rms e_y [m]':>14}{'min clear [m]':>15}{'collisions':>12}"
+    ]
     for prob, impls in results.items():
         for impl, r in impls.items():
             clear = r.get("min_obstacle_clearance_m")
             hits = r.get("collision_steps") if clear is not None else None
-            lines.append(f"{prob:<8}{impl:<30}{r['p50_us']:>12.1f}{r['p99_us']:>12.1f}{r['max_us']:>12.1f}"
-                         f"{r['steps']:>8d}{r['rms_lateral_error_m']:>14.5f}"
-                         f"{'—' if clear is None else f'{clear:.3f}':>15}{'—' if hits is None else hits:>12}")
+            lines.append(
+                f"{prob:<8}{impl:<30}{r['p50_us']:>12.1f}{r['p99_us']:>12.1f}{r['max_us']:>12.1f}"
+                f"{r['steps']:>8d}{r['rms_lateral_error_m']:>14.5f}"
+                f"{'—' if clear is None else f'{clear:.3f}':>15}{'—' if hits is None else hits:>12}"
+            )
     return "\n".join(lines)

@@ -25,7 +25,8 @@ class StateAdapter:
         if tuple(controller_model.input_names) != tuple(plant_model.input_names):
             raise ValueError(
                 f"controller model inputs {controller_model.input_names} differ from the plant's "
-                f"{plant_model.input_names}; a state adapter cannot map inputs")
+                f"{plant_model.input_names}; a state adapter cannot map inputs"
+            )
         self.inner = inner
         self.name = getattr(inner, "name", type(inner).__name__)
         self.nx, self.nu, self.N = plant_model.nx, inner.nu, inner.N

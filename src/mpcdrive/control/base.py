@@ -66,8 +66,9 @@ def checked_road(current: Road | None, road: Road) -> Road:
     """``road`` for a ``set_road`` call: a ValueError when the controller was built without a
     road (its QP has no road rows) or ``road`` is not a Road with the same knots."""
     if current is None:
-        raise ValueError("this controller was built without a road, so its QP has no road rows: "
-                         "build it with MpcProblem(road=...)")
+        raise ValueError(
+            "this controller was built without a road, so its QP has no road rows: build it with MpcProblem(road=...)"
+        )
     if not isinstance(road, Road):
         raise ValueError(f"road must be a mpcdrive.scene.road.Road, got {type(road).__name__}")
     if road.s_m.shape != current.s_m.shape or road.period_m != current.period_m:
@@ -80,8 +81,10 @@ def checked_obstacles(avoidance: A | None, obstacles) -> tuple[A, tuple[Obstacle
     :class:`Obstacle`; a ValueError for a controller built without obstacles (``avoidance`` None:
     its QP has no obstacle terms) or for an item that is not an Obstacle."""
     if avoidance is None:
-        raise ValueError("this controller was built without obstacles, so its QP has no obstacle "
-                         "terms: pass obstacles (and avoidance) at construction")
+        raise ValueError(
+            "this controller was built without obstacles, so its QP has no obstacle "
+            "terms: pass obstacles (and avoidance) at construction"
+        )
     obstacles = tuple(obstacles)
     for j, ob in enumerate(obstacles):
         if not isinstance(ob, Obstacle):

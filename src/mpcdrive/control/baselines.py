@@ -46,9 +46,19 @@ class BaselineLimits:
 class _GeometricTracker:
     name = "geometric"
 
-    def __init__(self, model: VehicleModel, path: ReferencePath, dt_s: float, speed_ref, limits: BaselineLimits,
-                 *, wheelbase_m: float, lr_m: float, speed_gain_per_s: float = 2.0,
-                 projection_window_m: float = 2.0):
+    def __init__(
+        self,
+        model: VehicleModel,
+        path: ReferencePath,
+        dt_s: float,
+        speed_ref,
+        limits: BaselineLimits,
+        *,
+        wheelbase_m: float,
+        lr_m: float,
+        speed_gain_per_s: float = 2.0,
+        projection_window_m: float = 2.0,
+    ):
         if not (math.isfinite(dt_s) and dt_s > 0):
             raise ValueError(f"dt_s must be positive, got {dt_s}")
         if not callable(getattr(speed_ref, "speed", None)):
@@ -92,9 +102,18 @@ class _GeometricTracker:
         pose = np.array([[*self.path.position(s0), float(self.path.heading(s0))]])
         # the path point as the logged reference (no steady-state solve: it is for the log only)
         xr, _ = self.model.reference(pose, np.array([float(self.path.curvature(s0))]), np.array([v_ref]), False)
-        return ControlOutput(u=u, status=STATUS_OK, fallback="", solve_time_s=time.perf_counter() - t0,
-                             s_m=float(s0), e_y_m=float(e_y), e_psi_rad=float(e_psi), X_pred=x[None, :].copy(),
-                             refs=xr, warm=WarmStart(s_m=float(s0), u_prev=u.copy()))
+        return ControlOutput(
+            u=u,
+            status=STATUS_OK,
+            fallback="",
+            solve_time_s=time.perf_counter() - t0,
+            s_m=float(s0),
+            e_y_m=float(e_y),
+            e_psi_rad=float(e_psi),
+            X_pred=x[None, :].copy(),
+            refs=xr,
+            warm=WarmStart(s_m=float(s0), u_prev=u.copy()),
+        )
 
 
 class PurePursuit(_GeometricTracker):
@@ -127,8 +146,9 @@ class Stanley(_GeometricTracker):
 
     name = "stanley"
 
-    def __init__(self, *args, gain: float = 2.5, softening_mps: float = 1.0,
-                 feedforward_model: VehicleModel | None = None, **kw):
+    def __init__(
+        self, *args, gain: float = 2.5, softening_mps: float = 1.0, feedforward_model: VehicleModel | None = None, **kw
+    ):
         super().__init__(*args, **kw)
         if not (gain > 0 and softening_mps > 0):
             raise ValueError("gain and softening_mps must be positive")

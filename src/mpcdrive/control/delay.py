@@ -72,8 +72,18 @@ class DelayCompensator:
     substeps : integration steps per control period for the prediction.
     """
 
-    def __init__(self, inner: Controller, model: VehicleModel, actuator: DelayedActuator[Any], dt_s: float, path: ReferencePath,
-                 *, method: Method = "rk4", substeps: int = 5, projection_window_m: float = 2.0):
+    def __init__(
+        self,
+        inner: Controller,
+        model: VehicleModel,
+        actuator: DelayedActuator[Any],
+        dt_s: float,
+        path: ReferencePath,
+        *,
+        method: Method = "rk4",
+        substeps: int = 5,
+        projection_window_m: float = 2.0,
+    ):
         if (inner.nx, inner.nu) != (model.nx, model.nu):
             raise ValueError("the delay compensator's model must match the wrapped controller's (nx, nu)")
         if not (math.isfinite(dt_s) and dt_s > 0):
@@ -90,8 +100,16 @@ class DelayCompensator:
     def initial_warm(self, x0) -> DelayWarmStart:
         w = self.inner.initial_warm(x0)
         pending = tuple(np.array(w.u_prev[1:], dtype=float) for _ in range(self.n_hold))
-        return DelayWarmStart(s_m=w.s_m, u_prev=w.u_prev, X=w.X, U=w.U, inner=w,
-                              actuator=self.actuator.start(0.0), t_s=0.0, pending=pending)
+        return DelayWarmStart(
+            s_m=w.s_m,
+            u_prev=w.u_prev,
+            X=w.X,
+            U=w.U,
+            inner=w,
+            actuator=self.actuator.start(0.0),
+            t_s=0.0,
+            pending=pending,
+        )
 
     def predict(self, x, warm: DelayWarmStart) -> np.ndarray:
         """State (nx,) expected when a command sent now starts to act (after the dead time),
@@ -116,8 +134,10 @@ class DelayCompensator:
     def step(self, x, warm: DelayWarmStart) -> ControlOutput:
         x = np.asarray(x, float)
         if not isinstance(warm, DelayWarmStart) or warm.inner is None or warm.actuator is None:
-            raise ValueError("warm must come from this DelayCompensator (initial_warm or a step's warm): "
-                             "it has no inner warm start or actuator estimate")
+            raise ValueError(
+                "warm must come from this DelayCompensator (initial_warm or a step's warm): "
+                "it has no inner warm start or actuator estimate"
+            )
         x_pred = self.predict(x, warm)
         out = self.inner.step(x_pred, warm.inner)
         # the actuator estimate after this step's command, at the next step's time
@@ -132,6 +152,14 @@ class DelayCompensator:
         if self.n_hold:  # send the held-back inputs planned for now, hold the new ones
             u[1:] = pending[0]
             pending = pending[1:] + (np.array(out.u[1:], dtype=float),)
-        new_warm = DelayWarmStart(s_m=fr.s_m, u_prev=iw.u_prev, X=iw.X, U=iw.U, inner=iw, actuator=act,
-                                  t_s=warm.t_s + self.dt_s, pending=pending)
+        new_warm = DelayWarmStart(
+            s_m=fr.s_m,
+            u_prev=iw.u_prev,
+            X=iw.X,
+            U=iw.U,
+            inner=iw,
+            actuator=act,
+            t_s=warm.t_s + self.dt_s,
+            pending=pending,
+        )
         return dataclasses.replace(out, u=u, s_m=fr.s_m, e_y_m=fr.e_y_m, e_psi_rad=fr.e_psi_rad, warm=new_warm)

@@ -20,9 +20,18 @@ class FastPathUnavailable(UserWarning):
     """The fast backend was asked for but does not cover the problem; OSQP is used instead."""
 
 
-def make_mpc(model, path: ReferencePath, problem: MpcProblem, config: MpcConfig = MpcConfig(),
-             backend: Backend = DEFAULT_BACKEND, osqp_settings: OsqpSettings = OsqpSettings(),
-             fast_settings=None, obstacles=(), avoidance=None, footprint=None):
+def make_mpc(
+    model,
+    path: ReferencePath,
+    problem: MpcProblem,
+    config: MpcConfig = MpcConfig(),
+    backend: Backend = DEFAULT_BACKEND,
+    osqp_settings: OsqpSettings = OsqpSettings(),
+    fast_settings=None,
+    obstacles=(),
+    avoidance=None,
+    footprint=None,
+):
     """An LTV-MPC controller solving ``problem`` with ``backend``.
 
     ``osqp``: :class:`~mpcdrive.control.mpc.LtvMpc` (sparse QP updated in place, OSQP), the
@@ -43,7 +52,6 @@ def make_mpc(model, path: ReferencePath, problem: MpcProblem, config: MpcConfig 
         reason = fast_unsupported_reason(model, path, problem, config, settings, obstacles, avoidance)
         if reason is None:
             return FastLtvMpc(model, path, problem, config, settings, obstacles, avoidance, fp)
-        warnings.warn(f"fast backend not used: {reason}; using the OSQP controller", FastPathUnavailable,
-                      stacklevel=2)
+        warnings.warn(f"fast backend not used: {reason}; using the OSQP controller", FastPathUnavailable, stacklevel=2)
     kw = {} if footprint is None else {"footprint": footprint}
     return LtvMpc(model, path, problem, config, osqp_settings, obstacles=obstacles, avoidance=avoidance, **kw)

@@ -54,6 +54,7 @@ from ..types import (  # noqa: F401  (the rung names are re-exported here, their
     SolveResult,
     WarmStart,
 )
+
 #: rungs that always yield a command
 TERMINAL_FALLBACKS: tuple[str, ...] = (FALLBACK_BRAKE, FALLBACK_HOLD)
 DEFAULT_LADDER: tuple[str, ...] = (FALLBACK_RELAX, FALLBACK_SHIFTED_PLAN, FALLBACK_BRAKE)
@@ -103,13 +104,18 @@ class FallbackConfig:
     def __post_init__(self):
         object.__setattr__(self, "ladder", check_ladder(self.ladder))
         if self.brake_decel_mps2 is not None and not (
-                isinstance(self.brake_decel_mps2, (int, float)) and math.isfinite(self.brake_decel_mps2)
-                and self.brake_decel_mps2 > 0):
+            isinstance(self.brake_decel_mps2, (int, float))
+            and math.isfinite(self.brake_decel_mps2)
+            and self.brake_decel_mps2 > 0
+        ):
             raise ValueError(f"brake_decel_mps2 must be a positive finite number, got {self.brake_decel_mps2!r}")
         if self.brake_steering not in ("hold", "straighten"):
             raise ValueError(f"brake_steering must be 'hold' or 'straighten', got {self.brake_steering!r}")
-        if not (isinstance(self.relax_slack_factor, (int, float)) and math.isfinite(self.relax_slack_factor)
-                and self.relax_slack_factor >= 1):
+        if not (
+            isinstance(self.relax_slack_factor, (int, float))
+            and math.isfinite(self.relax_slack_factor)
+            and self.relax_slack_factor >= 1
+        ):
             raise ValueError(f"relax_slack_factor must be a finite number >= 1, got {self.relax_slack_factor!r}")
 
 
@@ -145,8 +151,15 @@ class FallbackLadder:
     ``relax``, the linearization: :class:`~mpcdrive.control.mpc.StepData`).
     """
 
-    def __init__(self, controller, config: FallbackConfig, relax=None, *, footprint: Footprint = Footprint(),
-                 road: Road | None = None):
+    def __init__(
+        self,
+        controller,
+        config: FallbackConfig,
+        relax=None,
+        *,
+        footprint: Footprint = Footprint(),
+        road: Road | None = None,
+    ):
         self.ctrl = controller
         self.config = config
         self._relax_fn = relax
@@ -200,8 +213,20 @@ class FallbackLadder:
             return u, dataclasses.replace(new_warm, u_prev=u), X
         qp, be = self.relax_qp, self.relax_backend
         assert qp is not None and be is not None  # built in __init__ for the relax rung without relax_fn
-        qp.update(d.x, d.Ad, d.Bd, d.c, d.xref, d.uref, warm.u_prev, d.lane_normal, d.lane_offset,
-                  d.lane_lo, d.lane_hi, d.lane_slopes)
+        qp.update(
+            d.x,
+            d.Ad,
+            d.Bd,
+            d.c,
+            d.xref,
+            d.uref,
+            warm.u_prev,
+            d.lane_normal,
+            d.lane_offset,
+            d.lane_lo,
+            d.lane_hi,
+            d.lane_slopes,
+        )
         # obstacles stay in the relaxed problem (their slacks keep it feasible)
         if d.rows_a is not None and qp.n_obs_rows:
             qp.set_obstacle_rows(d.rows_a, d.rows_b)

@@ -70,19 +70,145 @@ from ..solvers.dense_qp import STATUS_WORDS, single_nonzero_columns
 from ..types import ControlOutput, WarmStart
 from .base import TrackingWarmStart, checked_obstacles, checked_road
 from .fast_step import (  # the compiled step and the layout of its buffers
-    _control_step, _BAD_STATE, _I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH, _I_LIN, _I_METHOD, _I_HORIZON,
-    _I_FF, _I_LANE, _I_MCONST, _I_RATE0, _I_MAXITER, _I_GAMMA, _I_NZ, _I_RICCATI, _I_MQ, _I_OFORM,
-    _I_NOBS, _I_OMAX, _I_DETOUR, _I_OROWS, _I_PROFILE, _I_ACCEL, _NIP, _SIDE_NONE, _OBS_POTENTIAL,
-    _OBS_GAUSSIAN, MODE_NO_PLAN, MODE_SHIFTED_PLAN, MODE_ITERATE, STAGE_ALL, STAGE_LINEARIZE,
-    STAGE_SOLVE, _OB_X, _OB_Y, _OB_VX, _OB_VY, _OB_RB, _OB_OX, _OB_OY, _OB_WIN, _NOB, _W_FP, _W_MP,
-    _W_BND, _W_GEO, _W_WQ, _W_RM, _W_RC, _W_TABS, _W_TABXY, _W_TABH, _W_TABK, _W_C, _W_B, _W_REFS,
-    _W_XREF, _W_UREF, _W_XBAR, _W_UBAR, _W_F, _W_A, _W_BD, _W_CD, _W_LANEN, _W_LANEB, _W_XF, _W_P,
-    _W_LAM, _W_VB, _W_S, _W_T2, _W_GAM, _W_H, _W_G, _W_Z, _W_L, _W_J, _W_RQ, _W_D, _W_ZDIR, _W_R,
-    _W_UQ, _W_SQ, _W_ROWN, _W_LAMQ, _W_DW, _W_KG, _W_KF, _W_PA, _W_MG, _W_GG, _W_QV, _W_WE, _W_QT,
-    _W_OBS, _W_ODIST, _W_OPROJ, _W_SARR, _W_EREF, _W_ROWA, _W_ROWB, _W_LLO, _W_LHI, _W_XLIN,
-    _W_GSUM, _W_PROF, _W_VARR, _W_REFW, _W_RDS, _W_RDL, _W_RDR, _W_LDLO, _W_LDHI, _NW, _F_DT,
-    _F_VREF, _F_HSTEP, _F_WINDOW, _F_RMARGIN, _F_SLACK2, _F_SLACK1, _F_TOL, _F_OW, _F_OEPS, _F_OSX,
-    _F_OSY, _F_OINF, _F_OMARGIN, _F_HW, _F_HL, _F_RAMP, _F_OSLACK2, _F_OSLACK1, _F_BOFF, _F_RPERIOD,
+    _control_step,
+    _BAD_STATE,
+    _I_MODEL,
+    _I_NX,
+    _I_NU,
+    _I_N,
+    _I_PATH,
+    _I_LIN,
+    _I_METHOD,
+    _I_HORIZON,
+    _I_FF,
+    _I_LANE,
+    _I_MCONST,
+    _I_RATE0,
+    _I_MAXITER,
+    _I_GAMMA,
+    _I_NZ,
+    _I_RICCATI,
+    _I_MQ,
+    _I_OFORM,
+    _I_NOBS,
+    _I_OMAX,
+    _I_DETOUR,
+    _I_OROWS,
+    _I_PROFILE,
+    _I_ACCEL,
+    _NIP,
+    _SIDE_NONE,
+    _OBS_POTENTIAL,
+    _OBS_GAUSSIAN,
+    MODE_NO_PLAN,
+    MODE_SHIFTED_PLAN,
+    MODE_ITERATE,
+    STAGE_ALL,
+    STAGE_LINEARIZE,
+    STAGE_SOLVE,
+    _OB_X,
+    _OB_Y,
+    _OB_VX,
+    _OB_VY,
+    _OB_RB,
+    _OB_OX,
+    _OB_OY,
+    _OB_WIN,
+    _NOB,
+    _W_FP,
+    _W_MP,
+    _W_BND,
+    _W_GEO,
+    _W_WQ,
+    _W_RM,
+    _W_RC,
+    _W_TABS,
+    _W_TABXY,
+    _W_TABH,
+    _W_TABK,
+    _W_C,
+    _W_B,
+    _W_REFS,
+    _W_XREF,
+    _W_UREF,
+    _W_XBAR,
+    _W_UBAR,
+    _W_F,
+    _W_A,
+    _W_BD,
+    _W_CD,
+    _W_LANEN,
+    _W_LANEB,
+    _W_XF,
+    _W_P,
+    _W_LAM,
+    _W_VB,
+    _W_S,
+    _W_T2,
+    _W_GAM,
+    _W_H,
+    _W_G,
+    _W_Z,
+    _W_L,
+    _W_J,
+    _W_RQ,
+    _W_D,
+    _W_ZDIR,
+    _W_R,
+    _W_UQ,
+    _W_SQ,
+    _W_ROWN,
+    _W_LAMQ,
+    _W_DW,
+    _W_KG,
+    _W_KF,
+    _W_PA,
+    _W_MG,
+    _W_GG,
+    _W_QV,
+    _W_WE,
+    _W_QT,
+    _W_OBS,
+    _W_ODIST,
+    _W_OPROJ,
+    _W_SARR,
+    _W_EREF,
+    _W_ROWA,
+    _W_ROWB,
+    _W_LLO,
+    _W_LHI,
+    _W_XLIN,
+    _W_GSUM,
+    _W_PROF,
+    _W_VARR,
+    _W_REFW,
+    _W_RDS,
+    _W_RDL,
+    _W_RDR,
+    _W_LDLO,
+    _W_LDHI,
+    _NW,
+    _F_DT,
+    _F_VREF,
+    _F_HSTEP,
+    _F_WINDOW,
+    _F_RMARGIN,
+    _F_SLACK2,
+    _F_SLACK1,
+    _F_TOL,
+    _F_OW,
+    _F_OEPS,
+    _F_OSX,
+    _F_OSY,
+    _F_OINF,
+    _F_OMARGIN,
+    _F_HW,
+    _F_HL,
+    _F_RAMP,
+    _F_OSLACK2,
+    _F_OSLACK1,
+    _F_BOFF,
+    _F_RPERIOD,
     _NFP,
 )
 from .fallback import FALLBACK_HOLD, FALLBACK_RELAX, FallbackConfig, FallbackLadder, relaxed_problem
@@ -154,9 +280,15 @@ def _obstacle_table(obstacles) -> np.ndarray:
     return tab
 
 
-def fast_unsupported_reason(model, path: ReferencePath, problem: MpcProblem, config: MpcConfig = MpcConfig(),
-                            settings: FastSettings = FastSettings(), obstacles=(),
-                            avoidance: AvoidanceConfig | None = None) -> str | None:
+def fast_unsupported_reason(
+    model,
+    path: ReferencePath,
+    problem: MpcProblem,
+    config: MpcConfig = MpcConfig(),
+    settings: FastSettings = FastSettings(),
+    obstacles=(),
+    avoidance: AvoidanceConfig | None = None,
+) -> str | None:
     """Why the compiled step cannot solve this problem exactly as ``LtvMpc`` would, or None."""
     prof = config.speed_profile
     if prof is not None:
@@ -246,7 +378,8 @@ def _announce_compile() -> None:
         import logging
 
         logging.getLogger("mpcdrive").info(
-            "compiling the fast controller for this machine (once: numba caches it; about 40-100 s on 2 cores)")
+            "compiling the fast controller for this machine (once: numba caches it; about 40-100 s on 2 cores)"
+        )
 
 
 class FastLtvMpc(TrackingWarmStart):
@@ -268,9 +401,17 @@ class FastLtvMpc(TrackingWarmStart):
     name = "ltv-mpc-fast"
     backend_name = "fast"
 
-    def __init__(self, model, path: ReferencePath, problem: MpcProblem, config: MpcConfig = MpcConfig(),
-                 settings: FastSettings = FastSettings(), obstacles=(), avoidance: AvoidanceConfig | None = None,
-                 footprint: Footprint = Footprint()):
+    def __init__(
+        self,
+        model,
+        path: ReferencePath,
+        problem: MpcProblem,
+        config: MpcConfig = MpcConfig(),
+        settings: FastSettings = FastSettings(),
+        obstacles=(),
+        avoidance: AvoidanceConfig | None = None,
+        footprint: Footprint = Footprint(),
+    ):
         reason = fast_unsupported_reason(model, path, problem, config, settings, obstacles, avoidance)
         if reason is not None:
             raise ValueError(f"the fast backend cannot solve this problem: {reason}")
@@ -357,35 +498,87 @@ class FastLtvMpc(TrackingWarmStart):
         fp[_F_SLACK2], fp[_F_SLACK1] = problem.lane_slack_weight, problem.lane_slack_weight_l1
         fp[_F_OSLACK2], fp[_F_OSLACK1] = problem.obstacle_slack_weight, problem.obstacle_slack_weight_l1
         fp[_F_TOL] = settings.feasibility_tol
-        bnd = np.concatenate([problem.u_min, problem.u_max, problem.du_max_per_s * problem.dt_s,
-                              problem.x_min, problem.x_max])
+        bnd = np.concatenate(
+            [problem.u_min, problem.u_max, problem.du_max_per_s * problem.dt_s, problem.x_min, problem.x_max]
+        )
         nw = max(nx, nu)
         arrays: dict[int, np.ndarray | tuple[int, ...]] = {  # initial values, or the shape of a work array
-            _W_FP: fp, _W_MP: mp, _W_BND: bnd, _W_GEO: pa.geo,
-            _W_WQ: np.stack([problem.Q] * (N - 1) + [problem.QN]), _W_RM: problem.R, _W_RC: problem.Rc,
-            _W_TABS: pa.tab_s, _W_TABXY: pa.tab_xy, _W_TABH: pa.tab_h, _W_TABK: pa.tab_k, _W_C: C, _W_B: b_,
-            _W_REFS: (N + 1, 4), _W_XREF: (N + 1, nx), _W_UREF: (N, nu), _W_XBAR: (N, nx), _W_UBAR: (N, nu),
-            _W_F: (N, nx), _W_A: (N, nx, nx), _W_BD: (N, nx, nu), _W_CD: (N, nx), _W_LANEN: (N, 2),
-            _W_LANEB: (N,), _W_XF: (N + 1, nx), _W_P: (N + 1, nx, nx), _W_LAM: (N + 1, nx),
-            _W_VB: (N, nx, nu), _W_S: (2, nx, N * nu), _W_T2: (nx, nw),
+            _W_FP: fp,
+            _W_MP: mp,
+            _W_BND: bnd,
+            _W_GEO: pa.geo,
+            _W_WQ: np.stack([problem.Q] * (N - 1) + [problem.QN]),
+            _W_RM: problem.R,
+            _W_RC: problem.Rc,
+            _W_TABS: pa.tab_s,
+            _W_TABXY: pa.tab_xy,
+            _W_TABH: pa.tab_h,
+            _W_TABK: pa.tab_k,
+            _W_C: C,
+            _W_B: b_,
+            _W_REFS: (N + 1, 4),
+            _W_XREF: (N + 1, nx),
+            _W_UREF: (N, nu),
+            _W_XBAR: (N, nx),
+            _W_UBAR: (N, nu),
+            _W_F: (N, nx),
+            _W_A: (N, nx, nx),
+            _W_BD: (N, nx, nu),
+            _W_CD: (N, nx),
+            _W_LANEN: (N, 2),
+            _W_LANEB: (N,),
+            _W_XF: (N + 1, nx),
+            _W_P: (N + 1, nx, nx),
+            _W_LAM: (N + 1, nx),
+            _W_VB: (N, nx, nu),
+            _W_S: (2, nx, N * nu),
+            _W_T2: (nx, nw),
             _W_GAM: (N, nx, N * nu) if need_gamma else (1, 1, 1),
-            _W_H: (nz, nz), _W_G: (nz,), _W_Z: (nz,), _W_L: (nz, nz), _W_J: (nz, nz), _W_RQ: (nz, nz),
-            _W_D: (nz,), _W_ZDIR: (nz,), _W_R: (nz,), _W_UQ: (nz,), _W_SQ: (mq,), _W_ROWN: (mq,),
-            _W_LAMQ: (mq,), _W_DW: (7, nx + nu + 1, nx + nu + 1), _W_KG: (N, nu, nx), _W_KF: (N, nu),
+            _W_H: (nz, nz),
+            _W_G: (nz,),
+            _W_Z: (nz,),
+            _W_L: (nz, nz),
+            _W_J: (nz, nz),
+            _W_RQ: (nz, nz),
+            _W_D: (nz,),
+            _W_ZDIR: (nz,),
+            _W_R: (nz,),
+            _W_UQ: (nz,),
+            _W_SQ: (mq,),
+            _W_ROWN: (mq,),
+            _W_LAMQ: (mq,),
+            _W_DW: (7, nx + nu + 1, nx + nu + 1),
+            _W_KG: (N, nu, nx),
+            _W_KF: (N, nu),
             _W_PA: (nx, nx),
-            _W_MG: (nu, nx), _W_GG: (nu, nu), _W_QV: (nx,),
-            _W_WE: np.stack([problem.Q] * (N - 1) + [problem.QN]), _W_QT: (N, nx),
-            _W_OBS: _obstacle_table(obstacles), _W_ODIST: (max(len(obstacles), 1),),
-            _W_OPROJ: (max(len(obstacles), 1), 2), _W_SARR: (N + 1,), _W_EREF: (N + 1,),
-            _W_ROWA: (N, max(n_orow, 1), 3), _W_ROWB: np.full((N, max(n_orow, 1)), -np.inf),
-            _W_LLO: (N,), _W_LHI: (N,), _W_LDLO: (N,), _W_LDHI: (N,), _W_XLIN: (N + 1, nx),
-            _W_GSUM: (2 * N,), _W_PROF: prof, _W_VARR: (N + 1,), _W_REFW: (N + 1, 8),
+            _W_MG: (nu, nx),
+            _W_GG: (nu, nu),
+            _W_QV: (nx,),
+            _W_WE: np.stack([problem.Q] * (N - 1) + [problem.QN]),
+            _W_QT: (N, nx),
+            _W_OBS: _obstacle_table(obstacles),
+            _W_ODIST: (max(len(obstacles), 1),),
+            _W_OPROJ: (max(len(obstacles), 1), 2),
+            _W_SARR: (N + 1,),
+            _W_EREF: (N + 1,),
+            _W_ROWA: (N, max(n_orow, 1), 3),
+            _W_ROWB: np.full((N, max(n_orow, 1)), -np.inf),
+            _W_LLO: (N,),
+            _W_LHI: (N,),
+            _W_LDLO: (N,),
+            _W_LDHI: (N,),
+            _W_XLIN: (N + 1, nx),
+            _W_GSUM: (2 * N,),
+            _W_PROF: prof,
+            _W_VARR: (N + 1,),
+            _W_REFW: (N + 1, 8),
             _W_RDS: road.s_m if road is not None else np.zeros(1),
             _W_RDL: road.left_m if road is not None else np.zeros(1),
             _W_RDR: road.right_m if road is not None else np.zeros(1),
         }
-        shapes: list[tuple[int, ...]] = [np.shape(a) if isinstance(a, np.ndarray) else a
-                                         for a in (arrays[i] for i in range(_NW))]
+        shapes: list[tuple[int, ...]] = [
+            np.shape(a) if isinstance(a, np.ndarray) else a for a in (arrays[i] for i in range(_NW))
+        ]
         sizes = [int(np.prod(sh)) for sh in shapes]
         fo = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         fs = np.ones((_NW, 3), dtype=np.int64)
@@ -393,7 +586,7 @@ class FastLtvMpc(TrackingWarmStart):
             fs[i, : len(sh)] = sh
         self._wbuf = np.zeros(int(fo[-1]))
         #: named views of the buffer (constants and work arrays), for inspection
-        self._w = {i: self._wbuf[fo[i]:fo[i + 1]].reshape(shapes[i]) for i in range(_NW)}
+        self._w = {i: self._wbuf[fo[i] : fo[i + 1]].reshape(shapes[i]) for i in range(_NW)}
         for i, v in arrays.items():
             if isinstance(v, np.ndarray):
                 self._w[i][...] = v
@@ -402,8 +595,16 @@ class FastLtvMpc(TrackingWarmStart):
         # (obstacles), rgrp (mq)
         rowcol = np.full(mq, -1, dtype=np.int64)
         rowcol[: len(crows)] = single_nonzero_columns(C[: len(crows)])
-        self._ibuf = np.concatenate([ip, fo, fs.ravel(), np.zeros(nz + mq, dtype=np.int64), rowcol,
-                                     np.zeros(2 * N + max(len(obstacles), 1) + mq, dtype=np.int64)])
+        self._ibuf = np.concatenate(
+            [
+                ip,
+                fo,
+                fs.ravel(),
+                np.zeros(nz + mq, dtype=np.int64),
+                rowcol,
+                np.zeros(2 * N + max(len(obstacles), 1) + mq, dtype=np.int64),
+            ]
+        )
         self._info = np.zeros(4)
         self._noX = np.zeros((N + 1, nx))
         self._noU = np.zeros((N, nu))
@@ -417,12 +618,22 @@ class FastLtvMpc(TrackingWarmStart):
         self._relaxed = None
         if FALLBACK_RELAX in config.fallback.ladder:
             self._relaxed = FastLtvMpc(
-                model, path, relaxed_problem(problem, config.fallback.relax_slack_factor),
+                model,
+                path,
+                relaxed_problem(problem, config.fallback.relax_slack_factor),
                 replace(config, sqp_max_iterations=1, fallback=FallbackConfig((FALLBACK_HOLD,))),
-                replace(settings, max_iter=2 * settings.max_iter), obstacles, avoidance, footprint)
-        self.fallback = FallbackLadder(self, config.fallback,
-                                       relax=self._relax_step if self._relaxed is not None else None,
-                                       footprint=footprint, road=road)
+                replace(settings, max_iter=2 * settings.max_iter),
+                obstacles,
+                avoidance,
+                footprint,
+            )
+        self.fallback = FallbackLadder(
+            self,
+            config.fallback,
+            relax=self._relax_step if self._relaxed is not None else None,
+            footprint=footprint,
+            road=road,
+        )
 
     def _warm_up(self) -> None:
         """One discarded step at the path start, so that loading (or, on a first run, compiling)
@@ -432,8 +643,21 @@ class FastLtvMpc(TrackingWarmStart):
         x[2] = float(self.path.heading(0.0))
         if self.nx >= 4:  # the speed state: v (kinematic bicycle) or vx (dynamic bicycle)
             x[3] = self.v_ref_mps
-        _control_step(x, 0.0, 0.0, np.zeros(self.nu), self._noX, self._noU, MODE_NO_PLAN, STAGE_ALL,
-                      self._sides.copy(), self._wbuf, self._ibuf, np.empty(self._out_size), self._info)
+        _control_step(
+            x,
+            0.0,
+            0.0,
+            np.zeros(self.nu),
+            self._noX,
+            self._noU,
+            MODE_NO_PLAN,
+            STAGE_ALL,
+            self._sides.copy(),
+            self._wbuf,
+            self._ibuf,
+            np.empty(self._out_size),
+            self._info,
+        )
 
     # -- obstacles ----------------------------------------------------------------------------
     @property
@@ -478,8 +702,10 @@ class FastLtvMpc(TrackingWarmStart):
         avoidance, obstacles = checked_obstacles(self.avoidance, obstacles)
         if self._rows is None:
             if len(obstacles) != len(self.obstacles):
-                raise ValueError(f"the compiled obstacle cost was built for {len(self.obstacles)} obstacle(s), "
-                                 f"got {len(obstacles)}: build the controller with that many")
+                raise ValueError(
+                    f"the compiled obstacle cost was built for {len(self.obstacles)} obstacle(s), "
+                    f"got {len(obstacles)}: build the controller with that many"
+                )
             reason = obstacles_unsupported_reason(obstacles, avoidance.config)
             if reason is not None:
                 raise ValueError(f"the fast backend cannot take these obstacles: {reason}")
@@ -512,13 +738,15 @@ class FastLtvMpc(TrackingWarmStart):
         ``ocp.avoidance``. Returns the status code and the passing sides for the next step."""
         sides = self._load_sides(warm_sides)
         if self._rows is None and self._lateral is None:
-            code = _control_step(x, s_guess, t_s, u_prev, X, U, mode, STAGE_ALL, sides, self._wbuf, self._ibuf,
-                                 out, self._info)
+            code = _control_step(
+                x, s_guess, t_s, u_prev, X, U, mode, STAGE_ALL, sides, self._wbuf, self._ibuf, out, self._info
+            )
             if self._detour:
                 return code, tuple((j, int(v)) for j, v in enumerate(sides) if v != _SIDE_NONE)
             return code, warm_sides
-        code = _control_step(x, s_guess, t_s, u_prev, X, U, mode, STAGE_LINEARIZE, sides, self._wbuf, self._ibuf,
-                             out, self._info)
+        code = _control_step(
+            x, s_guess, t_s, u_prev, X, U, mode, STAGE_LINEARIZE, sides, self._wbuf, self._ibuf, out, self._info
+        )
         if code != 0:
             return code, warm_sides
         w = self._w
@@ -540,8 +768,9 @@ class FastLtvMpc(TrackingWarmStart):
             new_sides = tuple(sorted(memory.sides.items()))
         if self._lateral is not None:
             w[_W_EREF] += np.asarray(self._lateral(w[_W_SARR]), float)
-        code = _control_step(x, s_guess, t_s, u_prev, X, U, mode, STAGE_SOLVE, sides, self._wbuf, self._ibuf,
-                             out, self._info)
+        code = _control_step(
+            x, s_guess, t_s, u_prev, X, U, mode, STAGE_SOLVE, sides, self._wbuf, self._ibuf, out, self._info
+        )
         return code, new_sides
 
     # -- one control step -----------------------------------------------------------------------
@@ -561,8 +790,10 @@ class FastLtvMpc(TrackingWarmStart):
         has_plan = X is not None and U is not None
         if X is not None and U is not None:
             if X.shape != (self.N + 1, self.nx) or U.shape != (self.N, self.nu):
-                raise ValueError(f"warm plan must be X ({self.N + 1}, {self.nx}) and U ({self.N}, {self.nu}), "
-                                 f"got {X.shape} and {U.shape}")
+                raise ValueError(
+                    f"warm plan must be X ({self.N + 1}, {self.nx}) and U ({self.N}, {self.nu}), "
+                    f"got {X.shape} and {U.shape}"
+                )
             if X.dtype != np.float64 or U.dtype != np.float64 or not (X.flags.c_contiguous and U.flags.c_contiguous):
                 X, U = np.ascontiguousarray(X, dtype=float), np.ascontiguousarray(U, dtype=float)
         else:
@@ -570,8 +801,9 @@ class FastLtvMpc(TrackingWarmStart):
         out = np.empty(self._out_size)
         t_s = float(warm.t_s)
         info = self._info
-        code, new_sides = self._run(x, float(warm.s_m), t_s, u_prev, X, U,
-                                    MODE_SHIFTED_PLAN if has_plan else MODE_NO_PLAN, warm.sides, out)
+        code, new_sides = self._run(
+            x, float(warm.s_m), t_s, u_prev, X, U, MODE_SHIFTED_PLAN if has_plan else MODE_NO_PLAN, warm.sides, out
+        )
         N, nx, nu = self.N, self.nx, self.nu
         cfg = self.config
         it = 1
@@ -579,10 +811,10 @@ class FastLtvMpc(TrackingWarmStart):
         t_qp = time.perf_counter() - t0  # the last QP's time: no new QP that would end past the cap
         while code == 0 and it < cfg.sqp_max_iterations and time.perf_counter() - t0 + t_qp < cfg.sqp_max_time_s:
             t1 = time.perf_counter()
-            U_it = out[self._o_U:self._o_R].reshape(N, nu)
+            U_it = out[self._o_U : self._o_R].reshape(N, nu)
             if float(np.max(np.abs(U_it - self._w[_W_UBAR]))) < cfg.sqp_tol:
                 break
-            X_it = out[self._o_X:self._o_U].reshape(N + 1, nx)
+            X_it = out[self._o_X : self._o_U].reshape(N + 1, nx)
             out = np.empty(self._out_size)
             code, new_sides = self._run(x, float(info[0]), t_s, u_prev, X_it, U_it, MODE_ITERATE, warm.sides, out)
             it += 1
@@ -590,16 +822,38 @@ class FastLtvMpc(TrackingWarmStart):
         t_next = t_s + self.dt_s
         if code == 0:
             u = out[:nu]
-            X_pred = out[self._o_X:self._o_U].reshape(N + 1, nx)
-            U_plan = out[self._o_U:self._o_R].reshape(N, nu)
-            refs: np.ndarray = out[self._o_R:].reshape(N + 1, nx)
-            return ControlOutput(u, "ok", "", time.perf_counter() - t0, info[0], e_y, e_psi,
-                                 X_pred, refs, WarmStart(info[0], u, X_pred, U_plan, t_next, new_sides), it)
+            X_pred = out[self._o_X : self._o_U].reshape(N + 1, nx)
+            U_plan = out[self._o_U : self._o_R].reshape(N, nu)
+            refs: np.ndarray = out[self._o_R :].reshape(N + 1, nx)
+            return ControlOutput(
+                u,
+                "ok",
+                "",
+                time.perf_counter() - t0,
+                info[0],
+                e_y,
+                e_psi,
+                X_pred,
+                refs,
+                WarmStart(info[0], u, X_pred, U_plan, t_next, new_sides),
+                it,
+            )
         if code == _BAD_STATE:
             self._check_state(x)  # raises, naming the field
         status = STATUS_WORDS[code]
         refs = self._w[_W_XREF].copy()
         u, name, new_warm, X_pred = self.fallback.run(SimpleNamespace(x=x, s_m=float(info[0])), warm)
         new_warm = replace(new_warm, t_s=t_next, sides=new_sides)
-        return ControlOutput(u, status, name, time.perf_counter() - t0, float(info[0]), float(e_y),
-                             float(e_psi), X_pred, refs, new_warm, it)
+        return ControlOutput(
+            u,
+            status,
+            name,
+            time.perf_counter() - t0,
+            float(info[0]),
+            float(e_y),
+            float(e_psi),
+            X_pred,
+            refs,
+            new_warm,
+            it,
+        )

@@ -36,9 +36,32 @@ _TWO_PI = 2.0 * math.pi
 _BAD_STATE = 4
 
 # integer parameters (ip)
-_I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH, _I_LIN, _I_METHOD, _I_HORIZON, _I_FF, _I_LANE, \
-    _I_MCONST, _I_RATE0, _I_MAXITER, _I_GAMMA, _I_NZ, _I_RICCATI, _I_MQ, _I_OFORM, _I_NOBS, _I_OMAX, \
-    _I_DETOUR, _I_OROWS, _I_PROFILE, _I_ACCEL = range(24)
+(
+    _I_MODEL,
+    _I_NX,
+    _I_NU,
+    _I_N,
+    _I_PATH,
+    _I_LIN,
+    _I_METHOD,
+    _I_HORIZON,
+    _I_FF,
+    _I_LANE,
+    _I_MCONST,
+    _I_RATE0,
+    _I_MAXITER,
+    _I_GAMMA,
+    _I_NZ,
+    _I_RICCATI,
+    _I_MQ,
+    _I_OFORM,
+    _I_NOBS,
+    _I_OMAX,
+    _I_DETOUR,
+    _I_OROWS,
+    _I_PROFILE,
+    _I_ACCEL,
+) = range(24)
 _NIP = 24
 # passing sides (as ocp.avoidance), and "not chosen yet" in the compiled side memory
 _SIDE_LEFT, _SIDE_RIGHT, _SIDE_BLOCKED, _SIDE_NONE = 1, -1, 0, 2
@@ -56,24 +79,112 @@ _OB_X, _OB_Y, _OB_VX, _OB_VY, _OB_RB, _OB_OX, _OB_OY, _OB_WIN = range(8)
 _NOB = 8
 # the float arrays of a controller, all views of one buffer (one argument to the compiled step:
 # passing arrays one by one costs about 0.1 us each in the call)
-(_W_FP, _W_MP, _W_BND, _W_GEO, _W_WQ, _W_RM, _W_RC, _W_TABS, _W_TABXY, _W_TABH, _W_TABK, _W_C, _W_B,
- _W_REFS, _W_XREF, _W_UREF, _W_XBAR, _W_UBAR, _W_F, _W_A, _W_BD, _W_CD, _W_LANEN, _W_LANEB, _W_XF, _W_P,
- _W_LAM, _W_VB, _W_S, _W_T2, _W_GAM, _W_H, _W_G, _W_Z, _W_L, _W_J, _W_RQ, _W_D, _W_ZDIR, _W_R, _W_UQ,
- _W_SQ, _W_ROWN, _W_LAMQ, _W_DW, _W_KG, _W_KF, _W_PA, _W_MG, _W_GG, _W_QV, _W_WE, _W_QT, _W_OBS,
- _W_ODIST, _W_OPROJ, _W_SARR, _W_EREF, _W_ROWA, _W_ROWB, _W_LLO, _W_LHI, _W_XLIN, _W_GSUM, _W_PROF,
- _W_VARR, _W_REFW, _W_RDS, _W_RDL, _W_RDR, _W_LDLO, _W_LDHI) = range(72)
+(
+    _W_FP,
+    _W_MP,
+    _W_BND,
+    _W_GEO,
+    _W_WQ,
+    _W_RM,
+    _W_RC,
+    _W_TABS,
+    _W_TABXY,
+    _W_TABH,
+    _W_TABK,
+    _W_C,
+    _W_B,
+    _W_REFS,
+    _W_XREF,
+    _W_UREF,
+    _W_XBAR,
+    _W_UBAR,
+    _W_F,
+    _W_A,
+    _W_BD,
+    _W_CD,
+    _W_LANEN,
+    _W_LANEB,
+    _W_XF,
+    _W_P,
+    _W_LAM,
+    _W_VB,
+    _W_S,
+    _W_T2,
+    _W_GAM,
+    _W_H,
+    _W_G,
+    _W_Z,
+    _W_L,
+    _W_J,
+    _W_RQ,
+    _W_D,
+    _W_ZDIR,
+    _W_R,
+    _W_UQ,
+    _W_SQ,
+    _W_ROWN,
+    _W_LAMQ,
+    _W_DW,
+    _W_KG,
+    _W_KF,
+    _W_PA,
+    _W_MG,
+    _W_GG,
+    _W_QV,
+    _W_WE,
+    _W_QT,
+    _W_OBS,
+    _W_ODIST,
+    _W_OPROJ,
+    _W_SARR,
+    _W_EREF,
+    _W_ROWA,
+    _W_ROWB,
+    _W_LLO,
+    _W_LHI,
+    _W_XLIN,
+    _W_GSUM,
+    _W_PROF,
+    _W_VARR,
+    _W_REFW,
+    _W_RDS,
+    _W_RDL,
+    _W_RDR,
+    _W_LDLO,
+    _W_LDHI,
+) = range(72)
 _NW = 72
 # float parameters (fp)
-_F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_RMARGIN, _F_SLACK2, _F_SLACK1, _F_TOL, _F_OW, _F_OEPS, _F_OSX, \
-    _F_OSY, _F_OINF, _F_OMARGIN, _F_HW, _F_HL, _F_RAMP, _F_OSLACK2, _F_OSLACK1, _F_BOFF, _F_RPERIOD = range(21)
+(
+    _F_DT,
+    _F_VREF,
+    _F_HSTEP,
+    _F_WINDOW,
+    _F_RMARGIN,
+    _F_SLACK2,
+    _F_SLACK1,
+    _F_TOL,
+    _F_OW,
+    _F_OEPS,
+    _F_OSX,
+    _F_OSY,
+    _F_OINF,
+    _F_OMARGIN,
+    _F_HW,
+    _F_HL,
+    _F_RAMP,
+    _F_OSLACK2,
+    _F_OSLACK1,
+    _F_BOFF,
+    _F_RPERIOD,
+) = range(21)
 _NFP = 21
 # info outputs
 _O_S, _O_EY, _O_EPSI, _O_ITER = range(4)
 
 
 @njit(cache=True)
-def _select_obstacles(nobs, omax, obs, odist, oproj, osel, fp, t_s, x, s0, pkind, geo, tab_s, tab_xy, tab_h,
-                      tab_k):
+def _select_obstacles(nobs, omax, obs, odist, oproj, osel, fp, t_s, x, s0, pkind, geo, tab_s, tab_xy, tab_h, tab_k):
     """The ``max_obstacles`` nearest obstacles within the influence distance of the vehicle at time
     ``t_s`` (nearest first, ties by index, as ``ocp.avoidance``) into osel; returns how many.
     oproj[j] = (s, e_y) of each one's projected point [m] (its Frenet position now)."""
@@ -96,8 +207,9 @@ def _select_obstacles(nobs, omax, obs, odist, oproj, osel, fp, t_s, x, s0, pkind
         nsel += 1
         cx = obs[j, _OB_X] + obs[j, _OB_VX] * t_s + obs[j, _OB_OX]
         cy = obs[j, _OB_Y] + obs[j, _OB_VY] * t_s + obs[j, _OB_OY]
-        oproj[j, 0], oproj[j, 1] = path_project(pkind, geo, tab_s, tab_xy, s0,
-                                                obs[j, _OB_WIN] + math.hypot(cx - px0, cy - py0), cx, cy)
+        oproj[j, 0], oproj[j, 1] = path_project(
+            pkind, geo, tab_s, tab_xy, s0, obs[j, _OB_WIN] + math.hypot(cx - px0, cy - py0), cx, cy
+        )
     return nsel
 
 
@@ -163,8 +275,9 @@ def _shift_references(N, s_arr, refs, e_ref, xref):
 
 
 @njit(cache=True)
-def _obstacle_cost(form, nsel, osel, obs, oproj, fp, t_s, dt, Xbar, F, N, pkind, geo, tab_s, tab_xy, tab_h,
-                   tab_k, We, qt):
+def _obstacle_cost(
+    form, nsel, osel, obs, oproj, fp, t_s, dt, Xbar, F, N, pkind, geo, tab_s, tab_xy, tab_h, tab_k, We, qt
+):
     """Add the potential (eq. 55) or Gaussian (eq. 56) cost of the selected obstacles, its
     second-order model at the linearization trajectory (x_k = Xbar[k], x_N = F[N-1]) with the
     Hessian projected onto the PSD cone, to the state cost ``x' We x - 2 qt' x`` of x_1..x_N, as
@@ -223,17 +336,17 @@ def _obstacle_cost(form, nsel, osel, obs, oproj, fp, t_s, dt, Xbar, F, N, pkind,
 
 @njit(cache=True, inline="always")
 def _v1(w, fo, i):
-    return w[fo[i]:fo[i + 1]]
+    return w[fo[i] : fo[i + 1]]
 
 
 @njit(cache=True, inline="always")
 def _v2(w, fo, fs, i):
-    return w[fo[i]:fo[i + 1]].reshape((fs[3 * i], fs[3 * i + 1]))
+    return w[fo[i] : fo[i + 1]].reshape((fs[3 * i], fs[3 * i + 1]))
 
 
 @njit(cache=True, inline="always")
 def _v3(w, fo, fs, i):
-    return w[fo[i]:fo[i + 1]].reshape((fs[3 * i], fs[3 * i + 1], fs[3 * i + 2]))
+    return w[fo[i] : fo[i + 1]].reshape((fs[3 * i], fs[3 * i + 1], fs[3 * i + 2]))
 
 
 @njit(cache=True)
@@ -249,17 +362,17 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
     read and updated by the detour. ``wbuf`` holds every float array (constants and work),
     ``ibuf`` the integer parameters, the layout of ``wbuf`` and the active-set work."""
     ip = ibuf[:_NIP]
-    fo = ibuf[_NIP:_NIP + _NW + 1]
-    fs = ibuf[_NIP + _NW + 1:_NIP + 4 * _NW + 1]
+    fo = ibuf[_NIP : _NIP + _NW + 1]
+    fs = ibuf[_NIP + _NW + 1 : _NIP + 4 * _NW + 1]
     a0 = _NIP + 4 * _NW + 1
-    active = ibuf[a0:a0 + ip[_I_NZ]]
-    isact = ibuf[a0 + ip[_I_NZ]:a0 + ip[_I_NZ] + ip[_I_MQ]]
-    rowcol = ibuf[a0 + ip[_I_NZ] + ip[_I_MQ]:a0 + ip[_I_NZ] + 2 * ip[_I_MQ]]
+    active = ibuf[a0 : a0 + ip[_I_NZ]]
+    isact = ibuf[a0 + ip[_I_NZ] : a0 + ip[_I_NZ] + ip[_I_MQ]]
+    rowcol = ibuf[a0 + ip[_I_NZ] + ip[_I_MQ] : a0 + ip[_I_NZ] + 2 * ip[_I_MQ]]
     a1 = a0 + ip[_I_NZ] + 2 * ip[_I_MQ]
-    kpos = ibuf[a1:a1 + 2 * ip[_I_N]]
+    kpos = ibuf[a1 : a1 + 2 * ip[_I_N]]
     a2 = a1 + 2 * ip[_I_N] + max(ip[_I_NOBS], 1)
-    osel = ibuf[a1 + 2 * ip[_I_N]:a2]
-    rgrp = ibuf[a2:a2 + ip[_I_MQ]]
+    osel = ibuf[a1 + 2 * ip[_I_N] : a2]
+    rgrp = ibuf[a2 : a2 + ip[_I_MQ]]
     fp, mp, bnd, geo = _v1(wbuf, fo, _W_FP), _v1(wbuf, fo, _W_MP), _v1(wbuf, fo, _W_BND), _v1(wbuf, fo, _W_GEO)
     Wq, Rm, Rc = _v3(wbuf, fo, fs, _W_WQ), _v2(wbuf, fo, fs, _W_RM), _v2(wbuf, fo, fs, _W_RC)
     tab_s, tab_xy = _v1(wbuf, fo, _W_TABS), _v2(wbuf, fo, fs, _W_TABXY)
@@ -270,7 +383,12 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
     A, B, c = _v3(wbuf, fo, fs, _W_A), _v3(wbuf, fo, fs, _W_BD), _v2(wbuf, fo, fs, _W_CD)
     lane_n, lane_b = _v2(wbuf, fo, fs, _W_LANEN), _v1(wbuf, fo, _W_LANEB)
     xf, P, lam = _v2(wbuf, fo, fs, _W_XF), _v3(wbuf, fo, fs, _W_P), _v2(wbuf, fo, fs, _W_LAM)
-    Vb, S, T2, Gam = _v3(wbuf, fo, fs, _W_VB), _v3(wbuf, fo, fs, _W_S), _v2(wbuf, fo, fs, _W_T2), _v3(wbuf, fo, fs, _W_GAM)
+    Vb, S, T2, Gam = (
+        _v3(wbuf, fo, fs, _W_VB),
+        _v3(wbuf, fo, fs, _W_S),
+        _v2(wbuf, fo, fs, _W_T2),
+        _v3(wbuf, fo, fs, _W_GAM),
+    )
     H, g, z = _v2(wbuf, fo, fs, _W_H), _v1(wbuf, fo, _W_G), _v1(wbuf, fo, _W_Z)
     L, J, Rq = _v2(wbuf, fo, fs, _W_L), _v2(wbuf, fo, fs, _W_J), _v2(wbuf, fo, fs, _W_RQ)
     d, zdir, r, uq = _v1(wbuf, fo, _W_D), _v1(wbuf, fo, _W_ZDIR), _v1(wbuf, fo, _W_R), _v1(wbuf, fo, _W_UQ)
@@ -289,10 +407,10 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
     nzu = N * nu
     dt, v_ref = fp[_F_DT], fp[_F_VREF]
     u_min = bnd[0:nu]
-    u_max = bnd[nu:2 * nu]
-    dmax = bnd[2 * nu:3 * nu]
-    x_min = bnd[3 * nu:3 * nu + nx]
-    x_max = bnd[3 * nu + nx:3 * nu + 2 * nx]
+    u_max = bnd[nu : 2 * nu]
+    dmax = bnd[2 * nu : 3 * nu]
+    x_min = bnd[3 * nu : 3 * nu + nx]
+    x_max = bnd[3 * nu + nx : 3 * nu + 2 * nx]
     for i in range(nx):
         if not math.isfinite(x[i]):
             return _BAD_STATE
@@ -335,11 +453,42 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
                 uref[k, ip[_I_ACCEL]] += (v_arr[k + 1] - v_arr[k]) / dt
 
         if ip[_I_OFORM] != _OBS_NONE:
-            nsel = _select_obstacles(ip[_I_NOBS], ip[_I_OMAX], obs, _v1(wbuf, fo, _W_ODIST), oproj, osel, fp, t_s, x,
-                                     s0, pkind, geo, tab_s, tab_xy, tab_h, tab_k)
+            nsel = _select_obstacles(
+                ip[_I_NOBS],
+                ip[_I_OMAX],
+                obs,
+                _v1(wbuf, fo, _W_ODIST),
+                oproj,
+                osel,
+                fp,
+                t_s,
+                x,
+                s0,
+                pkind,
+                geo,
+                tab_s,
+                tab_xy,
+                tab_h,
+                tab_k,
+            )
             if ip[_I_DETOUR] == 1:
-                _detour(nsel, osel, obs, oproj, sides, fp, N, s_arr, refs, xref, _v1(wbuf, fo, _W_EREF), lane,
-                        _v1(wbuf, fo, _W_RDS), _v1(wbuf, fo, _W_RDL), _v1(wbuf, fo, _W_RDR))
+                _detour(
+                    nsel,
+                    osel,
+                    obs,
+                    oproj,
+                    sides,
+                    fp,
+                    N,
+                    s_arr,
+                    refs,
+                    xref,
+                    _v1(wbuf, fo, _W_EREF),
+                    lane,
+                    _v1(wbuf, fo, _W_RDS),
+                    _v1(wbuf, fo, _W_RDL),
+                    _v1(wbuf, fo, _W_RDR),
+                )
 
         # -- linearization points and discrete model ---------------------------------------------
         if mode == MODE_ITERATE:
@@ -412,9 +561,24 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
         for i in range(nx):
             Xlin[N, i] = F[N - 1, i]
         if lane == 1:  # the body inside the road at the linearization trajectory's yaw (scene.road)
-            horizon_bounds(_v1(wbuf, fo, _W_RDS), _v1(wbuf, fo, _W_RDL), _v1(wbuf, fo, _W_RDR), fp[_F_RPERIOD], s_arr[1:],
-                           refs[1:, 2], refs[1:, 3], Xlin[1:, 2], fp[_F_HL], fp[_F_HW], fp[_F_BOFF],
-                           fp[_F_RMARGIN], lane_lo, lane_hi, lane_dlo, lane_dhi)
+            horizon_bounds(
+                _v1(wbuf, fo, _W_RDS),
+                _v1(wbuf, fo, _W_RDL),
+                _v1(wbuf, fo, _W_RDR),
+                fp[_F_RPERIOD],
+                s_arr[1:],
+                refs[1:, 2],
+                refs[1:, 3],
+                Xlin[1:, 2],
+                fp[_F_HL],
+                fp[_F_HW],
+                fp[_F_BOFF],
+                fp[_F_RMARGIN],
+                lane_lo,
+                lane_hi,
+                lane_dlo,
+                lane_dhi,
+            )
         if stage == STAGE_LINEARIZE:
             return 0
     else:  # the detour of the rows, or a lateral reference, written between the stages
@@ -435,8 +599,27 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
             for i in range(nx):
                 for j in range(nx):
                     We[k, i, j] = Wq[k, i, j]
-        _obstacle_cost(ip[_I_OFORM], nsel, osel, obs, oproj, fp, t_s, dt, Xbar, F, N, pkind, geo, tab_s, tab_xy,
-                       tab_h, tab_k, We, qt)
+        _obstacle_cost(
+            ip[_I_OFORM],
+            nsel,
+            osel,
+            obs,
+            oproj,
+            fp,
+            t_s,
+            dt,
+            Xbar,
+            F,
+            N,
+            pkind,
+            geo,
+            tab_s,
+            tab_xy,
+            tab_h,
+            tab_k,
+            We,
+            qt,
+        )
     if lane == 1:
         for k in range(N):
             yaw = refs[k + 1, 2]
@@ -649,20 +832,72 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
             for k in range(N):
                 Xl = Xbar[k + 1] if k < N - 1 else F[N - 1]
                 for q in range(nrow):
-                    if rowb[k, q] > -math.inf and (rowa[k, q, 0] * Xl[0] + rowa[k, q, 1] * Xl[1]
-                                                    + rowa[k, q, 2] * Xl[2] < rowb[k, q] + 1e-3):
+                    if rowb[k, q] > -math.inf and (
+                        rowa[k, q, 0] * Xl[0] + rowa[k, q, 1] * Xl[1] + rowa[k, q, 2] * Xl[2] < rowb[k, q] + 1e-3
+                    ):
                         kpos[N + k] = 1
         for f0 in range(0, 2 * N, N):  # and the 3 steps after each (RTI plans move a little)
             for k in range(N - 1, 0, -1):
                 if kpos[f0 + k - 1] == 1 or (k >= 2 and kpos[f0 + k - 2] == 1) or (k >= 3 and kpos[f0 + k - 3] == 1):
                     kpos[f0 + k] = 1
-        code, iters = soft_solve(H, g, C, b, m, m_lane, rgrp, N, nzu, kpos, fp[_F_SLACK2], fp[_F_SLACK1],
-                                 fp[_F_OSLACK2], fp[_F_OSLACK1], _v1(wbuf, fo, _W_GSUM), z, lamq,
-                                 active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, ip[_I_MAXITER],
-                                 fp[_F_TOL])
+        code, iters = soft_solve(
+            H,
+            g,
+            C,
+            b,
+            m,
+            m_lane,
+            rgrp,
+            N,
+            nzu,
+            kpos,
+            fp[_F_SLACK2],
+            fp[_F_SLACK1],
+            fp[_F_OSLACK2],
+            fp[_F_OSLACK1],
+            _v1(wbuf, fo, _W_GSUM),
+            z,
+            lamq,
+            active,
+            isact,
+            rowcol,
+            L,
+            J,
+            Rq,
+            d,
+            zdir,
+            r,
+            uq,
+            sq,
+            rown,
+            ip[_I_MAXITER],
+            fp[_F_TOL],
+        )
     else:
-        code, iters = gi_solve(H, g, C, b, m, nz, z, lamq, active, isact, rowcol, L, J, Rq, d, zdir, r, uq,
-                               sq, rown, ip[_I_MAXITER], fp[_F_TOL])
+        code, iters = gi_solve(
+            H,
+            g,
+            C,
+            b,
+            m,
+            nz,
+            z,
+            lamq,
+            active,
+            isact,
+            rowcol,
+            L,
+            J,
+            Rq,
+            d,
+            zdir,
+            r,
+            uq,
+            sq,
+            rown,
+            ip[_I_MAXITER],
+            fp[_F_TOL],
+        )
     info[_O_ITER] = iters
     if code != 0:
         return code
@@ -703,6 +938,20 @@ from ..paths import compiled as _paths_compiled, profile_compiled as _profile_co
 from ..scene import road as _road  # noqa: E402
 from ..solvers import condensed as _condensed, dense_qp as _dense_qp  # noqa: E402
 
-_jitcache.refresh(_control_step, [m.__file__ for m in (_kinematic, _dynamic, _models_compiled, _paths_compiled,
-                                                       _profile_compiled, _road, _dense_qp, _condensed)
-                                  if m.__file__ is not None])
+_jitcache.refresh(
+    _control_step,
+    [
+        m.__file__
+        for m in (
+            _kinematic,
+            _dynamic,
+            _models_compiled,
+            _paths_compiled,
+            _profile_compiled,
+            _road,
+            _dense_qp,
+            _condensed,
+        )
+        if m.__file__ is not None
+    ],
+)

@@ -92,8 +92,19 @@ class LaneConfig:
     ego_width_m: float = 2.0
 
     def __post_init__(self):
-        for name in ("horizon_s", "dt_s", "time_gap_s", "max_lat_accel_mps2", "max_lat_jerk_mps3",
-                     "min_change_s", "arrive_m", "range_m", "ego_length_m", "ego_width_m", "accel_mps2"):
+        for name in (
+            "horizon_s",
+            "dt_s",
+            "time_gap_s",
+            "max_lat_accel_mps2",
+            "max_lat_jerk_mps3",
+            "min_change_s",
+            "arrive_m",
+            "range_m",
+            "ego_length_m",
+            "ego_width_m",
+            "accel_mps2",
+        ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be positive, got {v!r}")
@@ -119,7 +130,7 @@ class LateralRamp:
         """e_y [m] of the reference at arc length(s) ``s_m`` [m]."""
         s = np.asarray(s_m, float)
         x = np.clip((s - self.s0_m) / (self.s1_m - self.s0_m), 0.0, 1.0)
-        w = x ** 3 * (10.0 - 15.0 * x + 6.0 * x * x)
+        w = x**3 * (10.0 - 15.0 * x + 6.0 * x * x)
         return (1.0 - w) * self.e0_m + w * np.interp(s, self.knots_m, self.center_m)
 
 
@@ -153,8 +164,11 @@ def lane_of(road: Road, s_m: float, e_y_m: float) -> int:
     if not road.lanes:
         raise ValueError("the road has no lanes")
     c = [float(np.interp(s_m, road.s_m, ln.center_m)) for ln in road.lanes]
-    inside = [i for i, ln in enumerate(road.lanes)
-              if np.interp(s_m, road.s_m, ln.right_m) <= e_y_m <= np.interp(s_m, road.s_m, ln.left_m)]
+    inside = [
+        i
+        for i, ln in enumerate(road.lanes)
+        if np.interp(s_m, road.s_m, ln.right_m) <= e_y_m <= np.interp(s_m, road.s_m, ln.left_m)
+    ]
     pool = inside or range(len(c))
     return min(pool, key=lambda i: abs(c[i] - e_y_m))
 
@@ -188,8 +202,17 @@ def _tracks(path, obstacles, t_s: float, taus: np.ndarray, s_m: float, range_m: 
     return out
 
 
-def decide_lane(road: Road, path, s_m: float, e_y_m: float, speed_mps: float, obstacles, t_s: float,
-                previous: LaneDecision | None = None, config: LaneConfig = LaneConfig()) -> LaneDecision:
+def decide_lane(
+    road: Road,
+    path,
+    s_m: float,
+    e_y_m: float,
+    speed_mps: float,
+    obstacles,
+    t_s: float,
+    previous: LaneDecision | None = None,
+    config: LaneConfig = LaneConfig(),
+) -> LaneDecision:
     """Decide the lane for the ego at arc length ``s_m`` [m], lateral offset ``e_y_m`` [m] and
     speed ``speed_mps`` [m/s] on ``path`` (the road's reference path: ``project``, ``heading``)
     at time ``t_s`` [s], given ``obstacles`` (:class:`~mpcdrive.scene.obstacles.Obstacle`, their
@@ -203,7 +226,7 @@ def decide_lane(road: Road, path, s_m: float, e_y_m: float, speed_mps: float, ob
     # the ego's predicted arc length: current speed, accelerating to the desired speed
     t_acc = (v_des - v) / cfg.accel_mps2
     tt = np.minimum(taus, t_acc)
-    s_ego = s_m + v * tt + 0.5 * cfg.accel_mps2 * tt ** 2 + v_des * (taus - tt)
+    s_ego = s_m + v * tt + 0.5 * cfg.accel_mps2 * tt**2 + v_des * (taus - tt)
     s_keep = s_m + v * taus  # during a change: at its current speed
     half_l = 0.5 * cfg.ego_length_m
     need = cfg.standstill_m + cfg.time_gap_s * v_des
@@ -215,8 +238,11 @@ def decide_lane(road: Road, path, s_m: float, e_y_m: float, speed_mps: float, ob
     def change_s(lane: int) -> float:
         """Duration [s] of the ramp to ``lane``: peak lateral acceleration and jerk within bounds."""
         d = abs(centres[lane] - e_y_m)
-        return max(math.sqrt(_PEAK_ACC * d / cfg.max_lat_accel_mps2),
-                   (_PEAK_JERK * d / cfg.max_lat_jerk_mps3) ** (1.0 / 3.0), cfg.min_change_s)
+        return max(
+            math.sqrt(_PEAK_ACC * d / cfg.max_lat_accel_mps2),
+            (_PEAK_JERK * d / cfg.max_lat_jerk_mps3) ** (1.0 / 3.0),
+            cfg.min_change_s,
+        )
 
     during = [taus <= change_s(i) + 1e-9 for i in range(n)]
     enter_gap = cfg.standstill_m + cfg.rear_time_gap_s * v
@@ -264,9 +290,18 @@ def decide_lane(road: Road, path, s_m: float, e_y_m: float, speed_mps: float, ob
             ramp = ramp_to(lane) if changed else previous.ramp  # type: ignore[union-attr]
         lo = min(edges[cur][0], edges[lane][0])
         hi = max(edges[cur][1], edges[lane][1])
-        return LaneDecision(lane, cur, action, tuple(float(f) for f in free_m), tuple(bool(f) for f in free),
-                            ramp, tuple(sorted({cur, lane})), (float(lo), float(hi)), stop_m,
-                            t_s if changed else previous.since_s)  # type: ignore[union-attr]
+        return LaneDecision(
+            lane,
+            cur,
+            action,
+            tuple(float(f) for f in free_m),
+            tuple(bool(f) for f in free),
+            ramp,
+            tuple(sorted({cur, lane})),
+            (float(lo), float(hi)),
+            stop_m,
+            t_s if changed else previous.since_s,  # type: ignore[union-attr]
+        )
 
     if previous is not None and previous.action == "change":
         tgt = previous.lane
@@ -279,15 +314,17 @@ def decide_lane(road: Road, path, s_m: float, e_y_m: float, speed_mps: float, ob
     if cur != road.route_lane:
         home = int(order[pos + (1 if int(np.flatnonzero(order == road.route_lane)[0]) > pos else -1)])
         # back early (min_return_s) once the lane home is clear over the whole look-ahead: a pass is over
-        early = free_m[home] >= look - 1e-6 and (previous is None
-                                                  or t_s - previous.since_s >= cfg.min_return_s - 1e-9)
+        early = free_m[home] >= look - 1e-6 and (previous is None or t_s - previous.since_s >= cfg.min_return_s - 1e-9)
         if (dwell_ok or early) and free[home] and free_m[home] >= min(free_m[cur], need + cfg.min_gain_m):
             return result(home, "change")
     if blocked[cur]:
         options = [j for j in neighbours if free[j]]
         if not options:
-            return result(cur, "stop", stop_m=max(gap_now - cfg.standstill_m, 0.0) if math.isfinite(gap_now)
-                          else float(free_m[cur]))
+            return result(
+                cur,
+                "stop",
+                stop_m=max(gap_now - cfg.standstill_m, 0.0) if math.isfinite(gap_now) else float(free_m[cur]),
+            )
         best = max(options, key=lambda j: free_m[j])
         if dwell_ok and free_m[best] >= free_m[cur] + cfg.min_gain_m:
             return result(best, "change")
@@ -330,8 +367,9 @@ class LaneChoosingMpc:
         if np.all(np.isfinite(x[:3])):
             s_m, e_y = mpc.path.project(x[:2], warm.s_m, mpc.config.projection_window_m)
             v = float(mpc.model.speed(x))
-            self.decision = decide_lane(self.road, mpc.path, s_m, e_y, v, mpc.obstacles, warm.t_s, self.decision,
-                                        self.config)
+            self.decision = decide_lane(
+                self.road, mpc.path, s_m, e_y, v, mpc.obstacles, warm.t_s, self.decision, self.config
+            )
             band = self.decision.band
             if band != self._band:
                 mpc.set_road(self.road.band(band))

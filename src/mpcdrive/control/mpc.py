@@ -146,7 +146,9 @@ class MpcConfig:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be a positive finite number, got {v!r}")
-        if self.v_ref_mps is not None and not (isinstance(self.v_ref_mps, (int, float)) and math.isfinite(self.v_ref_mps)):
+        if self.v_ref_mps is not None and not (
+            isinstance(self.v_ref_mps, (int, float)) and math.isfinite(self.v_ref_mps)
+        ):
             raise ValueError(f"v_ref_mps must be a finite number, got {self.v_ref_mps!r}")
         if not isinstance(self.fallback, FallbackConfig):
             raise ValueError(f"fallback must be a FallbackConfig, got {type(self.fallback).__name__}")
@@ -199,11 +201,13 @@ class LtvMpc(TrackingWarmStart):
             avoidance = avoidance or AvoidanceConfig()
             if avoidance.formulation == "corridor" and problem.road is None:
                 raise ValueError("the corridor formulation needs a road (MpcProblem.road / road.lane_width_m)")
-            problem = replace(problem, obstacle_rows=avoidance.rows_per_step(footprint),
-                              position_cost=avoidance.uses_cost)
+            problem = replace(
+                problem, obstacle_rows=avoidance.rows_per_step(footprint), position_cost=avoidance.uses_cost
+            )
             self.problem = problem
-            self.avoidance = Avoidance(avoidance, list(obstacles), path, footprint, problem.N, problem.dt_s,
-                                       problem.road)
+            self.avoidance = Avoidance(
+                avoidance, list(obstacles), path, footprint, problem.N, problem.dt_s, problem.road
+            )
         self.qp = LtvQp(problem)
         self.backend: OsqpBackend | ProjectedGradientBackend
         if isinstance(solver_settings, ProjectedGradientSettings):
@@ -270,7 +274,9 @@ class LtvMpc(TrackingWarmStart):
     def _check_warm(self, warm: WarmStart) -> np.ndarray:
         u_prev = np.asarray(warm.u_prev, dtype=float)
         if u_prev.shape != (self.nu,) or not np.all(np.isfinite(u_prev)):
-            raise ValueError(f"warm.u_prev must be {self.nu} finite numbers {self.model.input_names}, got {warm.u_prev!r}")
+            raise ValueError(
+                f"warm.u_prev must be {self.nu} finite numbers {self.model.input_names}, got {warm.u_prev!r}"
+            )
         if not math.isfinite(warm.s_m):
             raise ValueError(f"warm.s_m must be finite, got {warm.s_m!r}")
         return u_prev
@@ -283,8 +289,11 @@ class LtvMpc(TrackingWarmStart):
         res = self._solve(d, warm)
         it = 1
         t_qp = time.perf_counter() - t0  # the last iteration's time: none that would end past the cap
-        while (it < self.config.sqp_max_iterations and res.ok
-               and time.perf_counter() - t0 + t_qp < self.config.sqp_max_time_s):
+        while (
+            it < self.config.sqp_max_iterations
+            and res.ok
+            and time.perf_counter() - t0 + t_qp < self.config.sqp_max_time_s
+        ):
             dU = float(np.max(np.abs(res.U - d.Ubar)))
             if dU < self.config.sqp_tol:
                 break
@@ -297,8 +306,20 @@ class LtvMpc(TrackingWarmStart):
 
     def _solve(self, d: StepData, warm: WarmStart) -> SolveResult:
         qp = self.qp
-        qp.update(d.x, d.Ad, d.Bd, d.c, d.xref, d.uref, warm.u_prev, d.lane_normal, d.lane_offset,
-                  d.lane_lo, d.lane_hi, d.lane_slopes)
+        qp.update(
+            d.x,
+            d.Ad,
+            d.Bd,
+            d.c,
+            d.xref,
+            d.uref,
+            warm.u_prev,
+            d.lane_normal,
+            d.lane_offset,
+            d.lane_lo,
+            d.lane_hi,
+            d.lane_slopes,
+        )
         if d.rows_a is not None and d.rows_b is not None:  # set together (AvoidanceTerms)
             qp.set_obstacle_rows(d.rows_a, d.rows_b)
         if d.H is not None and d.g is not None:
@@ -343,8 +364,7 @@ class LtvMpc(TrackingWarmStart):
             Xbar[1:, 2] += TWO_PI * np.round((x[2] - warm.X[1, 2]) / TWO_PI)
             Ubar[:-1] = warm.U[1:]
             Ubar[-1] = warm.U[-1]
-        Fbar, Ad, Bd = discrete_step_and_jacobians(model, Xbar, Ubar, dt, cfg.discretization,
-                                                   cfg.prediction_substeps)
+        Fbar, Ad, Bd = discrete_step_and_jacobians(model, Xbar, Ubar, dt, cfg.discretization, cfg.prediction_substeps)
         c = Fbar - np.einsum("kij,kj->ki", Ad, Xbar) - np.einsum("kij,kj->ki", Bd, Ubar)
         Xlin = self._Xlin
         Xlin[:N] = Xbar
@@ -358,16 +378,18 @@ class LtvMpc(TrackingWarmStart):
             rows = self._road_rows.fill(road, self.footprint, s_arr, refs, Xlin)
         if self.avoidance is not None:
             memory = AvoidanceMemory(dict(warm.sides))
-            terms = self.avoidance.terms(warm.t_s, x, Xlin, s_arr, memory, None if rows is None else rows.lo,
-                                         None if rows is None else rows.hi)
+            terms = self.avoidance.terms(
+                warm.t_s, x, Xlin, s_arr, memory, None if rows is None else rows.lo, None if rows is None else rows.hi
+            )
             if rows is not None:
                 rows = rows.narrowed(terms.lane_lo, terms.lane_hi)
             sides = tuple(sorted(memory.sides.items()))
             if terms.s_max is not None:
                 # car following: the references approach the stop line behind the obstacle
                 # blocking the lane ahead and move on with its prediction
-                follow = follow_references(s_arr, v_arr, terms.s_max, float(model.speed(x)), dt,
-                                           self.avoidance.config.follow_decel_mps2)
+                follow = follow_references(
+                    s_arr, v_arr, terms.s_max, float(model.speed(x)), dt, self.avoidance.config.follow_decel_mps2
+                )
                 if follow is not None:
                     refs = self._references(*follow, x[2], True)
             if terms.e_ref is not None and np.any(terms.e_ref):
@@ -381,12 +403,31 @@ class LtvMpc(TrackingWarmStart):
             self._lane_n[:, 0] = -np.sin(yaw)
             self._lane_n[:, 1] = np.cos(yaw)
             self._lane_b[:] = np.einsum("ki,ki->k", self._lane_n, refs[1:, :2])
-        return StepData(x, float(s0), float(e_y), float(e_psi), xref, uref, Xbar, Ubar, Fbar, Ad, Bd, c,
-                        self._lane_n, self._lane_b, Xlin,
-                        None if rows is None else rows.lo, None if rows is None else rows.hi,
-                        None if terms is None else terms.rows_a, None if terms is None else terms.rows_b,
-                        None if terms is None else terms.H, None if terms is None else terms.g, sides,
-                        None if rows is None else (rows.dlo, rows.dhi, rows.yaw))
+        return StepData(
+            x,
+            float(s0),
+            float(e_y),
+            float(e_psi),
+            xref,
+            uref,
+            Xbar,
+            Ubar,
+            Fbar,
+            Ad,
+            Bd,
+            c,
+            self._lane_n,
+            self._lane_b,
+            Xlin,
+            None if rows is None else rows.lo,
+            None if rows is None else rows.hi,
+            None if terms is None else terms.rows_a,
+            None if terms is None else terms.rows_b,
+            None if terms is None else terms.H,
+            None if terms is None else terms.g,
+            sides,
+            None if rows is None else (rows.dlo, rows.dhi, rows.yaw),
+        )
 
     def _references(self, s_arr: np.ndarray, v_arr: np.ndarray, yaw_now: float, accel_ff: bool) -> np.ndarray:
         """Fill the state and input references for path points at arc lengths ``s_arr`` (N+1,)
@@ -395,7 +436,7 @@ class LtvMpc(TrackingWarmStart):
         refs = horizon_states(self.path, s_arr, yaw_now)
         xr, ur = self.model.reference(refs[:, :3], refs[:, 3], v_arr, self.config.feedforward == "curvature")
         self._xref[:] = xr
-        self._uref[:] = ur[:self.N]
+        self._uref[:] = ur[: self.N]
         if accel_ff and self._accel_index is not None:
             self._uref[:, self._accel_index] += np.diff(v_arr) / self.dt_s
         return refs

@@ -74,8 +74,7 @@ def _check_free(final: Path) -> None:
             raise FileExistsError(f"output path {final} exists and is not a directory")
         if any(final.iterdir()):
             raise FileExistsError(
-                f"output directory {final} already exists and is not empty; "
-                "choose another --out or remove it"
+                f"output directory {final} already exists and is not empty; choose another --out or remove it"
             )
 
 

@@ -37,8 +37,19 @@ __all__ = [
 
 #: the fixed leading columns of ``trajectory.csv``, in order
 TRAJECTORY_COLUMNS: tuple[str, ...] = (
-    "t", "x", "y", "yaw", "v", "steer", "accel", "s", "e_y", "e_psi",
-    "solve_time_us", "status", "fallback",
+    "t",
+    "x",
+    "y",
+    "yaw",
+    "v",
+    "steer",
+    "accel",
+    "s",
+    "e_y",
+    "e_psi",
+    "solve_time_us",
+    "status",
+    "fallback",
 )
 #: columns holding text; all others are floats
 _TEXT_COLUMNS = frozenset({"status", "fallback"})
@@ -78,19 +89,27 @@ def write_trajectory_csv(result: SimResult, path: str | os.PathLike) -> Path:
     K = result.steps
     extra = _extra_state_columns(result)
     numeric = [
-        result.t_s, result.x[:, 0], result.x[:, 1], result.yaw_rad, result.v_mps,
-        result.steer_rad, result.accel_mps2, result.s_m, result.e_y_m, result.e_psi_rad,
+        result.t_s,
+        result.x[:, 0],
+        result.x[:, 1],
+        result.yaw_rad,
+        result.v_mps,
+        result.steer_rad,
+        result.accel_mps2,
+        result.s_m,
+        result.e_y_m,
+        result.e_psi_rad,
         np.asarray(result.solve_time_s, dtype=float) * 1e6,
     ]
     numeric = [np.asarray(a, dtype=float).reshape(-1) for a in numeric]
     extra_cols = [np.asarray(result.x[:, i], dtype=float) for _, i in extra]
     for name, arr in zip(TRAJECTORY_COLUMNS, numeric):
         if arr.shape[0] != K:
-            raise ValueError(f"SimResult field for column {name!r} has {arr.shape[0]} rows, "
-                             f"expected {K} (len(t_s))")
+            raise ValueError(f"SimResult field for column {name!r} has {arr.shape[0]} rows, expected {K} (len(t_s))")
     if len(result.status) != K or len(result.fallback) != K:
-        raise ValueError(f"SimResult.status / fallback must have {K} entries, got "
-                         f"{len(result.status)} / {len(result.fallback)}")
+        raise ValueError(
+            f"SimResult.status / fallback must have {K} entries, got {len(result.status)} / {len(result.fallback)}"
+        )
 
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")

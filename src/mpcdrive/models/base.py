@@ -36,8 +36,9 @@ class VehicleModel(Protocol):
         a path of curvature kappa [1/m] at speed v_mps [m/s]; the yaw then trails the path
         heading by the slip angle."""
 
-    def reference(self, pose: np.ndarray, kappa: np.ndarray, v_mps: np.ndarray,
-                  feedforward: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    def reference(
+        self, pose: np.ndarray, kappa: np.ndarray, v_mps: np.ndarray, feedforward: bool = True
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Reference states ``(K, nx)`` and inputs ``(K, nu)`` for path points ``pose`` (K, 3)
         [x m, y m, heading rad] of curvature kappa (K,) [1/m] driven at v_mps (K,) [m/s]: with
         ``feedforward`` the steady-state cornering state and inputs, otherwise the path pose with

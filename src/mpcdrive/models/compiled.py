@@ -66,8 +66,13 @@ _rhs = njit(cache=True, inline="always")(kinematic_rhs_at_slip)
 _partials = njit(cache=True, inline="always")(kinematic_partials_at_slip)
 _ss = njit(cache=True)(steady_state_equations)
 # the dynamic equations call these helpers of their module: callable from compiled code as they are
-for _helper in (dynamic._pacejka, dynamic._pacejka_and_slope, dynamic._smoothstep, dynamic.slip_speed_floor,
-                dynamic.axle_tire):
+for _helper in (
+    dynamic._pacejka,
+    dynamic._pacejka_and_slope,
+    dynamic._smoothstep,
+    dynamic.slip_speed_floor,
+    dynamic.axle_tire,
+):
     register_jitable(_helper)
 _dyn_rhs = njit(cache=True, inline="always")(dynamic_rhs)
 _dyn_partials = njit(cache=True, inline="always")(dynamic_rhs_and_partials)
@@ -75,8 +80,20 @@ _axle_tire = dynamic.axle_tire
 _smoothstep = dynamic._smoothstep
 # parameter indices of mp for the dynamic bicycle
 _LF, _LR, _M, _MU, _CSF, _CSR, _H, _C, _E, _VLO, _VHI, _G, _PACEJKA = (
-    dynamic._P_LF, dynamic._P_LR, dynamic._P_M, dynamic._P_MU, dynamic._P_CSF, dynamic._P_CSR, dynamic._P_H,
-    dynamic._P_C, dynamic._P_E, dynamic._P_VLO, dynamic._P_VHI, dynamic._P_G, dynamic._P_PACEJKA)
+    dynamic._P_LF,
+    dynamic._P_LR,
+    dynamic._P_M,
+    dynamic._P_MU,
+    dynamic._P_CSF,
+    dynamic._P_CSR,
+    dynamic._P_H,
+    dynamic._P_C,
+    dynamic._P_E,
+    dynamic._P_VLO,
+    dynamic._P_VHI,
+    dynamic._P_G,
+    dynamic._P_PACEJKA,
+)
 _NA, _NB = len(DYNAMIC_A_ENTRIES), len(DYNAMIC_B_ENTRIES)
 
 
@@ -186,7 +203,7 @@ def model_jacobians(kind, mp, x, u, A, B):
     beta, dbeta = _step_slip(kind, mp, U, 0)
     _stage_into(kind, mp, W, U, 0, beta, dbeta)
     A[:, :] = W[_WA]
-    B[:, :] = W[_WB, :, :B.shape[1]]
+    B[:, :] = W[_WB, :, : B.shape[1]]
 
 
 @njit(cache=True, inline="always")
@@ -212,7 +229,7 @@ def expm_into(W, n, im, ie, it):
             t += abs(W[im, i, j])
         norm = max(norm, t)
     sq = max(0, int(math.ceil(math.log2(norm / 0.5)))) if norm > 0.5 else 0
-    scale = 2.0 ** sq
+    scale = 2.0**sq
     for i in range(n):
         for j in range(n):
             W[im, i, j] = W[im, i, j] / scale

@@ -29,7 +29,7 @@ def _expm(M: np.ndarray) -> np.ndarray:
     polynomial (relative error below 1e-14 after scaling the norm under 1/2)."""
     norm = float(np.max(np.sum(np.abs(M), axis=-1))) if M.size else 0.0
     sq = max(0, int(np.ceil(np.log2(norm / 0.5)))) if norm > 0.5 else 0
-    X = M / (2.0 ** sq)
+    X = M / (2.0**sq)
     eye = np.eye(M.shape[-1])
     E = eye + X / 12.0
     for j in range(11, 0, -1):  # Horner: I + X/1 (I + X/2 (I + ...))
@@ -58,10 +58,10 @@ def _exp_step(model: VehicleModel, x, u, dt: float):
     nx, nu = A.shape[-1], B.shape[-1]
     M = np.zeros(A.shape[:-2] + (nx + nu + 1, nx + nu + 1))
     M[..., :nx, :nx] = A * dt
-    M[..., :nx, nx:nx + nu] = B * dt
+    M[..., :nx, nx : nx + nu] = B * dt
     M[..., :nx, -1] = f0 * dt
     E = _expm(M)
-    return x + E[..., :nx, -1], E[..., :nx, :nx], E[..., :nx, nx:nx + nu]
+    return x + E[..., :nx, -1], E[..., :nx, :nx], E[..., :nx, nx : nx + nu]
 
 
 def _check_substeps(substeps: int) -> int:

@@ -91,15 +91,26 @@ class DynamicParams:
             v = getattr(self, f.name)
             if not np.isfinite(v):
                 raise ValueError(f"{f.name} must be finite, got {v}")
-        for name in ("lf_m", "lr_m", "mass_kg", "yaw_inertia_kgm2", "friction", "cs_front_per_rad",
-                     "cs_rear_per_rad", "kinematic_relax_s", "g_mps2", "v_blend_high_mps"):
+        for name in (
+            "lf_m",
+            "lr_m",
+            "mass_kg",
+            "yaw_inertia_kgm2",
+            "friction",
+            "cs_front_per_rad",
+            "cs_rear_per_rad",
+            "kinematic_relax_s",
+            "g_mps2",
+            "v_blend_high_mps",
+        ):
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
         if self.h_cg_m < 0:
             raise ValueError(f"h_cg_m must be >= 0, got {self.h_cg_m}")
         if not 0 < self.v_blend_low_mps < self.v_blend_high_mps:
             raise ValueError(
-                f"need 0 < v_blend_low_mps < v_blend_high_mps, got {self.v_blend_low_mps}, {self.v_blend_high_mps}")
+                f"need 0 < v_blend_low_mps < v_blend_high_mps, got {self.v_blend_low_mps}, {self.v_blend_high_mps}"
+            )
         if not 0 < self.pacejka_c < 2:
             raise ValueError(f"pacejka_c must lie in (0, 2), got {self.pacejka_c}")
         if self.pacejka_e >= 1:
@@ -139,8 +150,11 @@ class DynamicParams:
         """K_us = m / L (lr / C_alpha,f - lf / C_alpha,r) [rad / (m/s^2)]: steady-state steering
         ``delta = L kappa + K_us a_y`` of the linear-tire model (positive: understeer)."""
         p = self
-        return p.mass_kg / p.wheelbase_m * (p.lr_m / p.cornering_stiffness_front_n_per_rad
-                                            - p.lf_m / p.cornering_stiffness_rear_n_per_rad)
+        return (
+            p.mass_kg
+            / p.wheelbase_m
+            * (p.lr_m / p.cornering_stiffness_front_n_per_rad - p.lf_m / p.cornering_stiffness_rear_n_per_rad)
+        )
 
     def scaled(self, **factors: float) -> DynamicParams:
         """A copy with fields multiplied by factors, e.g. ``scaled(mass_kg=1.2)`` (+20 % mass)."""
@@ -188,7 +202,12 @@ class _ScalarMath:
     """The math namespace of :meth:`DynamicBicycle.f_components` for plain floats (a single state
     evaluates ~20x faster with ``math`` than with numpy's per-call overhead)."""
 
-    sin, cos, tan, arctan = staticmethod(math.sin), staticmethod(math.cos), staticmethod(math.tan), staticmethod(math.atan)
+    sin, cos, tan, arctan = (
+        staticmethod(math.sin),
+        staticmethod(math.cos),
+        staticmethod(math.tan),
+        staticmethod(math.atan),
+    )
     fmax, fmin = staticmethod(max), staticmethod(min)
 
 
@@ -209,13 +228,29 @@ def _smoothstep(vx, lo, hi, ns):
 STEADY_ACCEL_TOL_MPS2 = 1e-8
 STEADY_SECANT_ITERATIONS = 12
 
-_P_LF, _P_LR, _P_M, _P_IZ, _P_MU, _P_CSF, _P_CSR, _P_H, _P_C, _P_E, _P_VLO, _P_VHI, _P_TAU, _P_G, \
-    _P_PACEJKA = range(15)
+_P_LF, _P_LR, _P_M, _P_IZ, _P_MU, _P_CSF, _P_CSR, _P_H, _P_C, _P_E, _P_VLO, _P_VHI, _P_TAU, _P_G, _P_PACEJKA = range(15)
 
 #: (row, column) of the entries of df/dx and df/du that :func:`dynamic_rhs_and_partials` returns
 #: (all others are zero)
-DYNAMIC_A_ENTRIES = ((0, 2), (0, 3), (0, 4), (1, 2), (1, 3), (1, 4), (2, 3), (2, 5),
-                     (3, 3), (3, 4), (3, 5), (4, 3), (4, 4), (4, 5), (5, 3), (5, 4), (5, 5))
+DYNAMIC_A_ENTRIES = (
+    (0, 2),
+    (0, 3),
+    (0, 4),
+    (1, 2),
+    (1, 3),
+    (1, 4),
+    (2, 3),
+    (2, 5),
+    (3, 3),
+    (3, 4),
+    (3, 5),
+    (4, 3),
+    (4, 4),
+    (4, 5),
+    (5, 3),
+    (5, 4),
+    (5, 5),
+)
 DYNAMIC_B_ENTRIES = ((0, 0), (1, 0), (2, 0), (3, 0), (3, 1), (4, 0), (4, 1), (5, 0), (5, 1))
 
 
@@ -223,9 +258,23 @@ def dynamic_parameters(params: DynamicParams, tire: TireModel) -> tuple[float, .
     """The parameter sequence P of the equation functions: the fields of ``params`` in the order
     of the ``_P_*`` indices and 1.0 for Pacejka tires (0.0 linear)."""
     p = params
-    return (p.lf_m, p.lr_m, p.mass_kg, p.yaw_inertia_kgm2, p.friction, p.cs_front_per_rad, p.cs_rear_per_rad,
-            p.h_cg_m, p.pacejka_c, p.pacejka_e, p.v_blend_low_mps, p.v_blend_high_mps, p.kinematic_relax_s,
-            p.g_mps2, 1.0 if tire == "pacejka" else 0.0)
+    return (
+        p.lf_m,
+        p.lr_m,
+        p.mass_kg,
+        p.yaw_inertia_kgm2,
+        p.friction,
+        p.cs_front_per_rad,
+        p.cs_rear_per_rad,
+        p.h_cg_m,
+        p.pacejka_c,
+        p.pacejka_e,
+        p.v_blend_low_mps,
+        p.v_blend_high_mps,
+        p.kinematic_relax_s,
+        p.g_mps2,
+        1.0 if tire == "pacejka" else 0.0,
+    )
 
 
 def slip_speed_floor(P):
@@ -335,13 +384,27 @@ def dynamic_rhs_and_partials(yaw, vx, vy, r, delta, a, P, ns):
     dvx_d = a - Fyf * sd / m + r * vy
     dvy_d = (Fyf * cd + Fyr) / m - r * vx
     dr_d = (lf * Fyf * cd - lr * Fyr) / Iz
-    Dvx = (-sd / m * Fyf_vx, -sd / m * Fyf_vy + r, -sd / m * Fyf_r + vy,
-           -(Fyf_d * sd + Fyf * cd) / m, 1.0 - sd / m * Fyf_a)
-    Dvy = ((cd * Fyf_vx + Fyr_vx) / m - r, (cd * Fyf_vy + Fyr_vy) / m, (cd * Fyf_r + Fyr_r) / m - vx,
-           (cd * Fyf_d - sd * Fyf) / m, (cd * Fyf_a + Fyr_a) / m)
-    Dr = ((lf * cd * Fyf_vx - lr * Fyr_vx) / Iz, (lf * cd * Fyf_vy - lr * Fyr_vy) / Iz,
-          (lf * cd * Fyf_r - lr * Fyr_r) / Iz, lf * (cd * Fyf_d - sd * Fyf) / Iz,
-          (lf * cd * Fyf_a - lr * Fyr_a) / Iz)
+    Dvx = (
+        -sd / m * Fyf_vx,
+        -sd / m * Fyf_vy + r,
+        -sd / m * Fyf_r + vy,
+        -(Fyf_d * sd + Fyf * cd) / m,
+        1.0 - sd / m * Fyf_a,
+    )
+    Dvy = (
+        (cd * Fyf_vx + Fyr_vx) / m - r,
+        (cd * Fyf_vy + Fyr_vy) / m,
+        (cd * Fyf_r + Fyr_r) / m - vx,
+        (cd * Fyf_d - sd * Fyf) / m,
+        (cd * Fyf_a + Fyr_a) / m,
+    )
+    Dr = (
+        (lf * cd * Fyf_vx - lr * Fyr_vx) / Iz,
+        (lf * cd * Fyf_vy - lr * Fyr_vy) / Iz,
+        (lf * cd * Fyf_r - lr * Fyr_r) / Iz,
+        lf * (cd * Fyf_d - sd * Fyf) / Iz,
+        (lf * cd * Fyf_a - lr * Fyr_a) / Iz,
+    )
     # kinematic part
     td = ns.tan(delta)
     sec2 = 1.0 + td * td
@@ -360,10 +423,20 @@ def dynamic_rhs_and_partials(yaw, vx, vy, r, delta, a, P, ns):
     W = 1.0 - w
     # blended partials (vx, vy, r, delta, a); the kinematic vx' = a has the partials (0, 0, 0, 0, 1)
     Bvx = (w * Dvx[0] + dw * (dvx_d - a), w * Dvx[1], w * Dvx[2], w * Dvx[3], w * Dvx[4] + W)
-    Bvy = (w * Dvy[0] + W * Kvy[0] + dw * (dvy_d - dvy_k), w * Dvy[1] + W * Kvy[1], w * Dvy[2] + W * Kvy[2],
-           w * Dvy[3] + W * Kvy[3], w * Dvy[4] + W * Kvy[4])
-    Br = (w * Dr[0] + W * Kr[0] + dw * (dr_d - dr_k), w * Dr[1] + W * Kr[1], w * Dr[2] + W * Kr[2],
-          w * Dr[3] + W * Kr[3], w * Dr[4] + W * Kr[4])
+    Bvy = (
+        w * Dvy[0] + W * Kvy[0] + dw * (dvy_d - dvy_k),
+        w * Dvy[1] + W * Kvy[1],
+        w * Dvy[2] + W * Kvy[2],
+        w * Dvy[3] + W * Kvy[3],
+        w * Dvy[4] + W * Kvy[4],
+    )
+    Br = (
+        w * Dr[0] + W * Kr[0] + dw * (dr_d - dr_k),
+        w * Dr[1] + W * Kr[1],
+        w * Dr[2] + W * Kr[2],
+        w * Dr[3] + W * Kr[3],
+        w * Dr[4] + W * Kr[4],
+    )
     # pose velocities
     vy_p = w * vy + W * vy_k
     vyp_vx = dw * (vy - vy_k) + W * lq * td
@@ -371,12 +444,33 @@ def dynamic_rhs_and_partials(yaw, vx, vy, r, delta, a, P, ns):
     rp_vx = dw * (r - r_k) + W * td / L
     rp_d = W * vx * sec2 / L
     c, s = ns.cos(yaw), ns.sin(yaw)
-    f = (vx * c - vy_p * s, vx * s + vy_p * c, w * r + W * r_k, w * dvx_d + W * a, w * dvy_d + W * dvy_k,
-         w * dr_d + W * dr_k)
-    A = (-vx * s - vy_p * c, c - s * vyp_vx, -s * w,
-         vx * c - vy_p * s, s + c * vyp_vx, c * w,
-         rp_vx, w,
-         Bvx[0], Bvx[1], Bvx[2], Bvy[0], Bvy[1], Bvy[2], Br[0], Br[1], Br[2])
+    f = (
+        vx * c - vy_p * s,
+        vx * s + vy_p * c,
+        w * r + W * r_k,
+        w * dvx_d + W * a,
+        w * dvy_d + W * dvy_k,
+        w * dr_d + W * dr_k,
+    )
+    A = (
+        -vx * s - vy_p * c,
+        c - s * vyp_vx,
+        -s * w,
+        vx * c - vy_p * s,
+        s + c * vyp_vx,
+        c * w,
+        rp_vx,
+        w,
+        Bvx[0],
+        Bvx[1],
+        Bvx[2],
+        Bvy[0],
+        Bvy[1],
+        Bvy[2],
+        Br[0],
+        Br[1],
+        Br[2],
+    )
     B = (-s * vyp_d, c * vyp_d, rp_d, Bvx[3], Bvx[4], Bvy[3], Bvy[4], Br[3], Br[4])
     return f, A, B
 
@@ -438,8 +532,9 @@ class DynamicBicycle:
         :func:`dynamic_rhs_and_partials` placed in arrays."""
         x = np.asarray(x, float)
         u = np.asarray(u, float)
-        fs, a_entries, b_entries = dynamic_rhs_and_partials(x[..., 2], x[..., 3], x[..., 4], x[..., 5],
-                                                            u[..., 0], u[..., 1], self._P, np)
+        fs, a_entries, b_entries = dynamic_rhs_and_partials(
+            x[..., 2], x[..., 3], x[..., 4], x[..., 5], u[..., 0], u[..., 1], self._P, np
+        )
         shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1])
         A = np.zeros(shape + (6, 6))
         B = np.zeros(shape + (6, 2))

@@ -100,8 +100,7 @@ def kinematic_partials_at_slip(yaw, v, slip, dbeta, lr_m, ns):
     dy'/ddelta, dyaw'/ddelta)``; dbeta = d beta / d delta."""
     beta, sin_beta, cos_beta = slip
     sa, ca = ns.sin(yaw + beta), ns.cos(yaw + beta)
-    return (-v * sa, v * ca, ca, sa, sin_beta / lr_m,
-            -v * sa * dbeta, v * ca * dbeta, v / lr_m * cos_beta * dbeta)
+    return (-v * sa, v * ca, ca, sa, sin_beta / lr_m, -v * sa * dbeta, v * ca * dbeta, v / lr_m * cos_beta * dbeta)
 
 
 def kinematic_rhs(yaw, v, delta, lq, lr_m, ns):
@@ -114,8 +113,7 @@ def kinematic_rhs(yaw, v, delta, lq, lr_m, ns):
 
 def kinematic_jacobian_entries(yaw, v, delta, lq, lr_m, ns):
     """:func:`kinematic_partials_at_slip` at steering delta [rad]."""
-    return kinematic_partials_at_slip(yaw, v, slip_terms(delta, lq, ns), slip_angle_derivative(delta, lq, ns),
-                                      lr_m, ns)
+    return kinematic_partials_at_slip(yaw, v, slip_terms(delta, lq, ns), slip_angle_derivative(delta, lq, ns), lr_m, ns)
 
 
 class _FromComponents:

@@ -138,12 +138,18 @@ class FrenetBoxes:
         return len(self.s_ref)
 
     def __getitem__(self, k: int) -> FrenetBox:
-        return FrenetBox(float(self.s_ref[k]), float(self.s_lo[k]), float(self.s_hi[k]), float(self.e_lo[k]),
-                         float(self.e_hi[k]))
+        return FrenetBox(
+            float(self.s_ref[k]), float(self.s_lo[k]), float(self.s_hi[k]), float(self.e_lo[k]), float(self.e_hi[k])
+        )
 
 
-def frenet_boxes(path: ReferencePath, s_guess: np.ndarray, centers: np.ndarray, radius_m: float | np.ndarray = 0.0,
-                 points: np.ndarray | None = None) -> FrenetBoxes:
+def frenet_boxes(
+    path: ReferencePath,
+    s_guess: np.ndarray,
+    centers: np.ndarray,
+    radius_m: float | np.ndarray = 0.0,
+    points: np.ndarray | None = None,
+) -> FrenetBoxes:
     """Frenet extents of K world shapes, shape k near arc length ``s_guess[k]`` (K,) [m]: discs of
     ``radius_m`` (a number or (K,)) around ``centers`` (K, 2) [m], or, given ``points``
     (K, M, 2) [m], convex polygons (their vertex mean is projected; ``centers`` unused)."""
@@ -204,8 +210,16 @@ class AvoidanceTerms:
 class Avoidance:
     """Builds the obstacle terms of each step for one controller (sizes fixed at construction)."""
 
-    def __init__(self, config: AvoidanceConfig, obstacles: list[Obstacle], path: ReferencePath, footprint: Footprint,
-                 N: int, dt_s: float, road: Road | None):
+    def __init__(
+        self,
+        config: AvoidanceConfig,
+        obstacles: list[Obstacle],
+        path: ReferencePath,
+        footprint: Footprint,
+        N: int,
+        dt_s: float,
+        road: Road | None,
+    ):
         self.config = config
         self.obstacles = list(obstacles)
         self.path = path
@@ -262,9 +276,20 @@ class Avoidance:
         if self.compiled:
             tab = self._obstacle_table()
             if tab.all_simple:
-                n = _ac.select(float(t_s), float(xy[0]), float(xy[1]), t_s + self.N * self.dt_s,
-                               self.config.influence_m, tab.pose, tab.vel, tab.bound_r, tab.life, tab.has_life,
-                               self.config.max_obstacles, self._sel)
+                n = _ac.select(
+                    float(t_s),
+                    float(xy[0]),
+                    float(xy[1]),
+                    t_s + self.N * self.dt_s,
+                    self.config.influence_m,
+                    tab.pose,
+                    tab.vel,
+                    tab.bound_r,
+                    tab.life,
+                    tab.has_life,
+                    self.config.max_obstacles,
+                    self._sel,
+                )
                 return self._sel[:n].tolist()
         reach = self.config.influence_m
         t_end = t_s + self.N * self.dt_s
@@ -333,21 +358,43 @@ class Avoidance:
                 return self._tracks_compiled(cpath, tab, rel, t_s, s_arr)
         return (*self._tracks_numpy(rel, t_s, s_arr), None)
 
-    def _tracks_compiled(self, cpath: PathArrays, tab: _ac.ObstacleTable, rel: list[int], t_s: float,
-                         s_arr: np.ndarray):
+    def _tracks_compiled(
+        self, cpath: PathArrays, tab: _ac.ObstacleTable, rel: list[int], t_s: float, s_arr: np.ndarray
+    ):
         """:meth:`_tracks` of static and constant-velocity obstacles, compiled."""
         n, K = len(rel), self.N + 1
         sel = np.array(rel, np.int64)
         centers_a = np.empty((n, K, 2))
         outlines_a = np.empty((n, K, tab.verts.shape[1], 2))
         box = np.empty((n, 5, K))
-        _ac.tracks(cpath.kind, cpath.geo, cpath.tab_s, cpath.tab_xy, cpath.tab_h, cpath.tab_k, float(t_s),
-                   float(self.dt_s), s_arr, sel, tab.pose, tab.vel, tab.moving, tab.shape, tab.radius, tab.verts,
-                   tab.nverts, centers_a, outlines_a, box)
+        _ac.tracks(
+            cpath.kind,
+            cpath.geo,
+            cpath.tab_s,
+            cpath.tab_xy,
+            cpath.tab_h,
+            cpath.tab_k,
+            float(t_s),
+            float(self.dt_s),
+            s_arr,
+            sel,
+            tab.pose,
+            tab.vel,
+            tab.moving,
+            tab.shape,
+            tab.radius,
+            tab.verts,
+            tab.nverts,
+            centers_a,
+            outlines_a,
+            box,
+        )
         boxes = {j: FrenetBoxes(*box[i]) for i, j in enumerate(rel)}
         centers = {j: centers_a[i] for i, j in enumerate(rel)}
-        outlines = {j: None if tab.shape[j] == _ac.SHAPE_CIRCLE else outlines_a[i, :, :tab.nverts[j]]
-                    for i, j in enumerate(rel)}
+        outlines = {
+            j: None if tab.shape[j] == _ac.SHAPE_CIRCLE else outlines_a[i, :, : tab.nverts[j]]
+            for i, j in enumerate(rel)
+        }
         packed = (tab.shape[sel], tab.radius[sel], centers_a, outlines_a, tab.nverts[sel], box)
         return boxes, centers, outlines, packed
 
@@ -364,10 +411,11 @@ class Avoidance:
                 radius[i] = _radius(self.obstacles[j])
             else:
                 shape[i], nverts[i] = _ac.SHAPE_POLYGON, o.shape[1]
-                outlines_a[i, :, :o.shape[1]] = o
+                outlines_a[i, :, : o.shape[1]] = o
         centers_a = np.array([centers[j] for j in rel], float).reshape(n, K, 2)
-        box = np.array([[getattr(boxes[j], f) for f in ("s_ref", "s_lo", "s_hi", "e_lo", "e_hi")] for j in rel],
-                       float).reshape(n, 5, K)
+        box = np.array(
+            [[getattr(boxes[j], f) for f in ("s_ref", "s_lo", "s_hi", "e_lo", "e_hi")] for j in rel], float
+        ).reshape(n, 5, K)
         return shape, radius, centers_a, outlines_a, nverts, box
 
     def _tracks_numpy(self, rel: list[int], t_s: float, s_arr: np.ndarray):
@@ -394,11 +442,12 @@ class Avoidance:
                 radius = np.concatenate([np.full(n, _radius(self.obstacles[j])) for j, n in zip(js, counts)])
                 bx = frenet_boxes(self.path, guess, np.concatenate([centers[j] for j in js]), radius)
             else:
-                bx = frenet_boxes(self.path, guess, np.zeros((len(guess), 2)),
-                                  points=np.concatenate([outlines[j] for j in js]))
+                bx = frenet_boxes(
+                    self.path, guess, np.zeros((len(guess), 2)), points=np.concatenate([outlines[j] for j in js])
+                )
             ends = np.cumsum(counts)
             for j, n, end in zip(js, counts, ends):
-                fields = (getattr(bx, f)[end - n:end] for f in ("s_ref", "s_lo", "s_hi", "e_lo", "e_hi"))
+                fields = (getattr(bx, f)[end - n : end] for f in ("s_ref", "s_lo", "s_hi", "e_lo", "e_hi"))
                 boxes[j] = FrenetBoxes(*(np.repeat(v, K) if n == 1 else v for v in fields))
         for j in rel:
             if not self.obstacles[j].moving:
@@ -407,8 +456,16 @@ class Avoidance:
                 outlines[j] = None if o is None else np.repeat(o, K, axis=0)
         return boxes, centers, outlines
 
-    def terms(self, t_s: float, x: np.ndarray, Xlin: np.ndarray, s_arr: np.ndarray, memory: AvoidanceMemory,
-              road_lo: np.ndarray | None = None, road_hi: np.ndarray | None = None) -> AvoidanceTerms:
+    def terms(
+        self,
+        t_s: float,
+        x: np.ndarray,
+        Xlin: np.ndarray,
+        s_arr: np.ndarray,
+        memory: AvoidanceMemory,
+        road_lo: np.ndarray | None = None,
+        road_hi: np.ndarray | None = None,
+    ) -> AvoidanceTerms:
         """Obstacle terms for the horizon starting at time ``t_s`` [s].
 
         x : (nx,) measured state; Xlin : (N+1, nx) linearization trajectory (row k for x_k);
@@ -431,17 +488,16 @@ class Avoidance:
         following = {j for j in rel if cfg.uses_rows and self._following(boxes[j][0], x[:2], float(s_arr[0]))}
         # horizon steps 1..N at which each obstacle exists (its lifetime)
         times = t_s + self.dt_s * np.arange(1, self.N + 1) if any(self.obstacles[j].has_lifetime for j in rel) else None
-        present = {j: self.obstacles[j].present(times) if self.obstacles[j].has_lifetime else self._always
-                   for j in rel}
+        present = {j: self.obstacles[j].present(times) if self.obstacles[j].has_lifetime else self._always for j in rel}
         rows_a = rows_b = lo = hi = H = g = e_ref = None
         if cfg.detour == "trapezoid":
             e_ref = self._detour(s_arr, {j: b for j, b in boxes.items() if j not in following}, sides)
         if cfg.formulation == "hard":
-            rows_a, rows_b = self._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present, following,
-                                             packed)
+            rows_a, rows_b = self._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present, following, packed)
         elif cfg.formulation == "corridor":
-            lo, hi, rows_a, rows_b = self._corridor(Xlin, s_arr, [j for j in rel if j not in following], boxes,
-                                                    sides, present, road_lo, road_hi)
+            lo, hi, rows_a, rows_b = self._corridor(
+                Xlin, s_arr, [j for j in rel if j not in following], boxes, sides, present, road_lo, road_hi
+            )
         else:
             H, g = self._cost(Xlin, rel, boxes, centers, present)
         s_max = None if cfg.follow_gap_s is None else self._stop_lines(s_arr, rel, boxes, sides, gap_s=cfg.follow_gap_s)
@@ -517,8 +573,9 @@ class Avoidance:
         distance travelled along it (the car stays near the path)."""
         return s0 + np.cumsum(np.hypot(*np.diff(Xlin[:, :2], axis=0).T))
 
-    def _stop_plane(self, s_lo: np.ndarray, s_at: np.ndarray, clearance: float, *,
-                    ahead: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    def _stop_plane(
+        self, s_lo: np.ndarray, s_at: np.ndarray, clearance: float, *, ahead: bool = False
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The stop constraint ``s(p) <= s_lo - clearance`` linearized at arc length
         ``min(s_at, s_lo - clearance)`` (s_at: where the point is expected): unit tangents t
         (K, 2) and points q (K, 2) with the constraint ``t . p <= t . q - clearance``. Linearizing
@@ -532,8 +589,7 @@ class Avoidance:
         t = np.column_stack([np.cos(h), np.sin(h)])
         return t, self.path.position(s_bar) + t * (s_lo - s_bar)[:, None]
 
-    def _hard_rows(self, Xlin, s_arr, rel, boxes, centers, world, sides, present, following=frozenset(),
-                   packed=None):
+    def _hard_rows(self, Xlin, s_arr, rel, boxes, centers, world, sides, present, following=frozenset(), packed=None):
         """The hard rows (N, M, 3), (N, M) of the obstacles ``rel``: compiled on a path
         ``path_arrays`` describes (``packed``: the tracks as :meth:`_packed` gives them, made
         from the others when None), else :meth:`_hard_rows_numpy`."""
@@ -556,10 +612,32 @@ class Avoidance:
         else:
             pres = np.array([present[j] for j in rel], bool).reshape(n, self.N)
         shape, radius, centers_a, outlines_a, nverts, box = packed
-        _ac.hard_rows(cpath.kind, cpath.geo, cpath.tab_s, cpath.tab_xy, cpath.tab_h, cpath.tab_k, Xlin, s_arr,
-                      np.asarray(self.offsets, float), float(self.r_disc), float(self.config.margin_m),
-                      float(self.half_length), float(self.config.influence_m), shape, radius, centers_a, outlines_a,
-                      nverts, box, side, mode, pres, a, b)
+        _ac.hard_rows(
+            cpath.kind,
+            cpath.geo,
+            cpath.tab_s,
+            cpath.tab_xy,
+            cpath.tab_h,
+            cpath.tab_k,
+            Xlin,
+            s_arr,
+            np.asarray(self.offsets, float),
+            float(self.r_disc),
+            float(self.config.margin_m),
+            float(self.half_length),
+            float(self.config.influence_m),
+            shape,
+            radius,
+            centers_a,
+            outlines_a,
+            nverts,
+            box,
+            side,
+            mode,
+            pres,
+            a,
+            b,
+        )
         return a, b
 
     def _hard_rows_numpy(self, Xlin, s_arr, rel, boxes, centers, world, sides, present, following=frozenset()):
@@ -579,8 +657,10 @@ class Avoidance:
         s_disc = s_arr[None, 1:] + off
         # every considered obstacle at once: arrays (n_obs, nd, N[, 2]), obstacle i in row slot i
         side = np.array([sides[j] for j in rel], float)[:, None, None]
-        s_lo, s_hi, s_ref, e_lo, e_hi = (np.stack([getattr(boxes[j], f)[1:] for j in rel])[:, None, :]
-                                         for f in ("s_lo", "s_hi", "s_ref", "e_lo", "e_hi"))
+        s_lo, s_hi, s_ref, e_lo, e_hi = (
+            np.stack([getattr(boxes[j], f)[1:] for j in rel])[:, None, :]
+            for f in ("s_lo", "s_hi", "s_ref", "e_lo", "e_hi")
+        )
         e_edge = np.where(side == SIDE_LEFT, e_hi, e_lo)
         h = np.asarray(self.path.heading(s_ref), float)
         nl = np.stack([-np.sin(h), np.cos(h)], axis=-1)  # path left normal at the obstacle
@@ -613,8 +693,14 @@ class Avoidance:
         active &= np.stack([present[j] for j in rel])[:, None, :]  # no row at the steps the obstacle does not exist
         # n . (p + J (x - xbar)) >= n . q + r_need, J = d p / d (x, y, yaw)
         ay = off * (-n[..., 0] * s + n[..., 1] * c)
-        rhs = (np.einsum("odki,odki->odk", n, q) + r_need - np.einsum("odki,dki->odk", n, P)
-               + n[..., 0] * lin[:, 0] + n[..., 1] * lin[:, 1] + ay * lin[:, 2])
+        rhs = (
+            np.einsum("odki,odki->odk", n, q)
+            + r_need
+            - np.einsum("odki,dki->odk", n, P)
+            + n[..., 0] * lin[:, 0]
+            + n[..., 1] * lin[:, 1]
+            + ay * lin[:, 2]
+        )
         m = len(rel) * nd  # row slot * nd + disc, as the obstacles come in rel
 
         def rows(v, fill):
@@ -655,7 +741,7 @@ class Avoidance:
                 if sides[j] != SIDE_BLOCKED or not ahead[j] or not present[j][k - 1]:
                     continue
                 # stop before it: s(p) <= s_lo - margin - half length, i.e. t . p <= t . q - that
-                t, q = self._stop_plane(np.array([box.s_lo]), s_lin[k - 1:k], m + self.half_length)
+                t, q = self._stop_plane(np.array([box.s_lo]), s_lin[k - 1 : k], m + self.half_length)
                 a[k - 1, slot, :2] = -t[0]
                 b[k - 1, slot] = -(t[0] @ q[0]) + m + self.half_length
         # keep the tube non-empty: if the bounds cross, centre them (the slack handles the rest)
@@ -676,7 +762,9 @@ class Avoidance:
             if cfg.formulation == "potential":
                 den = np.einsum("ki,ki->k", d, d) + cfg.epsilon_m2
                 grad = -2.0 * w * d / den[:, None] ** 2
-                hess = (-2.0 * w / den**2)[:, None, None] * np.eye(2) + 8.0 * w * np.einsum("ki,kj->kij", d, d) / den[:, None, None] ** 3
+                hess = (-2.0 * w / den**2)[:, None, None] * np.eye(2) + 8.0 * w * np.einsum("ki,kj->kij", d, d) / den[
+                    :, None, None
+                ] ** 3
             else:
                 Sinv = self.sigma_inv(float(self.path.heading(boxes[j][0].s_ref)))
                 Sd = d @ Sinv
@@ -703,9 +791,17 @@ class Avoidance:
             if side == SIDE_BLOCKED:
                 continue
             box = bx[0]
-            shift = (box.e_hi + self.half_width + 2 * self.config.margin_m) if side == SIDE_LEFT else (box.e_lo - self.half_width - 2 * self.config.margin_m)
+            shift = (
+                (box.e_hi + self.half_width + 2 * self.config.margin_m)
+                if side == SIDE_LEFT
+                else (box.e_lo - self.half_width - 2 * self.config.margin_m)
+            )
             lo_s, hi_s = box.s_lo - self.half_length, box.s_hi + self.half_length
-            f = np.clip(np.minimum((s_arr - (lo_s - ramp)) / max(ramp, 1e-9), ((hi_s + ramp) - s_arr) / max(ramp, 1e-9)), 0.0, 1.0)
+            f = np.clip(
+                np.minimum((s_arr - (lo_s - ramp)) / max(ramp, 1e-9), ((hi_s + ramp) - s_arr) / max(ramp, 1e-9)),
+                0.0,
+                1.0,
+            )
             cand = shift * f
             e[:] = np.where(np.abs(cand) > np.abs(e), cand, e)
         return e
@@ -717,8 +813,9 @@ def _radius(ob: Obstacle) -> float:
     return ob.shape.radius_m
 
 
-def follow_references(s_arr: np.ndarray, v_arr: np.ndarray, s_max: np.ndarray, v0_mps: float, dt_s: float,
-                      decel_mps2: float) -> tuple[np.ndarray, np.ndarray] | None:
+def follow_references(
+    s_arr: np.ndarray, v_arr: np.ndarray, s_max: np.ndarray, v0_mps: float, dt_s: float, decel_mps2: float
+) -> tuple[np.ndarray, np.ndarray] | None:
     """Horizon references behind a stop line that moves: arc lengths (N+1,) [m] and speeds (N+1,)
     [m/s] of a car starting at ``s_arr[0]`` with speed ``v0_mps`` that drives at the free
     references' speed ``v_arr`` where it can, and otherwise at the speed from which braking at

@@ -77,8 +77,21 @@ def obstacle_table(obstacles: list[Obstacle]) -> ObstacleTable:
         bound_r[j] = ob.shape.bounding_radius_m
         life[j] = ob.t_start_s, ob.t_end_s
         has_life[j] = ob.has_lifetime
-    return ObstacleTable(tuple(obstacles), pose, vel, moving, simple, shape, radius, verts, nverts, bound_r, life,
-                         has_life, bool(simple.all()))
+    return ObstacleTable(
+        tuple(obstacles),
+        pose,
+        vel,
+        moving,
+        simple,
+        shape,
+        radius,
+        verts,
+        nverts,
+        bound_r,
+        life,
+        has_life,
+        bool(simple.all()),
+    )
 
 
 @njit(cache=True)
@@ -115,8 +128,28 @@ def select(t_s, x, y, t_end, reach, pose, vel, bound_r, life, has_life, max_n, o
 
 
 @njit(cache=True)
-def tracks(kind, geo, tab_s, tab_xy, tab_h, tab_k, t_s, dt_s, s_arr, sel, pose, vel, moving, shape, radius,
-           verts, nverts, centers, outlines, box):
+def tracks(
+    kind,
+    geo,
+    tab_s,
+    tab_xy,
+    tab_h,
+    tab_k,
+    t_s,
+    dt_s,
+    s_arr,
+    sel,
+    pose,
+    vel,
+    moving,
+    shape,
+    radius,
+    verts,
+    nverts,
+    centers,
+    outlines,
+    box,
+):
     """``Avoidance._tracks`` of static and constant-velocity obstacles ``sel`` (n,) over the K =
     len(s_arr) horizon times ``t_s + k dt_s``: centres (n, K, 2), world vertices (n, K, V, 2) of
     polygons (the first ``nverts`` of V) and Frenet boxes (n, 5, K) (``frenet_boxes``: a disc's
@@ -221,8 +254,32 @@ def _nearest(px, py, shape, radius, centers, outlines, nv, i, k):
 
 
 @njit(cache=True)
-def hard_rows(kind, geo, tab_s, tab_xy, tab_h, tab_k, Xlin, s_arr, offsets, r_disc, margin, half_length, influence,
-              shape, radius, centers, outlines, nverts, box, side, mode, present, a, b):
+def hard_rows(
+    kind,
+    geo,
+    tab_s,
+    tab_xy,
+    tab_h,
+    tab_k,
+    Xlin,
+    s_arr,
+    offsets,
+    r_disc,
+    margin,
+    half_length,
+    influence,
+    shape,
+    radius,
+    centers,
+    outlines,
+    nverts,
+    box,
+    side,
+    mode,
+    present,
+    a,
+    b,
+):
     """``Avoidance._hard_rows``: the hard half-plane rows of the n considered obstacles (in row
     slots 0..n-1, disc d of slot i in row ``i * len(offsets) + d``) at steps 1..N, into a (N, M, 3)
     and b (N, M) (unused rows: 0 and -inf). Obstacle i: ``shape``, ``radius`` (n,), centres

@@ -121,11 +121,19 @@ class MpcProblem:
             raise ValueError(f"horizon N must be a positive integer, got {N}")
         if not (np.isfinite(dt_s) and dt_s > 0):
             raise ValueError(f"dt_s must be a positive finite number, got {dt_s}")
-        for name, value in (("nx", nx), ("nu", nu), ("N", int(N)), ("dt_s", dt_s),
-                            ("road", road), ("lane_slack_weight", lane_slack_weight),
-                            ("lane_slack_weight_l1", lane_slack_weight_l1), ("obstacle_rows", obstacle_rows),
-                            ("obstacle_slack_weight", obstacle_slack_weight),
-                            ("obstacle_slack_weight_l1", obstacle_slack_weight_l1), ("position_cost", position_cost)):
+        for name, value in (
+            ("nx", nx),
+            ("nu", nu),
+            ("N", int(N)),
+            ("dt_s", dt_s),
+            ("road", road),
+            ("lane_slack_weight", lane_slack_weight),
+            ("lane_slack_weight_l1", lane_slack_weight_l1),
+            ("obstacle_rows", obstacle_rows),
+            ("obstacle_slack_weight", obstacle_slack_weight),
+            ("obstacle_slack_weight_l1", obstacle_slack_weight_l1),
+            ("position_cost", position_cost),
+        ):
             object.__setattr__(self, name, value)
         object.__setattr__(self, "Q", _as_matrix(Q, nx, "Q"))
         object.__setattr__(self, "R", _as_matrix(R, nu, "R"))

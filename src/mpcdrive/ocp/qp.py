@@ -123,9 +123,9 @@ class LtvQp:
         self.q = np.zeros(self.n_var)
         self._q_const = np.zeros(self.n_var)
         if self.lane:
-            self._q_const[self.ie(1):self.ie(1) + N] = pb.lane_slack_weight_l1
+            self._q_const[self.ie(1) : self.ie(1) + N] = pb.lane_slack_weight_l1
         if self.n_sig:
-            self._q_const[self.isig(1):self.isig(1) + N] = pb.obstacle_slack_weight_l1
+            self._q_const[self.isig(1) : self.isig(1) + N] = pb.obstacle_slack_weight_l1
         self.q[:] = self._q_const
         self._Qstack = np.stack([pb.Q] * (N - 1) + [pb.QN])  # (N, nx, nx) weights of x_1..x_N
 
@@ -228,12 +228,25 @@ class LtvQp:
         self.l = np.concatenate(lo)
         self.u = np.concatenate(hi)
         if self.r_rate is not None:
-            self._rate_base_lo = self.l[self.r_rate:self.r_rate + nu].copy()
-            self._rate_base_hi = self.u[self.r_rate:self.r_rate + nu].copy()
+            self._rate_base_lo = self.l[self.r_rate : self.r_rate + nu].copy()
+            self._rate_base_hi = self.u[self.r_rate : self.r_rate + nu].copy()
 
     # -- per-step update --------------------------------------------------------------------
-    def update(self, x0, Ad, Bd, c, xref, uref, u_prev, lane_normal=None, lane_offset=None,
-               lane_lo=None, lane_hi=None, lane_slopes=None) -> None:
+    def update(
+        self,
+        x0,
+        Ad,
+        Bd,
+        c,
+        xref,
+        uref,
+        u_prev,
+        lane_normal=None,
+        lane_offset=None,
+        lane_lo=None,
+        lane_hi=None,
+        lane_slopes=None,
+    ) -> None:
         """Write one step's numbers into ``q``, ``l``, ``u`` and ``A.data`` in place.
 
         x0 : (nx,) measured state; Ad : (N, nx, nx), Bd : (N, nx, nu), c : (N, nx) the affine
@@ -250,25 +263,25 @@ class LtvQp:
         """
         N, nx, nu = self.N, self.nx, self.nu
         pb = self.problem
-        self.l[self.r_init:self.r_init + nx] = x0
-        self.u[self.r_init:self.r_init + nx] = x0
+        self.l[self.r_init : self.r_init + nx] = x0
+        self.u[self.r_init : self.r_init + nx] = x0
         cflat = np.ravel(c)
-        self.l[self.r_dyn:self.r_dyn + N * nx] = cflat
-        self.u[self.r_dyn:self.r_dyn + N * nx] = cflat
+        self.l[self.r_dyn : self.r_dyn + N * nx] = cflat
+        self.u[self.r_dyn : self.r_dyn + N * nx] = cflat
         self._coo_vals[self._slot_A] = -np.ravel(Ad)
         self._coo_vals[self._slot_B] = -np.ravel(Bd)
         # cost: q_x = -2 W r ; q_u = -2 R ur ; minus 2 Rc u_prev on u_0
         self.q[:] = self._q_const
-        qx = self.q[nx:self.n_x].reshape(N, nx)
+        qx = self.q[nx : self.n_x].reshape(N, nx)
         np.einsum("kij,kj->ki", self._Qstack, xref[1:], out=qx)
         qx *= -2.0
-        qu = self.q[self.n_x:self.n_x + self.n_u].reshape(N, nu)
+        qu = self.q[self.n_x : self.n_x + self.n_u].reshape(N, nu)
         np.matmul(uref, pb.R.T, out=qu)
         qu *= -2.0
         qu[0] -= 2.0 * (pb.Rc @ u_prev)
         if self.r_rate is not None:
-            self.l[self.r_rate:self.r_rate + nu] = self._rate_base_lo + u_prev
-            self.u[self.r_rate:self.r_rate + nu] = self._rate_base_hi + u_prev
+            self.l[self.r_rate : self.r_rate + nu] = self._rate_base_lo + u_prev
+            self.u[self.r_rate : self.r_rate + nu] = self._rate_base_hi + u_prev
         if self.lane:
             if lane_normal is None or lane_offset is None or lane_lo is None or lane_hi is None:
                 raise ValueError("this problem has a road: pass lane_normal, lane_offset, lane_lo and lane_hi")
@@ -277,13 +290,13 @@ class LtvQp:
             if self.lane_yaw:
                 dlo, dhi, yaw = (np.zeros(N),) * 3 if lane_slopes is None else lane_slopes
                 self._coo_vals[self._slot_yaw] = np.column_stack([-dhi, -dlo]).ravel()
-                self.u[self.r_lane:self.r_lane + 2 * N:2] = lane_offset + lane_hi - dhi * yaw
-                self.l[self.r_lane + 1:self.r_lane + 2 * N:2] = lane_offset + lane_lo - dlo * yaw
+                self.u[self.r_lane : self.r_lane + 2 * N : 2] = lane_offset + lane_hi - dhi * yaw
+                self.l[self.r_lane + 1 : self.r_lane + 2 * N : 2] = lane_offset + lane_lo - dlo * yaw
             else:
-                self.u[self.r_lane:self.r_lane + 2 * N:2] = lane_offset + lane_hi
-                self.l[self.r_lane + 1:self.r_lane + 2 * N:2] = lane_offset + lane_lo
+                self.u[self.r_lane : self.r_lane + 2 * N : 2] = lane_offset + lane_hi
+                self.l[self.r_lane + 1 : self.r_lane + 2 * N : 2] = lane_offset + lane_lo
         if self.n_obs_rows:
-            self.l[self.r_obs:self.r_obs + N * self.n_obs_rows] = -np.inf
+            self.l[self.r_obs : self.r_obs + N * self.n_obs_rows] = -np.inf
         if self._P_has_terms:
             self._P_vals[:] = self._P_base
             self._P_has_terms = False
@@ -298,7 +311,7 @@ class LtvQp:
         if a.shape != (N, M, 3) or b.shape != (N, M):
             raise ValueError(f"obstacle rows must have shapes ({N}, {M}, 3) and ({N}, {M})")
         self._coo_vals[self._slot_o] = a.reshape(-1)
-        self.l[self.r_obs:self.r_obs + N * M] = b.reshape(-1)
+        self.l[self.r_obs : self.r_obs + N * M] = b.reshape(-1)
         np.take(self._coo_vals, self._perm, out=self.A.data)
 
     def add_position_cost(self, H: np.ndarray, g: np.ndarray) -> None:
@@ -311,7 +324,7 @@ class LtvQp:
         self._P_vals[self._slot_Px[:, i00]] += H[:, 0, 0]
         self._P_vals[self._slot_Px[:, i01]] += H[:, 0, 1]
         self._P_vals[self._slot_Px[:, i11]] += H[:, 1, 1]
-        qx = self.q[self.nx:self.n_x].reshape(self.N, self.nx)
+        qx = self.q[self.nx : self.n_x].reshape(self.N, self.nx)
         qx[:, :2] += g
         self._P_has_terms = True
         self._P_dirty = True
@@ -331,13 +344,13 @@ class LtvQp:
     def unpack(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """z -> (X (N+1, nx), U (N, nu), slacks (lane then obstacle) or empty)."""
         X = z[: self.n_x].reshape(self.N + 1, self.nx)
-        U = z[self.n_x:self.n_x + self.n_u].reshape(self.N, self.nu)
-        return X, U, z[self.n_x + self.n_u:]
+        U = z[self.n_x : self.n_x + self.n_u].reshape(self.N, self.nu)
+        return X, U, z[self.n_x + self.n_u :]
 
     def pack(self, X: np.ndarray, U: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """(X, U) -> z (slacks zero), for warm starts."""
         z = np.zeros(self.n_var) if out is None else out
         z[: self.n_x] = np.ravel(X)
-        z[self.n_x:self.n_x + self.n_u] = np.ravel(U)
-        z[self.n_x + self.n_u:] = 0.0
+        z[self.n_x : self.n_x + self.n_u] = np.ravel(U)
+        z[self.n_x + self.n_u :] = 0.0
         return z

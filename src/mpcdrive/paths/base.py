@@ -78,7 +78,9 @@ class ReferencePath(ABC):
             raise ValueError("window_m must be positive finite numbers")
         return self._project_many_xy(xy, s_guess, window_m)
 
-    def _project_many_xy(self, xy: np.ndarray, s_guess: np.ndarray, window_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _project_many_xy(
+        self, xy: np.ndarray, s_guess: np.ndarray, window_m: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(s, e_y) arrays of :meth:`project_many`, one :meth:`_project_xy` per point unless a
         path vectorizes it."""
         out = np.array([self._project_xy(p, float(g), float(w)) for p, g, w in zip(xy, s_guess, window_m)])

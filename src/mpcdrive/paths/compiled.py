@@ -48,8 +48,14 @@ def path_arrays(path) -> PathArrays | None:
         return PathArrays(KIND_CIRCLE, geo, one, one2, one, one)
     if type(path) is WaypointPath:
         geo = np.array([path.length_m, float(path.closed), path._ds, path._lap_turn])
-        return PathArrays(KIND_WAYPOINTS, geo, np.ascontiguousarray(path._s), np.ascontiguousarray(path._xy),
-                          np.ascontiguousarray(path._h), np.ascontiguousarray(path._k))
+        return PathArrays(
+            KIND_WAYPOINTS,
+            geo,
+            np.ascontiguousarray(path._s),
+            np.ascontiguousarray(path._xy),
+            np.ascontiguousarray(path._h),
+            np.ascontiguousarray(path._k),
+        )
     return None
 
 

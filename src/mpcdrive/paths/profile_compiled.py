@@ -84,7 +84,7 @@ def _interp(x, xp, fp):
 def _tables(prof):
     m = int(prof[_P_M])
     o = _NHEAD
-    return prof[o:o + m], prof[o + m:o + 2 * m], prof[o + 2 * m:o + 3 * m]
+    return prof[o : o + m], prof[o + m : o + 2 * m], prof[o + 2 * m : o + 3 * m]
 
 
 @njit(cache=True)

@@ -78,8 +78,12 @@ class SpeedProfile:
         curvature_window_m: float = 0.0,
         friction_circle: bool = True,
     ):
-        for name, val in (("lateral_accel_max_mps2", lateral_accel_max_mps2), ("accel_max_mps2", accel_max_mps2),
-                          ("decel_max_mps2", decel_max_mps2), ("v_max_mps", v_max_mps)):
+        for name, val in (
+            ("lateral_accel_max_mps2", lateral_accel_max_mps2),
+            ("accel_max_mps2", accel_max_mps2),
+            ("decel_max_mps2", decel_max_mps2),
+            ("v_max_mps", v_max_mps),
+        ):
             if not (math.isfinite(val) and val > 0):
                 raise ValueError(f"{name} must be a positive finite number, got {val}")
         for name, v_opt in (("v_start_mps", v_start_mps), ("v_end_mps", v_end_mps)):
@@ -116,8 +120,7 @@ class SpeedProfile:
             kappa = win.max(axis=1)
         self.s_m = s
         self.abs_kappa = kappa
-        self.v_limit_mps = np.minimum(self.v_max_mps,
-                                      np.sqrt(self.lateral_accel_max_mps2 / np.maximum(kappa, 1e-12)))
+        self.v_limit_mps = np.minimum(self.v_max_mps, np.sqrt(self.lateral_accel_max_mps2 / np.maximum(kappa, 1e-12)))
         self.v_mps = self._passes(v_start_mps, v_end_mps)
         # time along the grid: v^2 is linear in s on each segment (constant acceleration), so a
         # segment takes exactly 2 ds / (v_i + v_{i+1}); a segment between two stops takes forever
@@ -163,8 +166,9 @@ class SpeedProfile:
         return out
 
     @classmethod
-    def from_friction(cls, path: ReferencePath, friction: float, *, lateral_fraction: float = 0.8, g_mps2: float = 9.81,
-                      **kw) -> SpeedProfile:
+    def from_friction(
+        cls, path: ReferencePath, friction: float, *, lateral_fraction: float = 0.8, g_mps2: float = 9.81, **kw
+    ) -> SpeedProfile:
         """Profile with ``lateral_accel_max = lateral_fraction * friction * g``; other arguments as
         for the constructor."""
         if not (0 < lateral_fraction <= 1):
@@ -234,7 +238,7 @@ class SpeedProfile:
 
     def lateral_accel(self) -> np.ndarray:
         """(M,) v^2 |kappa| [m/s^2] at the grid points (with the windowed curvature)."""
-        return self.v_mps ** 2 * self.abs_kappa
+        return self.v_mps**2 * self.abs_kappa
 
     @property
     def lap_time_s(self) -> float:

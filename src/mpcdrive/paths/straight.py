@@ -25,8 +25,9 @@ class StraightPath(ReferencePath):
         d = end - self.start
         self.length_m = float(np.hypot(*d))
         if not np.isfinite(self.length_m) or self.length_m < MIN_LENGTH_M:
-            raise ValueError(f"a straight path needs two finite points at least {MIN_LENGTH_M:g} m apart, "
-                             f"got {start} and {end}")
+            raise ValueError(
+                f"a straight path needs two finite points at least {MIN_LENGTH_M:g} m apart, got {start} and {end}"
+            )
         self.t = d / self.length_m
         self.n = np.array([-self.t[1], self.t[0]])
         self._heading = float(np.arctan2(self.t[1], self.t[0]))

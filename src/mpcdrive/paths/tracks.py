@@ -114,8 +114,13 @@ def _parse(text: str, file: str) -> tuple[np.ndarray, np.ndarray | None, list[in
     cols = [c.strip() for c in header.split(delim)]
     missing = [c for c in REQUIRED if c not in cols]
     if missing:
-        _fail(file, hline, None, f"header must name the columns {', '.join(REQUIRED)} (found: {', '.join(cols)}); "
-              f"missing {', '.join(missing)}")
+        _fail(
+            file,
+            hline,
+            None,
+            f"header must name the columns {', '.join(REQUIRED)} (found: {', '.join(cols)}); "
+            f"missing {', '.join(missing)}",
+        )
     dup = sorted({c for c in cols if cols.count(c) > 1 and c})
     if dup:
         _fail(file, hline, None, f"duplicate column(s) {', '.join(dup)}")
@@ -150,8 +155,9 @@ def _parse(text: str, file: str) -> tuple[np.ndarray, np.ndarray | None, list[in
     return data[:, :2], (data[:, 2:4] if data.shape[1] == 4 else None), row_lines
 
 
-def load_track_csv(file: str | os.PathLike, *, closed: bool | None = None, smoothing: float = 0.0,
-                   name: str | None = None) -> Track:
+def load_track_csv(
+    file: str | os.PathLike, *, closed: bool | None = None, smoothing: float = 0.0, name: str | None = None
+) -> Track:
     """Read a CSV waypoint file into a :class:`Track`.
 
     closed : True / False, or None to decide from the data (closed when the last point lies within
@@ -165,12 +171,12 @@ def load_track_csv(file: str | os.PathLike, *, closed: bool | None = None, smoot
         raise ValueError(f"{fname}: track file not found") from None
     except (OSError, UnicodeDecodeError) as e:
         raise ValueError(f"{fname}: cannot read track file ({e})") from None
-    return track_from_text(text, fname, closed=closed, smoothing=smoothing,
-                           name=name or FsPath(fname).stem)
+    return track_from_text(text, fname, closed=closed, smoothing=smoothing, name=name or FsPath(fname).stem)
 
 
-def track_from_text(text: str, source: str, *, closed: bool | None = None, smoothing: float = 0.0,
-                    name: str = "track") -> Track:
+def track_from_text(
+    text: str, source: str, *, closed: bool | None = None, smoothing: float = 0.0, name: str = "track"
+) -> Track:
     """Parse CSV ``text`` (``source`` names it in errors) into a :class:`Track`."""
     pts, widths, row_lines = _parse(text, source)
     step = np.hypot(*np.diff(pts, axis=0).T)
@@ -194,14 +200,25 @@ def track_from_text(text: str, source: str, *, closed: bool | None = None, smoot
     for i in range(1, len(pts)):
         s_pts[i], _ = path.project(pts[i], s_pts[i - 1], window_m=window)
         if s_pts[i] <= s_pts[i - 1]:
-            _fail(source, row_lines[i], None, "waypoint does not advance along the track (reversing or self-overlapping waypoints)")
-    return Track(name=name, path=path, points=pts, s_points_m=s_pts,
-                 width_right_m=None if widths is None else widths[:, 0].copy(),
-                 width_left_m=None if widths is None else widths[:, 1].copy())
+            _fail(
+                source,
+                row_lines[i],
+                None,
+                "waypoint does not advance along the track (reversing or self-overlapping waypoints)",
+            )
+    return Track(
+        name=name,
+        path=path,
+        points=pts,
+        s_points_m=s_pts,
+        width_right_m=None if widths is None else widths[:, 0].copy(),
+        width_left_m=None if widths is None else widths[:, 1].copy(),
+    )
 
 
-def write_track_csv(file: str | os.PathLike, points, width_right_m=None, width_left_m=None,
-                    comment: str | None = None) -> None:
+def write_track_csv(
+    file: str | os.PathLike, points, width_right_m=None, width_left_m=None, comment: str | None = None
+) -> None:
     """Write waypoints (M, 2) [m] and optional widths (M,) [m] in the format :func:`load_track_csv` reads."""
     pts = np.asarray(points, float)
     lines = []

@@ -36,7 +36,7 @@ def _pchip_curve(pts: np.ndarray, closed: bool):
 
     if closed:  # the slopes are local (two neighbours each side): pad with the wrapped points
         pad = min(2, len(pts) - 2)
-        ext = np.vstack([pts[-1 - pad:-1], pts, pts[1:1 + pad]])
+        ext = np.vstack([pts[-1 - pad : -1], pts, pts[1 : 1 + pad]])
     else:
         pad = 0
         ext = pts
@@ -46,7 +46,7 @@ def _pchip_curve(pts: np.ndarray, closed: bool):
     span = t1 - t0
 
     def curve(u, der):
-        return f(t0 + np.asarray(u, float) * span, der) * span ** der
+        return f(t0 + np.asarray(u, float) * span, der) * span**der
 
     return curve
 
@@ -73,8 +73,14 @@ class WaypointPath(ReferencePath):
     the first).
     """
 
-    def __init__(self, points, closed: bool = False, smoothing: float = 0.0, ds_m: float | None = None,
-                 interpolation: str = "spline"):
+    def __init__(
+        self,
+        points,
+        closed: bool = False,
+        smoothing: float = 0.0,
+        ds_m: float | None = None,
+        interpolation: str = "spline",
+    ):
         pts = np.asarray(points, float)
         if pts.ndim != 2 or pts.shape[1] != 2:
             raise ValueError(f"waypoints must have shape (M, 2), got {pts.shape}")
@@ -86,7 +92,9 @@ class WaypointPath(ReferencePath):
             pts = pts[:-1]
         min_pts = 3 if closed else 2
         if len(pts) < min_pts:
-            raise ValueError(f"{'a closed' if closed else 'an open'} path needs at least {min_pts} distinct points, got {len(pts)}")
+            raise ValueError(
+                f"{'a closed' if closed else 'an open'} path needs at least {min_pts} distinct points, got {len(pts)}"
+            )
         if not np.isfinite(smoothing) or smoothing < 0:
             raise ValueError(f"smoothing must be >= 0, got {smoothing}")
         if ds_m is not None and not (np.isfinite(ds_m) and ds_m > 0):
@@ -94,7 +102,9 @@ class WaypointPath(ReferencePath):
         if interpolation not in INTERPOLATIONS:
             raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, got {interpolation!r}")
         if interpolation == "pchip" and smoothing != 0:
-            raise ValueError(f"smoothing applies to interpolation 'spline' only, got smoothing {smoothing} with 'pchip'")
+            raise ValueError(
+                f"smoothing applies to interpolation 'spline' only, got smoothing {smoothing} with 'pchip'"
+            )
         self.closed = bool(closed)
         self.interpolation = interpolation
         self.waypoints = pts

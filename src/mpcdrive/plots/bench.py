@@ -33,7 +33,9 @@ def _latency_lines(ax, sweep: Mapping[int, Mapping[str, Mapping]]) -> dict:
     return out
 
 
-def make_horizon_figure(sweep: Mapping[int, Mapping[str, Mapping]], title: str = "P1: per-step time vs horizon") -> Figure:
+def make_horizon_figure(
+    sweep: Mapping[int, Mapping[str, Mapping]], title: str = "P1: per-step time vs horizon"
+) -> Figure:
     """Median (solid) and p99 (dashed) per-step time [us] against N for each backend, log scale.
 
     sweep : ``{N: {backend: {"p50_us", "p99_us", ...}}}`` as :func:`mpcdrive.bench.extras.horizon_sweep`."""
@@ -50,8 +52,9 @@ def make_horizon_figure(sweep: Mapping[int, Mapping[str, Mapping]], title: str =
     return fig
 
 
-def make_obstacle_figure(sweep: Mapping[int, Mapping[str, Mapping]],
-                         title: str = "P3: per-step time vs obstacle count") -> Figure:
+def make_obstacle_figure(
+    sweep: Mapping[int, Mapping[str, Mapping]], title: str = "P3: per-step time vs obstacle count"
+) -> Figure:
     """Median (solid) and p99 (dashed) per-step time [us] against the obstacle count for each
     requested backend, log scale; where a backend fell back to another one (its ``backend``
     field differs from the requested name) the point is also circled, open.
@@ -68,9 +71,14 @@ def make_obstacle_figure(sweep: Mapping[int, Mapping[str, Mapping]],
         fell = [(n, r) for n, r in pts if r.get("backend", b) != b]
         if fell:
             ran = sorted({r["backend"] for _, r in fell})
-            ax.scatter([n for n, _ in fell] * 2, [r["p50_us"] for _, r in fell] + [r["p99_us"] for _, r in fell],
-                       s=140, facecolors="none", edgecolors=color,
-                       label=f"{b} requested, {', '.join(ran)} ran")
+            ax.scatter(
+                [n for n, _ in fell] * 2,
+                [r["p50_us"] for _, r in fell] + [r["p99_us"] for _, r in fell],
+                s=140,
+                facecolors="none",
+                edgecolors=color,
+                label=f"{b} requested, {', '.join(ran)} ran",
+            )
     ax.set_yscale("log")
     ax.set_xticks(counts)
     ax.set_xlabel("obstacles [count]")

@@ -24,8 +24,17 @@ ITER_LABEL = "iteration k [-]"
 REF_COLOR = "tab:blue"
 DRIVEN_COLOR = "tab:red"
 #: colours of several runs in one axes: never the reference path's blue
-RUN_COLORS = ("tab:red", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:pink", "tab:olive",
-              "tab:cyan", "0.25")
+RUN_COLORS = (
+    "tab:red",
+    "tab:orange",
+    "tab:green",
+    "tab:purple",
+    "tab:brown",
+    "tab:pink",
+    "tab:olive",
+    "tab:cyan",
+    "0.25",
+)
 OBSTACLE_COLOR = "0.35"
 #: a map whose bounding box is longer than this many times its width gets a path-coordinate panel
 LONG_ROAD_RATIO = 6.0
@@ -155,8 +164,7 @@ def closest_approach(outlines: list[np.ndarray], xy: np.ndarray) -> int:
     return int(np.argmin(dist))
 
 
-def draw_obstacles(ax, result: SimResult, frenet_path_xy: np.ndarray | None = None,
-                   time_labels: bool = True) -> None:
+def draw_obstacles(ax, result: SimResult, frenet_path_xy: np.ndarray | None = None, time_labels: bool = True) -> None:
     """Obstacles logged in ``result.meta["obstacles"]``: static ones filled; a moving one filled
     where it was at its closest approach to the vehicle, labelled with that time, the vehicle's
     position at that time marked, and the path of its centre dotted with an arrow (direction of
@@ -165,8 +173,11 @@ def draw_obstacles(ax, result: SimResult, frenet_path_xy: np.ndarray | None = No
     path-coordinate panel shows them)."""
     xy = np.asarray(result.xy, float)
     t = np.asarray(result.t_s, float)
-    to_plot = (lambda pts: polyline_coordinates(frenet_path_xy, pts)) if frenet_path_xy is not None \
+    to_plot = (
+        (lambda pts: polyline_coordinates(frenet_path_xy, pts))
+        if frenet_path_xy is not None
         else (lambda pts: np.asarray(pts, float))
+    )
     first_static = first_moving = True
     for entry in result.meta.get("obstacles") or []:
         outlines = obstacle_outlines(entry)
@@ -174,33 +185,73 @@ def draw_obstacles(ax, result: SimResult, frenet_path_xy: np.ndarray | None = No
             continue
         if len(outlines) == 1:
             o = to_plot(outlines[0])
-            ax.fill(o[:, 0], o[:, 1], color=OBSTACLE_COLOR, alpha=0.8, zorder=2.5,
-                    label="obstacle" if first_static else None)
+            ax.fill(
+                o[:, 0],
+                o[:, 1],
+                color=OBSTACLE_COLOR,
+                alpha=0.8,
+                zorder=2.5,
+                label="obstacle" if first_static else None,
+            )
             first_static = False
             continue
         k = closest_approach(outlines, xy)
         centres = to_plot(np.array([o[:-1].mean(axis=0) for o in outlines]))
-        ax.plot(centres[:, 0], centres[:, 1], color="0.4", lw=0.8, ls=":", zorder=2.4,
-                label="moving obstacle's track" if first_moving else None)
+        ax.plot(
+            centres[:, 0],
+            centres[:, 1],
+            color="0.4",
+            lw=0.8,
+            ls=":",
+            zorder=2.4,
+            label="moving obstacle's track" if first_moving else None,
+        )
         if len(centres) >= 2 and np.hypot(*(centres[-1] - centres[-2])) > 0:
-            ax.annotate("", xy=centres[-1], xytext=centres[-2], zorder=2.4,
-                        arrowprops={"arrowstyle": "-|>", "color": "0.4", "lw": 0.8})
+            ax.annotate(
+                "",
+                xy=centres[-1],
+                xytext=centres[-2],
+                zorder=2.4,
+                arrowprops={"arrowstyle": "-|>", "color": "0.4", "lw": 0.8},
+            )
         o = to_plot(outlines[k])
-        ax.fill(o[:, 0], o[:, 1], facecolor="0.75", edgecolor="0.15", lw=1.0, alpha=0.9, zorder=2.5,
-                label="moving obstacle at closest approach" if first_moving else None)
+        ax.fill(
+            o[:, 0],
+            o[:, 1],
+            facecolor="0.75",
+            edgecolor="0.15",
+            lw=1.0,
+            alpha=0.9,
+            zorder=2.5,
+            label="moving obstacle at closest approach" if first_moving else None,
+        )
         if k < len(xy) and time_labels:
-            ego = to_plot(xy[k:k + 1])[0]
-            ax.plot(ego[0], ego[1], "o", mfc="white", mec="k", ms=5, zorder=4.5,
-                    label="vehicle at that time" if first_moving else None)
+            ego = to_plot(xy[k : k + 1])[0]
+            ax.plot(
+                ego[0],
+                ego[1],
+                "o",
+                mfc="white",
+                mec="k",
+                ms=5,
+                zorder=4.5,
+                label="vehicle at that time" if first_moving else None,
+            )
             # the time label on the obstacle's side away from the vehicle
             centre = o[:-1].mean(axis=0)
             away = centre - ego
             away = away / np.hypot(*away) if np.hypot(*away) > 1e-12 else np.array([0.0, 1.0])
             label_at = o[int(np.argmax((o - centre) @ away))]
-            ax.annotate(f"t = {t[min(k, len(t) - 1)]:.1f} s", xy=label_at, xytext=tuple(5.0 * away),
-                        textcoords="offset points", fontsize="small", zorder=5,
-                        ha="left" if away[0] > 0.3 else "right" if away[0] < -0.3 else "center",
-                        va="bottom" if away[1] > 0.3 else "top" if away[1] < -0.3 else "center")
+            ax.annotate(
+                f"t = {t[min(k, len(t) - 1)]:.1f} s",
+                xy=label_at,
+                xytext=tuple(5.0 * away),
+                textcoords="offset points",
+                fontsize="small",
+                zorder=5,
+                ha="left" if away[0] > 0.3 else "right" if away[0] < -0.3 else "center",
+                va="bottom" if away[1] > 0.3 else "top" if away[1] < -0.3 else "center",
+            )
         first_moving = False
 
 

@@ -55,6 +55,7 @@ __all__ = [
     "write_run_figures",
 ]
 
+
 # --------------------------------------------------------------------------- helpers
 def _iterations(result: SimResult) -> np.ndarray:
     return np.arange(result.steps)
@@ -98,8 +99,14 @@ def is_long_road(result: SimResult) -> bool:
     return ratio > LONG_ROAD_RATIO
 
 
-def _draw_trajectory(ax, result: SimResult, title: str | None = None, horizons: bool = True,
-                     legend: bool = True, time_labels: bool = True) -> None:
+def _draw_trajectory(
+    ax,
+    result: SimResult,
+    title: str | None = None,
+    horizons: bool = True,
+    legend: bool = True,
+    time_labels: bool = True,
+) -> None:
     path = np.asarray(result.path_xy, dtype=float)
     xy = np.asarray(result.xy, dtype=float)
     if horizons and result.X_pred is not None and np.ndim(result.X_pred) == 3:
@@ -107,8 +114,14 @@ def _draw_trajectory(ax, result: SimResult, title: str | None = None, horizons: 
         if X.shape[0] and X.shape[1] and X.shape[2] >= 2:
             stride = max(1, X.shape[0] // 10)
             for i, k in enumerate(range(0, X.shape[0], stride)):
-                ax.plot(X[k, :, 0], X[k, :, 1], color="0.55", lw=0.8, zorder=1,
-                        label="predicted horizon" if i == 0 else None)
+                ax.plot(
+                    X[k, :, 0],
+                    X[k, :, 1],
+                    color="0.55",
+                    lw=0.8,
+                    zorder=1,
+                    label="predicted horizon" if i == 0 else None,
+                )
     if path.ndim == 2 and path.shape[0] >= 1:
         ax.plot(path[:, 0], path[:, 1], color=REF_COLOR, lw=1.5, label="reference path", zorder=2)
         edges = result_road_edges(result)
@@ -237,8 +250,13 @@ def _make_trajectory(result: SimResult, title: str | None = None) -> Figure:
         map_w = float(np.clip(5.5 / ratio, 0.6, 2.5))
         fig, axes = new_figure(1, 2, size=(map_w + 9.5, 5.5), width_ratios=[map_w + 0.9, 8.6])
         ax_map, ax_s = axes[0, 0], axes[0, 1]
-    _draw_trajectory(ax_map, result, title if title is not None else title_for("Trajectory (true scale)", result),
-                     legend=False, time_labels=False)
+    _draw_trajectory(
+        ax_map,
+        result,
+        title if title is not None else title_for("Trajectory (true scale)", result),
+        legend=False,
+        time_labels=False,
+    )
     _draw_path_coordinates(ax_s, result)
     return fig
 
@@ -274,12 +292,23 @@ def _make_speed(result: SimResult) -> Figure:
     # reference speed from the horizon references, when the model has a speed state
     names = tuple(result.state_names)
     refs = result.refs
-    if "v" in names and refs is not None and np.ndim(refs) == 3 and refs.shape[0] == result.steps \
-            and refs.shape[1] > 0 and refs.shape[2] > names.index("v"):
-        ax.plot(k, refs[:, 0, names.index("v")], color=REF_COLOR, ls="--", lw=1.0,
-                label="reference speed")
-    elif {"vx", "vy"} <= set(names) and refs is not None and np.ndim(refs) == 3 \
-            and refs.shape[0] == result.steps and refs.shape[1] > 0 and refs.shape[2] == len(names):
+    if (
+        "v" in names
+        and refs is not None
+        and np.ndim(refs) == 3
+        and refs.shape[0] == result.steps
+        and refs.shape[1] > 0
+        and refs.shape[2] > names.index("v")
+    ):
+        ax.plot(k, refs[:, 0, names.index("v")], color=REF_COLOR, ls="--", lw=1.0, label="reference speed")
+    elif (
+        {"vx", "vy"} <= set(names)
+        and refs is not None
+        and np.ndim(refs) == 3
+        and refs.shape[0] == result.steps
+        and refs.shape[1] > 0
+        and refs.shape[2] == len(names)
+    ):
         ref_v = np.hypot(refs[:, 0, names.index("vx")], refs[:, 0, names.index("vy")])
         ax.plot(k, ref_v, color=REF_COLOR, ls="--", lw=1.0, label="reference speed")
     ax.set_ylabel("speed v [m/s]")
@@ -388,8 +417,9 @@ def plot_overview(result: SimResult, path: str | os.PathLike) -> Path:
     return save(_make_overview(result), path)
 
 
-def plot_steering_comparison(results: Mapping[str, SimResult], path: str | os.PathLike,
-                             title: str | None = None) -> Path:
+def plot_steering_comparison(
+    results: Mapping[str, SimResult], path: str | os.PathLike, title: str | None = None
+) -> Path:
     """Overlaid steering angles [deg] and steering rates [deg/s] of several runs, keyed by legend
     label (the input-smoothing experiment, the paper's Fig. 12).  Writes a PNG; returns ``path``."""
     return save(_make_steering_comparison(results, title), path)
@@ -470,8 +500,9 @@ def _make_trajectory_overlay(results: Mapping[str, SimResult], title: str | None
     return fig
 
 
-def plot_trajectory_overlay(results: Mapping[str, SimResult], path: str | os.PathLike,
-                            title: str | None = None) -> Path:
+def plot_trajectory_overlay(
+    results: Mapping[str, SimResult], path: str | os.PathLike, title: str | None = None
+) -> Path:
     """Several runs on the same road overlaid (obstacles and lane from the first)."""
     return save(_make_trajectory_overlay(results, title), path)
 
@@ -488,7 +519,8 @@ def _make_cost_map(X: np.ndarray, Y: np.ndarray, C: np.ndarray, title: str) -> F
     return fig
 
 
-def plot_cost_map(X: np.ndarray, Y: np.ndarray, C: np.ndarray, path: str | os.PathLike,
-                  title: str = "Obstacle cost map") -> Path:
+def plot_cost_map(
+    X: np.ndarray, Y: np.ndarray, C: np.ndarray, path: str | os.PathLike, title: str = "Obstacle cost map"
+) -> Path:
     """Filled contours of an obstacle cost evaluated on a grid (the paper's Fig. 14)."""
     return save(_make_cost_map(X, Y, C, title), path)

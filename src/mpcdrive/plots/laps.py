@@ -131,8 +131,9 @@ def _make_tracking_comparison(results: Mapping[str, SimResult], title: str | Non
     return fig
 
 
-def plot_speed_map(result: SimResult, path: str | os.PathLike, track: Track | None = None,
-                   title: str | None = None) -> Path:
+def plot_speed_map(
+    result: SimResult, path: str | os.PathLike, track: Track | None = None, title: str | None = None
+) -> Path:
     """Driven trajectory coloured by speed [m/s] (colour bar), with the road edges of ``track`` (or
     the lane of the result) and the centre line. Writes a PNG; returns ``path``."""
     return save(_make_speed_map(result, track, title), path)
@@ -144,8 +145,9 @@ def plot_lateral_acceleration(result: SimResult, path: str | os.PathLike, limit_
     return save(_make_lateral_acceleration(result, limit_mps2), path)
 
 
-def plot_tracking_comparison(results: Mapping[str, SimResult], path: str | os.PathLike,
-                             title: str | None = None) -> Path:
+def plot_tracking_comparison(
+    results: Mapping[str, SimResult], path: str | os.PathLike, title: str | None = None
+) -> Path:
     """|e_y| [m] and speed [m/s] along the path of several runs keyed by label (e.g. controllers on
     the same track). Writes a PNG; returns ``path``."""
     return save(_make_tracking_comparison(results, title), path)

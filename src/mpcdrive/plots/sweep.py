@@ -53,7 +53,7 @@ def make_sweep_histograms(rows: list[dict], lane: bool = True) -> Figure:
             ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
         ax.set_xlabel(label)
         ax.set_ylabel("runs [-]")
-    for ax in list(axes.flat)[len(panels):]:
+    for ax in list(axes.flat)[len(panels) :]:
         ax.set_visible(False)
     return fig
 
@@ -67,9 +67,11 @@ def make_sweep_varied(rows: list[dict], names: list[str], metric: str = "rms_lat
     bad = [r for r in rows if not r.get("success")]
     for ax, name in zip(axes.flat, names):
         for group, colour, label in ((ok, "tab:blue", "success"), (bad, "tab:red", "failed")):
-            pts = [(r[name], r.get(metric)) for r in group
-                   if isinstance(r.get(metric), (int, float)) and r.get(metric) is not None
-                   and math.isfinite(r[metric])]
+            pts = [
+                (r[name], r.get(metric))
+                for r in group
+                if isinstance(r.get(metric), (int, float)) and r.get(metric) is not None and math.isfinite(r[metric])
+            ]
             if pts:
                 a = np.array(pts, float)
                 ax.plot(a[:, 0], a[:, 1], "o", ms=3, color=colour, label=label)
@@ -77,7 +79,7 @@ def make_sweep_varied(rows: list[dict], names: list[str], metric: str = "rms_lat
         ax.set_ylabel("RMS lateral error [m]" if metric == "rms_lateral_error_m" else metric)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7)
-    for ax in list(axes.flat)[len(names):]:
+    for ax in list(axes.flat)[len(names) :]:
         ax.set_visible(False)
     return fig
 

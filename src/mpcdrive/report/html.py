@@ -57,8 +57,7 @@ from mpcdrive.scene.geometry import road_edges
 from mpcdrive.scene.footprint import Footprint
 from mpcdrive.types import STATUS_INACCURATE, STATUS_OK, SimResult
 
-__all__ = ["HtmlRun", "replay_data", "render_html_report", "write_run_html",
-           "write_reproduce_html"]
+__all__ = ["HtmlRun", "replay_data", "render_html_report", "write_run_html", "write_reproduce_html"]
 
 #: most replay frames kept per run (longer runs are subsampled evenly; the last step is kept)
 MAX_FRAMES = 2000
@@ -122,12 +121,10 @@ def _obstacle_times(shape: Mapping, i: int, n: int, t_steps: np.ndarray) -> np.n
     if "t_s" in shape:
         t = np.asarray(shape["t_s"], dtype=float)
         if t.shape != (n,) or not np.all(np.isfinite(t)) or np.any(np.diff(t) < 0):
-            raise ValueError(f"obstacles[{i}].t_s: need {n} finite non-decreasing times [s], "
-                             f"got shape {t.shape}")
+            raise ValueError(f"obstacles[{i}].t_s: need {n} finite non-decreasing times [s], got shape {t.shape}")
         return t
     if n != len(t_steps):
-        raise ValueError(f"obstacles[{i}]: {n} positions over time but the run has "
-                         f"{len(t_steps)} steps; give t_s")
+        raise ValueError(f"obstacles[{i}]: {n} positions over time but the run has {len(t_steps)} steps; give t_s")
     return t_steps
 
 
@@ -138,8 +135,10 @@ def _xy_array(value, i: int, key: str, *, per_time_ndim: int) -> np.ndarray:
     except (TypeError, ValueError):
         raise ValueError(f"obstacles[{i}].{key}: not an array of numbers") from None
     if a.ndim not in (per_time_ndim - 1, per_time_ndim) or a.shape[-1] != 2:
-        raise ValueError(f"obstacles[{i}].{key}: expected shape {'(2,)' if per_time_ndim == 2 else '(P, 2)'}"
-                         f" or one per time, got {a.shape}")
+        raise ValueError(
+            f"obstacles[{i}].{key}: expected shape {'(2,)' if per_time_ndim == 2 else '(P, 2)'}"
+            f" or one per time, got {a.shape}"
+        )
     if not np.all(np.isfinite(a)):
         raise ValueError(f"obstacles[{i}].{key}: not finite")
     return a
@@ -221,7 +220,7 @@ def _encode_horizon(hz: np.ndarray, xy: np.ndarray, dec: int) -> list[list[int]]
     ``[dx0, dy0, dx1, dy1, ...]``: the first point relative to the frame's (rounded) position,
     each next one relative to the previous point (differences of rounded coordinates, so the
     decoded points carry no accumulated error). A frame with non-finite points is empty."""
-    scale = 10.0 ** dec
+    scale = 10.0**dec
     out = []
     for k in range(hz.shape[0]):
         h = hz[k]
@@ -235,8 +234,9 @@ def _encode_horizon(hz: np.ndarray, xy: np.ndarray, dec: int) -> list[list[int]]
     return out
 
 
-def replay_data(result: SimResult, footprint: Footprint = Footprint(), *, run_id: str = "",
-                max_frames: int = MAX_FRAMES) -> dict:
+def replay_data(
+    result: SimResult, footprint: Footprint = Footprint(), *, run_id: str = "", max_frames: int = MAX_FRAMES
+) -> dict:
     """The JSON-ready replay of one run: frames subsampled to at most ``max_frames``, positions
     rounded to about 1e-5 of the scene's size, angles to 1e-5 rad.
 
@@ -285,8 +285,11 @@ def replay_data(result: SimResult, footprint: Footprint = Footprint(), *, run_id
         "closed": closed,
         "left": None if left is None else _round(left, dec),
         "right": None if right is None else _round(right, dec),
-        "footprint": {"length": float(footprint.length_m), "width": float(footprint.width_m),
-                      "offset": float(footprint.center_offset_m)},
+        "footprint": {
+            "length": float(footprint.length_m),
+            "width": float(footprint.width_m),
+            "offset": float(footprint.center_offset_m),
+        },
         "frames": {
             "k": idx.tolist(),
             "t": _round(t_frames, 6),
@@ -331,8 +334,9 @@ def _e(text) -> str:
 
 def _image_tag(path: Path, alt: str) -> str:
     data = base64.b64encode(path.read_bytes()).decode("ascii")
-    return (f'<figure><img alt="{_e(alt)}" src="data:image/png;base64,{data}">'
-            f"<figcaption>{_e(alt)}</figcaption></figure>")
+    return (
+        f'<figure><img alt="{_e(alt)}" src="data:image/png;base64,{data}"><figcaption>{_e(alt)}</figcaption></figure>'
+    )
 
 
 def _figure_file(fig, base_dir: Path | None) -> Path:
@@ -392,8 +396,7 @@ def _flatten(metrics: Mapping, prefix: str = "") -> list[tuple[str, object]]:
 def _metrics_table(metrics: Mapping) -> str:
     if not metrics:
         return ""
-    rows = "".join(f"<tr><th><code>{_e(k)}</code></th><td>{_value_text(k, v)}</td></tr>"
-                   for k, v in _flatten(metrics))
+    rows = "".join(f"<tr><th><code>{_e(k)}</code></th><td>{_value_text(k, v)}</td></tr>" for k, v in _flatten(metrics))
     return f'<table class="metrics"><tbody>{rows}</tbody></table>'
 
 
@@ -404,13 +407,15 @@ def _inline_markup(text: str) -> str:
     return re.sub(r"\*([^*]+)\*", r"<em>\1</em>", out)
 
 
-def _table(header: Sequence[str], rows: Iterable[Sequence[str]], *, id_links: bool = False,
-           text: bool = False) -> str:
+def _table(header: Sequence[str], rows: Iterable[Sequence[str]], *, id_links: bool = False, text: bool = False) -> str:
     head = "".join(f"<th>{_e(h)}</th>" for h in header)
     body = []
     for r in rows:
-        first = (f'<a href="#" class="pick" data-run="{_e(r[0])}"><code>{_e(r[0])}</code></a>'
-                 if id_links else f"<code>{_e(r[0])}</code>")
+        first = (
+            f'<a href="#" class="pick" data-run="{_e(r[0])}"><code>{_e(r[0])}</code></a>'
+            if id_links
+            else f"<code>{_e(r[0])}</code>"
+        )
         body.append("<tr><td>" + first + "</td>" + "".join(f"<td>{_e(c)}</td>" for c in r[1:]) + "</tr>")
     cls = "text" if text else "summary"
     return f'<table class="{cls}"><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody></table>'
@@ -422,10 +427,16 @@ def _json_script(element_id: str, data) -> str:
     return f'<script type="application/json" id="{element_id}">{text}</script>'
 
 
-def render_html_report(runs: Sequence[HtmlRun], *, title: str, intro: str = "",
-                       base_dir: str | os.PathLike | None = None,
-                       paper_values: Mapping[str, Sequence[PaperValue]] | None = None,
-                       summary: bool | None = None, max_frames: int = MAX_FRAMES) -> str:
+def render_html_report(
+    runs: Sequence[HtmlRun],
+    *,
+    title: str,
+    intro: str = "",
+    base_dir: str | os.PathLike | None = None,
+    paper_values: Mapping[str, Sequence[PaperValue]] | None = None,
+    summary: bool | None = None,
+    max_frames: int = MAX_FRAMES,
+) -> str:
     """The page as text. ``runs`` with a ``result`` get a replay (an experiment selector when
     there are several); ``summary`` adds the table of every run's metrics (default: when there
     are several runs); ``paper_values`` adds the ours-vs-paper table; figures are read from
@@ -436,8 +447,9 @@ def render_html_report(runs: Sequence[HtmlRun], *, title: str, intro: str = "",
     if dupes:
         raise ValueError(f"duplicate experiment id(s) in report runs: {dupes}")
     base = None if base_dir is None else Path(base_dir)
-    replays = [replay_data(r.result, r.footprint, run_id=r.id, max_frames=max_frames)
-               for r in runs if r.result is not None]
+    replays = [
+        replay_data(r.result, r.footprint, run_id=r.id, max_frames=max_frames) for r in runs if r.result is not None
+    ]
     entries = [ReportEntry(r.id, r.description, r.metrics, []) for r in runs]
     parts = [f"<h1>{_e(title)}</h1>"]
     if intro.strip():
@@ -464,36 +476,55 @@ def render_html_report(runs: Sequence[HtmlRun], *, title: str, intro: str = "",
             body.append('<div class="figures">' + "".join(figs) + "</div>")
         cls = "run" if r.result is not None else "extra"
         (sections if r.result is not None else extras).append(
-            f'<section class="{cls}" data-run="{_e(r.id)}">{"".join(body)}</section>')
+            f'<section class="{cls}" data-run="{_e(r.id)}">{"".join(body)}</section>'
+        )
     parts += sections
     if paper_values:
         header, rows, notes = paper_comparison(entries, paper_values)
         foot = "".join(f'<p class="note">[{i}] {_e(n)}</p>' for i, n in enumerate(notes, 1))
-        parts.append("<h2>Ours vs paper</h2><p>The paper's values are quoted as text (read from "
-                     "its figures and prose); ours come from the metrics of the run. "
-                     f"{_inline_markup(VERDICT_RULE)}</p>" + _table(header, rows, text=True) + foot)
+        parts.append(
+            "<h2>Ours vs paper</h2><p>The paper's values are quoted as text (read from "
+            "its figures and prose); ours come from the metrics of the run. "
+            f"{_inline_markup(VERDICT_RULE)}</p>" + _table(header, rows, text=True) + foot
+        )
     parts += extras
-    return (_PAGE_HEAD.replace("{title}", _e(title)) + "\n".join(parts)
-            + _json_script("replay-data", replays) + _SCRIPT + "</body></html>\n")
+    return (
+        _PAGE_HEAD.replace("{title}", _e(title))
+        + "\n".join(parts)
+        + _json_script("replay-data", replays)
+        + _SCRIPT
+        + "</body></html>\n"
+    )
 
 
-def write_run_html(out_dir: str | os.PathLike, result: SimResult, metrics: Mapping,
-                   figures: Sequence[str | os.PathLike] = (), footprint: Footprint = Footprint(),
-                   *, run_id: str | None = None, description: str | None = None,
-                   max_frames: int = MAX_FRAMES) -> Path:
+def write_run_html(
+    out_dir: str | os.PathLike,
+    result: SimResult,
+    metrics: Mapping,
+    figures: Sequence[str | os.PathLike] = (),
+    footprint: Footprint = Footprint(),
+    *,
+    run_id: str | None = None,
+    description: str | None = None,
+    max_frames: int = MAX_FRAMES,
+) -> Path:
     """Write ``out_dir/report.html`` for one run (replay, metrics, embedded figures)."""
     rid = run_id if run_id is not None else str(result.meta.get("id", "run"))
     desc = description if description is not None else str(result.meta.get("description", ""))
     run = HtmlRun(rid, desc, metrics, list(figures), result, footprint)
-    text = render_html_report([run], title=f"mpcdrive run — {rid}", base_dir=out_dir,
-                              max_frames=max_frames)
+    text = render_html_report([run], title=f"mpcdrive run — {rid}", base_dir=out_dir, max_frames=max_frames)
     return atomic_write_text(Path(out_dir) / "report.html", text)
 
 
-def write_reproduce_html(out_dir: str | os.PathLike, runs: Iterable,
-                         paper_values: Mapping[str, Sequence[PaperValue]] | None = None, *,
-                         title: str = _DEFAULT_TITLE, intro: str = _DEFAULT_INTRO,
-                         max_frames: int = MAX_FRAMES) -> Path:
+def write_reproduce_html(
+    out_dir: str | os.PathLike,
+    runs: Iterable,
+    paper_values: Mapping[str, Sequence[PaperValue]] | None = None,
+    *,
+    title: str = _DEFAULT_TITLE,
+    intro: str = _DEFAULT_INTRO,
+    max_frames: int = MAX_FRAMES,
+) -> Path:
     """Write ``out_dir/report.html`` with every experiment: summary and ours-vs-paper tables, a
     replay with an experiment selector, and one section per experiment (metrics, figures).
 
@@ -507,8 +538,15 @@ def write_reproduce_html(out_dir: str | os.PathLike, runs: Iterable,
         else:
             e = _as_entry(r)
             items.append(HtmlRun(e.id, e.description, e.metrics, list(e.figures)))
-    text = render_html_report(items, title=title, intro=intro, base_dir=out_dir,
-                              paper_values=paper_values, summary=True, max_frames=max_frames)
+    text = render_html_report(
+        items,
+        title=title,
+        intro=intro,
+        base_dir=out_dir,
+        paper_values=paper_values,
+        summary=True,
+        max_frames=max_frames,
+    )
     return atomic_write_text(Path(out_dir) / "report.html", text)
 
 

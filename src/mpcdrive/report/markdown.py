@@ -23,9 +23,15 @@ from urllib.parse import quote
 from mpcdrive.io.atomic import atomic_write_text
 from mpcdrive.units import rad2deg
 
-__all__ = ["PaperFigure", "PaperValue", "ReportEntry", "paper_comparison", "render_reproduce_report",
-           "verdict", "write_reproduce_report"]
-
+__all__ = [
+    "PaperFigure",
+    "PaperValue",
+    "ReportEntry",
+    "paper_comparison",
+    "render_reproduce_report",
+    "verdict",
+    "write_reproduce_report",
+]
 
 
 @dataclass(frozen=True)
@@ -51,8 +57,9 @@ class PaperFigure:
     def __post_init__(self):
         if self.kind not in ("about", "at_most", "at_least", "lower_than"):
             raise ValueError(f"PaperFigure kind must be about, at_most, at_least or lower_than, got {self.kind!r}")
-        if (self.kind == "lower_than") != (self.relative_to is not None) or \
-                (self.kind != "lower_than" and _num(self.value) is None):
+        if (self.kind == "lower_than") != (self.relative_to is not None) or (
+            self.kind != "lower_than" and _num(self.value) is None
+        ):
             raise ValueError("PaperFigure: about / at_most / at_least need a value, lower_than a relative_to run")
 
 
@@ -68,7 +75,8 @@ VERDICT_RULE = (
     "gives a bound, at most 10 % beyond it; where it claims a reduction against another run, "
     "lower than our run of that one), *better* when ours is lower than the paper's number by "
     "more than that and lower is better (an error), *differs* otherwise (the footnote says "
-    "why), *no number* where the paper states no number to compare with.")
+    "why), *no number* where the paper states no number to compare with."
+)
 
 _DEFAULT_TITLE = "mpcdrive — reproduction of the paper experiments"
 _DEFAULT_INTRO = (
@@ -103,13 +111,19 @@ def _as_entry(entry) -> ReportEntry:
         unknown = set(entry) - {"id", "description", "metrics", "figures"}
         if unknown:
             raise ValueError(f"report entry has unknown key(s) {sorted(unknown)}")
-        return ReportEntry(id=str(entry["id"]), description=str(entry.get("description", "")),
-                           metrics=entry.get("metrics") or {},
-                           figures=[str(f) for f in entry.get("figures", [])])
+        return ReportEntry(
+            id=str(entry["id"]),
+            description=str(entry.get("description", "")),
+            metrics=entry.get("metrics") or {},
+            figures=[str(f) for f in entry.get("figures", [])],
+        )
     # any object with the four attributes
-    return ReportEntry(id=str(entry.id), description=str(getattr(entry, "description", "")),
-                       metrics=getattr(entry, "metrics", None) or {},
-                       figures=[str(f) for f in getattr(entry, "figures", [])])
+    return ReportEntry(
+        id=str(entry.id),
+        description=str(getattr(entry, "description", "")),
+        metrics=getattr(entry, "metrics", None) or {},
+        figures=[str(f) for f in getattr(entry, "figures", [])],
+    )
 
 
 def _lookup(metrics: Mapping, key: str):
@@ -169,8 +183,7 @@ def _cell(text: str) -> str:
 
 
 def _table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list[str]:
-    lines = ["| " + " | ".join(_cell(h) for h in header) + " |",
-             "|" + "|".join("---" for _ in header) + "|"]
+    lines = ["| " + " | ".join(_cell(h) for h in header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     lines += ["| " + " | ".join(_cell(c) for c in row) + " |" for row in rows]
     return lines
 
@@ -180,8 +193,7 @@ def metrics_summary(entries: Sequence[ReportEntry]) -> tuple[list[str], list[lis
     shared by the Markdown and HTML reports. Figure-only entries have no row."""
     entries = [e for e in entries if e.metrics]
     has_converged = any("converged_rms_lateral_error_m" in e.metrics for e in entries)
-    has_obstacles = any(_num(e.metrics.get("min_obstacle_clearance_m")) is not None
-                        for e in entries)
+    has_obstacles = any(_num(e.metrics.get("min_obstacle_clearance_m")) is not None for e in entries)
     columns: list[tuple[str, Callable[[Mapping], str]]] = [
         ("steps", lambda m: _fmt(m.get("steps"))),
         ("RMS e_y [m]", lambda m: _fmt(m.get("rms_lateral_error_m"))),
@@ -189,8 +201,7 @@ def metrics_summary(entries: Sequence[ReportEntry]) -> tuple[list[str], list[lis
         ("final |e_y| [m]", lambda m: _fmt(_abs(m.get("final_lateral_error_m")))),
     ]
     if has_converged:
-        columns.append(("converged RMS e_y [m]",
-                        lambda m: _fmt(m.get("converged_rms_lateral_error_m"))))
+        columns.append(("converged RMS e_y [m]", lambda m: _fmt(m.get("converged_rms_lateral_error_m"))))
     columns += [
         ("max |steer| [deg]", lambda m: _fmt(_deg(m.get("max_abs_steer_rad")))),
         ("max steer rate [deg/s]", lambda m: _fmt(_deg(m.get("max_abs_steer_rate_rad_s")))),
@@ -264,9 +275,9 @@ def verdict(ours, figure: PaperFigure | None, reference=None) -> tuple[str, str]
     return "differs", figure.note or f"Ours {_fmt(x)} against the paper's {_fmt(v)}."
 
 
-def paper_comparison(entries: Sequence[ReportEntry],
-                     paper_values: Mapping[str, Sequence[PaperValue]]
-                     ) -> tuple[list[str], list[list[str]], list[str]]:
+def paper_comparison(
+    entries: Sequence[ReportEntry], paper_values: Mapping[str, Sequence[PaperValue]]
+) -> tuple[list[str], list[list[str]], list[str]]:
     """Header, rows (experiment id, quantity, paper value, ours, verdict) and footnotes of the
     ours-vs-paper table; ids without an entry read "not run". A row that differs names its
     footnote (``differs [1]``); the same reason is one footnote for every row it explains."""
@@ -293,8 +304,7 @@ def paper_comparison(entries: Sequence[ReportEntry],
     return ["experiment", "quantity", "paper", "ours", "verdict"], rows, notes
 
 
-def _paper_table(entries: Sequence[ReportEntry],
-                 paper_values: Mapping[str, Sequence[PaperValue]]) -> list[str]:
+def _paper_table(entries: Sequence[ReportEntry], paper_values: Mapping[str, Sequence[PaperValue]]) -> list[str]:
     header, rows, notes = paper_comparison(entries, paper_values)
     lines = _table(header, [[f"`{r[0]}`"] + r[1:] for r in rows])
     if notes:
@@ -311,9 +321,13 @@ def _image_link(fig: str) -> str:
     return f"![{alt}]({quote(str(rel), safe='/-_.~')})"
 
 
-def render_reproduce_report(entries: Iterable, paper_values: Mapping[str, Sequence[PaperValue]]
-                            | None = None, *, title: str = _DEFAULT_TITLE,
-                            intro: str = _DEFAULT_INTRO) -> str:
+def render_reproduce_report(
+    entries: Iterable,
+    paper_values: Mapping[str, Sequence[PaperValue]] | None = None,
+    *,
+    title: str = _DEFAULT_TITLE,
+    intro: str = _DEFAULT_INTRO,
+) -> str:
     """The report as Markdown text (see :func:`write_reproduce_report`)."""
     items = [_as_entry(e) for e in entries]
     ids = [e.id for e in items]
@@ -326,9 +340,16 @@ def render_reproduce_report(entries: Iterable, paper_values: Mapping[str, Sequen
     else:
         lines.append("No experiments were run.")
     if paper_values:
-        lines += ["", "## Ours vs paper", "",
-                  ("The paper's values are quoted as text (read from its figures and prose); "
-                   "ours come from the metrics of the run. " + VERDICT_RULE), ""]
+        lines += [
+            "",
+            "## Ours vs paper",
+            "",
+            (
+                "The paper's values are quoted as text (read from its figures and prose); "
+                "ours come from the metrics of the run. " + VERDICT_RULE
+            ),
+            "",
+        ]
         lines += _paper_table(items, paper_values)
     for e in items:
         lines += ["", f"## `{e.id}`", ""]
@@ -341,9 +362,14 @@ def render_reproduce_report(entries: Iterable, paper_values: Mapping[str, Sequen
     return "\n".join(lines) + "\n"
 
 
-def write_reproduce_report(out_dir: str | os.PathLike, entries: Iterable,
-                           paper_values: Mapping[str, Sequence[PaperValue]] | None = None,
-                           *, title: str = _DEFAULT_TITLE, intro: str = _DEFAULT_INTRO) -> Path:
+def write_reproduce_report(
+    out_dir: str | os.PathLike,
+    entries: Iterable,
+    paper_values: Mapping[str, Sequence[PaperValue]] | None = None,
+    *,
+    title: str = _DEFAULT_TITLE,
+    intro: str = _DEFAULT_INTRO,
+) -> Path:
     """Write ``out_dir/report.md`` atomically and return its path.
 
     entries : :class:`ReportEntry` objects, dicts with keys ``id``, ``description``, ``metrics``,

@@ -1,8 +1,15 @@
 """Scenario files (YAML, validated by pydantic) and the built-in experiments."""
 
 from .build import Experiment, build_experiment, run_experiment
-from .loader import (ScenarioError, builtin_ids, dump_scenario, load_scenario,
-                     reject_initial_overlap, validate_scenario_data, warn_suspicious)
+from .loader import (
+    ScenarioError,
+    builtin_ids,
+    dump_scenario,
+    load_scenario,
+    reject_initial_overlap,
+    validate_scenario_data,
+    warn_suspicious,
+)
 from .schema import ScenarioSpec
 
 __all__ = [

@@ -60,8 +60,13 @@ def load_track(spec) -> Track:
     from .tracks import packaged_track_names, packaged_track_text
 
     if spec.file in packaged_track_names():
-        return track_from_text(packaged_track_text(spec.file), f"track {spec.file}", closed=spec.closed,
-                               smoothing=spec.smoothing, name=spec.file)
+        return track_from_text(
+            packaged_track_text(spec.file),
+            f"track {spec.file}",
+            closed=spec.closed,
+            smoothing=spec.smoothing,
+            name=spec.file,
+        )
     return load_track_csv(spec.file, closed=spec.closed, smoothing=spec.smoothing)
 
 
@@ -72,8 +77,9 @@ def build_path(spec) -> ReferencePath:
         return CirclePath(spec.center, spec.radius_m, spec.ccw, math.radians(spec.start_angle_deg))
     if spec.type == "csv":
         return load_track(spec).path
-    return WaypointPath(spec.points, closed=spec.closed, smoothing=spec.smoothing, ds_m=spec.ds_m,
-                        interpolation=spec.interpolation)
+    return WaypointPath(
+        spec.points, closed=spec.closed, smoothing=spec.smoothing, ds_m=spec.ds_m, interpolation=spec.interpolation
+    )
 
 
 def warn_if_path_too_curved(spec: ScenarioSpec, path: ReferencePath, source: str | None = None) -> float | None:
@@ -112,7 +118,9 @@ def warn_if_path_too_curved(spec: ScenarioSpec, path: ReferencePath, source: str
         f"{1.0 / kappa[i]:.3g} m) over {window:.3g} m around s = {s_at:.4g} m, ({x:.4g}, {y:.4g}) m, tighter than "
         f"the vehicle's {kappa_max:.3g} 1/m (radius {1.0 / kappa_max:.3g} m) at controller.max_steer_deg "
         f"{spec.controller.max_steer_deg:g}: it cannot follow the path there",
-        ScenarioWarning, stacklevel=2)
+        ScenarioWarning,
+        stacklevel=2,
+    )
     return float(kappa[i])
 
 
@@ -129,7 +137,7 @@ def build_obstacle(spec: ObstacleSpec) -> Obstacle:
         tr = spec.trajectory
         pts = np.array(tr.points, float)
         yaws = np.radians(tr.yaw_deg) if tr.yaw_deg is not None else np.full(len(pts), yaw)
-        x0, y0 = (spec.position if spec.position is not None else pts[0])
+        x0, y0 = spec.position if spec.position is not None else pts[0]
         motion = TrajectoryMotion(np.array(tr.t_s), pts[:, 0] - x0, pts[:, 1] - y0, yaws - yaw)
         pose = (x0, y0, yaw)
     else:
@@ -137,6 +145,8 @@ def build_obstacle(spec: ObstacleSpec) -> Obstacle:
         pose = (spec.position[0], spec.position[1], yaw)
     life = spec.lifetime_s if spec.lifetime_s is not None else (-math.inf, math.inf)
     return Obstacle(shape, pose, motion, spec.name, t_start_s=life[0], t_end_s=life[1])
+
+
 def initial_overlap(spec: ScenarioSpec) -> tuple[str, str] | None:
     """(field, problem) for the first obstacle that overlaps the car's footprint at t = 0 (the
     body rectangle at the initial pose against the obstacle's shape at t = 0; touching is
@@ -145,7 +155,8 @@ def initial_overlap(spec: ScenarioSpec) -> tuple[str, str] | None:
 
     v, init = spec.vehicle, spec.initial_state
     body = Footprint(v.length_m, v.width_m, n_discs=v.footprint_discs).polygon(
-        init.x_m, init.y_m, math.radians(init.yaw_deg))
+        init.x_m, init.y_m, math.radians(init.yaw_deg)
+    )
     for i, o in enumerate(spec.obstacles):
         try:
             ob = build_obstacle(o)
@@ -155,8 +166,11 @@ def initial_overlap(spec: ScenarioSpec) -> tuple[str, str] | None:
         except ValueError:
             continue
         if d < 0.0:
-            return (f"obstacles.{i}", f"{o.shape} obstacle{f' {o.name!r}' if o.name else ''} overlaps the car's "
-                    f"footprint at the start (t = 0, {-d:.3g} m deep): move it or the initial state")
+            return (
+                f"obstacles.{i}",
+                f"{o.shape} obstacle{f' {o.name!r}' if o.name else ''} overlaps the car's "
+                f"footprint at the start (t = 0, {-d:.3g} m deep): move it or the initial state",
+            )
     return None
 
 
@@ -181,25 +195,49 @@ def scenario_warnings(spec: ScenarioSpec) -> list[tuple[str, str]]:
     v, c = spec.vehicle, spec.controller
     wheelbase = v.lf_m + v.lr_m
     v_valid = MAX_FROUDE * math.sqrt(9.81 * wheelbase)
-    speeds = [("vehicle.speed_mps", v.speed_mps), ("plant.speed_mps", spec.plant.speed_mps),
-              ("initial_state.v_mps", spec.initial_state.v_mps),
-              ("controller.reference_speed_mps", c.reference_speed_mps),
-              ("controller.speed_profile.v_max_mps", None if c.speed_profile is None else c.speed_profile.v_max_mps)]
+    speeds = [
+        ("vehicle.speed_mps", v.speed_mps),
+        ("plant.speed_mps", spec.plant.speed_mps),
+        ("initial_state.v_mps", spec.initial_state.v_mps),
+        ("controller.reference_speed_mps", c.reference_speed_mps),
+        ("controller.speed_profile.v_max_mps", None if c.speed_profile is None else c.speed_profile.v_max_mps),
+    ]
     for field, speed in speeds:
         if speed is not None and abs(speed) > v_valid:
-            out.append((field, f"{speed:g} m/s is far beyond what the model is valid for with a {wheelbase:.3g} m "
-                        f"wheelbase (above {v_valid:.3g} m/s = {MAX_FROUDE:g} sqrt(g L)): check the value and its units"))
-    for field, deg in (("controller.max_steer_deg", c.max_steer_deg),
-                       ("controller.max_steer_rate_deg_s", c.max_steer_rate_deg_s)):
+            out.append(
+                (
+                    field,
+                    f"{speed:g} m/s is far beyond what the model is valid for with a {wheelbase:.3g} m "
+                    f"wheelbase (above {v_valid:.3g} m/s = {MAX_FROUDE:g} sqrt(g L)): check the value and its units",
+                )
+            )
+    for field, deg in (
+        ("controller.max_steer_deg", c.max_steer_deg),
+        ("controller.max_steer_rate_deg_s", c.max_steer_rate_deg_s),
+    ):
         if deg is not None and 0 < abs(deg) < RADIAN_LIKE_DEG:
-            out.append((field, f"{deg:g} looks like radians ({deg:g} rad = {math.degrees(deg):.4g} deg); "
-                        "this field is in degrees"))
+            out.append(
+                (
+                    field,
+                    f"{deg:g} looks like radians ({deg:g} rad = {math.degrees(deg):.4g} deg); this field is in degrees",
+                )
+            )
     if spec.dt_s >= MS_LIKE_DT_S:
-        out.append(("dt_s", f"a control period of {spec.dt_s:g} s looks like milliseconds "
-                    f"({spec.dt_s:g} ms = {spec.dt_s / 1000:g} s); dt_s is in seconds"))
+        out.append(
+            (
+                "dt_s",
+                f"a control period of {spec.dt_s:g} s looks like milliseconds "
+                f"({spec.dt_s:g} ms = {spec.dt_s / 1000:g} s); dt_s is in seconds",
+            )
+        )
     if c.period_s is not None and c.period_s >= MS_LIKE_DT_S:
-        out.append(("controller.period_s", f"a control period of {c.period_s:g} s looks like milliseconds "
-                    f"({c.period_s:g} ms = {c.period_s / 1000:g} s); period_s is in seconds"))
+        out.append(
+            (
+                "controller.period_s",
+                f"a control period of {c.period_s:g} s looks like milliseconds "
+                f"({c.period_s:g} ms = {c.period_s / 1000:g} s); period_s is in seconds",
+            )
+        )
     lane = _start_outside_lane(spec)
     if lane is not None:
         out.append(("initial_state", lane))
@@ -224,8 +262,7 @@ def _start_outside_lane(spec: ScenarioSpec) -> str | None:
     if right_e <= e_y <= left_e:
         return None
     side, width = ("left", left) if e_y > 0 else ("right", right)
-    return (f"the car starts {abs(e_y):.3g} m {side} of the path, outside the lane ({width:.3g} m to its "
-            f"{side} edge)")
+    return f"the car starts {abs(e_y):.3g} m {side} of the path, outside the lane ({width:.3g} m to its {side} edge)"
 
 
 def build_road(spec, path: ReferencePath, track: Track | None = None) -> Road | None:
@@ -254,22 +291,38 @@ def _with_neighbours(road: Road, rows) -> Road:
     s = road.s_m
     el, er = np.interp(s, s_n, ext_l), np.interp(s, s_n, ext_r)
     left, right = road.left_m, road.right_m
-    lanes = (Lane("right", right - 0.5 * er, right, right - er),
-             Lane("route", 0.5 * (left + right), left, right),
-             Lane("left", left + 0.5 * el, left + el, left))
+    lanes = (
+        Lane("right", right - 0.5 * er, right, right - er),
+        Lane("route", 0.5 * (left + right), left, right),
+        Lane("left", left + 0.5 * el, left + el, left),
+    )
     return Road(s, left, right, road.margin_m, lanes, 1, road.period_m)
 
 
 def dynamic_params(v, scale=None) -> DynamicParams:
     """Dynamic-bicycle parameters of a vehicle spec, optionally scaled (plant.param_scale)."""
     p = DynamicParams(
-        lf_m=v.lf_m, lr_m=v.lr_m, mass_kg=v.mass_kg, yaw_inertia_kgm2=v.yaw_inertia_kgm2, friction=v.friction,
-        cs_front_per_rad=v.cs_front_per_rad, cs_rear_per_rad=v.cs_rear_per_rad, h_cg_m=v.h_cg_m,
-        pacejka_c=v.pacejka_c, pacejka_e=v.pacejka_e, v_blend_low_mps=v.v_blend_low_mps,
-        v_blend_high_mps=v.v_blend_high_mps)
+        lf_m=v.lf_m,
+        lr_m=v.lr_m,
+        mass_kg=v.mass_kg,
+        yaw_inertia_kgm2=v.yaw_inertia_kgm2,
+        friction=v.friction,
+        cs_front_per_rad=v.cs_front_per_rad,
+        cs_rear_per_rad=v.cs_rear_per_rad,
+        h_cg_m=v.h_cg_m,
+        pacejka_c=v.pacejka_c,
+        pacejka_e=v.pacejka_e,
+        v_blend_low_mps=v.v_blend_low_mps,
+        v_blend_high_mps=v.v_blend_high_mps,
+    )
     if scale is not None:
-        p = p.scaled(mass_kg=scale.mass, yaw_inertia_kgm2=scale.yaw_inertia, friction=scale.friction,
-                     cs_front_per_rad=scale.cornering_stiffness_front, cs_rear_per_rad=scale.cornering_stiffness_rear)
+        p = p.scaled(
+            mass_kg=scale.mass,
+            yaw_inertia_kgm2=scale.yaw_inertia,
+            friction=scale.friction,
+            cs_front_per_rad=scale.cornering_stiffness_front,
+            cs_rear_per_rad=scale.cornering_stiffness_rear,
+        )
     return p
 
 
@@ -285,9 +338,17 @@ def build_model(name: str, v, scale=None):
 def build_speed_profile(spec, path: ReferencePath, friction: float) -> SpeedProfile:
     """The speed profile of a ``controller.speed_profile`` spec along ``path``."""
     a_lat = spec.lateral_accel_max_mps2 or spec.lateral_accel_fraction * friction * 9.81
-    return SpeedProfile(path, a_lat, spec.accel_max_mps2, spec.decel_max_mps2, spec.v_max_mps,
-                        v_start_mps=spec.v_start_mps, v_end_mps=spec.v_end_mps,
-                        curvature_window_m=spec.curvature_window_m, friction_circle=spec.friction_circle)
+    return SpeedProfile(
+        path,
+        a_lat,
+        spec.accel_max_mps2,
+        spec.decel_max_mps2,
+        spec.v_max_mps,
+        v_start_mps=spec.v_start_mps,
+        v_end_mps=spec.v_end_mps,
+        curvature_window_m=spec.curvature_window_m,
+        friction_circle=spec.friction_circle,
+    )
 
 
 def commonroad_plant(model: str, vehicle: str) -> ObservedPlant:
@@ -296,8 +357,10 @@ def commonroad_plant(model: str, vehicle: str) -> ObservedPlant:
     from ..adapters import commonroad_vehicles as crv  # imports vehiclemodels only when used
 
     if not crv.available():
-        raise ValueError(f"plant.model {model} needs the commonroad extra: pip install 'mpcdrive[commonroad]' "
-                         "(package commonroad-vehicle-models)")
+        raise ValueError(
+            f"plant.model {model} needs the commonroad extra: pip install 'mpcdrive[commonroad]' "
+            "(package commonroad-vehicle-models)"
+        )
     return crv.CommonRoadPlant(crv.PLANT_MODELS[model], vehicle)
 
 
@@ -368,33 +431,55 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         speed_profile=profile,
         prediction_substeps=c.prediction_substeps,
         projection_window_m=c.projection_window_m,
-        fallback=FallbackConfig(ladder=tuple(c.fallback), brake_decel_mps2=c.brake_decel_mps2,
-                                brake_steering=c.brake_steering, relax_slack_factor=c.relax_slack_factor,
-                                check_plans=c.check_plans),
+        fallback=FallbackConfig(
+            ladder=tuple(c.fallback),
+            brake_decel_mps2=c.brake_decel_mps2,
+            brake_steering=c.brake_steering,
+            relax_slack_factor=c.relax_slack_factor,
+            check_plans=c.check_plans,
+        ),
     )
     if c.solver == "projected_gradient":
         settings = ProjectedGradientSettings(max_iter=c.pg_max_iter, tol=c.pg_tol, accelerated=c.pg_accelerated)
     else:
-        settings = OsqpSettings(eps_abs=c.osqp_eps, eps_rel=c.osqp_eps, max_iter=c.osqp_max_iter,
-                                polish=c.osqp_polish, adaptive_rho=c.osqp_adaptive_rho,
-                                time_limit_s=c.osqp_time_limit_s)
+        settings = OsqpSettings(
+            eps_abs=c.osqp_eps,
+            eps_rel=c.osqp_eps,
+            max_iter=c.osqp_max_iter,
+            polish=c.osqp_polish,
+            adaptive_rho=c.osqp_adaptive_rho,
+            time_limit_s=c.osqp_time_limit_s,
+        )
     footprint = Footprint(v.length_m, v.width_m, n_discs=v.footprint_discs)
     obstacles = tuple(build_obstacle(o) for o in spec.obstacles)
     av = spec.avoidance or AvoidanceSpec()
     avoidance = AvoidanceConfig(**{f.name: getattr(av, f.name) for f in dataclasses.fields(AvoidanceConfig)})
     if obstacles:
-        config = replace(config, sqp_max_iterations=av.sqp_max_iterations, sqp_tol=av.sqp_tol,
-                         sqp_max_time_s=av.sqp_max_time_s)
+        config = replace(
+            config, sqp_max_iterations=av.sqp_max_iterations, sqp_tol=av.sqp_tol, sqp_max_time_s=av.sqp_max_time_s
+        )
     if c.backend == "fast" and c.solver == "osqp":
-        mpc = make_mpc(model, path, problem, config, "fast", settings, obstacles=obstacles, avoidance=avoidance,
-                       footprint=footprint)
+        mpc = make_mpc(
+            model,
+            path,
+            problem,
+            config,
+            "fast",
+            settings,
+            obstacles=obstacles,
+            avoidance=avoidance,
+            footprint=footprint,
+        )
     else:
-        mpc = LtvMpc(model, path, problem, config, settings, obstacles=obstacles, avoidance=avoidance,
-                     footprint=footprint)
+        mpc = LtvMpc(
+            model, path, problem, config, settings, obstacles=obstacles, avoidance=avoidance, footprint=footprint
+        )
     # the plant: same or another model, parameters scaled, steering through an actuator
     pl = spec.plant
     # the true vehicle: the controller's unless the plant names other parameters (a model error)
-    errors = {k: val for k, val in (("lf_m", pl.lf_m), ("lr_m", pl.lr_m), ("speed_mps", pl.speed_mps)) if val is not None}
+    errors = {
+        k: val for k, val in (("lf_m", pl.lf_m), ("lr_m", pl.lr_m), ("speed_mps", pl.speed_mps)) if val is not None
+    }
     plant_v = v.model_copy(update=errors) if errors else v
     same = pl.model == "same" and pl.param_scale is None and not errors
     if spec.plant_model in COMMONROAD_PLANTS:
@@ -412,8 +497,9 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
     if c.delay_compensation:
         # predicts over its own period with the plant's integration step
         period_steps = int(round(spec.control_period_s / spec.dt_s))
-        controller = DelayCompensator(mpc, model, actuator, spec.control_period_s, path,
-                                      substeps=pl.substeps * period_steps)
+        controller = DelayCompensator(
+            mpc, model, actuator, spec.control_period_s, path, substeps=pl.substeps * period_steps
+        )
     if tuple(plant_model.state_names) != tuple(model.state_names):
         controller = StateAdapter(controller, model, plant_model)
     if spec.plant_model not in COMMONROAD_PLANTS:
@@ -469,8 +555,12 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
         stop_at_path_end=spec.stop_at_path_end,
         road=road,
         progress=progress,
-        meta={"id": spec.id, "max_steer_rad": float(pb.u_max[0]), "description": spec.description,
-              "backend": getattr(exp.mpc, "backend_name", "")},
+        meta={
+            "id": spec.id,
+            "max_steer_rad": float(pb.u_max[0]),
+            "description": spec.description,
+            "backend": getattr(exp.mpc, "backend_name", ""),
+        },
         obstacles=exp.obstacles,
         footprint=exp.footprint,
         laps=spec.laps,

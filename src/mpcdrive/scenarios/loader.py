@@ -93,7 +93,9 @@ def validate_scenario_data(data, source: str) -> ScenarioSpec:
         spec = ScenarioSpec.model_validate(data)
     except ValidationError as e:
         err = e.errors()[0]
-        loc = ".".join(str(p) for p in err["loc"] if not (isinstance(p, str) and p in ("straight", "circle", "waypoints", "csv")))
+        loc = ".".join(
+            str(p) for p in err["loc"] if not (isinstance(p, str) and p in ("straight", "circle", "waypoints", "csv"))
+        )
         msg = err["msg"].removeprefix("Value error, ")
         if err["type"] == "extra_forbidden":
             msg = "unknown key"
@@ -145,12 +147,14 @@ def _resolve_track_file(spec: ScenarioSpec, source: str, base_dir: Path | None) 
     p = Path(f)
     if not p.is_absolute():
         if base_dir is None:
-            raise ScenarioError(source, "path.file",
-                                f"no packaged track {f!r} (packaged: {', '.join(packaged_track_names())})")
+            raise ScenarioError(
+                source, "path.file", f"no packaged track {f!r} (packaged: {', '.join(packaged_track_names())})"
+            )
         p = (base_dir / p).resolve()
     if not p.is_file():
-        raise ScenarioError(source, "path.file", f"track file not found: {p} (packaged tracks: "
-                            f"{', '.join(packaged_track_names())})")
+        raise ScenarioError(
+            source, "path.file", f"track file not found: {p} (packaged tracks: {', '.join(packaged_track_names())})"
+        )
     return spec.model_copy(update={"path": spec.path.model_copy(update={"file": str(p)})})
 
 
@@ -167,12 +171,15 @@ def load_scenario(name_or_path: str | Path) -> ScenarioSpec:
     if name in builtin_ids():
         path = _builtin_dir() / f"{name}.yaml"
         source = f"builtin:{name}"
-        return warn_suspicious(_resolve_track_file(_parse(path.read_text(encoding="utf-8"), source), source, None),
-                               source)
+        return warn_suspicious(
+            _resolve_track_file(_parse(path.read_text(encoding="utf-8"), source), source, None), source
+        )
     p = Path(name)
     if p.suffix.lower() not in (".yaml", ".yml"):
         if not p.exists():
-            raise ScenarioError(name, "", f"no built-in scenario or file of this name (built-ins: {', '.join(builtin_ids())})")
+            raise ScenarioError(
+                name, "", f"no built-in scenario or file of this name (built-ins: {', '.join(builtin_ids())})"
+            )
         raise ScenarioError(name, "", "unsupported file type (expected .yaml or .yml)")
     try:
         text = p.read_text(encoding="utf-8")

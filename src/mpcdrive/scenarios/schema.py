@@ -103,8 +103,9 @@ class WaypointsSpec(_Strict):
             pts = pts[:-1]
         need = 3 if self.closed else 2
         if len(pts) < need:
-            raise ValueError(f"{'a closed' if self.closed else 'an open'} path needs at least {need} distinct "
-                             f"points, got {len(pts)}")
+            raise ValueError(
+                f"{'a closed' if self.closed else 'an open'} path needs at least {need} distinct points, got {len(pts)}"
+            )
         return self
 
 
@@ -123,8 +124,20 @@ PathSpec = Annotated[StraightSpec | CircleSpec | WaypointsSpec | CsvPathSpec, Fi
 
 ModelName = Literal["kinematic3", "kinematic4", "dynamic_linear", "dynamic_pacejka"]
 PresetName = Literal[tuple(PRESETS)]  # type: ignore[valid-type]
-_PRESET_KEYS = ("lf_m", "lr_m", "mass_kg", "yaw_inertia_kgm2", "friction", "cs_front_per_rad", "cs_rear_per_rad",
-                "h_cg_m", "pacejka_c", "pacejka_e", "length_m", "width_m")
+_PRESET_KEYS = (
+    "lf_m",
+    "lr_m",
+    "mass_kg",
+    "yaw_inertia_kgm2",
+    "friction",
+    "cs_front_per_rad",
+    "cs_rear_per_rad",
+    "h_cg_m",
+    "pacejka_c",
+    "pacejka_e",
+    "length_m",
+    "width_m",
+)
 
 
 #: CommonRoad plant models; the closed loop observes them as kinematic4 (x, y, yaw, v at the CoG)
@@ -174,10 +187,20 @@ class VehicleSpec(_Strict):
         if isinstance(data, dict) and isinstance(data.get("preset"), str) and data["preset"] in PRESETS:
             pre = PRESETS[data["preset"]]
             p = pre.params
-            values = {"lf_m": p.lf_m, "lr_m": p.lr_m, "mass_kg": p.mass_kg, "yaw_inertia_kgm2": p.yaw_inertia_kgm2,
-                      "friction": p.friction, "cs_front_per_rad": p.cs_front_per_rad,
-                      "cs_rear_per_rad": p.cs_rear_per_rad, "h_cg_m": p.h_cg_m, "pacejka_c": p.pacejka_c,
-                      "pacejka_e": p.pacejka_e, "length_m": pre.length_m, "width_m": pre.width_m}
+            values = {
+                "lf_m": p.lf_m,
+                "lr_m": p.lr_m,
+                "mass_kg": p.mass_kg,
+                "yaw_inertia_kgm2": p.yaw_inertia_kgm2,
+                "friction": p.friction,
+                "cs_front_per_rad": p.cs_front_per_rad,
+                "cs_rear_per_rad": p.cs_rear_per_rad,
+                "h_cg_m": p.h_cg_m,
+                "pacejka_c": p.pacejka_c,
+                "pacejka_e": p.pacejka_e,
+                "length_m": pre.length_m,
+                "width_m": pre.width_m,
+            }
             data = {**{k: values[k] for k in _PRESET_KEYS}, **data}
         return data
 
@@ -290,8 +313,11 @@ class RoadSpec(_Strict):
 
     @model_validator(mode="after")
     def _one_form(self):
-        forms = [self.lane_width_m is not None, self.left_width_m is not None or self.right_width_m is not None,
-                 self.widths is not None]
+        forms = [
+            self.lane_width_m is not None,
+            self.left_width_m is not None or self.right_width_m is not None,
+            self.widths is not None,
+        ]
         if sum(forms) != 1:
             raise ValueError("give the road as one of: lane_width_m, left_width_m + right_width_m, or widths")
         if forms[1] and (self.left_width_m is None or self.right_width_m is None):
@@ -385,7 +411,9 @@ class ControllerSpec(_Strict):
     brake_steering: Literal["hold", "straighten"] = "hold"
     relax_slack_factor: Annotated[float, Field(strict=True, ge=1, allow_inf_nan=False)] = 100.0
     check_plans: bool = True  # a fallback rung's plan is applied only if it is safer than braking
-    projection_window_m: Positive = MpcConfig.projection_window_m  # how far along the path the car is looked for from the last step [m]
+    projection_window_m: Positive = (
+        MpcConfig.projection_window_m
+    )  # how far along the path the car is looked for from the last step [m]
     osqp_polish: bool = OsqpSettings.polish
     osqp_adaptive_rho: bool = OsqpSettings.adaptive_rho
     osqp_time_limit_s: NonNeg = OsqpSettings.time_limit_s  # 0: none
@@ -397,6 +425,7 @@ class ControllerSpec(_Strict):
     def _ladder(cls, v):
         check_ladder(v)
         return v
+
     backend: Literal["osqp", "fast"] = "fast"
 
     @field_validator("max_steer_deg")
@@ -456,8 +485,9 @@ class PlantSpec(_Strict):
     ``vw_vanagon``), steered through a rate-limited servo and integrated by the plant itself
     (see :mod:`mpcdrive.adapters.commonroad_vehicles`); needs a ``kinematic4`` controller."""
 
-    model: Literal["same", "kinematic4", "dynamic_linear", "dynamic_pacejka", "commonroad_ks", "commonroad_st",
-                   "commonroad_mb"] = "same"
+    model: Literal[
+        "same", "kinematic4", "dynamic_linear", "dynamic_pacejka", "commonroad_ks", "commonroad_st", "commonroad_mb"
+    ] = "same"
     vehicle: CommonRoadVehicle | None = None
     integrator: Literal["rk4", "euler"] = "rk4"
     substeps: int = Field(1, ge=1, le=100)
@@ -472,14 +502,20 @@ class PlantSpec(_Strict):
         if self.model in COMMONROAD_PLANTS:
             if self.vehicle is None:
                 raise ValueError(f"plant.model {self.model} needs plant.vehicle (ford_escort, bmw_320i or vw_vanagon)")
-            other = sorted(self.model_fields_set & {"integrator", "substeps", "param_scale", "steering_actuator",
-                                                    "lf_m", "lr_m", "speed_mps"})
+            other = sorted(
+                self.model_fields_set
+                & {"integrator", "substeps", "param_scale", "steering_actuator", "lf_m", "lr_m", "speed_mps"}
+            )
             if other:
-                raise ValueError(f"plant.{other[0]} does not apply to plant.model {self.model} (the CommonRoad "
-                                 "vehicle has its own parameters, steering servo and integrator)")
+                raise ValueError(
+                    f"plant.{other[0]} does not apply to plant.model {self.model} (the CommonRoad "
+                    "vehicle has its own parameters, steering servo and integrator)"
+                )
         elif self.vehicle is not None:
-            raise ValueError(f"plant.vehicle needs a CommonRoad plant model ({', '.join(COMMONROAD_PLANTS)}), "
-                             f"got plant.model {self.model}")
+            raise ValueError(
+                f"plant.vehicle needs a CommonRoad plant model ({', '.join(COMMONROAD_PLANTS)}), "
+                f"got plant.model {self.model}"
+            )
         return self
 
 
@@ -545,8 +581,12 @@ class ScenarioSpec(_Strict):
         except ValueError as e:
             _raise_at(("period_s",), c.period_s, str(e))
         if c.between_solves == "plan" and c.delay_compensation:
-            _raise_at(("between_solves",), c.between_solves, "plan cannot be combined with delay_compensation "
-                      "(the compensator predicts with held commands): use hold")
+            _raise_at(
+                ("between_solves",),
+                c.between_solves,
+                "plan cannot be combined with delay_compensation "
+                "(the compensator predicts with held commands): use hold",
+            )
         return c
 
     @property
@@ -564,14 +604,20 @@ class ScenarioSpec(_Strict):
         plant_nx, plant_nu = model_size(self.plant_model)
         if self.plant_model in COMMONROAD_PLANTS:
             if self.vehicle.model != "kinematic4":
-                raise ValueError(f"plant.model {self.plant_model} is observed as kinematic4 (x, y, yaw, v at the "
-                                 f"centre of gravity); vehicle.model {self.vehicle.model} cannot be; use kinematic4")
+                raise ValueError(
+                    f"plant.model {self.plant_model} is observed as kinematic4 (x, y, yaw, v at the "
+                    f"centre of gravity); vehicle.model {self.vehicle.model} cannot be; use kinematic4"
+                )
             if self.disturbance is not None:
-                raise ValueError(f"disturbance (added to the plant state) is not supported with plant.model "
-                                 f"{self.plant_model}; use measurement_noise")
+                raise ValueError(
+                    f"disturbance (added to the plant state) is not supported with plant.model "
+                    f"{self.plant_model}; use measurement_noise"
+                )
         if plant_nu != nu:
-            raise ValueError(f"plant.model {self.plant_model} has inputs of size {plant_nu} but the controller's "
-                             f"{self.vehicle.model} has {nu}; use a model with steering and acceleration")
+            raise ValueError(
+                f"plant.model {self.plant_model} has inputs of size {plant_nu} but the controller's "
+                f"{self.vehicle.model} has {nu}; use a model with steering and acceleration"
+            )
         if self.plant.param_scale is not None and not self.plant_model.startswith("dynamic"):
             raise ValueError("plant.param_scale needs a dynamic plant model")
         if c.delay_compensation and self.plant.steering_actuator is None:
@@ -589,18 +635,24 @@ class ScenarioSpec(_Strict):
         if self.duration_s / self.dt_s > 1_000_000:
             raise ValueError("duration_s / dt_s exceeds 1,000,000 steps")
         if self.vehicle.model != "kinematic3" and self.plant.speed_mps is not None:
-            raise ValueError("plant.speed_mps is only for the constant-speed model kinematic3 "
-                             f"({self.vehicle.model} has the speed as a state)")
+            raise ValueError(
+                "plant.speed_mps is only for the constant-speed model kinematic3 "
+                f"({self.vehicle.model} has the speed as a state)"
+            )
         if self.duration_s < self.dt_s:
             raise ValueError(f"duration_s {self.duration_s} is shorter than one step dt_s {self.dt_s}")
         if self.road is not None and self.road.min_width_m <= self.vehicle.width_m:
-            raise ValueError(f"the road ({self.road.min_width_m:g} m where narrowest) is not wider than the car "
-                             f"(vehicle.width_m {self.vehicle.width_m} m)")
+            raise ValueError(
+                f"the road ({self.road.min_width_m:g} m where narrowest) is not wider than the car "
+                f"(vehicle.width_m {self.vehicle.width_m} m)"
+            )
         d = _distance_to_path(self.path, (self.initial_state.x_m, self.initial_state.y_m))
         if d > MAX_INITIAL_DISTANCE_M:
-            raise ValueError(f"initial_state: position ({self.initial_state.x_m}, {self.initial_state.y_m}) is "
-                             f"{d:.4g} m from the path (more than {MAX_INITIAL_DISTANCE_M:g} m): check the "
-                             "coordinates and their units")
+            raise ValueError(
+                f"initial_state: position ({self.initial_state.x_m}, {self.initial_state.y_m}) is "
+                f"{d:.4g} m from the path (more than {MAX_INITIAL_DISTANCE_M:g} m): check the "
+                "coordinates and their units"
+            )
         return self
 
 

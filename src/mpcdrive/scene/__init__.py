@@ -2,7 +2,17 @@
 
 from .footprint import Footprint
 from .geometry import shape_distance
-from .obstacles import Circle, ConstantVelocity, Obstacle, Polygon, Static, TrajectoryMotion, WorldCircle, WorldPolygon, rectangle
+from .obstacles import (
+    Circle,
+    ConstantVelocity,
+    Obstacle,
+    Polygon,
+    Static,
+    TrajectoryMotion,
+    WorldCircle,
+    WorldPolygon,
+    rectangle,
+)
 
 __all__ = [
     "Footprint",

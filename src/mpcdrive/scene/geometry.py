@@ -32,8 +32,7 @@ def points_polygons(P: np.ndarray, polys: np.ndarray) -> tuple[np.ndarray, np.nd
     a = polys
     d = np.roll(polys, -1, axis=1) - polys
     rel = P[:, None, :] - a
-    t = np.clip(np.einsum("kmi,kmi->km", rel, np.broadcast_to(d, rel.shape))
-                / np.einsum("kmi,kmi->km", d, d), 0.0, 1.0)
+    t = np.clip(np.einsum("kmi,kmi->km", rel, np.broadcast_to(d, rel.shape)) / np.einsum("kmi,kmi->km", d, d), 0.0, 1.0)
     q = a + t[..., None] * d
     diff = P[:, None, :] - q
     dist = np.hypot(diff[..., 0], diff[..., 1])

@@ -71,8 +71,9 @@ def _interp(tab_s, tab_v, s, period):
 
 
 @njit(cache=True)
-def body_bounds(tab_s, tab_left, tab_right, period, s, kappa, yaw_rel, half_length_m, half_width_m,
-                center_offset_m, margin_m):
+def body_bounds(
+    tab_s, tab_left, tab_right, period, s, kappa, yaw_rel, half_length_m, half_width_m, center_offset_m, margin_m
+):
     """(lo, hi, dlo, dhi): the bounds [m] of the reference point's lateral offset that keep every
     sampled point of the body ``margin_m`` inside the road edges, for the reference point at arc
     length ``s`` [m] where the path's curvature is ``kappa`` [1/m], the body yawed ``yaw_rel``
@@ -111,26 +112,75 @@ def body_bounds(tab_s, tab_left, tab_right, period, s, kappa, yaw_rel, half_leng
 
 
 @njit(cache=True)
-def centre_bounds(tab_s, tab_left, tab_right, period, s_arr, kappa_arr, yaw_rel_arr, half_length_m, half_width_m,
-                  center_offset_m, margin_m, lo_out, hi_out):
+def centre_bounds(
+    tab_s,
+    tab_left,
+    tab_right,
+    period,
+    s_arr,
+    kappa_arr,
+    yaw_rel_arr,
+    half_length_m,
+    half_width_m,
+    center_offset_m,
+    margin_m,
+    lo_out,
+    hi_out,
+):
     """:func:`body_bounds` for each entry of the (n,) arrays, written to ``lo_out`` / ``hi_out``."""
     for k in range(s_arr.shape[0]):
-        lo_out[k], hi_out[k], _, _ = body_bounds(tab_s, tab_left, tab_right, period, s_arr[k], kappa_arr[k],
-                                                 yaw_rel_arr[k], half_length_m, half_width_m, center_offset_m,
-                                                 margin_m)
+        lo_out[k], hi_out[k], _, _ = body_bounds(
+            tab_s,
+            tab_left,
+            tab_right,
+            period,
+            s_arr[k],
+            kappa_arr[k],
+            yaw_rel_arr[k],
+            half_length_m,
+            half_width_m,
+            center_offset_m,
+            margin_m,
+        )
 
 
 @njit(cache=True)
-def horizon_bounds(tab_s, tab_left, tab_right, period, s_arr, heading, kappa, yaw, half_length_m, half_width_m,
-                   center_offset_m, margin_m, lo_out, hi_out, dlo_out, dhi_out):
+def horizon_bounds(
+    tab_s,
+    tab_left,
+    tab_right,
+    period,
+    s_arr,
+    heading,
+    kappa,
+    yaw,
+    half_length_m,
+    half_width_m,
+    center_offset_m,
+    margin_m,
+    lo_out,
+    hi_out,
+    dlo_out,
+    dhi_out,
+):
     """:func:`body_bounds` per horizon step: the path's heading [rad] and curvature [1/m] at arc
     lengths ``s_arr`` [m], the linearization trajectory's yaw ``yaw`` [rad] (all (n,)); the
     relative yaw is wrapped to [-pi, pi). Writes the bounds and their yaw slopes."""
     for k in range(s_arr.shape[0]):
         rel = (yaw[k] - heading[k] + math.pi) % (2.0 * math.pi) - math.pi
         lo_out[k], hi_out[k], dlo_out[k], dhi_out[k] = body_bounds(
-            tab_s, tab_left, tab_right, period, s_arr[k], kappa[k], rel, half_length_m, half_width_m,
-            center_offset_m, margin_m)
+            tab_s,
+            tab_left,
+            tab_right,
+            period,
+            s_arr[k],
+            kappa[k],
+            rel,
+            half_length_m,
+            half_width_m,
+            center_offset_m,
+            margin_m,
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -160,8 +210,16 @@ class Road:
     route_lane: int
     period_m: float
 
-    def __init__(self, s_m, left_m, right_m, margin_m: float = 0.05, lanes: tuple[Lane, ...] = (),
-                 route_lane: int = 0, period_m: float = 0.0):
+    def __init__(
+        self,
+        s_m,
+        left_m,
+        right_m,
+        margin_m: float = 0.05,
+        lanes: tuple[Lane, ...] = (),
+        route_lane: int = 0,
+        period_m: float = 0.0,
+    ):
         s = np.atleast_1d(np.asarray(s_m, float)).copy()
         left = np.broadcast_to(np.asarray(left_m, float), s.shape).copy()
         right = np.broadcast_to(np.asarray(right_m, float), s.shape).copy()
@@ -174,8 +232,9 @@ class Road:
             raise ValueError("road knots s_m must be strictly increasing")
         if np.any(left <= right):
             k = int(np.argmax(left <= right))
-            raise ValueError(f"road left edge {left[k]:g} m is not left of its right edge {right[k]:g} m "
-                             f"at s = {s[k]:g} m")
+            raise ValueError(
+                f"road left edge {left[k]:g} m is not left of its right edge {right[k]:g} m at s = {s[k]:g} m"
+            )
         if not (math.isfinite(margin_m) and margin_m >= 0):
             raise ValueError(f"road margin_m must be >= 0, got {margin_m!r}")
         if not (math.isfinite(period_m) and period_m >= 0):
@@ -188,9 +247,15 @@ class Road:
             for name in ("center_m", "left_m", "right_m"):
                 if np.shape(getattr(ln, name)) != s.shape:
                     raise ValueError(f"lane {ln.name}: {name} must have one value per road knot ({s.size})")
-        for name, value in (("s_m", s), ("left_m", left), ("right_m", right), ("margin_m", float(margin_m)),
-                            ("lanes", tuple(lanes)), ("route_lane", int(route_lane)),
-                            ("period_m", float(period_m))):
+        for name, value in (
+            ("s_m", s),
+            ("left_m", left),
+            ("right_m", right),
+            ("margin_m", float(margin_m)),
+            ("lanes", tuple(lanes)),
+            ("route_lane", int(route_lane)),
+            ("period_m", float(period_m)),
+        ):
             object.__setattr__(self, name, value)
 
     # -- construction -------------------------------------------------------------------------
@@ -257,8 +322,21 @@ class Road:
         shape = b[0].shape
         s, k, y = (np.ascontiguousarray(a, dtype=float).ravel() for a in b)
         lo, hi = np.empty(s.size), np.empty(s.size)
-        centre_bounds(self.s_m, self.left_m, self.right_m, self.period_m, s, k, y, 0.5 * footprint.length_m,
-                      0.5 * footprint.width_m, footprint.center_offset_m, margin_m, lo, hi)
+        centre_bounds(
+            self.s_m,
+            self.left_m,
+            self.right_m,
+            self.period_m,
+            s,
+            k,
+            y,
+            0.5 * footprint.length_m,
+            0.5 * footprint.width_m,
+            footprint.center_offset_m,
+            margin_m,
+            lo,
+            hi,
+        )
         return lo.reshape(shape), hi.reshape(shape)
 
     def narrowest_fit_m(self, footprint: Footprint) -> float:
@@ -274,8 +352,9 @@ class Road:
             raise ValueError(f"lane indices {lanes} are not among the road's {len(self.lanes)} lanes")
         left = np.max([self.lanes[i].left_m for i in idx], axis=0)
         right = np.min([self.lanes[i].right_m for i in idx], axis=0)
-        return Road(self.s_m, left, np.minimum(right, left - 1e-6), self.margin_m, self.lanes, self.route_lane,
-                    self.period_m)
+        return Road(
+            self.s_m, left, np.minimum(right, left - 1e-6), self.margin_m, self.lanes, self.route_lane, self.period_m
+        )
 
     def with_margin(self, margin_m: float) -> Road:
         """The same road with another margin."""

@@ -6,6 +6,18 @@ from ..scene.footprint import Footprint
 from .metrics import LANE_TOLERANCE_M, apply_goal_region, compute_metrics, goal_met, lane_excess_per_step
 from .verdict import RunVerdict, run_verdict
 
-__all__ = ["ActuatorState", "SteeringActuator", "Disturbance", "Footprint", "LANE_TOLERANCE_M", "Plant",
-           "RunVerdict", "apply_goal_region", "compute_metrics", "goal_met", "lane_excess_per_step", "run_verdict",
-           "simulate"]
+__all__ = [
+    "ActuatorState",
+    "SteeringActuator",
+    "Disturbance",
+    "Footprint",
+    "LANE_TOLERANCE_M",
+    "Plant",
+    "RunVerdict",
+    "apply_goal_region",
+    "compute_metrics",
+    "goal_met",
+    "lane_excess_per_step",
+    "run_verdict",
+    "simulate",
+]

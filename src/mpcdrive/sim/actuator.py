@@ -29,8 +29,7 @@ class ActuatorState:
         """The state after sending ``command_rad`` at time ``t_s``."""
         if not math.isfinite(command_rad):
             raise ValueError(f"steering command must be finite, got {command_rad}")
-        return ActuatorState(self.steer_rad, self.history + ((float(t_s), float(command_rad)),),
-                             self.idle_command_rad)
+        return ActuatorState(self.steer_rad, self.history + ((float(t_s), float(command_rad)),), self.idle_command_rad)
 
 
 @dataclass(frozen=True)

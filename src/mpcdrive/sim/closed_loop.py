@@ -36,7 +36,9 @@ class Plant:
 
     def __post_init__(self):
         if not isinstance(self.model, VehicleModel):
-            raise ValueError(f"plant model must be a vehicle model (f, jacobians, speed, ...), got {type(self.model).__name__}")
+            raise ValueError(
+                f"plant model must be a vehicle model (f, jacobians, speed, ...), got {type(self.model).__name__}"
+            )
         if self.method not in ("rk4", "euler"):
             raise ValueError(f"plant method must be 'rk4' or 'euler', got {self.method!r}")
         if isinstance(self.substeps, bool) or not isinstance(self.substeps, numbers.Integral) or self.substeps < 1:
@@ -48,8 +50,9 @@ class Plant:
             x = discrete_step(self.model, x, u, h, self.method)
         return x
 
-    def step_actuated(self, x: np.ndarray, u: np.ndarray, dt_s: float, act: ActuatorState,
-                      t_s: float) -> tuple[np.ndarray, ActuatorState]:
+    def step_actuated(
+        self, x: np.ndarray, u: np.ndarray, dt_s: float, act: ActuatorState, t_s: float
+    ) -> tuple[np.ndarray, ActuatorState]:
         """One control step from time ``t_s`` with the steering passed through the actuator, whose
         state ``act`` already holds the command ``u[0]``; returns (state, actuator state)."""
         h = dt_s / self.substeps
@@ -165,11 +168,14 @@ def solve_interval(dt_s: float, control_period_s: float | None, name: str = "con
     ratio = p / dt_s
     m = int(round(ratio))
     if m < 1:
-        raise ValueError(f"{name} {p:g} s is shorter than the plant step dt_s {dt_s:g} s; "
-                         "the controller cannot run faster than the plant")
+        raise ValueError(
+            f"{name} {p:g} s is shorter than the plant step dt_s {dt_s:g} s; "
+            "the controller cannot run faster than the plant"
+        )
     if abs(ratio - m) > 1e-9 * ratio:
-        raise ValueError(f"{name} {p:g} s is not a whole multiple of the plant step dt_s {dt_s:g} s "
-                         f"({ratio:.6g} plant steps)")
+        raise ValueError(
+            f"{name} {p:g} s is not a whole multiple of the plant step dt_s {dt_s:g} s ({ratio:.6g} plant steps)"
+        )
     return m
 
 
@@ -288,8 +294,10 @@ def simulate(
         raise ValueError(f"between_solves must be 'hold' or 'plan', got {between_solves!r}")
     h = _horizon_step_s(controller)
     if m > 1 and h is not None and abs(h - control_period_s) > 1e-9 * control_period_s:
-        raise ValueError(f"the controller's horizon step dt_s {h:g} s differs from control_period_s "
-                         f"{control_period_s:g} s: build the controller with dt_s = the control period")
+        raise ValueError(
+            f"the controller's horizon step dt_s {h:g} s differs from control_period_s "
+            f"{control_period_s:g} s: build the controller with dt_s = the control period"
+        )
     observed = not isinstance(plant, Plant)
     if observed and not isinstance(plant, ObservedPlant):
         raise ValueError(f"plant must be a Plant or an ObservedPlant, got {type(plant).__name__}")
@@ -308,7 +316,9 @@ def simulate(
         raise ValueError(f"initial state x0 must have shape ({model.nx},) {model.state_names}, got {x.shape}")
     bad = [n for n, v in zip(model.state_names, x) if not math.isfinite(v)]
     if bad:
-        raise ValueError(f"initial state x0 field(s) {', '.join(bad)} not finite: {dict(zip(model.state_names, x.tolist()))}")
+        raise ValueError(
+            f"initial state x0 field(s) {', '.join(bad)} not finite: {dict(zip(model.state_names, x.tolist()))}"
+        )
     if model.nx != nx:
         raise ValueError("plant and controller must share the state layout (same nx)")
     for name, noise in (("disturbance", disturbance), ("measurement_noise", measurement_noise)):
@@ -474,8 +484,16 @@ def collision_events(clearance_m: np.ndarray, t_s: np.ndarray, obstacles) -> lis
         starts = np.flatnonzero(hit & ~np.r_[False, hit[:-1]])
         ends = np.flatnonzero(hit & ~np.r_[hit[1:], False]) + 1
         for a, b in zip(starts, ends):
-            events.append({"obstacle": i, "name": obstacles[i].name, "step": int(a), "t_s": float(t_s[a]),
-                           "steps": int(b - a), "depth_m": float(-d[a:b].min())})
+            events.append(
+                {
+                    "obstacle": i,
+                    "name": obstacles[i].name,
+                    "step": int(a),
+                    "t_s": float(t_s[a]),
+                    "steps": int(b - a),
+                    "depth_m": float(-d[a:b].min()),
+                }
+            )
     return sorted(events, key=lambda e: (e["step"], e["obstacle"]))
 
 
@@ -493,8 +511,9 @@ def _clearances(X: np.ndarray, T: np.ndarray, obstacles, footprint: Footprint):
         entry = {"name": ob.name, "moving": ob.moving}
         if isinstance(ob.shape, Circle):
             centers = poses[:, :2].round(4)
-            entry.update(type="circle", radius_m=ob.shape.radius_m,
-                         center=centers.tolist() if ob.moving else centers[0].tolist())
+            entry.update(
+                type="circle", radius_m=ob.shape.radius_m, center=centers.tolist() if ob.moving else centers[0].tolist()
+            )
         else:
             world = np.array([ob.at(t).points for t in (T if ob.moving else T[:1])]).round(4)
             entry.update(type="polygon", points=world.tolist() if ob.moving else world[0].tolist())

@@ -37,8 +37,9 @@ def goal_met(region_reached: bool | None, max_lane_excess_m: float, collisions: 
     return bool(region_reached) and max_lane_excess_m <= LANE_TOLERANCE_M and int(collisions) == 0
 
 
-def apply_goal_region(metrics: dict, region_reached: bool, *, collision_free: bool = True,
-                      road_compliant: bool = True) -> dict:
+def apply_goal_region(
+    metrics: dict, region_reached: bool, *, collision_free: bool = True, road_compliant: bool = True
+) -> dict:
     """``metrics`` with the goal judged on another goal region (a CommonRoad planning problem's):
     ``goal_region_reached`` becomes ``region_reached`` and ``goal_reached`` follows
     :func:`goal_met`, also requiring an external checker's ``collision_free`` and
@@ -46,8 +47,11 @@ def apply_goal_region(metrics: dict, region_reached: bool, *, collision_free: bo
     is the authority on "inside the road" there: mpcdrive's own lane (one width along the route's
     centre line) is a proxy that a lane change or a wider lanelet exceeds."""
     met = goal_met(region_reached, 0.0, metrics["collisions"])  # the lane proxy gives way to the checker's road
-    return {**metrics, "goal_region_reached": bool(region_reached),
-            "goal_reached": bool(met and collision_free and road_compliant)}
+    return {
+        **metrics,
+        "goal_region_reached": bool(region_reached),
+        "goal_reached": bool(met and collision_free and road_compliant),
+    }
 
 
 def _rms(a) -> float:
@@ -76,7 +80,7 @@ def compute_metrics(result: SimResult) -> dict:
     the solves of a controller slower than the plant (status ``held``) are neither."""
     K = result.steps
     ey = result.e_y_m
-    half = ey[K // 2:]
+    half = ey[K // 2 :]
     steer = result.steer_rad
     # steering is 0 before the first step (the controller starts from u_prev = 0)
     steer0 = np.r_[result.meta.get("initial_steer_rad", 0.0), steer]

@@ -39,8 +39,12 @@ class RunVerdict:
     def problems(self) -> list[str]:
         """Short names of what failed (``collision``, ``left the road``, ``diverged``,
         ``goal not reached``)."""
-        names = [("collision", self.collided), ("left the road", self.off_road), ("diverged", self.diverged),
-                 ("goal not reached", self.goal_reached is False)]
+        names = [
+            ("collision", self.collided),
+            ("left the road", self.off_road),
+            ("diverged", self.diverged),
+            ("goal not reached", self.goal_reached is False),
+        ]
         return [n for n, bad in names if bad]
 
     def text(self) -> str:
@@ -67,8 +71,10 @@ def collision_phrase(m: dict) -> str | None:
     text = f"collided with {_obstacle(first)} at t = {first['t_s']:.2f} s, {first['depth_m']:.3g} m deep"
     if len(events) > 1:
         which = sorted({e["obstacle"] for e in events})
-        text += f" ({len(events)} contacts in all, with obstacle{'s' if len(which) > 1 else ''} " \
-                f"{', '.join(map(str, which))})"
+        text += (
+            f" ({len(events)} contacts in all, with obstacle{'s' if len(which) > 1 else ''} "
+            f"{', '.join(map(str, which))})"
+        )
     return text
 
 
@@ -118,16 +124,23 @@ def solver_phrase(m: dict) -> str:
 
 def checker_phrase(cr: dict) -> str:
     """The drivability checker's verdicts of a CommonRoad run (``metrics["commonroad"]``)."""
-    words = ["collision-free" if cr.get("collision_free") else "COLLISION",
-             "road-compliant" if cr.get("road_compliant") else "OFF THE ROAD"]
+    words = [
+        "collision-free" if cr.get("collision_free") else "COLLISION",
+        "road-compliant" if cr.get("road_compliant") else "OFF THE ROAD",
+    ]
     if "ks_feasible" in cr:
         model = cr.get("vehicle_model") or "KS"  # the solution's model (ST for a drive on the ST plant)
         words.append(f"{model}-feasible" if cr["ks_feasible"] else f"not {model}-feasible")
     goal = cr.get("goal_reached")
     if goal is not None:
         step = cr.get("goal_step")
-        words.append(f"goal reached at step {step}" if goal and step is not None
-                     else "goal reached" if goal else "goal not reached")
+        words.append(
+            f"goal reached at step {step}"
+            if goal and step is not None
+            else "goal reached"
+            if goal
+            else "goal not reached"
+        )
     return "CommonRoad checker: " + ", ".join(words)
 
 

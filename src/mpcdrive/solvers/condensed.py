@@ -179,8 +179,39 @@ def _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, every) -> bool:
 
 
 @njit(cache=True)
-def soft_solve(H, g, C, b, m, m_soft, rgrp, N, nzu, kpos, w2l, w1l, w2o, w1o, gsum, z, lam, active, isact, rowcol,
-                L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol):
+def soft_solve(
+    H,
+    g,
+    C,
+    b,
+    m,
+    m_soft,
+    rgrp,
+    N,
+    nzu,
+    kpos,
+    w2l,
+    w1l,
+    w2o,
+    w1o,
+    gsum,
+    z,
+    lam,
+    active,
+    isact,
+    rowcol,
+    L,
+    J,
+    Rq,
+    d,
+    zdir,
+    r,
+    uq,
+    sq,
+    rown,
+    max_iter,
+    tol,
+):
     """The condensed QP with soft rows, their slacks only where they can be nonzero.
 
     ``H[:nzu, :nzu]``, ``g[:nzu]`` are the input part; rows ``[0, m)`` of ``C z >= b`` the
@@ -195,8 +226,9 @@ def soft_solve(H, g, C, b, m, m_soft, rgrp, N, nzu, kpos, w2l, w1l, w2o, w1o, gs
     again until no group without a slack exceeds it (or with a slack on every group that has
     rows: the full problem). The slacks' sign rows follow row m (``rowcol`` names their single
     nonzero; the other rows written per step are marked dense there). z[:nzu] holds the inputs."""
-    code, iters = gi_solve(H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq,
-                           sq, rown, max_iter, tol)
+    code, iters = gi_solve(
+        H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol
+    )
     if code == 0 and _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, True):
         return 0, iters
     full = False
@@ -241,8 +273,9 @@ def soft_solve(H, g, C, b, m, m_soft, rgrp, N, nzu, kpos, w2l, w1l, w2o, w1o, gs
             C[rr, nzu + a] = 1.0
             b[rr] = 0.0
             rowcol[rr] = nzu + a
-        code, it2 = gi_solve(H, g, C, b, m + nk, n2, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq,
-                             sq, rown, max_iter, tol)
+        code, it2 = gi_solve(
+            H, g, C, b, m + nk, n2, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol
+        )
         iters += it2
         if code != 0:
             if full:

@@ -370,7 +370,29 @@ class DenseQpSolver:
         lam = np.zeros(max(m, 1))
         rowcol = single_nonzero_columns(C)
         v = self._vec
-        code, it = gi_solve(H, g, C, b, m, n, z, lam, self._active, self._isact, rowcol, self._L, self._J, self._R,
-                            v[0], v[1], v[2], v[3], self._s, self._norm, self.max_iter, self.tol)
+        code, it = gi_solve(
+            H,
+            g,
+            C,
+            b,
+            m,
+            n,
+            z,
+            lam,
+            self._active,
+            self._isact,
+            rowcol,
+            self._L,
+            self._J,
+            self._R,
+            v[0],
+            v[1],
+            v[2],
+            v[3],
+            self._s,
+            self._norm,
+            self.max_iter,
+            self.tol,
+        )
         obj = float(0.5 * z @ H @ z + g @ z) if code == QP_OK else float("nan")
         return DenseQpResult(STATUS_WORDS[code], z, lam[:m].copy(), obj, int(it))

@@ -55,7 +55,9 @@ class OsqpSettings:
             raise ValueError("OSQP eps_abs and eps_rel cannot both be 0")
         if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, (int, np.integer)) or self.max_iter < 1:
             raise ValueError(f"OSQP max_iter must be an integer >= 1, got {self.max_iter!r}")
-        if not (isinstance(self.time_limit_s, (int, float)) and np.isfinite(self.time_limit_s) and self.time_limit_s >= 0):
+        if not (
+            isinstance(self.time_limit_s, (int, float)) and np.isfinite(self.time_limit_s) and self.time_limit_s >= 0
+        ):
             raise ValueError(f"OSQP time_limit_s must be a finite number >= 0 (0 = none), got {self.time_limit_s!r}")
 
     def as_kwargs(self) -> dict:
@@ -99,8 +101,12 @@ class OsqpBackend:
         qp = self.qp
         # non-finite problem data (NaN anywhere, inf outside the bounds) is a failed step, not a
         # 4000-iteration OSQP run on garbage
-        finite = (np.isfinite(qp.q).all() and np.isfinite(qp.A.data).all()
-                  and not np.isnan(qp.l).any() and not np.isnan(qp.u).any())
+        finite = (
+            np.isfinite(qp.q).all()
+            and np.isfinite(qp.A.data).all()
+            and not np.isnan(qp.l).any()
+            and not np.isnan(qp.u).any()
+        )
         try:
             if not finite:
                 raise ValueError("non-finite QP data")
@@ -112,8 +118,14 @@ class OsqpBackend:
                 self._solver.update(q=qp.q, l=qp.l, u=qp.u, Ax=qp.A.data)
         except Exception:  # OSQP rejects the data: a failed step
             nan = float("nan")
-            return SolveResult(STATUS_FAILED, np.full((qp.N + 1, qp.nx), nan), np.full((qp.N, qp.nu), nan),
-                               nan, 0, time.perf_counter() - t0)
+            return SolveResult(
+                STATUS_FAILED,
+                np.full((qp.N + 1, qp.nx), nan),
+                np.full((qp.N, qp.nu), nan),
+                nan,
+                0,
+                time.perf_counter() - t0,
+            )
         if warm_X is not None and warm_U is not None:
             self._solver.warm_start(x=qp.pack(warm_X, warm_U, out=self._z0))
         res = self._solver.solve(raise_error=False)

@@ -68,8 +68,9 @@ class ProjectedGradientBackend:
         if qp.lane:
             unsupported.append("a road bound (MpcProblem.road)")
         if unsupported:
-            raise ValueError("the projected gradient solver handles input bounds only; this problem has "
-                             + ", ".join(unsupported))
+            raise ValueError(
+                "the projected gradient solver handles input bounds only; this problem has " + ", ".join(unsupported)
+            )
         self.qp = qp
         self.settings = settings
         N, nx, nu = qp.N, qp.nx, qp.nu
@@ -79,7 +80,7 @@ class ProjectedGradientBackend:
         self._hi = np.tile(pb.u_max, N)
         self._nz = qp.n_x + qp.n_u
         self._M = np.zeros((self._nz, qp.n_u))  # z = M U + m0
-        self._M[qp.n_x:, :] = np.eye(qp.n_u)
+        self._M[qp.n_x :, :] = np.eye(qp.n_u)
         self._m0 = np.zeros(self._nz)
         self._N, self._nx, self._nu = N, nx, nu
         self.last_condensed: tuple[np.ndarray, np.ndarray] | None = None
@@ -90,7 +91,7 @@ class ProjectedGradientBackend:
         qp = self.qp
         N, nx, nu = self._N, self._nx, self._nu
         A = qp.A.toarray()
-        x0 = qp.l[qp.r_init:qp.r_init + nx]
+        x0 = qp.l[qp.r_init : qp.r_init + nx]
         M, m0 = self._M, self._m0
         Gk = np.zeros((nx, N * nu))  # dX_k / dU
         gk = x0.copy()
@@ -98,14 +99,14 @@ class ProjectedGradientBackend:
         m0[0:nx] = gk
         for k in range(N):
             rows = slice(qp.r_dyn + k * nx, qp.r_dyn + (k + 1) * nx)
-            Ad = -A[rows, qp.ix(k):qp.ix(k) + nx]
-            Bd = -A[rows, qp.iu(k):qp.iu(k) + nu]
+            Ad = -A[rows, qp.ix(k) : qp.ix(k) + nx]
+            Bd = -A[rows, qp.iu(k) : qp.iu(k) + nu]
             c = qp.l[rows]
             Gk = Ad @ Gk
-            Gk[:, k * nu:(k + 1) * nu] += Bd
+            Gk[:, k * nu : (k + 1) * nu] += Bd
             gk = Ad @ gk + c
-            M[qp.ix(k + 1):qp.ix(k + 1) + nx, :] = Gk
-            m0[qp.ix(k + 1):qp.ix(k + 1) + nx] = gk
+            M[qp.ix(k + 1) : qp.ix(k + 1) + nx, :] = Gk
+            m0[qp.ix(k + 1) : qp.ix(k + 1) + nx] = gk
         q = qp.q[: self._nz]
         PM = self._P @ M
         H = M.T @ PM
@@ -118,17 +119,32 @@ class ProjectedGradientBackend:
         t0 = time.perf_counter()
         qp, st = self.qp, self.settings
         nan = float("nan")
-        finite = (np.isfinite(qp.q).all() and np.isfinite(qp.A.data).all()
-                  and np.isfinite(qp.l[: qp.r_dyn + qp.N * qp.nx]).all())
+        finite = (
+            np.isfinite(qp.q).all()
+            and np.isfinite(qp.A.data).all()
+            and np.isfinite(qp.l[: qp.r_dyn + qp.N * qp.nx]).all()
+        )
         if not finite:
-            return SolveResult(STATUS_FAILED, np.full((qp.N + 1, qp.nx), nan), np.full((qp.N, qp.nu), nan),
-                               nan, 0, time.perf_counter() - t0)
+            return SolveResult(
+                STATUS_FAILED,
+                np.full((qp.N + 1, qp.nx), nan),
+                np.full((qp.N, qp.nu), nan),
+                nan,
+                0,
+                time.perf_counter() - t0,
+            )
         H, g = self._condense()
         self.last_condensed = (H, g)
         L = float(np.linalg.eigvalsh(H)[-1])
         if not (np.isfinite(L) and L > 0):
-            return SolveResult(STATUS_FAILED, np.full((qp.N + 1, qp.nx), nan), np.full((qp.N, qp.nu), nan),
-                               nan, 0, time.perf_counter() - t0)
+            return SolveResult(
+                STATUS_FAILED,
+                np.full((qp.N + 1, qp.nx), nan),
+                np.full((qp.N, qp.nu), nan),
+                nan,
+                0,
+                time.perf_counter() - t0,
+            )
         step = 1.0 / L
         lo, hi = self._lo, self._hi
         U = np.zeros(qp.n_u) if warm_U is None else np.ravel(np.asarray(warm_U, float)).copy()
@@ -149,8 +165,11 @@ class ProjectedGradientBackend:
                 t = t_next
             U_prev, U = U, U_new
             # projected-gradient step at the current iterate (the optimality measure)
-            res = np.max(np.abs(np.clip(U - step * (H @ U + g), lo, hi) - U)) if st.accelerated \
+            res = (
+                np.max(np.abs(np.clip(U - step * (H @ U + g), lo, hi) - U))
+                if st.accelerated
                 else np.max(np.abs(U - U_prev))
+            )
             if res <= st.tol:
                 status, it = STATUS_OK, i
                 break

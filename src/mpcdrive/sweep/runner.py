@@ -36,12 +36,33 @@ __all__ = [
 
 #: metric columns of the results table, in order (after run_id, seed and the varied values)
 METRIC_COLUMNS: tuple[str, ...] = (
-    "success", "failure_reason", "termination", "steps", "duration_s",
-    "rms_lateral_error_m", "max_abs_lateral_error_m", "final_lateral_error_m", "rms_heading_error_rad",
-    "max_abs_steer_rad", "max_abs_steer_rate_rad_s", "min_obstacle_clearance_m", "collisions",
-    "max_lane_excess_m", "max_lane_excess_t_s", "lane_excess_at_start_m", "goal_reached", "solver_failures", "fallbacks",
-    "fallbacks_relax", "fallbacks_shifted_plan", "fallbacks_brake", "fallbacks_hold_last",
-    "solve_time_p50_us", "solve_time_p99_us", "solve_time_max_us", "wall_s",
+    "success",
+    "failure_reason",
+    "termination",
+    "steps",
+    "duration_s",
+    "rms_lateral_error_m",
+    "max_abs_lateral_error_m",
+    "final_lateral_error_m",
+    "rms_heading_error_rad",
+    "max_abs_steer_rad",
+    "max_abs_steer_rate_rad_s",
+    "min_obstacle_clearance_m",
+    "collisions",
+    "max_lane_excess_m",
+    "max_lane_excess_t_s",
+    "lane_excess_at_start_m",
+    "goal_reached",
+    "solver_failures",
+    "fallbacks",
+    "fallbacks_relax",
+    "fallbacks_shifted_plan",
+    "fallbacks_brake",
+    "fallbacks_hold_last",
+    "solve_time_p50_us",
+    "solve_time_p99_us",
+    "solve_time_max_us",
+    "wall_s",
 )
 #: columns that depend on the machine (left out when comparing backends)
 TIMING_COLUMNS: tuple[str, ...] = ("solve_time_p50_us", "solve_time_p99_us", "solve_time_max_us", "wall_s")
@@ -165,8 +186,9 @@ def plan_sweep(
         try:
             validate_scenario_data(trial, "")
         except ScenarioError as e:
-            raise SweepError(f"--vary {var}: gives an invalid scenario at its centre value "
-                             f"{nominal:g}: {e.field}: {e.problem}") from None
+            raise SweepError(
+                f"--vary {var}: gives an invalid scenario at its centre value {nominal:g}: {e.field}: {e.problem}"
+            ) from None
     tasks = []
     for i, child in enumerate(np.random.SeedSequence(seed).spawn(runs)):
         rng = np.random.default_rng(child)
@@ -221,16 +243,24 @@ def run_task(task: RunTask) -> dict:
             m["lane_excess_at_start_m"] = float(excess[0])
     except Exception as e:  # a run's error is its result; the sweep goes on
         msg = " ".join(str(e).split())
-        row.update(success=False, failure_reason=f"error: {type(e).__name__}: {msg}", termination="error",
-                   wall_s=time.perf_counter() - t0)
+        row.update(
+            success=False,
+            failure_reason=f"error: {type(e).__name__}: {msg}",
+            termination="error",
+            wall_s=time.perf_counter() - t0,
+        )
         return row
     fc = m["fallback_counts"]
     st = m["solve_time_us"]
     row.update({k: m[k] for k in METRIC_COLUMNS if k in m})
     row.update(
-        fallbacks_relax=fc.get("relax", 0), fallbacks_shifted_plan=fc.get("shifted_plan", 0),
-        fallbacks_brake=fc.get("brake", 0), fallbacks_hold_last=fc.get("hold_last", 0),
-        solve_time_p50_us=st["p50"], solve_time_p99_us=st["p99"], solve_time_max_us=st["max"],
+        fallbacks_relax=fc.get("relax", 0),
+        fallbacks_shifted_plan=fc.get("shifted_plan", 0),
+        fallbacks_brake=fc.get("brake", 0),
+        fallbacks_hold_last=fc.get("hold_last", 0),
+        solve_time_p50_us=st["p50"],
+        solve_time_p99_us=st["p99"],
+        solve_time_max_us=st["max"],
     )
     why = task.criteria.judge(m)
     row.update(success=not why, failure_reason="; ".join(why), wall_s=time.perf_counter() - t0)
@@ -362,12 +392,19 @@ def run_sweep(
     backend : ``local`` (a process pool of ``workers`` processes, all cores by default; 1 runs in
     this process) or ``ray`` (tasks on the Ray cluster at ``address``, a new local one when None;
     the cluster's nodes need mpcdrive installed). ``progress(done, total, row)`` after each run."""
-    return sorted(run_parallel(run_task, list(plan.tasks), backend, workers, address, progress),
-                  key=lambda r: r["run_id"])
+    return sorted(
+        run_parallel(run_task, list(plan.tasks), backend, workers, address, progress), key=lambda r: r["run_id"]
+    )
 
 
-def run_parallel(fn, tasks: list, backend: str = "local", workers: int | None = None, address: str | None = None,
-                 progress: Progress | None = None) -> list:
+def run_parallel(
+    fn,
+    tasks: list,
+    backend: str = "local",
+    workers: int | None = None,
+    address: str | None = None,
+    progress: Progress | None = None,
+) -> list:
     """``fn(task)`` for every task, in completion order, on ``backend`` (as :func:`run_sweep`);
     ``fn`` must be a top-level function that never raises (its result reports an error)."""
     if backend not in ("local", "ray"):

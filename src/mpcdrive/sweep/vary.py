@@ -87,8 +87,10 @@ class Distribution:
 def _parse_distribution(option: str, name: str, text: str) -> Distribution:
     m = _CALL.match(text)
     if not m:
-        raise SweepError(f"{option} {name}: expected a distribution like uniform(-0.5, 0.5), got {text!r} "
-                         f"(known: {', '.join(DISTRIBUTIONS)})")
+        raise SweepError(
+            f"{option} {name}: expected a distribution like uniform(-0.5, 0.5), got {text!r} "
+            f"(known: {', '.join(DISTRIBUTIONS)})"
+        )
     kind, body = m.group(1), m.group(2)
     if kind not in DISTRIBUTIONS:
         raise SweepError(f"{option} {name}: unknown distribution {kind!r} (known: {', '.join(DISTRIBUTIONS)})")
@@ -120,8 +122,10 @@ def _split_assignment(option: str, text: str) -> tuple[str, str]:
     name, value = text.split("=", 1)
     name = name.strip()
     if not _NAME.match(name):
-        raise SweepError(f"{option} {name!r}: NAME must be a dotted path of keys and list indices, "
-                         "e.g. initial_state.y_m or path.points.0.1")
+        raise SweepError(
+            f"{option} {name!r}: NAME must be a dotted path of keys and list indices, "
+            "e.g. initial_state.y_m or path.points.0.1"
+        )
     top = name.split(".")[0]
     if top in _RESERVED:
         raise SweepError(f"{option} {name}: cannot be set, {_RESERVED[top]}")
@@ -230,8 +234,10 @@ def parse_vary(text: str, data: dict) -> Variation:
         hint = f"; vary one of its numbers, e.g. {name}.0" if isinstance(base, list) else ""
         raise SweepError(f"--vary {name}: holds {_describe(base)}, not a number{hint}")
     if base is None and dist.relative:
-        raise SweepError(f"--vary {name}: is not set in this scenario, so {dist.kind} has nothing to "
-                         "offset or scale; use uniform/normal, or --set it first")
+        raise SweepError(
+            f"--vary {name}: is not set in this scenario, so {dist.kind} has nothing to "
+            "offset or scale; use uniform/normal, or --set it first"
+        )
     return Variation(name, keys, dist, integer=isinstance(base, int))
 
 
