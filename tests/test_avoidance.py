@@ -166,6 +166,7 @@ def test_blocked_lane_stops_before_the_barrier():
 def test_moving_obstacle_is_avoided_where_a_static_assumption_collides():
     base = load_scenario("obstacle-crossing").model_dump()
     base["obstacles"] = [dict(base["obstacles"][0], position=[4.0, -3.2], velocity_mps=[0.0, 0.8])]
+    base["controller"]["backend"] = "osqp"  # its prepare step is hooked below
     spec = ScenarioSpec.model_validate(base)
     results = {}
     for variant in ("predicted", "static"):
