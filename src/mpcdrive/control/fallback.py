@@ -213,25 +213,8 @@ class FallbackLadder:
             return u, dataclasses.replace(new_warm, u_prev=u), X
         qp, be = self.relax_qp, self.relax_backend
         assert qp is not None and be is not None  # built in __init__ for the relax rung without relax_fn
-        qp.update(
-            d.x,
-            d.Ad,
-            d.Bd,
-            d.c,
-            d.xref,
-            d.uref,
-            warm.u_prev,
-            d.lane_normal,
-            d.lane_offset,
-            d.lane_lo,
-            d.lane_hi,
-            d.lane_slopes,
-        )
         # obstacles stay in the relaxed problem (their slacks keep it feasible)
-        if d.rows_a is not None and qp.n_obs_rows:
-            qp.set_obstacle_rows(d.rows_a, d.rows_b)
-        if d.H is not None and qp.problem.position_cost:
-            qp.add_position_cost(d.H, d.g)
+        qp.load_step(d, warm.u_prev)
         Xws = np.vstack([d.Xbar, d.Fbar[-1:]])
         res: SolveResult = be.solve(Xws, d.Ubar)
         if not (res.ok and np.all(np.isfinite(res.U)) and np.all(np.isfinite(res.X))):

@@ -305,25 +305,7 @@ class LtvMpc(TrackingWarmStart):
         return self.finish(d, warm, res, t0, it)
 
     def _solve(self, d: StepData, warm: WarmStart) -> SolveResult:
-        qp = self.qp
-        qp.update(
-            d.x,
-            d.Ad,
-            d.Bd,
-            d.c,
-            d.xref,
-            d.uref,
-            warm.u_prev,
-            d.lane_normal,
-            d.lane_offset,
-            d.lane_lo,
-            d.lane_hi,
-            d.lane_slopes,
-        )
-        if d.rows_a is not None and d.rows_b is not None:  # set together (AvoidanceTerms)
-            qp.set_obstacle_rows(d.rows_a, d.rows_b)
-        if d.H is not None and d.g is not None:
-            qp.add_position_cost(d.H, d.g)
+        self.qp.load_step(d, warm.u_prev)
         # primal warm start: the linearization trajectory
         return self.backend.solve(d.Xlin, d.Ubar)
 

@@ -303,6 +303,29 @@ class LtvQp:
             self._P_dirty = True
         np.take(self._coo_vals, self._perm, out=self.A.data)
 
+    def load_step(self, d, u_prev) -> None:
+        """Everything of one step's data ``d`` (:class:`~mpcdrive.control.mpc.StepData`: the
+        affine model, references, road rows, obstacle rows, position cost) into the QP, the input
+        applied before it being ``u_prev``."""
+        self.update(
+            d.x,
+            d.Ad,
+            d.Bd,
+            d.c,
+            d.xref,
+            d.uref,
+            u_prev,
+            d.lane_normal,
+            d.lane_offset,
+            d.lane_lo,
+            d.lane_hi,
+            d.lane_slopes,
+        )
+        if d.rows_a is not None and d.rows_b is not None and self.n_obs_rows:  # set together (AvoidanceTerms)
+            self.set_obstacle_rows(d.rows_a, d.rows_b)
+        if d.H is not None and d.g is not None and self.problem.position_cost:
+            self.add_position_cost(d.H, d.g)
+
     def set_obstacle_rows(self, a: np.ndarray, b: np.ndarray) -> None:
         """Obstacle half-planes ``a[k-1, m] . (x_k, y_k, yaw_k) >= b[k-1, m]`` (soft, slack sigma_k).
 
