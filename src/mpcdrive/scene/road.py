@@ -299,11 +299,6 @@ class Road:
         """The farthest an edge gets from the path [m]."""
         return float(max(np.max(self.left_m), -np.min(self.right_m)))
 
-    @property
-    def is_uniform(self) -> bool:
-        """True when both edges are the same everywhere."""
-        return bool(np.ptp(self.left_m) == 0.0 and np.ptp(self.right_m) == 0.0)
-
     def bounds(self, s_m, kappa, yaw_rel_rad, footprint: Footprint) -> tuple[np.ndarray, np.ndarray]:
         """(lo, hi) [m]: the bounds of the reference point's lateral offset that keep ``footprint``
         ``margin_m`` inside the road (:func:`body_bounds`), for arrays of arc lengths [m],
@@ -355,10 +350,6 @@ class Road:
         return Road(
             self.s_m, left, np.minimum(right, left - 1e-6), self.margin_m, self.lanes, self.route_lane, self.period_m
         )
-
-    def with_margin(self, margin_m: float) -> Road:
-        """The same road with another margin."""
-        return Road(self.s_m, self.left_m, self.right_m, margin_m, self.lanes, self.route_lane, self.period_m)
 
     def profile(self, length_m: float, ds_m: float = 0.5) -> np.ndarray:
         """(M, 3) rows ``[s_m, left_m, right_m]`` over arc lengths 0..``length_m`` [m] (every
