@@ -60,6 +60,7 @@ from .. import _jitcache
 from ..models.compiled import METHOD_EULER, METHOD_EXP, METHOD_RK4, model_code
 from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory
 from ..ocp.problem import MpcProblem
+from ..ocp.road_rows import narrow_road_rows
 from ..paths.base import ReferencePath
 from ..paths.compiled import path_arrays
 from ..paths.profile_compiled import profile_array
@@ -758,11 +759,7 @@ class FastLtvMpc(TrackingWarmStart):
             w[_W_ROWA][...] = terms.rows_a
             w[_W_ROWB][...] = terms.rows_b
             if terms.lane_lo is not None and terms.lane_hi is not None:
-                # a corridor's bounds where it narrows the road's, without the road's yaw slope
-                w[_W_LDLO][terms.lane_lo != w[_W_LLO]] = 0.0
-                w[_W_LDHI][terms.lane_hi != w[_W_LHI]] = 0.0
-                w[_W_LLO][...] = terms.lane_lo
-                w[_W_LHI][...] = terms.lane_hi
+                narrow_road_rows(w[_W_LLO], w[_W_LHI], w[_W_LDLO], w[_W_LDHI], terms.lane_lo, terms.lane_hi)
             if terms.e_ref is not None:
                 w[_W_EREF][...] = terms.e_ref
             new_sides = tuple(sorted(memory.sides.items()))

@@ -364,7 +364,7 @@ class LtvMpc(TrackingWarmStart):
                 warm.t_s, x, Xlin, s_arr, memory, None if rows is None else rows.lo, None if rows is None else rows.hi
             )
             if rows is not None:
-                rows = rows.narrowed(terms.lane_lo, terms.lane_hi)
+                rows.narrow(terms.lane_lo, terms.lane_hi)
             sides = tuple(sorted(memory.sides.items()))
             if terms.s_max is not None:
                 # car following: the references approach the stop line behind the obstacle

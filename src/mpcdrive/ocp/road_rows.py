@@ -14,34 +14,40 @@ from ..scene.footprint import Footprint
 from ..scene.road import Road, horizon_bounds
 
 
-@dataclass
+@dataclass(eq=False)
 class RoadRows:
     """Work buffers of the road rows of steps 1..N: bounds ``lo``, ``hi`` [m] at the
-    linearization yaw ``yaw`` [rad], and their slopes ``dlo``, ``dhi`` [m/rad] in the yaw."""
+    linearization yaw ``yaw`` [rad], and their slopes ``dlo``, ``dhi`` [m/rad] in the yaw;
+    ``path`` (3, N): the arc lengths, path headings and curvatures they were evaluated at."""
 
     lo: np.ndarray
     hi: np.ndarray
     dlo: np.ndarray
     dhi: np.ndarray
     yaw: np.ndarray
+    path: np.ndarray
 
     @classmethod
     def empty(cls, N: int) -> RoadRows:
-        return cls(*(np.zeros(N) for _ in range(5)))
+        return cls(np.zeros(N), np.zeros(N), np.zeros(N), np.zeros(N), np.zeros(N), np.zeros((3, N)))
 
     def fill(self, road: Road, footprint: Footprint, s_arr: np.ndarray, refs: np.ndarray, Xlin: np.ndarray) -> RoadRows:
         """The rows for ``s_arr`` (N+1,) horizon arc lengths [m], ``refs`` (N+1, 4) path states
         ``[x, y, heading, curvature]`` there and ``Xlin`` (N+1, nx) the linearization trajectory
         (yaw in column 2)."""
         self.yaw[:] = Xlin[1:, 2]
+        path = self.path  # updated in place: no allocation per step
+        path[0] = s_arr[1:]
+        path[1] = refs[1:, 2]
+        path[2] = refs[1:, 3]
         horizon_bounds(
             road.s_m,
             road.left_m,
             road.right_m,
             road.period_m,
-            np.ascontiguousarray(s_arr[1:]),
-            np.ascontiguousarray(refs[1:, 2]),
-            np.ascontiguousarray(refs[1:, 3]),
+            path[0],
+            path[1],
+            path[2],
             self.yaw,
             0.5 * footprint.length_m,
             0.5 * footprint.width_m,
@@ -54,11 +60,19 @@ class RoadRows:
         )
         return self
 
-    def narrowed(self, lo: np.ndarray | None, hi: np.ndarray | None) -> RoadRows:
-        """These rows with the bounds replaced by a corridor's ``lo``, ``hi`` (N,) where it
-        narrows them (those bounds are the corridor's, with no yaw slope)."""
-        if lo is None or hi is None:
-            return self
-        return RoadRows(
-            lo, hi, np.where(lo != self.lo, 0.0, self.dlo), np.where(hi != self.hi, 0.0, self.dhi), self.yaw
-        )
+    def narrow(self, lo: np.ndarray | None, hi: np.ndarray | None) -> RoadRows:
+        """Replace the bounds, in place, by a corridor's ``lo``, ``hi`` (N,) (None: no corridor)."""
+        if lo is not None and hi is not None:
+            narrow_road_rows(self.lo, self.hi, self.dlo, self.dhi, lo, hi)
+        return self
+
+
+def narrow_road_rows(lo, hi, dlo, dhi, corridor_lo, corridor_hi) -> None:
+    """The road rows ``lo``, ``hi`` with their yaw slopes ``dlo``, ``dhi`` (N,), narrowed in place
+    by a corridor's bounds: where the corridor's bound differs from the road's it is the
+    corridor's, with no yaw slope (the corridor bounds the reference point). Both controllers
+    call this: the OSQP one on :class:`RoadRows`, the compiled one on its buffers."""
+    dlo[corridor_lo != lo] = 0.0
+    dhi[corridor_hi != hi] = 0.0
+    lo[:] = corridor_lo
+    hi[:] = corridor_hi
