@@ -36,7 +36,7 @@ import numpy as np
 
 from ..models.presets import PRESETS
 from ..scenarios.schema import ScenarioSpec
-from .commonroad_goal import DrivePlan, accel_limit, plan_drive
+from .commonroad_goal import DrivePlan, accel_limit, friction_accel, plan_drive
 from .commonroad_route import drivable_lanelets, point, route_edges, scalar
 
 PRESET = "commonroad_ford_escort"
@@ -228,6 +228,7 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
                 # lane cheap, which in dense recorded traffic gave commands KS rejects and road departures
                 "fallback": ["shifted_plan", "brake"],
                 "brake_decel_mps2": plan.accel_mps2,
+                "friction_accel_mps2": friction_accel(pre.accel_limit_mps2(0.0)),
             },
         }
     )

@@ -37,6 +37,17 @@ _PLAN_DS_M = 0.25  # grid of the speed profiles compared while planning
 _MISSED = "no cruise speed"  # how the note of a plan that misses the goal window begins
 
 
+#: the share of the tyres' friction circle (CommonRoad's ``a_max``, the radius its feasibility
+#: check of ST drives uses) that the controller plans with: per-stage steering and acceleration
+#: bounds at the planned speed (:mod:`mpcdrive.ocp.friction`)
+FRICTION_SHARE = 0.9
+
+
+def friction_accel(a_max_mps2: float) -> float:
+    """The controller's friction circle [m/s^2] for a vehicle whose tyres give ``a_max_mps2``."""
+    return FRICTION_SHARE * float(a_max_mps2)
+
+
 def accel_limit(v_max_mps: float) -> float:
     """CommonRoad's longitudinal limit at speeds up to ``v_max_mps``, with a 10 % margin: a_max,
     reduced to a_max v_switch / v above v_switch [m/s^2]."""

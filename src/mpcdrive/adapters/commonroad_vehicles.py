@@ -24,6 +24,7 @@ import numpy as np
 
 from ..models.kinematic import KinematicBicycle4, KinematicParams
 from ..models.presets import get_preset
+from .commonroad_goal import friction_accel
 
 
 #: CommonRoad vehicle name -> parameter set number (``parameters_vehicle<N>``)
@@ -140,6 +141,7 @@ def apply_vehicle(spec, vehicle: str, plant: str | None = None):
     ctrl["max_steer_deg"] = math.degrees(min(float(p.steering.max), -float(p.steering.min)))
     ctrl["max_steer_rate_deg_s"] = math.degrees(min(float(p.steering.v_max), -float(p.steering.v_min)))
     ctrl["accel_limits_mps2"] = (-float(lon.a_max), a_hi)
+    ctrl["friction_accel_mps2"] = friction_accel(float(lon.a_max))
     if s_hi is not None:
         ctrl["speed_limits_mps"] = (s_lo, s_hi)
     data["controller"] = ctrl

@@ -59,6 +59,7 @@ import numpy as np
 from .. import _jitcache
 from ..models.compiled import METHOD_EULER, METHOD_EXP, METHOD_RK4, model_code
 from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory
+from ..ocp.friction import friction_buffers
 from ..ocp.problem import MpcProblem
 from ..ocp.road_rows import narrow_road_rows
 from ..paths.base import ReferencePath
@@ -97,6 +98,8 @@ from .fast_step import (  # the compiled step and the layout of its buffers
     _I_OROWS,
     _I_PROFILE,
     _I_ACCEL,
+    _I_STEER,
+    _I_FRICTION,
     _NIP,
     _SIDE_NONE,
     _OBS_POTENTIAL,
@@ -188,6 +191,9 @@ from .fast_step import (  # the compiled step and the layout of its buffers
     _W_RDR,
     _W_LDLO,
     _W_LDHI,
+    _W_ULO,
+    _W_UHI,
+    _W_VLIN,
     _NW,
     _F_DT,
     _F_VREF,
@@ -210,6 +216,8 @@ from .fast_step import (  # the compiled step and the layout of its buffers
     _F_OSLACK1,
     _F_BOFF,
     _F_RPERIOD,
+    _F_FRIC,
+    _F_WHEELBASE,
     _NFP,
 )
 from .fallback import FALLBACK_HOLD, FALLBACK_RELAX, FallbackConfig, FallbackLadder, relaxed_problem
@@ -308,6 +316,10 @@ def fast_unsupported_reason(
         return f"path {type(path).__name__} has no compiled form"
     if (problem.nx, problem.nu) != (model.nx, model.nu):
         return f"problem is sized nx={problem.nx}, nu={problem.nu} but the model has nx={model.nx}, nu={model.nu}"
+    if problem.friction_accel_mps2 is not None:
+        limited = [i for i, n in enumerate(model.input_names) if n in ("steer", "accel")]
+        if not np.all(np.isfinite(problem.u_min[limited]) & np.isfinite(problem.u_max[limited])):
+            return "the friction circle needs finite steer and accel bounds on the compiled path"
     if np.linalg.eigvalsh(problem.R + problem.Rc).min() <= 1e-12 * max(1.0, float(np.abs(problem.R).max())):
         return "R + Rc is not positive definite (the condensed QP needs a strictly convex cost in the inputs)"
     lane = problem.lane
@@ -482,6 +494,9 @@ class FastLtvMpc(TrackingWarmStart):
         ip[_I_OROWS] = n_orow
         ip[_I_PROFILE] = int(config.speed_profile is not None)
         ip[_I_ACCEL] = list(model.input_names).index("accel") if "accel" in model.input_names else -1
+        if friction_buffers(problem, model) is not None:  # validates the model for the friction circle
+            ip[_I_FRICTION] = 1
+            ip[_I_STEER] = list(model.input_names).index("steer")
         if av is not None and not rows:
             ip[_I_OFORM] = _OBS_POTENTIAL if av.formulation == "potential" else _OBS_GAUSSIAN
             ip[_I_NOBS] = len(obstacles)
@@ -499,6 +514,8 @@ class FastLtvMpc(TrackingWarmStart):
         fp[_F_SLACK2], fp[_F_SLACK1] = problem.lane_slack_weight, problem.lane_slack_weight_l1
         fp[_F_OSLACK2], fp[_F_OSLACK1] = problem.obstacle_slack_weight, problem.obstacle_slack_weight_l1
         fp[_F_TOL] = settings.feasibility_tol
+        if problem.friction_accel_mps2 is not None:
+            fp[_F_FRIC], fp[_F_WHEELBASE] = problem.friction_accel_mps2, model.params.wheelbase_m
         bnd = np.concatenate(
             [problem.u_min, problem.u_max, problem.du_max_per_s * problem.dt_s, problem.x_min, problem.x_max]
         )
@@ -576,6 +593,9 @@ class FastLtvMpc(TrackingWarmStart):
             _W_RDS: road.s_m if road is not None else np.zeros(1),
             _W_RDL: road.left_m if road is not None else np.zeros(1),
             _W_RDR: road.right_m if road is not None else np.zeros(1),
+            _W_ULO: np.tile(problem.u_min, (N, 1)),
+            _W_UHI: np.tile(problem.u_max, (N, 1)),
+            _W_VLIN: (N + 1,),
         }
         shapes: list[tuple[int, ...]] = [
             np.shape(a) if isinstance(a, np.ndarray) else a for a in (arrays[i] for i in range(_NW))

@@ -22,7 +22,8 @@ import math
 import numpy as np
 from numba import njit
 
-from ..models.compiled import METHOD_EXP, discrete_step_jacobians, model_references, rollout_into
+from ..models.compiled import METHOD_EXP, discrete_step_jacobians, model_references, model_speed, rollout_into
+from ..ocp.friction import friction_input_bounds
 from ..paths.compiled import path_eval, path_project, wrap_angle
 from ..paths.profile_compiled import profile_arc_lengths, profile_speed
 from ..scene.road import _interp, horizon_bounds
@@ -61,8 +62,10 @@ _BAD_STATE = 4
     _I_OROWS,
     _I_PROFILE,
     _I_ACCEL,
-) = range(24)
-_NIP = 24
+    _I_STEER,
+    _I_FRICTION,
+) = range(26)
+_NIP = 26
 # passing sides (as ocp.avoidance), and "not chosen yet" in the compiled side memory
 _SIDE_LEFT, _SIDE_RIGHT, _SIDE_BLOCKED, _SIDE_NONE = 1, -1, 0, 2
 # obstacle cost formulations (ip[_I_OFORM])
@@ -152,8 +155,11 @@ _NOB = 8
     _W_RDR,
     _W_LDLO,
     _W_LDHI,
-) = range(72)
-_NW = 72
+    _W_ULO,
+    _W_UHI,
+    _W_VLIN,
+) = range(75)
+_NW = 75
 # float parameters (fp)
 (
     _F_DT,
@@ -177,8 +183,10 @@ _NW = 72
     _F_OSLACK1,
     _F_BOFF,
     _F_RPERIOD,
-) = range(21)
-_NFP = 21
+    _F_FRIC,
+    _F_WHEELBASE,
+) = range(23)
+_NFP = 23
 # info outputs
 _O_S, _O_EY, _O_EPSI, _O_ITER = range(4)
 
@@ -399,6 +407,7 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
     obs, oproj, s_arr = _v2(wbuf, fo, fs, _W_OBS), _v2(wbuf, fo, fs, _W_OPROJ), _v1(wbuf, fo, _W_SARR)
     lane_lo, lane_hi = _v1(wbuf, fo, _W_LLO), _v1(wbuf, fo, _W_LHI)
     lane_dlo, lane_dhi = _v1(wbuf, fo, _W_LDLO), _v1(wbuf, fo, _W_LDHI)
+    ulo, uhi = _v2(wbuf, fo, fs, _W_ULO), _v2(wbuf, fo, fs, _W_UHI)  # per-stage input bounds
     rowa, rowb, nrow = _v3(wbuf, fo, fs, _W_ROWA), _v2(wbuf, fo, fs, _W_ROWB), ip[_I_OROWS]
     prof, v_arr = _v1(wbuf, fo, _W_PROF), _v1(wbuf, fo, _W_VARR)
     mkind, nx, nu, N = ip[_I_MODEL], ip[_I_NX], ip[_I_NU], ip[_I_N]
@@ -560,6 +569,34 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
                 Xlin[k, i] = Xbar[k, i]
         for i in range(nx):
             Xlin[N, i] = F[N - 1, i]
+        if ip[_I_FRICTION] == 1:  # the friction circle as per-stage input bounds (ocp.friction)
+            vlin = _v1(wbuf, fo, _W_VLIN)
+            for k in range(N + 1):
+                vlin[k] = model_speed(mkind, mp, Xlin[k])
+            friction_input_bounds(
+                N,
+                vlin,
+                Ubar,
+                ip[_I_STEER],
+                ip[_I_ACCEL],
+                fp[_F_WHEELBASE],
+                fp[_F_FRIC],
+                u_min,
+                u_max,
+                dmax,
+                u_prev,
+                ulo,
+                uhi,
+            )
+            rb = 0  # the input-bound rows lead the constant rows: stage by stage, lower then upper
+            for k in range(N):
+                for a in range(nu):
+                    if math.isfinite(u_min[a]):
+                        b[rb] = ulo[k, a]
+                        rb += 1
+                    if math.isfinite(u_max[a]):
+                        b[rb] = -uhi[k, a]
+                        rb += 1
         if lane == 1:  # the body inside the road at the linearization trajectory's yaw (scene.road)
             horizon_bounds(
                 _v1(wbuf, fo, _W_RDS),
@@ -631,8 +668,8 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
     # bound it is the QP's solution ---------------------------------------------------------------
     if ip[_I_RICCATI] == 1:
         if riccati(N, nx, nu, A, B, c, qt, uref, We, Rm, x, P, lam, Kg, kf, PA, Mg, Gg, qv, z):
-            if plan_feasible(N, nx, nu, z, lam, u_prev, u_min, u_max, dmax, x_min, x_max, fp[_F_TOL]):
-                _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out)
+            if plan_feasible(N, nx, nu, z, lam, u_prev, ulo, uhi, dmax, x_min, x_max, fp[_F_TOL]):
+                _write_plan(N, nx, nu, x, z, A, B, c, xref, ulo, uhi, out)
                 return 0
 
     # -- condensing: x_k = xf_k + sum_j G_kj u_j ----------------------------------------------
@@ -901,13 +938,13 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
     info[_O_ITER] = iters
     if code != 0:
         return code
-    _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out)
+    _write_plan(N, nx, nu, x, z, A, B, c, xref, ulo, uhi, out)
     return 0
 
 
 @njit(cache=True)
-def _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out):
-    """out = [u (nu) = U_0 clipped to the input bounds, X ((N+1) nx) rolled out through the
+def _write_plan(N, nx, nu, x, z, A, B, c, xref, ulo, uhi, out):
+    """out = [u (nu) = U_0 clipped to its stage's input bounds ulo[0], uhi[0], X ((N+1) nx) rolled out through the
     linearized model, U (N nu), xref ((N+1) nx)]."""
     oX = nu
     oU = oX + (N + 1) * nx
@@ -928,12 +965,13 @@ def _write_plan(N, nx, nu, x, z, A, B, c, xref, u_min, u_max, out):
         for i in range(nx):
             out[oR + k * nx + i] = xref[k, i]
     for a in range(nu):
-        out[a] = min(max(z[a], u_min[a]), u_max[a])
+        out[a] = min(max(z[a], ulo[0, a]), uhi[0, a])
 
 
 # numba caches _control_step keyed to this file only; it inlines code from these
 from .. import _jitcache  # noqa: E402
 from ..models import compiled as _models_compiled, dynamic as _dynamic, kinematic as _kinematic  # noqa: E402
+from ..ocp import friction as _friction  # noqa: E402
 from ..paths import compiled as _paths_compiled, profile_compiled as _profile_compiled  # noqa: E402
 from ..scene import road as _road  # noqa: E402
 from ..solvers import condensed as _condensed, dense_qp as _dense_qp  # noqa: E402
@@ -949,6 +987,7 @@ _jitcache.refresh(
             _paths_compiled,
             _profile_compiled,
             _road,
+            _friction,
             _dense_qp,
             _condensed,
         )

@@ -19,6 +19,7 @@ import numpy as np
 from ..models.base import VehicleModel
 from ..models.discretize import Method, discrete_step_and_jacobians, rollout
 from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory, follow_references
+from ..ocp.friction import friction_buffers, stage_bounds
 from ..ocp.problem import MpcProblem
 from ..ocp.road_rows import RoadRows
 from ..paths.base import ReferencePath
@@ -55,7 +56,8 @@ class StepData:
     Xlin : (N+1, nx) linearization trajectory; lane_lo/hi : (N,) road bounds [m] (the body
     inside the road, narrowed by a corridor) with ``lane_slopes`` (their yaw slopes and
     linearization yaws, :class:`~mpcdrive.ocp.road_rows.RoadRows`);
-    rows_a/rows_b : obstacle half-planes; H, g : position cost model; sides : passing sides.
+    rows_a/rows_b : obstacle half-planes; H, g : position cost model; sides : passing sides;
+    u_lo, u_hi : (N, nu) per-stage input bounds of the friction circle (None: the problem's).
     """
 
     x: np.ndarray
@@ -81,6 +83,8 @@ class StepData:
     g: np.ndarray | None = None
     sides: tuple = ()
     lane_slopes: tuple | None = None
+    u_lo: np.ndarray | None = None
+    u_hi: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -231,6 +235,7 @@ class LtvMpc(TrackingWarmStart):
         self._du_step = problem.du_max_per_s * problem.dt_s  # (nu,) largest input change per step
         self._road = problem.road
         self._lateral = None
+        self._friction = friction_buffers(problem, model)
         self.fallback = FallbackLadder(self, config.fallback, footprint=footprint, road=problem.road)
 
     # -- obstacles ----------------------------------------------------------------------------
@@ -351,6 +356,10 @@ class LtvMpc(TrackingWarmStart):
         Xlin = self._Xlin
         Xlin[:N] = Xbar
         Xlin[N] = Fbar[-1]
+        u_lo = u_hi = None
+        if self._friction is not None:
+            u_lo, u_hi = self._friction
+            stage_bounds(self.problem, model, np.asarray(model.speed(Xlin), float), Ubar, warm.u_prev, u_lo, u_hi)
         terms = None
         sides = warm.sides
         road = self._road
@@ -409,6 +418,8 @@ class LtvMpc(TrackingWarmStart):
             None if terms is None else terms.g,
             sides,
             None if rows is None else (rows.dlo, rows.dhi, rows.yaw),
+            u_lo,
+            u_hi,
         )
 
     def _references(self, s_arr: np.ndarray, v_arr: np.ndarray, yaw_now: float, accel_ff: bool) -> np.ndarray:
@@ -450,7 +461,8 @@ class LtvMpc(TrackingWarmStart):
         if res.ok and np.all(np.isfinite(res.U[0])):
             # exactly within the bounds, whatever the solver's tolerance
             u_prev = warm.u_prev
-            u = np.clip(np.clip(res.U[0], u_prev - self._du_step, u_prev + self._du_step), pb.u_min, pb.u_max)
+            lo, hi = (pb.u_min, pb.u_max) if d.u_lo is None or d.u_hi is None else (d.u_lo[0], d.u_hi[0])
+            u = np.clip(np.clip(res.U[0], u_prev - self._du_step, u_prev + self._du_step), lo, hi)
             fallback = ""
             new_warm = WarmStart(s_m=d.s_m, u_prev=u, X=res.X, U=res.U, t_s=t_next, sides=d.sides)
             X_pred = res.X

@@ -179,6 +179,17 @@ def _rhs_into(kind, mp, w, U, k, beta):
         w[1, 3] = U[k, 1]
 
 
+@njit(cache=True, inline="always")
+def model_speed(kind, mp, x):
+    """The speed [m/s] of state x, as the model's ``speed``: the constant ``mp[2]`` (kinematic3),
+    ``v`` (kinematic4), ``hypot(vx, vy)`` (dynamic)."""
+    if kind == KIND_KINEMATIC3:
+        return mp[2]
+    if kind == KIND_KINEMATIC4:
+        return x[3]
+    return math.hypot(x[3], x[4])
+
+
 @njit(cache=True)
 def model_f(kind, mp, x, u, out):
     """out (nx,) = f(x, u), the continuous dynamics."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,6 +63,10 @@ class MpcProblem:
     and ``obstacle_slack_weight_l1`` (linear); ``position_cost=True`` reserves per-step 2x2
     (x, y) Hessian entries for non-convex obstacle costs approximated each step (SQP).
 
+    Friction: with ``friction_accel_mps2`` set, the input bounds of each stage are narrowed to
+    the friction circle ``a^2 + (v^2 tan(delta) / L)^2 <= friction_accel_mps2^2`` at the stage's
+    planned speed (:mod:`mpcdrive.ocp.friction`, for models with ``steer`` and ``accel`` inputs).
+
     Weights may be given as scalars, diagonals or full matrices; bounds as scalars or vectors
     (None or +-inf = unbounded). Units follow the model's states and inputs (SI, radians). The
     attributes hold them normalized: full matrices, and one bound per state / input.
@@ -87,6 +92,7 @@ class MpcProblem:
     obstacle_slack_weight: float
     obstacle_slack_weight_l1: float
     position_cost: bool
+    friction_accel_mps2: float | None
 
     def __init__(
         self,
@@ -111,6 +117,7 @@ class MpcProblem:
         obstacle_slack_weight: float = 1e4,
         obstacle_slack_weight_l1: float = 1e3,
         position_cost: bool = False,
+        friction_accel_mps2: float | None = None,
     ):
         for name, v in (("nx", nx), ("nu", nu)):
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
@@ -133,6 +140,7 @@ class MpcProblem:
             ("obstacle_slack_weight", obstacle_slack_weight),
             ("obstacle_slack_weight_l1", obstacle_slack_weight_l1),
             ("position_cost", position_cost),
+            ("friction_accel_mps2", None if friction_accel_mps2 is None else float(friction_accel_mps2)),
         ):
             object.__setattr__(self, name, value)
         object.__setattr__(self, "Q", _as_matrix(Q, nx, "Q"))
@@ -167,6 +175,9 @@ class MpcProblem:
             raise ValueError("obstacle slack weights must be >= 0")
         if (self.obstacle_rows or self.position_cost) and nx < 3:
             raise ValueError("obstacle terms need states x, y, yaw")
+        f = self.friction_accel_mps2
+        if f is not None and not (math.isfinite(f) and f > 0):
+            raise ValueError(f"friction_accel_mps2 must be a positive finite number or None, got {f!r}")
 
     @property
     def lane(self) -> bool:

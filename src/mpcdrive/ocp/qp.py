@@ -305,7 +305,8 @@ class LtvQp:
 
     def load_step(self, d, u_prev) -> None:
         """Everything of one step's data ``d`` (:class:`~mpcdrive.control.mpc.StepData`: the
-        affine model, references, road rows, obstacle rows, position cost) into the QP, the input
+        affine model, references, road rows, per-stage input bounds, obstacle rows, position cost)
+        into the QP, the input
         applied before it being ``u_prev``."""
         self.update(
             d.x,
@@ -321,10 +322,19 @@ class LtvQp:
             d.lane_hi,
             d.lane_slopes,
         )
+        if d.u_lo is not None and d.u_hi is not None:
+            self.set_input_bounds(d.u_lo, d.u_hi)
         if d.rows_a is not None and d.rows_b is not None and self.n_obs_rows:  # set together (AvoidanceTerms)
             self.set_obstacle_rows(d.rows_a, d.rows_b)
         if d.H is not None and d.g is not None and self.problem.position_cost:
             self.add_position_cost(d.H, d.g)
+
+    def set_input_bounds(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        """Per-stage input bounds ``lo[k] <= u_k <= hi[k]`` (N, nu) for this step (e.g. the
+        friction circle's, :mod:`mpcdrive.ocp.friction`), in place of the problem's."""
+        n = self.N * self.nu
+        self.l[self.r_ubound : self.r_ubound + n] = np.ravel(lo)
+        self.u[self.r_ubound : self.r_ubound + n] = np.ravel(hi)
 
     def set_obstacle_rows(self, a: np.ndarray, b: np.ndarray) -> None:
         """Obstacle half-planes ``a[k-1, m] . (x_k, y_k, yaw_k) >= b[k-1, m]`` (soft, slack sigma_k).

@@ -420,6 +420,7 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         road=road,
         lane_slack_weight=c.lane_slack_weight,
         lane_slack_weight_l1=c.lane_slack_weight_l1,
+        friction_accel_mps2=c.friction_accel_mps2,
     )
     config = MpcConfig(
         linearization=c.linearization,

@@ -398,6 +398,9 @@ class ControllerSpec(_Strict):
     feedforward: Literal["curvature", "none"] = "curvature"
     lane_slack_weight: NonNeg = 1e4
     lane_slack_weight_l1: NonNeg = 1e3
+    # the tyres' friction circle [m/s^2] as per-stage steering and acceleration bounds at the
+    # planned speed (mpcdrive.ocp.friction); None: only the input bounds
+    friction_accel_mps2: Positive | None = None
     osqp_eps: Positive = OsqpSettings.eps_abs
     speed_profile: SpeedProfileSpec | None = None
     solver: Literal["osqp", "projected_gradient"] = "osqp"

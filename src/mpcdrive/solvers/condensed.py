@@ -143,13 +143,13 @@ def riccati(N, nx, nu, A, B, c, qt, uref, Wq, Rm, x, P, p, K, kf, PA, M, G, q, z
 
 
 @njit(cache=True)
-def plan_feasible(N, nx, nu, z, Xr, u_prev, u_min, u_max, dmax, x_min, x_max, tol):
-    """Whether inputs z (N nu) and states Xr[1..N] satisfy the input, rate and state bounds
-    within tol (NaN never does)."""
+def plan_feasible(N, nx, nu, z, Xr, u_prev, u_lo, u_hi, dmax, x_min, x_max, tol):
+    """Whether inputs z (N nu) and states Xr[1..N] satisfy the per-stage input bounds u_lo,
+    u_hi (N, nu), the rate and the state bounds within tol (NaN never does)."""
     for k in range(N):
         for a in range(nu):
             u = z[k * nu + a]
-            if not (u >= u_min[a] - tol and u <= u_max[a] + tol):
+            if not (u >= u_lo[k, a] - tol and u <= u_hi[k, a] + tol):
                 return False
             prev = u_prev[a] if k == 0 else z[(k - 1) * nu + a]
             if not (abs(u - prev) <= dmax[a] + tol):

@@ -1,0 +1,115 @@
+"""The friction circle as per-stage input bounds: the one owner of that rule.
+
+A tyre transmits at most ``a_fric`` [m/s^2] in any direction: the car's lateral acceleration
+``a_lat = v^2 tan(delta) / L`` (the kinematic bicycle's, an upper bound of the slip-corrected one)
+and its longitudinal acceleration ``a`` must satisfy ``a^2 + a_lat^2 <= a_fric^2``. The MPC keeps
+that per horizon stage as two box bounds, so both solvers take it as they take input bounds:
+
+* the stage's speed ``v_k`` is the larger of the linearization trajectory's speeds at the
+  stage's start and end (the QP cannot change it within the step);
+* the circle is split between the two directions where the linearization (the previous plan)
+  is: with ``(a_lat_bar, a_bar)`` the plan's accelerations and ``r^2 = a_fric^2 - a_lat_bar^2 -
+  a_bar^2`` what it leaves, each direction gets its planned share plus half the rest,
+  ``sqrt(a_lat_bar^2 + r^2 / 2)`` and ``sqrt(a_bar^2 + r^2 / 2)`` (a plan outside the circle is
+  scaled onto it). Any input inside both boxes is inside the circle, and a plan that steers (or
+  brakes) harder moves the split its way from step to step;
+* the steering bound is ``|delta_k| <= atan(a_lat_max L / v_k^2)``, the acceleration bound
+  ``|a_k| <= a_long_max``, both intersected with the problem's input bounds;
+* the boxes stay reachable from the input applied last under the rate limit (a stage whose box
+  the greedy sequence ``u_k = clip(u_{k-1}, box_k)`` cannot reach within one rate step is widened
+  to that step), so the bounds never make the QP infeasible by themselves.
+
+A plan slowing down therefore widens the steering range of its later stages: the MPC brakes
+before a tight evasion instead of steering beyond what the tyres give.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def friction_input_bounds(
+    N, speed, Ubar, i_steer, i_accel, wheelbase_m, a_fric, u_min, u_max, dmax, u_prev, lo, hi
+):  # pragma: no cover - compiled
+    """Per-stage input bounds ``lo, hi`` (N, nu) from the friction circle (module docstring).
+
+    speed : (N+1,) speeds [m/s] of the linearization trajectory; Ubar : (N, nu) its inputs;
+    i_steer, i_accel : the steering [rad] and acceleration [m/s^2] input indices (-1: none);
+    u_min, u_max, dmax : (nu,) the problem's input bounds and largest change per step (inf: none);
+    u_prev : (nu,) the input applied last."""
+    nu = u_min.shape[0]
+    for k in range(N):
+        for a in range(nu):
+            lo[k, a] = u_min[a]
+            hi[k, a] = u_max[a]
+        if i_steer < 0:
+            continue
+        v = max(abs(speed[k]), abs(speed[k + 1]))
+        v2 = v * v
+        lat_bar = v2 * abs(math.tan(min(abs(Ubar[k, i_steer]), 1.5))) / wheelbase_m
+        lon_bar = abs(Ubar[k, i_accel]) if i_accel >= 0 else 0.0
+        rest = a_fric * a_fric - lat_bar * lat_bar - lon_bar * lon_bar
+        if i_accel < 0:
+            lat_max = a_fric
+            lon_max = math.inf
+        elif rest >= 0.0:
+            lat_max = math.sqrt(lat_bar * lat_bar + 0.5 * rest)
+            lon_max = math.sqrt(lon_bar * lon_bar + 0.5 * rest)
+        else:
+            scale = a_fric / math.sqrt(lat_bar * lat_bar + lon_bar * lon_bar)
+            lat_max = lat_bar * scale
+            lon_max = lon_bar * scale
+        if v2 > 0.0:
+            d = math.atan(lat_max * wheelbase_m / v2)
+            lo[k, i_steer] = max(lo[k, i_steer], -d)
+            hi[k, i_steer] = min(hi[k, i_steer], d)
+        if i_accel >= 0:
+            lo[k, i_accel] = max(lo[k, i_accel], -lon_max)
+            hi[k, i_accel] = min(hi[k, i_accel], lon_max)
+    # reachable from u_prev under the rate limit (the greedy sequence)
+    for a in range(nu):
+        prev = u_prev[a]
+        for k in range(N):
+            if prev - dmax[a] > hi[k, a]:
+                hi[k, a] = prev - dmax[a]
+            if prev + dmax[a] < lo[k, a]:
+                lo[k, a] = prev + dmax[a]
+            prev = min(max(prev, lo[k, a]), hi[k, a])
+
+
+def stage_bounds(problem, model, speed: np.ndarray, Ubar: np.ndarray, u_prev: np.ndarray, lo, hi) -> None:
+    """:func:`friction_input_bounds` for ``problem`` (its ``friction_accel_mps2``) and ``model``
+    (its ``steer`` / ``accel`` inputs and wheelbase), into ``lo, hi`` (N, nu)."""
+    names = list(model.input_names)
+    friction_input_bounds(
+        problem.N,
+        speed,
+        Ubar,
+        names.index("steer") if "steer" in names else -1,
+        names.index("accel") if "accel" in names else -1,
+        float(model.params.wheelbase_m),
+        float(problem.friction_accel_mps2),
+        problem.u_min,
+        problem.u_max,
+        problem.du_max_per_s * problem.dt_s,
+        u_prev,
+        lo,
+        hi,
+    )
+
+
+def friction_buffers(problem, model) -> tuple[np.ndarray, np.ndarray] | None:
+    """Work arrays ``(lo, hi)`` (N, nu) of :func:`stage_bounds` for a problem with a friction
+    circle (None without one); ValueError for a model it cannot apply to."""
+    if problem.friction_accel_mps2 is None:
+        return None
+    if "steer" not in model.input_names:
+        raise ValueError(f"friction_accel_mps2 needs a model with a steer input, got {model.input_names}")
+    wheelbase = getattr(getattr(model, "params", None), "wheelbase_m", None)
+    if wheelbase is None or not (math.isfinite(wheelbase) and wheelbase > 0):
+        raise ValueError("friction_accel_mps2 needs a model with a positive params.wheelbase_m")
+    return np.zeros((problem.N, problem.nu)), np.zeros((problem.N, problem.nu))
