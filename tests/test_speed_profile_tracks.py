@@ -100,6 +100,25 @@ def test_closed_profile_is_periodic_and_open_ends_can_be_pinned():
     assert ConstantSpeed(3.0).speed(np.arange(3.0)).tolist() == [3.0, 3.0, 3.0]
 
 
+def test_an_open_profile_starts_where_the_car_is():
+    """A path beginning 2 m behind the car: the start speed holds up to the car and the clock
+    starts there (without ``s_start_m`` the speed at the car would already be 4 m/s, not 0.5)."""
+    line = StraightPath([0, 0], [50, 0])
+    kw = dict(v_start_mps=0.5, v_end_mps=0.0)
+    prof = SpeedProfile(line, 5.0, 2.0, 4.0, 8.0, s_start_m=2.0, **kw)
+    assert prof.speed(0.0) == prof.speed(2.0) == pytest.approx(0.5)
+    assert prof.speed(12.0) == pytest.approx(math.sqrt(0.25 + 2 * 2.0 * 10.0), rel=0.01)
+    assert prof.time_at(2.0) == 0.0 and prof.time_at(1.0) == 0.0
+    v_end = math.sqrt(0.25 + 2 * 2.0 * 10.0)  # time of the first 10 m: (v - v0) / a
+    assert prof.time_at(12.0) == pytest.approx((v_end - 0.5) / 2.0, rel=0.02)
+    assert SpeedProfile(line, 5.0, 2.0, 4.0, 8.0, **kw).speed(2.0) == pytest.approx(math.sqrt(0.25 + 8.0), rel=0.01)
+    # a car at rest holds the profile at 0 up to it, and the clock still starts there
+    rest = SpeedProfile(line, 5.0, 2.0, 4.0, 8.0, s_start_m=2.0, v_start_mps=0.0, v_end_mps=0.0)
+    assert rest.speed(2.0) == 0.0 and rest.time_at(2.0) == 0.0 and math.isfinite(rest.time_at(20.0))
+    with pytest.raises(ValueError, match="s_start_m"):
+        SpeedProfile(line, 5.0, 2.0, 4.0, 8.0, s_start_m=60.0)
+
+
 @pytest.mark.parametrize(
     "kw",
     [

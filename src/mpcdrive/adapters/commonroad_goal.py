@@ -69,6 +69,7 @@ class DrivePlan:
     goal_arc_m: tuple[float, float] | None  # the route's stretch inside the goal region [m]
     arrival_s: float | None  # when the reference speed reaches the goal region [s]
     note: str
+    start_m: float = 0.0  # the car's arc length on the centre line (it begins behind the car) [m]
 
     def speed_profile_spec(self) -> dict:
         """The ``controller.speed_profile`` entry of the scenario."""
@@ -80,10 +81,12 @@ class DrivePlan:
             "v_start_mps": self.v_start_mps,
             "v_end_mps": 0.0,
             "curvature_window_m": 0.3,
+            "start_m": self.start_m,
         }
 
 
-def _profile(line: np.ndarray, v_cruise: float, v0: float, accel: float):
+def _profile(line: np.ndarray, v_cruise: float, v0: float, accel: float, p0: np.ndarray):
+    """The path along ``line`` and its speed profile, starting at ``v0`` where the car (``p0``) is."""
     from ..paths import WaypointPath
     from ..paths.speed_profile import SpeedProfile
 
@@ -98,7 +101,13 @@ def _profile(line: np.ndarray, v_cruise: float, v0: float, accel: float):
         v_end_mps=0.0,
         ds_m=_PLAN_DS_M,
         curvature_window_m=0.3,
+        s_start_m=start_arc(path, p0),
     )
+
+
+def start_arc(path, p0: np.ndarray) -> float:
+    """Arc length [m] of the car at ``p0`` on ``path`` (which begins a metre behind it)."""
+    return float(min(max(path.project(np.asarray(p0, float), 0.0, 10.0)[0], 0.0), path.length_m))
 
 
 def _cut(line: np.ndarray, s_end: float) -> np.ndarray:
@@ -127,7 +136,7 @@ def plan_drive(net, pp, p0: np.ndarray, yaw0: float, v0: float, dt_s: float) -> 
     v_want = 0.5 * (v_goal[0] + v_goal[1]) if v_goal is not None else (v0 if v0 >= 1.0 else DEFAULT_SPEED_MPS)
     v_lo, v_hi = (max(v_goal[0], 1.0), max(v_goal[1], 1.0)) if v_goal is not None else (1.0, max(v_want, v0) * 1.25)
     accel = min(COMFORT_ACCEL_MPS2, accel_limit(max(v_hi, v0) + 2.0))
-    pb = _Problem(v0, accel, window, dt_s)
+    pb = _Problem(v0, accel, window, dt_s, np.asarray(p0, float))
     t_last = window[1] if window is not None and math.isfinite(window[1]) else 60.0
     starts = cr.start_lanelets(net, p0, yaw0)
     goals = cr.goal_lanelets(net, pp)
@@ -186,7 +195,7 @@ def _stop(g: _GoalDrive):
     window = pb.window
     stop_line = _cut(line, 0.5 * (arc[0] + arc[1]))
     for v in _candidates(v_want, *v_range):
-        path, prof = _profile(stop_line, v, pb.v0, pb.accel)
+        path, prof = _profile(stop_line, v, pb.v0, pb.accel, pb.p0)
         t_in = float(prof.time_at(min(arc[0] + 1.0, path.length_m)))
         if window is None or t_in <= window[1] - 0.1 * (window[1] - window[0]) - pb.dt_s:
             return _finish(
@@ -212,7 +221,7 @@ def _through(g: _GoalDrive):
     s_end = float(np.sum(np.hypot(*np.diff(line, axis=0).T)))
     best = None
     for v in _candidates(v_want, *v_range):
-        path, prof = _profile(line, v, pb.v0, pb.accel)
+        path, prof = _profile(line, v, pb.v0, pb.accel, pb.p0)
         if arc[1] - arc[0] < 2.0:  # a small region (or the point nearest one): passed at one time
             t_in = t_out = float(prof.time_at(0.5 * (arc[0] + arc[1])))
         else:
@@ -257,10 +266,11 @@ class _Problem:
     accel: float  # forward / braking acceleration of the reference speed [m/s^2]
     window: tuple[float, float] | None  # goal time window [s]
     dt_s: float
+    p0: np.ndarray  # the car's start [m]
 
 
 def _finish(route, line, mode: str, v: float, pb: _Problem, *, arc=None, arrival=None, note="") -> DrivePlan:
-    path, prof = _profile(line, v, pb.v0, pb.accel)
+    path, prof = _profile(line, v, pb.v0, pb.accel, pb.p0)
     duration = float(prof.time_at(path.length_m)) + RUN_ON_S
     if pb.window is not None:
         # through the goal window's first step (a car waiting in the region must be there then),
@@ -278,4 +288,5 @@ def _finish(route, line, mode: str, v: float, pb: _Problem, *, arc=None, arrival
         arc,
         arrival,
         note,
+        start_arc(path, pb.p0),
     )

@@ -55,7 +55,9 @@ class SpeedProfile:
     lateral_accel_max_mps2 : largest lateral acceleration [m/s^2] (e.g. 0.8 * mu * g);
     accel_max_mps2, decel_max_mps2 : largest forward acceleration and braking deceleration
     [m/s^2] (both positive); v_max_mps : top speed [m/s]; v_start_mps, v_end_mps : speed at the start
-    and at the end of an open path (None: free); ds_m : grid spacing [m]; curvature_window_m : the
+    and at the end of an open path (None: free); s_start_m : where the start is [m] (the car's
+    arc length when the path begins behind it: the profile holds ``v_start_mps`` up to there and
+    its clock starts there, ``time_at(s_start_m) = 0``); ds_m : grid spacing [m]; curvature_window_m : the
     curvature used at s is the largest |kappa| within +- this distance (guards against sampling a
     bend between grid points); friction_circle : share the friction between lateral and longitudinal
     acceleration.
@@ -77,6 +79,7 @@ class SpeedProfile:
         ds_m: float | None = None,
         curvature_window_m: float = 0.0,
         friction_circle: bool = True,
+        s_start_m: float = 0.0,
     ):
         for name, val in (
             ("lateral_accel_max_mps2", lateral_accel_max_mps2),
@@ -91,6 +94,11 @@ class SpeedProfile:
                 raise ValueError(f"{name} must be >= 0, got {v_opt}")
         if curvature_window_m < 0 or not math.isfinite(curvature_window_m):
             raise ValueError(f"curvature_window_m must be >= 0, got {curvature_window_m}")
+        if not (math.isfinite(s_start_m) and 0.0 <= s_start_m <= float(path.length_m)):
+            raise ValueError(f"s_start_m must lie on the path [0, {float(path.length_m):.3f}] m, got {s_start_m}")
+        if path.closed and s_start_m != 0.0:
+            raise ValueError("s_start_m is for open paths")
+        self.s_start_m = float(s_start_m)
         self.path = path
         self.closed = bool(path.closed)
         self.length_m = float(path.length_m)
@@ -127,6 +135,8 @@ class SpeedProfile:
         v = np.r_[self.v_mps, self.v_mps[0]] if self.closed else self.v_mps
         vs = v[1:] + v[:-1]
         seg_t = np.where(vs > 0, 2.0 * self.ds_m / np.maximum(vs, 1e-300), np.inf)
+        if self.s_start_m > 0.0:  # open paths only: the clock starts at the start
+            seg_t[s[1:] <= self.s_start_m + 1e-12] = 0.0
         self._t_grid = np.r_[0.0, np.cumsum(seg_t)]
         self._s_grid = np.r_[self.s_m, self.length_m] if self.closed else self.s_m
 
@@ -148,7 +158,8 @@ class SpeedProfile:
         else:
             order = np.arange(n)
             if v_start is not None:
-                lim[0] = min(lim[0], v_start)
+                held = self.s_m <= max(self.s_start_m, self.s_m[0])  # up to the start, at least the first point
+                lim[held] = np.minimum(lim[held], v_start)
             if v_end is not None:
                 lim[-1] = min(lim[-1], v_end)
         v = lim[order].copy()

@@ -348,6 +348,7 @@ def build_speed_profile(spec, path: ReferencePath, friction: float) -> SpeedProf
         v_end_mps=spec.v_end_mps,
         curvature_window_m=spec.curvature_window_m,
         friction_circle=spec.friction_circle,
+        s_start_m=min(spec.start_m, float(path.length_m)),
     )
 
 

@@ -352,7 +352,8 @@ class SpeedProfileSpec(_Strict):
     braking (the car slows before bends): lateral acceleration <= ``lateral_accel_fraction`` *
     friction * g (or ``lateral_accel_max_mps2`` when given), forward / braking acceleration <=
     ``accel_max_mps2`` / ``decel_max_mps2`` (shared with the lateral one on the friction circle),
-    speed <= ``v_max_mps``; ``v_start_mps`` / ``v_end_mps`` pin the ends of an open path."""
+    speed <= ``v_max_mps``; ``v_start_mps`` / ``v_end_mps`` pin the ends of an open path,
+    ``v_start_mps`` at ``start_m`` [m] along it (where the car starts when the path begins behind it)."""
 
     lateral_accel_fraction: Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)] = 0.8
     lateral_accel_max_mps2: Positive | None = None
@@ -363,6 +364,7 @@ class SpeedProfileSpec(_Strict):
     v_end_mps: NonNeg | None = None
     curvature_window_m: NonNeg = 0.3
     friction_circle: bool = True
+    start_m: NonNeg = 0.0
 
 
 class ControllerSpec(_Strict):
