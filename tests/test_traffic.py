@@ -45,13 +45,14 @@ def car(x, y, vx, **kw):
 def test_a_car_following_in_the_lane_causes_no_swerve_and_no_braking():
     """A faster car 25 m behind in the ego's lane, closing at 2 m/s. It is kept behind by a
     longitudinal row only: the ego never swerves or brakes for it (a lateral half-plane from the
-    nearest point, as for a car ahead, pushed it sideways), and it keeps ahead of it within its
-    speed limit (recorded traffic does not brake for the ego: CommonRoad counts a rear-end
-    collision against it)."""
+    nearest point, as for a car ahead, pushed it sideways), and it keeps ahead of it no further
+    than its own references go: it does not speed away from it either (the follower keeps its
+    distance; before, the row pushed the ego to full throttle, on DEU_Salzwedel-107_1 into a
+    left turn)."""
     r, m = drive([car(-25.0, 0.0, 12.0, name="follower")])
     assert m["collisions"] == 0 and m["min_obstacle_clearance_m"] > 0.3
     assert np.max(np.abs(r.e_y_m)) < 0.01
-    assert np.min(r.v_mps) > 10.0 - 0.02 and np.max(r.v_mps) <= 15.0 + 1e-9
+    assert np.min(r.v_mps) > 10.0 - 0.02 and np.max(r.v_mps) < 10.0 + 0.05
 
 
 def test_a_car_passing_in_the_next_lane_is_still_avoided_and_the_ego_keeps_its_lane():

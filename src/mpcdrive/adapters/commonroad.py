@@ -204,6 +204,12 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
                 "widths": [[float(a), float(b), float(c)] for a, b, c in zip(s_k, left_k, right_k)],
                 "neighbours": neighbours.tolist() if NEIGHBOUR_LANES else None,
                 "margin_m": ROAD_MARGIN_M,
+                # a goal region on the route inside a time window: back in the route lane by its end
+                "return_by_s": plan.goal_window_s[1]
+                if plan.goal_arc_m is not None
+                and plan.goal_window_s is not None
+                and math.isfinite(plan.goal_window_s[1])
+                else None,
             },
             "initial_state": {"x_m": float(p0[0]), "y_m": float(p0[1]), "yaw_deg": math.degrees(yaw0), "v_mps": v0},
             "obstacles": obstacles,

@@ -27,14 +27,18 @@ Rules (:func:`decide_lane`):
   free and at least as free as the current lane (``min_gain_m`` over the blocked threshold when
   the current lane is not blocked);
 * blocked and no free neighbour: ``stop`` (with the distance ``stop_m`` to ``standstill_m``
-  behind the nearest obstacle ahead now: the car follows or stops in its lane);
+  behind the nearest obstacle ahead now: the car follows or stops in its lane); also when a
+  free neighbour is too close to reach: the ego, at its speed, would be at the obstacle in its
+  lane before the ramp has moved its body 60 % of the way (``creep_mps`` and slower always
+  fits): it brakes in its lane and changes once the change fits;
 * a change keeps its target until the ego arrives, unless the target stops being free while
   the ego is still in its origin lane (then it returns: the only change not held back by the
   dwell time); no voluntary change starts within ``min_dwell_s`` of the previous one.
 
 The lateral reference (:class:`LateralRamp`) is a quintic ramp from the ego's offset where the
 decision was taken to the target lane's centre, over the distance driven at the current speed
-in the time that keeps the peak lateral acceleration and jerk within bounds. numpy only.
+in the time that keeps the peak lateral acceleration and jerk within bounds, no steeper than
+``max_slope`` and no shorter than ``turn_out_m``. numpy only.
 """
 
 from __future__ import annotations
@@ -54,6 +58,13 @@ __all__ = ["LaneConfig", "LaneDecision", "LateralRamp", "decide_lane", "lane_of"
 BEHIND_CLEARANCE_M = 1.0
 #: peak |w''| and |w'''| of the quintic smoothstep w(x) = 10x^3 - 15x^4 + 6x^5 on [0, 1]
 _PEAK_ACC, _PEAK_JERK = 10.0 / math.sqrt(3.0), 60.0
+#: share of a ramp's time by which the body has moved 60 % of the way (w(0.55) = 0.59): a change
+#: fits before an obstacle in the lane when the ego, at its speed, is not at it before then
+_CLEAR_AT = 0.55
+#: what the stop room leaves of the braking distance for the car not braking at once [m]
+_STOP_SLACK_M = 1.0
+#: peak slope of the smoothstep per unit of rise over run: w'(1/2) = 15/8
+_PEAK_SLOPE = 15.0 / 8.0
 
 
 @dataclass(frozen=True)
@@ -70,7 +81,11 @@ class LaneConfig:
     the obstacle is behind); max_lat_accel_mps2 / max_lat_jerk_mps3 : bounds of the ramp;
     min_change_s : shortest ramp [s]; arrive_m : |e_y - centre| that ends a change [m];
     range_m : obstacles further along the path than this are ignored [m];
-    ego_length_m / ego_width_m : the ego's body [m].
+    ego_length_m / ego_width_m : the ego's body [m]; creep_mps : below this speed [m/s] a
+    change always fits before the obstacle; turn_out_m : the shortest ramp [m], and the room
+    the car keeps before an obstacle when it stops in its lane (:class:`LaneChoosingMpc`) so that
+    it can still turn out of the lane from standstill; max_slope : the ramp's steepest slope
+    (lateral per forward metre: a slow change is not a sharp turn).
     """
 
     horizon_s: float = 8.0
@@ -90,6 +105,9 @@ class LaneConfig:
     range_m: float = 300.0
     ego_length_m: float = 5.0
     ego_width_m: float = 2.0
+    creep_mps: float = 1.0
+    turn_out_m: float = 10.0
+    max_slope: float = 0.3
 
     def __post_init__(self):
         for name in (
@@ -98,6 +116,7 @@ class LaneConfig:
             "time_gap_s",
             "max_lat_accel_mps2",
             "max_lat_jerk_mps3",
+            "max_slope",
             "min_change_s",
             "arrive_m",
             "range_m",
@@ -108,7 +127,15 @@ class LaneConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be positive, got {v!r}")
-        for name in ("standstill_m", "rear_time_gap_s", "min_gain_m", "min_dwell_s", "min_return_s"):
+        for name in (
+            "standstill_m",
+            "rear_time_gap_s",
+            "min_gain_m",
+            "min_dwell_s",
+            "min_return_s",
+            "creep_mps",
+            "turn_out_m",
+        ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"{name} must be >= 0, got {v!r}")
@@ -144,7 +171,9 @@ class LaneDecision:
     free : (n_lanes,) whether each lane is free (own lane: not blocked ahead);
     ramp : the lateral reference to track; band : the lanes the body may use now (current and
     target); band_m : their (right, left) edges at the ego [m]; stop_m : distance [m] to the
-    stop point (``stop`` only, else None); since_s : when the target last changed [s].
+    stop point (``stop`` only, else None); since_s : when the target last changed [s] (-inf:
+    never, the ego keeps the lane it started in); gap_m : bumper-to-bumper distance [m] to the
+    nearest obstacle ahead in the ego's lane now (inf: none).
     """
 
     lane: int
@@ -157,6 +186,7 @@ class LaneDecision:
     band_m: tuple[float, float]
     stop_m: float | None
     since_s: float
+    gap_m: float = math.inf
 
 
 def lane_of(road: Road, s_m: float, e_y_m: float) -> int:
@@ -212,16 +242,23 @@ def decide_lane(
     t_s: float,
     previous: LaneDecision | None = None,
     config: LaneConfig = LaneConfig(),
+    desired_speed_mps: float | None = None,
+    return_by_s: float | None = None,
 ) -> LaneDecision:
     """Decide the lane for the ego at arc length ``s_m`` [m], lateral offset ``e_y_m`` [m] and
     speed ``speed_mps`` [m/s] on ``path`` (the road's reference path: ``project``, ``heading``)
     at time ``t_s`` [s], given ``obstacles`` (:class:`~mpcdrive.scene.obstacles.Obstacle`, their
-    poses on the same clock) and the ``previous`` decision (None at the start): see the module."""
+    poses on the same clock) and the ``previous`` decision (None at the start): see the module.
+    ``desired_speed_mps`` [m/s], when given, replaces the config's (e.g. the MPC's reference
+    speed here: a car stopped behind an obstacle still looks as far ahead as it wants to drive).
+    ``return_by_s`` [s]: the ego must be back in the route lane by then (a goal on it): from the
+    route lane no change starts whose way out and back (two ramps at the current speed) ends later."""
     if not road.lanes:
         raise ValueError("the road has no lanes")
     cfg, n = config, len(road.lanes)
     v = max(float(speed_mps), 0.0)
-    v_des = max(v, cfg.desired_speed_mps if cfg.desired_speed_mps is not None else v)
+    want = desired_speed_mps if desired_speed_mps is not None else cfg.desired_speed_mps
+    v_des = max(v, want if want is not None and math.isfinite(want) else v)
     taus = np.arange(0.0, cfg.horizon_s + 1e-9, cfg.dt_s)
     # the ego's predicted arc length: current speed, accelerating to the desired speed
     t_acc = (v_des - v) / cfg.accel_mps2
@@ -248,6 +285,16 @@ def decide_lane(
     enter_gap = cfg.standstill_m + cfg.rear_time_gap_s * v
     free_m = np.full(n, look)
     enter_ok = np.ones(n, bool)
+    fits = np.ones(n, bool)  # a change to the lane clears the obstacles in the ego's lane in time
+
+    def ramp_m(lane: int) -> float:
+        """Length [m] of the ramp to ``lane``: its duration at the current speed, no steeper than
+        ``max_slope`` and at least ``turn_out_m``."""
+        d = abs(centres[lane] - e_y_m)
+        return max(max(v, 1.0) * change_s(lane), _PEAK_SLOPE * d / cfg.max_slope, cfg.turn_out_m)
+
+    # when the ego, at its speed, has its body 60 % over on the ramp to each lane [s]
+    t_clear = [_CLEAR_AT * ramp_m(i) / max(v, cfg.creep_mps) for i in range(n)]
     gap_now = math.inf  # nearest obstacle ahead in the ego's lane now, bumper to bumper
     for S, E, HL, HW, present in _tracks(path, obstacles, t_s, taus, s_m, cfg.range_m):
         k0 = int(np.argmax(present))
@@ -263,6 +310,13 @@ def decide_lane(
                     enter_ok[i] = False
                 if i == cur and inlane[0]:
                     gap_now = min(gap_now, float(gap[0]))
+                if i == cur and v >= cfg.creep_mps:
+                    # at its current speed, is the ego at it before its body is mostly over?
+                    g_keep = np.where(inlane, S - s_keep - HL - half_l, math.inf)
+                    for j in range(n):
+                        kc = min(int(np.searchsorted(taus, t_clear[j])), len(taus) - 1)  # first sample at or after it
+                        if g_keep[: kc + 1].min() < 0.0:
+                            fits[j] = False
             elif i != cur:  # behind, in a neighbour lane: the follower must keep its gap
                 inlane &= during[i]
                 gap = s_keep[inlane] - S[inlane] - HL[inlane] - half_l
@@ -282,10 +336,15 @@ def decide_lane(
     neighbours = [int(order[j]) for j in (pos - 1, pos + 1) if 0 <= j < n]
 
     def ramp_to(lane: int) -> LateralRamp:
-        return LateralRamp(s_m, s_m + max(v, 1.0) * change_s(lane), e_y_m, road.s_m, road.lanes[lane].center_m)
+        return LateralRamp(s_m, s_m + ramp_m(lane), e_y_m, road.s_m, road.lanes[lane].center_m)
 
     def result(lane: int, action, ramp=None, stop_m=None) -> LaneDecision:
         changed = previous is None or lane != previous.lane
+        # when the target last changed: a first decision to keep the lane the ego is in is no change
+        if previous is None:
+            since = t_s if lane != cur else -math.inf
+        else:
+            since = t_s if lane != previous.lane else previous.since_s
         if ramp is None:
             ramp = ramp_to(lane) if changed else previous.ramp  # type: ignore[union-attr]
         lo = min(edges[cur][0], edges[lane][0])
@@ -300,7 +359,8 @@ def decide_lane(
             tuple(sorted({cur, lane})),
             (float(lo), float(hi)),
             stop_m,
-            t_s if changed else previous.since_s,  # type: ignore[union-attr]
+            since,
+            gap_now,
         )
 
     if previous is not None and previous.action == "change":
@@ -318,7 +378,11 @@ def decide_lane(
         if (dwell_ok or early) and free[home] and free_m[home] >= min(free_m[cur], need + cfg.min_gain_m):
             return result(home, "change")
     if blocked[cur]:
-        options = [j for j in neighbours if free[j]]
+        # a free neighbour the ego cannot reach before the obstacle at its speed: brake in the
+        # lane first (the change follows once it fits)
+        options = [j for j in neighbours if free[j] and fits[j]]
+        if return_by_s is not None and cur == road.route_lane:  # out and back in time
+            options = [j for j in options if t_s + 2.0 * ramp_m(j) / max(v, cfg.creep_mps) <= return_by_s]
         if not options:
             return result(
                 cur,
@@ -338,12 +402,12 @@ class LaneChoosingMpc:
     current lane alone when keeping it; the current and the target lane during a change or a
     pass: :meth:`Road.band`) and its lateral reference the decision's ramp to the target lane's
     centre (the path itself once the car is home in the route lane). Everything else is the
-    MPC's (attributes, warm start).
+    MPC's (attributes, warm start). ``return_by_s``: as for :func:`decide_lane`.
 
     ``road`` is the full road with its lanes (``road.lanes``, ``route_lane``), on the knots of the
     MPC's road. ``decision`` is the last :class:`LaneDecision`."""
 
-    def __init__(self, mpc, road: Road, config: LaneConfig | None = None):
+    def __init__(self, mpc, road: Road, config: LaneConfig | None = None, return_by_s: float | None = None):
         if not road.lanes:
             raise ValueError("LaneChoosingMpc needs a road with lanes")
         if getattr(mpc, "road", None) is None:
@@ -352,9 +416,11 @@ class LaneChoosingMpc:
         self.road = road
         fp = mpc.footprint
         self.config = config or LaneConfig(ego_length_m=fp.length_m, ego_width_m=fp.width_m)
+        self.return_by_s = return_by_s
         self.decision: LaneDecision | None = None
         self._band: tuple[int, ...] | None = None
         self._ramp: LateralRamp | None = None
+        self._held_gap: float | None = None
 
     def __getattr__(self, name):  # the MPC's attributes (problem, N, nx, path, obstacles ...)
         if name == "mpc":
@@ -368,7 +434,17 @@ class LaneChoosingMpc:
             s_m, e_y = mpc.path.project(x[:2], warm.s_m, mpc.config.projection_window_m)
             v = float(mpc.model.speed(x))
             self.decision = decide_lane(
-                self.road, mpc.path, s_m, e_y, v, mpc.obstacles, warm.t_s, self.decision, self.config
+                self.road,
+                mpc.path,
+                s_m,
+                e_y,
+                v,
+                mpc.obstacles,
+                warm.t_s,
+                self.decision,
+                self.config,
+                self._desired_speed(s_m),
+                self.return_by_s,
             )
             band = self.decision.band
             if band != self._band:
@@ -379,10 +455,41 @@ class LaneChoosingMpc:
             d = self.decision
             home = d.lane == self.road.route_lane and d.action != "change" and s_m >= d.ramp.s1_m
             ramp = None if home else d.ramp
+            av = getattr(mpc, "avoidance", None)
+            if av is not None:
+                av.stop_gap_m = self._stop_gap(d, v)
             if ramp is not self._ramp:
                 mpc.set_lateral_reference(None if ramp is None else self._offset(ramp))
                 self._ramp = ramp
         return mpc.step(x, warm)
+
+    def _stop_gap(self, d: LaneDecision, v: float) -> float:
+        """Extra room [m] the MPC's stop row keeps before the obstacle while the car is held in a
+        blocked lane: ``turn_out_m``, so that it can turn out of the lane later, or what braking
+        at the controller's full deceleration still leaves (a stop row it cannot keep would
+        have the car yaw its front disc back instead). It never grows while the car is held: the
+        stop line does not retreat before a car already braking for it."""
+        held = d.action == "stop" or (d.action == "keep" and not d.free[d.current])
+        if not held or not math.isfinite(d.gap_m):
+            self._held_gap = None
+            return 0.0
+        names = list(self.mpc.model.input_names)
+        decel = -float(self.mpc.problem.u_min[names.index("accel")]) if "accel" in names else 0.0
+        braking = v * v / (2.0 * decel) if decel > 0 else 0.0
+        room = min(self.config.turn_out_m, max(d.gap_m - braking - _STOP_SLACK_M, 0.0))
+        if self._held_gap is not None:
+            # a car (nearly) stopped keeps its line: moving it up with the car would let it creep on
+            room = self._held_gap if v < self.config.creep_mps else min(room, self._held_gap)
+        self._held_gap = room
+        return room
+
+    def _desired_speed(self, s_m: float) -> float | None:
+        """The MPC's reference speed at ``s_m`` [m] (its speed profile's, else its constant one),
+        unless the lane config names a desired speed."""
+        if self.config.desired_speed_mps is not None:
+            return None
+        prof = getattr(self.mpc.config, "speed_profile", None)
+        return float(prof.speed(s_m)) if prof is not None else float(self.mpc.v_ref_mps)
 
     def _offset(self, ramp: LateralRamp):
         """The ramp as an offset from the MPC's path: the route lane's centre is the path."""

@@ -226,6 +226,9 @@ class Avoidance:
         self.footprint = footprint
         self.N, self.dt_s = N, dt_s
         self.road = road
+        #: extra distance [m] the stop row of a blocked obstacle keeps before it (a decision
+        #: layer waiting to change lanes keeps room to turn out: control.lanes)
+        self.stop_gap_m = 0.0
         self.M = config.rows_per_step(footprint)
         self.offsets = footprint.disc_offsets_m
         self.r_disc = footprint.disc_radius_m
@@ -635,6 +638,7 @@ class Avoidance:
             side,
             mode,
             pres,
+            float(self.stop_gap_m),
             a,
             b,
         )
@@ -670,7 +674,10 @@ class Avoidance:
         nv = np.maximum(np.hypot(v[..., 0], v[..., 1]), 1e-12)
         n = v / nv[..., None] * np.where(dist >= 0, 1.0, -1.0)[..., None]
         active = dist - self.r_disc <= self.config.influence_m
-        lateral = (side != SIDE_BLOCKED) & (s_lo - reach <= s_disc) & (s_disc <= s_hi + reach)
+        # beside the obstacle where the plan has the disc (its reference may run far ahead of a
+        # slow car: rows from it had a car creeping out behind a parked one swerve at 45 deg)
+        s_near = s_lin[None, :] + off
+        lateral = (side != SIDE_BLOCKED) & (s_lo - reach <= s_near) & (s_near <= s_hi + reach)
         n = np.where(lateral[..., None], side[..., None] * nl, n)
         q = np.where(lateral[..., None], q_lat, q)
         active |= lateral
@@ -679,12 +686,14 @@ class Avoidance:
                 # stop behind an obstacle now ahead: the disc's arc length at most its near end
                 # less the clearance (the nearest-point normal points forward once the
                 # linearization passes it)
-                tb, qs = self._stop_plane(np.tile(s_lo[i, 0], nd), (s_lin + off).ravel(), r_need)
+                tb, qs = self._stop_plane(np.tile(s_lo[i, 0] - self.stop_gap_m, nd), (s_lin + off).ravel(), r_need)
                 n[i] = -tb.reshape(nd, -1, 2)
             elif j in following:
                 # keep ahead of a car following in the lane: the disc's arc length at least its far
-                # end plus the clearance; a longitudinal row only (no swerving, no braking for it)
-                tb, qs = self._stop_plane(np.tile(s_hi[i, 0], nd), (s_lin + off).ravel(), r_need, ahead=True)
+                # end plus the clearance, never beyond the disc's reference (the car keeps to its
+                # own plan: no speeding away, no swerving, no braking for it)
+                s_end = np.minimum(np.tile(s_hi[i, 0], nd), (s_disc - r_need).ravel())
+                tb, qs = self._stop_plane(s_end, (s_lin + off).ravel(), r_need, ahead=True)
                 n[i] = tb.reshape(nd, -1, 2)
             else:
                 continue

@@ -277,6 +277,7 @@ def hard_rows(
     side,
     mode,
     present,
+    stop_gap,
     a,
     b,
 ):
@@ -284,7 +285,8 @@ def hard_rows(
     slots 0..n-1, disc d of slot i in row ``i * len(offsets) + d``) at steps 1..N, into a (N, M, 3)
     and b (N, M) (unused rows: 0 and -inf). Obstacle i: ``shape``, ``radius`` (n,), centres
     (n, N+1, 2), vertices (n, N+1, V, 2) (``nverts`` (n,) of them), Frenet boxes (n, 5, N+1),
-    passing ``side`` (n,) (SIDE_*), ``mode`` (n,) (MODE_*) and ``present`` (n, N)."""
+    passing ``side`` (n,) (SIDE_*), ``mode`` (n,) (MODE_*) and ``present`` (n, N); a stop row
+    keeps ``stop_gap`` [m] more before the obstacle."""
     N = a.shape[0]
     nd = offsets.shape[0]
     for k in range(N):
@@ -321,18 +323,19 @@ def hard_rows(
                 sg = 1.0 if dist >= 0 else -1.0
                 nx, ny = vx / nv * sg, vy / nv * sg
                 active = dist - r_disc <= influence
-                if sd != 0 and s_lo - reach <= s_disc and s_disc <= s_hi + reach:
+                s_near = s_lin + off  # where the plan has the disc
+                if sd != 0 and s_lo - reach <= s_near and s_near <= s_hi + reach:
                     nx, ny = sd * nlx, sd * nly
                     qx, qy = qlx, qly
                     active = True
                 if mode[i] != MODE_AVOID:
                     s_at = s_lin + off
                     if mode[i] == MODE_STOP:  # behind its near end at that step
-                        s_bar = min(s_at, s_lo - r_need)
-                        s_end = s_lo
-                    else:  # ahead of its far end
-                        s_bar = max(s_at, s_hi + r_need)
-                        s_end = s_hi
+                        s_end = s_lo - stop_gap
+                        s_bar = min(s_at, s_end - r_need)
+                    else:  # ahead of its far end, as far as the disc's reference goes
+                        s_end = min(s_hi, s_disc - r_need)
+                        s_bar = max(s_at, s_end + r_need)
                     bx, by, bh, _ = path_eval(kind, geo, tab_s, tab_xy, tab_h, tab_k, s_bar)
                     tx, ty = math.cos(bh), math.sin(bh)
                     qx, qy = bx + tx * (s_end - s_bar), by + ty * (s_end - s_bar)

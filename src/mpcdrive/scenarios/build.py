@@ -495,7 +495,7 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
     controller: Controller = mpc
     if road is not None and road.lanes:
         # neighbour lanes: a decision layer opens them to pass a blocked stretch
-        controller = LaneChoosingMpc(mpc, road)
+        controller = LaneChoosingMpc(mpc, road, return_by_s=spec.road.return_by_s if spec.road else None)
     if c.delay_compensation:
         # predicts over its own period with the plant's integration step
         period_steps = int(round(spec.control_period_s / spec.dt_s))

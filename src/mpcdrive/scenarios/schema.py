@@ -302,7 +302,8 @@ class RoadSpec(_Strict):
     is followed exactly). ``neighbours`` (rows ``[s_m, left_m, right_m]``): how far lanes going
     the same way reach beyond the road's left / right edge (0 where there is none); with them a
     lane decision layer lets the car change into a free neighbour lane to pass a blocked
-    stretch, and come back."""
+    stretch, and come back; ``return_by_s`` [s]: the time by which the car must be back in its
+    own lane (e.g. a goal region on it): no change out of it starts that cannot return by then."""
 
     lane_width_m: Positive | None = None
     left_width_m: NonNeg | None = None
@@ -310,6 +311,7 @@ class RoadSpec(_Strict):
     widths: list[tuple[NonNeg, NonNeg, NonNeg]] | None = None
     neighbours: list[tuple[NonNeg, NonNeg, NonNeg]] | None = None
     margin_m: NonNeg = 0.05
+    return_by_s: NonNeg | None = None
 
     @model_validator(mode="after")
     def _one_form(self):
