@@ -225,6 +225,22 @@ def test_run_page_is_self_contained(tmp_path, run150):
     assert re.search(r"max_abs_steer_rad</code></th><td>[0-9.]+ rad \([0-9.]+°\)", text)
 
 
+def test_page_embeds_the_packaged_viewer_and_style_sheet(tmp_path, run150):
+    """The viewer and the style sheet are package data (found through importlib.resources, as
+    in an installed wheel) and every page carries them whole, inline."""
+    from importlib import resources
+
+    assets = resources.files("mpcdrive.report") / "assets"
+    js = (assets / "replay.js").read_text(encoding="utf-8")
+    css = (assets / "report.css").read_text(encoding="utf-8")
+    assert "RUNS" in js and "#replay" in css
+    # nothing in them could end the element they are embedded in
+    assert "</script" not in js.lower() and "</style" not in css.lower()
+    text = write_run_html(tmp_path, run150, compute_metrics(run150), [], FOOTPRINT).read_text(encoding="utf-8")
+    assert f"<style>\n{css}</style>" in text
+    assert f"<script>\n{js}</script>\n</body></html>\n" in text
+
+
 def test_reproduce_page_has_every_experiment(tmp_path, run150):
     short = circle_run(40, radius_m=2.0)
     (tmp_path / "a").mkdir()

@@ -14,8 +14,9 @@ Four formulations (the paper's Section V.C and its "safe driving envelope"):
   normalizing constant is folded into ``w``).
 The two costs are non-convex: each QP uses their second-order model at the linearization point
 with the Hessian projected onto the positive semidefinite cone (sequential quadratic
-programming). The passing side of each obstacle is chosen once, where the lane has more room,
-and kept from step to step (no dithering) unless that side closes.
+programming; see :mod:`mpcdrive.ocp.avoidance_cost`). The passing side of each obstacle is chosen
+once, where the lane has more room, and kept from step to step (no dithering) unless that side
+closes. Obstacles are judged on their Frenet boxes along the path (:mod:`mpcdrive.ocp.frenet`).
 """
 
 from __future__ import annotations
@@ -30,9 +31,28 @@ from ..paths.base import ReferencePath
 from ..paths.compiled import PathArrays, path_arrays
 from ..scene.footprint import Footprint
 from ..scene.geometry import points_polygons
-from ..scene.obstacles import Circle, Obstacle, Polygon, WorldCircle
+from ..scene.obstacles import Circle, Obstacle, Polygon
 from ..scene.road import Road
 from . import avoidance_compiled as _ac
+from .avoidance_cost import obstacle_cost, position_cost, sigma_inv
+from .frenet import FrenetBox, FrenetBoxes, frenet_box, frenet_boxes
+
+__all__ = [
+    "SIDE_BLOCKED",
+    "SIDE_LEFT",
+    "SIDE_RIGHT",
+    "Avoidance",
+    "AvoidanceConfig",
+    "AvoidanceMemory",
+    "AvoidanceTerms",
+    "Formulation",
+    "FrenetBox",
+    "FrenetBoxes",
+    "follow_references",
+    "frenet_box",
+    "frenet_boxes",
+    "obstacle_cost",
+]
 
 Formulation = Literal["hard", "corridor", "potential", "gaussian"]
 SIDE_LEFT, SIDE_RIGHT, SIDE_BLOCKED = 1, -1, 0
@@ -111,72 +131,6 @@ class AvoidanceConfig:
         return 0
 
 
-@dataclass(frozen=True)
-class FrenetBox:
-    """An obstacle's extent along / across the path at one time: s in [s_lo, s_hi],
-    e_y in [e_lo, e_hi] [m]; ``s_ref`` the arc length of its reference point."""
-
-    s_ref: float
-    s_lo: float
-    s_hi: float
-    e_lo: float
-    e_hi: float
-
-
-@dataclass(frozen=True)
-class FrenetBoxes:
-    """An obstacle's Frenet boxes at the K times of a horizon: the fields of :class:`FrenetBox`
-    as arrays (K,) [m]; ``boxes[k]`` is the FrenetBox of time k."""
-
-    s_ref: np.ndarray
-    s_lo: np.ndarray
-    s_hi: np.ndarray
-    e_lo: np.ndarray
-    e_hi: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.s_ref)
-
-    def __getitem__(self, k: int) -> FrenetBox:
-        return FrenetBox(
-            float(self.s_ref[k]), float(self.s_lo[k]), float(self.s_hi[k]), float(self.e_lo[k]), float(self.e_hi[k])
-        )
-
-
-def frenet_boxes(
-    path: ReferencePath,
-    s_guess: np.ndarray,
-    centers: np.ndarray,
-    radius_m: float | np.ndarray = 0.0,
-    points: np.ndarray | None = None,
-) -> FrenetBoxes:
-    """Frenet extents of K world shapes, shape k near arc length ``s_guess[k]`` (K,) [m]: discs of
-    ``radius_m`` (a number or (K,)) around ``centers`` (K, 2) [m], or, given ``points``
-    (K, M, 2) [m], convex polygons (their vertex mean is projected; ``centers`` unused)."""
-    # the search window reaches the shape however far it is from the path point at s_guess
-    if points is None:
-        far = np.hypot(*(centers - path.position(s_guess)).T)
-        s, e = path.project_many(centers, s_guess, np.maximum(2.0, 2 * radius_m) + far)
-        r = radius_m
-        return FrenetBoxes(s, s - r, s + r, e - r, e + r)
-    c = points.mean(axis=1)
-    far = np.hypot(*(c - path.position(s_guess)).T)
-    s, _ = path.project_many(c, s_guess, 2.0 + np.ptp(points, axis=(1, 2)) + far)
-    h = np.asarray(path.heading(s), float)[:, None]
-    d = points - path.position(s)[:, None, :]
-    along = d[..., 0] * np.cos(h) + d[..., 1] * np.sin(h)
-    across = d[..., 1] * np.cos(h) - d[..., 0] * np.sin(h)
-    return FrenetBoxes(s, s + along.min(axis=1), s + along.max(axis=1), across.min(axis=1), across.max(axis=1))
-
-
-def frenet_box(path: ReferencePath, shape, s_guess: float) -> FrenetBox:
-    """Frenet extent of a world shape near arc length ``s_guess``."""
-    g = np.array([s_guess], float)
-    if isinstance(shape, WorldCircle):
-        return frenet_boxes(path, g, np.asarray(shape.center, float)[None], shape.radius_m)[0]
-    return frenet_boxes(path, g, np.zeros((1, 2)), points=np.asarray(shape.points, float)[None])[0]
-
-
 @dataclass
 class AvoidanceMemory:
     """Passing-side decisions kept across steps: obstacle index -> SIDE_*."""
@@ -234,8 +188,6 @@ class Avoidance:
         self.r_disc = footprint.disc_radius_m
         self.half_width = 0.5 * footprint.width_m
         self.half_length = 0.5 * footprint.length_m
-        sx, sy = config.sigma_m
-        self._Sinv_local = np.diag([1.0 / sx**2, 1.0 / sy**2])
         N1 = N + 1
         self._a = np.zeros((N, max(self.M, 1), 3))
         self._b = np.full((N, max(self.M, 1)), -np.inf)
@@ -502,7 +454,7 @@ class Avoidance:
                 Xlin, s_arr, [j for j in rel if j not in following], boxes, sides, present, road_lo, road_hi
             )
         else:
-            H, g = self._cost(Xlin, rel, boxes, centers, present)
+            H, g = position_cost(cfg, self.path, Xlin, rel, boxes, centers, present, self._H, self._g)
         s_max = None if cfg.follow_gap_s is None else self._stop_lines(s_arr, rel, boxes, sides, gap_s=cfg.follow_gap_s)
         return AvoidanceTerms(rows_a, rows_b, lo, hi, H, g, e_ref, sides, s_max)
 
@@ -539,8 +491,7 @@ class Avoidance:
 
     def sigma_inv(self, heading_rad: float) -> np.ndarray:
         """Sigma^-1 of eq. 56 in the world frame, sx along and sy across the path heading."""
-        Rm = np.array([[math.cos(heading_rad), -math.sin(heading_rad)], [math.sin(heading_rad), math.cos(heading_rad)]])
-        return Rm @ self._Sinv_local @ Rm.T
+        return sigma_inv(self.config.sigma_m, heading_rad)
 
     def _nearest(self, P: np.ndarray, rel: list[int], centers, outlines) -> tuple[np.ndarray, np.ndarray]:
         """Signed distances (n, R, K) and nearest boundary points (n, R, K, 2) of points P (R, K, 2)
@@ -759,36 +710,6 @@ class Avoidance:
         lo[bad] = hi[bad] = mid[bad]
         return lo, hi, a, b
 
-    def _cost(self, Xlin, rel, boxes, centers, present):
-        cfg = self.config
-        H, g = self._H, self._g
-        H[:] = 0.0
-        g[:] = 0.0
-        p = Xlin[1:, :2]
-        w = cfg.weight
-        for j in rel:
-            d = p - centers[j][1:]
-            if cfg.formulation == "potential":
-                den = np.einsum("ki,ki->k", d, d) + cfg.epsilon_m2
-                grad = -2.0 * w * d / den[:, None] ** 2
-                hess = (-2.0 * w / den**2)[:, None, None] * np.eye(2) + 8.0 * w * np.einsum("ki,kj->kij", d, d) / den[
-                    :, None, None
-                ] ** 3
-            else:
-                Sinv = self.sigma_inv(float(self.path.heading(boxes[j][0].s_ref)))
-                Sd = d @ Sinv
-                val = w * np.exp(-0.5 * np.einsum("ki,ki->k", d, Sd))
-                grad = -val[:, None] * Sd
-                hess = val[:, None, None] * (np.einsum("ki,kj->kij", Sd, Sd) - Sinv)
-            ev, V = np.linalg.eigh(hess)
-            hp = np.einsum("kij,kj,klj->kil", V, np.maximum(ev, 0.0), V)
-            if not present[j].all():  # no cost at the steps the obstacle does not exist
-                hp = hp * present[j][:, None, None]
-                grad = grad * present[j][:, None]
-            H += hp
-            g += grad - np.einsum("kij,kj->ki", hp, p)
-        return H, g
-
     def _detour(self, s_arr, boxes, sides):
         """The paper's trapezoidal detour: the reference shifts sideways by the room each obstacle
         needs, ramping over ``detour_ramp_m`` before and after it."""
@@ -845,17 +766,3 @@ def follow_references(
         s = min(s + 0.5 * (v + v_next) * dt_s, float(s_arr[k]))
         s_out[k], v_out[k], v = s, v_next, v_next
     return (s_out, v_out) if held else None
-
-
-def obstacle_cost(config: AvoidanceConfig, dx: np.ndarray, dy: np.ndarray, heading_rad: float = 0.0) -> np.ndarray:
-    """The potential (eq. 55) or Gaussian (eq. 56) cost at offsets (dx, dy) [m] from an
-    obstacle's reference point, Sigma aligned with ``heading_rad``; for cost maps."""
-    if config.formulation == "potential":
-        return config.weight / (dx * dx + dy * dy + config.epsilon_m2)
-    if config.formulation != "gaussian":
-        raise ValueError(f"{config.formulation!r} has no cost map (it is a constraint)")
-    c, s = math.cos(heading_rad), math.sin(heading_rad)
-    a = c * dx + s * dy
-    b = -s * dx + c * dy
-    sx, sy = config.sigma_m
-    return config.weight * np.exp(-0.5 * ((a / sx) ** 2 + (b / sy) ** 2))
