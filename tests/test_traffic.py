@@ -88,3 +88,23 @@ def test_lifetime_in_the_core_and_the_schema():
         Obstacle(Circle(1.0), (0.0, 0.0, 0.0), t_start_s=2.0, t_end_s=1.0)
     with pytest.raises(ValueError, match="lifetime_s"):
         validate_scenario_data({**BASE, "obstacles": [car(30.0, 0.0, 0.0, lifetime_s=[3.0, 1.0])]}, "t.yaml")
+
+
+def test_a_crossing_car_is_yielded_to_not_swerved_around():
+    """A car crossing the ego's road at 5 m/s, timed to meet it (both at x = 30 m at t = 3 s).
+    The ego yields: it slows and lets it cross, keeps its lane (no swerve around or rush ahead
+    of it) and goes on once it is clear, without contact."""
+    crossing = {
+        "shape": "rectangle",
+        "position": [30.0, -15.0],
+        "length_m": 4.5,
+        "width_m": 1.8,
+        "yaw_deg": 90.0,
+        "velocity_mps": [0.0, 5.0],
+        "name": "crossing",
+    }
+    r, m = drive([crossing], duration_s=8.0)
+    assert m["collisions"] == 0 and m["min_obstacle_clearance_m"] > 0.3
+    assert np.max(np.abs(r.e_y_m)) < 0.3  # no swerve
+    assert np.min(r.v_mps) < 6.0 and np.max(r.v_mps) <= 10.0 + 0.05  # slowed for it, never rushed
+    assert r.x[-1, 0] > 45.0  # and went on after it

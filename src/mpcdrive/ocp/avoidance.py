@@ -56,6 +56,9 @@ __all__ = [
 
 Formulation = Literal["hard", "corridor", "potential", "gaussian"]
 SIDE_LEFT, SIDE_RIGHT, SIDE_BLOCKED = 1, -1, 0
+#: an obstacle coming towards the car along its path, or crossing it, faster than this [m/s], on
+#: the car's road where they meet, is yielded to (a stop row before it), not passed beside
+ONCOMING_MPS = 1.0
 
 
 @dataclass(frozen=True)
@@ -436,7 +439,7 @@ class Avoidance:
             # a moving obstacle is judged where the car meets it: the horizon step at which the
             # car's reference is nearest to it along the path
             meet = int(np.argmin(np.abs(bx.s_ref - s_arr))) if self.obstacles[j].moving else 0
-            sides[j] = self._choose_side(j, bx[meet], memory)
+            sides[j] = SIDE_BLOCKED if self._oncoming(bx, meet, s_arr) else self._choose_side(j, bx[meet], memory)
         memory.sides.update(sides)
         # cars following in the lane: kept behind by a longitudinal row only (never swerved or
         # braked for)
@@ -466,6 +469,25 @@ class Avoidance:
         if self.config.formulation == "hard":
             return self.r_disc + self.config.margin_m + float(np.max(self.offsets))
         return self.config.margin_m + self.half_length
+
+    def _oncoming(self, bx: FrenetBoxes, meet: int, s_arr: np.ndarray) -> bool:
+        """Whether an obstacle (Frenet boxes over the horizon) comes towards the car along its
+        path or crosses it (faster than ONCOMING_MPS where they meet) and is on the car's road at
+        some step before the car's references have passed it: the car yields to it (stops
+        before it) instead of squeezing past beside or ahead of it."""
+        if self.road is None or len(bx.s_ref) < 2:
+            return False
+        k0, k1 = max(meet - 1, 0), min(meet + 1, len(bx.s_ref) - 1)
+        if k1 == k0:
+            return False
+        span = (k1 - k0) * self.dt_s
+        v_s = (bx.s_ref[k1] - bx.s_ref[k0]) / span
+        v_e = 0.5 * ((bx.e_lo[k1] + bx.e_hi[k1]) - (bx.e_lo[k0] + bx.e_hi[k0])) / span
+        if v_s > -ONCOMING_MPS and abs(v_e) < ONCOMING_MPS:
+            return False
+        left, right = self.road.edges(bx.s_ref)
+        on_road = (bx.e_lo < left) & (bx.e_hi > right) & (bx.s_hi >= s_arr)
+        return bool(np.any(on_road))
 
     def _blocks_ahead(self, box0: FrenetBox, s_arr: np.ndarray) -> bool:
         """A blocking obstacle (Frenet box now) gets a stop line: its centre is ahead of the car's
