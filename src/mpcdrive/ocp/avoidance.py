@@ -447,6 +447,12 @@ class Avoidance:
         # horizon steps 1..N at which each obstacle exists (its lifetime)
         times = t_s + self.dt_s * np.arange(1, self.N + 1) if any(self.obstacles[j].has_lifetime for j in rel) else None
         present = {j: self.obstacles[j].present(times) if self.obstacles[j].has_lifetime else self._always for j in rel}
+        if following and any(
+            sides[j] == SIDE_BLOCKED and j not in following and self._blocks_ahead(boxes[j][0], s_arr) for j in rel
+        ):
+            # braking for an obstacle ahead: keeping clear of a car following is its driver's job
+            # (its keep-ahead row would forbid the braking)
+            present.update({j: np.zeros(self.N, bool) for j in following})
         rows_a = rows_b = lo = hi = H = g = e_ref = None
         if cfg.detour == "trapezoid":
             e_ref = self._detour(s_arr, {j: b for j, b in boxes.items() if j not in following}, sides)
@@ -472,9 +478,10 @@ class Avoidance:
 
     def _oncoming(self, bx: FrenetBoxes, meet: int, s_arr: np.ndarray) -> bool:
         """Whether an obstacle (Frenet boxes over the horizon) comes towards the car along its
-        path or crosses it (faster than ONCOMING_MPS where they meet) and is on the car's road at
-        some step before the car's references have passed it: the car yields to it (stops
-        before it) instead of squeezing past beside or ahead of it."""
+        path or crosses it (faster than ONCOMING_MPS where they meet) and their predictions
+        conflict: at some step it is on the car's road where the car's reference is (within the
+        body's half length and the clearance along the path). The car yields to it (stops before
+        it) instead of squeezing past beside or ahead of it."""
         if self.road is None or len(bx.s_ref) < 2:
             return False
         k0, k1 = max(meet - 1, 0), min(meet + 1, len(bx.s_ref) - 1)
@@ -486,8 +493,9 @@ class Avoidance:
         if v_s > -ONCOMING_MPS and abs(v_e) < ONCOMING_MPS:
             return False
         left, right = self.road.edges(bx.s_ref)
-        on_road = (bx.e_lo < left) & (bx.e_hi > right) & (bx.s_hi >= s_arr)
-        return bool(np.any(on_road))
+        reach = self.r_disc + self.config.margin_m + self.half_length
+        there = (bx.s_lo - reach <= s_arr) & (s_arr <= bx.s_hi + reach)
+        return bool(np.any((bx.e_lo < left) & (bx.e_hi > right) & there))
 
     def _blocks_ahead(self, box0: FrenetBox, s_arr: np.ndarray) -> bool:
         """A blocking obstacle (Frenet box now) gets a stop line: its centre is ahead of the car's
