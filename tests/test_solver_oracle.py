@@ -309,7 +309,7 @@ def solve_oracle(pb: MpcProblem, d, u_prev) -> Oracle:
 # The objective moves by y' r_p at first order (y the multipliers; the step K^-1 [r_d; 0] keeps
 # the active rows and is orthogonal to the objective's gradient -A_a' y), and by 1/2 dz' P dz at
 # second order, at most 1/2 sum |P_ij| |dz|_inf^2.
-# On these instances (the seeds below) kd is at most 9 and kp 20 - 6e3, and |q|_inf, mostly the
+# On these instances (all seeds below) kd is at most 9 and kp 20 - 6e3, and |q|_inf, mostly the
 # obstacle slack's l1 weight 1e3, dominates the dual norms: the bounds come out at 1e-7 - 1e-4
 # (median 4e-6) for OSQP at 1e-9, 4e-8 - 8e-6 for the active-set solver and 1e-13 - 3e-4 for
 # Clarabel, while a wrong row, bound or weight moves the plan by 1e-2 or more; MAX_TOL keeps it
@@ -450,9 +450,10 @@ def compare(name, out, o: Oracle, s: Sensitivity, residuals, pb, d, u_prev) -> N
     assert abs(J - o.J) <= tol_J, f"{name}: cost {J} against the oracle's {o.J} (tolerance {tol_J:.2e})"
 
 
-def check_step(case: Case, x, warm) -> tuple[Oracle, object]:
+def check_step(case: Case, x, warm, osqp_may_stall: bool = False) -> tuple[Oracle, object]:
     """Solve one step with both controllers and the oracle and compare; returns the oracle's
-    solution and the OSQP controller's output (for the next step)."""
+    solution and the output the next step starts from (the OSQP controller's, or the compiled
+    one's where OSQP stalled: ``osqp_may_stall``, see OSQP_STALLS)."""
     ref, fast = case.ref, case.fast
     pb = ref.problem  # with the obstacle rows the controller added
     d = ref.prepare(x, warm)
@@ -474,12 +475,16 @@ def check_step(case: Case, x, warm) -> tuple[Oracle, object]:
     assert obj + constant_cost(pb, d, warm.u_prev) == pytest.approx(o.J, rel=1e-9, abs=1e-9)
     # the OSQP controller's step (prepare, load, solve, check, clip: the same data again)
     out = ref.step(x, warm)
-    compare("OSQP", out, o, s, osqp_residuals(s, OSQP, out.status), pb, d, warm.u_prev)
+    stalled = osqp_may_stall and out.status == "max_iter"
+    if stalled:  # no answer to compare: the controller says so and falls back
+        assert out.fallback != ""
+    else:
+        compare("OSQP", out, o, s, osqp_residuals(s, OSQP, out.status), pb, d, warm.u_prev)
     # the compiled controller's step, on the same state and warm start, and the same instance
     of = fast.step(x, warm)
     same_instance(fast, d)
     compare("compiled", of, o, s, fast_residuals(fast), pb, d, warm.u_prev)
-    return o, out
+    return o, (of if stalled else out)
 
 
 def run_case(seed: int, steps: int = 2) -> None:
@@ -491,8 +496,8 @@ def run_case(seed: int, steps: int = 2) -> None:
     warm = case.ref.initial_warm(x)
     model = case.ref.model
     found = dict(bound=False, rate=False, road_slack=False, obstacle=False)
-    for _ in range(steps):
-        o, out = check_step(case, x, warm)
+    for k in range(steps):
+        o, out = check_step(case, x, warm, (seed, k) in OSQP_STALLS)
         found["bound"] |= o.dual_bound > ACTIVE_TOL
         found["rate"] |= o.dual_rate > ACTIVE_TOL
         found["road_slack"] |= bool(o.eps.max() > 1e-3)
@@ -502,12 +507,24 @@ def run_case(seed: int, steps: int = 2) -> None:
     assert all(found.values()), found
 
 
-#: every obstacle kind, with and without the speed state, on straight and circular roads; seed 4
-#: is left out: at its optimum (on the steps run) the input bounds happen not to bind, which
-#: run_case refuses
+#: (seed, step) where the OSQP controller, at the tolerance of OSQP above and warm-started from its
+#: previous solve, stops at its iteration cap (status max_iter) and falls back: near-degenerate
+#: steps of a car braking to the stop line before a blocked lane (a fresh OSQP solve of the same
+#: QP converges, in 64,000 iterations). Its answer is not compared there; the compiled one is.
+OSQP_STALLS = {(29, 3)}
+#: every obstacle kind, with and without the speed state, on straight and circular roads; seeds 4
+#: and 31 are left out: at their optimum (on the steps run) the input bounds (4) or the obstacle
+#: rows (31) happen not to bind, which run_case refuses
 FAST_SEEDS = [0, 1, 2, 3, 5, 6, 7, 8]
+SLOW_SEEDS = [s for s in range(9, 40) if s != 31]
 
 
 @pytest.mark.parametrize("seed", FAST_SEEDS)
 def test_both_solvers_match_the_oracle(seed):
     run_case(seed)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", SLOW_SEEDS)
+def test_both_solvers_match_the_oracle_on_more_instances(seed):
+    run_case(seed, steps=4)
