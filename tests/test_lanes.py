@@ -195,21 +195,18 @@ def test_lane_of_and_config_checks():
     assert r.offset(-5.0) == 1.0 and r.offset(50.0) == pytest.approx(2.0) and not math.isnan(r.offset(1e9))
 
 
-def test_a_change_that_does_not_fit_before_a_close_obstacle_brakes_in_the_lane_first():
-    """A parked car 12 m ahead (bumpers), the neighbour lane free. The ramp to it (4 m, no
-    steeper than 0.3: 25 m) has the body 60 % over after 13.75 m: at 9 m/s the ego would be at
-    the car first, so it stops in its lane; crawling (below creep_mps), the change always fits.
-    30 m ahead the change fits at 9 m/s."""
-    cfg = LaneConfig(desired_speed_mps=9.0)
-
-    def parked(gap):
-        return [Obstacle(rectangle(4.0, 2.0), (100.0 + 2.5 + gap + 2.0, 0.0, 0.0), Static())]
-
-    d = decide(parked(12.0), v=9.0, cfg=cfg)
-    assert d.action == "stop" and d.lane == 0 and d.free[1] and d.band == (0,)
-    assert decide(parked(12.0), v=3.0, cfg=cfg).action == "stop"
-    d = decide(parked(12.0), v=0.5, cfg=cfg)
+def test_ramps_are_gentle_at_low_speed_and_a_stopped_car_looks_as_far_as_it_wants_to_drive():
+    """At 0.5 m/s behind a parked car 12 m ahead the ramp to the free lane is no steeper than
+    max_slope (25 m for 4 m), and with the MPC's reference speed (9 m/s) as the desired speed the
+    car looks far enough ahead to see the lane blocked and change; looking only as far as its
+    own speed goes (0.5 m/s) it would not."""
+    parked = [Obstacle(rectangle(4.0, 2.0), (100.0 + 2.5 + 12.0 + 2.0, 0.0, 0.0), Static())]
+    cfg = LaneConfig()
+    d = decide_lane(road(), PATH, 100.0, 0.0, 0.5, parked, 0.0, None, cfg, 9.0)
     assert d.action == "change" and d.lane == 1
-    assert d.ramp.s1_m - d.ramp.s0_m == pytest.approx(15.0 / 8.0 * W / cfg.max_slope)  # gentle at crawling speed
-    d = decide(parked(30.0), v=9.0, cfg=cfg)
-    assert d.action == "change" and d.lane == 1
+    assert d.ramp.s1_m - d.ramp.s0_m == pytest.approx(15.0 / 8.0 * W / cfg.max_slope)
+    assert decide_lane(road(), PATH, 100.0, 0.0, 0.5, parked, 0.0, None, cfg).action == "keep"  # not blocked
+    # the first decision is no lane change: the dwell time does not hold the next one back
+    keep = decide([])
+    assert keep.since_s == -math.inf
+    assert decide([car(160.0, 0, 20.0)], t=0.5, previous=keep).action == "change"

@@ -27,10 +27,7 @@ Rules (:func:`decide_lane`):
   free and at least as free as the current lane (``min_gain_m`` over the blocked threshold when
   the current lane is not blocked);
 * blocked and no free neighbour: ``stop`` (with the distance ``stop_m`` to ``standstill_m``
-  behind the nearest obstacle ahead now: the car follows or stops in its lane); also when a
-  free neighbour is too close to reach: the ego, at its speed, would be at the obstacle in its
-  lane before the ramp has moved its body 60 % of the way (``creep_mps`` and slower always
-  fits): it brakes in its lane and changes once the change fits;
+  behind the nearest obstacle ahead now: the car follows or stops in its lane);
 * a change keeps its target until the ego arrives, unless the target stops being free while
   the ego is still in its origin lane (then it returns: the only change not held back by the
   dwell time); no voluntary change starts within ``min_dwell_s`` of the previous one.
@@ -58,9 +55,6 @@ __all__ = ["LaneConfig", "LaneDecision", "LateralRamp", "decide_lane", "lane_of"
 BEHIND_CLEARANCE_M = 1.0
 #: peak |w''| and |w'''| of the quintic smoothstep w(x) = 10x^3 - 15x^4 + 6x^5 on [0, 1]
 _PEAK_ACC, _PEAK_JERK = 10.0 / math.sqrt(3.0), 60.0
-#: share of a ramp's time by which the body has moved 60 % of the way (w(0.55) = 0.59): a change
-#: fits before an obstacle in the lane when the ego, at its speed, is not at it before then
-_CLEAR_AT = 0.55
 #: what the stop room leaves of the braking distance for the car not braking at once [m]
 _STOP_SLACK_M = 1.0
 #: peak slope of the smoothstep per unit of rise over run: w'(1/2) = 15/8
@@ -81,8 +75,8 @@ class LaneConfig:
     the obstacle is behind); max_lat_accel_mps2 / max_lat_jerk_mps3 : bounds of the ramp;
     min_change_s : shortest ramp [s]; arrive_m : |e_y - centre| that ends a change [m];
     range_m : obstacles further along the path than this are ignored [m];
-    ego_length_m / ego_width_m : the ego's body [m]; creep_mps : below this speed [m/s] a
-    change always fits before the obstacle; turn_out_m : the shortest ramp [m], and the room
+    ego_length_m / ego_width_m : the ego's body [m]; creep_mps : below this speed [m/s] the car
+    counts as stopped (its stop line stays put); turn_out_m : the shortest ramp [m], and the room
     the car keeps before an obstacle when it stops in its lane (:class:`LaneChoosingMpc`) so that
     it can still turn out of the lane from standstill; max_slope : the ramp's steepest slope
     (lateral per forward metre: a slow change is not a sharp turn).
@@ -285,7 +279,6 @@ def decide_lane(
     enter_gap = cfg.standstill_m + cfg.rear_time_gap_s * v
     free_m = np.full(n, look)
     enter_ok = np.ones(n, bool)
-    fits = np.ones(n, bool)  # a change to the lane clears the obstacles in the ego's lane in time
 
     def ramp_m(lane: int) -> float:
         """Length [m] of the ramp to ``lane``: its duration at the current speed, no steeper than
@@ -293,8 +286,6 @@ def decide_lane(
         d = abs(centres[lane] - e_y_m)
         return max(max(v, 1.0) * change_s(lane), _PEAK_SLOPE * d / cfg.max_slope, cfg.turn_out_m)
 
-    # when the ego, at its speed, has its body 60 % over on the ramp to each lane [s]
-    t_clear = [_CLEAR_AT * ramp_m(i) / max(v, cfg.creep_mps) for i in range(n)]
     gap_now = math.inf  # nearest obstacle ahead in the ego's lane now, bumper to bumper
     for S, E, HL, HW, present in _tracks(path, obstacles, t_s, taus, s_m, cfg.range_m):
         k0 = int(np.argmax(present))
@@ -310,13 +301,6 @@ def decide_lane(
                     enter_ok[i] = False
                 if i == cur and inlane[0]:
                     gap_now = min(gap_now, float(gap[0]))
-                if i == cur and v >= cfg.creep_mps:
-                    # at its current speed, is the ego at it before its body is mostly over?
-                    g_keep = np.where(inlane, S - s_keep - HL - half_l, math.inf)
-                    for j in range(n):
-                        kc = min(int(np.searchsorted(taus, t_clear[j])), len(taus) - 1)  # first sample at or after it
-                        if g_keep[: kc + 1].min() < 0.0:
-                            fits[j] = False
             elif i != cur:  # behind, in a neighbour lane: the follower must keep its gap
                 inlane &= during[i]
                 gap = s_keep[inlane] - S[inlane] - HL[inlane] - half_l
@@ -378,9 +362,7 @@ def decide_lane(
         if (dwell_ok or early) and free[home] and free_m[home] >= min(free_m[cur], need + cfg.min_gain_m):
             return result(home, "change")
     if blocked[cur]:
-        # a free neighbour the ego cannot reach before the obstacle at its speed: brake in the
-        # lane first (the change follows once it fits)
-        options = [j for j in neighbours if free[j] and fits[j]]
+        options = [j for j in neighbours if free[j]]
         if return_by_s is not None and cur == road.route_lane:  # out and back in time
             options = [j for j in options if t_s + 2.0 * ramp_m(j) / max(v, cfg.creep_mps) <= return_by_s]
         if not options:
