@@ -71,9 +71,7 @@ from ..scene.road import Road
 from ..solvers.dense_qp import STATUS_WORDS, single_nonzero_columns
 from ..types import ControlOutput, WarmStart
 from .base import TrackingWarmStart, checked_obstacles, checked_road
-from .fast_step import (  # the compiled step and the layout of its buffers
-    _control_step,
-    _BAD_STATE,
+from .fast_layout import (  # the layout of the compiled step's buffers
     _I_MODEL,
     _I_NX,
     _I_NU,
@@ -220,6 +218,7 @@ from .fast_step import (  # the compiled step and the layout of its buffers
     _F_WHEELBASE,
     _NFP,
 )
+from .fast_step import _BAD_STATE, _control_step  # the compiled step
 from .fallback import FALLBACK_HOLD, FALLBACK_RELAX, FallbackConfig, FallbackLadder, relaxed_problem
 from .mpc import MpcConfig
 

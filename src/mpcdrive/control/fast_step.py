@@ -1,4 +1,4 @@
-"""The compiled step of :class:`~mpcdrive.control.fast.FastLtvMpc` and the layout of its buffers.
+"""The compiled step of :class:`~mpcdrive.control.fast.FastLtvMpc`.
 
 :func:`_control_step` is one control step (or one SQP iteration of it) in one numba call:
 projection onto the path, horizon references (constant speed or a speed profile), the compiled
@@ -8,8 +8,9 @@ linearization trajectory, then condensing onto the inputs (Hessian, gradient, co
 and the soft-row solve of :mod:`mpcdrive.solvers.condensed`, the dual active-set kernel of
 :mod:`mpcdrive.solvers.dense_qp`. It works in one float buffer (``wbuf``) and one integer
 buffer (``ibuf``) that :class:`~mpcdrive.control.fast.FastLtvMpc` allocates at construction;
-the constants below name their parts (``_I_*``: integer parameters, ``_F_*``: float parameters,
-``_W_*``: the arrays of ``wbuf``, ``_OB_*``: the columns of the obstacle table).
+the constants of :mod:`mpcdrive.control.fast_layout` name their parts (``_I_*``: integer
+parameters, ``_F_*``: float parameters, ``_W_*``: the arrays of ``wbuf``, ``_OB_*``: the
+columns of the obstacle table).
 
 Compiled functions use numba's on-disk cache; numba keys it to this file only, so the cache
 is dropped (by :mod:`mpcdrive._jitcache`) when a file whose code the step links in changes.
@@ -29,15 +30,7 @@ from ..paths.profile_compiled import profile_arc_lengths, profile_speed
 from ..scene.road import _interp, horizon_bounds
 from ..solvers.condensed import plan_feasible, riccati, soft_solve
 from ..solvers.dense_qp import gi_solve
-
-_TWO_PI = 2.0 * math.pi
-
-#: status code of a non-finite measured state (raised as ValueError by
-#: :meth:`FastLtvMpc.step <mpcdrive.control.fast.FastLtvMpc.step>`)
-_BAD_STATE = 4
-
-# integer parameters (ip)
-(
+from .fast_layout import (  # the layout of the buffers
     _I_MODEL,
     _I_NX,
     _I_NU,
@@ -64,25 +57,25 @@ _BAD_STATE = 4
     _I_ACCEL,
     _I_STEER,
     _I_FRICTION,
-) = range(26)
-_NIP = 26
-# passing sides (as ocp.avoidance), and "not chosen yet" in the compiled side memory
-_SIDE_LEFT, _SIDE_RIGHT, _SIDE_BLOCKED, _SIDE_NONE = 1, -1, 0, 2
-# obstacle cost formulations (ip[_I_OFORM])
-_OBS_NONE, _OBS_POTENTIAL, _OBS_GAUSSIAN = 0, 1, 2
-# linearization modes of a step: no plan (roll out the references), the previous step's plan
-# shifted by one step (real-time iteration), the current SQP iterate as it is
-MODE_NO_PLAN, MODE_SHIFTED_PLAN, MODE_ITERATE = 0, 1, 2
-# stages of a step: all of it; up to the linearization trajectory (obstacle rows are built from it
-# in Python by ``ocp.avoidance``); the rest, with those rows in the buffers
-STAGE_ALL, STAGE_LINEARIZE, STAGE_SOLVE = 0, 1, 2
-# columns of an obstacle row: pose (x, y) [m] at t = 0, velocity (vx, vy) [m/s], bounding radius
-# [m], offset (x, y) [m] of the point projected for the path heading, projection window extra [m]
-_OB_X, _OB_Y, _OB_VX, _OB_VY, _OB_RB, _OB_OX, _OB_OY, _OB_WIN = range(8)
-_NOB = 8
-# the float arrays of a controller, all views of one buffer (one argument to the compiled step:
-# passing arrays one by one costs about 0.1 us each in the call)
-(
+    _NIP,
+    _SIDE_LEFT,
+    _SIDE_RIGHT,
+    _SIDE_BLOCKED,
+    _OBS_NONE,
+    _OBS_POTENTIAL,
+    _OBS_GAUSSIAN,
+    MODE_SHIFTED_PLAN,
+    MODE_ITERATE,
+    STAGE_LINEARIZE,
+    STAGE_SOLVE,
+    _OB_X,
+    _OB_Y,
+    _OB_VX,
+    _OB_VY,
+    _OB_RB,
+    _OB_OX,
+    _OB_OY,
+    _OB_WIN,
     _W_FP,
     _W_MP,
     _W_BND,
@@ -158,10 +151,7 @@ _NOB = 8
     _W_ULO,
     _W_UHI,
     _W_VLIN,
-) = range(75)
-_NW = 75
-# float parameters (fp)
-(
+    _NW,
     _F_DT,
     _F_VREF,
     _F_HSTEP,
@@ -185,10 +175,17 @@ _NW = 75
     _F_RPERIOD,
     _F_FRIC,
     _F_WHEELBASE,
-) = range(23)
-_NFP = 23
-# info outputs
-_O_S, _O_EY, _O_EPSI, _O_ITER = range(4)
+    _O_S,
+    _O_EY,
+    _O_EPSI,
+    _O_ITER,
+)
+
+_TWO_PI = 2.0 * math.pi
+
+#: status code of a non-finite measured state (raised as ValueError by
+#: :meth:`FastLtvMpc.step <mpcdrive.control.fast.FastLtvMpc.step>`)
+_BAD_STATE = 4
 
 
 @njit(cache=True)
@@ -968,8 +965,9 @@ def _write_plan(N, nx, nu, x, z, A, B, c, xref, ulo, uhi, out):
         out[a] = min(max(z[a], ulo[0, a]), uhi[0, a])
 
 
-# numba caches _control_step keyed to this file only; it inlines code from these
+# numba caches _control_step keyed to this file only; it inlines code (and constants) from these
 from .. import _jitcache  # noqa: E402
+from . import fast_layout as _fast_layout  # noqa: E402
 from ..models import compiled as _models_compiled, dynamic as _dynamic, kinematic as _kinematic  # noqa: E402
 from ..ocp import friction as _friction  # noqa: E402
 from ..paths import compiled as _paths_compiled, profile_compiled as _profile_compiled  # noqa: E402
@@ -990,6 +988,7 @@ _jitcache.refresh(
             _friction,
             _dense_qp,
             _condensed,
+            _fast_layout,
         )
         if m.__file__ is not None
     ],
