@@ -10,8 +10,9 @@ reference; see :mod:`mpcdrive.paths.profile_compiled`) --, linearization along t
 previous plan or the paper's frozen point, Euler / RK4 / ``exp`` discrete models, cost, input /
 rate / state bounds, soft lane bound with slack, the fallback ladder of ``config.fallback`` --
 its ``relax`` rung on a second compiled controller for the relaxed problem) but runs every step in one numba-compiled
-function that works in buffers allocated at construction (the step and the layout of its buffers in
-:mod:`mpcdrive.control.fast_step`, the QP solve in :mod:`mpcdrive.solvers`). The QP is condensed onto the inputs
+function that works in buffers allocated at construction (the step in :mod:`mpcdrive.control.fast_step`, its
+obstacle terms in :mod:`mpcdrive.control.fast_obstacles`, the layout of its buffers in
+:mod:`mpcdrive.control.fast_layout`, the QP solve in :mod:`mpcdrive.solvers`). The QP is condensed onto the inputs
 (and lane slacks): the states are eliminated with the linearized dynamics, the Hessian is built
 by a backward recursion ``P_k = W_k + A_k' P_{k+1} A_k`` (O(N^2) blocks), and the dense QP is
 solved by the dual active-set method of :mod:`mpcdrive.solvers.dense_qp`, which is exact (no
@@ -42,16 +43,15 @@ and inputs, as ``DynamicBicycle.reference`` computes them).
 Compiled functions use numba's on-disk cache, so only the first process on a machine compiles
 (tens of seconds); later processes load the machine code.
 
-Problems the compiled step does not cover (see :func:`fast_unsupported_reason`) are refused
-here with a ValueError naming the reason; :func:`mpcdrive.control.factory.make_mpc` then uses
-the OSQP controller and says so.
+Problems the compiled step does not cover (see :func:`~mpcdrive.control.fast_setup.fast_unsupported_reason`,
+importable from here too, as :class:`~mpcdrive.control.fast_setup.FastSettings` is) are refused here with a
+ValueError naming the reason; :func:`mpcdrive.control.factory.make_mpc` then uses the OSQP controller and says so.
 """
 
 from __future__ import annotations
 
-import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -66,316 +66,32 @@ from ..paths.base import ReferencePath
 from ..paths.compiled import path_arrays
 from ..paths.profile_compiled import profile_array
 from ..scene.footprint import Footprint
-from ..scene.obstacles import Circle, ConstantVelocity, Polygon, Static
 from ..scene.road import Road
 from ..solvers.dense_qp import STATUS_WORDS, single_nonzero_columns
 from ..types import ControlOutput, WarmStart
 from .base import TrackingWarmStart, checked_obstacles, checked_road
-from .fast_step import (  # the compiled step and the layout of its buffers
-    _control_step,
-    _BAD_STATE,
-    _I_MODEL,
-    _I_NX,
-    _I_NU,
-    _I_N,
-    _I_PATH,
-    _I_LIN,
-    _I_METHOD,
-    _I_HORIZON,
-    _I_FF,
-    _I_LANE,
-    _I_MCONST,
-    _I_RATE0,
-    _I_MAXITER,
-    _I_GAMMA,
-    _I_NZ,
-    _I_RICCATI,
-    _I_MQ,
-    _I_OFORM,
-    _I_NOBS,
-    _I_OMAX,
-    _I_DETOUR,
-    _I_OROWS,
-    _I_PROFILE,
-    _I_ACCEL,
-    _I_STEER,
-    _I_FRICTION,
-    _NIP,
-    _SIDE_NONE,
-    _OBS_POTENTIAL,
-    _OBS_GAUSSIAN,
-    MODE_NO_PLAN,
-    MODE_SHIFTED_PLAN,
-    MODE_ITERATE,
-    STAGE_ALL,
-    STAGE_LINEARIZE,
-    STAGE_SOLVE,
-    _OB_X,
-    _OB_Y,
-    _OB_VX,
-    _OB_VY,
-    _OB_RB,
-    _OB_OX,
-    _OB_OY,
-    _OB_WIN,
-    _NOB,
-    _W_FP,
-    _W_MP,
-    _W_BND,
-    _W_GEO,
-    _W_WQ,
-    _W_RM,
-    _W_RC,
-    _W_TABS,
-    _W_TABXY,
-    _W_TABH,
-    _W_TABK,
-    _W_C,
-    _W_B,
-    _W_REFS,
-    _W_XREF,
-    _W_UREF,
-    _W_XBAR,
-    _W_UBAR,
-    _W_F,
-    _W_A,
-    _W_BD,
-    _W_CD,
-    _W_LANEN,
-    _W_LANEB,
-    _W_XF,
-    _W_P,
-    _W_LAM,
-    _W_VB,
-    _W_S,
-    _W_T2,
-    _W_GAM,
-    _W_H,
-    _W_G,
-    _W_Z,
-    _W_L,
-    _W_J,
-    _W_RQ,
-    _W_D,
-    _W_ZDIR,
-    _W_R,
-    _W_UQ,
-    _W_SQ,
-    _W_ROWN,
-    _W_LAMQ,
-    _W_DW,
-    _W_KG,
-    _W_KF,
-    _W_PA,
-    _W_MG,
-    _W_GG,
-    _W_QV,
-    _W_WE,
-    _W_QT,
-    _W_OBS,
-    _W_ODIST,
-    _W_OPROJ,
-    _W_SARR,
-    _W_EREF,
-    _W_ROWA,
-    _W_ROWB,
-    _W_LLO,
-    _W_LHI,
-    _W_XLIN,
-    _W_GSUM,
-    _W_PROF,
-    _W_VARR,
-    _W_REFW,
-    _W_RDS,
-    _W_RDL,
-    _W_RDR,
-    _W_LDLO,
-    _W_LDHI,
-    _W_ULO,
-    _W_UHI,
-    _W_VLIN,
-    _NW,
-    _F_DT,
-    _F_VREF,
-    _F_HSTEP,
-    _F_WINDOW,
-    _F_RMARGIN,
-    _F_SLACK2,
-    _F_SLACK1,
-    _F_TOL,
-    _F_OW,
-    _F_OEPS,
-    _F_OSX,
-    _F_OSY,
-    _F_OINF,
-    _F_OMARGIN,
-    _F_HW,
-    _F_HL,
-    _F_RAMP,
-    _F_OSLACK2,
-    _F_OSLACK1,
-    _F_BOFF,
-    _F_RPERIOD,
-    _F_FRIC,
-    _F_WHEELBASE,
-    _NFP,
-)
+
+# the layout of the compiled step's buffers
+from .fast_layout import _I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH, _I_LIN, _I_METHOD, _I_HORIZON, _I_FF, _I_LANE, _I_MCONST
+from .fast_layout import _I_RATE0, _I_MAXITER, _I_GAMMA, _I_NZ, _I_RICCATI, _I_MQ, _I_OFORM, _I_NOBS, _I_OMAX, _I_DETOUR
+from .fast_layout import _I_OROWS, _I_PROFILE, _I_ACCEL, _I_STEER, _I_FRICTION, _NIP
+from .fast_layout import _SIDE_NONE, _OBS_POTENTIAL, _OBS_GAUSSIAN, MODE_NO_PLAN, MODE_SHIFTED_PLAN, MODE_ITERATE
+from .fast_layout import STAGE_ALL, STAGE_LINEARIZE, STAGE_SOLVE
+from .fast_layout import _W_FP, _W_MP, _W_BND, _W_GEO, _W_WQ, _W_RM, _W_RC, _W_TABS, _W_TABXY, _W_TABH, _W_TABK, _W_C
+from .fast_layout import _W_B, _W_REFS, _W_XREF, _W_UREF, _W_XBAR, _W_UBAR, _W_F, _W_A, _W_BD, _W_CD, _W_LANEN, _W_LANEB
+from .fast_layout import _W_XF, _W_P, _W_LAM, _W_VB, _W_S, _W_T2, _W_GAM, _W_H, _W_G, _W_Z, _W_L, _W_J, _W_RQ, _W_D
+from .fast_layout import _W_ZDIR, _W_R, _W_UQ, _W_SQ, _W_ROWN, _W_LAMQ, _W_DW, _W_KG, _W_KF, _W_PA, _W_MG, _W_GG, _W_QV
+from .fast_layout import _W_WE, _W_QT, _W_OBS, _W_ODIST, _W_OPROJ, _W_SARR, _W_EREF, _W_ROWA, _W_ROWB, _W_LLO, _W_LHI
+from .fast_layout import _W_XLIN, _W_GSUM, _W_PROF, _W_VARR, _W_REFW, _W_RDS, _W_RDL, _W_RDR, _W_LDLO, _W_LDHI, _W_ULO
+from .fast_layout import _W_UHI, _W_VLIN, _NW
+from .fast_layout import _F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_RMARGIN, _F_SLACK2, _F_SLACK1, _F_TOL, _F_OW, _F_OEPS
+from .fast_layout import _F_OSX, _F_OSY, _F_OINF, _F_OMARGIN, _F_HW, _F_HL, _F_RAMP, _F_OSLACK2, _F_OSLACK1, _F_BOFF
+from .fast_layout import _F_RPERIOD, _F_FRIC, _F_WHEELBASE, _NFP
+from .fast_setup import FastSettings, fast_unsupported_reason, obstacles_unsupported_reason  # importers use these
+from .fast_setup import _constant_rows, _obstacle_table
+from .fast_step import _BAD_STATE, _control_step  # the compiled step
 from .fallback import FALLBACK_HOLD, FALLBACK_RELAX, FallbackConfig, FallbackLadder, relaxed_problem
 from .mpc import MpcConfig
-
-
-@dataclass(frozen=True)
-class FastSettings:
-    """Settings of the compiled QP solve.
-
-    max_iter : cap on active-set changes per step (status ``max_iter`` beyond it);
-    feasibility_tol : accepted violation of a constraint row, scaled by the row's norm;
-    max_variables : the largest condensed QP (N * nu + lane slacks) the fast path accepts.
-    """
-
-    max_iter: int = 500
-    feasibility_tol: float = 1e-9
-    max_variables: int = 400
-
-    def __post_init__(self):
-        if self.max_iter < 1:
-            raise ValueError(f"max_iter must be >= 1, got {self.max_iter}")
-        if not (self.feasibility_tol > 0 and math.isfinite(self.feasibility_tol)):
-            raise ValueError(f"feasibility_tol must be positive, got {self.feasibility_tol}")
-        if self.max_variables < 1:
-            raise ValueError(f"max_variables must be >= 1, got {self.max_variables}")
-
-
-def obstacles_unsupported_reason(obstacles, avoidance: AvoidanceConfig | None) -> str | None:
-    """Why the compiled step cannot take these obstacles as ``LtvMpc`` would, or None.
-
-    Covered: the cost formulations (``potential``, ``gaussian``) on circle and polygon obstacles
-    that stand still or move at constant velocity, compiled; with the trapezoidal detour
-    reference, on static circles. The constraint formulations (``hard``, ``corridor``) on any
-    obstacle, their rows built by ``ocp.avoidance`` between two compiled stages; not with car
-    following (``follow_gap_s``)."""
-    if not obstacles:
-        return None
-    av = avoidance or AvoidanceConfig()
-    if av.uses_rows:
-        if av.follow_gap_s is not None:
-            return "car following (follow_gap_s) needs the OSQP controller"
-        return None
-    for ob in obstacles:
-        if av.detour != "none" and not (isinstance(ob.motion, Static) and isinstance(ob.shape, Circle)):
-            return f"the {av.detour!r} detour around obstacle {ob.name or '?'} (not a static circle) needs the OSQP controller"
-        if ob.has_lifetime:
-            return f"obstacle {ob.name or '?'} has a lifetime (present only from t_start_s to t_end_s)"
-        if not isinstance(ob.motion, (Static, ConstantVelocity)):
-            return f"obstacle {ob.name or '?'} follows a {type(ob.motion).__name__} (only static or constant velocity)"
-        if not isinstance(ob.shape, (Circle, Polygon)):
-            return f"obstacle {ob.name or '?'} has a {type(ob.shape).__name__} shape"
-    return None
-
-
-def _obstacle_table(obstacles) -> np.ndarray:
-    """(n, _NOB) rows of the compiled obstacle description (see ``_OB_*``)."""
-    tab = np.zeros((max(len(obstacles), 1), _NOB))
-    for j, ob in enumerate(obstacles):
-        x0, y0, yaw0 = ob.pose
-        vx, vy = (ob.motion.vx_mps, ob.motion.vy_mps) if isinstance(ob.motion, ConstantVelocity) else (0.0, 0.0)
-        tab[j, [_OB_X, _OB_Y, _OB_VX, _OB_VY, _OB_RB]] = x0, y0, vx, vy, ob.shape.bounding_radius_m
-        if isinstance(ob.shape, Circle):
-            tab[j, _OB_WIN] = max(2.0, 2.0 * ob.shape.radius_m)
-        else:  # as ocp.avoidance.frenet_box: the vertex mean is projected (a fixed offset: no rotation)
-            pts = ob.at(0.0).points
-            tab[j, _OB_OX], tab[j, _OB_OY] = pts.mean(axis=0) - (x0, y0)
-            tab[j, _OB_WIN] = 2.0 + float(np.ptp(pts))
-    return tab
-
-
-def fast_unsupported_reason(
-    model,
-    path: ReferencePath,
-    problem: MpcProblem,
-    config: MpcConfig = MpcConfig(),
-    settings: FastSettings = FastSettings(),
-    obstacles=(),
-    avoidance: AvoidanceConfig | None = None,
-) -> str | None:
-    """Why the compiled step cannot solve this problem exactly as ``LtvMpc`` would, or None."""
-    prof = config.speed_profile
-    if prof is not None:
-        if profile_array(prof) is None:
-            return f"speed profile {type(prof).__name__} has no compiled form"
-        if config.horizon != "arc_length":
-            return f"a speed profile with the {config.horizon!r} horizon needs the OSQP controller"
-    if config.prediction_substeps != 1:
-        return "prediction substeps need the OSQP controller"
-    reason = obstacles_unsupported_reason(obstacles, avoidance)
-    if reason is not None:
-        return reason
-    if model_code(model) is None:
-        return f"model {type(model).__name__} has no compiled form"
-    if path_arrays(path) is None:
-        return f"path {type(path).__name__} has no compiled form"
-    if (problem.nx, problem.nu) != (model.nx, model.nu):
-        return f"problem is sized nx={problem.nx}, nu={problem.nu} but the model has nx={model.nx}, nu={model.nu}"
-    if problem.friction_accel_mps2 is not None:
-        limited = [i for i, n in enumerate(model.input_names) if n in ("steer", "accel")]
-        if not np.all(np.isfinite(problem.u_min[limited]) & np.isfinite(problem.u_max[limited])):
-            return "the friction circle needs finite steer and accel bounds on the compiled path"
-    if np.linalg.eigvalsh(problem.R + problem.Rc).min() <= 1e-12 * max(1.0, float(np.abs(problem.R).max())):
-        return "R + Rc is not positive definite (the condensed QP needs a strictly convex cost in the inputs)"
-    lane = problem.lane
-    if lane and problem.lane_slack_weight <= 0:
-        return "lane_slack_weight is 0 (the slack needs a quadratic weight)"
-    rows = bool(obstacles) and (avoidance or AvoidanceConfig()).uses_rows
-    if rows and problem.obstacle_slack_weight <= 0:
-        return "obstacle_slack_weight is 0 (the slack needs a quadratic weight)"
-    if rows and not lane and (avoidance or AvoidanceConfig()).formulation == "corridor":
-        return "the corridor formulation needs a road (MpcProblem.road)"
-    nz = problem.N * problem.nu + (problem.N if lane else 0) + (problem.N if rows else 0)
-    if nz > settings.max_variables:
-        return f"the condensed QP has {nz} variables, more than max_variables={settings.max_variables}"
-    return None
-
-
-def _constant_rows(problem: MpcProblem, nz: int, n_orow: int = 0):
-    """Rows of ``C z >= b`` that do not change between steps (input bounds, input rates), the row
-    of the first u_0 rate row (its b follows u_prev), how many rows the step adds after them
-    (state bounds, lane, ``n_orow`` obstacle rows per step) and how many slack sign rows may
-    follow those (one per step for the lane and for the obstacle rows; written per step by
-    ``soft_solve``)."""
-    N, nu = problem.N, problem.nu
-    rows, rhs = [], []
-
-    def unit(j, sign=1.0):
-        r = np.zeros(nz)
-        r[j] = sign
-        return r
-
-    for k in range(N):
-        for i in range(nu):
-            if np.isfinite(problem.u_min[i]):
-                rows.append(unit(k * nu + i))
-                rhs.append(problem.u_min[i])
-            if np.isfinite(problem.u_max[i]):
-                rows.append(unit(k * nu + i, -1.0))
-                rhs.append(-problem.u_max[i])
-    r_rate0 = len(rows)
-    dmax = problem.du_max_per_s * problem.dt_s
-    for i in range(nu):  # |u_0 - u_prev| <= d: b written each step
-        if np.isfinite(dmax[i]):
-            rows += [unit(i), unit(i, -1.0)]
-            rhs += [0.0, 0.0]
-    for k in range(1, N):
-        for i in range(nu):
-            if np.isfinite(dmax[i]):
-                r = np.zeros(nz)
-                r[k * nu + i], r[(k - 1) * nu + i] = 1.0, -1.0
-                rows += [r, -r]
-                rhs += [-dmax[i], -dmax[i]]
-    lane = problem.lane
-    n_slack = (N if lane else 0) + (N if n_orow else 0)
-    n_state = N * int(np.isfinite(problem.x_min).sum() + np.isfinite(problem.x_max).sum())
-    n_var = n_state + (2 * N if lane else 0) + N * n_orow
-    return rows, rhs, r_rate0, n_var, n_slack
 
 
 _announced = [False]
@@ -402,8 +118,8 @@ class FastLtvMpc(TrackingWarmStart):
     ``infeasible``, ``max_iter``, ``failed``; after a failed solve the ladder of
     ``config.fallback`` as ``LtvMpc`` runs it (its ``relax`` rung on a second compiled controller
     built here for the relaxed problem), the rung named in ``ControlOutput.fallback``. Obstacles with a cost
-    formulation (see :func:`obstacles_unsupported_reason`) enter each QP as the cost's convex
-    model at the linearization trajectory; the constraint formulations (``hard``, ``corridor``)
+    formulation (see :func:`~mpcdrive.control.fast_setup.obstacles_unsupported_reason`) enter each QP as the
+    cost's convex model at the linearization trajectory; the constraint formulations (``hard``, ``corridor``)
     as rows built by ``ocp.avoidance`` between two compiled stages, their passing sides kept
     in ``WarmStart.sides`` as ``LtvMpc`` keeps them; ``config.sqp_max_iterations > 1`` re-linearizes and
     re-solves (each iteration one compiled call) until the inputs move less than

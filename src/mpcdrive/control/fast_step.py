@@ -1,15 +1,17 @@
-"""The compiled step of :class:`~mpcdrive.control.fast.FastLtvMpc` and the layout of its buffers.
+"""The compiled step of :class:`~mpcdrive.control.fast.FastLtvMpc`.
 
 :func:`_control_step` is one control step (or one SQP iteration of it) in one numba call:
 projection onto the path, horizon references (constant speed or a speed profile), the compiled
-obstacle cost and detour, linearization points and the discrete model, the road's rows at the
-linearization trajectory, then condensing onto the inputs (Hessian, gradient, constraint rows
-``C z >= b``) and the solve, which it hands to :mod:`mpcdrive.solvers`: the Riccati shortcut
-and the soft-row solve of :mod:`mpcdrive.solvers.condensed`, the dual active-set kernel of
+obstacle cost and detour (:mod:`mpcdrive.control.fast_obstacles`), linearization points and the
+discrete model, the road's rows at the linearization trajectory, then condensing onto the
+inputs (Hessian, gradient, constraint rows ``C z >= b``) and the solve, which it hands to
+:mod:`mpcdrive.solvers`: the Riccati shortcut and the soft-row solve of
+:mod:`mpcdrive.solvers.condensed`, the dual active-set kernel of
 :mod:`mpcdrive.solvers.dense_qp`. It works in one float buffer (``wbuf``) and one integer
 buffer (``ibuf``) that :class:`~mpcdrive.control.fast.FastLtvMpc` allocates at construction;
-the constants below name their parts (``_I_*``: integer parameters, ``_F_*``: float parameters,
-``_W_*``: the arrays of ``wbuf``, ``_OB_*``: the columns of the obstacle table).
+the constants of :mod:`mpcdrive.control.fast_layout` name their parts (``_I_*``: integer
+parameters, ``_F_*``: float parameters, ``_W_*``: the arrays of ``wbuf``, ``_OB_*``: the
+columns of the obstacle table).
 
 Compiled functions use numba's on-disk cache; numba keys it to this file only, so the cache
 is dropped (by :mod:`mpcdrive._jitcache`) when a file whose code the step links in changes.
@@ -26,320 +28,32 @@ from ..models.compiled import METHOD_EXP, discrete_step_jacobians, model_referen
 from ..ocp.friction import friction_input_bounds
 from ..paths.compiled import path_eval, path_project, wrap_angle
 from ..paths.profile_compiled import profile_arc_lengths, profile_speed
-from ..scene.road import _interp, horizon_bounds
+from ..scene.road import horizon_bounds
 from ..solvers.condensed import plan_feasible, riccati, soft_solve
 from ..solvers.dense_qp import gi_solve
+
+# the layout of the compiled step's buffers
+from .fast_layout import _I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH, _I_LIN, _I_METHOD, _I_HORIZON, _I_FF, _I_LANE, _I_MCONST
+from .fast_layout import _I_RATE0, _I_MAXITER, _I_GAMMA, _I_NZ, _I_RICCATI, _I_MQ, _I_OFORM, _I_NOBS, _I_OMAX, _I_DETOUR
+from .fast_layout import _I_OROWS, _I_PROFILE, _I_ACCEL, _I_STEER, _I_FRICTION, _NIP
+from .fast_layout import _OBS_NONE, MODE_SHIFTED_PLAN, MODE_ITERATE, STAGE_LINEARIZE, STAGE_SOLVE
+from .fast_layout import _W_FP, _W_MP, _W_BND, _W_GEO, _W_WQ, _W_RM, _W_RC, _W_TABS, _W_TABXY, _W_TABH, _W_TABK, _W_C
+from .fast_layout import _W_B, _W_REFS, _W_XREF, _W_UREF, _W_XBAR, _W_UBAR, _W_F, _W_A, _W_BD, _W_CD, _W_LANEN, _W_LANEB
+from .fast_layout import _W_XF, _W_P, _W_LAM, _W_VB, _W_S, _W_T2, _W_GAM, _W_H, _W_G, _W_Z, _W_L, _W_J, _W_RQ, _W_D
+from .fast_layout import _W_ZDIR, _W_R, _W_UQ, _W_SQ, _W_ROWN, _W_LAMQ, _W_DW, _W_KG, _W_KF, _W_PA, _W_MG, _W_GG, _W_QV
+from .fast_layout import _W_WE, _W_QT, _W_OBS, _W_ODIST, _W_OPROJ, _W_SARR, _W_EREF, _W_ROWA, _W_ROWB, _W_LLO, _W_LHI
+from .fast_layout import _W_XLIN, _W_GSUM, _W_PROF, _W_VARR, _W_REFW, _W_RDS, _W_RDL, _W_RDR, _W_LDLO, _W_LDHI, _W_ULO
+from .fast_layout import _W_UHI, _W_VLIN, _NW
+from .fast_layout import _F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_RMARGIN, _F_SLACK2, _F_SLACK1, _F_TOL, _F_HW, _F_HL
+from .fast_layout import _F_OSLACK2, _F_OSLACK1, _F_BOFF, _F_RPERIOD, _F_FRIC, _F_WHEELBASE
+from .fast_layout import _O_S, _O_EY, _O_EPSI, _O_ITER
+from .fast_obstacles import _detour, _obstacle_cost, _select_obstacles, _shift_references
 
 _TWO_PI = 2.0 * math.pi
 
 #: status code of a non-finite measured state (raised as ValueError by
 #: :meth:`FastLtvMpc.step <mpcdrive.control.fast.FastLtvMpc.step>`)
 _BAD_STATE = 4
-
-# integer parameters (ip)
-(
-    _I_MODEL,
-    _I_NX,
-    _I_NU,
-    _I_N,
-    _I_PATH,
-    _I_LIN,
-    _I_METHOD,
-    _I_HORIZON,
-    _I_FF,
-    _I_LANE,
-    _I_MCONST,
-    _I_RATE0,
-    _I_MAXITER,
-    _I_GAMMA,
-    _I_NZ,
-    _I_RICCATI,
-    _I_MQ,
-    _I_OFORM,
-    _I_NOBS,
-    _I_OMAX,
-    _I_DETOUR,
-    _I_OROWS,
-    _I_PROFILE,
-    _I_ACCEL,
-    _I_STEER,
-    _I_FRICTION,
-) = range(26)
-_NIP = 26
-# passing sides (as ocp.avoidance), and "not chosen yet" in the compiled side memory
-_SIDE_LEFT, _SIDE_RIGHT, _SIDE_BLOCKED, _SIDE_NONE = 1, -1, 0, 2
-# obstacle cost formulations (ip[_I_OFORM])
-_OBS_NONE, _OBS_POTENTIAL, _OBS_GAUSSIAN = 0, 1, 2
-# linearization modes of a step: no plan (roll out the references), the previous step's plan
-# shifted by one step (real-time iteration), the current SQP iterate as it is
-MODE_NO_PLAN, MODE_SHIFTED_PLAN, MODE_ITERATE = 0, 1, 2
-# stages of a step: all of it; up to the linearization trajectory (obstacle rows are built from it
-# in Python by ``ocp.avoidance``); the rest, with those rows in the buffers
-STAGE_ALL, STAGE_LINEARIZE, STAGE_SOLVE = 0, 1, 2
-# columns of an obstacle row: pose (x, y) [m] at t = 0, velocity (vx, vy) [m/s], bounding radius
-# [m], offset (x, y) [m] of the point projected for the path heading, projection window extra [m]
-_OB_X, _OB_Y, _OB_VX, _OB_VY, _OB_RB, _OB_OX, _OB_OY, _OB_WIN = range(8)
-_NOB = 8
-# the float arrays of a controller, all views of one buffer (one argument to the compiled step:
-# passing arrays one by one costs about 0.1 us each in the call)
-(
-    _W_FP,
-    _W_MP,
-    _W_BND,
-    _W_GEO,
-    _W_WQ,
-    _W_RM,
-    _W_RC,
-    _W_TABS,
-    _W_TABXY,
-    _W_TABH,
-    _W_TABK,
-    _W_C,
-    _W_B,
-    _W_REFS,
-    _W_XREF,
-    _W_UREF,
-    _W_XBAR,
-    _W_UBAR,
-    _W_F,
-    _W_A,
-    _W_BD,
-    _W_CD,
-    _W_LANEN,
-    _W_LANEB,
-    _W_XF,
-    _W_P,
-    _W_LAM,
-    _W_VB,
-    _W_S,
-    _W_T2,
-    _W_GAM,
-    _W_H,
-    _W_G,
-    _W_Z,
-    _W_L,
-    _W_J,
-    _W_RQ,
-    _W_D,
-    _W_ZDIR,
-    _W_R,
-    _W_UQ,
-    _W_SQ,
-    _W_ROWN,
-    _W_LAMQ,
-    _W_DW,
-    _W_KG,
-    _W_KF,
-    _W_PA,
-    _W_MG,
-    _W_GG,
-    _W_QV,
-    _W_WE,
-    _W_QT,
-    _W_OBS,
-    _W_ODIST,
-    _W_OPROJ,
-    _W_SARR,
-    _W_EREF,
-    _W_ROWA,
-    _W_ROWB,
-    _W_LLO,
-    _W_LHI,
-    _W_XLIN,
-    _W_GSUM,
-    _W_PROF,
-    _W_VARR,
-    _W_REFW,
-    _W_RDS,
-    _W_RDL,
-    _W_RDR,
-    _W_LDLO,
-    _W_LDHI,
-    _W_ULO,
-    _W_UHI,
-    _W_VLIN,
-) = range(75)
-_NW = 75
-# float parameters (fp)
-(
-    _F_DT,
-    _F_VREF,
-    _F_HSTEP,
-    _F_WINDOW,
-    _F_RMARGIN,
-    _F_SLACK2,
-    _F_SLACK1,
-    _F_TOL,
-    _F_OW,
-    _F_OEPS,
-    _F_OSX,
-    _F_OSY,
-    _F_OINF,
-    _F_OMARGIN,
-    _F_HW,
-    _F_HL,
-    _F_RAMP,
-    _F_OSLACK2,
-    _F_OSLACK1,
-    _F_BOFF,
-    _F_RPERIOD,
-    _F_FRIC,
-    _F_WHEELBASE,
-) = range(23)
-_NFP = 23
-# info outputs
-_O_S, _O_EY, _O_EPSI, _O_ITER = range(4)
-
-
-@njit(cache=True)
-def _select_obstacles(nobs, omax, obs, odist, oproj, osel, fp, t_s, x, s0, pkind, geo, tab_s, tab_xy, tab_h, tab_k):
-    """The ``max_obstacles`` nearest obstacles within the influence distance of the vehicle at time
-    ``t_s`` (nearest first, ties by index, as ``ocp.avoidance``) into osel; returns how many.
-    oproj[j] = (s, e_y) of each one's projected point [m] (its Frenet position now)."""
-    reach = fp[_F_OINF]
-    for j in range(nobs):
-        d = math.hypot(obs[j, _OB_X] + obs[j, _OB_VX] * t_s - x[0], obs[j, _OB_Y] + obs[j, _OB_VY] * t_s - x[1])
-        d -= obs[j, _OB_RB]
-        odist[j] = d if d <= reach else math.inf
-    px0, py0, _h0, _k0 = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s0)
-    nsel = 0
-    for _slot in range(min(omax, nobs)):
-        j, best = -1, math.inf
-        for jj in range(nobs):
-            if odist[jj] < best:
-                j, best = jj, odist[jj]
-        if j < 0:
-            break
-        odist[j] = math.inf
-        osel[nsel] = j
-        nsel += 1
-        cx = obs[j, _OB_X] + obs[j, _OB_VX] * t_s + obs[j, _OB_OX]
-        cy = obs[j, _OB_Y] + obs[j, _OB_VY] * t_s + obs[j, _OB_OY]
-        oproj[j, 0], oproj[j, 1] = path_project(
-            pkind, geo, tab_s, tab_xy, s0, obs[j, _OB_WIN] + math.hypot(cx - px0, cy - py0), cx, cy
-        )
-    return nsel
-
-
-@njit(cache=True)
-def _detour(nsel, osel, obs, oproj, sides, fp, N, s_arr, refs, xref, e_ref, lane, rd_s, rd_l, rd_r):
-    """The paper's trapezoidal detour around the selected (static, circular) obstacles, as
-    ``ocp.avoidance``: pick each one's passing side (kept from ``sides`` while it has room
-    between the obstacle and the road's edge beside it, ``lane`` = 1 when there is a road: the
-    body's half width, the road's margin, the obstacle margin and the body's half width again),
-    shift the references sideways over the obstacle with ramps before and after it, and turn
-    their heading with the slope."""
-    margin, hw, hl, ramp = fp[_F_OMARGIN], fp[_F_HW], fp[_F_HL], fp[_F_RAMP]
-    need = margin + hw  # as Avoidance.passing_room_m for the cost formulations, less the edge's share
-    for k in range(N + 1):
-        e_ref[k] = 0.0
-    any_shift = False
-    for a in range(nsel):
-        j = osel[a]
-        r = obs[j, _OB_RB]
-        s_ref, e_c = oproj[j, 0], oproj[j, 1]
-        e_lo, e_hi = e_c - r, e_c + r
-        if lane == 1:
-            lim_l = _interp(rd_s, rd_l, s_ref, fp[_F_RPERIOD]) - hw - fp[_F_RMARGIN]
-            lim_r = _interp(rd_s, rd_r, s_ref, fp[_F_RPERIOD]) + hw + fp[_F_RMARGIN]
-            room_left, room_right = lim_l - e_hi, e_lo - lim_r
-        else:
-            room_left = room_right = math.inf
-        prev = sides[j]
-        if prev == _SIDE_LEFT and room_left >= need:
-            side = _SIDE_LEFT
-        elif prev == _SIDE_RIGHT and room_right >= need:
-            side = _SIDE_RIGHT
-        elif max(room_left, room_right) < need:
-            side = _SIDE_BLOCKED
-        else:
-            side = _SIDE_LEFT if room_left >= room_right else _SIDE_RIGHT
-        sides[j] = side
-        if side == _SIDE_BLOCKED:
-            continue
-        shift = (e_hi + hw + 2.0 * margin) if side == _SIDE_LEFT else (e_lo - hw - 2.0 * margin)
-        lo_s, hi_s = s_ref - r - hl, s_ref + r + hl
-        rr = max(ramp, 1e-9)
-        for k in range(N + 1):
-            f = min(max(min((s_arr[k] - (lo_s - ramp)) / rr, ((hi_s + ramp) - s_arr[k]) / rr), 0.0), 1.0)
-            cand = shift * f
-            if abs(cand) > abs(e_ref[k]):
-                e_ref[k] = cand
-                any_shift = any_shift or cand != 0.0
-    if any_shift:
-        _shift_references(N, s_arr, refs, e_ref, xref)
-
-
-@njit(cache=True)
-def _shift_references(N, s_arr, refs, e_ref, xref):
-    """The detour: shift the state references sideways by ``e_ref`` (N+1,) [m] from the path
-    points ``refs`` and turn their heading with the slope of the shift."""
-    for k in range(N + 1):
-        h = refs[k, 2]
-        xref[k, 0] -= math.sin(h) * e_ref[k]
-        xref[k, 1] += math.cos(h) * e_ref[k]
-    for k in range(1, N + 1):
-        xref[k, 2] += math.atan((e_ref[k] - e_ref[k - 1]) / max(s_arr[k] - s_arr[k - 1], 1e-9))
-
-
-@njit(cache=True)
-def _obstacle_cost(
-    form, nsel, osel, obs, oproj, fp, t_s, dt, Xbar, F, N, pkind, geo, tab_s, tab_xy, tab_h, tab_k, We, qt
-):
-    """Add the potential (eq. 55) or Gaussian (eq. 56) cost of the selected obstacles, its
-    second-order model at the linearization trajectory (x_k = Xbar[k], x_N = F[N-1]) with the
-    Hessian projected onto the PSD cone, to the state cost ``x' We x - 2 qt' x`` of x_1..x_N, as
-    ``ocp.avoidance`` does for the OSQP controller: each obstacle predicted at constant velocity,
-    Sigma aligned with the path where the obstacle is now."""
-    w, eps = fp[_F_OW], fp[_F_OEPS]
-    isx2, isy2 = 1.0 / (fp[_F_OSX] * fp[_F_OSX]), 1.0 / (fp[_F_OSY] * fp[_F_OSY])
-    s00, s01, s11 = 0.0, 0.0, 0.0
-    for a in range(nsel):
-        j = osel[a]
-        vx, vy = obs[j, _OB_VX], obs[j, _OB_VY]
-        if form == _OBS_GAUSSIAN:
-            h = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, oproj[j, 0])[2]
-            ch, sh = math.cos(h), math.sin(h)
-            s00 = ch * ch * isx2 + sh * sh * isy2
-            s01 = ch * sh * (isx2 - isy2)
-            s11 = sh * sh * isx2 + ch * ch * isy2
-        for k in range(1, N + 1):
-            if k < N:
-                px, py = Xbar[k, 0], Xbar[k, 1]
-            else:
-                px, py = F[N - 1, 0], F[N - 1, 1]
-            tk = t_s + dt * k
-            dx = px - (obs[j, _OB_X] + vx * tk)
-            dy = py - (obs[j, _OB_Y] + vy * tk)
-            if form == _OBS_POTENTIAL:
-                den = dx * dx + dy * dy + eps
-                d2, d3 = den * den, den * den * den
-                g0, g1 = -2.0 * w * dx / d2, -2.0 * w * dy / d2
-                a = -2.0 * w / d2 + 8.0 * w * dx * dx / d3
-                b = 8.0 * w * dx * dy / d3
-                cc = -2.0 * w / d2 + 8.0 * w * dy * dy / d3
-            else:
-                sd0, sd1 = s00 * dx + s01 * dy, s01 * dx + s11 * dy
-                val = w * math.exp(-0.5 * (dx * sd0 + dy * sd1))
-                g0, g1 = -val * sd0, -val * sd1
-                a, b, cc = val * (sd0 * sd0 - s00), val * (sd0 * sd1 - s01), val * (sd1 * sd1 - s11)
-            # projection of [[a, b], [b, cc]] onto the PSD cone (closed-form 2 x 2 eigen-split)
-            half = 0.5 * (a + cc)
-            rad = math.sqrt(0.25 * (a - cc) * (a - cc) + b * b)
-            l1, l2 = half + rad, half - rad
-            if l2 >= 0.0:
-                h00, h01, h11 = a, b, cc
-            elif l1 <= 0.0:
-                h00, h01, h11 = 0.0, 0.0, 0.0
-            else:
-                f = l1 / (l1 - l2)
-                h00, h01, h11 = f * (a - l2), f * b, f * (cc - l2)
-            We[k - 1, 0, 0] += 0.5 * h00
-            We[k - 1, 0, 1] += 0.5 * h01
-            We[k - 1, 1, 0] += 0.5 * h01
-            We[k - 1, 1, 1] += 0.5 * h11
-            qt[k - 1, 0] -= 0.5 * (g0 - h00 * px - h01 * py)
-            qt[k - 1, 1] -= 0.5 * (g1 - h01 * px - h11 * py)
 
 
 @njit(cache=True, inline="always")
@@ -968,8 +682,9 @@ def _write_plan(N, nx, nu, x, z, A, B, c, xref, ulo, uhi, out):
         out[a] = min(max(z[a], ulo[0, a]), uhi[0, a])
 
 
-# numba caches _control_step keyed to this file only; it inlines code from these
+# numba caches _control_step keyed to this file only; it inlines code (and constants) from these
 from .. import _jitcache  # noqa: E402
+from . import fast_layout as _fast_layout, fast_obstacles as _fast_obstacles  # noqa: E402
 from ..models import compiled as _models_compiled, dynamic as _dynamic, kinematic as _kinematic  # noqa: E402
 from ..ocp import friction as _friction  # noqa: E402
 from ..paths import compiled as _paths_compiled, profile_compiled as _profile_compiled  # noqa: E402
@@ -990,6 +705,8 @@ _jitcache.refresh(
             _friction,
             _dense_qp,
             _condensed,
+            _fast_layout,
+            _fast_obstacles,
         )
         if m.__file__ is not None
     ],
