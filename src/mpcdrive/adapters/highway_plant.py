@@ -1,0 +1,259 @@
+"""highway-env's side of the adapter: lane centrelines, action scaling, other vehicles as obstacles.
+
+Optional extra ``highway`` (``pip install mpcdrive[highway]``: highway-env, gymnasium). Nothing
+here imports highway-env at module import; the functions take a created environment. What it
+maps:
+
+* **Road -> path.** The centreline of a lane is sampled from the environment's road network
+  (``lane.position(longitudinal, 0)`` of each ``StraightLane`` / ``CircularLane``), following
+  the successor lanes with the same lane id until the track closes, and fitted with a (lightly
+  smoothed) :class:`~mpcdrive.paths.WaypointPath` (:func:`lane_centerline`). The racetrack's
+  lane pieces overlap or leave small gaps where they join (up to about 1 m); the end of a piece
+  that lies past the start line of the next one is dropped before the fit.
+* **Units.** ``ContinuousAction`` maps each action component linearly from [-1, 1] to its
+  range: steering to ``steering_range`` [rad], acceleration to ``acceleration_range``
+  [m/s^2]; :class:`ActionScaling` converts our radians and m/s^2 into that normalized action
+  (order ``[acceleration, steering]`` when both are controlled).
+* **Other vehicles -> moving obstacles.** Every other vehicle (and solid road object) is a
+  ``LENGTH`` x ``WIDTH`` rectangle at its position and heading, predicted over the horizon at
+  constant speed along the lane each one steers to (:func:`lane_following_obstacle`; its offset
+  from that lane's centre decays, as highway-env's lane keeping makes it) or in a straight line
+  (:func:`vehicle_obstacle`, ``prediction="constant_velocity"``; it runs off the racetrack's
+  15-25 m bends within the horizon and makes phantom obstacles of cars in the next lane).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..paths.waypoints import WaypointPath
+from ..scene.obstacles import ConstantVelocity, Obstacle, TrajectoryMotion, rectangle
+
+__all__ = [
+    "ActionScaling",
+    "lane_centerline",
+    "lane_following_obstacle",
+    "lane_sequence",
+    "vehicle_obstacle",
+]
+
+#: highway-env's ContinuousAction defaults (used when the env config names no range)
+DEFAULT_STEERING_RANGE_RAD = (-math.pi / 4, math.pi / 4)
+DEFAULT_ACCELERATION_RANGE_MPS2 = (-5.0, 5.0)
+
+
+# --------------------------------------------------------------------------- road -> path
+def lane_sequence(network, start_index) -> tuple[list, bool]:
+    """Lane indices ``(from, to, id)`` followed from ``start_index`` through the road network,
+    keeping the lane id where the next road has it (else the nearest lane of the next road);
+    returns (indices, closed): closed when the sequence comes back to the start."""
+    graph = network.graph
+    try:
+        network.get_lane(start_index)
+    except (KeyError, IndexError, TypeError):
+        raise ValueError(f"lane index {start_index!r} is not in the road network") from None
+    seq, cur = [tuple(start_index)], tuple(start_index)
+    n_lanes = sum(len(lanes) for to in graph.values() for lanes in to.values())
+    for _ in range(n_lanes):
+        _, to, lane_id = cur
+        nexts = graph.get(to, {})
+        if not nexts:
+            return seq, False
+        end = network.get_lane(cur).position(network.get_lane(cur).length, 0.0)
+        best = None
+        for nxt_to, lanes in nexts.items():
+            ids = [lane_id] if lane_id < len(lanes) else range(len(lanes))
+            for j in ids:
+                d = float(np.hypot(*(np.asarray(lanes[j].position(0.0, 0.0)) - end)))
+                if best is None or d < best[0]:
+                    best = (d, (to, nxt_to, j))
+        cur = best[1]
+        if cur == seq[0]:
+            return seq, True
+        if cur in seq:
+            raise ValueError(
+                f"the lanes from {start_index!r} run into a loop that does not return to the start (at {cur!r})"
+            )
+        seq.append(cur)
+    raise ValueError(f"could not follow the lanes from {start_index!r}")
+
+
+def lane_centerline(network, lane_index, *, ds_m: float = 1.0, smoothing_m: float = 0.02) -> tuple[WaypointPath, float]:
+    """The centreline of the lane ``lane_index`` and its successors as a path, and the lane
+    half width [m] (the narrowest along the way).
+
+    ds_m : sampling step along each lane [m]; smoothing_m : allowed RMS distance [m] between
+    the fitted spline and the samples (0 interpolates; the default irons out the few-decimetre
+    steps where the racetrack's pieces join without moving the line noticeably).
+    """
+    if not (math.isfinite(ds_m) and ds_m > 0):
+        raise ValueError(f"ds_m must be positive, got {ds_m}")
+    if not (math.isfinite(smoothing_m) and smoothing_m >= 0):
+        raise ValueError(f"smoothing_m must be >= 0, got {smoothing_m}")
+    seq, closed = lane_sequence(network, lane_index)
+    lanes = [network.get_lane(ix) for ix in seq]
+    pts, widths = [], []
+    for n, lane in enumerate(lanes):
+        length = float(lane.length)
+        s = np.arange(0.0, length, ds_m)
+        if not closed and n == len(lanes) - 1:
+            s = np.r_[s, length]
+        P = np.array([lane.position(si, 0.0) for si in s], dtype=float).reshape(-1, 2)
+        widths += [float(lane.width_at(si)) for si in (0.0, 0.5 * length, length)]
+        if closed or n + 1 < len(lanes):
+            nxt = lanes[(n + 1) % len(lanes)]
+            start = np.asarray(nxt.position(0.0, 0.0), dtype=float)
+            h = float(nxt.heading_at(0.0))
+            along = (P - start) @ np.array([math.cos(h), math.sin(h)])
+            # near the end only: points at or past the next piece's start line overlap it
+            near_end = s > length - min(5.0, 0.5 * length)
+            P = P[~(near_end & (along > -0.25 * ds_m))]
+        pts.append(P)
+    P = np.vstack(pts)
+    path = WaypointPath(P, closed=closed, smoothing=len(P) * smoothing_m**2)
+    return path, 0.5 * min(widths)
+
+
+# --------------------------------------------------------------------------- actions
+@dataclass(frozen=True)
+class ActionScaling:
+    """highway-env's ContinuousAction mapping between [-1, 1] and physical inputs.
+
+    steering_range_rad : (low, high) [rad]; acceleration_range_mps2 : (low, high) [m/s^2], or
+    None when the action has no longitudinal part (then the action is ``[steering]``, else
+    ``[acceleration, steering]``).
+    """
+
+    steering_range_rad: tuple[float, float] = DEFAULT_STEERING_RANGE_RAD
+    acceleration_range_mps2: tuple[float, float] | None = DEFAULT_ACCELERATION_RANGE_MPS2
+
+    def __post_init__(self):
+        for name in ("steering_range_rad", "acceleration_range_mps2"):
+            rng = getattr(self, name)
+            if rng is None and name == "acceleration_range_mps2":
+                continue
+            lo, hi = (float(v) for v in rng)
+            if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+                raise ValueError(f"{name} must be two finite numbers, low < high, got {rng}")
+            object.__setattr__(self, name, (lo, hi))
+
+    @classmethod
+    def from_env(cls, env) -> ActionScaling:
+        """The scaling of a created environment's ContinuousAction (lateral control required)."""
+        at = env.unwrapped.action_type
+        if type(at).__name__ != "ContinuousAction":
+            raise ValueError(f"action.type must be ContinuousAction, got {type(at).__name__}")
+        if not at.lateral:
+            raise ValueError("action.lateral must be true: the driver steers")
+        return cls(tuple(at.steering_range), tuple(at.acceleration_range) if at.longitudinal else None)
+
+    @property
+    def longitudinal(self) -> bool:
+        return self.acceleration_range_mps2 is not None
+
+    @staticmethod
+    def _to_unit(value: float, rng: tuple[float, float]) -> float:
+        lo, hi = rng
+        return float(np.clip(2.0 * (value - lo) / (hi - lo) - 1.0, -1.0, 1.0))
+
+    @staticmethod
+    def _from_unit(a: float, rng: tuple[float, float]) -> float:
+        lo, hi = rng
+        return float(lo + (float(np.clip(a, -1.0, 1.0)) + 1.0) * 0.5 * (hi - lo))
+
+    def to_action(self, steer_rad: float, accel_mps2: float = 0.0) -> np.ndarray:
+        """Normalized action (float32, in [-1, 1]) for steering [rad] and acceleration [m/s^2]."""
+        if not (math.isfinite(steer_rad) and math.isfinite(accel_mps2)):
+            raise ValueError(f"steer_rad and accel_mps2 must be finite, got {steer_rad}, {accel_mps2}")
+        st = self._to_unit(steer_rad, self.steering_range_rad)
+        if self.acceleration_range_mps2 is None:
+            return np.array([st], dtype=np.float32)
+        return np.array([self._to_unit(accel_mps2, self.acceleration_range_mps2), st], dtype=np.float32)
+
+    def from_action(self, action) -> tuple[float, float]:
+        """(steering [rad], acceleration [m/s^2]) that the environment applies for ``action``."""
+        a = np.asarray(action, dtype=float).reshape(-1)
+        n = 2 if self.longitudinal else 1
+        if a.shape != (n,):
+            raise ValueError(f"action must have {n} component(s), got shape {a.shape}")
+        if not self.longitudinal:
+            return self._from_unit(a[0], self.steering_range_rad), 0.0
+        return (self._from_unit(a[1], self.steering_range_rad), self._from_unit(a[0], self.acceleration_range_mps2))
+
+
+# --------------------------------------------------------------------------- other vehicles
+def vehicle_obstacle(vehicle, t_s: float = 0.0, name: str = "") -> Obstacle:
+    """A highway-env vehicle (or road object) as a moving obstacle: its ``LENGTH`` x ``WIDTH``
+    rectangle [m] centred at its ``position`` [m] with its ``heading`` [rad], moving at its
+    current velocity ``speed (cos heading, sin heading)`` [m/s].
+
+    t_s : the time [s] on the controller's clock at which the vehicle is where it is now (the
+    ``warm.t_s`` of the step that uses the obstacle), so ``pose_at(t_s)`` is its current pose
+    and ``pose_at(t_s + k dt)`` the constant-velocity prediction ``k`` steps ahead."""
+    if not math.isfinite(t_s):
+        raise ValueError(f"t_s must be finite, got {t_s}")
+    x, y = (float(v) for v in vehicle.position)
+    heading, speed = float(vehicle.heading), float(getattr(vehicle, "speed", 0.0))
+    vx, vy = speed * math.cos(heading), speed * math.sin(heading)
+    return Obstacle(
+        rectangle(float(vehicle.LENGTH), float(vehicle.WIDTH)),
+        (x - vx * t_s, y - vy * t_s, heading),
+        ConstantVelocity(vx, vy),
+        name,
+    )
+
+
+def lane_following_obstacle(
+    vehicle,
+    path,
+    times_s,
+    t_s: float = 0.0,
+    *,
+    s_guess: float | None = None,
+    tau_lateral_s: float = 1.0,
+    name: str = "",
+) -> Obstacle:
+    """A highway-env vehicle as an obstacle that follows its lane: the ``LENGTH`` x ``WIDTH``
+    rectangle [m] starts at the vehicle's pose and moves along ``path`` (the lane's centreline,
+    a :class:`~mpcdrive.paths.ReferencePath`) at its current speed [m/s], its lateral offset [m] and
+    heading offset [rad] from the lane decaying with time constant ``tau_lateral_s`` [s] (the
+    vehicle steers back to the lane centre; ``math.inf`` keeps the offsets).
+
+    times_s : (K,) prediction times [s] from now (increasing, starting at 0; the pose is held
+    after the last); t_s : the controller's clock [s] now (see :func:`vehicle_obstacle`);
+    s_guess : arc length [m] near which to project the vehicle (None: the whole path)."""
+    times = np.asarray(times_s, dtype=float)
+    if times.ndim != 1 or len(times) < 1 or times[0] != 0.0 or np.any(np.diff(times) <= 0):
+        raise ValueError("times_s must be increasing prediction times starting at 0")
+    if not math.isfinite(t_s):
+        raise ValueError(f"t_s must be finite, got {t_s}")
+    if not tau_lateral_s > 0:
+        raise ValueError(f"tau_lateral_s must be positive, got {tau_lateral_s}")
+    xy = np.array([float(v) for v in vehicle.position])
+    heading, speed = float(vehicle.heading), float(getattr(vehicle, "speed", 0.0))
+    window = 10.0 + float(vehicle.LENGTH)
+    s0, e0 = path.project(xy, s_guess, window) if s_guess is not None else path.project(xy)
+    s = s0 + max(speed, 0.0) * times
+    if not path.closed:
+        s = np.minimum(s, path.length_m)
+    h = np.asarray(path.heading(s), dtype=float)
+    dpsi = (heading - float(path.heading(s0)) + math.pi) % (2.0 * math.pi) - math.pi
+    decay = np.exp(-times / tau_lateral_s)
+    normal = np.column_stack([-np.sin(h), np.cos(h)])
+    P = np.asarray(path.position(s), dtype=float) + (e0 * decay)[:, None] * normal
+    # the prediction starts exactly at the vehicle's pose
+    P += (xy - P[0]) * decay[:, None]
+    yaw = np.unwrap(h + dpsi * decay)
+    yaw += heading - yaw[0]
+    motion = TrajectoryMotion(t_s + times, P[:, 0] - xy[0], P[:, 1] - xy[1], yaw - heading)
+    return Obstacle(rectangle(float(vehicle.LENGTH), float(vehicle.WIDTH)), (xy[0], xy[1], heading), motion, name)
+
+
+def _vehicle_state(vehicle, nx: int) -> np.ndarray:
+    x = [float(vehicle.position[0]), float(vehicle.position[1]), float(vehicle.heading)]
+    if nx == 4:
+        x.append(float(vehicle.speed))
+    return np.array(x)
