@@ -1,15 +1,27 @@
-"""highway-env's side of the adapter: lane centrelines, action scaling, other vehicles as obstacles.
+"""highway-env as the plant of mpcdrive's closed loop (:func:`mpcdrive.sim.simulate`).
 
 Optional extra ``highway`` (``pip install mpcdrive[highway]``: highway-env, gymnasium). Nothing
-here imports highway-env at module import; the functions take a created environment. What it
-maps:
+here imports highway-env at module import; the functions take a created environment.
+
+:class:`HighwayEnvPlant` is a created and reset environment seen by the loop as a plant: the
+ego's state is read from the environment, a command is its action for one policy step, the
+other vehicles are the plant's traffic (obstacles with their predictions, every step) and the
+environment's termination ends the run. What it maps:
 
 * **Road -> path.** The centreline of a lane is sampled from the environment's road network
   (``lane.position(longitudinal, 0)`` of each ``StraightLane`` / ``CircularLane``), following
   the successor lanes with the same lane id until the track closes, and fitted with a (lightly
   smoothed) :class:`~mpcdrive.paths.WaypointPath` (:func:`lane_centerline`). The racetrack's
   lane pieces overlap or leave small gaps where they join (up to about 1 m); the end of a piece
-  that lies past the start line of the next one is dropped before the fit.
+  that lies past the start line of the next one is dropped before the fit. A straight lane
+  without successors (highway-v0's) is its own centreline, a
+  :class:`~mpcdrive.paths.StraightPath`.
+* **Vehicle -> model.** highway-env's kinematic ``Vehicle`` is a bicycle with the reference
+  point at the centre, ``lf = lr = LENGTH / 2``, steering ``delta`` and acceleration held over
+  the policy period and integrated with Euler steps at the simulation frequency:
+  :class:`~mpcdrive.models.KinematicBicycle4` with those lengths (or
+  :class:`~mpcdrive.models.KinematicBicycle3` at the current speed when the action has no
+  longitudinal part).
 * **Units.** ``ContinuousAction`` maps each action component linearly from [-1, 1] to its
   range: steering to ``steering_range`` [rad], acceleration to ``acceleration_range``
   [m/s^2]; :class:`ActionScaling` converts our radians and m/s^2 into that normalized action
@@ -25,15 +37,24 @@ maps:
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
+from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams
+from ..paths.base import ReferencePath
+from ..paths.straight import StraightPath
 from ..paths.waypoints import WaypointPath
+from ..scene.footprint import Footprint
 from ..scene.obstacles import ConstantVelocity, Obstacle, TrajectoryMotion, rectangle
+from ..sim.closed_loop import ENDED_COLLISION
 
 __all__ = [
     "ActionScaling",
+    "EnvStep",
+    "HighwayEnvPlant",
     "lane_centerline",
     "lane_following_obstacle",
     "lane_sequence",
@@ -257,3 +278,186 @@ def _vehicle_state(vehicle, nx: int) -> np.ndarray:
     if nx == 4:
         x.append(float(vehicle.speed))
     return np.array(x)
+
+
+# --------------------------------------------------------------------------- the plant
+@dataclass(frozen=True)
+class EnvStep:
+    """What the environment reported after one ``env.step``: its ``reward``, ``terminated``
+    and ``truncated``; the ego's ``crashed``, ``on_road`` (on a lane), ``speed_mps`` [m/s] and
+    ``lane_index``."""
+
+    reward: float
+    terminated: bool
+    truncated: bool
+    crashed: bool
+    on_road: bool
+    speed_mps: float
+    lane_index: tuple
+
+
+class HighwayEnvPlant:
+    """A created and reset highway-env environment as the plant of :func:`mpcdrive.sim.simulate`
+    (an ``ObservedPlant`` with traffic that can end the episode: ``TrafficPlant``,
+    ``EpisodicPlant`` of :mod:`mpcdrive.sim.closed_loop`).
+
+    The environment holds the state: the plant state is the ego's observed state [x m, y m,
+    yaw rad(, v m/s)] (:attr:`model`'s layout) as read after the last step, and :meth:`step`
+    must be given that state. A command ``u`` (steering [rad](, acceleration [m/s^2])) is the
+    action of one policy step (``dt_s = 1 / policy_frequency``), scaled by :attr:`scaling`; what
+    the environment reports after it is appended to :attr:`records` and ``observer(env)`` (when
+    given) is called. :meth:`traffic` gives the other vehicles (and solid road objects:
+    :attr:`others`, their order fixed) as obstacles at the loop's time, with the prediction
+    ``prediction`` over ``horizon`` policy steps (``lane``: along the lane each one steers to, its
+    offset decaying with ``tau_lateral_s`` [s]; ``constant_velocity``: a straight line; lane
+    centrelines built with ``centerline_ds_m`` / ``centerline_smoothing_m``, see
+    :func:`lane_centerline`, except those given in ``lane_paths``, a path per lane index, e.g.
+    the controller's own). :meth:`ended` ends the run when the environment terminates
+    (``collision`` when the ego crashed, else ``terminated``) or truncates (``truncated``).
+    """
+
+    def __init__(
+        self,
+        env,
+        *,
+        horizon: int = 15,
+        prediction: Literal["lane", "constant_velocity"] = "lane",
+        tau_lateral_s: float = 1.0,
+        centerline_ds_m: float = 1.0,
+        centerline_smoothing_m: float = 0.02,
+        lane_paths: dict | None = None,
+        observer: Callable | None = None,
+    ):
+        u = env.unwrapped
+        vehicle = getattr(u, "vehicle", None)
+        if vehicle is None:
+            raise ValueError("the environment has no ego vehicle: call env.reset() first")
+        cfg = u.config
+        if cfg["action"].get("dynamical", False):
+            raise ValueError(
+                "action.dynamical must be false: the plant models highway-env's "
+                "kinematic Vehicle, not the dynamical BicycleVehicle"
+            )
+        if isinstance(horizon, bool) or int(horizon) != horizon or horizon < 1:
+            raise ValueError(f"horizon must be a positive integer, got {horizon}")
+        if prediction not in ("lane", "constant_velocity"):
+            raise ValueError(f"prediction must be 'lane' or 'constant_velocity', got {prediction!r}")
+        if not tau_lateral_s > 0:
+            raise ValueError(f"tau_lateral_s must be positive, got {tau_lateral_s}")
+        self.env = env
+        self.scaling = ActionScaling.from_env(env)
+        self.dt_s = 1.0 / float(cfg["policy_frequency"])
+        #: the ego's lane when the plant was made
+        self.lane_index = tuple(vehicle.lane_index)
+        # everything the ego can collide with, in a fixed order (index = obstacle identity)
+        self.others = tuple(
+            o
+            for o in [*u.road.vehicles, *getattr(u.road, "objects", [])]
+            if o is not vehicle and getattr(o, "collidable", True) and getattr(o, "solid", True)
+        )
+        length_m, width_m = float(vehicle.LENGTH), float(vehicle.WIDTH)
+        self.footprint = Footprint(length_m, width_m)
+        params = KinematicParams(0.5 * length_m, 0.5 * length_m)
+        self.model: KinematicBicycle3 | KinematicBicycle4
+        if self.scaling.longitudinal:
+            self.model = KinematicBicycle4(params)
+        else:
+            self.model = KinematicBicycle3(float(vehicle.speed), params)
+        self.prediction, self.tau_lateral_s = prediction, float(tau_lateral_s)
+        self._centerline = {"ds_m": centerline_ds_m, "smoothing_m": centerline_smoothing_m}
+        self._times_s = self.dt_s * np.arange(int(horizon) + 1)
+        self._lane_paths: dict = {tuple(ix): p for ix, p in (lane_paths or {}).items()}
+        self.observer = observer
+        #: what the environment reported after each step
+        self.records: list[EnvStep] = []
+
+    # -- the ego ------------------------------------------------------------------------------
+    def state(self) -> np.ndarray:
+        """(nx,) the ego's state [x m, y m, yaw rad(, v m/s)] read from the environment."""
+        return _vehicle_state(self.env.unwrapped.vehicle, self.model.nx)
+
+    def initial_state(self, x0) -> np.ndarray:
+        """The plant state: the ego where the environment has it, which ``x0`` must be."""
+        x = self.state()
+        if np.shape(x0) != x.shape or not np.allclose(np.asarray(x0, float), x, rtol=0.0, atol=1e-9):
+            raise ValueError(f"x0 must be the ego's state in the environment (plant.state()) {x.tolist()}, got {x0!r}")
+        return x
+
+    def observe(self, xp) -> np.ndarray:
+        return np.asarray(xp, float)
+
+    def step(self, xp, u, dt_s: float) -> np.ndarray:
+        """One ``env.step`` with the command ``u`` from the plant state ``xp`` (the last one this
+        plant gave); the ego's state after it. A command that is not finite is not applied: the
+        state is NaN (the loop ends the run as diverged)."""
+        if not math.isclose(dt_s, self.dt_s, rel_tol=1e-9):
+            raise ValueError(f"dt_s must be the policy period {self.dt_s:g} s (1 / policy_frequency), got {dt_s!r}")
+        if not np.array_equal(np.asarray(xp, float), self.state()):
+            raise ValueError("xp must be the environment's current ego state (the plant's last state)")
+        u = np.asarray(u, float).reshape(-1)
+        if not np.all(np.isfinite(u)):
+            return np.full(self.model.nx, np.nan)
+        accel = float(u[1]) if self.model.nu > 1 else 0.0
+        _, reward, terminated, truncated, _ = self.env.step(self.scaling.to_action(float(u[0]), accel))
+        ego = self.env.unwrapped.vehicle
+        self.records.append(
+            EnvStep(
+                float(reward),
+                bool(terminated),
+                bool(truncated),
+                bool(ego.crashed),
+                bool(ego.on_road),
+                float(ego.speed),
+                tuple(ego.lane_index),
+            )
+        )
+        if self.observer is not None:
+            self.observer(self.env)
+        return self.state()
+
+    def ended(self, xp=None) -> str | None:
+        """Why the episode is over after the last step (None while it goes on)."""
+        if not self.records:
+            return None
+        r = self.records[-1]
+        if r.crashed:
+            return ENDED_COLLISION
+        if r.terminated:
+            return "terminated"
+        return "truncated" if r.truncated else None
+
+    # -- the traffic --------------------------------------------------------------------------
+    def lane_path(self, lane_index) -> ReferencePath:
+        """Centreline path of the lanes followed from ``lane_index`` (built once per sequence;
+        a straight lane without successors is a :class:`StraightPath`)."""
+        lane_index = tuple(lane_index)
+        if lane_index not in self._lane_paths:
+            network = self.env.unwrapped.road.network
+            lane = network.get_lane(lane_index)
+            if type(lane).__name__ == "StraightLane" and not network.graph.get(lane_index[1]):
+                self._lane_paths[lane_index] = StraightPath(lane.start, lane.end)
+            else:
+                seq, _ = lane_sequence(network, lane_index)
+                path, _ = lane_centerline(network, lane_index, **self._centerline)
+                for ix in seq:
+                    self._lane_paths.setdefault(ix, path)
+        return self._lane_paths[lane_index]
+
+    def traffic(self, t_s: float) -> tuple[Obstacle, ...]:
+        """The other vehicles (and solid road objects) where they are now, as obstacles on the
+        loop's clock at ``t_s`` [s]: moving along their lane (:func:`lane_following_obstacle`,
+        towards the lane they steer to) or, with ``prediction="constant_velocity"`` and for
+        objects off the lanes, in a straight line (:func:`vehicle_obstacle`)."""
+        out = []
+        for j, o in enumerate(self.others):
+            name = f"{type(o).__name__}-{j}"
+            lane = getattr(o, "target_lane_index", None) or getattr(o, "lane_index", None)
+            if self.prediction == "lane" and lane is not None and float(getattr(o, "speed", 0.0)) != 0.0:
+                out.append(
+                    lane_following_obstacle(
+                        o, self.lane_path(lane), self._times_s, t_s, tau_lateral_s=self.tau_lateral_s, name=name
+                    )
+                )
+            else:
+                out.append(vehicle_obstacle(o, t_s, name))
+        return tuple(out)
