@@ -132,3 +132,40 @@ def test_traffic_that_changes_its_number_is_refused():
 
     with pytest.raises(ValueError, match="traffic changed from 1 to 2"):
         simulate(Coast(), Growing(), PATH, [0.0, 0.0, 0.0, 8.0], 0.1, 5, footprint=BODY)
+
+
+def test_the_clearance_is_the_exact_nearest_distance_at_every_step():
+    """Several cars and a parked circle, some overlapping the ego for a while: the clearance per
+    step is the brute-force smallest distance (the accounting computes far ones only roughly)."""
+    from mpcdrive.scene.obstacles import Circle
+
+    class Cars(CarAhead):
+        x0 = np.array([30.0, 60.0, -20.0, 200.0, 12.0])
+        y = np.array([0.0, 3.0, 0.0, -3.5, 1.5])
+        v = np.array([5.0, 2.0, 12.0, 0.0, 8.0])
+
+        def __init__(self):
+            super().__init__()
+            self.t = 0.0
+
+        def step(self, xp, u, dt_s):
+            self.t += dt_s
+            return super().step(xp, u, dt_s)
+
+        def traffic(self, t_s):
+            x = self.x0 + self.v * self.t
+            return tuple(
+                Obstacle(rectangle(4.0, 2.0), (xi, yi, 0.1 * i), name=f"car{i}")
+                for i, (xi, yi) in enumerate(zip(x, self.y))
+            )
+
+    parked = Obstacle(Circle(1.0), (45.0, -1.5, 0.0), name="parked")
+    r = simulate(Coast(), Cars(), PATH, [0.0, 0.0, 0.0, 8.0], 0.1, 80, footprint=BODY, obstacles=(parked,))
+    brute = []
+    for k, t in enumerate(r.t_s):
+        body = BODY.polygon(*r.x[k, :3])
+        x = Cars.x0 + Cars.v * t
+        cars = [Obstacle(rectangle(4.0, 2.0), (xi, yi, 0.1 * i)).at(0.0) for i, (xi, yi) in enumerate(zip(x, Cars.y))]
+        brute.append(min(shape_distance(body, o) for o in [parked.at(t), *cars]))
+    np.testing.assert_allclose(r.clearance_m, brute, rtol=0, atol=1e-12)
+    assert r.clearance_m.min() < 0 and r.meta["collisions"] >= 1  # car 2 from behind runs into the ego

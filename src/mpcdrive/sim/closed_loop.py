@@ -581,15 +581,34 @@ def collision_events(clearance_m: np.ndarray, t_s: np.ndarray, obstacles) -> lis
 
 def _clearances(X: np.ndarray, T: np.ndarray, obstacles, footprint: Footprint):
     """(n_obstacles, K) footprint-to-obstacle signed distance per obstacle and step [m], and the
-    obstacles' logged shapes and poses (for reports)."""
+    obstacles' logged shapes and poses (for reports).
+
+    The distance is exact where it can matter: the step's nearest obstacle and every contact.
+    For the others it is a lower bound (centre distance less both bounding radii), >= 0 and
+    >= the step's smallest distance; inf outside an obstacle's lifetime."""
     K = len(T)
+    hl, hw = 0.5 * footprint.length_m, 0.5 * footprint.width_m
+    body_r = math.hypot(abs(footprint.center_offset_m) + hl, hw)  # about the reference point
     clear = np.full((len(obstacles), K), np.inf)
-    logs = []
     for i, ob in enumerate(obstacles):
+        P = ob.poses_at(T)
+        bound = np.hypot(P[:, 0] - X[:, 0], P[:, 1] - X[:, 1]) - body_r - ob.shape.bounding_radius_m
+        # an obstacle outside its lifetime is not there to hit
+        clear[i] = np.where(np.broadcast_to(ob.present(T), (K,)), bound, np.inf)
+    for k in range(K):
+        body = None
+        best = math.inf
+        for i in np.argsort(clear[:, k], kind="stable"):
+            b = clear[i, k]
+            if b == math.inf or (b > best + 1e-9 and b > 1e-9):
+                break  # this one and the rest are farther and not in contact (1 nm of rounding)
+            if body is None:
+                body = footprint.polygon(*X[k, :3])
+            clear[i, k] = shape_distance(body, obstacles[i].at(T[k]))
+            best = min(best, clear[i, k])
+    logs = []
+    for ob in obstacles:
         poses = np.array([ob.pose_at(t) for t in T])
-        for k in range(K):
-            if ob.present(T[k]):  # an obstacle outside its lifetime is not there to hit
-                clear[i, k] = shape_distance(footprint.polygon(*X[k, :3]), ob.at(T[k]))
         entry = {"name": ob.name, "moving": ob.moving}
         if isinstance(ob.shape, Circle):
             centers = poses[:, :2].round(4)
