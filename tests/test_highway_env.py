@@ -22,7 +22,8 @@ from mpcdrive.adapters.highway_env import (
     racetrack_config,
     vehicle_obstacle,
 )
-from mpcdrive.sim import compute_metrics
+from mpcdrive.sim import compute_metrics, run_verdict
+from mpcdrive.types import ControlOutput, WarmStart
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")  # pygame without a display
 
@@ -251,7 +252,7 @@ def test_lane_following_prediction_stays_on_the_lane_and_comes_true(gym):
     others = driver.others
     net = u.road.network
     times = np.arange(0.0, 3.01, 0.2)
-    obs = driver.obstacles(t_s=2.0)
+    obs = driver.plant.traffic(t_s=2.0)
     straight_off_road = 0
     for v, ob in zip(others, obs):
         assert ob.pose_at(2.0) == pytest.approx((v.position[0], v.position[1], v.heading), abs=1e-9)
@@ -265,9 +266,7 @@ def test_lane_following_prediction_stays_on_the_lane_and_comes_true(gym):
     assert straight_off_road >= 1  # the straight-line prediction leaves the road within 3 s
     # drive 1 s (5 policy steps): the vehicles are where the prediction put them
     predicted = [ob.pose_at(2.0 + 1.0) for ob in obs]
-    for _ in range(5):
-        action, _ = driver.act()
-        env.step(action)
+    assert drive_env(env, driver, 5).result.steps == 5
     err = [math.hypot(v.position[0] - p[0], v.position[1] - p[1]) for v, p in zip(others, predicted)]
     assert max(err) < 1.0, err
     env.close()
@@ -338,3 +337,52 @@ def test_highway_v0_overtakes_a_slower_car_without_a_crash(gym):
     assert ep.steps == 200 and not ep.crashed and ep.off_road_steps == 0
     assert ep.lane_changes >= 1 and ep.overtakes >= 1
     assert ep.mean_speed_mps > 20.0
+    # the closed loop's own accounting agrees: no contact, inside the road's lanes, every solve ok
+    m = compute_metrics(ep.result)
+    assert m["steps"] == 200 and m["termination"] == "truncated"  # highway-env's 40 s ran out
+    assert m["collisions"] == 0 and m["min_obstacle_clearance_m"] > 0.5
+    assert m["max_lane_excess_m"] == 0.0 and m["solver_failures"] == 0 and m["fallbacks"] == 0
+    assert not run_verdict(m).unsafe
+
+
+class FullThrottle:
+    """Straight ahead at full acceleration, blind to the traffic (N = 0)."""
+
+    nx, nu, N, dt_s = 4, 2, 0, 0.2
+
+    def initial_warm(self, x0):
+        return WarmStart(s_m=0.0, u_prev=np.zeros(2))
+
+    def step(self, x, warm):
+        X = np.asarray(x, float)[None, :]
+        u = np.array([0.0, 5.0])
+        return ControlOutput(u, "ok", "", 0.0, float(x[0]), 0.0, 0.0, X, X, WarmStart(0.0, u, t_s=warm.t_s + 0.2))
+
+
+@pytest.mark.slow
+def test_highway_env_is_the_plant_and_its_crash_ends_the_run(gym):
+    """The environment as sim.simulate's plant: its state, its step, its traffic and its end;
+    a blind ego at full throttle runs into the car ahead, and the run's accounting says so."""
+    from mpcdrive.adapters.highway_env import HighwayEnvPlant, highway_config, straight_road
+    from mpcdrive.sim import simulate
+    from mpcdrive.sim.closed_loop import EpisodicPlant, ObservedPlant, TrafficPlant
+
+    env = gym.make("highway-v0", config=highway_config(duration_s=40.0))
+    env.reset(seed=3)
+    plant = HighwayEnvPlant(env, prediction="constant_velocity")
+    assert all(isinstance(plant, P) for P in (ObservedPlant, TrafficPlant, EpisodicPlant))
+    assert len(plant.traffic(0.0)) == len(plant.others) >= 40
+    x = plant.state()
+    with pytest.raises(ValueError, match="x0"):
+        plant.initial_state(x + 1.0)
+    with pytest.raises(ValueError, match="policy period"):
+        plant.step(x, [0.0, 0.0], 0.1)
+    road, path, _ = straight_road(env.unwrapped.road.network, plant.lane_index)
+    r = simulate(FullThrottle(), plant, path, x, plant.dt_s, 200, road=road, footprint=plant.footprint)
+    assert r.steps < 200 and r.meta["termination"] == "collision" and env.unwrapped.vehicle.crashed
+    assert plant.records[-1].crashed and plant.ended(r.x_final) == "collision"
+    m = compute_metrics(r)
+    assert m["collisions"] >= 1 and run_verdict(m).collided
+    with pytest.raises(ValueError, match="current ego state"):
+        plant.step(x, [0.0, 0.0], plant.dt_s)
+    env.close()

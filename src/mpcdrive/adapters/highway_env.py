@@ -1,44 +1,34 @@
-"""Drive highway-env's racetrack (``racetrack-v0``) with mpcdrive's LTV-MPC.
+"""Drive highway-env's racetrack (``racetrack-v0`` / ``racetrack-v1``) and ``highway-v0`` with
+mpcdrive's LTV-MPC, through :func:`mpcdrive.sim.simulate`'s closed loop.
 
 Optional extra ``highway`` (``pip install mpcdrive[highway]``: highway-env, gymnasium). Nothing
 here imports highway-env at module import; the functions take a created environment.
 
-What the adapter does:
+The environment is the loop's plant (:class:`~mpcdrive.adapters.highway_plant.HighwayEnvPlant`:
+the ego's state, a command as one policy step's action, the other vehicles as its traffic, the
+episode's end); :class:`HighwayEnvMpcDriver` is the controller:
 
-* **Road -> path.** The centreline of the lane the ego vehicle is on is sampled from the
-  environment's road network (``lane.position(longitudinal, 0)`` of each ``StraightLane`` /
-  ``CircularLane``), following the successor lanes with the same lane id until the track closes,
-  and fitted with a (lightly smoothed) :class:`~mpcdrive.paths.WaypointPath`. The racetrack's
-  lane pieces overlap or leave small gaps where they join (up to about 1 m); the end of a piece
-  that lies past the start line of the next one is dropped before the fit.
-* **Vehicle -> model.** highway-env's kinematic ``Vehicle`` is a bicycle with the reference
-  point at the centre, ``lf = lr = LENGTH / 2``, steering ``delta`` and acceleration held over
-  the policy period and integrated with Euler steps at the simulation frequency:
-  :class:`~mpcdrive.models.KinematicBicycle4` with those lengths (or
-  :class:`~mpcdrive.models.KinematicBicycle3` at the current speed when the action has no
-  longitudinal part).
-* **Units.** ``ContinuousAction`` maps each action component linearly from [-1, 1] to its
-  range: steering to ``steering_range`` [rad], acceleration to ``acceleration_range``
-  [m/s^2]; :class:`ActionScaling` converts our radians and m/s^2 into that normalized action
-  (order ``[acceleration, steering]`` when both are controlled) and the MPC's input bounds are
-  exactly those ranges, so a command is never clipped by the environment.
-* **Other vehicles -> moving obstacles.** Every other vehicle (and solid road object) is a
-  ``LENGTH`` x ``WIDTH`` rectangle at its position and heading; each policy step the driver hands
-  the controller their current poses (:meth:`LtvMpc.set_obstacles`, on the controller's clock),
-  predicted over the horizon at constant speed along the lane each one steers to
-  (:func:`lane_following_obstacle`; its offset from that lane's centre decays, as highway-env's
-  lane keeping makes it) -- a straight-line prediction (:func:`vehicle_obstacle`,
-  ``prediction="constant_velocity"``) runs off the racetrack's 15-25 m bends within the horizon
-  and makes phantom obstacles of cars in the next lane. The avoidance is ``hard`` with car
-  following (``follow_gap_s``): the ego keeps to its lane (the lane bound keeps its body inside),
-  passes cars in the next lane, and behind a car in its own lane -- or one cutting in, judged
-  where the ego meets it -- it slows down and follows at a time gap instead of overtaking.
-  Vehicles beyond the influence distance (20 m) are ignored, the nearest three considered.
+* **Path and model.** The path is the centreline of the ego's lane
+  (:func:`~mpcdrive.adapters.highway_plant.lane_centerline`), the model the plant's (the
+  environment's kinematic vehicle), and the MPC's input bounds are exactly the action's ranges,
+  so a command is never clipped by the environment.
+* **Other vehicles.** At each step the loop hands the controller the plant's traffic (their
+  current poses and predictions, on the loop's clock: :meth:`LtvMpc.set_obstacles`). The
+  avoidance is ``hard`` with car following (``follow_gap_s``): the ego keeps to its lane (the
+  lane bound keeps its body inside), passes cars in the next lane, and behind a car in its own
+  lane -- or one cutting in, judged where the ego meets it -- it slows down and follows at a time
+  gap instead of overtaking. Vehicles beyond the influence distance (20 m) are ignored, the
+  nearest three considered.
+* **Lanes (highway-v0).** With ``settings.lanes`` (:func:`highway_settings`) a decision layer
+  (:mod:`mpcdrive.control.lanes`) picks the lane on highway-v0's straight parallel lanes and the
+  controller is retargeted onto the route lane's centreline shifted by its lateral ramp
+  (docs/highway.md).
 
-Example::
+:func:`drive_env` runs an episode (:func:`~mpcdrive.sim.simulate` with the plant, the road the
+run is judged on and the vehicle's footprint) and adds what the environment reported. Example::
 
     import gymnasium as gym
-    env = gym.make("racetrack-v0", config=racetrack_config(other_vehicles=10))
+    env = gym.make("racetrack-v1", config=racetrack_config(other_vehicles=10))
     env.reset(seed=0)
     drive = drive_env(env, HighwayEnvMpcDriver(env), steps=300)
     print(drive.result.e_y_m.max(), drive.on_road.all(), drive.crashed, drive.clearance_m.min())
@@ -54,23 +44,31 @@ import numpy as np
 
 from ..control.lanes import LaneConfig, LaneDecision, LateralRamp, decide_lane
 from ..control.mpc import LtvMpc, MpcConfig
-from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams
 from ..ocp.avoidance import AvoidanceConfig
 from ..ocp.problem import MpcProblem
 from ..paths.straight import StraightPath
 from ..paths.waypoints import WaypointPath
 from ..scene.footprint import Footprint
-from ..scene.geometry import shape_distance
-from ..scene.obstacles import ConstantVelocity, Obstacle, TrajectoryMotion, rectangle
 from ..scene.road import Lane, Road
-from ..sim.closed_loop import contact_count
-from ..types import ControlOutput, SimResult
+from ..sim.closed_loop import simulate
+from ..types import ControlOutput, SimResult, WarmStart
+from .highway_plant import (
+    DEFAULT_ACCELERATION_RANGE_MPS2,
+    DEFAULT_STEERING_RANGE_RAD,
+    ActionScaling,
+    HighwayEnvPlant,
+    lane_centerline,
+    lane_following_obstacle,
+    lane_sequence,
+    vehicle_obstacle,
+)
 
 __all__ = [
     "ActionScaling",
     "DriverSettings",
     "HighwayDrive",
     "HighwayEnvMpcDriver",
+    "HighwayEnvPlant",
     "drive_env",
     "lane_centerline",
     "lane_following_obstacle",
@@ -78,10 +76,6 @@ __all__ = [
     "racetrack_config",
     "vehicle_obstacle",
 ]
-
-#: highway-env's ContinuousAction defaults (used when the env config names no range)
-DEFAULT_STEERING_RANGE_RAD = (-math.pi / 4, math.pi / 4)
-DEFAULT_ACCELERATION_RANGE_MPS2 = (-5.0, 5.0)
 
 
 def racetrack_config(
@@ -148,77 +142,6 @@ def highway_config(
 
 
 # --------------------------------------------------------------------------- road -> path
-def lane_sequence(network, start_index) -> tuple[list, bool]:
-    """Lane indices ``(from, to, id)`` followed from ``start_index`` through the road network,
-    keeping the lane id where the next road has it (else the nearest lane of the next road);
-    returns (indices, closed): closed when the sequence comes back to the start."""
-    graph = network.graph
-    try:
-        network.get_lane(start_index)
-    except (KeyError, IndexError, TypeError):
-        raise ValueError(f"lane index {start_index!r} is not in the road network") from None
-    seq, cur = [tuple(start_index)], tuple(start_index)
-    n_lanes = sum(len(lanes) for to in graph.values() for lanes in to.values())
-    for _ in range(n_lanes):
-        _, to, lane_id = cur
-        nexts = graph.get(to, {})
-        if not nexts:
-            return seq, False
-        end = network.get_lane(cur).position(network.get_lane(cur).length, 0.0)
-        best = None
-        for nxt_to, lanes in nexts.items():
-            ids = [lane_id] if lane_id < len(lanes) else range(len(lanes))
-            for j in ids:
-                d = float(np.hypot(*(np.asarray(lanes[j].position(0.0, 0.0)) - end)))
-                if best is None or d < best[0]:
-                    best = (d, (to, nxt_to, j))
-        cur = best[1]
-        if cur == seq[0]:
-            return seq, True
-        if cur in seq:
-            raise ValueError(
-                f"the lanes from {start_index!r} run into a loop that does not return to the start (at {cur!r})"
-            )
-        seq.append(cur)
-    raise ValueError(f"could not follow the lanes from {start_index!r}")
-
-
-def lane_centerline(network, lane_index, *, ds_m: float = 1.0, smoothing_m: float = 0.02) -> tuple[WaypointPath, float]:
-    """The centreline of the lane ``lane_index`` and its successors as a path, and the lane
-    half width [m] (the narrowest along the way).
-
-    ds_m : sampling step along each lane [m]; smoothing_m : allowed RMS distance [m] between
-    the fitted spline and the samples (0 interpolates; the default irons out the few-decimetre
-    steps where the racetrack's pieces join without moving the line noticeably).
-    """
-    if not (math.isfinite(ds_m) and ds_m > 0):
-        raise ValueError(f"ds_m must be positive, got {ds_m}")
-    if not (math.isfinite(smoothing_m) and smoothing_m >= 0):
-        raise ValueError(f"smoothing_m must be >= 0, got {smoothing_m}")
-    seq, closed = lane_sequence(network, lane_index)
-    lanes = [network.get_lane(ix) for ix in seq]
-    pts, widths = [], []
-    for n, lane in enumerate(lanes):
-        length = float(lane.length)
-        s = np.arange(0.0, length, ds_m)
-        if not closed and n == len(lanes) - 1:
-            s = np.r_[s, length]
-        P = np.array([lane.position(si, 0.0) for si in s], dtype=float).reshape(-1, 2)
-        widths += [float(lane.width_at(si)) for si in (0.0, 0.5 * length, length)]
-        if closed or n + 1 < len(lanes):
-            nxt = lanes[(n + 1) % len(lanes)]
-            start = np.asarray(nxt.position(0.0, 0.0), dtype=float)
-            h = float(nxt.heading_at(0.0))
-            along = (P - start) @ np.array([math.cos(h), math.sin(h)])
-            # near the end only: points at or past the next piece's start line overlap it
-            near_end = s > length - min(5.0, 0.5 * length)
-            P = P[~(near_end & (along > -0.25 * ds_m))]
-        pts.append(P)
-    P = np.vstack(pts)
-    path = WaypointPath(P, closed=closed, smoothing=len(P) * smoothing_m**2)
-    return path, 0.5 * min(widths)
-
-
 def straight_road(network, lane_index) -> tuple[Road, StraightPath, dict]:
     """highway-v0's road: the lanes of the edge holding ``lane_index`` (straight and parallel,
     as ``RoadNetwork.straight_road_network`` makes them) as a :class:`~mpcdrive.scene.road.Road`
@@ -275,73 +198,6 @@ def lane_problem(
         x_max=x_max,
         road=road,
     )
-
-
-# --------------------------------------------------------------------------- actions
-@dataclass(frozen=True)
-class ActionScaling:
-    """highway-env's ContinuousAction mapping between [-1, 1] and physical inputs.
-
-    steering_range_rad : (low, high) [rad]; acceleration_range_mps2 : (low, high) [m/s^2], or
-    None when the action has no longitudinal part (then the action is ``[steering]``, else
-    ``[acceleration, steering]``).
-    """
-
-    steering_range_rad: tuple[float, float] = DEFAULT_STEERING_RANGE_RAD
-    acceleration_range_mps2: tuple[float, float] | None = DEFAULT_ACCELERATION_RANGE_MPS2
-
-    def __post_init__(self):
-        for name in ("steering_range_rad", "acceleration_range_mps2"):
-            rng = getattr(self, name)
-            if rng is None and name == "acceleration_range_mps2":
-                continue
-            lo, hi = (float(v) for v in rng)
-            if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
-                raise ValueError(f"{name} must be two finite numbers, low < high, got {rng}")
-            object.__setattr__(self, name, (lo, hi))
-
-    @classmethod
-    def from_env(cls, env) -> ActionScaling:
-        """The scaling of a created environment's ContinuousAction (lateral control required)."""
-        at = env.unwrapped.action_type
-        if type(at).__name__ != "ContinuousAction":
-            raise ValueError(f"action.type must be ContinuousAction, got {type(at).__name__}")
-        if not at.lateral:
-            raise ValueError("action.lateral must be true: the driver steers")
-        return cls(tuple(at.steering_range), tuple(at.acceleration_range) if at.longitudinal else None)
-
-    @property
-    def longitudinal(self) -> bool:
-        return self.acceleration_range_mps2 is not None
-
-    @staticmethod
-    def _to_unit(value: float, rng: tuple[float, float]) -> float:
-        lo, hi = rng
-        return float(np.clip(2.0 * (value - lo) / (hi - lo) - 1.0, -1.0, 1.0))
-
-    @staticmethod
-    def _from_unit(a: float, rng: tuple[float, float]) -> float:
-        lo, hi = rng
-        return float(lo + (float(np.clip(a, -1.0, 1.0)) + 1.0) * 0.5 * (hi - lo))
-
-    def to_action(self, steer_rad: float, accel_mps2: float = 0.0) -> np.ndarray:
-        """Normalized action (float32, in [-1, 1]) for steering [rad] and acceleration [m/s^2]."""
-        if not (math.isfinite(steer_rad) and math.isfinite(accel_mps2)):
-            raise ValueError(f"steer_rad and accel_mps2 must be finite, got {steer_rad}, {accel_mps2}")
-        st = self._to_unit(steer_rad, self.steering_range_rad)
-        if self.acceleration_range_mps2 is None:
-            return np.array([st], dtype=np.float32)
-        return np.array([self._to_unit(accel_mps2, self.acceleration_range_mps2), st], dtype=np.float32)
-
-    def from_action(self, action) -> tuple[float, float]:
-        """(steering [rad], acceleration [m/s^2]) that the environment applies for ``action``."""
-        a = np.asarray(action, dtype=float).reshape(-1)
-        n = 2 if self.longitudinal else 1
-        if a.shape != (n,):
-            raise ValueError(f"action must have {n} component(s), got shape {a.shape}")
-        if not self.longitudinal:
-            return self._from_unit(a[0], self.steering_range_rad), 0.0
-        return (self._from_unit(a[1], self.steering_range_rad), self._from_unit(a[0], self.acceleration_range_mps2))
 
 
 # --------------------------------------------------------------------------- driver
@@ -413,91 +269,21 @@ def highway_settings(v_ref_mps: float = 30.0, **overrides) -> DriverSettings:
     return DriverSettings(**{**base, **overrides})
 
 
-def vehicle_obstacle(vehicle, t_s: float = 0.0, name: str = "") -> Obstacle:
-    """A highway-env vehicle (or road object) as a moving obstacle: its ``LENGTH`` x ``WIDTH``
-    rectangle [m] centred at its ``position`` [m] with its ``heading`` [rad], moving at its
-    current velocity ``speed (cos heading, sin heading)`` [m/s].
-
-    t_s : the time [s] on the controller's clock at which the vehicle is where it is now (the
-    ``warm.t_s`` of the step that uses the obstacle), so ``pose_at(t_s)`` is its current pose
-    and ``pose_at(t_s + k dt)`` the constant-velocity prediction ``k`` steps ahead."""
-    if not math.isfinite(t_s):
-        raise ValueError(f"t_s must be finite, got {t_s}")
-    x, y = (float(v) for v in vehicle.position)
-    heading, speed = float(vehicle.heading), float(getattr(vehicle, "speed", 0.0))
-    vx, vy = speed * math.cos(heading), speed * math.sin(heading)
-    return Obstacle(
-        rectangle(float(vehicle.LENGTH), float(vehicle.WIDTH)),
-        (x - vx * t_s, y - vy * t_s, heading),
-        ConstantVelocity(vx, vy),
-        name,
-    )
-
-
-def lane_following_obstacle(
-    vehicle,
-    path,
-    times_s,
-    t_s: float = 0.0,
-    *,
-    s_guess: float | None = None,
-    tau_lateral_s: float = 1.0,
-    name: str = "",
-) -> Obstacle:
-    """A highway-env vehicle as an obstacle that follows its lane: the ``LENGTH`` x ``WIDTH``
-    rectangle [m] starts at the vehicle's pose and moves along ``path`` (the lane's centreline,
-    a :class:`~mpcdrive.paths.ReferencePath`) at its current speed [m/s], its lateral offset [m] and
-    heading offset [rad] from the lane decaying with time constant ``tau_lateral_s`` [s] (the
-    vehicle steers back to the lane centre; ``math.inf`` keeps the offsets).
-
-    times_s : (K,) prediction times [s] from now (increasing, starting at 0; the pose is held
-    after the last); t_s : the controller's clock [s] now (see :func:`vehicle_obstacle`);
-    s_guess : arc length [m] near which to project the vehicle (None: the whole path)."""
-    times = np.asarray(times_s, dtype=float)
-    if times.ndim != 1 or len(times) < 1 or times[0] != 0.0 or np.any(np.diff(times) <= 0):
-        raise ValueError("times_s must be increasing prediction times starting at 0")
-    if not math.isfinite(t_s):
-        raise ValueError(f"t_s must be finite, got {t_s}")
-    if not tau_lateral_s > 0:
-        raise ValueError(f"tau_lateral_s must be positive, got {tau_lateral_s}")
-    xy = np.array([float(v) for v in vehicle.position])
-    heading, speed = float(vehicle.heading), float(getattr(vehicle, "speed", 0.0))
-    window = 10.0 + float(vehicle.LENGTH)
-    s0, e0 = path.project(xy, s_guess, window) if s_guess is not None else path.project(xy)
-    s = s0 + max(speed, 0.0) * times
-    if not path.closed:
-        s = np.minimum(s, path.length_m)
-    h = np.asarray(path.heading(s), dtype=float)
-    dpsi = (heading - float(path.heading(s0)) + math.pi) % (2.0 * math.pi) - math.pi
-    decay = np.exp(-times / tau_lateral_s)
-    normal = np.column_stack([-np.sin(h), np.cos(h)])
-    P = np.asarray(path.position(s), dtype=float) + (e0 * decay)[:, None] * normal
-    # the prediction starts exactly at the vehicle's pose
-    P += (xy - P[0]) * decay[:, None]
-    yaw = np.unwrap(h + dpsi * decay)
-    yaw += heading - yaw[0]
-    motion = TrajectoryMotion(t_s + times, P[:, 0] - xy[0], P[:, 1] - xy[1], yaw - heading)
-    return Obstacle(rectangle(float(vehicle.LENGTH), float(vehicle.WIDTH)), (xy[0], xy[1], heading), motion, name)
-
-
-def _vehicle_state(vehicle, nx: int) -> np.ndarray:
-    x = [float(vehicle.position[0]), float(vehicle.position[1]), float(vehicle.heading)]
-    if nx == 4:
-        x.append(float(vehicle.speed))
-    return np.array(x)
-
-
 class HighwayEnvMpcDriver:
-    """LTV-MPC driver of a created (and reset) highway-env environment's ego vehicle.
+    """LTV-MPC driver of a created (and reset) highway-env environment's ego vehicle: a
+    controller (``initial_warm``, ``step``, ``set_obstacles``) for :func:`~mpcdrive.sim.simulate`
+    with :attr:`plant` (the environment as the plant, its traffic predicted per ``settings``).
 
     Built once per episode (after ``env.reset``): path from the ego's lane, model from the
-    vehicle's length, QP from the action ranges, and the list of the other vehicles (and solid
-    road objects: ``others``, their order fixed, an obstacle's index its identity). :meth:`act`
-    reads the vehicle state (position [m], heading [rad], speed [m/s]) and the other vehicles'
-    poses, hands those to the controller as obstacles and returns the normalized action and the
-    controller's output. The controller's period is the policy period ``1 / policy_frequency``.
-    With steering only (no longitudinal action) the ego cannot slow down behind a slower car in
-    its lane: it keeps its lane and speed, and the avoidance can only hold it off sideways.
+    vehicle's length, QP from the action ranges. At each step the loop hands it the plant's
+    traffic (:meth:`set_obstacles`; ``others``, their order fixed, an obstacle's index its
+    identity); :meth:`step` takes the lane decision (with ``settings.lanes``), passes the
+    obstacles to the MPC and solves. Its outputs' path coordinates are those on :attr:`path`
+    (the route lane's centreline), whichever reference the MPC tracks. The controller's period
+    is the policy period ``1 / policy_frequency``. With steering only (no longitudinal action)
+    the ego cannot slow down behind a slower car in its lane: it keeps its lane and speed, and
+    the avoidance can only hold it off sideways. :attr:`considered` counts, per step, the
+    obstacles the MPC considered (within the influence distance, at most ``max_obstacles``).
     """
 
     def __init__(self, env, settings: DriverSettings = DriverSettings()):
@@ -505,29 +291,14 @@ class HighwayEnvMpcDriver:
         vehicle = getattr(u, "vehicle", None)
         if vehicle is None:
             raise ValueError("the environment has no ego vehicle: call env.reset() first")
-        cfg = u.config
-        if cfg["action"].get("dynamical", False):
-            raise ValueError(
-                "action.dynamical must be false: the driver models highway-env's "
-                "kinematic Vehicle, not the dynamical BicycleVehicle"
-            )
-        # everything the ego can collide with, in a fixed order (index = obstacle identity)
-        self.others = tuple(
-            o
-            for o in [*u.road.vehicles, *getattr(u.road, "objects", [])]
-            if o is not vehicle and getattr(o, "collidable", True) and getattr(o, "solid", True)
-        )
         self.env = env
         self.settings = settings
-        self.scaling = ActionScaling.from_env(env)
-        self.dt_s = 1.0 / float(cfg["policy_frequency"])
         self.lane_index = tuple(vehicle.lane_index)
         # highway-v0's straight parallel lanes: a decision layer picks the lane to drive in
         self.road: Road | None = None
         self.decision: LaneDecision | None = None
-        self._lane_paths: dict = {}
         if settings.lanes is not None:
-            self.road, self.path, self._lane_paths = straight_road(u.road.network, self.lane_index)
+            self.road, self.path, lane_paths = straight_road(u.road.network, self.lane_index)
             self.lane_half_width_m = 0.5 * float(u.road.network.get_lane(self.lane_index).width)
         else:
             self.path, self.lane_half_width_m = lane_centerline(
@@ -536,23 +307,31 @@ class HighwayEnvMpcDriver:
                 ds_m=settings.centerline_ds_m,
                 smoothing_m=settings.centerline_smoothing_m,
             )
-            self._lane_paths = dict.fromkeys(lane_sequence(u.road.network, self.lane_index)[0], self.path)
-        self._times_s = self.dt_s * np.arange(int(settings.horizon) + 1)
-        length_m, width_m = float(vehicle.LENGTH), float(vehicle.WIDTH)
-        self.footprint = Footprint(length_m, width_m)
-        params = KinematicParams(0.5 * length_m, 0.5 * length_m)
+            lane_paths = dict.fromkeys(lane_sequence(u.road.network, self.lane_index)[0], self.path)
+        #: the environment as the closed loop's plant
+        self.plant = HighwayEnvPlant(
+            env,
+            horizon=int(settings.horizon),
+            prediction=settings.prediction,
+            tau_lateral_s=settings.tau_lateral_s,
+            centerline_ds_m=settings.centerline_ds_m,
+            centerline_smoothing_m=settings.centerline_smoothing_m,
+            lane_paths=lane_paths,
+        )
+        p = self.plant
+        # the plant's vehicle, action and traffic
+        self.model, self.footprint, self.scaling, self.dt_s = p.model, p.footprint, p.scaling, p.dt_s
+        self.others = p.others
         st_lo, st_hi = self.scaling.steering_range_rad
         rate = settings.max_steer_rate_rad_s if settings.max_steer_rate_rad_s is not None else np.inf
         s = settings
         if self.scaling.longitudinal:
-            self.model = KinematicBicycle4(params)
             a_lo, a_hi = self.scaling.acceleration_range_mps2
             u_min, u_max, du = [st_lo, a_lo], [st_hi, a_hi], [rate, np.inf]
             x_min = [-np.inf] * 3 + [s.speed_limits_mps[0]]
             x_max = [np.inf] * 3 + [s.speed_limits_mps[1]]
             v_ref, nq, nr = s.v_ref_mps, 4, 2
         else:
-            self.model = KinematicBicycle3(float(vehicle.speed), params)
             u_min, u_max, du = [st_lo], [st_hi], [rate]
             x_min = x_max = None
             v_ref, nq, nr = float(vehicle.speed), 3, 1
@@ -563,17 +342,61 @@ class HighwayEnvMpcDriver:
         if self.lane_road.narrowest_fit_m(self.footprint) <= 0:
             raise ValueError(
                 f"lane half width {self.lane_half_width_m} m leaves no room for the "
-                f"vehicle ({width_m} m wide) with a margin of {s.lane_margin_m} m"
+                f"vehicle ({self.footprint.width_m} m wide) with a margin of {s.lane_margin_m} m"
             )
         self._bounds = (u_min, u_max, du, x_min, x_max)
         # the projection window must cover the distance driven per step, and more
         window = max(2.0, 3.0 * max(v_ref, float(vehicle.speed)) * self.dt_s)
         self._mpc_config = MpcConfig(v_ref_mps=v_ref, projection_window_m=window)
-        obstacles = self.obstacles(0.0)
-        self.controller = self._controller(self.path, obstacles)
-        self.warm = self.controller.initial_warm(self.state())
+        #: obstacles the MPC considered per step
+        self.considered: list[int] = []
+        self._obstacles = p.traffic(0.0)
+        self.controller = self._controller(self.path, self._obstacles)
         if self.road is not None:
-            self._follow_lanes(obstacles)
+            x = p.state()
+            self._follow_lanes(x, self.controller.initial_warm(x), self._obstacles)
+
+    # -- the controller interface (sim.simulate) -----------------------------------------------
+    @property
+    def nx(self) -> int:
+        return self.model.nx
+
+    @property
+    def nu(self) -> int:
+        return self.model.nu
+
+    @property
+    def N(self) -> int:
+        return int(self.settings.horizon)
+
+    @property
+    def safety_road(self) -> Road:
+        """The road a run is judged on along :attr:`path`: highway-v0's whole road (every lane)
+        with the lane decision layer, else the lane around the path."""
+        return self.road if self.road is not None else self.lane_road
+
+    def initial_warm(self, x0) -> WarmStart:
+        return self.controller.initial_warm(x0)
+
+    def set_obstacles(self, obstacles) -> None:
+        """The other vehicles (the plant's traffic) for the next :meth:`step`, on its clock."""
+        self._obstacles = tuple(obstacles)
+
+    def step(self, x, warm: WarmStart) -> ControlOutput:
+        """One control step from the measured state ``x``: with ``settings.lanes`` the lane
+        decision first (:attr:`decision`), then the MPC with the last obstacles given."""
+        x = np.asarray(x, float)
+        if self._obstacles:
+            if self.road is not None:
+                warm = self._follow_lanes(x, warm, self._obstacles)
+            self.controller.set_obstacles(self._obstacles)
+        out = self.controller.step(x, warm)
+        avoidance = self.controller.avoidance
+        self.considered.append(0 if avoidance is None else len(avoidance.relevant(warm.t_s, x[:2])))
+        if self.controller.path is not self.path and np.all(np.isfinite(x[:3])):  # retargeted
+            fr = self.path.frenet(x[:3])
+            out = replace(out, s_m=fr.s_m, e_y_m=fr.e_y_m, e_psi_rad=fr.e_psi_rad)
+        return out
 
     def _controller(self, path, obstacles) -> LtvMpc:
         """The LTV-MPC along ``path`` (the body kept inside the lane around it) avoiding ``obstacles``."""
@@ -604,96 +427,45 @@ class HighwayEnvMpcDriver:
             footprint=self.footprint,
         )
 
-    def _follow_lanes(self, obstacles) -> None:
+    def _follow_lanes(self, x, warm: WarmStart, obstacles) -> WarmStart:
         """Ask the decision layer for the lane; on a new lateral reference, retarget the
         controller: a fresh one along the route lane's centreline shifted by the reference
-        (:func:`ramp_path`), its warm start carried over (the plan is in world coordinates)."""
+        (:func:`ramp_path`), the warm start carried over (the plan is in world coordinates).
+        Returns the warm start for the controller now in place."""
         assert self.road is not None and self.settings.lanes is not None
-        x = self.state()
         s_m, e_y = self.path.project(x[:2])
         d = decide_lane(
             self.road,
             self.path,
             s_m,
             e_y,
-            float(self.env.unwrapped.vehicle.speed),
+            float(self.model.speed(x)),
             obstacles,
-            self.warm.t_s,
+            warm.t_s,
             self.decision,
             self.settings.lanes,
         )
         if self.decision is None or d.ramp is not self.decision.ramp:
             ctrl = self._controller(ramp_path(self.path, d.ramp, s_m), obstacles)
-            self.warm = replace(self.warm, s_m=ctrl.initial_warm(x).s_m, sides=())
+            warm = replace(warm, s_m=ctrl.initial_warm(x).s_m, sides=())
             self.controller = ctrl
         self.decision = d
-
-    def state(self) -> np.ndarray:
-        """(nx,) ego state [x m, y m, yaw rad(, v m/s)] read from the environment."""
-        return _vehicle_state(self.env.unwrapped.vehicle, self.model.nx)
-
-    def lane_path(self, lane_index):
-        """Centreline path of the lanes followed from ``lane_index`` (built once per sequence)."""
-        lane_index = tuple(lane_index)
-        if lane_index not in self._lane_paths:
-            seq, _ = lane_sequence(self.env.unwrapped.road.network, lane_index)
-            path, _ = lane_centerline(
-                self.env.unwrapped.road.network,
-                lane_index,
-                ds_m=self.settings.centerline_ds_m,
-                smoothing_m=self.settings.centerline_smoothing_m,
-            )
-            for ix in seq:
-                self._lane_paths.setdefault(ix, path)
-        return self._lane_paths[lane_index]
-
-    def obstacles(self, t_s: float) -> tuple[Obstacle, ...]:
-        """The other vehicles (and solid road objects) where they are now, as obstacles on the
-        controller's clock at ``t_s`` [s]: moving along their lane (:func:`lane_following_obstacle`,
-        towards the lane they steer to) or, with ``prediction="constant_velocity"`` and for
-        objects off the lanes, in a straight line (:func:`vehicle_obstacle`)."""
-        s = self.settings
-        out = []
-        for j, o in enumerate(self.others):
-            name = f"{type(o).__name__}-{j}"
-            lane = getattr(o, "target_lane_index", None) or getattr(o, "lane_index", None)
-            if s.prediction == "lane" and lane is not None and float(getattr(o, "speed", 0.0)) != 0.0:
-                out.append(
-                    lane_following_obstacle(
-                        o, self.lane_path(lane), self._times_s, t_s, tau_lateral_s=s.tau_lateral_s, name=name
-                    )
-                )
-            else:
-                out.append(vehicle_obstacle(o, t_s, name))
-        return tuple(out)
-
-    def act(self) -> tuple[np.ndarray, ControlOutput]:
-        """One control step: (normalized action for ``env.step``, controller output); with
-        ``settings.lanes``, the lane decision first (:attr:`decision`)."""
-        if self.others:
-            obstacles = self.obstacles(self.warm.t_s)
-            if self.road is not None:
-                self._follow_lanes(obstacles)
-            self.controller.set_obstacles(obstacles)
-        out = self.controller.step(self.state(), self.warm)
-        self.warm = out.warm
-        steer = float(out.u[0])
-        accel = float(out.u[1]) if self.model.nu > 1 else 0.0
-        return self.scaling.to_action(steer, accel), out
+        return warm
 
 
 @dataclass(frozen=True)
 class HighwayDrive:
-    """An episode driven by :class:`HighwayEnvMpcDriver`.
+    """An episode driven by :class:`HighwayEnvMpcDriver` (:func:`drive_env`).
 
-    result : the log as a :class:`SimResult` (states as read from the environment, inputs as
-    applied after the action's scaling); on_road : (K,) the environment's ``vehicle.on_road``
-    after each step; crashed : the vehicle crashed; terminated / truncated : how the episode
-    ended (both False when ``steps`` ran out first); rewards : (K,) per-step rewards;
-    footprint : the vehicle body; clearance_m : (K,) signed distance [m] between the body and
-    the nearest other vehicle (or road object) at each logged state (inf without any);
-    considered : (K,) number of obstacles the controller considered at each step (within the
-    avoidance's influence distance, at most ``max_obstacles``).
+    result : :func:`~mpcdrive.sim.simulate`'s log (states as read from the environment, the
+    controller's commands, the safety accounting: collisions with the other vehicles, the body's
+    excess outside :attr:`HighwayEnvMpcDriver.safety_road`, failed solves, fallbacks); on_road :
+    (K,) the environment's ``vehicle.on_road`` after each step; crashed : the vehicle crashed;
+    terminated / truncated : how the episode ended (both False when ``steps`` ran out first);
+    rewards : (K,) per-step rewards; footprint : the vehicle body; clearance_m : (K,) signed
+    distance [m] between the body and the nearest other vehicle (or road object) at each logged
+    state (inf without any); considered : (K,) number of obstacles the controller considered at
+    each step (within the avoidance's influence distance, at most ``max_obstacles``).
     """
 
     result: SimResult
@@ -708,92 +480,46 @@ class HighwayDrive:
 
 
 def drive_env(env, driver: HighwayEnvMpcDriver, steps: int) -> HighwayDrive:
-    """Run up to ``steps`` policy steps (fewer if the episode ends) and log them."""
-    if int(steps) != steps or steps < 1:
+    """Run up to ``steps`` policy steps (fewer if the episode ends) of ``driver`` on its plant
+    (``env``) through :func:`~mpcdrive.sim.simulate`, judged on ``driver.safety_road``. One run
+    per driver: the loop's clock and the warm start begin at 0 (after ``env.reset``, build a new
+    driver)."""
+    if isinstance(steps, bool) or int(steps) != steps or steps < 1:
         raise ValueError(f"steps must be a positive integer, got {steps}")
-    u = env.unwrapped
-    model, path = driver.model, driver.path
-    N, nx = driver.controller.N, model.nx
-    T, X, U, S, EY, EPSI, XP, RF, ST = [], [], [], [], [], [], [], [], []
-    status, fallback, on_road, rewards, clearance, considered = [], [], [], [], [], []
-    terminated = truncated = False
-    for k in range(int(steps)):
-        x = driver.state()
-        t_s = driver.warm.t_s
-        body = driver.footprint.polygon(*x[:3])
-        clearance.append(
-            min((shape_distance(body, vehicle_obstacle(o).at(0.0)) for o in driver.others), default=np.inf)
-        )
-        action, out = driver.act()
-        avoidance = driver.controller.avoidance
-        considered.append(0 if avoidance is None else len(avoidance.relevant(t_s, x[:2])))
-        steer, accel = driver.scaling.from_action(action)
-        T.append(k * driver.dt_s)
-        X.append(x)
-        U.append([steer, accel][: model.nu])
-        S.append(out.s_m)
-        EY.append(out.e_y_m)
-        EPSI.append(out.e_psi_rad)
-        XP.append(out.X_pred)
-        RF.append(out.refs)
-        ST.append(out.solve_time_s)
-        status.append(out.status)
-        fallback.append(out.fallback)
-        _, reward, terminated, truncated, _ = env.step(action)
-        rewards.append(float(reward))
-        on_road.append(bool(u.vehicle.on_road))
-        if terminated or truncated:
-            break
-    Xa = np.array(X)
-    Ua = np.array(U, dtype=float).reshape(len(X), model.nu)
-    clearance = np.array(clearance)
-    meta = {}
-    if driver.others:
-        meta = {"min_obstacle_clearance_m": float(clearance.min()), "collisions": contact_count(clearance)}
-    result = SimResult(
-        t_s=np.array(T),
-        x=Xa,
-        u=Ua,
-        x_final=driver.state(),
-        s_m=np.array(S),
-        e_y_m=np.array(EY),
-        e_psi_rad=np.array(EPSI),
-        yaw_rad=Xa[:, 2].copy(),
-        v_mps=np.asarray(model.speed(Xa), dtype=float).copy() if nx == 4 else np.full(len(Xa), float(model.v_mps)),
-        steer_rad=Ua[:, 0].copy(),
-        accel_mps2=Ua[:, 1].copy() if model.nu > 1 else np.zeros(len(Xa)),
-        X_pred=np.array(XP).reshape(len(X), N + 1, nx),
-        refs=np.array(RF).reshape(len(X), N + 1, nx),
-        status=tuple(status),
-        fallback=tuple(fallback),
-        solve_time_s=np.array(ST),
-        path_xy=path.polyline(),
-        dt_s=driver.dt_s,
-        state_names=tuple(model.state_names),
-        input_names=tuple(model.input_names),
-        road_profile=driver.lane_road.profile(path.length_m),
-        lane_excess_m=driver.lane_road.body_excess_m(
-            np.array(S), np.array(EY), np.asarray(path.curvature(np.array(S))), np.array(EPSI), driver.footprint
-        ),
-        goal_reached=None,
+    plant = driver.plant
+    if plant.env is not env:
+        raise ValueError("the driver was built for another environment")
+    first, first_considered = len(plant.records), len(driver.considered)
+    result = simulate(
+        driver,
+        plant,
+        driver.path,
+        plant.state(),
+        driver.dt_s,
+        int(steps),
+        road=driver.safety_road,
+        footprint=driver.footprint,
+        stop_at_path_end=False,
         meta={
-            "id": "highway-env-racetrack",
-            "description": "highway-env racetrack driven by LTV-MPC",
+            "id": "highway-env-racetrack" if driver.road is None else "highway-env-highway",
+            "description": "highway-env driven by LTV-MPC",
             "max_steer_rad": float(driver.scaling.steering_range_rad[1]),
             "lane_index": list(driver.lane_index),
-            "on_road_steps": int(sum(on_road)),
             "other_vehicles": len(driver.others),
-            **meta,
         },
     )
+    records = plant.records[first:]
+    on_road = np.array([r.on_road for r in records], dtype=bool)
+    result = replace(result, meta={**result.meta, "on_road_steps": int(on_road.sum())})
+    last = records[-1] if records else None
     return HighwayDrive(
         result,
-        np.array(on_road, dtype=bool),
-        bool(u.vehicle.crashed),
-        bool(terminated),
-        bool(truncated),
-        np.array(rewards),
+        on_road,
+        bool(env.unwrapped.vehicle.crashed),
+        last is not None and last.terminated,
+        last is not None and last.truncated,
+        np.array([r.reward for r in records]),
         driver.footprint,
-        clearance,
-        np.array(considered, dtype=int),
+        np.full(result.steps, np.inf) if result.clearance_m is None else result.clearance_m,
+        np.array(driver.considered[first_considered:], dtype=int),
     )

@@ -17,7 +17,7 @@ from ..paths.base import ReferencePath
 from ..scene.footprint import Footprint
 from ..scene.road import Road
 from ..scene.geometry import shape_distance
-from ..scene.obstacles import Circle, Obstacle
+from ..scene.obstacles import Circle, Obstacle, TrajectoryMotion
 from ..types import STATUS_HELD, SimResult
 from .actuator import ActuatorState, SteeringActuator
 
@@ -82,6 +82,33 @@ class ObservedPlant(Protocol):
     def step(self, xp: np.ndarray, u: np.ndarray, dt_s: float) -> np.ndarray: ...
 
     def observe(self, xp: np.ndarray) -> np.ndarray: ...
+
+
+@runtime_checkable
+class TrafficPlant(Protocol):
+    """A plant with traffic of its own (another simulator's vehicles), which it moves itself.
+
+    traffic(t_s) : the obstacles as they are at the loop's time ``t_s`` [s] (``pose_at(t_s)``
+    their current poses, later times their predictions), always the same number in the same
+    order (index = identity).
+    """
+
+    def traffic(self, t_s: float) -> tuple[Obstacle, ...]: ...
+
+
+@runtime_checkable
+class EpisodicPlant(Protocol):
+    """A plant whose episode can end (another simulator's termination).
+
+    ended(xp) : after a step to plant state ``xp``, why the episode is over (a short reason,
+    :data:`ENDED_COLLISION` for a contact the plant found itself), or None while it goes on.
+    """
+
+    def ended(self, xp: np.ndarray) -> str | None: ...
+
+
+#: the reason a plant that checks contacts itself gives for ending the episode
+ENDED_COLLISION = "collision"
 
 
 @dataclass(frozen=True)
@@ -284,9 +311,19 @@ def simulate(
     ``meta["plant_states"]`` (K, n) and the one after the last step ``meta["plant_state_final"]``;
     state ``disturbance`` needs a :class:`Plant`.
 
+    A :class:`TrafficPlant` (another simulator's vehicles) is asked for its ``traffic`` at every
+    step; at each solve the controller gets ``obstacles`` followed by the traffic
+    (``controller.set_obstacles``, when it has the method and there is traffic), and the
+    traffic's poses at each step, as the plant reported them, join ``obstacles`` in the clearance
+    and collision accounting (indices after those of ``obstacles``). An :class:`EpisodicPlant`
+    ends the run after the step at which ``ended`` gives a reason: ``meta["termination"]`` is
+    that reason, and a plant-found contact (:data:`ENDED_COLLISION`) counts as a collision
+    (``meta["collisions"]`` at least 1) even when no logged state overlaps.
+
     Invalid arguments raise ValueError naming the argument. A plant state that stops being finite
     ends the run early (``meta["termination"] = "diverged"``, the last finite state as
-    ``x_final``); otherwise ``termination`` is ``goal_reached`` or ``completed``.
+    ``x_final``); otherwise ``termination`` is ``goal_reached``, the reason an episodic plant
+    gave or ``completed``.
     """
     _check_run_args(dt_s, steps, seed, road)
     m = solve_interval(dt_s, control_period_s)
@@ -354,9 +391,18 @@ def simulate(
     aborted = False
     termination = "completed"
     slope = None  # input change over one period along the plan (between_solves "plan")
+    has_traffic = isinstance(plant, TrafficPlant)
+    episodic = isinstance(plant, EpisodicPlant)
+    set_obstacles = getattr(controller, "set_obstacles", None)
+    traffic_log: list[tuple[Obstacle, ...]] = []  # the plant's traffic at each step
+    seen: tuple[Obstacle, ...] = ()
     for k in range(steps):
         j = k % m  # plant steps since the last solve
+        if has_traffic:
+            seen = _traffic(plant, k * dt_s, traffic_log)
         if j == 0:
+            if seen and set_obstacles is not None:
+                set_obstacles((*obstacles, *seen))
             meas = x if measurement_noise is None else x + measurement_noise.sample(rng, nx)
             out = controller.step(meas, warm)
             warm = out.warm
@@ -402,6 +448,11 @@ def simulate(
         x = x_next
         if observed:
             xp = xp_next
+        reason = plant.ended(xp if observed else x) if episodic else None
+        if reason:
+            termination = str(reason)
+            k_end = k + 1
+            break
         if goal_reached is not None and s >= (path.length_m if s_goal is None else s_goal):
             goal_reached = True
             termination = "goal_reached"
@@ -421,12 +472,15 @@ def simulate(
         #: (K, n) the plant's own state at each logged step (e.g. for a CommonRoad ST solution)
         meta["plant_states"] = np.array(plant_log[:k_end], float)
     clearance = None
-    if obstacles:
-        per_obstacle, meta["obstacles"] = _clearances(Xs[sl], T[sl], obstacles, footprint)
+    judged = (*obstacles, *_recorded_traffic(traffic_log[:k_end], T[sl]))
+    if judged:
+        per_obstacle, meta["obstacles"] = _clearances(Xs[sl], T[sl], judged, footprint)
         clearance = per_obstacle.min(axis=0)
         meta["min_obstacle_clearance_m"] = float(clearance.min())
         meta["collisions"] = contact_count(clearance)
-        meta["collision_events"] = collision_events(per_obstacle, T[sl], obstacles)
+        meta["collision_events"] = collision_events(per_obstacle, T[sl], judged)
+    if termination == ENDED_COLLISION:
+        meta["collisions"] = max(int(meta.get("collisions", 0)), 1)
     lane_excess = profile = None
     if road is not None:
         s_k = S[sl]
@@ -464,6 +518,34 @@ def simulate(
     )
 
 
+def _traffic(plant: TrafficPlant, t_s: float, log: list) -> tuple[Obstacle, ...]:
+    """The plant's traffic at ``t_s`` [s], appended to ``log``; ValueError when it is not a tuple
+    of obstacles or its number changes (an obstacle's index is its identity)."""
+    seen = tuple(plant.traffic(t_s))
+    for i, ob in enumerate(seen):
+        if not isinstance(ob, Obstacle):
+            raise ValueError(f"the plant's traffic[{i}] must be an Obstacle, got {type(ob).__name__}")
+    if log and len(seen) != len(log[0]):
+        raise ValueError(f"the plant's traffic changed from {len(log[0])} to {len(seen)} obstacles (index = identity)")
+    log.append(seen)
+    return seen
+
+
+def _recorded_traffic(log: list, T: np.ndarray) -> tuple[Obstacle, ...]:
+    """The traffic as it moved: per obstacle its shape through the poses the plant reported at
+    each logged step (``T`` (K,) [s]; interpolated between), with its lifetime."""
+    if not log or not log[0]:
+        return ()
+    out = []
+    for i, last in enumerate(log[-1]):
+        P = np.array([seen[i].pose_at(t) for seen, t in zip(log, T)], float)
+        P[:, 2] = np.unwrap(P[:, 2])
+        d = P - P[0]
+        motion = TrajectoryMotion(T, d[:, 0], d[:, 1], d[:, 2])
+        out.append(Obstacle(last.shape, tuple(P[0]), motion, last.name, last.t_start_s, last.t_end_s))
+    return tuple(out)
+
+
 def contact_count(clearance_m: np.ndarray) -> int:
     """How many contacts a run had: stretches of steps with the smallest footprint-to-obstacle
     distance ``clearance_m`` (K,) [m] below 0 (one contact lasting many steps counts once)."""
@@ -499,15 +581,34 @@ def collision_events(clearance_m: np.ndarray, t_s: np.ndarray, obstacles) -> lis
 
 def _clearances(X: np.ndarray, T: np.ndarray, obstacles, footprint: Footprint):
     """(n_obstacles, K) footprint-to-obstacle signed distance per obstacle and step [m], and the
-    obstacles' logged shapes and poses (for reports)."""
+    obstacles' logged shapes and poses (for reports).
+
+    The distance is exact where it can matter: the step's nearest obstacle and every contact.
+    For the others it is a lower bound (centre distance less both bounding radii), >= 0 and
+    >= the step's smallest distance; inf outside an obstacle's lifetime."""
     K = len(T)
+    hl, hw = 0.5 * footprint.length_m, 0.5 * footprint.width_m
+    body_r = math.hypot(abs(footprint.center_offset_m) + hl, hw)  # about the reference point
     clear = np.full((len(obstacles), K), np.inf)
-    logs = []
     for i, ob in enumerate(obstacles):
+        P = ob.poses_at(T)
+        bound = np.hypot(P[:, 0] - X[:, 0], P[:, 1] - X[:, 1]) - body_r - ob.shape.bounding_radius_m
+        # an obstacle outside its lifetime is not there to hit
+        clear[i] = np.where(np.broadcast_to(ob.present(T), (K,)), bound, np.inf)
+    for k in range(K):
+        body = None
+        best = math.inf
+        for i in np.argsort(clear[:, k], kind="stable"):
+            b = clear[i, k]
+            if b == math.inf or (b > best + 1e-9 and b > 1e-9):
+                break  # this one and the rest are farther and not in contact (1 nm of rounding)
+            if body is None:
+                body = footprint.polygon(*X[k, :3])
+            clear[i, k] = shape_distance(body, obstacles[i].at(T[k]))
+            best = min(best, clear[i, k])
+    logs = []
+    for ob in obstacles:
         poses = np.array([ob.pose_at(t) for t in T])
-        for k in range(K):
-            if ob.present(T[k]):  # an obstacle outside its lifetime is not there to hit
-                clear[i, k] = shape_distance(footprint.polygon(*X[k, :3]), ob.at(T[k]))
         entry = {"name": ob.name, "moving": ob.moving}
         if isinstance(ob.shape, Circle):
             centers = poses[:, :2].round(4)
