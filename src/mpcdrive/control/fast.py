@@ -59,7 +59,7 @@ import numpy as np
 from .. import _jitcache
 from ..models.compiled import METHOD_EULER, METHOD_EXP, METHOD_RK4, model_code
 from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory
-from ..ocp.friction import friction_buffers
+from ..ocp.friction import friction_bounds
 from ..ocp.problem import MpcProblem
 from ..ocp.road_rows import narrow_road_rows
 from ..paths.base import ReferencePath
@@ -210,7 +210,7 @@ class FastLtvMpc(TrackingWarmStart):
         ip[_I_OROWS] = n_orow
         ip[_I_PROFILE] = int(config.speed_profile is not None)
         ip[_I_ACCEL] = list(model.input_names).index("accel") if "accel" in model.input_names else -1
-        if friction_buffers(problem, model) is not None:  # validates the model for the friction circle
+        if friction_bounds(problem, model) is not None:  # validates the model for the friction circle
             ip[_I_FRICTION] = 1
             ip[_I_STEER] = list(model.input_names).index("steer")
         if av is not None and not rows:

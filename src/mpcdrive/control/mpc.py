@@ -19,7 +19,7 @@ import numpy as np
 from ..models.base import VehicleModel
 from ..models.discretize import Method, discrete_step_and_jacobians, rollout
 from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory, follow_references
-from ..ocp.friction import friction_buffers, stage_bounds
+from ..ocp.friction import friction_bounds
 from ..ocp.problem import MpcProblem
 from ..ocp.road_rows import RoadRows
 from ..paths.base import ReferencePath
@@ -235,7 +235,7 @@ class LtvMpc(TrackingWarmStart):
         self._du_step = problem.du_max_per_s * problem.dt_s  # (nu,) largest input change per step
         self._road = problem.road
         self._lateral = None
-        self._friction = friction_buffers(problem, model)
+        self._friction = friction_bounds(problem, model)
         self.fallback = FallbackLadder(self, config.fallback, footprint=footprint, road=problem.road)
 
     # -- obstacles ----------------------------------------------------------------------------
@@ -358,8 +358,7 @@ class LtvMpc(TrackingWarmStart):
         Xlin[N] = Fbar[-1]
         u_lo = u_hi = None
         if self._friction is not None:
-            u_lo, u_hi = self._friction
-            stage_bounds(self.problem, model, np.asarray(model.speed(Xlin), float), Ubar, warm.u_prev, u_lo, u_hi)
+            u_lo, u_hi = self._friction.fill(Xlin, Ubar, warm.u_prev)
         terms = None
         sides = warm.sides
         road = self._road

@@ -81,35 +81,51 @@ def friction_input_bounds(
             prev = min(max(prev, lo[k, a]), hi[k, a])
 
 
-def stage_bounds(problem, model, speed: np.ndarray, Ubar: np.ndarray, u_prev: np.ndarray, lo, hi) -> None:
-    """:func:`friction_input_bounds` for ``problem`` (its ``friction_accel_mps2``) and ``model``
-    (its ``steer`` / ``accel`` inputs and wheelbase), into ``lo, hi`` (N, nu)."""
-    names = list(model.input_names)
-    friction_input_bounds(
-        problem.N,
-        speed,
-        Ubar,
-        names.index("steer") if "steer" in names else -1,
-        names.index("accel") if "accel" in names else -1,
-        float(model.params.wheelbase_m),
-        float(problem.friction_accel_mps2),
-        problem.u_min,
-        problem.u_max,
-        problem.du_max_per_s * problem.dt_s,
-        u_prev,
-        lo,
-        hi,
-    )
+class FrictionBounds:
+    """The friction circle of ``problem`` (its ``friction_accel_mps2``) for ``model`` (its
+    ``steer`` / ``accel`` inputs, wheelbase and ``speed``), set up once: :meth:`fill` writes
+    each step's per-stage bounds into ``lo, hi`` (N, nu) in place. ValueError for a model it
+    cannot apply to."""
+
+    def __init__(self, problem, model):
+        names = list(model.input_names)
+        if "steer" not in names:
+            raise ValueError(f"friction_accel_mps2 needs a model with a steer input, got {model.input_names}")
+        wheelbase = getattr(getattr(model, "params", None), "wheelbase_m", None)
+        if wheelbase is None or not (math.isfinite(wheelbase) and wheelbase > 0):
+            raise ValueError("friction_accel_mps2 needs a model with a positive params.wheelbase_m")
+        self.model = model
+        self.N = problem.N
+        self.i_steer = names.index("steer")
+        self.i_accel = names.index("accel") if "accel" in names else -1
+        self.wheelbase_m = float(wheelbase)
+        self.a_fric = float(problem.friction_accel_mps2)
+        self.u_min, self.u_max = problem.u_min, problem.u_max
+        self.dmax = problem.du_max_per_s * problem.dt_s
+        self.lo = np.zeros((problem.N, problem.nu))
+        self.hi = np.zeros((problem.N, problem.nu))
+
+    def fill(self, Xlin: np.ndarray, Ubar: np.ndarray, u_prev: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The bounds ``(lo, hi)`` at the linearization trajectory ``Xlin`` (N+1, nx) with inputs
+        ``Ubar`` (N, nu), the input applied last being ``u_prev``."""
+        friction_input_bounds(
+            self.N,
+            np.asarray(self.model.speed(Xlin), float),
+            Ubar,
+            self.i_steer,
+            self.i_accel,
+            self.wheelbase_m,
+            self.a_fric,
+            self.u_min,
+            self.u_max,
+            self.dmax,
+            u_prev,
+            self.lo,
+            self.hi,
+        )
+        return self.lo, self.hi
 
 
-def friction_buffers(problem, model) -> tuple[np.ndarray, np.ndarray] | None:
-    """Work arrays ``(lo, hi)`` (N, nu) of :func:`stage_bounds` for a problem with a friction
-    circle (None without one); ValueError for a model it cannot apply to."""
-    if problem.friction_accel_mps2 is None:
-        return None
-    if "steer" not in model.input_names:
-        raise ValueError(f"friction_accel_mps2 needs a model with a steer input, got {model.input_names}")
-    wheelbase = getattr(getattr(model, "params", None), "wheelbase_m", None)
-    if wheelbase is None or not (math.isfinite(wheelbase) and wheelbase > 0):
-        raise ValueError("friction_accel_mps2 needs a model with a positive params.wheelbase_m")
-    return np.zeros((problem.N, problem.nu)), np.zeros((problem.N, problem.nu))
+def friction_bounds(problem, model) -> FrictionBounds | None:
+    """:class:`FrictionBounds` for a problem with a friction circle, else None."""
+    return None if problem.friction_accel_mps2 is None else FrictionBounds(problem, model)
