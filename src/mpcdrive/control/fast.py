@@ -210,9 +210,9 @@ class FastLtvMpc(TrackingWarmStart):
         ip[_I_OROWS] = n_orow
         ip[_I_PROFILE] = int(config.speed_profile is not None)
         ip[_I_ACCEL] = list(model.input_names).index("accel") if "accel" in model.input_names else -1
-        if friction_bounds(problem, model) is not None:  # validates the model for the friction circle
-            ip[_I_FRICTION] = 1
-            ip[_I_STEER] = list(model.input_names).index("steer")
+        fric = friction_bounds(problem, model)  # validates the model for the friction circle
+        if fric is not None:
+            ip[_I_FRICTION], ip[_I_STEER] = 1, fric.i_steer
         if av is not None and not rows:
             ip[_I_OFORM] = _OBS_POTENTIAL if av.formulation == "potential" else _OBS_GAUSSIAN
             ip[_I_NOBS] = len(obstacles)
@@ -230,8 +230,8 @@ class FastLtvMpc(TrackingWarmStart):
         fp[_F_SLACK2], fp[_F_SLACK1] = problem.lane_slack_weight, problem.lane_slack_weight_l1
         fp[_F_OSLACK2], fp[_F_OSLACK1] = problem.obstacle_slack_weight, problem.obstacle_slack_weight_l1
         fp[_F_TOL] = settings.feasibility_tol
-        if problem.friction_accel_mps2 is not None:
-            fp[_F_FRIC], fp[_F_WHEELBASE] = problem.friction_accel_mps2, model.params.wheelbase_m
+        if fric is not None:
+            fp[_F_FRIC], fp[_F_WHEELBASE] = fric.a_fric, fric.wheelbase_m
         bnd = np.concatenate(
             [problem.u_min, problem.u_max, problem.du_max_per_s * problem.dt_s, problem.x_min, problem.x_max]
         )

@@ -23,6 +23,7 @@ from ..paths.base import ReferencePath
 from ..paths.compiled import path_arrays
 from ..paths.profile_compiled import profile_array
 from ..scene.obstacles import Circle, ConstantVelocity, Polygon, Static
+from .fast_step import input_bound_rows
 from .fast_layout import _OB_X, _OB_Y, _OB_VX, _OB_VY, _OB_RB, _OB_OX, _OB_OY, _OB_WIN, _NOB
 from .mpc import MpcConfig
 
@@ -153,14 +154,12 @@ def _constant_rows(problem: MpcProblem, nz: int, n_orow: int = 0):
         r[j] = sign
         return r
 
-    for k in range(N):
-        for i in range(nu):
-            if np.isfinite(problem.u_min[i]):
-                rows.append(unit(k * nu + i))
-                rhs.append(problem.u_min[i])
-            if np.isfinite(problem.u_max[i]):
-                rows.append(unit(k * nu + i, -1.0))
-                rhs.append(-problem.u_max[i])
+    n_bound = N * int(np.isfinite(problem.u_min).sum() + np.isfinite(problem.u_max).sum())
+    Cb, bb = np.zeros((n_bound, nz)), np.zeros(n_bound)
+    lo, hi = np.tile(problem.u_min, (N, 1)), np.tile(problem.u_max, (N, 1))
+    input_bound_rows(N, nu, problem.u_min, problem.u_max, lo, hi, Cb, bb, True)
+    rows += list(Cb)
+    rhs += bb.tolist()
     r_rate0 = len(rows)
     dmax = problem.du_max_per_s * problem.dt_s
     for i in range(nu):  # |u_0 - u_prev| <= d: b written each step

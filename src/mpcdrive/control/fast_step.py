@@ -302,15 +302,7 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
                 ulo,
                 uhi,
             )
-            rb = 0  # the input-bound rows lead the constant rows: stage by stage, lower then upper
-            for k in range(N):
-                for a in range(nu):
-                    if math.isfinite(u_min[a]):
-                        b[rb] = ulo[k, a]
-                        rb += 1
-                    if math.isfinite(u_max[a]):
-                        b[rb] = -uhi[k, a]
-                        rb += 1
+            input_bound_rows(N, nu, u_min, u_max, ulo, uhi, C, b, False)
         if lane == 1:  # the body inside the road at the linearization trajectory's yaw (scene.road)
             horizon_bounds(
                 _v1(wbuf, fo, _W_RDS),
@@ -654,6 +646,25 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
         return code
     _write_plan(N, nx, nu, x, z, A, B, c, xref, ulo, uhi, out)
     return 0
+
+
+@njit(cache=True)
+def input_bound_rows(N, nu, u_min, u_max, lo, hi, C, b, write_rows):
+    """The input-bound rows of ``C z >= b``, which lead the constant rows: stage by stage, input
+    by input, ``u_ka >= lo[k, a]`` then ``-u_ka >= -hi[k, a]``, each only where the problem's bound
+    (``u_min``, ``u_max``) is finite. Writes their ``b`` (and, with ``write_rows``, their unit
+    entries of C); returns how many there are."""
+    r = 0
+    for k in range(N):
+        for a in range(nu):
+            for upper in (False, True):
+                if not math.isfinite(u_max[a] if upper else u_min[a]):
+                    continue
+                if write_rows:
+                    C[r, k * nu + a] = -1.0 if upper else 1.0
+                b[r] = -hi[k, a] if upper else lo[k, a]
+                r += 1
+    return r
 
 
 @njit(cache=True)
