@@ -403,6 +403,9 @@ class LaneChoosingMpc:
         self._band: tuple[int, ...] | None = None
         self._ramp: LateralRamp | None = None
         self._held_gap: float | None = None
+        names = list(mpc.model.input_names)
+        #: the controller's full braking [m/s^2] (0: a model without an acceleration input)
+        self._decel_mps2 = max(-float(mpc.problem.u_min[names.index("accel")]), 0.0) if "accel" in names else 0.0
 
     def __getattr__(self, name):  # the MPC's attributes (problem, N, nx, path, obstacles ...)
         if name == "mpc":
@@ -455,8 +458,7 @@ class LaneChoosingMpc:
         if not held or not math.isfinite(d.gap_m):
             self._held_gap = None
             return 0.0
-        names = list(self.mpc.model.input_names)
-        decel = -float(self.mpc.problem.u_min[names.index("accel")]) if "accel" in names else 0.0
+        decel = self._decel_mps2
         braking = v * v / (2.0 * decel) if decel > 0 else 0.0
         room = min(self.config.turn_out_m, max(d.gap_m - braking - _STOP_SLACK_M, 0.0))
         if self._held_gap is not None:
