@@ -53,6 +53,16 @@ def _scenario_warnings_as_lines() -> None:
     warnings.showwarning = show
 
 
+def _ignore_further_interrupts() -> None:
+    """Once the interrupt is handled (the output cleaned up), a second Ctrl-C or SIGTERM while
+    the interpreter shuts down is ignored: it would end the process with the signal itself
+    instead of exit code 130 (seen on a loaded machine, where the shutdown took seconds)."""
+    import signal
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
+
+
 def main() -> None:
     """Console-script entry point. Exit codes: 0 done, 1 other failures, 2 bad input, 3 a
     ``run --check`` that collided, left the road or missed its goal, 130 interrupted."""
@@ -84,6 +94,7 @@ def main() -> None:
     except typer.Exit as e:
         sys.exit(e.exit_code)
     except KeyboardInterrupt:
+        _ignore_further_interrupts()
         typer.echo("mpcdrive: interrupted; no partial output was kept", err=True)
         sys.exit(130)
     except Exception as e:
@@ -95,6 +106,7 @@ def main() -> None:
             typer.echo(f"{where}: {' '.join(fmt().split())}", err=True)
             sys.exit(code)
         if type(e).__name__ == "Abort":
+            _ignore_further_interrupts()
             typer.echo("mpcdrive: aborted; no partial output was kept", err=True)
             sys.exit(130)
         typer.echo(f"mpcdrive: error: {type(e).__name__}: {e}", err=True)
