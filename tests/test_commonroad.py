@@ -493,6 +493,25 @@ def test_goal_time_window_sets_the_cruise_speed():
     assert 3.0 <= plan.arrival_s <= 4.0
 
 
+def test_a_goal_passed_too_early_at_its_slowest_speed_is_approached_slower():
+    """USA_US101-3_1_T-1: a 2 m goal stretch 86 m ahead, 7.0 .. 8.0 s, 12.6 .. 18.6 m/s, from
+    9.65 m/s. At the slowest goal speed the car passes it at 7.0 s, on the window's edge; the plan
+    approaches slower and is back at a goal speed before the region, inside the window."""
+    from mpcdrive.adapters.commonroad_goal import APPROACH_LEAD_M
+
+    imp = imported("USA_US101-3_1_T-1.xml")
+    plan = imp.plan
+    assert plan.mode == "through goal" and plan.top_speed_until, plan.note
+    ((s_up, v_slow),) = plan.top_speed_until
+    assert v_slow < 12.6 <= plan.v_cruise_mps <= 18.6
+    assert 7.0 < plan.arrival_s < 8.0
+    prof = build_experiment(imp.spec).speed_profile
+    a0, a1 = plan.goal_arc_m
+    assert s_up < a0 - APPROACH_LEAD_M
+    assert 12.6 <= prof.speed(0.5 * (a0 + a1)) <= 18.6
+    assert 7.0 < prof.time_at(0.5 * (a0 + a1)) < 8.0
+
+
 # -- solutions CommonRoad accepts -----------------------------------------------------------------
 @pytest.mark.parametrize("name", ["ZAM_Tutorial-1_1_T-1.xml", "DEU_A9-3_1_T-1.xml"])
 def test_valid_solution_accepts_the_written_solution(name, tmp_path):

@@ -119,6 +119,25 @@ def test_an_open_profile_starts_where_the_car_is():
         SpeedProfile(line, 5.0, 2.0, 4.0, 8.0, s_start_m=60.0)
 
 
+def test_a_slower_approach_caps_the_top_speed_and_then_speeds_up():
+    """``top_speed_until``: 5 m/s up to 40 m, then on to 10 m/s at 2 m/s^2 (reached at
+    40 + (100 - 25) / 4 = 58.75 m); it takes longer than without the cap, by the slower stretch."""
+    line = StraightPath([0, 0], [150, 0])
+    kw = dict(v_start_mps=5.0, v_end_mps=0.0, ds_m=0.05)
+    free = SpeedProfile(line, 5.0, 2.0, 4.0, 10.0, **kw)
+    slow = SpeedProfile(line, 5.0, 2.0, 4.0, 10.0, top_speed_until=((40.0, 5.0),), **kw)
+    s = np.linspace(0.0, 40.0, 81)
+    assert np.max(slow.speed(s)) <= 5.0 + 1e-12
+    assert slow.speed(50.0) == pytest.approx(math.sqrt(25.0 + 2 * 2.0 * 10.0), rel=1e-3)
+    assert slow.speed(70.0) == pytest.approx(10.0) and free.speed(20.0) == pytest.approx(10.0)
+    _check_limits(slow, 5.0, 2.0, 4.0)
+    # the first 40 m take 8 s at 5 m/s; without the cap the car is at 10 m/s after 18.75 m
+    assert slow.time_at(40.0) == pytest.approx(8.0, rel=1e-3)
+    assert free.time_at(40.0) == pytest.approx(2.5 + 21.25 / 10.0, rel=1e-3)
+    with pytest.raises(ValueError, match="top_speed_until"):
+        SpeedProfile(line, 5.0, 2.0, 4.0, 10.0, top_speed_until=((40.0, 0.0),))
+
+
 @pytest.mark.parametrize(
     "kw",
     [

@@ -35,6 +35,7 @@ RUN_ON_S = 3.0  # the run ends this long after the reference stops (unless the g
 _LIMIT_PRESET = PRESETS["commonroad_bmw_320i"]
 _PLAN_DS_M = 0.25  # grid of the speed profiles compared while planning
 _MISSED = "no cruise speed"  # how the note of a plan that misses the goal window begins
+APPROACH_LEAD_M = 5.0  # a slower approach is back at the goal speed this far before the region [m]
 
 
 #: the share of the tyres' friction circle (CommonRoad's ``a_max``, the radius its feasibility
@@ -70,6 +71,7 @@ class DrivePlan:
     arrival_s: float | None  # when the reference speed reaches the goal region [s]
     note: str
     start_m: float = 0.0  # the car's arc length on the centre line (it begins behind the car) [m]
+    top_speed_until: tuple[tuple[float, float], ...] = ()  # a slower approach: (s_until [m], v [m/s])
 
     def speed_profile_spec(self) -> dict:
         """The ``controller.speed_profile`` entry of the scenario."""
@@ -82,11 +84,13 @@ class DrivePlan:
             "v_end_mps": 0.0,
             "curvature_window_m": 0.3,
             "start_m": self.start_m,
+            "top_speed_until": [list(c) for c in self.top_speed_until],
         }
 
 
-def _profile(line: np.ndarray, v_cruise: float, v0: float, accel: float, p0: np.ndarray):
-    """The path along ``line`` and its speed profile, starting at ``v0`` where the car (``p0``) is."""
+def _profile(line: np.ndarray, v_cruise: float, v0: float, accel: float, p0: np.ndarray, caps: tuple = ()):
+    """The path along ``line`` and its speed profile, starting at ``v0`` where the car (``p0``) is
+    (``caps``: its ``top_speed_until``)."""
     from ..paths import WaypointPath
     from ..paths.speed_profile import SpeedProfile
 
@@ -102,6 +106,7 @@ def _profile(line: np.ndarray, v_cruise: float, v0: float, accel: float, p0: np.
         ds_m=_PLAN_DS_M,
         curvature_window_m=0.3,
         s_start_m=start_arc(path, p0),
+        top_speed_until=caps,
     )
 
 
@@ -213,28 +218,25 @@ def _stop(g: _GoalDrive):
 
 def _through(g: _GoalDrive):
     """Drive through the goal region along the lane to the route's end; in the region inside the
-    time window (a region reaching the route's end holds the stopped car from then on)."""
+    time window (a region reaching the route's end holds the stopped car from then on). First at
+    one cruise speed; when even the slowest one in the goal's speed range is there too early, with
+    a slower approach that speeds up to the goal's speed before the region (:func:`_approaches`)."""
     ahead, v_want, v_range, pb = g.ahead, g.v_want, g.v_range, g.pb
     window = pb.window
     line = cr.route_centerline(g.net, ahead, g.p0, goal_xy=g.goal_xy)
     arc = cr.arc_inside(line, g.shapes) or cr.nearest_arc(line, g.shapes)
     s_end = float(np.sum(np.hypot(*np.diff(line, axis=0).T)))
     best = None
-    for v in _candidates(v_want, *v_range):
-        path, prof = _profile(line, v, pb.v0, pb.accel, pb.p0)
-        if arc[1] - arc[0] < 2.0:  # a small region (or the point nearest one): passed at one time
-            t_in = t_out = float(prof.time_at(0.5 * (arc[0] + arc[1])))
-        else:
-            t_in = float(prof.time_at(arc[0] + 1.0))
-            t_out = math.inf if arc[1] >= s_end - 1.0 else float(prof.time_at(arc[1] - 1.0))
-        margin = min(0.3, 0.25 * (window[1] - window[0])) if window is not None else 0.0
-        miss = 0.0 if window is None else max(window[0] + margin - min(t_out, 1e9), t_in + margin - window[1], 0.0)
+    tries = [(v, ()) for v in _candidates(v_want, *v_range)]
+    tries += _approaches(v_want, v_range, pb, arc)
+    for v, caps in tries:
+        path, prof = _profile(line, v, pb.v0, pb.accel, pb.p0, caps)
+        t_in, t_out, miss = _timing(prof, path, arc, s_end, window)
         if best is None or miss < best[2]:
-            best = (v, t_in, miss)
-        # in the region at some time inside the window (by a margin from its ends)
-        inside = window is None or (t_in <= window[1] - margin and t_out >= window[0] + margin)
-        if inside:
+            best = (v, t_in, miss, caps)
+        if miss == 0.0:  # in the region at some time inside the window (by a margin from its ends)
             stay = " and stops in it" if math.isinf(t_out) else ""
+            slow = f" after an approach at {caps[0][1]:.1f} m/s" if caps else ""
             return _finish(
                 ahead,
                 line,
@@ -243,9 +245,10 @@ def _through(g: _GoalDrive):
                 pb,
                 arc=arc,
                 arrival=t_in,
-                note=f"drives into the goal region at {t_in:.1f} s{stay}",
+                caps=caps,
+                note=f"drives into the goal region at {t_in:.1f} s{slow}{stay}",
             )
-    v, t_in, _ = best
+    v, t_in, _, caps = best
     return _finish(
         ahead,
         line,
@@ -254,10 +257,40 @@ def _through(g: _GoalDrive):
         pb,
         arc=arc,
         arrival=t_in,
+        caps=caps,
         note=f"{_MISSED} in [{v_range[0]:.1f}, {v_range[1]:.1f}] m/s has the car in the goal region "
         f"in its time window [{window[0]:.1f}, {window[1]:.1f}] s: drives at {v:.1f} m/s "
         f"(in the region at {t_in:.1f} s)",
     )
+
+
+def _timing(prof, path, arc: tuple, s_end: float, window) -> tuple[float, float, float]:
+    """(time in, time out of the goal region [s], by how much the stay misses the time window
+    shrunk by a margin at both ends [s], 0 when inside) of the reference speed ``prof``."""
+    if arc[1] - arc[0] < 2.0:  # a small region (or the point nearest one): passed at one time
+        t_in = t_out = float(prof.time_at(0.5 * (arc[0] + arc[1])))
+    else:
+        t_in = float(prof.time_at(arc[0] + 1.0))
+        t_out = math.inf if arc[1] >= s_end - 1.0 else float(prof.time_at(arc[1] - 1.0))
+    if window is None:
+        return t_in, t_out, 0.0
+    margin = min(0.3, 0.25 * (window[1] - window[0]))
+    return t_in, t_out, max(window[0] + margin - min(t_out, 1e9), t_in + margin - window[1], 0.0)
+
+
+def _approaches(v_want: float, v_range: tuple, pb: _Problem, arc: tuple) -> list:
+    """(goal speed, caps) plans that approach the goal region slower than the goal's speed range
+    allows and speed up to the goal speed (at the plan's acceleration) :data:`APPROACH_LEAD_M`
+    before the region: for goal speeds closest to ``v_want`` first, the least slowing first."""
+    if pb.window is None:
+        return []
+    out = []
+    for v in _candidates(v_want, *v_range):
+        for v_slow in np.linspace(v, 1.0, 25)[1:]:
+            s_up = arc[0] - APPROACH_LEAD_M - (v * v - v_slow * v_slow) / (2.0 * pb.accel)
+            if s_up > 0.0:
+                out.append((v, ((float(s_up), float(v_slow)),)))
+    return out
 
 
 @dataclass(frozen=True)
@@ -269,8 +302,10 @@ class _Problem:
     p0: np.ndarray  # the car's start [m]
 
 
-def _finish(route, line, mode: str, v: float, pb: _Problem, *, arc=None, arrival=None, note="") -> DrivePlan:
-    path, prof = _profile(line, v, pb.v0, pb.accel, pb.p0)
+def _finish(
+    route, line, mode: str, v: float, pb: _Problem, *, arc=None, arrival=None, note="", caps: tuple = ()
+) -> DrivePlan:
+    path, prof = _profile(line, v, pb.v0, pb.accel, pb.p0, caps)
     duration = float(prof.time_at(path.length_m)) + RUN_ON_S
     if pb.window is not None:
         # through the goal window's first step (a car waiting in the region must be there then),
@@ -289,4 +324,5 @@ def _finish(route, line, mode: str, v: float, pb: _Problem, *, arc=None, arrival
         arrival,
         note,
         start_arc(path, pb.p0),
+        caps,
     )

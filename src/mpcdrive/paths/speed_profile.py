@@ -57,7 +57,10 @@ class SpeedProfile:
     [m/s^2] (both positive); v_max_mps : top speed [m/s]; v_start_mps, v_end_mps : speed at the start
     and at the end of an open path (None: free); s_start_m : where the start is [m] (the car's
     arc length when the path begins behind it: the profile holds ``v_start_mps`` up to there and
-    its clock starts there, ``time_at(s_start_m) = 0``); ds_m : grid spacing [m]; curvature_window_m : the
+    its clock starts there, ``time_at(s_start_m) = 0``); top_speed_until : ``(s_until_m, v_mps)`` pairs,
+    each capping the top speed at ``v_mps`` [m/s] on the arc lengths up to ``s_until_m`` [m] (an
+    approach slower than ``v_max_mps``: e.g. to reach a goal region later but at its speed; the
+    forward pass then accelerates to ``v_max_mps`` after ``s_until_m``); ds_m : grid spacing [m]; curvature_window_m : the
     curvature used at s is the largest |kappa| within +- this distance (guards against sampling a
     bend between grid points); friction_circle : share the friction between lateral and longitudinal
     acceleration.
@@ -80,6 +83,7 @@ class SpeedProfile:
         curvature_window_m: float = 0.0,
         friction_circle: bool = True,
         s_start_m: float = 0.0,
+        top_speed_until: tuple[tuple[float, float], ...] = (),
     ):
         for name, val in (
             ("lateral_accel_max_mps2", lateral_accel_max_mps2),
@@ -98,6 +102,13 @@ class SpeedProfile:
             raise ValueError(f"s_start_m must lie on the path [0, {float(path.length_m):.3f}] m, got {s_start_m}")
         if path.closed and s_start_m != 0.0:
             raise ValueError("s_start_m is for open paths")
+        caps = tuple((float(su), float(vc)) for su, vc in top_speed_until)
+        for su, vc in caps:
+            if not (math.isfinite(su) and math.isfinite(vc) and vc > 0):
+                raise ValueError(f"top_speed_until needs finite (s_until_m, v_mps > 0) pairs, got ({su}, {vc})")
+        if caps and path.closed:
+            raise ValueError("top_speed_until is for open paths")
+        self.top_speed_until = caps
         self.s_start_m = float(s_start_m)
         self.path = path
         self.closed = bool(path.closed)
@@ -129,6 +140,8 @@ class SpeedProfile:
         self.s_m = s
         self.abs_kappa = kappa
         self.v_limit_mps = np.minimum(self.v_max_mps, np.sqrt(self.lateral_accel_max_mps2 / np.maximum(kappa, 1e-12)))
+        for s_until, v_cap in caps:
+            self.v_limit_mps[s <= s_until] = np.minimum(self.v_limit_mps[s <= s_until], v_cap)
         self.v_mps = self._passes(v_start_mps, v_end_mps)
         # time along the grid: v^2 is linear in s on each segment (constant acceleration), so a
         # segment takes exactly 2 ds / (v_i + v_{i+1}); a segment between two stops takes forever

@@ -349,6 +349,7 @@ def build_speed_profile(spec, path: ReferencePath, friction: float) -> SpeedProf
         curvature_window_m=spec.curvature_window_m,
         friction_circle=spec.friction_circle,
         s_start_m=min(spec.start_m, float(path.length_m)),
+        top_speed_until=tuple((float(su), float(vc)) for su, vc in spec.top_speed_until),
     )
 
 

@@ -355,7 +355,9 @@ class SpeedProfileSpec(_Strict):
     friction * g (or ``lateral_accel_max_mps2`` when given), forward / braking acceleration <=
     ``accel_max_mps2`` / ``decel_max_mps2`` (shared with the lateral one on the friction circle),
     speed <= ``v_max_mps``; ``v_start_mps`` / ``v_end_mps`` pin the ends of an open path,
-    ``v_start_mps`` at ``start_m`` [m] along it (where the car starts when the path begins behind it)."""
+    ``v_start_mps`` at ``start_m`` [m] along it (where the car starts when the path begins behind it);
+    ``top_speed_until`` rows ``[s_until_m, v_mps]`` cap the top speed at ``v_mps`` up to arc length
+    ``s_until_m`` (a slower approach, then on at ``v_max_mps``)."""
 
     lateral_accel_fraction: Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)] = 0.8
     lateral_accel_max_mps2: Positive | None = None
@@ -367,6 +369,7 @@ class SpeedProfileSpec(_Strict):
     curvature_window_m: NonNeg = 0.3
     friction_circle: bool = True
     start_m: NonNeg = 0.0
+    top_speed_until: list[tuple[NonNeg, Positive]] = []
 
 
 class ControllerSpec(_Strict):
