@@ -368,12 +368,11 @@ def _circle_follower(path: CirclePath, s0: float, v: float, t_end: float) -> Obs
     )
 
 
-@pytest.mark.parametrize("follow_gap_s", [None, 1.0])
-def test_following_a_slower_car_in_a_bend(follow_gap_s):
-    """A car at 10 m/s closes on a car driving 6 m/s ahead in its lane on a 20 m circle. With a
-    follow gap the references trail the leader by that time gap: the car settles at its speed,
-    the gap and the lane centre. Without it the references run on at 10 m/s and pull the car
-    against the stop constraint, which in a bend it eases by cutting inwards."""
+def _bend_follower(follow_gap_s, backend: str, osqp: OsqpSettings = OsqpSettings()):
+    """A car at 10 m/s closing on a car driving 6 m/s ahead in its lane on a 20 m circle: the
+    controller (``backend``), the leader, the plant's start and its step count."""
+    from mpcdrive.control.factory import make_mpc
+
     path = CirclePath((0.0, 0.0), 20.0)
     model = KinematicBicycle4(KinematicParams(2.5, 2.5))
     dt, N, steps = 0.2, 15, 120
@@ -394,17 +393,31 @@ def test_following_a_slower_car_in_a_bend(follow_gap_s):
     )
     leader = _circle_follower(path, 25.0, 6.0, dt * steps + 10.0)
     cfg = AvoidanceConfig("hard", margin_m=0.3, influence_m=30.0, follow_gap_s=follow_gap_s)
-    c = LtvMpc(
+    c = make_mpc(
         model,
         path,
         pb,
         MpcConfig(v_ref_mps=10.0, projection_window_m=6.0),
+        backend,
+        osqp,
         obstacles=(leader,),
         avoidance=cfg,
         footprint=CAR,
     )
-    x0 = np.array([20.0, 0.0, math.pi / 2, 10.0])
-    r = simulate(c, Plant(model), path, x0, dt, steps, obstacles=(leader,), footprint=CAR, road=pb.road)
+    assert c.backend_name == backend
+    return c, leader, np.array([20.0, 0.0, math.pi / 2, 10.0]), steps
+
+
+@pytest.mark.parametrize("backend", ["osqp", "fast"])
+@pytest.mark.parametrize("follow_gap_s", [None, 1.0])
+def test_following_a_slower_car_in_a_bend(follow_gap_s, backend):
+    """A car at 10 m/s closes on a car driving 6 m/s ahead in its lane on a 20 m circle. With a
+    follow gap the references trail the leader by that time gap: the car settles at its speed,
+    the gap and the lane centre. Without it the references run on at 10 m/s and pull the car
+    against the stop constraint, which in a bend it eases by cutting inwards. Both solvers."""
+    c, leader, x0, steps = _bend_follower(follow_gap_s, backend)
+    road = c.problem.road
+    r = simulate(c, Plant(c.model), c.path, x0, c.dt_s, steps, obstacles=(leader,), footprint=CAR, road=road)
     m = compute_metrics(r)
     assert m["collisions"] == 0 and m["min_obstacle_clearance_m"] > 0.2
     assert m["solver_failures"] == 0 and m["fallbacks"] == 0
@@ -419,6 +432,27 @@ def test_following_a_slower_car_in_a_bend(follow_gap_s):
     else:
         np.testing.assert_allclose(arc_gap, 5.0 + stop_gap + follow_gap_s * 6.0, atol=0.2)
         assert np.abs(r.e_y_m).max() < 0.15 and abs(r.e_y_m[-1]) < 0.03
+
+
+def test_car_following_on_the_compiled_controller_gives_tight_osqps_commands():
+    """Car following's references (behind the moving stop line) on the compiled controller: fed
+    the states of OSQP's closed loop (at 1e-9) and OSQP's own warm start, it gives OSQP's command
+    on every step OSQP solves, within 1e-5 (the comparison of the other constraint rows)."""
+    tight = OsqpSettings(eps_abs=1e-9, eps_rel=1e-9, max_iter=50000)
+    ref, leader, x0, steps = _bend_follower(1.0, "osqp", tight)
+    fast = _bend_follower(1.0, "fast")[0]
+    r = simulate(ref, Plant(ref.model), ref.path, x0, ref.dt_s, steps, obstacles=(leader,), footprint=CAR)
+    warm = ref.initial_warm(r.x[0])
+    du, held = [], 0
+    for k in range(r.steps):
+        o_ref, o_fast = ref.step(r.x[k], warm), fast.step(r.x[k], warm)
+        assert o_fast.status == "ok", (k, o_fast.status)
+        if o_ref.status == "ok":
+            du.append(float(np.abs(o_fast.u - o_ref.u).max()))
+        held += int(o_ref.refs[-1, 3] < 9.0)  # references held back behind the leader
+        warm = o_ref.warm
+    assert held > steps // 2 and len(du) >= 0.97 * r.steps
+    assert max(du) <= 1e-5, f"max |du| {max(du):.2e}"
 
 
 def test_set_obstacles_replaces_what_the_controller_avoids():

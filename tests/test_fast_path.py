@@ -87,21 +87,6 @@ def test_unsupported_scenarios_fall_back_to_osqp():
     with pytest.warns(UserWarning, match="fast backend not used: .*prediction substeps need the OSQP controller"):
         ctrl = make_mpc(b.model, b.path, b.problem, replace(b.config, prediction_substeps=2), "fast")
     assert ctrl.backend_name == "osqp"
-    # car following (not in the scenario schema) is declined by name
-    from mpcdrive.ocp.avoidance import AvoidanceConfig
-
-    b = build_experiment(_with_backend(load_scenario("paper-exp5-hard"), "osqp")).mpc
-    with pytest.warns(FastPathUnavailable, match="car following"):
-        ctrl = make_mpc(
-            b.model,
-            b.path,
-            b.problem,
-            b.config,
-            "fast",
-            obstacles=b.obstacles,
-            avoidance=AvoidanceConfig("hard", follow_gap_s=1.0),
-        )
-    assert ctrl.backend_name == "osqp"
 
 
 @pytest.fixture(scope="module", params=FAST_SCENARIOS)
@@ -692,7 +677,7 @@ def test_obstacle_formulations_the_fast_path_declines_are_named():
     assert obstacles_unsupported_reason((ob,), AvoidanceConfig("gaussian")) is None
     assert obstacles_unsupported_reason((ob,), AvoidanceConfig("hard")) is None
     assert obstacles_unsupported_reason((ob,), AvoidanceConfig("corridor")) is None
-    assert "car following" in obstacles_unsupported_reason((ob,), AvoidanceConfig("hard", follow_gap_s=0.5))
+    assert obstacles_unsupported_reason((ob,), AvoidanceConfig("hard", follow_gap_s=0.5)) is None  # car following
     m4 = KinematicBicycle4()
     pb = MpcProblem(4, 2, 10, 0.05, Q=[1, 1, 1, 1], R=[1, 1])
     assert "needs a road" in fast_unsupported_reason(

@@ -58,7 +58,7 @@ import numpy as np
 
 from .. import _jitcache
 from ..models.compiled import METHOD_EULER, METHOD_EXP, METHOD_RK4, model_code
-from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory
+from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory, follow_references
 from ..ocp.friction import friction_bounds
 from ..ocp.problem import MpcProblem
 from ..ocp.road_rows import narrow_road_rows
@@ -89,7 +89,7 @@ from .fast_layout import _F_OSX, _F_OSY, _F_OINF, _F_OMARGIN, _F_HW, _F_HL, _F_R
 from .fast_layout import _F_RPERIOD, _F_FRIC, _F_WHEELBASE, _NFP
 from .fast_setup import FastSettings, fast_unsupported_reason, obstacles_unsupported_reason  # importers use these
 from .fast_setup import _constant_rows, _obstacle_table
-from .fast_step import _BAD_STATE, _control_step  # the compiled step
+from .fast_step import _BAD_STATE, _control_step, follow_references_into  # the compiled step
 from .fallback import FALLBACK_HOLD, FALLBACK_RELAX, FallbackConfig, FallbackLadder, relaxed_problem
 from .mpc import MpcConfig
 
@@ -498,6 +498,19 @@ class FastLtvMpc(TrackingWarmStart):
                 narrow_road_rows(w[_W_LLO], w[_W_LHI], w[_W_LDLO], w[_W_LDHI], terms.lane_lo, terms.lane_hi)
             if terms.e_ref is not None:
                 w[_W_EREF][...] = terms.e_ref
+            if terms.s_max is not None:
+                # car following: the references approach the stop line behind the obstacle
+                # blocking the lane ahead and move on with its prediction (as LtvMpc.prepare)
+                follow = follow_references(
+                    w[_W_SARR],
+                    w[_W_VARR],
+                    terms.s_max,
+                    float(self.model.speed(x)),
+                    self.dt_s,
+                    self._rows.config.follow_decel_mps2,
+                )
+                if follow is not None:
+                    follow_references_into(float(x[2]), follow[0], follow[1], self._wbuf, self._ibuf)
             new_sides = tuple(sorted(memory.sides.items()))
         if self._lateral is not None:
             w[_W_EREF] += np.asarray(self._lateral(w[_W_SARR]), float)

@@ -56,14 +56,12 @@ def obstacles_unsupported_reason(obstacles, avoidance: AvoidanceConfig | None) -
     Covered: the cost formulations (``potential``, ``gaussian``) on circle and polygon obstacles
     that stand still or move at constant velocity, compiled; with the trapezoidal detour
     reference, on static circles. The constraint formulations (``hard``, ``corridor``) on any
-    obstacle, their rows built by ``ocp.avoidance`` between two compiled stages; not with car
-    following (``follow_gap_s``)."""
+    obstacle, their rows (and, with car following, ``follow_gap_s``, the references behind the
+    stop line) built by ``ocp.avoidance`` between two compiled stages."""
     if not obstacles:
         return None
     av = avoidance or AvoidanceConfig()
     if av.uses_rows:
-        if av.follow_gap_s is not None:
-            return "car following (follow_gap_s) needs the OSQP controller"
         return None
     for ob in obstacles:
         if av.detour != "none" and not (isinstance(ob.motion, Static) and isinstance(ob.shape, Circle)):

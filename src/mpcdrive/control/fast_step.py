@@ -71,6 +71,50 @@ def _v3(w, fo, fs, i):
     return w[fo[i] : fo[i + 1]].reshape((fs[3 * i], fs[3 * i + 1], fs[3 * i + 2]))
 
 
+@njit(cache=True, inline="always")
+def _place_references(
+    pkind, geo, tab_s, tab_xy, tab_h, tab_k, mkind, mp, N, ff, yaw, s_arr, v_arr, refs, xref, uref, rw
+):
+    """The horizon references at arc lengths ``s_arr`` (N+1,) [m] driven at ``v_arr`` [m/s]:
+    the path points ``refs`` (x, y, heading unwrapped next to the car's ``yaw``, curvature) and the
+    model's state and input references (``model.reference``: path pose, speed states, the
+    steady-state feedforward with ``ff == 1``)."""
+    for k in range(N + 1):
+        px, py, hk, kap = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s_arr[k])
+        refs[k, 0] = px
+        refs[k, 1] = py
+        refs[k, 2] = hk
+        refs[k, 3] = kap
+    shift = _TWO_PI * np.rint((yaw - refs[0, 2]) / _TWO_PI)
+    for k in range(N + 1):
+        refs[k, 2] += shift
+    model_references(mkind, mp, refs, v_arr, N + 1, ff == 1, xref, uref, rw)
+
+
+@njit(cache=True)
+def follow_references_into(yaw, s_arr, v_arr, wbuf, ibuf):
+    """Between the two stages of a step: the references of car following
+    (:func:`~mpcdrive.ocp.avoidance.follow_references`: arc lengths ``s_arr`` (N+1,) [m] and speeds
+    ``v_arr`` [m/s] behind a moving stop line) replace the step's, their speed changes the
+    acceleration reference (as ``LtvMpc`` does); the horizon arc lengths the rows were built on
+    stay."""
+    ip = ibuf[:_NIP]
+    fo = ibuf[_NIP : _NIP + _NW + 1]
+    fs = ibuf[_NIP + _NW + 1 : _NIP + 4 * _NW + 1]
+    mp, geo, fp = _v1(wbuf, fo, _W_MP), _v1(wbuf, fo, _W_GEO), _v1(wbuf, fo, _W_FP)
+    tab_s, tab_xy = _v1(wbuf, fo, _W_TABS), _v2(wbuf, fo, fs, _W_TABXY)
+    tab_h, tab_k = _v1(wbuf, fo, _W_TABH), _v1(wbuf, fo, _W_TABK)
+    refs, xref, uref = _v2(wbuf, fo, fs, _W_REFS), _v2(wbuf, fo, fs, _W_XREF), _v2(wbuf, fo, fs, _W_UREF)
+    N = ip[_I_N]
+    _place_references(
+        ip[_I_PATH], geo, tab_s, tab_xy, tab_h, tab_k, ip[_I_MODEL], mp, N, ip[_I_FF], yaw, s_arr, v_arr, refs, xref,
+        uref, _v2(wbuf, fo, fs, _W_REFW),
+    )  # fmt: skip
+    if ip[_I_ACCEL] >= 0:
+        for k in range(N):
+            uref[k, ip[_I_ACCEL]] += (v_arr[k + 1] - v_arr[k]) / fp[_F_DT]
+
+
 @njit(cache=True)
 def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibuf, out, info):
     """One control step (or one SQP iteration of it) at time ``t_s`` [s]; returns a status code
@@ -161,16 +205,10 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
                 s_arr[k] = s0 + fp[_F_HSTEP] * k if hmode == 1 else s0 + acc
                 acc += vdt
                 v_arr[k] = v_ref
-            px, py, hk, kap = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s_arr[k])
-            refs[k, 0] = px
-            refs[k, 1] = py
-            refs[k, 2] = hk
-            refs[k, 3] = kap
-        shift = _TWO_PI * np.rint((x[2] - refs[0, 2]) / _TWO_PI)
-        for k in range(N + 1):
-            refs[k, 2] += shift
-        # the model's references (model.reference): path pose, speed states, steady-state feedforward
-        model_references(mkind, mp, refs, v_arr, N + 1, ff == 1, xref, uref, _v2(wbuf, fo, fs, _W_REFW))
+        _place_references(
+            pkind, geo, tab_s, tab_xy, tab_h, tab_k, mkind, mp, N, ff, x[2], s_arr, v_arr, refs, xref, uref,
+            _v2(wbuf, fo, fs, _W_REFW),
+        )  # fmt: skip
         if has_prof and ip[_I_ACCEL] >= 0:  # the profile's speed changes as acceleration reference
             for k in range(N):
                 uref[k, ip[_I_ACCEL]] += (v_arr[k + 1] - v_arr[k]) / dt
