@@ -132,6 +132,27 @@ def test_a_change_whose_target_closes_returns_to_the_origin_lane():
     d2 = decide([slow, fast], x=106.0, e_y=0.5, t=0.2, previous=d, rd=road(2))
     assert d2.action == "change" and d2.lane == 0 and d2.ramp is not d.ramp
     assert d2.ramp.offset(106.0) == pytest.approx(0.5) and d2.ramp.offset(1e4) == 0.0
+    # called back with the body across the line (centre 0.3 m into the target lane): the body
+    # may still use both lanes, not only the one it is now mostly in
+    d3 = decide([slow, fast], x=106.0, e_y=W / 2 + 0.3, t=0.2, previous=d, rd=road(2))
+    assert d3.action == "change" and d3.lane == d3.current == 1
+    assert d3.band == (0, 1) and d3.band_m == (-2.0, 6.0)
+
+
+def test_a_called_back_change_is_driven_home_not_called_back_again():
+    """The return of a called-back change is not called back in turn when the body's centre
+    swings over the line with the origin lane still blocked ahead: no flip-flop between lanes."""
+    slow = car(160.0, 0, 20.0)
+    d = decide([slow], rd=road(2))
+    fast = car(50.0, 1, 45.0)
+    back = decide([slow, fast], x=106.0, e_y=0.5, t=0.2, previous=d, rd=road(2))
+    assert (back.action, back.lane, back.called_back) == ("change", 0, True) and not back.free[0]
+    # the centre swung 0.2 m over the line into lane 1: the return goes on to lane 0
+    on = decide([slow, fast], x=112.0, e_y=W / 2 + 0.2, t=0.4, previous=back, rd=road(2))
+    assert (on.action, on.lane, on.current, on.called_back) == ("change", 0, 1, True)
+    assert on.ramp is back.ramp and on.band == (0, 1)
+    home = decide([slow, fast], x=118.0, e_y=0.05, t=0.6, previous=on, rd=road(2))
+    assert home.lane == 0 and home.action != "change" and not home.called_back
 
 
 def test_hysteresis_alternating_marginal_gains_do_not_flip_every_step():

@@ -164,10 +164,11 @@ class LaneDecision:
     free_m : (n_lanes,) predicted free distance ahead per lane [m] (capped at the look-ahead);
     free : (n_lanes,) whether each lane is free (own lane: not blocked ahead);
     ramp : the lateral reference to track; band : the lanes the body may use now (current and
-    target); band_m : their (right, left) edges at the ego [m]; stop_m : distance [m] to the
+    target, and any other the body overlaps now); band_m : their (right, left) edges at the ego [m]; stop_m : distance [m] to the
     stop point (``stop`` only, else None); since_s : when the target last changed [s] (-inf:
     never, the ego keeps the lane it started in); gap_m : bumper-to-bumper distance [m] to the
-    nearest obstacle ahead in the ego's lane now (inf: none).
+    nearest obstacle ahead in the ego's lane now (inf: none); called_back : the change is a
+    called-back one, back to the lane a change left (it is driven home, never called back itself).
     """
 
     lane: int
@@ -181,6 +182,7 @@ class LaneDecision:
     stop_m: float | None
     since_s: float
     gap_m: float = math.inf
+    called_back: bool = False
 
 
 def lane_of(road: Road, s_m: float, e_y_m: float) -> int:
@@ -322,7 +324,7 @@ def decide_lane(
     def ramp_to(lane: int) -> LateralRamp:
         return LateralRamp(s_m, s_m + ramp_m(lane), e_y_m, road.s_m, road.lanes[lane].center_m)
 
-    def result(lane: int, action, ramp=None, stop_m=None) -> LaneDecision:
+    def result(lane: int, action, ramp=None, stop_m=None, called_back: bool = False) -> LaneDecision:
         changed = previous is None or lane != previous.lane
         # when the target last changed: a first decision to keep the lane the ego is in is no change
         if previous is None:
@@ -331,8 +333,12 @@ def decide_lane(
             since = t_s if lane != previous.lane else previous.since_s
         if ramp is None:
             ramp = ramp_to(lane) if changed else previous.ramp  # type: ignore[union-attr]
-        lo = min(edges[cur][0], edges[lane][0])
-        hi = max(edges[cur][1], edges[lane][1])
+        # the body may use the current and the target lane, and every lane it overlaps now (a
+        # change called back with the body across the line keeps the lane it is leaving)
+        hw = 0.5 * cfg.ego_width_m
+        band = {cur, lane} | {i for i, (lo_i, hi_i) in enumerate(edges) if e_y_m - hw < hi_i and e_y_m + hw > lo_i}
+        lo = min(edges[i][0] for i in band)
+        hi = max(edges[i][1] for i in band)
         return LaneDecision(
             lane,
             cur,
@@ -340,20 +346,23 @@ def decide_lane(
             tuple(float(f) for f in free_m),
             tuple(bool(f) for f in free),
             ramp,
-            tuple(sorted({cur, lane})),
+            tuple(sorted(band)),
             (float(lo), float(hi)),
             stop_m,
             since,
             gap_now,
+            called_back,
         )
 
     if previous is not None and previous.action == "change":
         tgt = previous.lane
         c_t = float(np.interp(s_m, road.s_m, road.lanes[tgt].center_m))
         if not (cur == tgt and abs(e_y_m - c_t) < cfg.arrive_m):
-            if not free[tgt] and cur != tgt:
-                return result(cur, "change")  # the target closed before the ego got there: back
-            return result(tgt, "change")
+            if not free[tgt] and cur != tgt and not previous.called_back:
+                # the target closed before the ego got there: back (and that return is not called
+                # back in turn when the body's centre swings over the line: no flip-flop)
+                return result(cur, "change", called_back=True)
+            return result(tgt, "change", called_back=previous.called_back)
     dwell_ok = previous is None or t_s - previous.since_s >= cfg.min_dwell_s - 1e-9
     if cur != road.route_lane:
         home = int(order[pos + (1 if int(np.flatnonzero(order == road.route_lane)[0]) > pos else -1)])
