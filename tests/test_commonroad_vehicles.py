@@ -465,3 +465,28 @@ def test_commonroad_file_on_a_commonroad_plant_stops_behind_the_parked_car(plant
     stopped = res.v_mps <= 1e-6
     assert stopped[-10:].all()  # the last second: standing
     assert np.min(res.clearance_m) > 0.3
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("plant", ["ks", "st"])
+def test_us101_a_route_moving_over_a_lane_in_dense_traffic_stays_on_the_road(plant):
+    """USA_US101-3_1 (route lanelets 31 -> 33: the path blends into the next lanelet, where a car
+    drives beside the ego) on CommonRoad's KS / ST model of the BMW 320i: judged by CommonRoad's
+    drivability checker, collision-free and on the road (the car beside was once taken for a
+    crossing car and the ego braked and yawed off the road; the lane layer's first ramp once
+    pulled it towards the edge)."""
+    from pathlib import Path
+
+    from mpcdrive.adapters import commonroad as cr
+
+    if not cr.available():
+        pytest.skip("commonroad-io / drivability checker not installed")
+    imp = cr.with_vehicle(
+        cr.load_commonroad(Path(__file__).resolve().parent / "data" / "commonroad" / "USA_US101-3_1_T-1.xml"),
+        "bmw_320i",
+        plant,
+    )
+    res = run_experiment(build_experiment(imp.spec))
+    rep = cr.check_drive(imp, res)
+    assert rep.collision_free and rep.road_compliant and rep.feasible, rep.line()
+    assert np.min(res.clearance_m) > 0.3

@@ -231,3 +231,23 @@ def test_ramps_are_gentle_at_low_speed_and_a_stopped_car_looks_as_far_as_it_want
     keep = decide([])
     assert keep.since_s == -math.inf
     assert decide([car(160.0, 0, 20.0)], t=0.5, previous=keep).action == "change"
+
+
+def test_a_route_lane_wider_than_the_lane_of_the_path_is_driven_along_the_path():
+    """A route that moves over a lane: the route lane's table holds the path's lane and the one
+    to its right (its middle W/2 right of the path), a neighbour lies to the left. The ramps run
+    to the path in the route lane (to the table's middle, the controller was pulled W/2 off the
+    path when it started), to the neighbour's centre out of it, and a return home ends on the path."""
+    s = np.array([0.0, 5000.0])
+    route = Lane("route", np.full(2, -W / 2), np.full(2, W / 2), np.full(2, -1.5 * W))
+    left = Lane("left", np.full(2, W), np.full(2, 1.5 * W), np.full(2, W / 2))
+    rd = Road(s, 1.5 * W, -1.5 * W, lanes=(route, left), route_lane=0)
+    d = decide([], e_y=0.3, rd=rd)
+    assert (d.action, d.lane) == ("keep", 0)
+    assert d.ramp.offset(100.0) == pytest.approx(0.3) and d.ramp.offset(1e4) == 0.0
+    out = decide([car(160.0, 0, 20.0)], rd=rd)  # blocked ahead: out to the neighbour's centre
+    assert (out.action, out.lane) == ("change", 1) and out.ramp.offset(1e4) == pytest.approx(W)
+    home = decide([], e_y=W, rd=rd)  # in the neighbour, the route lane free: home to the path
+    assert (home.action, home.lane) == ("change", 0) and home.ramp.offset(1e4) == 0.0
+    there = decide([], x=200.0, e_y=0.1, t=3.0, previous=home, rd=rd)
+    assert (there.action, there.lane) == ("keep", 0)

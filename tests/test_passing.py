@@ -122,3 +122,17 @@ def test_no_change_out_of_the_route_lane_that_cannot_return_by_return_by_s():
     res = run_experiment(exp)
     m = compute_metrics(res)
     assert res.e_y_m.max() < 0.3 and m["collisions"] == 0 and m["min_obstacle_clearance_m"] > 0.2
+
+
+def test_a_route_lane_wider_than_the_lane_of_the_path_does_not_pull_the_car_off_the_path():
+    """The route lane's table two lanes wide, the path in its left one (a CommonRoad route moving
+    over a lane: its lanelets side by side), a neighbour lane to the left: on a free road the car
+    drives along the path (its lateral reference is the path, not the table's middle 1.75 m to
+    the right, and not shifted by it either: the car was pulled 1.75 m to the left)."""
+    spec = _spec([])
+    spec["road"] = {"widths": [[0.0, 1.75, 5.25]], "neighbours": [[0.0, 3.5, 0.0]], "margin_m": 0.1}
+    exp = build_experiment(ScenarioSpec.model_validate(spec))
+    assert isinstance(exp.controller, LaneChoosingMpc)
+    res = run_experiment(exp)
+    assert np.max(np.abs(res.e_y_m)) < 0.05
+    assert compute_metrics(res)["max_lane_excess_m"] == 0.0

@@ -1,5 +1,6 @@
-"""Traffic rules of the obstacle terms: lifetimes (an obstacle exists only over its time span) and
-traffic behind (a car following in the ego's lane is not avoided as if it were ahead)."""
+"""Traffic rules of the obstacle terms: lifetimes (an obstacle exists only over its time span),
+traffic behind (a car following in the ego's lane is not avoided as if it were ahead) and the
+yield rule (a car crossing the road is yielded to; one driving along it is not)."""
 
 import numpy as np
 import pytest
@@ -108,3 +109,39 @@ def test_a_crossing_car_is_yielded_to_not_swerved_around():
     assert np.max(np.abs(r.e_y_m)) < 0.3  # no swerve
     assert np.min(r.v_mps) < 6.0 and np.max(r.v_mps) <= 10.0 + 0.05  # slowed for it, never rushed
     assert r.x[-1, 0] > 45.0  # and went on after it
+
+
+def _lane_change_path(shift_m: float = -3.5, start_m: float = 30.0, length_m: float = 40.0):
+    """Waypoints (every metre to x = 150 m) of a path that moves over a lane: straight along y = 0,
+    a cosine ramp to y = ``shift_m`` over ``length_m`` from x = ``start_m``, then straight on
+    (a CommonRoad route changing lanes is such a path), and the y of the path at each point."""
+    x = np.arange(0.0, 151.0)
+    ramp = np.clip((x - start_m) / length_m, 0.0, 1.0)
+    y = shift_m * 0.5 * (1.0 - np.cos(np.pi * ramp))
+    return np.column_stack([x, y]), y
+
+
+@pytest.mark.parametrize("backend", ["fast", "osqp"])
+def test_a_car_along_its_lane_where_the_path_moves_over_a_lane_is_not_yielded_to(backend):
+    """Two 3.5 m lanes; the path moves from the left one into the right one over 40 m, where a car
+    a little faster than the ego drives straight along the right one, beside it. In the path's
+    frame that car drifts sideways at the path's slope (up to 1.5 m/s, above the crossing speed
+    of the yield rule): it must not be taken for a crossing car (a stop row before a car beside
+    cannot be kept: the ego braked at full force, yawed its nose away from it and left the road
+    by 0.7 m). It is avoided as a car driving along the road: the ego keeps beside it in the left
+    lane, neither braking nor swerving, and stays on the road."""
+    points, y = _lane_change_path()
+    # the road: both lanes, as offsets from the path (the path's slope is at most 0.14: the normal
+    # offsets are the lateral ones to within 1 %)
+    widths = [[float(x), 1.75 - float(yy), 5.25 + float(yy)] for (x, _), yy in zip(points, y)]
+    r, m = drive(
+        [car(-1.0, -3.5, 11.0, name="beside")],
+        duration_s=8.0,
+        path={"type": "waypoints", "points": points.tolist(), "ds_m": 0.2},
+        road={"widths": widths, "margin_m": 0.1},
+        controller={**BASE["controller"], "backend": backend},
+    )
+    assert m["collisions"] == 0 and m["min_obstacle_clearance_m"] > 0.3
+    assert m["max_lane_excess_m"] == 0.0
+    assert np.min(r.accel_mps2) > -3.0  # no braking for it
+    assert np.max(np.abs(r.yaw_rad)) < 0.15  # no swerve: the lane runs along x

@@ -33,7 +33,9 @@ Rules (:func:`decide_lane`):
   dwell time); no voluntary change starts within ``min_dwell_s`` of the previous one.
 
 The lateral reference (:class:`LateralRamp`) is a quintic ramp from the ego's offset where the
-decision was taken to the target lane's centre, over the distance driven at the current speed
+decision was taken to the target lane's line (:func:`lane_line`: the path itself in the route
+lane, whose table may be wider than the lane the path is in, e.g. a route that moves over a
+lane; a neighbour's centre), over the distance driven at the current speed
 in the time that keeps the peak lateral acceleration and jerk within bounds, no steeper than
 ``max_slope`` and no shorter than ``turn_out_m``. numpy only.
 """
@@ -49,7 +51,7 @@ import numpy as np
 from ..scene.obstacles import Circle, Obstacle
 from ..scene.road import Road
 
-__all__ = ["LaneConfig", "LaneDecision", "LateralRamp", "decide_lane", "lane_of"]
+__all__ = ["LaneConfig", "LaneDecision", "LateralRamp", "decide_lane", "lane_line", "lane_of"]
 
 #: the gap [m] kept to an obstacle standing behind in a lane changed into (a parked car passed)
 BEHIND_CLEARANCE_M = 1.0
@@ -138,8 +140,8 @@ class LaneConfig:
 @dataclass(frozen=True, eq=False)
 class LateralRamp:
     """Lateral reference e_y(s) [m] on the road's path: ``e0_m`` at ``s0_m`` [m], the target
-    lane's centre (table ``center_m`` on knots ``knots_m``) from ``s1_m`` on, a quintic blend
-    (zero slope and curvature at both ends) between."""
+    lane's line (:func:`lane_line`, table ``center_m`` on knots ``knots_m``) from ``s1_m`` on, a
+    quintic blend (zero slope and curvature at both ends) between."""
 
     s0_m: float
     s1_m: float
@@ -183,6 +185,14 @@ class LaneDecision:
     since_s: float
     gap_m: float = math.inf
     called_back: bool = False
+
+
+def lane_line(road: Road, lane: int) -> np.ndarray:
+    """The line [m] (offset from the road's path, on its knots) that the ego drives in ``lane``:
+    the path itself (zeros) in the route lane -- the route's lanelets side by side where the
+    route moves over a lane make that lane's table wider than the lane the path is in, and its
+    middle no line to drive -- and the lane's centre in the others."""
+    return np.zeros_like(road.s_m) if lane == road.route_lane else road.lanes[lane].center_m
 
 
 def lane_of(road: Road, s_m: float, e_y_m: float) -> int:
@@ -266,7 +276,7 @@ def decide_lane(
     look = v_des * cfg.horizon_s + need
     cur = lane_of(road, s_m, e_y_m)
     edges = [(np.interp(s_m, road.s_m, ln.right_m), np.interp(s_m, road.s_m, ln.left_m)) for ln in road.lanes]
-    centres = [float(np.interp(s_m, road.s_m, ln.center_m)) for ln in road.lanes]
+    centres = [float(np.interp(s_m, road.s_m, lane_line(road, i))) for i in range(n)]
 
     def change_s(lane: int) -> float:
         """Duration [s] of the ramp to ``lane``: peak lateral acceleration and jerk within bounds."""
@@ -322,7 +332,7 @@ def decide_lane(
     neighbours = [int(order[j]) for j in (pos - 1, pos + 1) if 0 <= j < n]
 
     def ramp_to(lane: int) -> LateralRamp:
-        return LateralRamp(s_m, s_m + ramp_m(lane), e_y_m, road.s_m, road.lanes[lane].center_m)
+        return LateralRamp(s_m, s_m + ramp_m(lane), e_y_m, road.s_m, lane_line(road, lane))
 
     def result(lane: int, action, ramp=None, stop_m=None, called_back: bool = False) -> LaneDecision:
         changed = previous is None or lane != previous.lane
@@ -356,7 +366,7 @@ def decide_lane(
 
     if previous is not None and previous.action == "change":
         tgt = previous.lane
-        c_t = float(np.interp(s_m, road.s_m, road.lanes[tgt].center_m))
+        c_t = centres[tgt]
         if not (cur == tgt and abs(e_y_m - c_t) < cfg.arrive_m):
             if not free[tgt] and cur != tgt and not previous.called_back:
                 # the target closed before the ego got there: back (and that return is not called
@@ -392,7 +402,7 @@ class LaneChoosingMpc:
     picks the lane, and the MPC's road becomes the lanes the decision lets the body use (the
     current lane alone when keeping it; the current and the target lane during a change or a
     pass: :meth:`Road.band`) and its lateral reference the decision's ramp to the target lane's
-    centre (the path itself once the car is home in the route lane). Everything else is the
+    line (the path itself once the car is home in the route lane). Everything else is the
     MPC's (attributes, warm start). ``return_by_s``: as for :func:`decide_lane`.
 
     ``road`` is the full road with its lanes (``road.lanes``, ``route_lane``), on the knots of the
@@ -444,7 +454,7 @@ class LaneChoosingMpc:
             if band != self._band:
                 mpc.set_road(self.road.band(band))
                 self._band = band
-            # the lateral reference: the decision's ramp to its lane's centre, or the path itself
+            # the lateral reference: the decision's ramp to its lane's line, or the path itself
             # once the car is home in the route lane
             d = self.decision
             home = d.lane == self.road.route_lane and d.action != "change" and s_m >= d.ramp.s1_m
@@ -453,7 +463,7 @@ class LaneChoosingMpc:
             if av is not None:
                 av.stop_gap_m = self._stop_gap(d, v)
             if ramp is not self._ramp:
-                mpc.set_lateral_reference(None if ramp is None else self._offset(ramp))
+                mpc.set_lateral_reference(None if ramp is None else ramp.offset)
                 self._ramp = ramp
         return mpc.step(x, warm)
 
@@ -483,8 +493,3 @@ class LaneChoosingMpc:
             return None
         prof = getattr(self.mpc.config, "speed_profile", None)
         return float(prof.speed(s_m)) if prof is not None else float(self.mpc.v_ref_mps)
-
-    def _offset(self, ramp: LateralRamp):
-        """The ramp as an offset from the MPC's path: the route lane's centre is the path."""
-        route = self.road.lanes[self.road.route_lane]
-        return lambda s: ramp.offset(s) - np.interp(s, self.road.s_m, route.center_m)

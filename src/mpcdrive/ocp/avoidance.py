@@ -56,8 +56,8 @@ __all__ = [
 
 Formulation = Literal["hard", "corridor", "potential", "gaussian"]
 SIDE_LEFT, SIDE_RIGHT, SIDE_BLOCKED = 1, -1, 0
-#: an obstacle coming towards the car along its path, or crossing it, faster than this [m/s], on
-#: the car's road where they meet, is yielded to (a stop row before it), not passed beside
+#: an obstacle coming towards the car along its path, or crossing its road, faster than this
+#: [m/s], on the car's road where they meet, is yielded to (a stop row before it), not passed beside
 ONCOMING_MPS = 1.0
 
 
@@ -478,21 +478,23 @@ class Avoidance:
 
     def _oncoming(self, bx: FrenetBoxes, meet: int, s_arr: np.ndarray) -> bool:
         """Whether an obstacle (Frenet boxes over the horizon) comes towards the car along its
-        path or crosses it (faster than ONCOMING_MPS where they meet) and their predictions
+        path or crosses its road (faster than ONCOMING_MPS where they meet) and their predictions
         conflict: at some step it is on the car's road where the car's reference is (within the
         body's half length and the clearance along the path). The car yields to it (stops before
         it) instead of squeezing past beside or ahead of it."""
         if self.road is None or len(bx.s_ref) < 2:
             return False
-        k0, k1 = max(meet - 1, 0), min(meet + 1, len(bx.s_ref) - 1)
-        if k1 == k0:
-            return False
+        k0, k1 = max(meet - 1, 0), min(meet + 1, len(bx.s_ref) - 1)  # k1 > k0: two or more steps
         span = (k1 - k0) * self.dt_s
         v_s = (bx.s_ref[k1] - bx.s_ref[k0]) / span
-        v_e = 0.5 * ((bx.e_lo[k1] + bx.e_hi[k1]) - (bx.e_lo[k0] + bx.e_hi[k0])) / span
-        if v_s > -ONCOMING_MPS and abs(v_e) < ONCOMING_MPS:
-            return False
         left, right = self.road.edges(bx.s_ref)
+        # across the road: the offset moves that fast from the path and from both edges beside it
+        # (where the path moves over a lane, a car along its lane drifts at the path's slope in the
+        # path's frame but keeps its offset to the edges; to one edge where the other one bends)
+        d_e = 0.5 * ((bx.e_lo[k1] + bx.e_hi[k1]) - (bx.e_lo[k0] + bx.e_hi[k0]))
+        v_e = min(abs(d_e), abs(d_e - (left[k1] - left[k0])), abs(d_e - (right[k1] - right[k0]))) / span
+        if v_s > -ONCOMING_MPS and v_e < ONCOMING_MPS:
+            return False
         reach = self.r_disc + self.config.margin_m + self.half_length
         there = (bx.s_lo - reach <= s_arr) & (s_arr <= bx.s_hi + reach)
         return bool(np.any((bx.e_lo < left) & (bx.e_hi > right) & there))
