@@ -266,8 +266,8 @@ class ObstacleSpec(_Strict):
 class AvoidanceSpec(_Strict):
     """How obstacles enter the MPC (see mpcdrive.ocp.avoidance; the defaults are
     :class:`~mpcdrive.ocp.avoidance.AvoidanceConfig`'s). ``follow_gap_s``: behind an obstacle
-    blocking the lane the references trail it by that time gap (car following; the compiled
-    backend declines it and the OSQP controller runs, with a notice)."""
+    blocking the lane the references trail it by that time gap (car following, on both
+    backends)."""
 
     formulation: Literal["hard", "corridor", "potential", "gaussian"] = _AV.formulation
     margin_m: NonNeg = _AV.margin_m
