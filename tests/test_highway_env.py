@@ -302,24 +302,18 @@ def test_mpc_drives_among_other_vehicles_without_a_crash(gym, seed):
 
 
 # --------------------------------------------------------------------------- highway-v0
-def test_highway_road_and_the_shifted_reference(gym):
+def test_highway_road_is_the_lanes_along_the_route_lane(gym):
     """highway-v0's four straight lanes become a Road along the ego's lane (offsets +-4 m
-    apart), and a lateral ramp to the next lane shifts the controller's path onto its centre."""
+    apart), with a path per lane for the other vehicles' predictions."""
     from highway_env.road.road import RoadNetwork
 
-    from mpcdrive.adapters.highway_env import ramp_path, straight_road
-    from mpcdrive.control.lanes import LateralRamp
+    from mpcdrive.adapters.highway_env import straight_road
 
     net = RoadNetwork.straight_road_network(4)
     road, path, paths = straight_road(net, ("0", "1", 1))
     assert road.route_lane == 1 and len(road.lanes) == 4 and len(paths) == 4
     np.testing.assert_allclose([ln.center_m[0] for ln in road.lanes], [-4.0, 0.0, 4.0, 8.0])
     np.testing.assert_allclose(road.edges(100.0), (10.0, -6.0))
-    ramp = LateralRamp(100.0, 200.0, 0.0, road.s_m, road.lanes[2].center_m)
-    p = ramp_path(path, ramp, 100.0)
-    for x, y in [(100.0, 0.0), (150.0, 2.0), (200.0, 4.0), (400.0, 4.0)]:
-        s, e = p.project(np.array([x, 4.0 + y]))  # highway-env's lane 1 lies at y = 4 m
-        assert abs(e) < 0.02, (x, e)
     assert paths[("0", "1", 3)].project(np.array([50.0, 12.0])) == pytest.approx((50.0, 0.0))
 
 

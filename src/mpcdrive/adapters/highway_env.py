@@ -19,10 +19,12 @@ episode's end); :class:`HighwayEnvMpcDriver` is the controller:
   lane -- or one cutting in, judged where the ego meets it -- it slows down and follows at a time
   gap instead of overtaking. Vehicles beyond the influence distance (20 m) are ignored, the
   nearest three considered.
-* **Lanes (highway-v0).** With ``settings.lanes`` (:func:`highway_settings`) a decision layer
-  (:mod:`mpcdrive.control.lanes`) picks the lane on highway-v0's straight parallel lanes and the
-  controller is retargeted onto the route lane's centreline shifted by its lateral ramp
-  (docs/highway.md).
+* **Lanes (highway-v0).** With ``settings.lanes`` (:func:`highway_settings`) the controller is
+  :class:`~mpcdrive.control.lanes.LaneChoosingMpc`: its decision layer picks the lane on
+  highway-v0's straight parallel lanes, and the MPC keeps the body inside the lanes the decision
+  allows and follows its lateral ramp (docs/highway.md), as on every other road with lanes.
+* **Solver.** The compiled controller (:func:`~mpcdrive.control.factory.make_mpc`, ``fast``), the
+  default everywhere; OSQP with a one-line notice for a problem it does not cover.
 
 :func:`drive_env` runs an episode (:func:`~mpcdrive.sim.simulate` with the plant, the road the
 run is judged on and the vehicle's footprint) and adds what the environment reported. Example::
@@ -42,12 +44,12 @@ from typing import Literal
 
 import numpy as np
 
-from ..control.lanes import LaneConfig, LaneDecision, LateralRamp, decide_lane
-from ..control.mpc import LtvMpc, MpcConfig
+from ..control.factory import make_mpc
+from ..control.lanes import LaneChoosingMpc, LaneConfig, LaneDecision
+from ..control.mpc import MpcConfig
 from ..ocp.avoidance import AvoidanceConfig
 from ..ocp.problem import MpcProblem
 from ..paths.straight import StraightPath
-from ..paths.waypoints import WaypointPath
 from ..scene.footprint import Footprint
 from ..scene.road import Lane, Road
 from ..sim.closed_loop import simulate
@@ -168,16 +170,6 @@ def straight_road(network, lane_index) -> tuple[Road, StraightPath, dict]:
     return road, path, paths
 
 
-def ramp_path(path, ramp: LateralRamp, s_m: float, ds_m: float = 2.0) -> WaypointPath:
-    """The controller's path: ``path`` shifted sideways by the decision layer's lateral
-    reference ``ramp`` [m], from 20 m behind ``s_m`` [m] to 50 m past the ramp's end (beyond,
-    the path goes on straight along its end tangent: the target lane's centre on highway-v0)."""
-    s = np.arange(s_m - 20.0, max(ramp.s1_m, s_m) + 50.0, ds_m)
-    h = np.asarray(path.heading(s), float)
-    n = np.column_stack([-np.sin(h), np.cos(h)])
-    return WaypointPath(np.asarray(path.position(s), float) + ramp.offset(s)[:, None] * n, ds_m=0.5)
-
-
 def lane_problem(
     nx: int, nu: int, N: int, dt_s: float, Q, R, Rc, u_min, u_max, du_max_per_s, x_min, x_max, road: Road
 ) -> MpcProblem:
@@ -277,9 +269,9 @@ class HighwayEnvMpcDriver:
     Built once per episode (after ``env.reset``): path from the ego's lane, model from the
     vehicle's length, QP from the action ranges. At each step the loop hands it the plant's
     traffic (:meth:`set_obstacles`; ``others``, their order fixed, an obstacle's index its
-    identity); :meth:`step` takes the lane decision (with ``settings.lanes``), passes the
-    obstacles to the MPC and solves. Its outputs' path coordinates are those on :attr:`path`
-    (the route lane's centreline), whichever reference the MPC tracks. The controller's period
+    identity); :meth:`step` passes them to the MPC and solves (with ``settings.lanes`` the
+    :class:`~mpcdrive.control.lanes.LaneChoosingMpc` takes the lane decision first). Its outputs'
+    path coordinates are those on :attr:`path` (the route lane's centreline). The controller's period
     is the policy period ``1 / policy_frequency``. With steering only (no longitudinal action)
     the ego cannot slow down behind a slower car in its lane: it keeps its lane and speed, and
     the avoidance can only hold it off sideways. :attr:`considered` counts, per step, the
@@ -296,7 +288,6 @@ class HighwayEnvMpcDriver:
         self.lane_index = tuple(vehicle.lane_index)
         # highway-v0's straight parallel lanes: a decision layer picks the lane to drive in
         self.road: Road | None = None
-        self.decision: LaneDecision | None = None
         if settings.lanes is not None:
             self.road, self.path, lane_paths = straight_road(u.road.network, self.lane_index)
             self.lane_half_width_m = 0.5 * float(u.road.network.get_lane(self.lane_index).width)
@@ -351,10 +342,7 @@ class HighwayEnvMpcDriver:
         #: obstacles the MPC considered per step
         self.considered: list[int] = []
         self._obstacles = p.traffic(0.0)
-        self.controller = self._controller(self.path, self._obstacles)
-        if self.road is not None:
-            x = p.state()
-            self._follow_lanes(x, self.controller.initial_warm(x), self._obstacles)
+        self.controller = self._controller(self._obstacles)
 
     # -- the controller interface (sim.simulate) -----------------------------------------------
     @property
@@ -375,6 +363,11 @@ class HighwayEnvMpcDriver:
         with the lane decision layer, else the lane around the path."""
         return self.road if self.road is not None else self.lane_road
 
+    @property
+    def decision(self) -> LaneDecision | None:
+        """The lane decision layer's last decision (None without ``settings.lanes``)."""
+        return getattr(self.controller, "decision", None) if self.road is not None else None
+
     def initial_warm(self, x0) -> WarmStart:
         return self.controller.initial_warm(x0)
 
@@ -383,25 +376,23 @@ class HighwayEnvMpcDriver:
         self._obstacles = tuple(obstacles)
 
     def step(self, x, warm: WarmStart) -> ControlOutput:
-        """One control step from the measured state ``x``: with ``settings.lanes`` the lane
-        decision first (:attr:`decision`), then the MPC with the last obstacles given."""
+        """One control step from the measured state ``x`` with the last obstacles given (with
+        ``settings.lanes`` the lane decision first: :attr:`decision`)."""
         x = np.asarray(x, float)
         if self._obstacles:
-            if self.road is not None:
-                warm = self._follow_lanes(x, warm, self._obstacles)
             self.controller.set_obstacles(self._obstacles)
         out = self.controller.step(x, warm)
         avoidance = self.controller.avoidance
         self.considered.append(0 if avoidance is None else len(avoidance.relevant(warm.t_s, x[:2])))
-        if self.controller.path is not self.path and np.all(np.isfinite(x[:3])):  # retargeted
-            fr = self.path.frenet(x[:3])
-            out = replace(out, s_m=fr.s_m, e_y_m=fr.e_y_m, e_psi_rad=fr.e_psi_rad)
         return out
 
-    def _controller(self, path, obstacles) -> LtvMpc:
-        """The LTV-MPC along ``path`` (the body kept inside the lane around it) avoiding ``obstacles``."""
+    def _controller(self, obstacles):
+        """The MPC along :attr:`path` avoiding ``obstacles``: the body kept inside the lane around
+        it, or, with ``settings.lanes``, a :class:`LaneChoosingMpc` on highway-v0's whole road
+        (the MPC starting in the route lane)."""
         s, (nx, nu) = self.settings, (self.model.nx, self.model.nu)
         u_min, u_max, du, x_min, x_max = self._bounds
+        road = self.lane_road if self.road is None else self.road.band((self.road.route_lane,))
         problem = lane_problem(
             nx,
             nu,
@@ -415,42 +406,22 @@ class HighwayEnvMpcDriver:
             du,
             x_min,
             x_max,
-            self.lane_road,
+            road,
         )
-        return LtvMpc(
+        mpc = make_mpc(
             self.model,
-            path,
+            self.path,
             problem,
             self._mpc_config,
+            backend="fast",
             obstacles=obstacles,
             avoidance=s.avoidance,
             footprint=self.footprint,
         )
-
-    def _follow_lanes(self, x, warm: WarmStart, obstacles) -> WarmStart:
-        """Ask the decision layer for the lane; on a new lateral reference, retarget the
-        controller: a fresh one along the route lane's centreline shifted by the reference
-        (:func:`ramp_path`), the warm start carried over (the plan is in world coordinates).
-        Returns the warm start for the controller now in place."""
-        assert self.road is not None and self.settings.lanes is not None
-        s_m, e_y = self.path.project(x[:2])
-        d = decide_lane(
-            self.road,
-            self.path,
-            s_m,
-            e_y,
-            float(self.model.speed(x)),
-            obstacles,
-            warm.t_s,
-            self.decision,
-            self.settings.lanes,
-        )
-        if self.decision is None or d.ramp is not self.decision.ramp:
-            ctrl = self._controller(ramp_path(self.path, d.ramp, s_m), obstacles)
-            warm = replace(warm, s_m=ctrl.initial_warm(x).s_m, sides=())
-            self.controller = ctrl
-        self.decision = d
-        return warm
+        if self.road is None:
+            return mpc
+        assert s.lanes is not None
+        return LaneChoosingMpc(mpc, self.road, s.lanes)
 
 
 @dataclass(frozen=True)
