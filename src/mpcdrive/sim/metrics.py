@@ -136,8 +136,9 @@ class Metrics(Mapping[str, Any]):
     Safety:
 
     min_obstacle_clearance_m : smallest footprint-to-obstacle distance [m] (negative: overlap;
-    None without obstacles); collisions : contacts with obstacles; collision_events : each
-    contact (:class:`CollisionEvent`), in time order, ``()`` without one; first_collision : the
+    None without obstacles); collisions : contacts with obstacles (a stretch of steps in contact
+    counts once; at least 1 when the plant reported a crash); collision_events : each contact
+    (:class:`CollisionEvent`), in time order, ``()`` without one; first_collision : the
     first event or None (follows ``collision_events``; not an argument); road_given : False when
     no road or lane was given; max_lane_excess_m : the body's largest excess outside the road
     [m] (0 inside; the road's own rule).
@@ -164,9 +165,9 @@ class Metrics(Mapping[str, Any]):
     commonroad : the CommonRoad block (:class:`CommonRoadCheck`) of a run of a CommonRoad file,
     None otherwise (then the key is absent from ``metrics.json``).
 
-    The JSON view: :meth:`as_dict` gives ``metrics.json``'s dict (nested records as dicts, ``collision_events`` a list, no
-    ``commonroad`` key when it is None). A Metrics is also a read-only
-    :class:`~collections.abc.Mapping` over that view, so code written for the dict keeps working:
+    The JSON view: :meth:`as_dict` gives ``metrics.json``'s dict (nested records as dicts,
+    ``collision_events`` a list, no ``commonroad`` key when it is None). A Metrics is also a
+    read-only :class:`~collections.abc.Mapping` over that view, so code written for the dict works:
     ``m["collisions"]``, ``m["solve_time_us"]["p50"]``, ``m.get("commonroad")``, ``dict(m)``,
     ``{**m}``, ``json.dumps(dict(m))``; items are fresh copies (changing one changes nothing).
     It equals any mapping with the same items. Typed code uses the attributes
