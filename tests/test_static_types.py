@@ -1,5 +1,6 @@
 """The core packages type-check: ``mypy`` with the configuration in pyproject.toml (the files it
-lists: units, types, models, paths, scene, ocp, solvers, control) reports no error.
+lists: units, types, models, paths, scene, ocp, solvers, control, and the metrics and verdicts
+of sim) reports no error.
 
 Skipped where mypy is not installed (it comes with the ``lint`` extra); CI runs it as well."""
 

@@ -13,10 +13,13 @@ class BuildError(ValueError):
 def run_into(spec, out_dir: Path, progress=None, source: str | None = None, extra_outputs=None):
     """Run ``spec`` and write its files into ``out_dir``: ``trajectory.csv``, ``metrics.json``,
     ``scenario.yaml``, the figures and the interactive ``report.html`` (``extra_outputs(result,
-    out_dir)`` writes more and returns entries merged into the metrics, and under ``figures`` the
-    names of figures it wrote). ``progress`` is a
-    context manager factory ``progress(label, steps)`` yielding a step callback (or None).
-    Returns (result, metrics, figures, footprint); BuildError when the scenario does not build."""
+    out_dir)`` writes more and returns a dict: under ``commonroad`` a
+    :class:`~mpcdrive.sim.CommonRoadCheck`, which becomes the metrics' ``commonroad`` and judges
+    the goal, and under ``figures`` the names of figures it wrote; other entries are an error).
+    ``progress`` is a context manager factory ``progress(label, steps)`` yielding a step callback
+    (or None). Returns (result, metrics, figures, footprint), ``metrics`` a
+    :class:`~mpcdrive.sim.Metrics`; BuildError when the scenario does not build."""
+    import dataclasses
     from contextlib import nullcontext
 
     from .io import write_json, write_trajectory_csv
@@ -36,19 +39,23 @@ def run_into(spec, out_dir: Path, progress=None, source: str | None = None, extr
     metrics = compute_metrics(result)
     out_dir.mkdir(parents=True, exist_ok=True)
     write_trajectory_csv(result, out_dir / "trajectory.csv")
-    write_json(out_dir / "metrics.json", metrics)
+    write_json(out_dir / "metrics.json", metrics.as_dict())
     atomic_write_text(out_dir / "scenario.yaml", dump_scenario(spec))
     extra_figures = []
     if extra_outputs is not None:
         extra = dict(extra_outputs(result, out_dir))
         extra_figures = [Path(out_dir) / f for f in extra.pop("figures", [])]
-        metrics.update(extra)
-        cr = metrics.get("commonroad")
+        cr = extra.pop("commonroad", None)
+        if extra:
+            raise ValueError(f"extra_outputs returned unknown entries {sorted(extra)} (known: commonroad, figures)")
         if cr is not None:  # the goal is the planning problem's, the checker's verdicts count too
             metrics = apply_goal_region(
-                metrics, cr["goal_reached"], collision_free=cr["collision_free"], road_compliant=cr["road_compliant"]
+                dataclasses.replace(metrics, commonroad=cr),
+                cr.goal_reached,
+                collision_free=cr.collision_free,
+                road_compliant=cr.road_compliant,
             )
-        write_json(out_dir / "metrics.json", metrics)
+        write_json(out_dir / "metrics.json", metrics.as_dict())
     figures = list(write_run_figures(result, out_dir)) + extra_figures
     write_run_html(out_dir, result, metrics, figures, exp.footprint, run_id=spec.id, description=spec.description)
     return result, metrics, figures, exp.footprint

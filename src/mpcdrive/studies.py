@@ -58,7 +58,7 @@ def _summary(result: SimResult, exp) -> dict:
     excess = (
         road_excess_m(result, exp.track, exp.footprint)
         if exp.track is not None and exp.track.has_widths
-        else m["max_lane_excess_m"]
+        else m.max_lane_excess_m
     )
     ay = lateral_acceleration_mps2(result)
     inner = ay[2:-2] if ay.size > 6 else ay  # central differences are one-sided at the ends
@@ -66,15 +66,15 @@ def _summary(result: SimResult, exp) -> dict:
         "finished": bool(result.goal_reached),
         "lap_time_s": lap_time_s(result),
         "profile_time_s": None if exp.speed_profile is None else float(exp.speed_profile.lap_time_s),
-        "rms_e_y_m": m["rms_lateral_error_m"],
-        "max_abs_e_y_m": m["max_abs_lateral_error_m"],
+        "rms_e_y_m": m.rms_lateral_error_m,
+        "max_abs_e_y_m": m.max_abs_lateral_error_m,
         "road_excess_m": excess,
         # after leaving the road the car spins: its accelerations say nothing about the controller
         "max_abs_lateral_accel_mps2": (float(np.max(np.abs(inner))) if inner.size else 0.0)
         if result.goal_reached
         else None,
-        "solver_failures": m["solver_failures"],
-        "step_p50_us": m["solve_time_us"]["p50"],
+        "solver_failures": m.solver_failures,
+        "step_p50_us": m.solve_time_us.p50,
     }
 
 

@@ -36,6 +36,7 @@ import numpy as np
 
 from ..models.presets import PRESETS
 from ..scenarios.schema import ScenarioSpec
+from ..sim.metrics import CommonRoadCheck
 from .commonroad_goal import DrivePlan, accel_limit, friction_accel, plan_drive
 from .commonroad_route import drivable_lanelets, point, route_edges, scalar
 
@@ -75,8 +76,9 @@ class CommonRoadImport:
     def write_outputs(self, result, out_dir: Path) -> dict:
         """Write ``solution.xml`` (up to the goal, else the whole drive) and ``commonroad_scene.png``
         (commonroad-io's renderer), hand the lanelet polygons to the replay (``result.meta``), and
-        return the ``commonroad`` metrics: route, plan, goal step, the drivability checker's
-        verdicts and whether CommonRoad's solution checker accepts the solution."""
+        return the ``commonroad`` metrics (:class:`~mpcdrive.sim.CommonRoadCheck`): route, plan,
+        goal step, the drivability checker's verdicts and whether CommonRoad's solution checker
+        accepts the solution."""
         from .commonroad_figures import lanelet_polygons, write_scene_figure
 
         report = check_drive(self, result)
@@ -89,23 +91,23 @@ class CommonRoadImport:
         result.meta["lanelets"] = lanelet_polygons(self.scenario)
         plan = self.plan
         return {
-            "commonroad": {
-                "file": self.file.name,
-                "route_lanelets": list(self.route),
-                "plan": None if plan is None else plan.note,
-                "goal_reached": report.goal_step is not None,
-                "goal_step": report.goal_step,
-                "collision_free": report.collision_free,
-                "road_compliant": report.road_compliant,
-                "ks_feasible": report.feasible,
-                "states_checked": report.steps_checked,
-                "passed": passed,
-                "solution": path.name,
-                "vehicle_type": self.vehicle_type,
-                "vehicle_model": solution_model(self, result),
-                "solution_valid": valid,
-                "solution_check": why,
-            },
+            "commonroad": CommonRoadCheck(
+                file=self.file.name,
+                route_lanelets=tuple(self.route),
+                plan=None if plan is None else plan.note,
+                goal_reached=report.goal_step is not None,
+                goal_step=report.goal_step,
+                collision_free=report.collision_free,
+                road_compliant=report.road_compliant,
+                ks_feasible=report.feasible,
+                states_checked=report.steps_checked,
+                passed=passed,
+                solution=path.name,
+                vehicle_type=self.vehicle_type,
+                vehicle_model=solution_model(self, result),
+                solution_valid=valid,
+                solution_check=why,
+            ),
             "figures": [fig.name],
         }
 

@@ -103,23 +103,25 @@ def drive_file(task: BatchTask) -> dict:
         if task.configure is not None:
             imp = task.configure(imp)
         res, m, _, _ = run_into(imp.spec, Path(task.out_dir), source=task.file, extra_outputs=imp.write_outputs)
-        cr = m["commonroad"]
-        st = m.get("solve_time_us") or {}
+        cr = m.commonroad
+        if cr is None:
+            raise RuntimeError("the run has no CommonRoad checks")
+        st = m.solve_time_us
         row.update(
-            passed=bool(cr["passed"]),
-            collision_free=cr["collision_free"],
-            road_compliant=cr["road_compliant"],
-            ks_feasible=cr["ks_feasible"],
-            goal_reached=cr["goal_reached"],
+            passed=bool(cr.passed),
+            collision_free=cr.collision_free,
+            road_compliant=cr.road_compliant,
+            ks_feasible=cr.ks_feasible,
+            goal_reached=cr.goal_reached,
             # over the drive the checker judged (up to the goal), and over the whole run
-            min_obstacle_clearance_m=_min_clearance(res, cr["states_checked"]),
+            min_obstacle_clearance_m=_min_clearance(res, cr.states_checked),
             min_obstacle_clearance_whole_run_m=_min_clearance(res, None),
-            solver_failures=int(m["solver_failures"]),
-            solve_time_us={"p50": st.get("p50"), "p99": st.get("p99")},
-            solution_valid=cr.get("solution_valid"),
-            solution_check=cr.get("solution_check"),
-            vehicle_model=cr.get("vehicle_model"),
-            plan=cr.get("plan"),
+            solver_failures=m.solver_failures,
+            solve_time_us={"p50": st.p50, "p99": st.p99},
+            solution_valid=cr.solution_valid,
+            solution_check=cr.solution_check,
+            vehicle_model=cr.vehicle_model,
+            plan=cr.plan,
         )
     except Exception as e:  # a file's failure is its row; the batch goes on
         import shutil

@@ -165,10 +165,10 @@ def highway_episode(
         float(u.vehicle.position[0]) - x0,
         int(np.count_nonzero(np.diff(lanes))),
         len(overtakes.passed),
-        collisions=int(m["collisions"]),
-        max_lane_excess_m=float(m["max_lane_excess_m"]),
-        solver_failures=int(m["solver_failures"]),
-        fallbacks=int(m["fallbacks"]),
+        collisions=m.collisions,
+        max_lane_excess_m=m.max_lane_excess_m,
+        solver_failures=m.solver_failures,
+        fallbacks=m.fallbacks,
         result=result,
     )
 

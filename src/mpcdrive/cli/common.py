@@ -6,10 +6,14 @@ from __future__ import annotations
 import time
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
 from ..scenarios import ScenarioError, load_scenario
+
+if TYPE_CHECKING:
+    from ..sim import Metrics
 
 
 app = typer.Typer(
@@ -150,17 +154,16 @@ def _default_out(stem: str) -> Path:
     return Path("runs") / f"{stem}-{time.strftime('%Y%m%d-%H%M%S')}"
 
 
-def _summary_line(sid: str, m: dict) -> str:
+def _summary_line(sid: str, m: Metrics) -> str:
     """The run's safety verdict in words (``UNSAFE:`` first when it collided, left the road or
     diverged), then its tracking figures."""
     from ..sim import run_verdict
 
-    st = m["solve_time_us"]
     v = run_verdict(m)
     return (
-        f"{'UNSAFE: ' if v.unsafe else ''}{sid}: {'; '.join(v.findings)} | {m['steps']} steps, rms |e_y| "
-        f"{m['rms_lateral_error_m']:.4g} m, final |e_y| {m['final_lateral_error_m']:.3g} m, max |steer| "
-        f"{m['max_abs_steer_rad']:.3f} rad, step p50 {st['p50']:.0f} us"
+        f"{'UNSAFE: ' if v.unsafe else ''}{sid}: {'; '.join(v.findings)} | {m.steps} steps, rms |e_y| "
+        f"{m.rms_lateral_error_m:.4g} m, final |e_y| {m.final_lateral_error_m:.3g} m, max |steer| "
+        f"{m.max_abs_steer_rad:.3f} rad, step p50 {m.solve_time_us.p50:.0f} us"
     )
 
 

@@ -45,7 +45,7 @@ def reproduce(
             typer.echo(f"[{n}/{len(specs)}] {spec.id}", err=True)
             result, metrics, figures, footprint = _run_into(spec, tmp / spec.id, not quiet)
             results[spec.id] = result
-            all_metrics[spec.id] = metrics
+            all_metrics[spec.id] = metrics.as_dict()
             entries.append(
                 ReportEntry(spec.id, spec.description, metrics, [f"{spec.id}/{Path(f).name}" for f in figures])
             )
@@ -132,14 +132,14 @@ def compare_avoidance(
                 typer.echo(f"[{k_run}/{n_runs}] {sp.id} / {f}", err=True)
                 result, m, _, _ = _run_into(spec, tmp / sp.id / f, not quiet)
                 runs[f] = result
-                table.setdefault(sp.id, {})[f] = m
-                st = m["solve_time_us"]
+                table.setdefault(sp.id, {})[f] = m.as_dict()
+                st = m.solve_time_us
                 rows.append(
-                    f"| `{sp.id}` | {f} | {m['min_obstacle_clearance_m']:.3f} | {m['collisions']} | "
-                    f"{m['max_lane_excess_m']:.3f} | {math.degrees(m['max_abs_steer_rad']):.1f} | "
-                    f"{math.degrees(m['max_abs_steer_rate_rad_s']):.0f} | {m['rms_lateral_error_m']:.3f} | "
-                    f"{m['solver_failures']} | {m['fallbacks']} | {'yes' if m['goal_reached'] else 'no'} | "
-                    f"{st['p50']:.0f} / {st['p99']:.0f} |"
+                    f"| `{sp.id}` | {f} | {m.min_obstacle_clearance_m:.3f} | {m.collisions} | "
+                    f"{m.max_lane_excess_m:.3f} | {math.degrees(m.max_abs_steer_rad):.1f} | "
+                    f"{math.degrees(m.max_abs_steer_rate_rad_s):.0f} | {m.rms_lateral_error_m:.3f} | "
+                    f"{m.solver_failures} | {m.fallbacks} | {'yes' if m.goal_reached else 'no'} | "
+                    f"{st.p50:.0f} / {st.p99:.0f} |"
                 )
             plot_trajectory_overlay(runs, tmp / f"{sp.id}.png", title=f"{sp.id}: every formulation")
         maps = []

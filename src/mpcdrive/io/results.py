@@ -19,6 +19,7 @@ import io
 import json
 import math
 import os
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -152,9 +153,9 @@ def read_trajectory_csv(path: str | os.PathLike) -> dict[str, np.ndarray | list[
 def to_jsonable(obj):
     """Convert ``obj`` to plain JSON types.
 
-    numpy scalars and arrays become Python numbers and lists, tuples/sets lists, dataclasses
-    dicts, paths strings, dict keys strings; NaN and +-inf become ``None`` (JSON null).
-    Anything else raises ``TypeError`` naming the type.
+    numpy scalars and arrays become Python numbers and lists, tuples/sets lists, mappings (a
+    :class:`~mpcdrive.sim.Metrics` too) and dataclasses dicts, paths strings, dict keys strings;
+    NaN and +-inf become ``None`` (JSON null). Anything else raises ``TypeError`` naming the type.
     """
     if obj is None or isinstance(obj, (bool, str)):
         return obj
@@ -169,7 +170,7 @@ def to_jsonable(obj):
         return to_jsonable(obj.tolist())
     if isinstance(obj, np.generic):  # complex, str_, ... -> python scalar
         return to_jsonable(obj.item())
-    if isinstance(obj, dict):
+    if isinstance(obj, Mapping):  # before dataclasses: a Metrics is both, its items the JSON view
         return {str(k): to_jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [to_jsonable(v) for v in obj]

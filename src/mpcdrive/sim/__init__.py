@@ -3,17 +3,31 @@
 from .actuator import ActuatorState, SteeringActuator
 from .closed_loop import Disturbance, Plant, simulate
 from ..scene.footprint import Footprint
-from .metrics import LANE_TOLERANCE_M, apply_goal_region, compute_metrics, goal_met, lane_excess_per_step
+from .metrics import (
+    LANE_TOLERANCE_M,
+    CollisionEvent,
+    CommonRoadCheck,
+    Metrics,
+    SolveTimes,
+    apply_goal_region,
+    compute_metrics,
+    goal_met,
+    lane_excess_per_step,
+)
 from .verdict import RunVerdict, run_verdict
 
 __all__ = [
     "ActuatorState",
+    "CollisionEvent",
+    "CommonRoadCheck",
     "SteeringActuator",
     "Disturbance",
     "Footprint",
     "LANE_TOLERANCE_M",
+    "Metrics",
     "Plant",
     "RunVerdict",
+    "SolveTimes",
     "apply_goal_region",
     "compute_metrics",
     "goal_met",

@@ -1,10 +1,231 @@
-"""Run metrics (``metrics.json``), computed from a SimResult only."""
+"""Run metrics (``metrics.json``), computed from a SimResult only.
+
+:func:`compute_metrics` returns a :class:`Metrics`: a frozen dataclass with one typed field per
+key of ``metrics.json``, and at the same time a read-only mapping whose items are that JSON view
+(``m["collisions"]``, ``dict(m)``, ``m.get("commonroad")``; :meth:`Metrics.as_dict`)."""
 
 from __future__ import annotations
+
+import dataclasses
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from ..types import FALLBACK_KINDS, STATUS_HELD, STATUS_INACCURATE, STATUS_OK, SimResult
+
+__all__ = [
+    "LANE_TOLERANCE_M",
+    "CollisionEvent",
+    "CommonRoadCheck",
+    "Metrics",
+    "SolveTimes",
+    "apply_goal_region",
+    "compute_metrics",
+    "goal_met",
+    "lane_excess_per_step",
+]
+
+
+@dataclass(frozen=True)
+class CollisionEvent:
+    """One contact of the body with an obstacle (``metrics.json["collision_events"]``, from
+    ``SimResult.meta["collision_events"]``).
+
+    obstacle : index of the obstacle in the scenario's list (traffic follows the obstacles);
+    name : its name (``""`` when it has none); step, t_s : the first overlapping step and its
+    time [s]; steps : steps in contact; depth_m : the deepest penetration [m] (> 0)."""
+
+    obstacle: int
+    name: str
+    step: int
+    t_s: float
+    steps: int
+    depth_m: float
+
+    def as_dict(self) -> dict[str, Any]:
+        """The JSON object of ``metrics.json`` (keys in field order)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+
+@dataclass(frozen=True)
+class SolveTimes:
+    """Solve-time percentiles [µs] over the real solves of a run (``held`` steps left out):
+    ``p50`` (median), ``p99`` and ``max``. They vary from run to run with the machine's load."""
+
+    p50: float
+    p99: float
+    max: float
+
+    def as_dict(self) -> dict[str, float]:
+        """``{"p50": ..., "p99": ..., "max": ...}``, as in ``metrics.json``."""
+        return {"p50": self.p50, "p99": self.p99, "max": self.max}
+
+
+@dataclass(frozen=True)
+class CommonRoadCheck:
+    """The CommonRoad block of a run's metrics (``metrics.json["commonroad"]``, written by the
+    CommonRoad adapter, docs/commonroad.md): the drivability checker's verdicts on the drive and
+    CommonRoad's solution checker on the solution written.
+
+    file : the scenario file's name; route_lanelets : the route's lanelet ids; plan : how the
+    goal is driven, in words (None without a plan); goal_reached, goal_step : the first step
+    whose state is in the planning problem's goal (None: never); collision_free, road_compliant :
+    the drive up to the goal (else all of it) against the obstacles and the road boundary;
+    ks_feasible : the solution trajectory is feasible for its model (``vehicle_model``);
+    states_checked : the states judged; passed : all of these and ``solution_valid``;
+    solution : the solution file's name; vehicle_type : CommonRoad's vehicle type;
+    vehicle_model : the model of the solution's states (``KS``, ``ST``); solution_valid,
+    solution_check : CommonRoad's solution checker's verdict and message."""
+
+    file: str
+    route_lanelets: tuple[int, ...]
+    plan: str | None
+    goal_reached: bool
+    goal_step: int | None
+    collision_free: bool
+    road_compliant: bool
+    ks_feasible: bool
+    states_checked: int
+    passed: bool
+    solution: str
+    vehicle_type: str
+    vehicle_model: str
+    solution_valid: bool
+    solution_check: str
+
+    def as_dict(self) -> dict[str, Any]:
+        """The JSON object of ``metrics.json["commonroad"]`` (keys in field order)."""
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        d["route_lanelets"] = list(self.route_lanelets)
+        return d
+
+
+def _plain(value: Any) -> Any:
+    """A field's value as it appears in ``metrics.json`` (nested records as dicts, a fresh copy
+    of a dict)."""
+    if isinstance(value, (CollisionEvent, SolveTimes, CommonRoadCheck)):
+        return value.as_dict()
+    if isinstance(value, tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, dict):
+        return dict(value)
+    return value
+
+
+@dataclass(frozen=True, eq=False)
+class Metrics(Mapping[str, Any]):
+    """The metrics of one run (:func:`compute_metrics`): one field per key of ``metrics.json``,
+    units in the names ([m], [s], [rad], [rad/s], [µs]); ``None`` where a figure can be absent.
+
+    Tracking (the path's lateral error ``e_y`` and heading error ``e_psi``, per plant step):
+
+    steps : plant steps run; duration_s : steps x dt [s]; rms_lateral_error_m,
+    max_abs_lateral_error_m, final_lateral_error_m : RMS, largest and last |e_y| [m];
+    converged_rms_lateral_error_m, converged_max_abs_lateral_error_m : the same over the second
+    half of the run [m]; rms_heading_error_rad : RMS of e_psi [rad].
+
+    Steering (rates include the first step's change from the initial steering angle,
+    ``meta["initial_steer_rad"]``, 0 by default: the wheels start straight):
+
+    max_abs_steer_rad : largest |steering angle| [rad]; max_abs_steer_rate_rad_s : largest
+    |steering rate| [rad/s]; steer_total_variation_rad : sum of |steering changes| [rad] (the
+    smoothing study).
+
+    Safety:
+
+    min_obstacle_clearance_m : smallest footprint-to-obstacle distance [m] (negative: overlap;
+    None without obstacles); collisions : contacts with obstacles (a stretch of steps in contact
+    counts once; at least 1 when the plant reported a crash); collision_events : each contact
+    (:class:`CollisionEvent`), in time order, ``()`` without one; first_collision : the
+    first event or None (follows ``collision_events``; not an argument); road_given : False when
+    no road or lane was given; max_lane_excess_m : the body's largest excess outside the road
+    [m] (0 inside; the road's own rule).
+
+    Solver (``solver_failures`` and ``solve_time_us`` count real solves only: the plant steps
+    between the solves of a controller slower than the plant, status ``held``, are neither):
+
+    solver_failures : solves that failed; fallbacks : steps that used a fallback rung;
+    fallback_counts : steps per fallback rung, every rung listed (``relax``, ``shifted_plan``,
+    ``brake``, ``hold_last``); solve_time_us : solve-time percentiles (:class:`SolveTimes`).
+
+    Outcome:
+
+    goal_region_reached : the raw test (the run reached the end of an open path or its laps;
+    ``SimResult.goal_reached``; None: the run has no goal); goal_reached : the definition of
+    :func:`goal_met` -- region reached, inside the lane and without collision (None: no goal;
+    for CommonRoad the planning problem's goal and the checker's verdicts,
+    :func:`apply_goal_region`); termination : why the run ended (``completed``,
+    ``goal_reached`` or ``diverged``); controller_backend : the MPC implementation that ran
+    (``osqp`` or ``fast``, from ``meta["backend"]``; None if not recorded).
+
+    External checkers:
+
+    commonroad : the CommonRoad block (:class:`CommonRoadCheck`) of a run of a CommonRoad file,
+    None otherwise (then the key is absent from ``metrics.json``).
+
+    The JSON view: :meth:`as_dict` gives ``metrics.json``'s dict (nested records as dicts,
+    ``collision_events`` a list, no ``commonroad`` key when it is None). A Metrics is also a
+    read-only :class:`~collections.abc.Mapping` over that view, so code written for the dict works:
+    ``m["collisions"]``, ``m["solve_time_us"]["p50"]``, ``m.get("commonroad")``, ``dict(m)``,
+    ``{**m}``, ``json.dumps(dict(m))``; items are fresh copies (changing one changes nothing).
+    It equals any mapping with the same items. Typed code uses the attributes
+    (``m.solve_time_us.p50``, ``m.collision_events[0].t_s``)."""
+
+    steps: int
+    duration_s: float
+    rms_lateral_error_m: float
+    max_abs_lateral_error_m: float
+    final_lateral_error_m: float
+    converged_rms_lateral_error_m: float
+    converged_max_abs_lateral_error_m: float
+    rms_heading_error_rad: float
+    max_abs_steer_rad: float
+    max_abs_steer_rate_rad_s: float
+    steer_total_variation_rad: float
+    min_obstacle_clearance_m: float | None
+    collisions: int
+    collision_events: tuple[CollisionEvent, ...]
+    first_collision: CollisionEvent | None = field(init=False)
+    road_given: bool
+    max_lane_excess_m: float
+    solver_failures: int
+    fallbacks: int
+    fallback_counts: dict[str, int]
+    solve_time_us: SolveTimes
+    goal_region_reached: bool | None
+    goal_reached: bool | None
+    termination: str
+    controller_backend: str | None
+    commonroad: CommonRoadCheck | None = None
+
+    def __post_init__(self) -> None:
+        events = tuple(self.collision_events)
+        object.__setattr__(self, "collision_events", events)
+        object.__setattr__(self, "first_collision", events[0] if events else None)
+
+    def as_dict(self) -> dict[str, Any]:
+        """The run's ``metrics.json`` as a dict of plain JSON types (numbers, bools, strings,
+        None, lists, dicts), keys in the order of the fields (``commonroad`` only when given)."""
+        return {k: self[k] for k in self}
+
+    # -- the read-only Mapping over the JSON view -------------------------------------------------
+    def __getitem__(self, key: str) -> Any:
+        if key not in _FIELD_NAMES or (key == "commonroad" and self.commonroad is None):
+            raise KeyError(key)
+        return _plain(getattr(self, key))
+
+    def __iter__(self) -> Iterator[str]:
+        return (k for k in _KEYS if k != "commonroad" or self.commonroad is not None)
+
+    def __len__(self) -> int:
+        return len(_KEYS) - (self.commonroad is None)
+
+
+#: the keys of ``metrics.json`` in order (``commonroad`` last, only for CommonRoad runs)
+_KEYS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(Metrics))
+_FIELD_NAMES = frozenset(_KEYS)
 
 
 def lane_excess_per_step(result: SimResult) -> np.ndarray | None:
@@ -38,20 +259,20 @@ def goal_met(region_reached: bool | None, max_lane_excess_m: float, collisions: 
 
 
 def apply_goal_region(
-    metrics: dict, region_reached: bool, *, collision_free: bool = True, road_compliant: bool = True
-) -> dict:
+    metrics: Metrics, region_reached: bool, *, collision_free: bool = True, road_compliant: bool = True
+) -> Metrics:
     """``metrics`` with the goal judged on another goal region (a CommonRoad planning problem's):
     ``goal_region_reached`` becomes ``region_reached`` and ``goal_reached`` follows
     :func:`goal_met`, also requiring an external checker's ``collision_free`` and
     ``road_compliant`` verdicts (the drivability checker's for CommonRoad). The checker's road
     is the authority on "inside the road" there: mpcdrive's own lane (one width along the route's
     centre line) is a proxy that a lane change or a wider lanelet exceeds."""
-    met = goal_met(region_reached, 0.0, metrics["collisions"])  # the lane proxy gives way to the checker's road
-    return {
-        **metrics,
-        "goal_region_reached": bool(region_reached),
-        "goal_reached": bool(met and collision_free and road_compliant),
-    }
+    met = goal_met(region_reached, 0.0, metrics.collisions)  # the lane proxy gives way to the checker's road
+    return dataclasses.replace(
+        metrics,
+        goal_region_reached=bool(region_reached),
+        goal_reached=bool(met and collision_free and road_compliant),
+    )
 
 
 def _rms(a) -> float:
@@ -59,25 +280,10 @@ def _rms(a) -> float:
     return float(np.sqrt(np.mean(a * a))) if a.size else float("nan")
 
 
-def compute_metrics(result: SimResult) -> dict:
-    """Metrics of one run (the keys of ``metrics.json``): tracking, steering, obstacle and lane figures plus ``converged_*`` (second half of the run),
-    ``steer_total_variation_rad`` (sum of |steering changes|, for the smoothing study),
-    ``fallback_counts`` (steps per fallback rung, every rung listed), ``termination`` (why the
-    run ended: ``completed``, ``goal_reached`` or ``diverged``) and ``controller_backend`` (the
-    MPC implementation that ran, ``osqp`` or ``fast``, from ``meta["backend"]``; None if absent).
-
-    Safety: ``collisions`` (contacts with obstacles), ``collision_events`` (each contact:
-    ``obstacle`` index, ``name``, ``step``, ``t_s``, ``steps``, ``depth_m``; ``[]`` without one),
-    ``first_collision`` (the first event or None), ``road_given`` (False: no road or lane was
-    given), ``max_lane_excess_m`` (the body's largest excess outside the road [m]). ``goal_region_reached`` is the raw test (the run reached the
-    end of an open path or its laps; ``SimResult.goal_reached``), ``goal_reached`` the
-    definition of :func:`goal_met`: region reached, inside the lane and without collision.
-
-    Steering rates include the first step's change from the initial steering angle
-    (``meta["initial_steer_rad"]``, 0 by default: the wheels start straight).
-
-    ``solver_failures`` and ``solve_time_us`` count real solves only: the plant steps between
-    the solves of a controller slower than the plant (status ``held``) are neither."""
+def compute_metrics(result: SimResult) -> Metrics:
+    """The metrics of one run (:class:`Metrics`, whose :meth:`~Metrics.as_dict` is the run's
+    ``metrics.json``), from ``result`` alone: its log and ``result.meta`` (collisions and their
+    events, obstacle clearance, termination, backend, initial steering angle)."""
     K = result.steps
     ey = result.e_y_m
     half = ey[K // 2 :]
@@ -89,40 +295,39 @@ def compute_metrics(result: SimResult) -> dict:
     st = np.asarray(result.solve_time_s, float)[solved] * 1e6
     failures = sum(1 for s in result.status if s not in (STATUS_OK, STATUS_INACCURATE, STATUS_HELD))
     collisions = int(result.meta.get("collisions", 0))
-    events = [dict(e) for e in result.meta.get("collision_events", ())]
+    events = tuple(CollisionEvent(**e) for e in result.meta.get("collision_events", ()))
     lane_excess = _lane_excess(result)
-    return {
-        "steps": int(K),
-        "duration_s": float(K * result.dt_s),
-        "rms_lateral_error_m": _rms(ey),
-        "max_abs_lateral_error_m": float(np.max(np.abs(ey))),
-        "final_lateral_error_m": float(abs(ey[-1])),
-        "converged_rms_lateral_error_m": _rms(half),
-        "converged_max_abs_lateral_error_m": float(np.max(np.abs(half))),
-        "rms_heading_error_rad": _rms(result.e_psi_rad),
-        "max_abs_steer_rad": float(np.max(np.abs(steer))),
-        "max_abs_steer_rate_rad_s": float(np.max(np.abs(rate))),
-        "steer_total_variation_rad": float(np.sum(np.abs(np.diff(steer0)))),
-        "min_obstacle_clearance_m": result.meta.get("min_obstacle_clearance_m"),
-        "collisions": collisions,
-        "collision_events": events,
-        "first_collision": events[0] if events else None,
-        "road_given": result.lane_excess_m is not None,
-        "max_lane_excess_m": lane_excess,
-        "solver_failures": int(failures),
-        "fallbacks": int(sum(1 for f in result.fallback if f)),
-        "fallback_counts": _fallback_counts(result.fallback),
-        "solve_time_us": {
-            "p50": float(np.percentile(st, 50)),
-            "p99": float(np.percentile(st, 99)),
-            "max": float(np.max(st)),
-        },
-        "goal_region_reached": result.goal_reached,
-        "goal_reached": goal_met(result.goal_reached, lane_excess, collisions),
-        "termination": result.meta.get("termination", "completed"),
-        # the controller implementation that ran (osqp or fast; None when not recorded)
-        "controller_backend": result.meta.get("backend") or None,
-    }
+    clearance = result.meta.get("min_obstacle_clearance_m")
+    return Metrics(
+        steps=int(K),
+        duration_s=float(K * result.dt_s),
+        rms_lateral_error_m=_rms(ey),
+        max_abs_lateral_error_m=float(np.max(np.abs(ey))),
+        final_lateral_error_m=float(abs(ey[-1])),
+        converged_rms_lateral_error_m=_rms(half),
+        converged_max_abs_lateral_error_m=float(np.max(np.abs(half))),
+        rms_heading_error_rad=_rms(result.e_psi_rad),
+        max_abs_steer_rad=float(np.max(np.abs(steer))),
+        max_abs_steer_rate_rad_s=float(np.max(np.abs(rate))),
+        steer_total_variation_rad=float(np.sum(np.abs(np.diff(steer0)))),
+        min_obstacle_clearance_m=None if clearance is None else float(clearance),
+        collisions=collisions,
+        collision_events=events,
+        road_given=result.lane_excess_m is not None,
+        max_lane_excess_m=lane_excess,
+        solver_failures=int(failures),
+        fallbacks=int(sum(1 for f in result.fallback if f)),
+        fallback_counts=_fallback_counts(result.fallback),
+        solve_time_us=SolveTimes(
+            p50=float(np.percentile(st, 50)),
+            p99=float(np.percentile(st, 99)),
+            max=float(np.max(st)),
+        ),
+        goal_region_reached=result.goal_reached,
+        goal_reached=goal_met(result.goal_reached, lane_excess, collisions),
+        termination=result.meta.get("termination", "completed"),
+        controller_backend=result.meta.get("backend") or None,
+    )
 
 
 def _fallback_counts(fallback) -> dict[str, int]:

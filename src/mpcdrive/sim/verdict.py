@@ -1,10 +1,14 @@
 """A run's safety outcome in words: collisions (which obstacle, when), clearance, lane excess,
 goal, failed solves and how they were handled, and an external checker's verdicts (CommonRoad's
-drivability checker). Pure functions of a metrics dict (:func:`~mpcdrive.sim.compute_metrics`)."""
+drivability checker). Pure functions of a run's metrics as a mapping in the shape of
+``metrics.json``: a :class:`~mpcdrive.sim.Metrics` (:func:`~mpcdrive.sim.compute_metrics`) or a
+``metrics.json`` read back (missing keys count as fine)."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from .metrics import LANE_TOLERANCE_M
 
@@ -52,12 +56,12 @@ class RunVerdict:
         return ("UNSAFE: " if self.unsafe else "") + "; ".join(self.findings)
 
 
-def _obstacle(event: dict) -> str:
+def _obstacle(event: Mapping[str, Any]) -> str:
     name = event.get("name")
     return f"obstacle {event['obstacle']}" + (f" ({name})" if name else "")
 
 
-def collision_phrase(m: dict) -> str | None:
+def collision_phrase(m: Mapping[str, Any]) -> str | None:
     """``collided with obstacle 2 (slow-car) at t = 3.10 s, 0.12 m deep`` (plus how many contacts
     in all), ``no collision (min clearance 0.21 m)``, or None without obstacles."""
     n = int(m.get("collisions") or 0)
@@ -78,7 +82,7 @@ def collision_phrase(m: dict) -> str | None:
     return text
 
 
-def lane_phrase(m: dict) -> str:
+def lane_phrase(m: Mapping[str, Any]) -> str:
     """``left the lane by 0.82 m``, ``inside the lane (max excess 0 m)`` or ``no lane given``; for
     a run an external checker judged on the road (CommonRoad) the lane is the route lane, a proxy
     the checker's verdict overrides."""
@@ -92,7 +96,7 @@ def lane_phrase(m: dict) -> str:
     return "inside the lane" + (f" (max excess {e:.2g} m)" if e > 0 else "")
 
 
-def goal_phrase(m: dict) -> str | None:
+def goal_phrase(m: Mapping[str, Any]) -> str | None:
     """``goal reached``, ``goal not reached`` (saying when the region was reached but not
     safely), or None for a run without a goal."""
     g = m.get("goal_reached")
@@ -105,7 +109,7 @@ def goal_phrase(m: dict) -> str | None:
     return "goal not reached"
 
 
-def solver_phrase(m: dict) -> str:
+def solver_phrase(m: Mapping[str, Any]) -> str:
     """``no failed solves``, ``5 failed solves, all recovered by relax`` or ``5 failed solves: 3
     recovered by shifted_plan, 2 by brake``."""
     n = int(m.get("solver_failures") or 0)
@@ -122,7 +126,7 @@ def solver_phrase(m: dict) -> str:
     return f"{head}: {', '.join(parts)}"
 
 
-def checker_phrase(cr: dict) -> str:
+def checker_phrase(cr: Mapping[str, Any]) -> str:
     """The drivability checker's verdicts of a CommonRoad run (``metrics["commonroad"]``)."""
     words = [
         "collision-free" if cr.get("collision_free") else "COLLISION",
@@ -144,7 +148,7 @@ def checker_phrase(cr: dict) -> str:
     return "CommonRoad checker: " + ", ".join(words)
 
 
-def run_verdict(m: dict) -> RunVerdict:
+def run_verdict(m: Mapping[str, Any]) -> RunVerdict:
     """The verdict of a run with metrics ``m`` (missing keys count as fine)."""
     cr = m.get("commonroad") or {}
     collided = bool(m.get("collisions")) or bool(m.get("collision_events")) or cr.get("collision_free") is False

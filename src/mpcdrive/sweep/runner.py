@@ -18,11 +18,15 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..scenarios import ScenarioError, ScenarioSpec, validate_scenario_data
 from .vary import Setting, SweepError, Variation, apply, parse_set, parse_vary
+
+if TYPE_CHECKING:
+    from ..sim import Metrics
 
 __all__ = [
     "METRIC_COLUMNS",
@@ -83,23 +87,27 @@ class SuccessCriteria:
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise SweepError(f"{name} must be a finite number >= 0, got {v!r}")
 
-    def judge(self, m: dict) -> list[str]:
-        """Reasons the run with metrics ``m`` failed (empty: success)."""
+    def judge(
+        self, m: Metrics, *, max_lane_excess_t_s: float | None = None, lane_excess_at_start_m: float | None = None
+    ) -> list[str]:
+        """Reasons the run with metrics ``m`` failed (empty: success). ``max_lane_excess_t_s``
+        (when the lane excess was largest [s]) and ``lane_excess_at_start_m`` (the excess at the
+        first step [m]) add to the lane finding."""
         why = []
-        if m.get("termination") == "diverged":
+        if m.termination == "diverged":
             why.append("plant state diverged (not finite)")
-        if m["collisions"]:
-            why.append(f"{m['collisions']} collision(s)")
-        if m["max_lane_excess_m"] > self.max_lane_excess_m:
-            msg = f"left the lane by {m['max_lane_excess_m']:.3g} m"
-            if m.get("max_lane_excess_t_s") is not None:
-                msg += f" at t = {m['max_lane_excess_t_s']:.2f} s"
-            if m.get("lane_excess_at_start_m"):
-                msg += f" (already {m['lane_excess_at_start_m']:.3g} m outside at the start)"
+        if m.collisions:
+            why.append(f"{m.collisions} collision(s)")
+        if m.max_lane_excess_m > self.max_lane_excess_m:
+            msg = f"left the lane by {m.max_lane_excess_m:.3g} m"
+            if max_lane_excess_t_s is not None:
+                msg += f" at t = {max_lane_excess_t_s:.2f} s"
+            if lane_excess_at_start_m:
+                msg += f" (already {lane_excess_at_start_m:.3g} m outside at the start)"
             why.append(msg)
-        if m["goal_reached"] is False:
+        if m.goal_reached is False:
             why.append("goal not reached")
-        fe = m["final_lateral_error_m"]
+        fe = m.final_lateral_error_m
         if not (isinstance(fe, float) and math.isfinite(fe)):
             why.append("final lateral error not finite")
         elif fe > self.max_final_lateral_error_m:
@@ -238,9 +246,10 @@ def run_task(task: RunTask) -> dict:
         result = run_experiment(exp)
         m = compute_metrics(result)
         excess = lane_excess_per_step(result)
+        lane: dict[str, float] = {}  # when the excess was largest, and the excess at the start
         if excess is not None and excess.size:
-            m["max_lane_excess_t_s"] = float(result.t_s[int(np.argmax(excess))])
-            m["lane_excess_at_start_m"] = float(excess[0])
+            lane["max_lane_excess_t_s"] = float(result.t_s[int(np.argmax(excess))])
+            lane["lane_excess_at_start_m"] = float(excess[0])
     except Exception as e:  # a run's error is its result; the sweep goes on
         msg = " ".join(str(e).split())
         row.update(
@@ -250,19 +259,20 @@ def run_task(task: RunTask) -> dict:
             wall_s=time.perf_counter() - t0,
         )
         return row
-    fc = m["fallback_counts"]
-    st = m["solve_time_us"]
-    row.update({k: m[k] for k in METRIC_COLUMNS if k in m})
+    fc = m.fallback_counts
+    st = m.solve_time_us
+    row.update({k: v for k, v in m.items() if k in METRIC_COLUMNS})
+    row.update(lane)
     row.update(
         fallbacks_relax=fc.get("relax", 0),
         fallbacks_shifted_plan=fc.get("shifted_plan", 0),
         fallbacks_brake=fc.get("brake", 0),
         fallbacks_hold_last=fc.get("hold_last", 0),
-        solve_time_p50_us=st["p50"],
-        solve_time_p99_us=st["p99"],
-        solve_time_max_us=st["max"],
+        solve_time_p50_us=st.p50,
+        solve_time_p99_us=st.p99,
+        solve_time_max_us=st.max,
     )
-    why = task.criteria.judge(m)
+    why = task.criteria.judge(m, **lane)
     row.update(success=not why, failure_reason="; ".join(why), wall_s=time.perf_counter() - t0)
     return row
 
