@@ -574,6 +574,11 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
                     C[m + 1, jj] = 0.0
                 b[m] = nxf - dh * xf[k, 2] - lane_b[k - 1] - lane_hi[k - 1] + dh * ybar
                 b[m + 1] = lane_b[k - 1] + lane_lo[k - 1] - dl * ybar - (nxf - dl * xf[k, 2])
+                for r_ in (m, m + 1):  # an unbounded side (scene.road.FREE_STAGES): 0 >= -1, never active
+                    if not b[r_] > -math.inf:
+                        for jj in range(nz):
+                            C[r_, jj] = 0.0
+                        b[r_] = -1.0
                 rgrp[m] = k - 1
                 rgrp[m + 1] = k - 1
                 rowcol[m] = -1

@@ -144,6 +144,10 @@ def centre_bounds(
         )
 
 
+#: steps at the start of an MPC horizon without road bounds (:func:`horizon_bounds`)
+FREE_STAGES = 1
+
+
 @njit(cache=True)
 def horizon_bounds(
     tab_s,
@@ -163,10 +167,18 @@ def horizon_bounds(
     dlo_out,
     dhi_out,
 ):
-    """:func:`body_bounds` per horizon step: the path's heading [rad] and curvature [1/m] at arc
-    lengths ``s_arr`` [m], the linearization trajectory's yaw ``yaw`` [rad] (all (n,)); the
-    relative yaw is wrapped to [-pi, pi). Writes the bounds and their yaw slopes."""
+    """:func:`body_bounds` per horizon step x_1 .. x_n of an MPC: the path's heading [rad] and
+    curvature [1/m] at arc lengths ``s_arr`` [m], the linearization trajectory's yaw ``yaw`` [rad]
+    (all (n,)); the relative yaw is wrapped to [-pi, pi). Writes the bounds and their yaw slopes.
+
+    The first :data:`FREE_STAGES` steps get no bound (-inf, inf): the position one step ahead is
+    the current motion's (the step's inputs move it by at most ``v^2 dt^2 tan(delta) / (2 L)``),
+    so a bound there that the plant's lag (a steering servo, tyre slip) has made unkeepable only
+    buys its slack with the steering at its rate limit, a limit cycle on CommonRoad's ST model."""
     for k in range(s_arr.shape[0]):
+        if k < FREE_STAGES:
+            lo_out[k], hi_out[k], dlo_out[k], dhi_out[k] = -math.inf, math.inf, 0.0, 0.0
+            continue
         rel = (yaw[k] - heading[k] + math.pi) % (2.0 * math.pi) - math.pi
         lo_out[k], hi_out[k], dlo_out[k], dhi_out[k] = body_bounds(
             tab_s,
