@@ -497,8 +497,8 @@ def test_st_plant_settles_onto_the_lane_without_a_limit_cycle():
     (ZAM_Tutorial_Urban-3_2's road, its parked car left out). The ST model lags the kinematic
     controller's prediction (tyre slip; braking makes it oversteer), so a road bound on the very
     next step could not be kept and bought its slack with the steering at its rate limit: a limit
-    cycle of +-0.7 m with the speed dipping to 6 m/s. Without road bounds on that step
-    (scene.road.FREE_STAGES) it settles."""
+    cycle of +-0.7 m with the speed dipping to 6 m/s. With that step's bounds holding where the
+    car can get (scene.road.reach_first_step) it settles."""
     from pathlib import Path
 
     from mpcdrive.adapters.commonroad import load_commonroad, with_vehicle

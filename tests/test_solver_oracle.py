@@ -234,18 +234,17 @@ def solve_oracle(pb: MpcProblem, d, u_prev) -> Oracle:
                 cons.append(X[k, i] >= pb.x_min[i])
             if np.isfinite(pb.x_max[i]):
                 cons.append(X[k, i] <= pb.x_max[i])
-    # the soft road rows (one slack per step for both sides; an infinite bound, the road's first
-    # step, scene.road.FREE_STAGES: no row) and the obstacle rows (one slack per step shared by
-    # its rows; b = -inf: an unused row)
+    # the soft road rows (one slack per step for both sides) and the obstacle rows (one slack per
+    # step shared by its rows; b = -inf: an unused row)
     dlo, dhi, ybar = d.lane_slopes
     obstacle_rows = []
     for k in range(1, N + 1):
         e = d.lane_normal[k - 1] @ X[k, :2] - d.lane_offset[k - 1]
         dy = X[k, 2] - ybar[k - 1]
-        if np.isfinite(d.lane_hi[k - 1]):
-            cons.append(e <= d.lane_hi[k - 1] + dhi[k - 1] * dy + eps[k - 1])
-        if np.isfinite(d.lane_lo[k - 1]):
-            cons.append(e >= d.lane_lo[k - 1] + dlo[k - 1] * dy - eps[k - 1])
+        cons += [
+            e <= d.lane_hi[k - 1] + dhi[k - 1] * dy + eps[k - 1],
+            e >= d.lane_lo[k - 1] + dlo[k - 1] * dy - eps[k - 1],
+        ]
         for m in np.flatnonzero(np.isfinite(d.rows_b[k - 1])):
             obstacle_rows.append(d.rows_a[k - 1, m] @ X[k, :3] + sig[k - 1] >= d.rows_b[k - 1, m])
     cons += obstacle_rows
@@ -515,12 +514,11 @@ def run_case(seed: int, steps: int = 2) -> None:
 OSQP_STALLS = {(29, 3)}
 #: every obstacle kind, with and without the speed state, on straight and circular roads; seeds 4
 #: and 31 are left out: at their optimum (on the steps run) the input bounds (4) or the obstacle
-#: rows (31) happen not to bind, which run_case refuses; seed 38: on its second step a row is
-#: weakly active at Clarabel's optimum (slack 2.7e-6, multiplier 1.5e-5), so the measured
-#: primal residual is 2.7e-6 and, with that step's sensitivity (927), the tolerance 2.5e-3 -- above
-#: MAX_TOL, where the comparison says nothing
+#: rows (31) happen not to bind, which run_case refuses; seed 37: its fourth step is near
+#: degenerate (primal sensitivity 1.1e5: OSQP stops at its iteration cap, and the tolerance the
+#: active-set solver's residuals give is 9e-3, above MAX_TOL, where the comparison says nothing)
 FAST_SEEDS = [0, 1, 2, 3, 5, 6, 7, 8]
-SLOW_SEEDS = [s for s in range(9, 40) if s not in (31, 38)]
+SLOW_SEEDS = [s for s in range(9, 40) if s not in (31, 37)]
 
 
 @pytest.mark.parametrize("seed", FAST_SEEDS)

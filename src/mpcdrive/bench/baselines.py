@@ -205,10 +205,7 @@ class CasadiIpoptMpc:
             opti.set_value(self.lane_n, d.lane_normal.T)
             opti.set_value(self.lane_b, d.lane_offset)
             dlo, dhi, yaw = d.lane_slopes
-            # an unbounded side (the road's first step, scene.road.FREE_STAGES) as a far one
-            lo = np.where(np.isfinite(d.lane_lo), d.lane_lo, _UNUSED_ROW_B)
-            hi = np.where(np.isfinite(d.lane_hi), d.lane_hi, -_UNUSED_ROW_B)
-            opti.set_value(self.lane_rows, np.vstack([lo, hi, dlo, dhi, yaw]))
+            opti.set_value(self.lane_rows, np.vstack([d.lane_lo, d.lane_hi, dlo, dhi, yaw]))
         if self.rows_a is not None:
             for k, a in enumerate(self.rows_a):
                 opti.set_value(a, d.rows_a[k])

@@ -28,7 +28,7 @@ from ..models.compiled import METHOD_EXP, discrete_step_jacobians, model_referen
 from ..ocp.friction import friction_input_bounds
 from ..paths.compiled import path_eval, path_project, wrap_angle
 from ..paths.profile_compiled import profile_arc_lengths, profile_speed
-from ..scene.road import horizon_bounds
+from ..scene.road import horizon_bounds, reach_first_step
 from ..solvers.condensed import plan_feasible, riccati, soft_solve
 from ..solvers.dense_qp import gi_solve
 
@@ -407,6 +407,17 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
             lane_n[k, 0] = -math.sin(yaw)
             lane_n[k, 1] = math.cos(yaw)
             lane_b[k] = lane_n[k, 0] * refs[k + 1, 0] + lane_n[k, 1] * refs[k + 1, 1]
+        # the first step's bounds hold where the model puts the car with the first input of the
+        # linearization (F[0] = f(x, Ubar[0])): reachable, so never bought with slack
+        Xl1 = _v2(wbuf, fo, fs, _W_XLIN)
+        reach_first_step(
+            lane_lo,
+            lane_hi,
+            lane_dlo,
+            lane_dhi,
+            lane_n[0, 0] * F[0, 0] + lane_n[0, 1] * F[0, 1] - lane_b[0],
+            F[0, 2] - Xl1[1, 2],
+        )
 
     # -- no Rc, no lane: try the unconstrained minimizer (Riccati, O(N)); if it satisfies every
     # bound it is the QP's solution ---------------------------------------------------------------
@@ -574,11 +585,6 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
                     C[m + 1, jj] = 0.0
                 b[m] = nxf - dh * xf[k, 2] - lane_b[k - 1] - lane_hi[k - 1] + dh * ybar
                 b[m + 1] = lane_b[k - 1] + lane_lo[k - 1] - dl * ybar - (nxf - dl * xf[k, 2])
-                for r_ in (m, m + 1):  # an unbounded side (scene.road.FREE_STAGES): 0 >= -1, never active
-                    if not b[r_] > -math.inf:
-                        for jj in range(nz):
-                            C[r_, jj] = 0.0
-                        b[r_] = -1.0
                 rgrp[m] = k - 1
                 rgrp[m + 1] = k - 1
                 rowcol[m] = -1

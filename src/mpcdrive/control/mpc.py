@@ -25,7 +25,7 @@ from ..ocp.road_rows import RoadRows
 from ..paths.base import ReferencePath
 from ..scene.footprint import Footprint
 from ..scene.obstacles import Obstacle
-from ..scene.road import Road
+from ..scene.road import Road, reach_first_step
 from ..paths.reference import HorizonMode, horizon_arc_lengths, horizon_states
 from ..paths.speed_profile import SpeedReference
 from ..solvers.osqp_backend import OsqpBackend, OsqpSettings
@@ -393,6 +393,9 @@ class LtvMpc(TrackingWarmStart):
             self._lane_n[:, 0] = -np.sin(yaw)
             self._lane_n[:, 1] = np.cos(yaw)
             self._lane_b[:] = np.einsum("ki,ki->k", self._lane_n, refs[1:, :2])
+            if rows is not None:  # the first step's bounds hold where f(x, Ubar[0]) puts the car
+                e1 = float(self._lane_n[0] @ Fbar[0, :2] - self._lane_b[0])
+                reach_first_step(rows.lo, rows.hi, rows.dlo, rows.dhi, e1, float(Fbar[0, 2] - Xlin[1, 2]))
         return StepData(
             x,
             float(s0),

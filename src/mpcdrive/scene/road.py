@@ -144,10 +144,6 @@ def centre_bounds(
         )
 
 
-#: steps at the start of an MPC horizon without road bounds (:func:`horizon_bounds`)
-FREE_STAGES = 1
-
-
 @njit(cache=True)
 def horizon_bounds(
     tab_s,
@@ -169,16 +165,9 @@ def horizon_bounds(
 ):
     """:func:`body_bounds` per horizon step x_1 .. x_n of an MPC: the path's heading [rad] and
     curvature [1/m] at arc lengths ``s_arr`` [m], the linearization trajectory's yaw ``yaw`` [rad]
-    (all (n,)); the relative yaw is wrapped to [-pi, pi). Writes the bounds and their yaw slopes.
-
-    The first :data:`FREE_STAGES` steps get no bound (-inf, inf): the position one step ahead is
-    the current motion's (the step's inputs move it by at most ``v^2 dt^2 tan(delta) / (2 L)``),
-    so a bound there that the plant's lag (a steering servo, tyre slip) has made unkeepable only
-    buys its slack with the steering at its rate limit, a limit cycle on CommonRoad's ST model."""
+    (all (n,)); the relative yaw is wrapped to [-pi, pi). Writes the bounds and their yaw slopes
+    (the first step's are then widened to what it can reach: :func:`reach_first_step`)."""
     for k in range(s_arr.shape[0]):
-        if k < FREE_STAGES:
-            lo_out[k], hi_out[k], dlo_out[k], dhi_out[k] = -math.inf, math.inf, 0.0, 0.0
-            continue
         rel = (yaw[k] - heading[k] + math.pi) % (2.0 * math.pi) - math.pi
         lo_out[k], hi_out[k], dlo_out[k], dhi_out[k] = body_bounds(
             tab_s,
@@ -193,6 +182,24 @@ def horizon_bounds(
             center_offset_m,
             margin_m,
         )
+
+
+@njit(cache=True)
+def reach_first_step(lo, hi, dlo, dhi, e1_m, dyaw1_rad):
+    """Widen the road bounds of an MPC horizon's first step x_1 (``lo[0]``, ``hi[0]`` [m], yaw
+    slopes ``dlo[0]``, ``dhi[0]``, of :func:`horizon_bounds`) to hold the body where the model puts
+    it one step ahead with the linearization's first input: its reference point's lateral offset
+    ``e1_m`` [m] (as the rows measure it) and yaw ``dyaw1_rad`` [rad] off the linearization yaw.
+    That x_1 is reachable (the first input of the shifted plan keeps the rate limits), so the row
+    never asks for what no input gives. Without this, a car that the plant's lag (tyre slip, a
+    steering servo) carried past a bound bought the slack back with the steering at its rate
+    limit: a limit cycle on CommonRoad's ST model. Where x_1 is inside, nothing changes."""
+    need_lo = e1_m - dlo[0] * dyaw1_rad
+    need_hi = e1_m - dhi[0] * dyaw1_rad
+    if need_lo < lo[0]:
+        lo[0] = need_lo
+    if need_hi > hi[0]:
+        hi[0] = need_hi
 
 
 @dataclass(frozen=True, eq=False)
