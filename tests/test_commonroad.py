@@ -231,27 +231,24 @@ def test_vehicle_flags_are_checked(tmp_path):
     assert not (tmp_path / "o").exists()
 
 
-def _urban_3_2():
-    imp = load_commonroad(DIR / "ZAM_Tutorial_Urban-3_2.xml")
-    res = run_experiment(build_experiment(imp.spec))
-    return imp, res, check_drive(imp, res)
-
-
 @pytest.mark.slow
 def test_parked_car_is_passed_through_the_free_neighbour_lane(capsys):
     """ZAM_Tutorial_Urban-3_2 ("critical evasive"): a parked car blocks the route lanelet 12 m ahead
     at 9 m/s; the lanelet to its left goes the same way and is free. The lane decision layer opens
-    it, the car passes and comes back: collision-free, on the road, KS-feasible. Without the
-    neighbour lane it stops behind the car instead."""
-    imp, res, rep = _urban_3_2()
+    it, the car passes and comes back: collision-free, on the road, KS-feasible, goal reached, and
+    the solution accepted. Without the neighbour lane it stops behind the car instead."""
+    imp = load_commonroad(DIR / "ZAM_Tutorial_Urban-3_2.xml")
+    exp = build_experiment(imp.spec)
+    res = run_experiment(exp)
     m = compute_metrics(res)
+    rep = check_drive(imp, res)
     with capsys.disabled():
         print(
             f"\nZAM_Tutorial_Urban-3_2.xml: checker: {rep.line()}; ours: max e_y {res.e_y_m.max():.2f} m, "
             f"min clearance {np.min(res.clearance_m):.2f} m, solver failures {m['solver_failures']}"
         )
-    assert rep.collision_free and rep.road_compliant and rep.feasible
-    assert res.e_y_m.max() > 1.0 and abs(res.e_y_m[-1]) < 0.05  # over beside the parked car, and back
+    assert rep.collision_free and rep.road_compliant and rep.feasible and rep.goal_step is not None
+    assert res.e_y_m.max() > 1.0  # over in the neighbour lane beside the parked car
     assert np.min(res.clearance_m) > 0.3
     # no neighbour lane: it stops behind the car (the first 6 s)
     road = imp.spec.road.model_copy(update={"neighbours": None})
@@ -485,19 +482,6 @@ def test_no_extension_past_the_route_and_speed_ends_at_zero(name):
     assert exp.path.length_m == pytest.approx(float(np.sum(np.hypot(*np.diff(imp.centerline, axis=0).T))), rel=1e-3)
     # v^2 |kappa| <= a_lat (the profile's curvature is the windowed one it is built on)
     assert np.max(prof.v_mps**2 * prof.abs_kappa) <= LAT_ACCEL_MPS2 * (1 + 1e-9)
-
-
-@pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="the goal rectangle (x 90-95 m, 1.6 m wide, 16-21 m past the parked car) lies on the "
-    "return ramp: the states at the 0.1 s steps fall at x = 93.2 m, 1.03 m off its centre line, and "
-    "x = 95.0 m, 0.63 m off, on its end line. It was reached while the lane layer's road dropped the "
-    "lane the body was leaving and the MPC swerved the car home",
-)
-def test_parked_car_passed_and_back_in_the_goal_rectangle():
-    imp, res, rep = _urban_3_2()
-    assert rep.goal_step is not None
 
 
 def test_goal_time_window_sets_the_cruise_speed():

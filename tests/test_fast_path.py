@@ -89,10 +89,17 @@ def test_unsupported_scenarios_fall_back_to_osqp():
     assert ctrl.backend_name == "osqp"
 
 
+#: scenarios whose closed loop on OSQP at its scenario tolerance (1e-5) parts from OSQP's own at
+#: 1e-9, so the reference is OSQP at 1e-9: paper-exp5-potential's max |steer| is 0.35247 rad at
+#: 1e-5 and 0.35505 at 1e-9 (the fast path: 0.35505, within 1e-13), since the first step's road
+#: bounds follow the previous plan (scene.road.reach_first_step; before that they agreed within 1e-4)
+LOOSE_OSQP_SCENARIOS = ["paper-exp5-potential"]
+
+
 @pytest.fixture(scope="module", params=FAST_SCENARIOS)
 def builtin_pair(request):
     spec = load_scenario(request.param)
-    ref = build_experiment(_with_backend(spec, "osqp"))
+    ref = build_experiment(_tight(spec) if request.param in LOOSE_OSQP_SCENARIOS else _with_backend(spec, "osqp"))
     fast = build_experiment(_with_backend(spec, "fast"))
     assert isinstance(fast.mpc, FastLtvMpc), "every built-in scenario must run on the fast path"
     assert isinstance(ref.mpc, LtvMpc)
