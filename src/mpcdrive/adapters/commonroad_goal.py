@@ -88,14 +88,19 @@ class DrivePlan:
         }
 
 
-def _profile(line: np.ndarray, v_cruise: float, v0: float, accel: float, p0: np.ndarray, caps: tuple = ()):
-    """The path along ``line`` and its speed profile, starting at ``v0`` where the car (``p0``) is
-    (``caps``: its ``top_speed_until``)."""
+def _line_path(line: np.ndarray):
+    """The reference path along the centre line ``line`` (M, 2) [m]."""
     from ..paths import WaypointPath
+
+    return WaypointPath(line, ds_m=0.2)
+
+
+def _profile(path, v_cruise: float, v0: float, accel: float, p0: np.ndarray, caps: tuple = ()):
+    """The speed profile along ``path`` (:func:`_line_path`), starting at ``v0`` where the car
+    (``p0``) is (``caps``: its ``top_speed_until``)."""
     from ..paths.speed_profile import SpeedProfile
 
-    path = WaypointPath(line, ds_m=0.2)
-    return path, SpeedProfile(
+    return SpeedProfile(
         path,
         LAT_ACCEL_MPS2,
         accel,
@@ -199,8 +204,9 @@ def _stop(g: _GoalDrive):
         return None
     window = pb.window
     stop_line = _cut(line, 0.5 * (arc[0] + arc[1]))
+    path = _line_path(stop_line)
     for v in _candidates(v_want, *v_range):
-        path, prof = _profile(stop_line, v, pb.v0, pb.accel, pb.p0)
+        prof = _profile(path, v, pb.v0, pb.accel, pb.p0)
         t_in = float(prof.time_at(min(arc[0] + 1.0, path.length_m)))
         if window is None or t_in <= window[1] - 0.1 * (window[1] - window[0]) - pb.dt_s:
             return _finish(
@@ -229,9 +235,9 @@ def _through(g: _GoalDrive):
     best = None
     tries = [(v, ()) for v in _candidates(v_want, *v_range)]
     tries += _approaches(v_want, v_range, pb, arc)
+    path = _line_path(line)
     for v, caps in tries:
-        path, prof = _profile(line, v, pb.v0, pb.accel, pb.p0, caps)
-        t_in, t_out, miss = _timing(prof, path, arc, s_end, window)
+        t_in, t_out, miss = _timing(_profile(path, v, pb.v0, pb.accel, pb.p0, caps), arc, s_end, window)
         if best is None or miss < best[2]:
             best = (v, t_in, miss, caps)
         if miss == 0.0:  # in the region at some time inside the window (by a margin from its ends)
@@ -264,7 +270,7 @@ def _through(g: _GoalDrive):
     )
 
 
-def _timing(prof, path, arc: tuple, s_end: float, window) -> tuple[float, float, float]:
+def _timing(prof, arc: tuple, s_end: float, window) -> tuple[float, float, float]:
     """(time in, time out of the goal region [s], by how much the stay misses the time window
     shrunk by a margin at both ends [s], 0 when inside) of the reference speed ``prof``."""
     if arc[1] - arc[0] < 2.0:  # a small region (or the point nearest one): passed at one time
@@ -305,7 +311,8 @@ class _Problem:
 def _finish(
     route, line, mode: str, v: float, pb: _Problem, *, arc=None, arrival=None, note="", caps: tuple = ()
 ) -> DrivePlan:
-    path, prof = _profile(line, v, pb.v0, pb.accel, pb.p0, caps)
+    path = _line_path(line)
+    prof = _profile(path, v, pb.v0, pb.accel, pb.p0, caps)
     duration = float(prof.time_at(path.length_m)) + RUN_ON_S
     if pb.window is not None:
         # through the goal window's first step (a car waiting in the region must be there then),
