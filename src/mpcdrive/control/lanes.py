@@ -166,8 +166,8 @@ class LaneDecision:
     free_m : (n_lanes,) predicted free distance ahead per lane [m] (capped at the look-ahead);
     free : (n_lanes,) whether each lane is free (own lane: not blocked ahead);
     ramp : the lateral reference to track; band : the lanes the body may use now (current and
-    target, and any other the body overlaps now); band_m : their (right, left) edges at the ego [m]; stop_m : distance [m] to the
-    stop point (``stop`` only, else None); since_s : when the target last changed [s] (-inf:
+    target, and any other the body overlaps now); band_m : their (right, left) edges at the ego
+    [m]; stop_m : distance [m] to the stop point (``stop`` only, else None); since_s : when the target last changed [s] (-inf:
     never, the ego keeps the lane it started in); gap_m : bumper-to-bumper distance [m] to the
     nearest obstacle ahead in the ego's lane now (inf: none); called_back : the change is a
     called-back one, back to the lane a change left (it is driven home, never called back itself).

@@ -141,7 +141,7 @@ class SpeedProfile:
         self.abs_kappa = kappa
         self.v_limit_mps = np.minimum(self.v_max_mps, np.sqrt(self.lateral_accel_max_mps2 / np.maximum(kappa, 1e-12)))
         for s_until, v_cap in caps:
-            self.v_limit_mps[s <= s_until] = np.minimum(self.v_limit_mps[s <= s_until], v_cap)
+            np.minimum(self.v_limit_mps, v_cap, out=self.v_limit_mps, where=s <= s_until)
         self.v_mps = self._passes(v_start_mps, v_end_mps)
         # time along the grid: v^2 is linear in s on each segment (constant acceleration), so a
         # segment takes exactly 2 ds / (v_i + v_{i+1}); a segment between two stops takes forever
