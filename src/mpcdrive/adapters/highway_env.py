@@ -170,28 +170,6 @@ def straight_road(network, lane_index) -> tuple[Road, StraightPath, dict]:
     return road, path, paths
 
 
-def lane_problem(
-    nx: int, nu: int, N: int, dt_s: float, Q, R, Rc, u_min, u_max, du_max_per_s, x_min, x_max, road: Road
-) -> MpcProblem:
-    """The driver's MPC problem (every one this module builds): weights, input / rate / state
-    bounds, and the body kept inside the lane ``road`` around the path."""
-    return MpcProblem(
-        nx=nx,
-        nu=nu,
-        N=N,
-        dt_s=dt_s,
-        Q=np.array(Q),
-        R=np.array(R),
-        Rc=np.array(Rc),
-        u_min=np.array(u_min),
-        u_max=np.array(u_max),
-        du_max_per_s=np.array(du_max_per_s),
-        x_min=x_min,
-        x_max=x_max,
-        road=road,
-    )
-
-
 # --------------------------------------------------------------------------- driver
 @dataclass(frozen=True)
 class DriverSettings:
@@ -335,14 +313,40 @@ class HighwayEnvMpcDriver:
                 f"lane half width {self.lane_half_width_m} m leaves no room for the "
                 f"vehicle ({self.footprint.width_m} m wide) with a margin of {s.lane_margin_m} m"
             )
-        self._bounds = (u_min, u_max, du, x_min, x_max)
         # the projection window must cover the distance driven per step, and more
         window = max(2.0, 3.0 * max(v_ref, float(vehicle.speed)) * self.dt_s)
-        self._mpc_config = MpcConfig(v_ref_mps=v_ref, projection_window_m=window)
+        nx, nu = self.model.nx, self.model.nu
+        problem = MpcProblem(
+            nx=nx,
+            nu=nu,
+            N=int(s.horizon),
+            dt_s=self.dt_s,
+            Q=np.array(s.Q[:nx]),
+            R=np.array(s.R[:nu]),
+            Rc=np.array(s.Rc[:nu]),
+            u_min=np.array(u_min),
+            u_max=np.array(u_max),
+            du_max_per_s=np.array(du),
+            x_min=x_min,
+            x_max=x_max,
+            # the body inside the lane around the path, or, with lanes, the route lane to start in
+            road=self.lane_road if self.road is None else self.road.band((self.road.route_lane,)),
+        )
         #: obstacles the MPC considered per step
         self.considered: list[int] = []
         self._obstacles = p.traffic(0.0)
-        self.controller = self._controller(self._obstacles)
+        mpc = make_mpc(
+            self.model,
+            self.path,
+            problem,
+            MpcConfig(v_ref_mps=v_ref, projection_window_m=window),
+            backend="fast",
+            obstacles=self._obstacles,
+            avoidance=s.avoidance,
+            footprint=self.footprint,
+        )
+        #: the MPC (compiled), with ``settings.lanes`` wrapped in a LaneChoosingMpc on highway-v0's road
+        self.controller = mpc if self.road is None or s.lanes is None else LaneChoosingMpc(mpc, self.road, s.lanes)
 
     # -- the controller interface (sim.simulate) -----------------------------------------------
     @property
@@ -385,43 +389,6 @@ class HighwayEnvMpcDriver:
         avoidance = self.controller.avoidance
         self.considered.append(0 if avoidance is None else len(avoidance.relevant(warm.t_s, x[:2])))
         return out
-
-    def _controller(self, obstacles):
-        """The MPC along :attr:`path` avoiding ``obstacles``: the body kept inside the lane around
-        it, or, with ``settings.lanes``, a :class:`LaneChoosingMpc` on highway-v0's whole road
-        (the MPC starting in the route lane)."""
-        s, (nx, nu) = self.settings, (self.model.nx, self.model.nu)
-        u_min, u_max, du, x_min, x_max = self._bounds
-        road = self.lane_road if self.road is None else self.road.band((self.road.route_lane,))
-        problem = lane_problem(
-            nx,
-            nu,
-            int(s.horizon),
-            self.dt_s,
-            s.Q[:nx],
-            s.R[:nu],
-            s.Rc[:nu],
-            u_min,
-            u_max,
-            du,
-            x_min,
-            x_max,
-            road,
-        )
-        mpc = make_mpc(
-            self.model,
-            self.path,
-            problem,
-            self._mpc_config,
-            backend="fast",
-            obstacles=obstacles,
-            avoidance=s.avoidance,
-            footprint=self.footprint,
-        )
-        if self.road is None:
-            return mpc
-        assert s.lanes is not None
-        return LaneChoosingMpc(mpc, self.road, s.lanes)
 
 
 @dataclass(frozen=True)
