@@ -8,6 +8,7 @@ import pickle
 import warnings
 
 import pytest
+from test_verdict import COLLIDE  # a car at 1 m/s on a straight path through a rock: one collision
 
 from mpcdrive.io import write_json
 from mpcdrive.scenarios import build_experiment, load_scenario, run_experiment
@@ -52,21 +53,6 @@ EXPECTED_KEYS = [
 EVENT_KEYS = ["obstacle", "name", "step", "t_s", "steps", "depth_m"]
 FALLBACK_KEYS = ["relax", "shifted_plan", "brake", "hold_last"]
 
-# a car at 1 m/s on a straight path through a rock (as in test_verdict): one collision event
-COLLIDE = """\
-id: collide
-dt_s: 0.05
-duration_s: 2.0
-vehicle: {model: kinematic3, speed_mps: 1.0}
-path: {type: straight, start: [0.0, 0.0], end: [3.0, 0.0]}
-road: {lane_width_m: 1.0}
-initial_state: {x_m: 0.0, y_m: 0.0, yaw_deg: 0.0}
-obstacles:
-  - {shape: circle, position: [1.5, 3.0], radius_m: 0.2, name: tree}
-  - {shape: circle, position: [1.52, 0.0], radius_m: 0.3, name: rock}
-avoidance: {formulation: potential, weight: 0.0}
-controller: {horizon: 10, Q: [1, 1, 1], R: [1]}
-"""
 
 _RUNS: dict = {}
 
@@ -80,7 +66,7 @@ def run(source: str, tmp_path_factory=None):
             spec = load_scenario(p)
         else:
             spec = load_scenario(source)
-            spec = spec.model_copy(update={"duration_s": min(spec.duration_s, 2.0)})
+        spec = spec.model_copy(update={"duration_s": min(spec.duration_s, 2.0)})
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             result = run_experiment(build_experiment(spec))
