@@ -73,13 +73,12 @@ def _v3(w, fo, fs, i):
 
 @njit(cache=True, inline="always")
 def _place_references(
-    pkind, geo, tab_s, tab_xy, tab_h, tab_k, mkind, mp, N, ff, yaw, s_arr, v_arr, refs, xref, uref, rw, i_acc, dt
+    pkind, geo, tab_s, tab_xy, tab_h, tab_k, mkind, mp, N, ff, yaw, s_arr, v_arr, refs, xref, uref, rw
 ):
     """The horizon references at arc lengths ``s_arr`` (N+1,) [m] driven at ``v_arr`` [m/s]:
     the path points ``refs`` (x, y, heading unwrapped next to the car's ``yaw``, curvature) and the
     model's state and input references (``model.reference``: path pose, speed states, the
-    steady-state feedforward with ``ff == 1``); with an acceleration input (index ``i_acc`` >= 0)
-    the speed changes over the step ``dt`` [s] are added to its reference."""
+    steady-state feedforward with ``ff == 1``)."""
     for k in range(N + 1):
         px, py, hk, kap = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s_arr[k])
         refs[k, 0] = px
@@ -90,9 +89,6 @@ def _place_references(
     for k in range(N + 1):
         refs[k, 2] += shift
     model_references(mkind, mp, refs, v_arr, N + 1, ff == 1, xref, uref, rw)
-    if i_acc >= 0:
-        for k in range(N):
-            uref[k, i_acc] += (v_arr[k + 1] - v_arr[k]) / dt
 
 
 @njit(cache=True)
@@ -112,8 +108,11 @@ def follow_references_into(yaw, s_arr, v_arr, wbuf, ibuf):
     N = ip[_I_N]
     _place_references(
         ip[_I_PATH], geo, tab_s, tab_xy, tab_h, tab_k, ip[_I_MODEL], mp, N, ip[_I_FF], yaw, s_arr, v_arr, refs, xref,
-        uref, _v2(wbuf, fo, fs, _W_REFW), ip[_I_ACCEL], fp[_F_DT],
+        uref, _v2(wbuf, fo, fs, _W_REFW),
     )  # fmt: skip
+    if ip[_I_ACCEL] >= 0:
+        for k in range(N):
+            uref[k, ip[_I_ACCEL]] += (v_arr[k + 1] - v_arr[k]) / fp[_F_DT]
 
 
 @njit(cache=True)
@@ -206,11 +205,13 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
                 s_arr[k] = s0 + fp[_F_HSTEP] * k if hmode == 1 else s0 + acc
                 acc += vdt
                 v_arr[k] = v_ref
-        # a profile's speed changes are the acceleration reference (a constant speed has none)
         _place_references(
             pkind, geo, tab_s, tab_xy, tab_h, tab_k, mkind, mp, N, ff, x[2], s_arr, v_arr, refs, xref, uref,
-            _v2(wbuf, fo, fs, _W_REFW), ip[_I_ACCEL] if has_prof else -1, dt,
+            _v2(wbuf, fo, fs, _W_REFW),
         )  # fmt: skip
+        if has_prof and ip[_I_ACCEL] >= 0:  # the profile's speed changes as acceleration reference
+            for k in range(N):
+                uref[k, ip[_I_ACCEL]] += (v_arr[k + 1] - v_arr[k]) / dt
 
         if ip[_I_OFORM] != _OBS_NONE:
             nsel = _select_obstacles(
