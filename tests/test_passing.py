@@ -80,20 +80,26 @@ def test_both_lanes_blocked_stops_before_them_with_clearance(backend):
     assert exp.controller.decision.action in ("stop", "keep")  # waiting in its lane: no change
 
 
+def _both_solvers(neighbours: bool):
+    """The compiled and the OSQP controller (at 1e-9) of the free road of :func:`_spec`."""
+    fast = build_experiment(ScenarioSpec.model_validate(_spec([], backend="fast", neighbours=neighbours))).mpc
+    spec_osqp = ScenarioSpec.model_validate(
+        _spec([], backend="osqp", neighbours=neighbours)
+        | {"controller": {**_spec([])["controller"], "backend": "osqp", "osqp_eps": 1e-9}}
+    )
+    osqp = build_experiment(spec_osqp).mpc
+    assert (fast.backend_name, osqp.backend_name) == ("fast", "osqp")
+    return fast, osqp
+
+
 def test_lateral_reference_is_tracked_the_same_by_both_solvers():
     """set_lateral_reference: the path shifted 1 m to the left; the compiled controller (two
     stages, the offsets written between them) gives OSQP's commands at the same states, and the
     car settles 1 m left of the path."""
     from mpcdrive.sim import Plant
 
-    spec = ScenarioSpec.model_validate(_spec([], backend="fast", neighbours=True))
-    fast = build_experiment(spec).mpc
-    spec_osqp = ScenarioSpec.model_validate(
-        _spec([], backend="osqp", neighbours=True)
-        | {"controller": {**_spec([])["controller"], "backend": "osqp", "osqp_eps": 1e-9}}
-    )
-    osqp = build_experiment(spec_osqp).mpc
-    road = build_experiment(spec).road
+    fast, osqp = _both_solvers(neighbours=True)
+    road = build_experiment(ScenarioSpec.model_validate(_spec([], neighbours=True))).road
     for c in (fast, osqp):
         c.set_road(road.band([1, 2]))  # the route and the left lane
         c.set_lateral_reference(lambda s: np.ones_like(np.asarray(s, float)))
@@ -107,6 +113,39 @@ def test_lateral_reference_is_tracked_the_same_by_both_solvers():
         wf, wo = of.warm, oo.warm
         x = plant.step(x, oo.u, 0.1)
     assert abs(oo.e_y_m - 1.0) < 0.05
+
+
+def test_speed_cap_is_kept_the_same_by_both_solvers():
+    """set_speed_cap: 10 m/s references capped at 4 m/s, reached braking at 2 m/s^2: the compiled
+    controller (two stages, the capped references placed between them) gives OSQP's commands at
+    the same states, and the car settles at the cap; None lifts it; bad caps are refused."""
+    from mpcdrive.sim import Plant
+
+    fast, osqp = _both_solvers(neighbours=False)
+    for c in (fast, osqp):
+        c.set_speed_cap(4.0, 2.0)
+    plant = Plant(osqp.model)
+    x = np.array([0.0, 0.0, 0.0, 10.0])
+    wf, wo = fast.initial_warm(x), osqp.initial_warm(x)
+    for k in range(60):
+        of, oo = fast.step(x, wf), osqp.step(x, wo)
+        assert of.status == "ok" and oo.status == "ok"
+        np.testing.assert_allclose(of.u, oo.u, atol=1e-4)
+        np.testing.assert_allclose(of.refs[:, 3], oo.refs[:, 3], atol=1e-9)
+        if k == 0:  # references: down from 10 m/s at 2 m/s^2 to the cap
+            np.testing.assert_allclose(oo.refs[:4, 3], [10.0, 9.8, 9.6, 9.4], atol=1e-9)
+            assert oo.refs[-1, 3] == pytest.approx(4.0)
+        wf, wo = of.warm, oo.warm
+        x = plant.step(x, oo.u, 0.1)
+    assert abs(x[3] - 4.0) < 0.1
+    for c in (fast, osqp):
+        c.set_speed_cap(None)
+        assert c.step(x, wo).refs[-1, 3] > 9.0
+        for bad in (-1.0, float("nan")):
+            with pytest.raises(ValueError, match="speed cap"):
+                c.set_speed_cap(bad)
+        with pytest.raises(ValueError, match="braking"):
+            c.set_speed_cap(3.0, 0.0)
 
 
 def test_no_change_out_of_the_route_lane_that_cannot_return_by_return_by_s():

@@ -76,6 +76,19 @@ def checked_road(current: Road | None, road: Road) -> Road:
     return road
 
 
+def checked_speed_cap(v_mps, decel_mps2, default_decel_mps2: float) -> tuple[float, float] | None:
+    """``(cap [m/s], decel [m/s^2])`` of a ``set_speed_cap`` call (None: no cap); a ValueError
+    for a cap that is not a finite number >= 0 or a deceleration that is not > 0."""
+    if v_mps is None:
+        return None
+    decel = default_decel_mps2 if decel_mps2 is None else decel_mps2
+    if not (isinstance(v_mps, (int, float)) and math.isfinite(v_mps) and v_mps >= 0):
+        raise ValueError(f"the speed cap must be None or a finite number >= 0 [m/s], got {v_mps!r}")
+    if not (isinstance(decel, (int, float)) and math.isfinite(decel) and decel > 0):
+        raise ValueError(f"the braking to the speed cap must be a positive number [m/s^2], got {decel!r}")
+    return float(v_mps), float(decel)
+
+
 def checked_obstacles(avoidance: A | None, obstacles) -> tuple[A, tuple[Obstacle, ...]]:
     """``(avoidance, obstacles)`` of a ``set_obstacles`` call, the obstacles as a tuple of
     :class:`Obstacle`; a ValueError for a controller built without obstacles (``avoidance`` None:

@@ -50,6 +50,7 @@ ValueError naming the reason; :func:`mpcdrive.control.factory.make_mpc` then use
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import replace
 from types import SimpleNamespace
@@ -69,7 +70,7 @@ from ..scene.footprint import Footprint
 from ..scene.road import Road
 from ..solvers.dense_qp import STATUS_WORDS, single_nonzero_columns
 from ..types import ControlOutput, WarmStart
-from .base import TrackingWarmStart, checked_obstacles, checked_road
+from .base import TrackingWarmStart, checked_obstacles, checked_road, checked_speed_cap
 
 # the layout of the compiled step's buffers
 from .fast_layout import _I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH, _I_LIN, _I_METHOD, _I_HORIZON, _I_FF, _I_LANE, _I_MCONST
@@ -158,6 +159,9 @@ class FastLtvMpc(TrackingWarmStart):
         road = problem.road
         self._road = road
         self._lateral = None
+        #: (cap [m/s], braking to it [m/s^2]) of set_speed_cap, or None
+        self._speed_cap: tuple[float, float] | None = None
+        self._follow_decel = (av or AvoidanceConfig()).follow_decel_mps2
         lane = road is not None
         #: the obstacle terms as LtvMpc keeps them (``avoidance.config``, ``.obstacles``,
         #: ``.relevant``). With a constraint formulation it builds each step's rows between the two
@@ -430,6 +434,13 @@ class FastLtvMpc(TrackingWarmStart):
         if self._relaxed is not None:
             self._relaxed.set_lateral_reference(offset)
 
+    def set_speed_cap(self, v_mps: float | None, decel_mps2: float | None = None) -> None:
+        """As :meth:`LtvMpc.set_speed_cap <mpcdrive.control.mpc.LtvMpc.set_speed_cap>` (the step
+        then runs in two stages, the capped references placed between them)."""
+        self._speed_cap = checked_speed_cap(v_mps, decel_mps2, self._follow_decel)
+        if self._relaxed is not None:
+            self._relaxed.set_speed_cap(v_mps, decel_mps2)
+
     def set_obstacles(self, obstacles) -> None:
         """Replace the obstacles, as :meth:`LtvMpc.set_obstacles <mpcdrive.control.mpc.LtvMpc.set_obstacles>`
         does (fresh predictions of moving ones each step; index j keeps naming the same
@@ -474,7 +485,7 @@ class FastLtvMpc(TrackingWarmStart):
         """One compiled step (or SQP iteration); with constraint rows, in two stages around
         ``ocp.avoidance``. Returns the status code and the passing sides for the next step."""
         sides = self._load_sides(warm_sides)
-        if self._rows is None and self._lateral is None:
+        if self._rows is None and self._lateral is None and self._speed_cap is None:
             code = _control_step(
                 x, s_guess, t_s, u_prev, X, U, mode, STAGE_ALL, sides, self._wbuf, self._ibuf, out, self._info
             )
@@ -489,6 +500,7 @@ class FastLtvMpc(TrackingWarmStart):
         w = self._w
         w[_W_EREF][...] = 0.0
         new_sides = warm_sides
+        s_max = None
         if self._rows is not None:
             memory = AvoidanceMemory(dict(warm_sides))
             terms = self._rows.terms(t_s, x, w[_W_XLIN], w[_W_SARR], memory, w[_W_LLO], w[_W_LHI])
@@ -498,20 +510,15 @@ class FastLtvMpc(TrackingWarmStart):
                 narrow_road_rows(w[_W_LLO], w[_W_LHI], w[_W_LDLO], w[_W_LDHI], terms.lane_lo, terms.lane_hi)
             if terms.e_ref is not None:
                 w[_W_EREF][...] = terms.e_ref
-            if terms.s_max is not None:
-                # car following: the references approach the stop line behind the obstacle
-                # blocking the lane ahead and move on with its prediction (as LtvMpc.prepare)
-                follow = follow_references(
-                    w[_W_SARR],
-                    w[_W_VARR],
-                    terms.s_max,
-                    float(self.model.speed(x)),
-                    self.dt_s,
-                    self._rows.config.follow_decel_mps2,
-                )
-                if follow is not None:
-                    follow_references_into(float(x[2]), follow[0], follow[1], self._wbuf, self._ibuf)
+            s_max = terms.s_max
             new_sides = tuple(sorted(memory.sides.items()))
+        if s_max is not None or self._speed_cap is not None:
+            # car following: the references approach the stop line behind the obstacle blocking
+            # the lane ahead and move on with its prediction; and a speed cap (as LtvMpc.prepare)
+            cap, decel = self._speed_cap or (math.inf, self._follow_decel)
+            follow = follow_references(w[_W_SARR], w[_W_VARR], s_max, float(self.model.speed(x)), self.dt_s, decel, cap)
+            if follow is not None:
+                follow_references_into(float(x[2]), follow[0], follow[1], self._wbuf, self._ibuf)
         if self._lateral is not None:
             w[_W_EREF] += np.asarray(self._lateral(w[_W_SARR]), float)
         code = _control_step(

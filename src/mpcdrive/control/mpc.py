@@ -33,7 +33,7 @@ from ..solvers.projected_gradient import ProjectedGradientBackend, ProjectedGrad
 from ..types import ControlOutput, SolveResult, WarmStart
 from ..units import TWO_PI, wrap_angle
 from .fallback import FallbackConfig, FallbackLadder
-from .base import TrackingWarmStart, checked_obstacles, checked_road
+from .base import TrackingWarmStart, checked_obstacles, checked_road, checked_speed_cap
 
 
 def _shift_references(xref: np.ndarray, refs: np.ndarray, s_arr: np.ndarray, e: np.ndarray) -> None:
@@ -235,6 +235,11 @@ class LtvMpc(TrackingWarmStart):
         self._du_step = problem.du_max_per_s * problem.dt_s  # (nu,) largest input change per step
         self._road = problem.road
         self._lateral = None
+        #: (cap [m/s], braking to it [m/s^2]) of set_speed_cap, or None
+        self._speed_cap: tuple[float, float] | None = None
+        self._follow_decel = (
+            self.avoidance.config.follow_decel_mps2 if self.avoidance else AvoidanceConfig().follow_decel_mps2
+        )
         self._friction = friction_bounds(problem, model)
         self.fallback = FallbackLadder(self, config.fallback, footprint=footprint, road=problem.road)
 
@@ -264,6 +269,12 @@ class LtvMpc(TrackingWarmStart):
         if offset is not None and not callable(offset):
             raise ValueError("the lateral reference must be a callable of arc length, or None")
         self._lateral = offset
+
+    def set_speed_cap(self, v_mps: float | None, decel_mps2: float | None = None) -> None:
+        """Cap the horizon references' speed at ``v_mps`` [m/s] from the next step on (reached by
+        braking at ``decel_mps2`` [m/s^2], default the avoidance's ``follow_decel_mps2``; e.g. a
+        decision layer turning out past an obstacle slowly); None: the free references."""
+        self._speed_cap = checked_speed_cap(v_mps, decel_mps2, self._follow_decel)
 
     def set_obstacles(self, obstacles) -> None:
         """Replace the obstacles, e.g. with fresh predictions of moving ones each step; the QP is
@@ -374,14 +385,15 @@ class LtvMpc(TrackingWarmStart):
             if rows is not None:
                 rows.narrow(terms.lane_lo, terms.lane_hi)
             sides = tuple(sorted(memory.sides.items()))
-            if terms.s_max is not None:
-                # car following: the references approach the stop line behind the obstacle
-                # blocking the lane ahead and move on with its prediction
-                follow = follow_references(
-                    s_arr, v_arr, terms.s_max, float(model.speed(x)), dt, self.avoidance.config.follow_decel_mps2
-                )
-                if follow is not None:
-                    refs = self._references(*follow, x[2], True)
+        s_max = None if terms is None else terms.s_max
+        if s_max is not None or self._speed_cap is not None:
+            # car following: the references approach the stop line behind the obstacle blocking
+            # the lane ahead and move on with its prediction; and a speed cap (set_speed_cap)
+            cap, decel = self._speed_cap or (math.inf, self._follow_decel)
+            follow = follow_references(s_arr, v_arr, s_max, float(model.speed(x)), dt, decel, cap)
+            if follow is not None:
+                refs = self._references(*follow, x[2], True)
+        if terms is not None:
             if terms.e_ref is not None and np.any(terms.e_ref):
                 # the paper's detour: shift the reference sideways, turn its heading with the slope
                 _shift_references(xref, refs, s_arr, terms.e_ref)
