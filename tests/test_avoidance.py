@@ -241,6 +241,32 @@ def test_obstacle_rows_are_separating_half_planes():
     assert math.isfinite(float(t.rows_b[active].max()))
 
 
+def test_lateral_rows_start_where_the_disc_can_reach_the_obstacle_side_within_a_step():
+    """A car standing with its front 2 m behind a parked car, passing left: its front disc is
+    not yet beside the car (1.6 m of disc radius and margin short of it), so its row is the
+    nearest-point half-plane (a car turning out from standstill may go round the corner), not
+    the lateral one that asked for the full passing offset 2 m before the car, with speed
+    as the only way to get it. On a plan moving 3 m per step from the same place the disc may
+    be beside the car by the next step: the row is lateral, as it was."""
+    path = StraightPath([0, 0], [100, 0])
+    ob = Obstacle(rectangle(4.0, 2.0), (20.0, 0.0, 0.0))
+    N = 10
+    av = Avoidance(AvoidanceConfig("hard", margin_m=0.3, influence_m=20.0), [ob], path, CAR, N, 0.1, Road.constant(12.0))
+    front = int(np.argmax(CAR.disc_offsets_m))
+    x_stand = 20.0 - 2.0 - 2.0 - 2.5
+    for step_m, lateral in ((0.0, False), (3.0, True)):
+        xs = x_stand + step_m * np.arange(N + 1)
+        Xlin = np.column_stack([xs, np.zeros(N + 1), np.zeros(N + 1), np.full(N + 1, 10.0 * step_m)])
+        mem = AvoidanceMemory({0: SIDE_LEFT})
+        t = av.terms(0.0, Xlin[0], Xlin, xs, mem)
+        n = t.rows_a[0, front, :2]  # the front disc's row at step 1
+        if lateral:
+            np.testing.assert_allclose(n, [0.0, 1.0], atol=1e-12)
+        else:
+            assert n[0] < -0.9  # the nearest-point plane: the parked car's rear faces the disc
+            assert t.rows_a[0, front] @ Xlin[1, :3] >= t.rows_b[0, front] - 1e-9  # the standing car keeps it
+
+
 def test_frenet_box_finds_an_obstacle_far_from_the_guess():
     """A full-size car 40 m ahead of the arc-length guess is placed where it is, not at the end of
     a short search window around the guess."""

@@ -638,8 +638,9 @@ class Avoidance:
         nd = len(self.offsets)
         off = np.asarray(self.offsets, float)[:, None]  # (nd, 1): every disc at once, (nd, N) arrays
         r_need = self.r_disc + self.config.margin_m
-        reach = r_need + self.half_length
         s_lin = self._lin_arc_lengths(Xlin, s_arr[0])
+        # lateral from where the disc may reach the obstacle's side before the next step
+        reach = r_need + np.minimum(self.half_length, np.diff(np.concatenate([[s_arr[0]], s_lin])))
         P = lin[None, :, :2] + off[..., None] * np.column_stack([c, s])[None]  # disc centres (nd, N, 2)
         s_disc = s_arr[None, 1:] + off
         # every considered obstacle at once: arrays (n_obs, nd, N[, 2]), obstacle i in row slot i

@@ -299,11 +299,13 @@ def hard_rows(
     if n_obs == 0:
         return
     r_need = r_disc + margin
-    reach = r_need + half_length
     acc = 0.0
     for k in range(N):
         x0, y0, th = Xlin[k + 1, 0], Xlin[k + 1, 1], Xlin[k + 1, 2]
-        acc += math.hypot(x0 - Xlin[k, 0], y0 - Xlin[k, 1])
+        ds = math.hypot(x0 - Xlin[k, 0], y0 - Xlin[k, 1])
+        acc += ds
+        # lateral from where the disc may reach the obstacle's side before the next step
+        reach = r_need + min(half_length, ds)
         s_lin = s_arr[0] + acc
         c, s = math.cos(th), math.sin(th)
         for i in range(n_obs):
