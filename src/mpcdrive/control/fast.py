@@ -59,7 +59,8 @@ import numpy as np
 
 from .. import _jitcache
 from ..models.compiled import METHOD_EULER, METHOD_EXP, METHOD_RK4, model_code
-from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory, follow_references
+from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory
+from ..ocp.follow import follow_references
 from ..ocp.friction import friction_bounds
 from ..ocp.problem import MpcProblem
 from ..ocp.road_rows import narrow_road_rows

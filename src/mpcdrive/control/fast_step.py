@@ -94,7 +94,7 @@ def _place_references(
 @njit(cache=True)
 def follow_references_into(yaw, s_arr, v_arr, wbuf, ibuf):
     """Between the two stages of a step: the references of car following
-    (:func:`~mpcdrive.ocp.avoidance.follow_references`: arc lengths ``s_arr`` (N+1,) [m] and speeds
+    (:func:`~mpcdrive.ocp.follow.follow_references`: arc lengths ``s_arr`` (N+1,) [m] and speeds
     ``v_arr`` [m/s] behind a moving stop line) replace the step's, their speed changes the
     acceleration reference (as ``LtvMpc`` does); the horizon arc lengths the rows were built on
     stay."""

@@ -18,7 +18,8 @@ import numpy as np
 
 from ..models.base import VehicleModel
 from ..models.discretize import Method, discrete_step_and_jacobians, rollout
-from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory, follow_references
+from ..ocp.avoidance import Avoidance, AvoidanceConfig, AvoidanceMemory
+from ..ocp.follow import follow_references
 from ..ocp.friction import friction_bounds
 from ..ocp.problem import MpcProblem
 from ..ocp.road_rows import RoadRows

@@ -48,7 +48,6 @@ __all__ = [
     "Formulation",
     "FrenetBox",
     "FrenetBoxes",
-    "follow_references",
     "frenet_box",
     "frenet_boxes",
     "obstacle_cost",
@@ -77,7 +76,7 @@ class AvoidanceConfig:
         holds the car back) or a time gap [s] (hard, corridor): behind an obstacle that blocks the
         lane ahead, the horizon references approach a stop line that moves with the obstacle's
         prediction, trailing a moving one by this gap at its speed -- car following, without the
-        tracking cost pulling the car against the stop constraint (see :func:`follow_references`);
+        tracking cost pulling the car against the stop constraint (see :func:`~mpcdrive.ocp.follow.follow_references`);
     follow_decel_mps2 : the hardest braking [m/s^2] of those references relative to the line
         (closer than that they fall back at this rate; the stop constraint still holds the car
         off the obstacle).
@@ -774,43 +773,3 @@ def _radius(ob: Obstacle) -> float:
     """The radius [m] of a circle obstacle."""
     assert isinstance(ob.shape, Circle)
     return ob.shape.radius_m
-
-
-def follow_references(
-    s_arr: np.ndarray,
-    v_arr: np.ndarray,
-    s_max: np.ndarray | None,
-    v0_mps: float,
-    dt_s: float,
-    decel_mps2: float,
-    v_cap_mps: float = math.inf,
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """Horizon references behind a stop line that moves: arc lengths (N+1,) [m] and speeds (N+1,)
-    [m/s] of a car starting at ``s_arr[0]`` with speed ``v0_mps`` that drives at the free
-    references' speed ``v_arr`` where it can, and otherwise at the speed from which braking at
-    ``decel_mps2`` relative to the line ``s_max`` (N+1,) [m] ends on it (past the line, the
-    speed that falls back behind it the same way) -- never braking harder than ``decel_mps2``,
-    and never faster than ``v_cap_mps`` (a speed cap, e.g. a decision layer's, with or without a
-    line: ``s_max`` None). None when nothing holds the car back (the free references stand)."""
-    N = len(s_arr) - 1
-    if s_max is None:
-        s_max = np.full(N + 1, math.inf)
-        v_line = np.zeros(N + 1)
-    else:
-        v_line = np.append(np.diff(s_max) / dt_s, (s_max[-1] - s_max[-2]) / dt_s if N > 1 else 0.0)
-    s_out, v_out = np.empty(N + 1), np.empty(N + 1)
-    v = max(float(v0_mps), 0.0)
-    s, held = float(s_arr[0]), False
-    s_out[0], v_out[0] = s, v
-    for k in range(1, N + 1):
-        room = s_max[k - 1] - s  # now; < 0: past the line, fall back behind it
-        if math.isfinite(room):
-            v_allow = max(v_line[k - 1], 0.0) + math.copysign(math.sqrt(2.0 * decel_mps2 * abs(room)), room)
-        else:
-            v_allow = math.inf
-        v_allow = min(v_allow, v_cap_mps)
-        held |= v_allow < v_arr[k]
-        v_next = max(min(v_arr[k], v_allow), v - decel_mps2 * dt_s, 0.0)
-        s = min(s + 0.5 * (v + v_next) * dt_s, float(s_arr[k]))
-        s_out[k], v_out[k], v = s, v_next, v_next
-    return (s_out, v_out) if held else None
