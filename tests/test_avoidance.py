@@ -247,11 +247,15 @@ def test_lateral_rows_start_where_the_disc_can_reach_the_obstacle_side_within_a_
     nearest-point half-plane (a car turning out from standstill may go round the corner), not
     the lateral one that asked for the full passing offset 2 m before the car, with speed
     as the only way to get it. On a plan moving 3 m per step from the same place the disc may
-    be beside the car by the next step: the row is lateral, as it was."""
+    be beside the car by the next step: the row is lateral, as it was. Before a moving car the
+    lateral zone keeps its half car length (a hedge on the prediction: with less, a car driving
+    beside the ego got corner rows that had the ego swerve): lateral for the standing plan too."""
     path = StraightPath([0, 0], [100, 0])
     ob = Obstacle(rectangle(4.0, 2.0), (20.0, 0.0, 0.0))
     N = 10
-    av = Avoidance(AvoidanceConfig("hard", margin_m=0.3, influence_m=20.0), [ob], path, CAR, N, 0.1, Road.constant(12.0))
+    av = Avoidance(
+        AvoidanceConfig("hard", margin_m=0.3, influence_m=20.0), [ob], path, CAR, N, 0.1, Road.constant(12.0)
+    )
     front = int(np.argmax(CAR.disc_offsets_m))
     x_stand = 20.0 - 2.0 - 2.0 - 2.5
     for step_m, lateral in ((0.0, False), (3.0, True)):
@@ -265,6 +269,19 @@ def test_lateral_rows_start_where_the_disc_can_reach_the_obstacle_side_within_a_
         else:
             assert n[0] < -0.9  # the nearest-point plane: the parked car's rear faces the disc
             assert t.rows_a[0, front] @ Xlin[1, :3] >= t.rows_b[0, front] - 1e-9  # the standing car keeps it
+            # the same car driving at 1 m/s (0.1 m per step), starting where the parked one stands
+            moving = Obstacle(rectangle(4.0, 2.0), (20.0 - 0.1, 0.0, 0.0), ConstantVelocity(1.0, 0.0))
+            av_m = Avoidance(
+                AvoidanceConfig("hard", margin_m=0.3, influence_m=20.0),
+                [moving],
+                path,
+                CAR,
+                N,
+                0.1,
+                Road.constant(12.0),
+            )
+            t_m = av_m.terms(0.0, Xlin[0], Xlin, xs, AvoidanceMemory({0: SIDE_LEFT}))
+            np.testing.assert_allclose(t_m.rows_a[0, front, :2], [0.0, 1.0], atol=1e-12)
 
 
 def test_frenet_box_finds_an_obstacle_far_from_the_guess():

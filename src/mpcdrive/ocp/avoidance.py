@@ -638,8 +638,6 @@ class Avoidance:
         off = np.asarray(self.offsets, float)[:, None]  # (nd, 1): every disc at once, (nd, N) arrays
         r_need = self.r_disc + self.config.margin_m
         s_lin = self._lin_arc_lengths(Xlin, s_arr[0])
-        # lateral from where the disc may reach the obstacle's side before the next step
-        reach = r_need + np.minimum(self.half_length, np.diff(np.concatenate([[s_arr[0]], s_lin])))
         P = lin[None, :, :2] + off[..., None] * np.column_stack([c, s])[None]  # disc centres (nd, N, 2)
         s_disc = s_arr[None, 1:] + off
         # every considered obstacle at once: arrays (n_obs, nd, N[, 2]), obstacle i in row slot i
@@ -649,6 +647,11 @@ class Avoidance:
             for f in ("s_lo", "s_hi", "s_ref", "e_lo", "e_hi")
         )
         e_edge = np.where(side == SIDE_LEFT, e_hi, e_lo)
+        # lateral from half a car length before a moving obstacle (a hedge on its prediction);
+        # before a standing one from where the disc may reach its side by the next step
+        ds = np.diff(np.concatenate([[s_arr[0]], s_lin]))
+        moving = np.abs(np.stack([np.diff(boxes[j].s_ref) for j in rel]))[:, None, :] > _ac.STANDING_STEP_M
+        reach = r_need + np.where(moving, self.half_length, np.minimum(self.half_length, ds))
         h = np.asarray(self.path.heading(s_ref), float)
         nl = np.stack([-np.sin(h), np.cos(h)], axis=-1)  # path left normal at the obstacle
         q_lat = self.path.position(s_ref) + nl * e_edge[..., None]

@@ -28,6 +28,9 @@ SHAPE_CIRCLE, SHAPE_POLYGON = 0, 1
 MODE_AVOID, MODE_STOP, MODE_AHEAD = 0, 1, 2
 #: the fields of a Frenet box, in the order of ``box`` arrays (n, 5, K)
 BOX_S_REF, BOX_S_LO, BOX_S_HI, BOX_E_LO, BOX_E_HI = 0, 1, 2, 3, 4
+#: an obstacle whose box moves less than this along the path per step [m] is standing (a parked
+#: car, a recorded one jittering by centimetres)
+STANDING_STEP_M = 0.05
 
 
 @dataclass(frozen=True, eq=False)
@@ -304,13 +307,15 @@ def hard_rows(
         x0, y0, th = Xlin[k + 1, 0], Xlin[k + 1, 1], Xlin[k + 1, 2]
         ds = math.hypot(x0 - Xlin[k, 0], y0 - Xlin[k, 1])
         acc += ds
-        # lateral from where the disc may reach the obstacle's side before the next step
-        reach = r_need + min(half_length, ds)
         s_lin = s_arr[0] + acc
         c, s = math.cos(th), math.sin(th)
         for i in range(n_obs):
             sd = side[i]
             s_lo, s_hi, s_ref = box[i, BOX_S_LO, k + 1], box[i, BOX_S_HI, k + 1], box[i, BOX_S_REF, k + 1]
+            # lateral from half a car length before a moving obstacle (a hedge on its prediction);
+            # before a standing one from where the disc may reach its side by the next step
+            moving = abs(s_ref - box[i, BOX_S_REF, k]) > STANDING_STEP_M
+            reach = r_need + (half_length if moving else min(half_length, ds))
             e_edge = box[i, BOX_E_HI, k + 1] if sd == 1 else box[i, BOX_E_LO, k + 1]
             rx, ry, h, _ = path_eval(kind, geo, tab_s, tab_xy, tab_h, tab_k, s_ref)
             nlx, nly = -math.sin(h), math.cos(h)
