@@ -492,6 +492,43 @@ def test_us101_a_route_moving_over_a_lane_in_dense_traffic_stays_on_the_road(pla
     assert np.min(res.clearance_m) > 0.3
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("plant", ["ks", "st"])
+def test_a_parked_car_too_close_to_swerve_round_at_speed_is_passed_slowly(plant):
+    """ZAM_Tutorial_Urban-3_2 on CommonRoad's KS / ST model of the BMW 320i: a parked car 9 m
+    ahead at 9 m/s, the left lane free. Swerving at speed left the road (0.25 / 0.98 m: the
+    steering at its rate limit, the controller speeding up to 11 m/s along its linearized rows).
+    The lane layer sees that its ramp cannot clear the car at 9 m/s and caps the references at
+    ``turn_out_mps``: the car brakes while easing out, draws level slowly and then drives on.
+    Judged by CommonRoad's drivability checker: collision-free, on the road, feasible, goal
+    reached."""
+    from pathlib import Path
+
+    from mpcdrive.adapters import commonroad as cr
+    from mpcdrive.control.lanes import LaneConfig
+
+    if not cr.available():
+        pytest.skip("commonroad-io / drivability checker not installed")
+    imp = cr.with_vehicle(
+        cr.load_commonroad(Path(__file__).resolve().parent / "data" / "commonroad" / "ZAM_Tutorial_Urban-3_2.xml"),
+        "bmw_320i",
+        plant,
+    )
+    res = run_experiment(build_experiment(imp.spec))
+    rep = cr.check_drive(imp, res)
+    assert rep.collision_free and rep.road_compliant and rep.feasible and rep.goal_step is not None, rep.line()
+    ob = imp.scenario.obstacles[0]
+    rear = ob.initial_state.position[0] - 0.5 * ob.obstacle_shape.length
+    front = res.x[:, 0] + 0.5 * imp.spec.vehicle.length_m
+    # drawing level with the parked car at the capped speed (beside it the rows that keep the
+    # body's rear clear of it may ask for more, to swing the yaw back)
+    level = int(np.argmax(front >= rear))
+    assert level > 0 and res.v_mps[level] < LaneConfig().turn_out_mps + 0.5
+    assert res.v_mps[:level].min() > 1.0  # braking while easing out, not stopping
+    assert res.x[:, 1].max() > 2.0  # beside it in the left lane
+    assert np.min(res.clearance_m) > 0.3 and compute_metrics(res).solver_failures == 0
+
+
 def test_st_plant_settles_onto_the_lane_without_a_limit_cycle():
     """The BMW on CommonRoad's ST model, 1 m right of the lane centre with 25 deg of yaw at 9 m/s
     (ZAM_Tutorial_Urban-3_2's road, its parked car left out). The ST model lags the kinematic

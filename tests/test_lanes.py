@@ -251,3 +251,36 @@ def test_a_route_lane_wider_than_the_lane_of_the_path_is_driven_along_the_path()
     assert (home.action, home.lane) == ("change", 0) and home.ramp.offset(1e4) == 0.0
     there = decide([], x=200.0, e_y=0.1, t=3.0, previous=home, rd=rd)
     assert (there.action, there.lane) == ("keep", 0)
+
+
+def test_a_change_that_cannot_clear_a_close_obstacle_at_speed_is_capped_until_past_it():
+    """A parked car 10 m ahead (bumper to bumper) at 9 m/s, the neighbour lane free: the ramp at
+    that speed (26 m for 4 m) would still overlap the car when the ego reaches it, so the change
+    has its references capped at ``turn_out_mps`` (the MPC brakes to it while easing out) until
+    the ego is past the car; the same car 40 m ahead is passed at speed, no cap. Once past, in
+    the target lane with the route lane clear, the change ends before the ego settles on the
+    lane's centre, and the return starts."""
+    cfg = LaneConfig()
+    rd = road(2)
+    parked = [Obstacle(rectangle(4.0, 2.0), (100.0 + 2.5 + 10.0 + 2.0, 0.0, 0.0), Static())]
+
+    close = decide_lane(rd, PATH, 100.0, 0.0, 9.0, parked, 0.0, None, cfg, 9.0)
+    assert (close.action, close.lane, close.origin) == ("change", 1, 0)
+    assert close.speed_cap_mps == cfg.turn_out_mps and close.band == (0, 1) and close.gap_m == pytest.approx(10.0)
+    # under way beside the parked car: still capped
+    beside = decide_lane(rd, PATH, 112.0, 2.5, 2.0, parked, 3.0, close, cfg, 9.0)
+    assert (beside.action, beside.lane, beside.origin, beside.speed_cap_mps) == ("change", 1, 0, cfg.turn_out_mps)
+    # its centre behind the ego's: no cap; the change goes on while the body still overlaps it
+    level = decide_lane(rd, PATH, 117.0, W - 1.2, 2.0, parked, 4.0, beside, cfg, 9.0)
+    assert (level.action, level.lane, level.speed_cap_mps) == ("change", 1, None)
+    # clear of it, 1.2 m short of the lane centre: the change is over, heading home
+    past = decide_lane(rd, PATH, 122.0, W - 1.2, 2.0, parked, 5.0, level, cfg, 9.0)
+    assert (past.action, past.lane, past.current, past.speed_cap_mps) == ("change", 0, 1, None)
+    # far enough ahead for the ramp at 9 m/s: the change starts at speed, not capped
+    far = [Obstacle(rectangle(4.0, 2.0), (100.0 + 2.5 + 40.0 + 2.0, 0.0, 0.0), Static())]
+    d = decide_lane(rd, PATH, 100.0, 0.0, 9.0, far, 0.0, None, cfg, 9.0)
+    assert (d.action, d.lane, d.speed_cap_mps) == ("change", 1, None)
+    with pytest.raises(ValueError, match="turn_out_mps"):
+        LaneConfig(turn_out_mps=0.0)
+    with pytest.raises(ValueError, match="pass_margin_m"):
+        LaneConfig(pass_margin_m=-0.1)

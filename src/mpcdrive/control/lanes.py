@@ -28,7 +28,11 @@ Rules (:func:`decide_lane`):
   the current lane is not blocked);
 * blocked and no free neighbour: ``stop`` (with the distance ``stop_m`` to ``standstill_m``
   behind the nearest obstacle ahead now: the car follows or stops in its lane);
-* a change keeps its target until the ego arrives, unless the target stops being free while
+* a change past an obstacle ahead that its ramp, driven at the current speed, does not clear
+  by ``pass_margin_m`` is capped at ``turn_out_mps`` (braking hard to it) until the ego is past
+  the obstacle: an evasive change too close to swerve round at speed eases out while braking;
+* a change keeps its target until the ego arrives (or is in the target lane with the pass
+  over: the lane home clear over the whole look-ahead), unless the target stops being free while
   the ego is still in its origin lane (then it returns: the only change not held back by the
   dwell time); no voluntary change starts within ``min_dwell_s`` of the previous one.
 
@@ -81,7 +85,12 @@ class LaneConfig:
     counts as stopped (its stop line stays put); turn_out_m : the shortest ramp [m], and the room
     the car keeps before an obstacle when it stops in its lane (:class:`LaneChoosingMpc`) so that
     it can still turn out of the lane from standstill; max_slope : the ramp's steepest slope
-    (lateral per forward metre: a slow change is not a sharp turn).
+    (lateral per forward metre: a slow change is not a sharp turn); pass_margin_m : the room
+    [m] beside an obstacle ahead in the ego's lane that a change's ramp, driven at the current
+    speed, must give the body to pass it at speed; turn_out_mps : the speed cap [m/s] of a
+    change whose ramp does not (an obstacle too close to swerve round at this speed): the MPC
+    brakes to it at full deceleration while easing out, and passes slowly, its rows steering
+    round the obstacle, until the ego is past it.
     """
 
     horizon_s: float = 8.0
@@ -104,6 +113,8 @@ class LaneConfig:
     creep_mps: float = 1.0
     turn_out_m: float = 10.0
     max_slope: float = 0.3
+    pass_margin_m: float = 0.3
+    turn_out_mps: float = 2.0
 
     def __post_init__(self):
         for name in (
@@ -113,6 +124,7 @@ class LaneConfig:
             "max_lat_accel_mps2",
             "max_lat_jerk_mps3",
             "max_slope",
+            "turn_out_mps",
             "min_change_s",
             "arrive_m",
             "range_m",
@@ -131,6 +143,7 @@ class LaneConfig:
             "min_return_s",
             "creep_mps",
             "turn_out_m",
+            "pass_margin_m",
         ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
@@ -170,7 +183,10 @@ class LaneDecision:
     [m]; stop_m : distance [m] to the stop point (``stop`` only, else None); since_s : when the target last changed [s] (-inf:
     never, the ego keeps the lane it started in); gap_m : bumper-to-bumper distance [m] to the
     nearest obstacle ahead in the ego's lane now (inf: none); called_back : the change is a
-    called-back one, back to the lane a change left (it is driven home, never called back itself).
+    called-back one, back to the lane a change left (it is driven home, never called back itself);
+    origin : the lane a change started from (else ``current``); speed_cap_mps : the speed [m/s]
+    the MPC's references keep to (a turn-out past an obstacle its ramp does not clear: see
+    ``LaneConfig.turn_out_mps``), None: no cap.
     """
 
     lane: int
@@ -185,6 +201,12 @@ class LaneDecision:
     since_s: float
     gap_m: float = math.inf
     called_back: bool = False
+    origin: int = -1
+    speed_cap_mps: float | None = None
+
+    def __post_init__(self):
+        if self.origin < 0:  # not a change: the lane the ego is in
+            object.__setattr__(self, "origin", self.current)
 
 
 def lane_line(road: Road, lane: int) -> np.ndarray:
@@ -299,6 +321,7 @@ def decide_lane(
         return max(max(v, 1.0) * change_s(lane), _PEAK_SLOPE * d / cfg.max_slope, cfg.turn_out_m)
 
     gap_now = math.inf  # nearest obstacle ahead in the ego's lane now, bumper to bumper
+    blockers: list[list] = [[] for _ in range(n)]  # per lane, the tracks of the obstacles ahead in it
     for S, E, HL, HW, present in _tracks(path, obstacles, t_s, taus, s_m, cfg.range_m):
         k0 = int(np.argmax(present))
         ahead = S[k0] >= s_ego[k0]
@@ -309,6 +332,7 @@ def decide_lane(
             if ahead:
                 gap = S - s_ego - HL - half_l
                 free_m[i] = min(free_m[i], float(gap[inlane].min()))
+                blockers[i].append((S, E, HL, HW, inlane))
                 if np.any((S - s_keep - HL - half_l)[inlane & during[i]] < enter_gap):
                     enter_ok[i] = False
                 if i == cur and inlane[0]:
@@ -334,7 +358,37 @@ def decide_lane(
     def ramp_to(lane: int) -> LateralRamp:
         return LateralRamp(s_m, s_m + ramp_m(lane), e_y_m, road.s_m, lane_line(road, lane))
 
-    def result(lane: int, action, ramp=None, stop_m=None, called_back: bool = False) -> LaneDecision:
+    def clears(lane: int, ramp: LateralRamp, origin: int, speed: float) -> bool:
+        """Whether ``ramp`` (to ``lane``), driven at ``speed`` [m/s], keeps the body
+        ``pass_margin_m`` beside every obstacle ahead in lane ``origin`` while passing it (on a
+        0.05 s grid: a fast pass is not stepped over)."""
+        if not blockers[origin]:
+            return True
+        side = 1.0 if centres[lane] > e_y_m else -1.0
+        tf = np.arange(0.0, cfg.horizon_s + 1e-9, 0.05)
+        s_f = s_m + speed * tf
+        off = side * ramp.offset(s_f)
+        for S, E, HL, HW, inlane in blockers[origin]:
+            k = np.flatnonzero(inlane)
+            if len(k) > 1:
+                Sf, Ef, HLf, HWf = (np.interp(tf, taus[k], a[k], left=np.nan, right=np.nan) for a in (S, E, HL, HW))
+            else:  # one sample: held over its time step
+                Sf, Ef, HLf, HWf = (
+                    np.where(np.abs(tf - taus[k[0]]) <= 0.5 * cfg.dt_s, a[k[0]], np.nan) for a in (S, E, HL, HW)
+                )
+            beside = (s_f + half_l > Sf - HLf) & (s_f - half_l < Sf + HLf)
+            if np.any(off[beside] < (side * Ef + HWf)[beside] + 0.5 * cfg.ego_width_m + cfg.pass_margin_m):
+                return False
+        return True
+
+    def turn_out_cap(lane: int, ramp: LateralRamp, origin: int) -> float | None:
+        """The speed cap of a change to ``lane`` along ``ramp`` from lane ``origin``: ``turn_out_mps``
+        while the ramp does not clear the obstacles ahead in the origin lane at that speed."""
+        return None if clears(lane, ramp, origin, max(v, cfg.turn_out_mps)) else cfg.turn_out_mps
+
+    def result(
+        lane: int, action, ramp=None, stop_m=None, called_back: bool = False, origin: int = -1, cap=None
+    ) -> LaneDecision:
         changed = previous is None or lane != previous.lane
         # when the target last changed: a first decision to keep the lane the ego is in is no change
         if previous is None:
@@ -362,37 +416,54 @@ def decide_lane(
             since,
             gap_now,
             called_back,
+            origin,
+            cap,
         )
+
+    def home_lane() -> int:
+        """The neighbour of the ego's lane towards the route lane (the ego out of it)."""
+        return int(order[pos + (1 if int(np.flatnonzero(order == road.route_lane)[0]) > pos else -1)])
+
+    def pass_over() -> bool:
+        """Out of the route lane with the lane home free and clear over the whole look-ahead."""
+        if cur == road.route_lane:
+            return False
+        home = home_lane()
+        return bool(free[home]) and free_m[home] >= look - 1e-6
 
     if previous is not None and previous.action == "change":
         tgt = previous.lane
         c_t = centres[tgt]
-        if not (cur == tgt and abs(e_y_m - c_t) < cfg.arrive_m):
+        # held until the ego arrives, or is in its target lane with the pass over (no need to
+        # settle on the lane's centre before heading home)
+        if not (cur == tgt and (abs(e_y_m - c_t) < cfg.arrive_m or pass_over())):
             if not free[tgt] and cur != tgt and not previous.called_back:
                 # the target closed before the ego got there: back (and that return is not called
                 # back in turn when the body's centre swings over the line: no flip-flop)
                 return result(cur, "change", called_back=True)
-            return result(tgt, "change", called_back=previous.called_back)
+            cap = None
+            if previous.speed_cap_mps is not None:  # a turn-out: slow until past the obstacle
+                cap = turn_out_cap(tgt, previous.ramp, previous.origin)
+            return result(tgt, "change", called_back=previous.called_back, origin=previous.origin, cap=cap)
     dwell_ok = previous is None or t_s - previous.since_s >= cfg.min_dwell_s - 1e-9
     if cur != road.route_lane:
-        home = int(order[pos + (1 if int(np.flatnonzero(order == road.route_lane)[0]) > pos else -1)])
+        home = home_lane()
         # back early (min_return_s) once the lane home is clear over the whole look-ahead: a pass is over
-        early = free_m[home] >= look - 1e-6 and (previous is None or t_s - previous.since_s >= cfg.min_return_s - 1e-9)
+        early = pass_over() and (previous is None or t_s - previous.since_s >= cfg.min_return_s - 1e-9)
         if (dwell_ok or early) and free[home] and free_m[home] >= min(free_m[cur], need + cfg.min_gain_m):
             return result(home, "change")
     if blocked[cur]:
         options = [j for j in neighbours if free[j]]
         if return_by_s is not None and cur == road.route_lane:  # out and back in time
             options = [j for j in options if t_s + 2.0 * ramp_m(j) / max(v, cfg.creep_mps) <= return_by_s]
+        stop_m = max(gap_now - cfg.standstill_m, 0.0) if math.isfinite(gap_now) else float(free_m[cur])
         if not options:
-            return result(
-                cur,
-                "stop",
-                stop_m=max(gap_now - cfg.standstill_m, 0.0) if math.isfinite(gap_now) else float(free_m[cur]),
-            )
+            return result(cur, "stop", stop_m=stop_m)
         best = max(options, key=lambda j: free_m[j])
         if dwell_ok and free_m[best] >= free_m[cur] + cfg.min_gain_m:
-            return result(best, "change")
+            ramp = ramp_to(best)
+            cap = None if clears(best, ramp, cur, v) else cfg.turn_out_mps
+            return result(best, "change", ramp=ramp, origin=cur, cap=cap)
     return result(cur, "keep")
 
 
@@ -422,6 +493,7 @@ class LaneChoosingMpc:
         self._band: tuple[int, ...] | None = None
         self._ramp: LateralRamp | None = None
         self._held_gap: float | None = None
+        self._cap: float | None = None
         names = list(mpc.model.input_names)
         #: the controller's full braking [m/s^2] (0: a model without an acceleration input)
         self._decel_mps2 = max(-float(mpc.problem.u_min[names.index("accel")]), 0.0) if "accel" in names else 0.0
@@ -465,6 +537,9 @@ class LaneChoosingMpc:
             if ramp is not self._ramp:
                 mpc.set_lateral_reference(None if ramp is None else ramp.offset)
                 self._ramp = ramp
+            if d.speed_cap_mps != self._cap:  # a turn-out: slowly past the obstacle, braking hard to it
+                mpc.set_speed_cap(d.speed_cap_mps, self._decel_mps2 or None)
+                self._cap = d.speed_cap_mps
         return mpc.step(x, warm)
 
     def _stop_gap(self, d: LaneDecision, v: float) -> float:
