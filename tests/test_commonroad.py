@@ -344,6 +344,31 @@ def test_route_reaches_the_goal_as_the_network_says(name):
         assert d < 1.0
 
 
+ROUTE_PLANNER = json.loads((DIR / "route_planner_routes.json").read_text(encoding="utf-8"))
+
+
+@pytest.mark.parametrize("name", sorted(ROUTE_PLANNER["files"]))
+def test_route_matches_commonroad_route_planners(name):
+    """The oracle: commonroad-route-planner's routes for every file, recorded in its own
+    environment (it pins osqp 0.6.7; ``tests/data/commonroad/record_routes.py``). With goal
+    lanelets, mpcdrive's route up to its first goal lanelet is one of the planner's routes up to
+    that lanelet (the planner may continue to further goal lanelets). A time-only goal names no
+    lanelet: the planner then plans a survival route through the whole network, mpcdrive drives
+    the start lane forward (no invented turns, docs/commonroad.md): they share the start
+    lanelet."""
+    rec = ROUTE_PLANNER["files"][name]
+    assert rec["error"] is None and rec["routes"]
+    route = [int(i) for i in imported(name).route]
+    if not rec["goal_lanelets"]:
+        assert route[0] in {r[0] for r in rec["routes"]} and route[0] in rec["start_lanelets"]
+        return
+    goals = set(rec["goal_lanelets"])
+    k = next(i for i, lid in enumerate(route) if lid in goals)
+    ours = route[: k + 1]
+    theirs = [r[: r.index(route[k]) + 1] for r in rec["routes"] if route[k] in r]
+    assert ours in theirs, (ours, rec["routes"])
+
+
 def _two_lane_network_with_exit():
     """Two lanes heading east for 50 m (2 left of 1), then both curving left together (11 left of
     12... as successors 21 / 22), and on the right lane a straight exit 23."""
