@@ -175,3 +175,38 @@ def test_a_route_lane_wider_than_the_lane_of_the_path_does_not_pull_the_car_off_
     res = run_experiment(exp)
     assert np.max(np.abs(res.e_y_m)) < 0.05
     assert compute_metrics(res)["max_lane_excess_m"] == 0.0
+
+
+def test_every_lane_setting_is_reachable_from_yaml_and_bad_ones_are_refused():
+    """road.lanes sets the decision layer's LaneConfig by its field names (each field, changed
+    from its default, arrives); the body's size defaults to the vehicle's; unknown names, bad
+    values and lanes without neighbours are refused with the reason."""
+    import dataclasses
+
+    from mpcdrive.control.lanes import LaneConfig
+    from mpcdrive.scenarios.loader import ScenarioError, validate_scenario_data
+
+    exp = build_experiment(ScenarioSpec.model_validate(_spec([PARKED])))
+    cfg = exp.controller.config
+    fp = exp.mpc.footprint
+    assert (cfg.ego_length_m, cfg.ego_width_m) == (fp.length_m, fp.width_m)
+    assert (
+        dataclasses.replace(cfg, ego_length_m=LaneConfig().ego_length_m, ego_width_m=LaneConfig().ego_width_m)
+        == LaneConfig()
+    )
+    for f in dataclasses.fields(LaneConfig):
+        default = getattr(LaneConfig(), f.name)
+        value = 7.0 if default is None else default * 1.5 + 0.5
+        spec = _spec([PARKED])
+        spec["road"]["lanes"] = {f.name: value}
+        got = getattr(build_experiment(ScenarioSpec.model_validate(spec)).controller.config, f.name)
+        assert got == pytest.approx(value), f.name
+    for lanes, words in (({"time_gap": 1.0}, "unknown lane setting"), ({"turn_out_mps": -1.0}, "turn_out_mps")):
+        spec = _spec([PARKED])
+        spec["road"]["lanes"] = lanes
+        with pytest.raises(ScenarioError, match=words):
+            validate_scenario_data(spec, "lanes.yaml")
+    spec = _spec([PARKED], neighbours=False)
+    spec["road"]["lanes"] = {"time_gap_s": 2.0}
+    with pytest.raises(ScenarioError, match="needs neighbours"):
+        validate_scenario_data(spec, "lanes.yaml")

@@ -14,7 +14,7 @@ from ..control.adapters import StateAdapter
 from ..control.base import Controller
 from ..control.delay import DelayCompensator
 from ..control.fallback import FallbackConfig
-from ..control.lanes import LaneChoosingMpc
+from ..control.lanes import LaneChoosingMpc, LaneConfig
 from ..control.mpc import LtvMpc, MpcConfig
 from ..models.dynamic import DynamicBicycle, DynamicParams
 from ..control.factory import make_mpc
@@ -496,7 +496,11 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
     controller: Controller = mpc
     if road is not None and road.lanes:
         # neighbour lanes: a decision layer opens them to pass a blocked stretch
-        controller = LaneChoosingMpc(mpc, road, return_by_s=spec.road.return_by_s if spec.road else None)
+        rs = spec.road
+        lanes = LaneConfig(
+            **{"ego_length_m": footprint.length_m, "ego_width_m": footprint.width_m, **((rs.lanes or {}) if rs else {})}
+        )
+        controller = LaneChoosingMpc(mpc, road, lanes, return_by_s=rs.return_by_s if rs else None)
     if c.delay_compensation:
         # predicts over its own period with the plant's integration step
         period_steps = int(round(spec.control_period_s / spec.dt_s))

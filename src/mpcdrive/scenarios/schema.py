@@ -16,6 +16,7 @@ from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from ..models.presets import PRESETS
 from ..control.fallback import DEFAULT_LADDER, check_ladder
+from ..control.lanes import LaneConfig
 from ..control.mpc import MpcConfig
 from ..ocp.avoidance import AvoidanceConfig
 from ..sim.closed_loop import solve_interval
@@ -303,7 +304,10 @@ class RoadSpec(_Strict):
     the same way reach beyond the road's left / right edge (0 where there is none); with them a
     lane decision layer lets the car change into a free neighbour lane to pass a blocked
     stretch, and come back; ``return_by_s`` [s]: the time by which the car must be back in its
-    own lane (e.g. a goal region on it): no change out of it starts that cannot return by then."""
+    own lane (e.g. a goal region on it): no change out of it starts that cannot return by then;
+    ``lanes``: settings of that decision layer by the names of
+    :class:`~mpcdrive.control.lanes.LaneConfig` (e.g. ``{time_gap_s: 2.0, turn_out_mps: 1.5}``;
+    the rest its defaults, the body's length and width the vehicle's)."""
 
     lane_width_m: Positive | None = None
     left_width_m: NonNeg | None = None
@@ -312,6 +316,19 @@ class RoadSpec(_Strict):
     neighbours: list[tuple[NonNeg, NonNeg, NonNeg]] | None = None
     margin_m: NonNeg = 0.05
     return_by_s: NonNeg | None = None
+    lanes: dict[str, float] | None = None
+
+    @field_validator("lanes")
+    @classmethod
+    def _lane_config(cls, v):
+        if v is None:
+            return v
+        known = set(LaneConfig.__dataclass_fields__)
+        unknown = sorted(set(v) - known)
+        if unknown:
+            raise ValueError(f"unknown lane setting(s) {unknown}; known: {sorted(known)}")
+        LaneConfig(**v)  # its own checks, with its own messages
+        return v
 
     @model_validator(mode="after")
     def _one_form(self):
@@ -336,6 +353,8 @@ class RoadSpec(_Strict):
                 raise ValueError("neighbours: rows [s_m, left_m, right_m] with increasing s_m")
         if self.min_width_m <= 0:
             raise ValueError("the road has no width somewhere (left + right width is 0)")
+        if self.lanes is not None and self.neighbours is None:
+            raise ValueError("road.lanes sets the lane decision layer, which needs neighbours")
         return self
 
     @property
