@@ -154,3 +154,33 @@ def test_body_stays_inside_a_lane_that_narrows_in_a_tight_curve(backend):
     # a centre-only bound (half the narrowest lane minus half the car) would leave no room here:
     # the rule keeps the car inside by moving it where the road is
     assert m["max_abs_lateral_error_m"] > 0.05
+
+
+def test_road_rows_are_linearized_where_the_car_is_not_where_its_references_run():
+    """A car standing at the start of a 12 m-radius bend whose references run on at 6 m/s (7.5 m
+    into the bend by the horizon's end, 0.6 rad round it): the road rows of every step are the
+    path's normal and bounds where the linearization trajectory has the car, at the start, not
+    the references' (rows from a stretch of the bend the car is not on let a car held back gain
+    ground sideways: it left the road on the outside of a left turn while yielding). Both
+    controllers alike."""
+    from mpcdrive.control.fast_layout import _W_LANEB, _W_LANEN
+
+    spec = _curve_spec({"lane_width_m": 3.5, "margin_m": 0.05})
+    spec["initial_state"]["v_mps"] = 0.0
+    mpcs = {}
+    for backend in ("osqp", "fast"):
+        spec["controller"]["backend"] = backend
+        mpcs[backend] = build_experiment(ScenarioSpec.model_validate(spec)).mpc
+    osqp, fast = mpcs["osqp"], mpcs["fast"]
+    x = np.array([0.0, 0.0, 0.0, 0.0])
+    warm = osqp.initial_warm(x)
+    d = osqp.prepare(x, warm)
+    assert d.xref[-1, 2] > 0.5  # the references' heading, well round the bend
+    assert np.abs(d.Xlin[:, 0]).max() < 1e-9  # the car stays where it stands
+    h = float(osqp.path.heading(d.s_m))  # the path where the car stands (heading 0 to 2e-5)
+    np.testing.assert_allclose(d.lane_normal, np.tile([-math.sin(h), math.cos(h)], (osqp.N, 1)), atol=1e-9)
+    np.testing.assert_allclose(d.lane_offset, d.lane_normal @ osqp.path.position(d.s_m), atol=1e-9)
+    assert abs(h) < 1e-4
+    fast.step(x, warm)
+    np.testing.assert_allclose(fast._w[_W_LANEN], d.lane_normal, atol=1e-9)
+    np.testing.assert_allclose(fast._w[_W_LANEB], d.lane_offset, atol=1e-9)

@@ -85,7 +85,7 @@ from .fast_layout import _W_XF, _W_P, _W_LAM, _W_VB, _W_S, _W_T2, _W_GAM, _W_H, 
 from .fast_layout import _W_ZDIR, _W_R, _W_UQ, _W_SQ, _W_ROWN, _W_LAMQ, _W_DW, _W_KG, _W_KF, _W_PA, _W_MG, _W_GG, _W_QV
 from .fast_layout import _W_WE, _W_QT, _W_OBS, _W_ODIST, _W_OPROJ, _W_SARR, _W_EREF, _W_ROWA, _W_ROWB, _W_LLO, _W_LHI
 from .fast_layout import _W_XLIN, _W_GSUM, _W_PROF, _W_VARR, _W_REFW, _W_RDS, _W_RDL, _W_RDR, _W_LDLO, _W_LDHI, _W_ULO
-from .fast_layout import _W_UHI, _W_VLIN, _NW
+from .fast_layout import _W_UHI, _W_VLIN, _W_SLIN, _W_RLIN, _NW
 from .fast_layout import _F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_RMARGIN, _F_SLACK2, _F_SLACK1, _F_TOL, _F_OW, _F_OEPS
 from .fast_layout import _F_OSX, _F_OSY, _F_OINF, _F_OMARGIN, _F_HW, _F_HL, _F_RAMP, _F_OSLACK2, _F_OSLACK1, _F_BOFF
 from .fast_layout import _F_RPERIOD, _F_FRIC, _F_WHEELBASE, _NFP
@@ -317,6 +317,8 @@ class FastLtvMpc(TrackingWarmStart):
             _W_ULO: np.tile(problem.u_min, (N, 1)),
             _W_UHI: np.tile(problem.u_max, (N, 1)),
             _W_VLIN: (N + 1,),
+            _W_SLIN: (N + 1,),
+            _W_RLIN: (N + 1, 4),
         }
         shapes: list[tuple[int, ...]] = [
             np.shape(a) if isinstance(a, np.ndarray) else a for a in (arrays[i] for i in range(_NW))

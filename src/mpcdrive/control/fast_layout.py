@@ -135,8 +135,10 @@ _NOB = 8
     _W_ULO,
     _W_UHI,
     _W_VLIN,
-) = range(75)
-_NW = 75
+    _W_SLIN,
+    _W_RLIN,
+) = range(77)
+_NW = 77
 # float parameters (fp)
 (
     _F_DT,

@@ -43,7 +43,7 @@ from .fast_layout import _W_XF, _W_P, _W_LAM, _W_VB, _W_S, _W_T2, _W_GAM, _W_H, 
 from .fast_layout import _W_ZDIR, _W_R, _W_UQ, _W_SQ, _W_ROWN, _W_LAMQ, _W_DW, _W_KG, _W_KF, _W_PA, _W_MG, _W_GG, _W_QV
 from .fast_layout import _W_WE, _W_QT, _W_OBS, _W_ODIST, _W_OPROJ, _W_SARR, _W_EREF, _W_ROWA, _W_ROWB, _W_LLO, _W_LHI
 from .fast_layout import _W_XLIN, _W_GSUM, _W_PROF, _W_VARR, _W_REFW, _W_RDS, _W_RDL, _W_RDR, _W_LDLO, _W_LDHI, _W_ULO
-from .fast_layout import _W_UHI, _W_VLIN, _NW
+from .fast_layout import _W_UHI, _W_VLIN, _W_SLIN, _W_RLIN, _NW
 from .fast_layout import _F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_RMARGIN, _F_SLACK2, _F_SLACK1, _F_TOL, _F_HW, _F_HL
 from .fast_layout import _F_OSLACK2, _F_OSLACK1, _F_BOFF, _F_RPERIOD, _F_FRIC, _F_WHEELBASE
 from .fast_layout import _O_S, _O_EY, _O_EPSI, _O_ITER
@@ -341,15 +341,24 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
                 uhi,
             )
             input_bound_rows(N, nu, u_min, u_max, ulo, uhi, C, b, False)
-        if lane == 1:  # the body inside the road at the linearization trajectory's yaw (scene.road)
+        if lane == 1:
+            # the body inside the road where the linearization trajectory has the car, in its yaw
+            # (scene.road; as LtvMpc.prepare: its arc lengths, not the references')
+            s_lin, rlin = _v1(wbuf, fo, _W_SLIN), _v2(wbuf, fo, fs, _W_RLIN)
+            s_lin[0] = s0
+            for k in range(N):
+                s_lin[k + 1] = s_lin[k] + math.hypot(Xlin[k + 1, 0] - Xlin[k, 0], Xlin[k + 1, 1] - Xlin[k, 1])
+            for k in range(N + 1):
+                px, py, ph, pk = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s_lin[k])
+                rlin[k, 0], rlin[k, 1], rlin[k, 2], rlin[k, 3] = px, py, ph, pk
             horizon_bounds(
                 _v1(wbuf, fo, _W_RDS),
                 _v1(wbuf, fo, _W_RDL),
                 _v1(wbuf, fo, _W_RDR),
                 fp[_F_RPERIOD],
-                s_arr[1:],
-                refs[1:, 2],
-                refs[1:, 3],
+                s_lin[1:],
+                rlin[1:, 2],
+                rlin[1:, 3],
                 Xlin[1:, 2],
                 fp[_F_HL],
                 fp[_F_HW],
@@ -402,11 +411,12 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
             qt,
         )
     if lane == 1:
+        rlin = _v2(wbuf, fo, fs, _W_RLIN)  # where the road rows are linearized
         for k in range(N):
-            yaw = refs[k + 1, 2]
+            yaw = rlin[k + 1, 2]
             lane_n[k, 0] = -math.sin(yaw)
             lane_n[k, 1] = math.cos(yaw)
-            lane_b[k] = lane_n[k, 0] * refs[k + 1, 0] + lane_n[k, 1] * refs[k + 1, 1]
+            lane_b[k] = lane_n[k, 0] * rlin[k + 1, 0] + lane_n[k, 1] * rlin[k + 1, 1]
         # the first step's bounds hold where the model puts the car with the first input of the
         # linearization (F[0] = f(x, Ubar[0])): reachable, so never bought with slack
         Xl1 = _v2(wbuf, fo, fs, _W_XLIN)

@@ -26,7 +26,7 @@ from ..ocp.road_rows import RoadRows
 from ..paths.base import ReferencePath
 from ..scene.footprint import Footprint
 from ..scene.obstacles import Obstacle
-from ..scene.road import Road, reach_first_step
+from ..scene.road import Road, lin_arc_lengths, reach_first_step
 from ..paths.reference import HorizonMode, horizon_arc_lengths, horizon_states
 from ..paths.speed_profile import SpeedReference
 from ..solvers.osqp_backend import OsqpBackend, OsqpSettings
@@ -376,8 +376,12 @@ class LtvMpc(TrackingWarmStart):
         road = self._road
         rows = None
         if road is not None:
-            # the body inside the road, linearized in the yaw at the linearization trajectory
-            rows = self._road_rows.fill(road, self.footprint, s_arr, refs, Xlin)
+            # the body inside the road, linearized where the linearization trajectory has the car
+            # (its arc lengths, not the references', which run on ahead of a car held back: rows
+            # from a stretch of the bend it is not on let it gain ground sideways) and in its yaw
+            s_lin = lin_arc_lengths(Xlin, s0)
+            refs_lin = horizon_states(self.path, s_lin, x[2])
+            rows = self._road_rows.fill(road, self.footprint, s_lin, refs_lin, Xlin)
         if self.avoidance is not None:
             memory = AvoidanceMemory(dict(warm.sides))
             terms = self.avoidance.terms(
@@ -400,12 +404,13 @@ class LtvMpc(TrackingWarmStart):
                 _shift_references(xref, refs, s_arr, terms.e_ref)
         if self._lateral is not None:  # a lateral reference (set_lateral_reference): the same shift
             _shift_references(xref, refs, s_arr, np.asarray(self._lateral(s_arr), float))
-        # lane normals at the (undetoured) centreline at the references
+        # lane normals at the (undetoured) centreline where the road rows are linearized
         if self.qp.lane:
-            yaw = refs[1:, 2]
+            at = refs if rows is None else refs_lin
+            yaw = at[1:, 2]
             self._lane_n[:, 0] = -np.sin(yaw)
             self._lane_n[:, 1] = np.cos(yaw)
-            self._lane_b[:] = np.einsum("ki,ki->k", self._lane_n, refs[1:, :2])
+            self._lane_b[:] = np.einsum("ki,ki->k", self._lane_n, at[1:, :2])
             if rows is not None:  # the first step's bounds hold where f(x, Ubar[0]) puts the car
                 e1 = float(self._lane_n[0] @ Fbar[0, :2] - self._lane_b[0])
                 reach_first_step(rows.lo, rows.hi, rows.dlo, rows.dhi, e1, float(Fbar[0, 2] - Xlin[1, 2]))

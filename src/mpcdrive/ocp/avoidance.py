@@ -32,7 +32,7 @@ from ..paths.compiled import PathArrays, path_arrays
 from ..scene.footprint import Footprint
 from ..scene.geometry import points_polygons
 from ..scene.obstacles import Circle, Obstacle, Polygon
-from ..scene.road import Road
+from ..scene.road import Road, lin_arc_lengths
 from . import avoidance_compiled as _ac
 from .avoidance_cost import obstacle_cost, position_cost, sigma_inv
 from .frenet import FrenetBox, FrenetBoxes, frenet_box, frenet_boxes
@@ -555,8 +555,8 @@ class Avoidance:
 
     def _lin_arc_lengths(self, Xlin: np.ndarray, s0: float) -> np.ndarray:
         """(N,) arc lengths [m] of the linearization trajectory's steps 1..N: ``s0`` plus the
-        distance travelled along it (the car stays near the path)."""
-        return s0 + np.cumsum(np.hypot(*np.diff(Xlin[:, :2], axis=0).T))
+        distance travelled along it (the car stays near the path: :func:`~mpcdrive.scene.road.lin_arc_lengths`)."""
+        return lin_arc_lengths(Xlin, s0)[1:]
 
     def _stop_plane(
         self, s_lo: np.ndarray, s_at: np.ndarray, clearance: float, *, ahead: bool = False

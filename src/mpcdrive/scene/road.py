@@ -144,6 +144,13 @@ def centre_bounds(
         )
 
 
+def lin_arc_lengths(Xlin, s0_m: float) -> np.ndarray:
+    """(N+1,) arc lengths [m] of a linearization trajectory ``Xlin`` (N+1, >= 2) on the path:
+    ``s0_m`` (the measured state's) plus the distance travelled along it (the car stays near the
+    path); where the road rows and the obstacle rows are linearized."""
+    return s0_m + np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(Xlin[:, :2], axis=0).T))])
+
+
 @njit(cache=True)
 def horizon_bounds(
     tab_s,
