@@ -171,14 +171,22 @@ def test_case_4_left_turn_keeps_clear_of_the_oncoming_car(plant):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="yields by braking hard (-10 m/s^2) but swerves out of the bend and off the road: the stop "
-    "half-plane for the oncoming car, linearized at the car's predicted positions on the bend, lets "
-    "it gain ground sideways on the outside; it stops 10.4 m (KS) / 4.7 m (ST) right of the path, "
-    "outside the road, and stands there to the end of the run (goal not reached)",
+@pytest.mark.parametrize(
+    "plant",
+    [
+        "ks",
+        pytest.param(
+            "st",
+            marks=pytest.mark.xfail(
+                strict=True,
+                reason="yields and completes the turn, but the body leaves the road by 3 cm while it "
+                "brakes for the stop line: on the first step of the yield the stop half-plane, "
+                "linearized where the previous plan (driving through) was in the bend, lets the car "
+                "gain ground sideways; it stops 0.58 m right of the path with 0.18 rad of yaw",
+            ),
+        ),
+    ],
 )
-@pytest.mark.parametrize("plant", PLANTS)
 def test_case_4_yields_then_completes_the_left_turn(plant):
     _, res, rep = drive(4, plant)
     assert rep.collision_free and rep.road_compliant and rep.goal_step is not None, rep.line()
