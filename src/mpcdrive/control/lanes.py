@@ -383,7 +383,9 @@ def decide_lane(
 
     def turn_out_cap(lane: int, ramp: LateralRamp, origin: int) -> float | None:
         """The speed cap of a change to ``lane`` along ``ramp`` from lane ``origin``: ``turn_out_mps``
-        while the ramp does not clear the obstacles ahead in the origin lane at that speed."""
+        while the ramp, driven at the current speed (at least that cap: a car starting from
+        standstill is judged as it will drive), does not clear the obstacles ahead in the origin
+        lane."""
         return None if clears(lane, ramp, origin, max(v, cfg.turn_out_mps)) else cfg.turn_out_mps
 
     def result(
@@ -456,14 +458,13 @@ def decide_lane(
         options = [j for j in neighbours if free[j]]
         if return_by_s is not None and cur == road.route_lane:  # out and back in time
             options = [j for j in options if t_s + 2.0 * ramp_m(j) / max(v, cfg.creep_mps) <= return_by_s]
-        stop_m = max(gap_now - cfg.standstill_m, 0.0) if math.isfinite(gap_now) else float(free_m[cur])
         if not options:
+            stop_m = max(gap_now - cfg.standstill_m, 0.0) if math.isfinite(gap_now) else float(free_m[cur])
             return result(cur, "stop", stop_m=stop_m)
         best = max(options, key=lambda j: free_m[j])
         if dwell_ok and free_m[best] >= free_m[cur] + cfg.min_gain_m:
             ramp = ramp_to(best)
-            cap = None if clears(best, ramp, cur, v) else cfg.turn_out_mps
-            return result(best, "change", ramp=ramp, origin=cur, cap=cap)
+            return result(best, "change", ramp=ramp, origin=cur, cap=turn_out_cap(best, ramp, cur))
     return result(cur, "keep")
 
 
