@@ -526,6 +526,8 @@ def test_a_parked_car_too_close_to_swerve_round_at_speed_is_passed_slowly(plant)
     assert level > 0 and res.v_mps[level] < LaneConfig().turn_out_mps + 0.5
     assert res.v_mps[:level].min() > 1.0  # braking while easing out, not stopping
     assert res.x[:, 1].max() > 2.0  # beside it in the left lane
+    # feasibility under the solution's model: the ST plant's own states on ST
+    assert rep.model == plant.upper() and f"{plant.upper()}-feasible True" in rep.line()
     assert np.min(res.clearance_m) > 0.3 and compute_metrics(res).solver_failures == 0
 
 

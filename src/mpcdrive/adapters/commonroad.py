@@ -356,24 +356,26 @@ def write_solution(imp: CommonRoadImport, result, out_dir: Path, last_step: int 
 
 @dataclass(frozen=True)
 class CheckReport:
-    """The drivability checker's verdicts on a driven trajectory."""
+    """The drivability checker's verdicts on a driven trajectory; ``feasible`` under the vehicle
+    model ``model`` (``KS``, or ``ST`` for a drive on the ST plant)."""
 
     collision_free: bool
     road_compliant: bool
     feasible: bool
     goal_step: int | None
     steps_checked: int
+    model: str = "KS"
 
     @property
     def passed(self) -> bool:
-        """Collision-free, on the road, KS-feasible and at the goal."""
+        """Collision-free, on the road, feasible and at the goal."""
         return self.collision_free and self.road_compliant and self.feasible and self.goal_step is not None
 
     def line(self) -> str:
         goal = "not reached" if self.goal_step is None else f"reached at step {self.goal_step}"
         return (
             f"collision-free {self.collision_free}, road-compliant {self.road_compliant}, "
-            f"KS-feasible {self.feasible}, goal {goal}, {self.steps_checked} states"
+            f"{self.model}-feasible {self.feasible}, goal {goal}, {self.steps_checked} states"
         )
 
 
@@ -411,12 +413,15 @@ def check_drive(imp: CommonRoadImport, result) -> CheckReport:
     _, road = create_road_boundary_obstacle(imp.scenario, method="obb_rectangles")
     road_ok = not road.collide(ego)
     vtype = VehicleType[imp.vehicle_type]
-    if solution_model(imp, result) == "ST":  # feasible under the model it was driven on
+    model = solution_model(imp, result)
+    if model == "ST":  # feasible under the model it was driven on
         traj, dyn = st_solution_trajectory(imp, result, last), VehicleDynamics.ST(vtype)
     else:
         traj, dyn = solution_trajectory(imp, result, last), VehicleDynamics.KS(vtype)
     feasible, _ = trajectory_feasibility(traj, dyn, imp.spec.dt_s)
-    return CheckReport(bool(collision_free), bool(road_ok), bool(feasible), g, last + 1)
+    return CheckReport(
+        bool(collision_free), bool(road_ok), bool(feasible), g, last + 1, "ST" if model == "ST" else "KS"
+    )
 
 
 def solution_accepted(imp: CommonRoadImport, solution_file: Path) -> tuple[bool, str]:

@@ -193,13 +193,14 @@ def summary_markdown(rows: dict, header: str = "") -> str:
         "",
         header,
         "",
-        f"{passed} of {n} files passed (collision-free, on the road, KS-feasible and at the goal, as "
+        f"{passed} of {n} files passed (collision-free, on the road, feasible and at the goal, as "
         "CommonRoad's drivability checker judges the drive up to the goal, and the solution accepted by "
-        "CommonRoad's solution checker).",
+        "CommonRoad's solution checker). Feasible: under the solution's vehicle model, KS (ST for a "
+        "drive on the ST plant).",
         "",
         "Min clearance: footprint to obstacle over the checked drive (whole run in brackets when smaller).",
         "",
-        "| file | verdict | collision-free | road-compliant | KS-feasible | goal reached | min clearance [m] | "
+        "| file | verdict | collision-free | road-compliant | feasible | goal reached | min clearance [m] | "
         "solver failures | solve p50 / p99 [us] | wall [s] |",
         "|" + "---|" * 10,
     ]
