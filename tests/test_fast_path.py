@@ -732,7 +732,10 @@ def test_fast_constraint_rows_match_tight_osqp(sid):
     assert max(du) <= 1e-5, f"{sid}: max |du| {max(du):.2e}"
     m_ref = compute_metrics(ref_result)
     m_fast = compute_metrics(run_experiment(fast))
-    assert m_fast["steps"] == m_ref["steps"] and m_fast["goal_reached"] == m_ref["goal_reached"]
+    # the two closed loops (solvers at different tolerances) drift apart by centimetres over the
+    # run (obstacle-crossing: 3 cm at the path's end, less than the 5 cm one step covers), so the
+    # step that crosses the goal may differ by one
+    assert abs(m_fast["steps"] - m_ref["steps"]) <= 1 and m_fast["goal_reached"] == m_ref["goal_reached"]
     assert m_fast["collisions"] == 0 and m_fast["solver_failures"] == 0
     assert abs(m_fast["rms_lateral_error_m"] - m_ref["rms_lateral_error_m"]) <= 0.01
 

@@ -450,10 +450,9 @@ def compare(name, out, o: Oracle, s: Sensitivity, residuals, pb, d, u_prev) -> N
     assert abs(J - o.J) <= tol_J, f"{name}: cost {J} against the oracle's {o.J} (tolerance {tol_J:.2e})"
 
 
-def check_step(case: Case, x, warm, osqp_may_stall: bool = False) -> tuple[Oracle, object]:
+def check_step(case: Case, x, warm) -> tuple[Oracle, object]:
     """Solve one step with both controllers and the oracle and compare; returns the oracle's
-    solution and the output the next step starts from (the OSQP controller's, or the compiled
-    one's where OSQP stalled: ``osqp_may_stall``, see OSQP_STALLS)."""
+    solution and the output the next step starts from (the OSQP controller's)."""
     ref, fast = case.ref, case.fast
     pb = ref.problem  # with the obstacle rows the controller added
     d = ref.prepare(x, warm)
@@ -475,16 +474,12 @@ def check_step(case: Case, x, warm, osqp_may_stall: bool = False) -> tuple[Oracl
     assert obj + constant_cost(pb, d, warm.u_prev) == pytest.approx(o.J, rel=1e-9, abs=1e-9)
     # the OSQP controller's step (prepare, load, solve, check, clip: the same data again)
     out = ref.step(x, warm)
-    stalled = osqp_may_stall and out.status == "max_iter"
-    if stalled:  # no answer to compare: the controller says so and falls back
-        assert out.fallback != ""
-    else:
-        compare("OSQP", out, o, s, osqp_residuals(s, OSQP, out.status), pb, d, warm.u_prev)
+    compare("OSQP", out, o, s, osqp_residuals(s, OSQP, out.status), pb, d, warm.u_prev)
     # the compiled controller's step, on the same state and warm start, and the same instance
     of = fast.step(x, warm)
     same_instance(fast, d)
     compare("compiled", of, o, s, fast_residuals(fast), pb, d, warm.u_prev)
-    return o, (of if stalled else out)
+    return o, out
 
 
 def run_case(seed: int, steps: int = 2) -> None:
@@ -496,8 +491,8 @@ def run_case(seed: int, steps: int = 2) -> None:
     warm = case.ref.initial_warm(x)
     model = case.ref.model
     found = dict(bound=False, rate=False, road_slack=False, obstacle=False)
-    for k in range(steps):
-        o, out = check_step(case, x, warm, (seed, k) in OSQP_STALLS)
+    for _ in range(steps):
+        o, out = check_step(case, x, warm)
         found["bound"] |= o.dual_bound > ACTIVE_TOL
         found["rate"] |= o.dual_rate > ACTIVE_TOL
         found["road_slack"] |= bool(o.eps.max() > 1e-3)
@@ -507,18 +502,15 @@ def run_case(seed: int, steps: int = 2) -> None:
     assert all(found.values()), found
 
 
-#: (seed, step) where the OSQP controller, at the tolerance of OSQP above and warm-started from its
-#: previous solve, stops at its iteration cap (status max_iter) and falls back: near-degenerate
-#: steps of a car braking to the stop line before a blocked lane (a fresh OSQP solve of the same
-#: QP converges, in 64,000 iterations). Its answer is not compared there; the compiled one is.
-OSQP_STALLS = {(29, 3)}
 #: every obstacle kind, with and without the speed state, on straight and circular roads; seeds 4
 #: and 31 are left out: at their optimum (on the steps run) the input bounds (4) or the obstacle
-#: rows (31) happen not to bind, which run_case refuses; seed 37: its fourth step is near
-#: degenerate (primal sensitivity 1.1e5: OSQP stops at its iteration cap, and the tolerance the
-#: active-set solver's residuals give is 9e-3, above MAX_TOL, where the comparison says nothing)
+#: rows (31) happen not to bind, which run_case refuses; seeds 29 and 37 are near degenerate on a
+#: step (a car braking to the stop line before a blocked lane): the tolerance the residuals give
+#: there is above MAX_TOL, where the comparison says nothing (29, third step: 3.1e-3 for either
+#: solver, since the road rows are linearized where the plan has the car; 37, fourth step: primal
+#: sensitivity 1.1e5, OSQP stops at its iteration cap, 9e-3 from the active-set solver's residuals)
 FAST_SEEDS = [0, 1, 2, 3, 5, 6, 7, 8]
-SLOW_SEEDS = [s for s in range(9, 40) if s not in (31, 37)]
+SLOW_SEEDS = [s for s in range(9, 40) if s not in (29, 31, 37)]
 
 
 @pytest.mark.parametrize("seed", FAST_SEEDS)
