@@ -419,6 +419,8 @@ def test_factory_falls_back_to_osqp_and_says_why():
         warnings.simplefilter("error")
         assert make_mpc(model, path, MpcProblem(3, 1, 10, 0.01, Q=1.0, R=1.0), backend="fast").backend_name == "fast"
         assert make_mpc(model, path, pb, backend="osqp").backend_name == "osqp"
+        # compiled unless the caller asks for OSQP, as scenarios and the CLI
+        assert make_mpc(model, path, MpcProblem(3, 1, 10, 0.01, Q=1.0, R=1.0)).backend_name == "fast"
     with pytest.raises(ValueError, match="backend"):
         make_mpc(model, path, pb, backend="gpu")
 

@@ -13,7 +13,8 @@ from .mpc import LtvMpc, MpcConfig
 
 Backend = Literal["osqp", "fast"]
 BACKENDS: tuple[str, ...] = ("osqp", "fast")
-DEFAULT_BACKEND: Backend = "osqp"
+#: the compiled controller unless the caller asks for the OSQP reference (as scenarios and the CLI)
+DEFAULT_BACKEND: Backend = "fast"
 
 
 class FastPathUnavailable(UserWarning):
@@ -32,7 +33,7 @@ def make_mpc(
     avoidance=None,
     footprint=None,
 ):
-    """An LTV-MPC controller solving ``problem`` with ``backend``.
+    """An LTV-MPC controller solving ``problem`` with ``backend`` (default ``fast``).
 
     ``osqp``: :class:`~mpcdrive.control.mpc.LtvMpc` (sparse QP updated in place, OSQP), the
     reference. ``fast``: :class:`~mpcdrive.control.fast.FastLtvMpc` (the whole step compiled);
