@@ -574,3 +574,52 @@ def test_project_many_is_project_point_by_point(path):
     np.testing.assert_array_equal(e2, want[:, 1])
     with pytest.raises(ValueError):
         path.project_many(np.array([[np.nan, 0.0]]), [0.0], [1.0])
+
+
+def _nearest_on_table(path, xy):
+    """Oracle for the waypoint projection, written independently of paths.compiled: the
+    nearest point of every segment of the path's arc-length table (an open path's end segments
+    extended along their tangents), as (s, e_y) with e_y positive to the left."""
+    p0, p1 = path._xy[:-1], path._xy[1:]
+    d = p1 - p0
+    length = np.linalg.norm(d, axis=1)
+    t = np.einsum("ij,ij->i", xy - p0, d) / length**2
+    lo = np.zeros_like(t)
+    hi = np.ones_like(t)
+    if not path.closed:
+        lo[0], hi[-1] = -np.inf, np.inf
+    t = np.clip(t, lo, hi)
+    foot = p0 + t[:, None] * d
+    j = int(np.argmin(np.linalg.norm(xy - foot, axis=1)))
+    r = xy - foot[j]
+    tangent = d[j] / length[j]
+    return path._s[j] + t[j] * length[j], float(tangent[0] * r[1] - tangent[1] * r[0])
+
+
+@pytest.mark.parametrize("closed", [False, True], ids=["open", "closed"])
+def test_waypoint_projection_is_the_nearest_table_point(closed):
+    """Open and closed waypoint paths: project (without a guess, and near a guess on the right
+    lap) finds the nearest point of the table polyline, and project_many agrees point by point."""
+    pts = np.array([[0.0, 0.0], [6.0, 1.0], [12.0, -2.0], [18.0, 3.0], [24.0, 0.0]])
+    if closed:
+        th = np.linspace(0.0, 2.0 * np.pi, 9)[:-1]
+        pts = np.c_[20.0 * np.cos(th), 12.0 * np.sin(th)]
+    path = WaypointPath(pts, closed=closed)
+    rng = np.random.default_rng(11)
+    L = path.length_m
+    s_true = rng.uniform(-3.0 if not closed else 0.0, L + (3.0 if not closed else 0.0), 300)
+    xy = path.position(s_true) + rng.normal(0.0, 0.4, (300, 2))
+    got, guess = [], []
+    for p, s in zip(xy, s_true):
+        s_o, e_o = _nearest_on_table(path, p)
+        s_n, e_n = path.project(p)
+        assert (s_n, e_n) == pytest.approx((s_o, e_o), abs=1e-9)
+        lap = 2 * L if closed else 0.0  # a guess two laps on: the same point, on the guess's lap
+        s_g, e_g = path.project(p, s + lap, 3.0)
+        if closed:
+            s_o += L * round((s + lap - s_o) / L)
+        assert (s_g, e_g) == pytest.approx((s_o, e_o), abs=1e-9)
+        got.append((s_g, e_g))
+        guess.append(s + lap)
+    s_m, e_m = path.project_many(xy, np.array(guess), np.full(len(xy), 3.0))
+    np.testing.assert_array_equal(np.c_[s_m, e_m], np.array(got))

@@ -15,10 +15,6 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .circle import CirclePath
-from .straight import StraightPath
-from .waypoints import WaypointPath
-
 KIND_STRAIGHT = 0  # geo: [start x, start y, t x, t y, n x, n y, heading, length]
 KIND_CIRCLE = 1  # geo: [centre x, centre y, radius, sign, start angle, length]
 KIND_WAYPOINTS = 2  # geo: [length, closed, ds, lap turn]
@@ -39,6 +35,11 @@ class PathArrays:
 
 def path_arrays(path) -> PathArrays | None:
     """The compiled description of ``path``, or None for a path type compiled code lacks."""
+    # the path classes are imported here: the waypoint path projects with this module's kernel
+    from .circle import CirclePath
+    from .straight import StraightPath
+    from .waypoints import WaypointPath
+
     one, one2 = np.zeros(1), np.zeros((1, 2))
     if type(path) is StraightPath:
         geo = np.array([*path.start, *path.t, *path.n, path._heading, path.length_m])
@@ -47,10 +48,9 @@ def path_arrays(path) -> PathArrays | None:
         geo = np.array([*path.center, path.radius_m, path.sign, path.start_angle_rad, path.length_m])
         return PathArrays(KIND_CIRCLE, geo, one, one2, one, one)
     if type(path) is WaypointPath:
-        geo = np.array([path.length_m, float(path.closed), path._ds, path._lap_turn])
         return PathArrays(
             KIND_WAYPOINTS,
-            geo,
+            path._geo,
             np.ascontiguousarray(path._s),
             np.ascontiguousarray(path._xy),
             np.ascontiguousarray(path._h),
@@ -163,6 +163,17 @@ def path_project(kind, geo, tab_s, tab_xy, s_guess, window_m, px, py):
         r, sg, L = geo[2], geo[3], geo[5]
         s_local = np.mod(sg * (th - geo[4]) * r, L)
         return _lap_shift(L, True, s_local, s_guess), sg * (r - rho)
+    s_loc, e_y = waypoints_project_local(geo, tab_s, tab_xy, s_guess, window_m, px, py)
+    return _lap_shift(geo[0], geo[1] != 0.0, s_loc, s_guess), e_y
+
+
+@njit(cache=True)
+def waypoints_project_local(geo, tab_s, tab_xy, s_guess, window_m, px, py):
+    """(local s [m], e_y [m]) of the nearest point of a waypoint path (``geo``, tables as
+    :class:`PathArrays`) to (px, py), searched on the segments within s_guess +- window_m
+    (every segment when 2 window_m >= the length: pass an infinite window without a guess); the
+    first of equally near segments wins. The end segments of an open path extend along their
+    tangents. ``s`` is not shifted by laps (:func:`path_project` does that)."""
     L, closed, ds = geo[0], geo[1] != 0.0, geo[2]
     m = tab_s.shape[0] - 1  # segments
     if 2.0 * window_m >= L:
@@ -195,5 +206,15 @@ def path_project(kind, geo, tab_s, tab_xy, s_guess, window_m, px, py):
     sd = math.sqrt(bdd)
     segx = (tab_xy[bj + 1, 0] - tab_xy[bj, 0]) / sd
     segy = (tab_xy[bj + 1, 1] - tab_xy[bj, 1]) / sd
-    s_loc = tab_s[bj] + bt * sd
-    return _lap_shift(L, closed, s_loc, s_guess), segx * bry - segy * brx
+    return tab_s[bj] + bt * sd, segx * bry - segy * brx
+
+
+@njit(cache=True)
+def waypoints_project_many(geo, tab_s, tab_xy, s_guess, window_m, xy, out_s, out_e):
+    """:func:`path_project` of the waypoint path for the points ``xy`` (K, 2) [m], point k
+    searched near ``s_guess[k]`` within ``window_m[k]``, into ``out_s``, ``out_e`` (K,)."""
+    L, closed = geo[0], geo[1] != 0.0
+    for k in range(xy.shape[0]):
+        s_loc, e_y = waypoints_project_local(geo, tab_s, tab_xy, s_guess[k], window_m[k], xy[k, 0], xy[k, 1])
+        out_s[k] = _lap_shift(L, closed, s_loc, s_guess[k])
+        out_e[k] = e_y

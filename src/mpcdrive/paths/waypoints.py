@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from . import compiled as _compiled
 from .base import ReferencePath
 
 
@@ -129,7 +130,7 @@ class WaypointPath(ReferencePath):
         s_tab = np.linspace(0.0, self.length_m, n)
         u_tab = np.interp(s_tab, s_dense, u_dense)
         self._s = s_tab
-        self._xy = curve(u_tab, 0)
+        self._xy = np.ascontiguousarray(curve(u_tab, 0))
         self._ds = s_tab[1] - s_tab[0]
         d1 = curve(u_tab, 1)
         if interpolation == "pchip":
@@ -151,6 +152,8 @@ class WaypointPath(ReferencePath):
             self._k = (dx * d2[:, 1] - dy * d2[:, 0]) / np.maximum(np.hypot(dx, dy) ** 3, 1e-12)
         # total heading change per lap (a multiple of 2*pi on a closed path)
         self._lap_turn = 2.0 * math.pi * round((self._h[-1] - self._h[0]) / (2.0 * math.pi)) if closed else 0.0
+        #: the scalars of the compiled description (paths.compiled.PathArrays.geo)
+        self._geo = np.array([self.length_m, float(closed), self._ds, self._lap_turn])
 
     # -- evaluation -----------------------------------------------------------------------
     def _split(self, s):
@@ -185,59 +188,35 @@ class WaypointPath(ReferencePath):
         return float(k) if np.ndim(k) == 0 else k
 
     # -- projection -----------------------------------------------------------------------
+    # one projection rule, compiled (paths.compiled), for this class and the compiled controller
     def _project_xy(self, xy, s_guess, window_m):
-        m = len(self._s) - 1  # number of segments
-        if s_guess is None or 2 * window_m >= self.length_m:
-            idx = np.arange(m)
-        else:
-            s_loc = float(self._split(s_guess)[0])
-            i0 = int(math.floor((s_loc - window_m) / self._ds))
-            i1 = int(math.ceil((s_loc + window_m) / self._ds))
-            idx = np.arange(i0, i1 + 1)
-            idx = np.mod(idx, m) if self.closed else np.unique(np.clip(idx, 0, m - 1))
-        p0 = self._xy[idx]
-        d = self._xy[idx + 1] - p0
-        q = xy - p0
-        dd = np.einsum("ij,ij->i", d, d)
-        t_raw = np.einsum("ij,ij->i", q, d) / dd
-        t = np.clip(t_raw, 0.0, 1.0)
-        if not self.closed:  # the end segments extend along their tangents
-            t = np.where((idx == 0) & (t_raw < 0.0), t_raw, t)
-            t = np.where((idx == m - 1) & (t_raw > 1.0), t_raw, t)
-        r = q - t[:, None] * d
-        dist2 = np.einsum("ij,ij->i", r, r)
-        j = int(np.argmin(dist2))
-        seg = d[j] / math.sqrt(dd[j])
-        s_loc = self._s[idx[j]] + t[j] * math.sqrt(dd[j])
-        e_y = float(seg[0] * r[j, 1] - seg[1] * r[j, 0])
-        return float(self._lap_shift(s_loc, s_guess)), e_y
+        if s_guess is None:  # every segment, no lap shift
+            s_loc, e_y = _compiled.waypoints_project_local(
+                self._geo, self._s, self._xy, 0.0, math.inf, float(xy[0]), float(xy[1])
+            )
+            return float(s_loc), float(e_y)
+        s, e_y = _compiled.path_project(
+            _compiled.KIND_WAYPOINTS,
+            self._geo,
+            self._s,
+            self._xy,
+            float(s_guess),
+            float(window_m),
+            float(xy[0]),
+            float(xy[1]),
+        )
+        return float(s), float(e_y)
 
     def _project_many_xy(self, xy, s_guess, window_m):
-        # _project_xy for every point at once: each point's window of segments, in the same order,
-        # padded to the widest with repeats of its last segment (argmin keeps the first of equals)
-        m = len(self._s) - 1
-        s_loc = self._split(s_guess)[0]
-        full = 2 * window_m >= self.length_m
-        i0 = np.where(full, 0, np.floor((s_loc - window_m) / self._ds)).astype(np.int64)
-        i1 = np.where(full, m - 1, np.ceil((s_loc + window_m) / self._ds)).astype(np.int64)
-        idx = i0[:, None] + np.arange(int(np.max(i1 - i0)) + 1)
-        idx = np.minimum(idx, i1[:, None])
-        idx = np.mod(idx, m) if self.closed else np.clip(idx, 0, m - 1)
-        p0 = self._xy[idx]
-        d = self._xy[idx + 1] - p0
-        q = xy[:, None, :] - p0
-        dd = np.einsum("kij,kij->ki", d, d)
-        t_raw = np.einsum("kij,kij->ki", q, d) / dd
-        t = np.clip(t_raw, 0.0, 1.0)
-        if not self.closed:  # the end segments extend along their tangents
-            t = np.where((idx == 0) & (t_raw < 0.0), t_raw, t)
-            t = np.where((idx == m - 1) & (t_raw > 1.0), t_raw, t)
-        r = q - t[..., None] * d
-        dist2 = np.einsum("kij,kij->ki", r, r)
-        k = np.arange(len(xy))
-        j = np.argmin(dist2, axis=1)
-        sd = np.sqrt(dd[k, j])
-        seg = d[k, j] / sd[:, None]
-        s_loc = self._s[idx[k, j]] + t[k, j] * sd
-        e_y = seg[:, 0] * r[k, j, 1] - seg[:, 1] * r[k, j, 0]
-        return self._lap_shift(s_loc, s_guess), e_y
+        s, e_y = np.empty(len(xy)), np.empty(len(xy))
+        _compiled.waypoints_project_many(
+            self._geo,
+            self._s,
+            self._xy,
+            np.ascontiguousarray(s_guess, dtype=float),
+            np.ascontiguousarray(window_m, dtype=float),
+            np.ascontiguousarray(xy, dtype=float),
+            s,
+            e_y,
+        )
+        return s, e_y
