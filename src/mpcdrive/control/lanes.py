@@ -231,32 +231,36 @@ def lane_of(road: Road, s_m: float, e_y_m: float) -> int:
     return min(pool, key=lambda i: abs(c[i] - e_y_m))
 
 
-def _extent(ob: Obstacle, dyaw: float) -> tuple[float, float]:
-    """Half extents (along, across) [m] of the obstacle's shape yawed ``dyaw`` from the path."""
+def _extent(ob: Obstacle, dyaw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Half extents (along, across) [m] of the obstacle's shape yawed ``dyaw`` (K,) [rad] from
+    the path, arrays (K,)."""
     if isinstance(ob.shape, Circle):
-        return ob.shape.radius_m, ob.shape.radius_m
+        r = np.full(len(dyaw), ob.shape.radius_m)
+        return r, r
     p = ob.shape.points
-    c, s = math.cos(dyaw), math.sin(dyaw)
-    return float(np.max(np.abs(c * p[:, 0] - s * p[:, 1]))), float(np.max(np.abs(s * p[:, 0] + c * p[:, 1])))
+    c, s = np.cos(dyaw)[:, None], np.sin(dyaw)[:, None]
+    return np.max(np.abs(c * p[:, 0] - s * p[:, 1]), axis=1), np.max(np.abs(s * p[:, 0] + c * p[:, 1]), axis=1)
 
 
 def _tracks(path, obstacles, t_s: float, taus: np.ndarray, s_m: float, range_m: float):
-    """Per obstacle within range: (s, e, half length, half width, present) over ``taus``."""
+    """Per obstacle within range (judged where it is first present): (s, e, half length, half
+    width, present) over ``taus``, NaN where it is absent."""
     out = []
+    t = t_s + taus
     for ob in obstacles:
-        t = t_s + taus
         present = np.asarray(ob.present(t), bool)
         if not present.any():
             continue
+        ks = np.flatnonzero(present)
+        poses = ob.poses_at(t[ks])
+        n = len(ks)
+        s_p, e_p = path.project_many(poses[:, :2], np.full(n, s_m), np.full(n, range_m))
+        if abs(s_p[0] - s_m) > range_m:
+            continue  # out of range now
         S, E, HL, HW = (np.full(len(taus), np.nan) for _ in range(4))
-        for j, k in enumerate(np.flatnonzero(present)):
-            x, y, yaw = ob.pose_at(float(t[k]))
-            S[k], E[k] = path.project(np.array([x, y]), s_m, range_m)
-            if j == 0 and abs(S[k] - s_m) > range_m:
-                break  # out of range now
-            HL[k], HW[k] = _extent(ob, yaw - float(path.heading(S[k])))
-        else:
-            out.append((S, E, HL, HW, present))
+        S[ks], E[ks] = s_p, e_p
+        HL[ks], HW[ks] = _extent(ob, poses[:, 2] - np.asarray(path.heading(s_p), float))
+        out.append((S, E, HL, HW, present))
     return out
 
 
