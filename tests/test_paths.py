@@ -623,3 +623,47 @@ def test_waypoint_projection_is_the_nearest_table_point(closed):
         guess.append(s + lap)
     s_m, e_m = path.project_many(xy, np.array(guess), np.full(len(xy), 3.0))
     np.testing.assert_array_equal(np.c_[s_m, e_m], np.array(got))
+
+
+@pytest.mark.parametrize(
+    "path",
+    [
+        StraightPath([1.0, -2.0], [9.0, 4.0]),
+        CirclePath(center=(1.0, 2.0), radius_m=3.0, ccw=False, start_angle_rad=0.4),
+        WaypointPath(np.array([[0.0, 0.0], [4.0, 1.0], [8.0, -1.0], [12.0, 2.0], [16.0, 0.0]])),
+        WaypointPath(np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]]), closed=True),
+    ],
+    ids=["straight", "circle", "waypoints", "closed-waypoints"],
+)
+def test_project_track_chains_each_point_to_the_one_before(path):
+    """project_track equals the generic per-point chain (each point searched near the previous
+    one's s within their distance plus the margin), over more than one lap on closed paths."""
+    L = path.length_m
+    s_true = np.linspace(0.2 * L, 2.6 * L if path.closed else 0.9 * L, 60)
+    rng = np.random.default_rng(5)
+    xy = path.position(s_true) + rng.normal(0.0, 0.05, (60, 2))
+    s, e = path.project_track(xy, float(s_true[0]), 0.5)
+    s2, e2 = ReferencePath._project_track_xy(path, xy, float(s_true[0]), 0.5, 2.0)
+    np.testing.assert_allclose(s, s2, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(e, e2, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(s, s_true, atol=0.2)  # on the right lap all along
+    assert path.project_track(np.zeros((0, 2)), 0.0, 1.0)[0].shape == (0,)
+    with pytest.raises(ValueError):
+        path.project_track(np.array([[np.nan, 0.0]]), 0.0, 1.0)
+    with pytest.raises(ValueError):
+        path.project_track(xy, 0.0, 1.0, step_margin_m=0.0)
+
+
+def test_project_track_keeps_a_track_on_its_branch_of_a_hairpin():
+    """A car driving out along the first leg of a hairpin whose legs are 3 m apart: one wide
+    window (project_many) puts its later positions on the nearer return leg once they are nearer
+    to it; the track stays on the leg it is driving."""
+    pts = np.array([[0.0, 0.0], [30.0, 0.0], [33.0, 1.5], [30.0, 3.0], [0.0, 3.0]])
+    path = WaypointPath(pts, interpolation="pchip")
+    xy = np.c_[np.linspace(2.0, 25.0, 24), np.full(24, 1.6)]  # just past the middle, on leg one's side
+    xy[0, 1] = 0.5  # starts clearly on leg one
+    s, e = path.project_track(xy, 2.0, 1.0)
+    np.testing.assert_allclose(s, xy[:, 0], atol=1e-6)  # leg one, moving on
+    np.testing.assert_allclose(e, xy[:, 1], atol=1e-6)
+    s_wide, _ = path.project_many(xy, np.full(24, 2.0), np.full(24, 1e3))
+    assert np.all(s_wide[1:] > 40.0)  # the wide search puts them on the return leg

@@ -253,8 +253,8 @@ def _tracks(path, obstacles, t_s: float, taus: np.ndarray, s_m: float, range_m: 
             continue
         ks = np.flatnonzero(present)
         poses = ob.poses_at(t[ks])
-        n = len(ks)
-        s_p, e_p = path.project_many(poses[:, :2], np.full(n, s_m), np.full(n, range_m))
+        # the first pose searched within range of the car, each later one near the one before
+        s_p, e_p = path.project_track(poses[:, :2], s_m, range_m)
         if abs(s_p[0] - s_m) > range_m:
             continue  # out of range now
         S, E, HL, HW = (np.full(len(taus), np.nan) for _ in range(4))

@@ -62,3 +62,11 @@ class CirclePath(ReferencePath):
         th = np.arctan2(d[:, 1], d[:, 0])
         s_local = (self.sign * (th - self.start_angle_rad) * self.radius_m) % self.length_m
         return self._lap_shift(s_local, s_guess), self.sign * (self.radius_m - rho)
+
+    def _project_track_xy(self, xy, s_guess, window_m, step_margin_m):
+        s_local, e_y = self._project_many_xy(xy, None, None)
+        if len(xy) == 0:
+            return s_local, e_y
+        # each point on the lap nearest the one before, the first on the guess's
+        s = np.unwrap(s_local, period=self.length_m)
+        return s + self.length_m * np.round((s_guess - s[0]) / self.length_m), e_y

@@ -218,3 +218,19 @@ def waypoints_project_many(geo, tab_s, tab_xy, s_guess, window_m, xy, out_s, out
         s_loc, e_y = waypoints_project_local(geo, tab_s, tab_xy, s_guess[k], window_m[k], xy[k, 0], xy[k, 1])
         out_s[k] = _lap_shift(L, closed, s_loc, s_guess[k])
         out_e[k] = e_y
+
+
+@njit(cache=True)
+def waypoints_project_track(geo, tab_s, tab_xy, s_guess, window_m, step_margin_m, xy, out_s, out_e):
+    """``ReferencePath.project_track`` of the waypoint path: point 0 searched near ``s_guess``
+    within ``window_m``, point k near point k-1's s within their distance plus
+    ``step_margin_m``, into ``out_s``, ``out_e`` (K,)."""
+    L, closed = geo[0], geo[1] != 0.0
+    guess, window = s_guess, window_m
+    for k in range(xy.shape[0]):
+        if k > 0:
+            window = math.hypot(xy[k, 0] - xy[k - 1, 0], xy[k, 1] - xy[k - 1, 1]) + step_margin_m
+        s_loc, e_y = waypoints_project_local(geo, tab_s, tab_xy, guess, window, xy[k, 0], xy[k, 1])
+        out_s[k] = _lap_shift(L, closed, s_loc, guess)
+        out_e[k] = e_y
+        guess = out_s[k]

@@ -49,3 +49,6 @@ class StraightPath(ReferencePath):
     def _project_many_xy(self, xy, s_guess, window_m):
         d = xy - self.start
         return d @ self.t, d @ self.n
+
+    def _project_track_xy(self, xy, s_guess, window_m, step_margin_m):
+        return self._project_many_xy(xy, None, None)  # one nearest point: no search to narrow

@@ -207,6 +207,13 @@ class WaypointPath(ReferencePath):
         )
         return float(s), float(e_y)
 
+    def _project_track_xy(self, xy, s_guess, window_m, step_margin_m):
+        s, e_y = np.empty(len(xy)), np.empty(len(xy))
+        _compiled.waypoints_project_track(
+            self._geo, self._s, self._xy, s_guess, window_m, step_margin_m, np.ascontiguousarray(xy), s, e_y
+        )
+        return s, e_y
+
     def _project_many_xy(self, xy, s_guess, window_m):
         s, e_y = np.empty(len(xy)), np.empty(len(xy))
         _compiled.waypoints_project_many(
