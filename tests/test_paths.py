@@ -550,15 +550,17 @@ def test_polyline():
         np.testing.assert_allclose(pl[-1], p.position(p.length_m), atol=1e-9)
 
 
-@pytest.mark.parametrize(
-    "path",
-    [
-        StraightPath([1.0, -2.0], [9.0, 4.0]),
-        CirclePath(center=(1.0, 2.0), radius_m=3.0, ccw=False, start_angle_rad=0.4),
-        WaypointPath(np.array([[0.0, 0.0], [4.0, 1.0], [8.0, -1.0], [12.0, 2.0], [16.0, 0.0]])),
-        WaypointPath(np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]]), closed=True),
-    ],
-)
+#: one path of each kind for the multi-point projections
+PROJECTION_PATHS = [
+    StraightPath([1.0, -2.0], [9.0, 4.0]),
+    CirclePath(center=(1.0, 2.0), radius_m=3.0, ccw=False, start_angle_rad=0.4),
+    WaypointPath(np.array([[0.0, 0.0], [4.0, 1.0], [8.0, -1.0], [12.0, 2.0], [16.0, 0.0]])),
+    WaypointPath(np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]]), closed=True),
+]
+PROJECTION_IDS = ["straight", "circle", "waypoints", "closed-waypoints"]
+
+
+@pytest.mark.parametrize("path", PROJECTION_PATHS, ids=PROJECTION_IDS)
 def test_project_many_is_project_point_by_point(path):
     rng = np.random.default_rng(3)
     s_guess = rng.uniform(-0.5 * path.length_m, 2.5 * path.length_m, 40)
@@ -625,16 +627,7 @@ def test_waypoint_projection_is_the_nearest_table_point(closed):
     np.testing.assert_array_equal(np.c_[s_m, e_m], np.array(got))
 
 
-@pytest.mark.parametrize(
-    "path",
-    [
-        StraightPath([1.0, -2.0], [9.0, 4.0]),
-        CirclePath(center=(1.0, 2.0), radius_m=3.0, ccw=False, start_angle_rad=0.4),
-        WaypointPath(np.array([[0.0, 0.0], [4.0, 1.0], [8.0, -1.0], [12.0, 2.0], [16.0, 0.0]])),
-        WaypointPath(np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]]), closed=True),
-    ],
-    ids=["straight", "circle", "waypoints", "closed-waypoints"],
-)
+@pytest.mark.parametrize("path", PROJECTION_PATHS, ids=PROJECTION_IDS)
 def test_project_track_chains_each_point_to_the_one_before(path):
     """project_track equals the generic per-point chain (each point searched near the previous
     one's s within their distance plus the margin), over more than one lap on closed paths."""
