@@ -66,12 +66,10 @@ class ReferencePath(ABC):
     def project_many(self, xy, s_guess, window_m) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`project` of the points ``xy`` (K, 2) [m], point k searched near its own
         ``s_guess[k]`` within ``window_m[k]`` [m] (arrays (K,)). Returns arrays ``(s_m, e_y_m)``."""
-        xy = np.asarray(xy, float)
+        xy = _checked_points(xy)
         K = len(xy)
         s_guess = np.broadcast_to(np.asarray(s_guess, float), (K,))
         window_m = np.broadcast_to(np.asarray(window_m, float), (K,))
-        if xy.shape != (K, 2) or not np.all(np.isfinite(xy)):
-            raise ValueError(f"positions must be (K, 2) finite numbers, got shape {xy.shape}")
         if not np.all(np.isfinite(s_guess)):
             raise ValueError("s_guess must be finite")
         if not (np.all(np.isfinite(window_m)) and np.all(window_m > 0)):
@@ -86,9 +84,7 @@ class ReferencePath(ABC):
         later one near the one before, within the distance between them plus ``step_margin_m``
         [m]. Cheaper than :meth:`project_many` with one wide window for all, and it keeps a track
         on its branch of a path that comes back near itself. Returns arrays ``(s_m, e_y_m)``."""
-        xy = np.asarray(xy, float)
-        if xy.ndim != 2 or xy.shape[1:] != (2,) or not np.all(np.isfinite(xy)):
-            raise ValueError(f"positions must be (K, 2) finite numbers, got shape {xy.shape}")
+        xy = _checked_points(xy)
         if not np.isfinite(s_guess):
             raise ValueError(f"s_guess must be finite, got {s_guess!r}")
         for name, v in (("window_m", window_m), ("step_margin_m", step_margin_m)):
@@ -137,3 +133,11 @@ class ReferencePath(ABC):
             return s_local
         L = self.length_m
         return s_local + L * np.round((s_guess - s_local) / L)
+
+
+def _checked_points(xy) -> np.ndarray:
+    """``xy`` as a (K, 2) float array of finite positions [m], else a ValueError."""
+    xy = np.asarray(xy, float)
+    if xy.ndim != 2 or xy.shape[1:] != (2,) or not np.all(np.isfinite(xy)):
+        raise ValueError(f"positions must be (K, 2) finite numbers, got shape {xy.shape}")
+    return xy
