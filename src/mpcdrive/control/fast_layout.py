@@ -41,8 +41,9 @@ from __future__ import annotations
     _I_ACCEL,
     _I_STEER,
     _I_FRICTION,
-) = range(26)
-_NIP = 26
+    _I_NSEL,
+) = range(27)
+_NIP = 27
 # passing sides (as ocp.avoidance), and "not chosen yet" in the compiled side memory
 _SIDE_LEFT, _SIDE_RIGHT, _SIDE_BLOCKED, _SIDE_NONE = 1, -1, 0, 2
 # obstacle cost formulations (ip[_I_OFORM])
@@ -51,8 +52,10 @@ _OBS_NONE, _OBS_POTENTIAL, _OBS_GAUSSIAN = 0, 1, 2
 # shifted by one step (real-time iteration), the current SQP iterate as it is
 MODE_NO_PLAN, MODE_SHIFTED_PLAN, MODE_ITERATE = 0, 1, 2
 # stages of a step: all of it; up to the linearization trajectory (obstacle rows are built from it
-# in Python by ``ocp.avoidance``); the rest, with those rows in the buffers
-STAGE_ALL, STAGE_LINEARIZE, STAGE_SOLVE = 0, 1, 2
+# in Python by ``ocp.avoidance``); the rest, with those rows in the buffers; of the rest, only
+# the stage costs and road rows (the stage QP complete in the buffers, for another solver); only
+# the condensed solve of the stage QP in the buffers
+STAGE_ALL, STAGE_LINEARIZE, STAGE_SOLVE, STAGE_COST, STAGE_CONDENSE = 0, 1, 2, 3, 4
 # columns of an obstacle row: pose (x, y) [m] at t = 0, velocity (vx, vy) [m/s], bounding radius
 # [m], offset (x, y) [m] of the point projected for the path heading, projection window extra [m]
 _OB_X, _OB_Y, _OB_VX, _OB_VY, _OB_RB, _OB_OX, _OB_OY, _OB_WIN = range(8)

@@ -35,8 +35,9 @@ from ..solvers.dense_qp import gi_solve
 # the layout of the compiled step's buffers
 from .fast_layout import _I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH, _I_LIN, _I_METHOD, _I_HORIZON, _I_FF, _I_LANE, _I_MCONST
 from .fast_layout import _I_RATE0, _I_MAXITER, _I_GAMMA, _I_NZ, _I_RICCATI, _I_MQ, _I_OFORM, _I_NOBS, _I_OMAX, _I_DETOUR
-from .fast_layout import _I_OROWS, _I_PROFILE, _I_ACCEL, _I_STEER, _I_FRICTION, _NIP
-from .fast_layout import _OBS_NONE, MODE_SHIFTED_PLAN, MODE_ITERATE, STAGE_LINEARIZE, STAGE_SOLVE
+from .fast_layout import _I_OROWS, _I_PROFILE, _I_ACCEL, _I_STEER, _I_FRICTION, _I_NSEL, _NIP
+from .fast_layout import _OBS_NONE, MODE_SHIFTED_PLAN, MODE_ITERATE, STAGE_LINEARIZE, STAGE_COST
+from .fast_layout import STAGE_ALL, STAGE_CONDENSE
 from .fast_layout import _W_FP, _W_MP, _W_BND, _W_GEO, _W_WQ, _W_RM, _W_RC, _W_TABS, _W_TABXY, _W_TABH, _W_TABK, _W_C
 from .fast_layout import _W_B, _W_REFS, _W_XREF, _W_UREF, _W_XBAR, _W_UBAR, _W_F, _W_A, _W_BD, _W_CD, _W_LANEN, _W_LANEB
 from .fast_layout import _W_XF, _W_P, _W_LAM, _W_VB, _W_S, _W_T2, _W_GAM, _W_H, _W_G, _W_Z, _W_L, _W_J, _W_RQ, _W_D
@@ -116,13 +117,59 @@ def follow_references_into(yaw, s_arr, v_arr, wbuf, ibuf):
 
 
 @njit(cache=True)
+def _stage_costs(
+    N, nx, ip, fp, lane, Wq, We, qt, xref, obs, oproj, osel, t_s, dt, Xbar, F, pkind, geo, tab_s, tab_xy, tab_h,
+    tab_k, lane_n, lane_b, lane_lo, lane_hi, lane_dlo, lane_dhi, rlin, Xlin,
+):  # fmt: skip
+    """The stage costs and road rows of a step, from its references and linearization: the state
+    cost of x_1..x_N as ``x' We_k x - 2 qt_k' x`` (the weights plus the obstacle cost's convex
+    model at the linearization trajectory), the road rows' normals and offsets where they are
+    linearized (``rlin``), and the first step's bounds made reachable. With these the stage QP
+    is complete in the buffers."""
+    for k in range(N):
+        for i in range(nx):
+            t = 0.0
+            for j in range(nx):
+                t += Wq[k, i, j] * xref[k + 1, j]
+            qt[k, i] = t
+    if ip[_I_OFORM] != _OBS_NONE:
+        for k in range(N):
+            for i in range(nx):
+                for j in range(nx):
+                    We[k, i, j] = Wq[k, i, j]
+        _obstacle_cost(
+            ip[_I_OFORM], ip[_I_NSEL], osel, obs, oproj, fp, t_s, dt, Xbar, F, N, pkind, geo, tab_s, tab_xy, tab_h,
+            tab_k, We, qt,
+        )  # fmt: skip
+    if lane == 1:
+        for k in range(N):
+            yaw = rlin[k + 1, 2]
+            lane_n[k, 0] = -math.sin(yaw)
+            lane_n[k, 1] = math.cos(yaw)
+            lane_b[k] = lane_n[k, 0] * rlin[k + 1, 0] + lane_n[k, 1] * rlin[k + 1, 1]
+        # the first step's bounds hold where the model puts the car with the first input of the
+        # linearization (F[0] = f(x, Ubar[0])): reachable, so never bought with slack
+        reach_first_step(
+            lane_lo,
+            lane_hi,
+            lane_dlo,
+            lane_dhi,
+            lane_n[0, 0] * F[0, 0] + lane_n[0, 1] * F[0, 1] - lane_b[0],
+            F[0, 2] - Xlin[1, 2],
+        )
+
+
+@njit(cache=True)
 def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibuf, out, info):
     """One control step (or one SQP iteration of it) at time ``t_s`` [s]; returns a status code
     (0 ok, 1 infeasible, 2 max_iter, 3 failed, 4 non-finite state). ``mode`` says what (Xw, Uw)
     is (``MODE_*``: no plan, the previous step's plan, the current SQP iterate). ``stage``
     (``STAGE_*``): the whole step; or only up to the linearization trajectory (written to the
     ``_W_XLIN`` buffer, horizon arc lengths in ``_W_SARR``), after which the caller writes the
-    obstacle rows, lane bounds and detour offsets of the step and runs the rest. Writes
+    obstacle rows, lane bounds and detour offsets of the step and runs the rest (``STAGE_SOLVE``);
+    or, of the rest, only the stage costs and road rows (``STAGE_COST``: the stage QP is then
+    complete in the buffers, for another solver) or only the condensed solve of the stage QP in
+    the buffers (``STAGE_CONDENSE``). A solve writes
     ``out = [u (nu), X ((N+1) nx), U (N nu), xref ((N+1) nx)]`` and
     ``info = [s, e_y, e_psi, iterations]``. ``sides`` : passing side per obstacle (``_SIDE_*``),
     read and updated by the detour. ``wbuf`` holds every float array (constants and work),
@@ -182,8 +229,8 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
         if not math.isfinite(x[i]):
             return _BAD_STATE
 
-    nsel = 0
-    if stage != STAGE_SOLVE:
+    if stage == STAGE_LINEARIZE or stage == STAGE_ALL:
+        ip[_I_NSEL] = 0
         # -- projection and horizon references -------------------------------------------------
         s0, e_y = path_project(pkind, geo, tab_s, tab_xy, s_guess, fp[_F_WINDOW], x[0], x[1])
         h0 = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s0)[2]
@@ -214,7 +261,7 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
                 uref[k, ip[_I_ACCEL]] += (v_arr[k + 1] - v_arr[k]) / dt
 
         if ip[_I_OFORM] != _OBS_NONE:
-            nsel = _select_obstacles(
+            ip[_I_NSEL] = _select_obstacles(
                 ip[_I_NOBS],
                 ip[_I_OMAX],
                 obs,
@@ -234,7 +281,7 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
             )
             if ip[_I_DETOUR] == 1:
                 _detour(
-                    nsel,
+                    ip[_I_NSEL],
                     osel,
                     obs,
                     oproj,
@@ -371,64 +418,18 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
             )
         if stage == STAGE_LINEARIZE:
             return 0
-    else:  # the detour of the rows, or a lateral reference, written between the stages
+    elif stage != STAGE_CONDENSE:  # the detour of the rows, or a lateral reference, written between the stages
         e_ref = _v1(wbuf, fo, _W_EREF)
         for k in range(N + 1):
             if e_ref[k] != 0.0:
                 _shift_references(N, s_arr, refs, e_ref, xref)
                 break
-    # -- state cost of x_1..x_N: x' We x - 2 qt' x, with the obstacle cost's convex model ------
-    for k in range(N):
-        for i in range(nx):
-            t = 0.0
-            for j in range(nx):
-                t += Wq[k, i, j] * xref[k + 1, j]
-            qt[k, i] = t
-    if ip[_I_OFORM] != _OBS_NONE:
-        for k in range(N):
-            for i in range(nx):
-                for j in range(nx):
-                    We[k, i, j] = Wq[k, i, j]
-        _obstacle_cost(
-            ip[_I_OFORM],
-            nsel,
-            osel,
-            obs,
-            oproj,
-            fp,
-            t_s,
-            dt,
-            Xbar,
-            F,
-            N,
-            pkind,
-            geo,
-            tab_s,
-            tab_xy,
-            tab_h,
-            tab_k,
-            We,
-            qt,
-        )
-    if lane == 1:
-        rlin = _v2(wbuf, fo, fs, _W_RLIN)  # where the road rows are linearized
-        for k in range(N):
-            yaw = rlin[k + 1, 2]
-            lane_n[k, 0] = -math.sin(yaw)
-            lane_n[k, 1] = math.cos(yaw)
-            lane_b[k] = lane_n[k, 0] * rlin[k + 1, 0] + lane_n[k, 1] * rlin[k + 1, 1]
-        # the first step's bounds hold where the model puts the car with the first input of the
-        # linearization (F[0] = f(x, Ubar[0])): reachable, so never bought with slack
-        Xl1 = _v2(wbuf, fo, fs, _W_XLIN)
-        reach_first_step(
-            lane_lo,
-            lane_hi,
-            lane_dlo,
-            lane_dhi,
-            lane_n[0, 0] * F[0, 0] + lane_n[0, 1] * F[0, 1] - lane_b[0],
-            F[0, 2] - Xl1[1, 2],
-        )
-
+    if stage != STAGE_CONDENSE:
+        _stage_costs(N, nx, ip, fp, lane, Wq, We, qt, xref, obs, oproj, osel, t_s, dt, Xbar, F, pkind, geo,
+                     tab_s, tab_xy, tab_h, tab_k, lane_n, lane_b, lane_lo, lane_hi, lane_dlo, lane_dhi,
+                     _v2(wbuf, fo, fs, _W_RLIN), _v2(wbuf, fo, fs, _W_XLIN))  # fmt: skip
+        if stage == STAGE_COST:
+            return 0
     # -- no Rc, no lane: try the unconstrained minimizer (Riccati, O(N)); if it satisfies every
     # bound it is the QP's solution ---------------------------------------------------------------
     if ip[_I_RICCATI] == 1:
