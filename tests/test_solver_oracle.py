@@ -3,9 +3,11 @@
 Random instances of one step of the tracking MPC with everything that makes the QP hard: input
 bounds and rate limits that bind, a car starting partly outside its road (the soft road rows'
 slacks are nonzero), and a static obstacle ahead in the lane whose ``hard`` half-plane rows
-bind. For each step the OSQP controller (:class:`LtvMpc`: the sparse QP of ``ocp.qp``) and the
-compiled controller (:class:`FastLtvMpc`: the condensed QP and its dual active-set solver) take
-the same measured state and warm start, and their first inputs, plans and objective values are
+bind. For each step the OSQP controller (:class:`LtvMpc`: the sparse QP of ``ocp.qp``), the
+compiled controller (:class:`FastLtvMpc`: the condensed QP and its dual active-set solver) and
+the compiled controller with ``solver="osqp"`` (its compiled assembly's stage QP, checked field
+by field against the OSQP controller's, solved by OSQP) take the same measured state and warm
+start, and their first inputs, plans and objective values are
 compared with the optimum of the same stage problem written here in cvxpy from
 :class:`MpcProblem`'s documented cost and constraints and solved with Clarabel.
 
@@ -18,6 +20,7 @@ documentation, not taken from either controller's matrices.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -56,6 +59,8 @@ class Case:
     ref: LtvMpc
     fast: FastLtvMpc
     x: np.ndarray
+    #: the compiled assembly's stage QP solved by OSQP
+    fast_osqp: FastLtvMpc
 
 
 #: where the obstacle is: ahead on the car's way back to the centre line, passed on the far side
@@ -148,7 +153,10 @@ def make_case(seed: int) -> Case:
     fp = Footprint()
     ref = LtvMpc(model, path, pb, cfg, OSQP, obstacles=obstacles, avoidance=av, footprint=fp)
     fast = FastLtvMpc(model, path, pb, cfg, FAST, obstacles=obstacles, avoidance=av, footprint=fp)
-    return Case(ref, fast, x)
+    fast_osqp = FastLtvMpc(
+        model, path, pb, cfg, FAST, obstacles=obstacles, avoidance=av, footprint=fp, solver="osqp", osqp_settings=OSQP
+    )
+    return Case(ref, fast, x, fast_osqp)
 
 
 # --------------------------------------------------------------------------------------------
@@ -433,6 +441,24 @@ def same_instance(fast: FastLtvMpc, d) -> None:
     np.testing.assert_allclose(w[fs._W_ROWB][used], d.rows_b[used], rtol=0, atol=1e-10)
 
 
+def same_step_data(dc, d, atol=1e-10, sides=True) -> None:
+    """The compiled assembly's stage QP ``dc`` is the OSQP controller's ``d``
+    (:class:`~mpcdrive.control.mpc.StepData`, every field; None where ``d`` has None; the
+    passing sides unless ``sides`` is False: the compiled cost formulations keep them only for
+    a detour, where they matter)."""
+    for f in dataclasses.fields(d):
+        a, b = getattr(dc, f.name), getattr(d, f.name)
+        if b is None:
+            assert a is None, f.name
+        elif f.name == "sides":
+            assert not sides or a == b
+        elif isinstance(b, tuple):
+            for ai, bi in zip(a, b, strict=True):
+                np.testing.assert_allclose(ai, bi, rtol=0, atol=atol, err_msg=f.name)
+        else:
+            np.testing.assert_allclose(a, b, rtol=0, atol=atol, err_msg=f.name)
+
+
 def compare(name, out, o: Oracle, s: Sensitivity, residuals, pb, d, u_prev) -> None:
     """A controller's output ``out`` for the step against the oracle's optimum: the first input,
     the planned inputs and states, and the plan's documented cost, to the tolerance its solver's
@@ -479,6 +505,10 @@ def check_step(case: Case, x, warm) -> tuple[Oracle, object]:
     of = fast.step(x, warm)
     same_instance(fast, d)
     compare("compiled", of, o, s, fast_residuals(fast), pb, d, warm.u_prev)
+    # the compiled assembly's stage QP (the same instance, field by field), solved by OSQP
+    same_step_data(case.fast_osqp.prepare(x, warm), d)
+    ofo = case.fast_osqp.step(x, warm)
+    compare("OSQP", ofo, o, s, osqp_residuals(s, OSQP, ofo.status), pb, d, warm.u_prev)
     return o, out
 
 

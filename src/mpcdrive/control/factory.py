@@ -35,24 +35,47 @@ def make_mpc(
 ):
     """An LTV-MPC controller solving ``problem`` with ``backend`` (default ``fast``).
 
-    ``osqp``: :class:`~mpcdrive.control.mpc.LtvMpc` (sparse QP updated in place, OSQP), the
-    reference. ``fast``: :class:`~mpcdrive.control.fast.FastLtvMpc` (the whole step compiled);
-    when it does not cover the problem (see ``fast_unsupported_reason``) the OSQP controller is
-    returned and a :class:`FastPathUnavailable` warning names the reason -- no constraint or
-    setting is ever dropped. The returned controller's ``backend_name`` tells which one runs.
-    Both keep the body inside ``problem.road`` by the same rule (:mod:`mpcdrive.scene.road`).
+    Where the compiled step covers the problem (see ``fast_unsupported_reason``) it assembles
+    each step's stage QP (:class:`~mpcdrive.control.fast.FastLtvMpc`) and ``backend`` names the
+    solver: ``fast`` the condensed dual active-set solve compiled into the step, ``osqp`` OSQP on
+    the sparse layout (the reference solver). When only the condensed solver's limits exclude
+    the problem (the dense size limit ``max_variables``, a cost not strictly convex in the
+    inputs, a slack without quadratic weight), ``fast`` solves with OSQP. Where the compiled step
+    does not cover the problem at all (a model, path, speed profile or obstacle it has no
+    compiled form of, prediction substeps), :class:`~mpcdrive.control.mpc.LtvMpc` assembles the
+    same stage QP in Python and OSQP solves it. A ``fast`` request that is not met says so in a
+    :class:`FastPathUnavailable` warning naming the reason -- no constraint or setting is ever
+    dropped. The returned controller's ``backend_name`` names the solver that runs and its
+    ``assembly`` (``compiled`` or ``python``) who builds the QP. Both keep the body inside
+    ``problem.road`` by the same rule (:mod:`mpcdrive.scene.road`).
     """
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
-    if backend == "fast":
-        from ..scene.footprint import Footprint
-        from .fast import FastLtvMpc, FastSettings, fast_unsupported_reason
+    from ..scene.footprint import Footprint
+    from .fast import FastLtvMpc, FastSettings, fast_unsupported_reason
 
-        settings = fast_settings if fast_settings is not None else FastSettings()
-        fp = footprint if footprint is not None else Footprint()
+    settings = fast_settings if fast_settings is not None else FastSettings()
+    fp = footprint if footprint is not None else Footprint()
+    compiled_assembly = (
+        fast_unsupported_reason(model, path, problem, config, settings, obstacles, avoidance, solver="osqp") is None
+    )
+    if backend == "fast":
         reason = fast_unsupported_reason(model, path, problem, config, settings, obstacles, avoidance)
         if reason is None:
             return FastLtvMpc(model, path, problem, config, settings, obstacles, avoidance, fp)
-        warnings.warn(f"fast backend not used: {reason}; using the OSQP controller", FastPathUnavailable, stacklevel=2)
+        if compiled_assembly:  # only the condensed solver's limits: the compiled step assembles, OSQP solves
+            warnings.warn(
+                f"condensed solver not used: {reason}; OSQP solves the compiled step's QP",
+                FastPathUnavailable,
+                stacklevel=2,
+            )
+        else:
+            warnings.warn(
+                f"fast backend not used: {reason}; using the OSQP controller", FastPathUnavailable, stacklevel=2
+            )
+    if compiled_assembly:
+        return FastLtvMpc(
+            model, path, problem, config, settings, obstacles, avoidance, fp, solver="osqp", osqp_settings=osqp_settings
+        )
     kw = {} if footprint is None else {"footprint": footprint}
     return LtvMpc(model, path, problem, config, osqp_settings, obstacles=obstacles, avoidance=avoidance, **kw)

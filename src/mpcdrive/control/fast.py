@@ -54,6 +54,7 @@ import math
 import time
 from dataclasses import replace
 from types import SimpleNamespace
+from typing import Literal
 
 import numpy as np
 
@@ -70,6 +71,7 @@ from ..paths.profile_compiled import profile_array
 from ..scene.footprint import Footprint
 from ..scene.road import Road
 from ..solvers.dense_qp import STATUS_WORDS, single_nonzero_columns
+from ..solvers.osqp_backend import OsqpSettings
 from ..types import ControlOutput, WarmStart
 from .base import TrackingWarmStart, checked_obstacles, checked_road, checked_speed_cap
 
@@ -78,7 +80,7 @@ from .fast_layout import _I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH, _I_LIN, _I_METHO
 from .fast_layout import _I_RATE0, _I_MAXITER, _I_GAMMA, _I_NZ, _I_RICCATI, _I_MQ, _I_OFORM, _I_NOBS, _I_OMAX, _I_DETOUR
 from .fast_layout import _I_OROWS, _I_PROFILE, _I_ACCEL, _I_STEER, _I_FRICTION, _NIP
 from .fast_layout import _SIDE_NONE, _OBS_POTENTIAL, _OBS_GAUSSIAN, MODE_NO_PLAN, MODE_SHIFTED_PLAN, MODE_ITERATE
-from .fast_layout import STAGE_ALL, STAGE_LINEARIZE, STAGE_SOLVE
+from .fast_layout import STAGE_ALL, STAGE_LINEARIZE, STAGE_SOLVE, STAGE_COST
 from .fast_layout import _W_FP, _W_MP, _W_BND, _W_GEO, _W_WQ, _W_RM, _W_RC, _W_TABS, _W_TABXY, _W_TABH, _W_TABK, _W_C
 from .fast_layout import _W_B, _W_REFS, _W_XREF, _W_UREF, _W_XBAR, _W_UBAR, _W_F, _W_A, _W_BD, _W_CD, _W_LANEN, _W_LANEB
 from .fast_layout import _W_XF, _W_P, _W_LAM, _W_VB, _W_S, _W_T2, _W_GAM, _W_H, _W_G, _W_Z, _W_L, _W_J, _W_RQ, _W_D
@@ -93,10 +95,14 @@ from .fast_setup import FastSettings, fast_unsupported_reason, obstacles_unsuppo
 from .fast_setup import _constant_rows, _obstacle_table
 from .fast_step import _BAD_STATE, _control_step, follow_references_into  # the compiled step
 from .fallback import FALLBACK_HOLD, FALLBACK_RELAX, FallbackConfig, FallbackLadder, relaxed_problem
-from .mpc import MpcConfig
+from .mpc import MpcConfig, StageQpSolve, StepData
 
 
 _announced = [False]
+
+#: the solvers of the compiled controller's stage QP: the condensed dual active-set solve in the
+#: compiled step, or OSQP on the sparse layout of ``ocp.qp``
+SOLVERS: tuple[str, ...] = ("condensed", "osqp")
 
 
 def _announce_compile() -> None:
@@ -113,7 +119,7 @@ def _announce_compile() -> None:
         )
 
 
-class FastLtvMpc(TrackingWarmStart):
+class FastLtvMpc(StageQpSolve, TrackingWarmStart):
     """Tracking LTV-MPC of ``model`` along ``path``, every step compiled (see the module text).
 
     Same interface and results as :class:`~mpcdrive.control.mpc.LtvMpc`; statuses ``ok``,
@@ -130,7 +136,10 @@ class FastLtvMpc(TrackingWarmStart):
     """
 
     name = "ltv-mpc-fast"
+    #: the solver that runs: ``fast`` (condensed) or ``osqp``
     backend_name = "fast"
+    #: who builds each step's stage QP
+    assembly = "compiled"
 
     def __init__(
         self,
@@ -142,10 +151,16 @@ class FastLtvMpc(TrackingWarmStart):
         obstacles=(),
         avoidance: AvoidanceConfig | None = None,
         footprint: Footprint = Footprint(),
+        *,
+        solver: Literal["condensed", "osqp"] = "condensed",
+        osqp_settings: OsqpSettings = OsqpSettings(),
     ):
-        reason = fast_unsupported_reason(model, path, problem, config, settings, obstacles, avoidance)
+        if solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+        reason = fast_unsupported_reason(model, path, problem, config, settings, obstacles, avoidance, solver=solver)
         if reason is not None:
             raise ValueError(f"the fast backend cannot solve this problem: {reason}")
+        self.solver = solver
         _announce_compile()
         self.model, self.path, self.problem, self.config, self.settings = model, path, problem, config, settings
         obstacles = tuple(obstacles)
@@ -356,6 +371,15 @@ class FastLtvMpc(TrackingWarmStart):
         self._o_U = nu + (N + 1) * nx
         self._o_R = self._o_U + N * nu
         self._out_size = self._o_R + (N + 1) * nx
+        self._du_step = problem.du_max_per_s * problem.dt_s  # (nu,) largest input change per step
+        if solver == "osqp":
+            # the stage QP of the compiled assembly (prepare), solved by OSQP on the sparse layout
+            from ..ocp.qp import LtvQp  # scipy.sparse: imported when an OSQP controller is built
+            from ..solvers.osqp_backend import OsqpBackend
+
+            self.qp = LtvQp(replace(problem, obstacle_rows=n_orow, position_cost=av is not None and av.uses_cost))
+            self.backend = OsqpBackend(self.qp, osqp_settings)
+            self.backend_name = "osqp"
         self._warm_up()
         # the fallback ladder of config.fallback; its relax rung solves the step again on a second
         # compiled controller without rate limits and state bounds, with a cheaper lane slack
@@ -370,6 +394,8 @@ class FastLtvMpc(TrackingWarmStart):
                 obstacles,
                 avoidance,
                 footprint,
+                solver=solver,
+                osqp_settings=osqp_settings,
             )
         self.fallback = FallbackLadder(
             self,
@@ -387,21 +413,23 @@ class FastLtvMpc(TrackingWarmStart):
         x[2] = float(self.path.heading(0.0))
         if self.nx >= 4:  # the speed state: v (kinematic bicycle) or vx (dynamic bicycle)
             x[3] = self.v_ref_mps
-        _control_step(
-            x,
-            0.0,
-            0.0,
-            np.zeros(self.nu),
-            self._noX,
-            self._noU,
-            MODE_NO_PLAN,
-            STAGE_ALL,
-            self._sides.copy(),
-            self._wbuf,
-            self._ibuf,
-            np.empty(self._out_size),
-            self._info,
-        )
+        out = np.empty(self._out_size)
+        for stage in (STAGE_ALL,) if self.solver == "condensed" else (STAGE_LINEARIZE, STAGE_COST):
+            _control_step(
+                x,
+                0.0,
+                0.0,
+                np.zeros(self.nu),
+                self._noX,
+                self._noU,
+                MODE_NO_PLAN,
+                stage,
+                self._sides.copy(),
+                self._wbuf,
+                self._ibuf,
+                out,
+                self._info,
+            )
 
     # -- obstacles ----------------------------------------------------------------------------
     @property
@@ -484,11 +512,12 @@ class FastLtvMpc(TrackingWarmStart):
             return None
         return out.u, replace(out.warm, s_m=d.s_m), out.X_pred
 
-    def _run(self, x, s_guess: float, t_s: float, u_prev, X, U, mode: int, warm_sides: tuple, out):
+    def _run(self, x, s_guess: float, t_s: float, u_prev, X, U, mode: int, warm_sides: tuple, out, last=STAGE_SOLVE):
         """One compiled step (or SQP iteration); with constraint rows, in two stages around
-        ``ocp.avoidance``. Returns the status code and the passing sides for the next step."""
+        ``ocp.avoidance``. Returns the status code and the passing sides for the next step.
+        ``last=STAGE_COST``: only the stage QP, into the buffers (for :meth:`prepare`)."""
         sides = self._load_sides(warm_sides)
-        if self._rows is None and self._lateral is None and self._speed_cap is None:
+        if last == STAGE_SOLVE and self._rows is None and self._lateral is None and self._speed_cap is None:
             code = _control_step(
                 x, s_guess, t_s, u_prev, X, U, mode, STAGE_ALL, sides, self._wbuf, self._ibuf, out, self._info
             )
@@ -524,14 +553,84 @@ class FastLtvMpc(TrackingWarmStart):
                 follow_references_into(float(x[2]), follow[0], follow[1], self._wbuf, self._ibuf)
         if self._lateral is not None:
             w[_W_EREF] += np.asarray(self._lateral(w[_W_SARR]), float)
-        code = _control_step(
-            x, s_guess, t_s, u_prev, X, U, mode, STAGE_SOLVE, sides, self._wbuf, self._ibuf, out, self._info
-        )
+        code = _control_step(x, s_guess, t_s, u_prev, X, U, mode, last, sides, self._wbuf, self._ibuf, out, self._info)
         return code, new_sides
+
+    def prepare(self, x, warm: WarmStart, around=None, s_m: float | None = None) -> StepData:
+        """The stage QP of one step, as :meth:`LtvMpc.prepare <mpcdrive.control.mpc.LtvMpc.prepare>`
+        gives it (:class:`~mpcdrive.control.mpc.StepData`) but assembled by the compiled step:
+        projection, references, linearization, road rows, obstacle rows or cost terms, per-stage
+        input bounds. ``around=(X, U)`` re-linearizes at an SQP iterate. The arrays are views of
+        the controller's buffers, valid until its next step; a step whose model or references are
+        not finite gives NaN dynamics (any solver then fails it)."""
+        x = self._check_state(x)
+        u_prev = np.asarray(warm.u_prev, dtype=float)
+        if u_prev.shape != (self.nu,) or not np.all(np.isfinite(u_prev)):
+            raise ValueError(
+                f"warm.u_prev must be {self.nu} finite numbers {self.model.input_names}, got {warm.u_prev!r}"
+            )
+        if not math.isfinite(warm.s_m):
+            raise ValueError(f"warm.s_m must be finite, got {warm.s_m!r}")
+        N, nx, nu = self.N, self.nx, self.nu
+        if around is not None:
+            X, U, mode = around[0], around[1], MODE_ITERATE
+            s_guess = float(warm.s_m if s_m is None else s_m)
+        elif warm.X is not None and warm.U is not None:
+            X, U, mode, s_guess = warm.X, warm.U, MODE_SHIFTED_PLAN, float(warm.s_m)
+        else:
+            X, U, mode, s_guess = self._noX, self._noU, MODE_NO_PLAN, float(warm.s_m)
+        X = np.ascontiguousarray(X, dtype=float)
+        U = np.ascontiguousarray(U, dtype=float)
+        if X.shape != (N + 1, nx) or U.shape != (N, nu):
+            raise ValueError(f"warm plan must be X ({N + 1}, {nx}) and U ({N}, {nu}), got {X.shape} and {U.shape}")
+        code, sides = self._run(
+            x, s_guess, float(warm.t_s), u_prev, X, U, mode, warm.sides, np.empty(self._out_size), last=STAGE_COST
+        )
+        w, info = self._w, self._info
+        if code != 0:  # a non-finite model or references: no usable stage QP
+            w[_W_CD][...] = math.nan
+        Wq, xref = w[_W_WQ], w[_W_XREF]
+        H = g = None
+        if self.avoidance is not None and self._rows is None:  # the cost's model, added to the state weights
+            H = 2.0 * (w[_W_WE][:, :2, :2] - Wq[:, :2, :2])
+            g = -2.0 * (w[_W_QT][:, :2] - np.einsum("kij,kj->ki", Wq, xref[1:])[:, :2])
+        road = self._road is not None
+        rows = self._rows is not None
+        friction = self._ibuf[_I_FRICTION] == 1
+        Xlin = w[_W_XLIN]
+        return StepData(
+            x,
+            float(info[0]),
+            float(info[1]),
+            float(info[2]),
+            xref,
+            w[_W_UREF],
+            w[_W_XBAR],
+            w[_W_UBAR],
+            w[_W_F],
+            w[_W_A],
+            w[_W_BD],
+            w[_W_CD],
+            w[_W_LANEN],
+            w[_W_LANEB],
+            Xlin,
+            w[_W_LLO] if road else None,
+            w[_W_LHI] if road else None,
+            w[_W_ROWA] if rows else None,
+            w[_W_ROWB] if rows else None,
+            H,
+            g,
+            sides,
+            (w[_W_LDLO], w[_W_LDHI], Xlin[1:, 2]) if road else None,
+            w[_W_ULO] if friction else None,
+            w[_W_UHI] if friction else None,
+        )
 
     # -- one control step -----------------------------------------------------------------------
     def step(self, x, warm: WarmStart) -> ControlOutput:
         """Compute the command for measured state ``x`` (nx,) given the previous step's ``warm``."""
+        if self.solver == "osqp":  # prepare, then OSQP on the stage QP (StageQpSolve)
+            return StageQpSolve.step(self, x, warm)
         t0 = time.perf_counter()
         if type(x) is not np.ndarray or x.dtype != np.float64 or not x.flags.c_contiguous:
             x = np.ascontiguousarray(x, dtype=float)

@@ -99,8 +99,13 @@ def fast_unsupported_reason(
     settings: FastSettings = FastSettings(),
     obstacles=(),
     avoidance: AvoidanceConfig | None = None,
+    *,
+    solver: str = "condensed",
 ) -> str | None:
-    """Why the compiled step cannot solve this problem exactly as ``LtvMpc`` would, or None."""
+    """Why the compiled step cannot solve this problem exactly as ``LtvMpc`` would, or None.
+    ``solver="osqp"`` (the compiled assembly, OSQP solving its stage QP): only the assembly's
+    limits; the condensed solver's (a strictly convex cost in the inputs, quadratic slack
+    weights, ``settings.max_variables``) do not apply."""
     prof = config.speed_profile
     if prof is not None:
         if profile_array(prof) is None:
@@ -122,16 +127,18 @@ def fast_unsupported_reason(
         limited = [i for i, n in enumerate(model.input_names) if n in ("steer", "accel")]
         if not np.all(np.isfinite(problem.u_min[limited]) & np.isfinite(problem.u_max[limited])):
             return "the friction circle needs finite steer and accel bounds on the compiled path"
-    if np.linalg.eigvalsh(problem.R + problem.Rc).min() <= 1e-12 * max(1.0, float(np.abs(problem.R).max())):
-        return "R + Rc is not positive definite (the condensed QP needs a strictly convex cost in the inputs)"
     lane = problem.lane
-    if lane and problem.lane_slack_weight <= 0:
-        return "lane_slack_weight is 0 (the slack needs a quadratic weight)"
     rows = bool(obstacles) and (avoidance or AvoidanceConfig()).uses_rows
-    if rows and problem.obstacle_slack_weight <= 0:
-        return "obstacle_slack_weight is 0 (the slack needs a quadratic weight)"
     if rows and not lane and (avoidance or AvoidanceConfig()).formulation == "corridor":
         return "the corridor formulation needs a road (MpcProblem.road)"
+    if solver == "osqp":
+        return None
+    if np.linalg.eigvalsh(problem.R + problem.Rc).min() <= 1e-12 * max(1.0, float(np.abs(problem.R).max())):
+        return "R + Rc is not positive definite (the condensed QP needs a strictly convex cost in the inputs)"
+    if lane and problem.lane_slack_weight <= 0:
+        return "lane_slack_weight is 0 (the slack needs a quadratic weight)"
+    if rows and problem.obstacle_slack_weight <= 0:
+        return "obstacle_slack_weight is 0 (the slack needs a quadratic weight)"
     nz = problem.N * problem.nu + (problem.N if lane else 0) + (problem.N if rows else 0)
     if nz > settings.max_variables:
         return f"the condensed QP has {nz} variables, more than max_variables={settings.max_variables}"

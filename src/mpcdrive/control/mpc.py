@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, replace
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -34,6 +34,9 @@ from ..solvers.projected_gradient import ProjectedGradientBackend, ProjectedGrad
 from ..types import ControlOutput, SolveResult, WarmStart
 from ..units import TWO_PI, wrap_angle
 from .fallback import FallbackConfig, FallbackLadder
+
+if TYPE_CHECKING:
+    from ..ocp.qp import LtvQp
 from .base import TrackingWarmStart, checked_obstacles, checked_road, checked_speed_cap
 
 
@@ -159,7 +162,83 @@ class MpcConfig:
             raise ValueError(f"fallback must be a FallbackConfig, got {type(self.fallback).__name__}")
 
 
-class LtvMpc(TrackingWarmStart):
+class StageQpSolve:
+    """The step of a controller that assembles each step's stage QP (its ``prepare``, giving
+    :class:`StepData`) and hands it to a sparse solver backend (``qp``, an
+    :class:`~mpcdrive.ocp.qp.LtvQp`, and ``backend``, OSQP or projected gradient), with the SQP
+    iterations of ``config`` and the fallback ladder after a failed solve. The solver only solves:
+    it never rebuilds the problem and knows no model. Needs ``prepare``, ``qp``, ``backend``,
+    ``config``, ``problem``, ``dt_s``, ``fallback`` and ``_du_step`` on the instance."""
+
+    config: MpcConfig
+    problem: MpcProblem
+    dt_s: float
+    qp: LtvQp
+    backend: OsqpBackend | ProjectedGradientBackend
+    fallback: FallbackLadder
+    _du_step: np.ndarray
+
+    def prepare(self, x, warm: WarmStart, around=None, s_m: float | None = None) -> StepData:
+        raise NotImplementedError  # pragma: no cover
+
+    def step(self, x, warm: WarmStart) -> ControlOutput:
+        """Compute the command for measured state ``x`` (nx,) given the previous step's ``warm``."""
+        t0 = time.perf_counter()
+        d = self.prepare(x, warm)
+        res = self._solve(d, warm)
+        it = 1
+        t_qp = time.perf_counter() - t0  # the last iteration's time: none that would end past the cap
+        while (
+            it < self.config.sqp_max_iterations
+            and res.ok
+            and time.perf_counter() - t0 + t_qp < self.config.sqp_max_time_s
+        ):
+            dU = float(np.max(np.abs(res.U - d.Ubar)))
+            if dU < self.config.sqp_tol:
+                break
+            t1 = time.perf_counter()
+            d = self.prepare(x, warm, around=(res.X, res.U), s_m=d.s_m)
+            res = self._solve(d, warm)
+            it += 1
+            t_qp = time.perf_counter() - t1
+        return self.finish(d, warm, res, t0, it)
+
+    def _solve(self, d: StepData, warm: WarmStart) -> SolveResult:
+        self.qp.load_step(d, warm.u_prev)
+        # primal warm start: the linearization trajectory
+        return self.backend.solve(d.Xlin, d.Ubar)
+
+    def finish(self, d: StepData, warm: WarmStart, res: SolveResult, t0: float, iterations: int = 1) -> ControlOutput:
+        """Check the solve, pick the command (or fall back) and package the step's output."""
+        pb = self.problem
+        t_next = warm.t_s + self.dt_s
+        if res.ok and np.all(np.isfinite(res.U[0])):
+            # exactly within the bounds, whatever the solver's tolerance
+            u_prev = warm.u_prev
+            lo, hi = (pb.u_min, pb.u_max) if d.u_lo is None or d.u_hi is None else (d.u_lo[0], d.u_hi[0])
+            u = np.clip(np.clip(res.U[0], u_prev - self._du_step, u_prev + self._du_step), lo, hi)
+            fallback = ""
+            new_warm = WarmStart(s_m=d.s_m, u_prev=u, X=res.X, U=res.U, t_s=t_next, sides=d.sides)
+            X_pred = res.X
+        else:
+            u, fallback, new_warm, X_pred = self.fallback.run(d, warm)
+            new_warm = replace(new_warm, t_s=t_next, sides=d.sides)
+        return ControlOutput(
+            u=u,
+            status=res.status,
+            fallback=fallback,
+            solve_time_s=time.perf_counter() - t0,
+            s_m=d.s_m,
+            e_y_m=d.e_y_m,
+            e_psi_rad=d.e_psi_rad,
+            X_pred=X_pred,
+            refs=d.xref.copy(),
+            warm=new_warm,
+            sqp_iterations=iterations,
+        )
+
+
+class LtvMpc(StageQpSolve, TrackingWarmStart):
     """Tracking LTV-MPC of ``model`` along ``path`` solving ``problem`` with OSQP (or, given
     :class:`~mpcdrive.solvers.ProjectedGradientSettings`, the paper's projected gradient descent).
 
@@ -172,6 +251,8 @@ class LtvMpc(TrackingWarmStart):
 
     name = "ltv-mpc"
     backend_name = "osqp"
+    #: who builds each step's stage QP
+    assembly = "python"
 
     def __init__(
         self,
@@ -298,34 +379,7 @@ class LtvMpc(TrackingWarmStart):
             raise ValueError(f"warm.s_m must be finite, got {warm.s_m!r}")
         return u_prev
 
-    # -- one control step -----------------------------------------------------------------------
-    def step(self, x, warm: WarmStart) -> ControlOutput:
-        """Compute the command for measured state ``x`` (nx,) given the previous step's ``warm``."""
-        t0 = time.perf_counter()
-        d = self.prepare(x, warm)
-        res = self._solve(d, warm)
-        it = 1
-        t_qp = time.perf_counter() - t0  # the last iteration's time: none that would end past the cap
-        while (
-            it < self.config.sqp_max_iterations
-            and res.ok
-            and time.perf_counter() - t0 + t_qp < self.config.sqp_max_time_s
-        ):
-            dU = float(np.max(np.abs(res.U - d.Ubar)))
-            if dU < self.config.sqp_tol:
-                break
-            t1 = time.perf_counter()
-            d = self.prepare(x, warm, around=(res.X, res.U), s_m=d.s_m)
-            res = self._solve(d, warm)
-            it += 1
-            t_qp = time.perf_counter() - t1
-        return self.finish(d, warm, res, t0, it)
-
-    def _solve(self, d: StepData, warm: WarmStart) -> SolveResult:
-        self.qp.load_step(d, warm.u_prev)
-        # primal warm start: the linearization trajectory
-        return self.backend.solve(d.Xlin, d.Ubar)
-
+    # -- one control step: step, _solve and finish from StageQpSolve ---------------------------
     def prepare(self, x, warm: WarmStart, around=None, s_m: float | None = None) -> StepData:
         """Projection, horizon references, linearization and obstacle terms for measured state
         ``x``: the part of a step every solver of this problem shares. ``around=(X, U)``
@@ -473,32 +527,3 @@ class LtvMpc(TrackingWarmStart):
             s_arr = horizon_arc_lengths(s0, N, cfg.horizon, dt, 0.5 * (v[1:] + v[:-1]), cfg.horizon_step_m)
             v = np.asarray(prof.speed(s_arr), float)
         return s_arr, v
-
-    def finish(self, d: StepData, warm: WarmStart, res: SolveResult, t0: float, iterations: int = 1) -> ControlOutput:
-        """Check the solve, pick the command (or fall back) and package the step's output."""
-        pb = self.problem
-        t_next = warm.t_s + self.dt_s
-        if res.ok and np.all(np.isfinite(res.U[0])):
-            # exactly within the bounds, whatever the solver's tolerance
-            u_prev = warm.u_prev
-            lo, hi = (pb.u_min, pb.u_max) if d.u_lo is None or d.u_hi is None else (d.u_lo[0], d.u_hi[0])
-            u = np.clip(np.clip(res.U[0], u_prev - self._du_step, u_prev + self._du_step), lo, hi)
-            fallback = ""
-            new_warm = WarmStart(s_m=d.s_m, u_prev=u, X=res.X, U=res.U, t_s=t_next, sides=d.sides)
-            X_pred = res.X
-        else:
-            u, fallback, new_warm, X_pred = self.fallback.run(d, warm)
-            new_warm = replace(new_warm, t_s=t_next, sides=d.sides)
-        return ControlOutput(
-            u=u,
-            status=res.status,
-            fallback=fallback,
-            solve_time_s=time.perf_counter() - t0,
-            s_m=d.s_m,
-            e_y_m=d.e_y_m,
-            e_psi_rad=d.e_psi_rad,
-            X_pred=X_pred,
-            refs=d.xref.copy(),
-            warm=new_warm,
-            sqp_iterations=iterations,
-        )

@@ -1,0 +1,158 @@
+"""One stage QP, two solvers: the compiled assembly's stage QP (``FastLtvMpc.prepare``) is the
+OSQP controller's (``LtvMpc.prepare``) field by field, and OSQP solving it (``solver="osqp"``)
+drives the closed loop the OSQP controller drives.
+
+The cases cover what the oracle test (``test_solver_oracle``, hard rows) does not: the cost
+formulations (their convex model enters the stage QP as the position cost ``H``, ``g``), the
+corridor, the friction circle's per-stage input bounds, the paper's frozen linearization, a
+lateral reference with a speed cap (the step in two stages), and SQP iterates.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from mpcdrive.control import FastPathUnavailable, LtvMpc, MpcConfig, make_mpc
+from mpcdrive.control.fast import FastLtvMpc
+from mpcdrive.models import KinematicBicycle3, KinematicBicycle4
+from mpcdrive.models.discretize import discrete_step
+from mpcdrive.ocp import MpcProblem
+from mpcdrive.ocp.avoidance import AvoidanceConfig
+from mpcdrive.paths import CirclePath, StraightPath
+from mpcdrive.scene import Circle, Obstacle
+from mpcdrive.scene.road import Road
+from mpcdrive.solvers.osqp_backend import OsqpSettings
+
+from test_solver_oracle import same_step_data
+
+#: both OSQP solves at 1e-9 (the tolerances below follow from it)
+OSQP = OsqpSettings(eps_abs=1e-9, eps_rel=1e-9, max_iter=100000)
+#: the two assemblies compute the same numbers in a different order: they agree to rounding
+#: (measured: 1e-13 on these cases); 1e-9 is the room for rounding through the linearization
+ASSEMBLY_TOL = 1e-9
+#: OSQP on two stage QPs equal to rounding, with the same settings and warm starts: the plans
+#: differ by rounding carried through its iterations and through the closed loop (measured:
+#: below 1e-12 m over 40 steps), far below its stopping rule's 1e-9 scaled by the problem's
+#: sensitivity; a wrong row, weight or bound moves a plan by centimetres
+LOOP_TOL = 1e-6
+
+CASES = ["plain", "potential", "gaussian", "hard", "corridor", "friction", "paper", "lateral-cap", "sqp"]
+
+
+def _controllers(case: str, curved: bool):
+    model = KinematicBicycle4()
+    path = CirclePath((0.0, 0.0), 20.0) if curved else StraightPath([0.0, 0.0], [100.0, 0.0])
+    kw = dict(
+        Q=np.diag([1.0, 5.0, 1.0, 1.0]),
+        R=np.diag([1.0, 0.1]),
+        Rc=np.diag([0.1, 0.01]),
+        u_min=[-0.5, -3.0],
+        u_max=[0.5, 2.0],
+        du_max_per_s=[1.0, 5.0],
+        road=Road.constant(4.0, 0.05),
+    )
+    if case == "friction":
+        kw["friction_accel_mps2"] = 4.0
+    pb = MpcProblem(4, 2, 20, 0.1, **kw)
+    cfg = MpcConfig(
+        v_ref_mps=5.0,
+        linearization="paper" if case == "paper" else "trajectory",
+        sqp_max_iterations=3 if case == "sqp" else 1,
+        sqp_tol=1e-9,
+    )
+    obstacles, av = (), None
+    form = {
+        "potential": "potential",
+        "gaussian": "gaussian",
+        "hard": "hard",
+        "corridor": "corridor",
+        "sqp": "potential",
+    }
+    if case in form:
+        s_ob = 6.0
+        p, h = path.position(s_ob), float(path.heading(s_ob))
+        obstacles = (Obstacle(Circle(0.5), (p[0] - 0.3 * math.sin(h), p[1] + 0.3 * math.cos(h), 0.0)),)
+        av = AvoidanceConfig(form[case], weight=50.0)
+    ref = LtvMpc(model, path, pb, cfg, OSQP, obstacles=obstacles, avoidance=av)
+    fo = FastLtvMpc(model, path, pb, cfg, obstacles=obstacles, avoidance=av, solver="osqp", osqp_settings=OSQP)
+    if case == "lateral-cap":
+        for c in (ref, fo):
+            c.set_lateral_reference(lambda s: 0.4 * np.sin(0.2 * np.asarray(s)))
+            c.set_speed_cap(3.0, 2.0)
+    x0 = np.array([*path.position(0.0), float(path.heading(0.0)), 5.0])
+    return model, ref, fo, x0
+
+
+@pytest.mark.parametrize("curved", [False, True], ids=["straight", "circle"])
+@pytest.mark.parametrize("case", CASES)
+def test_compiled_assembly_is_the_osqp_controllers_stage_qp_and_drives_the_same_loop(case, curved):
+    model, ref, fo, x = _controllers(case, curved)
+    warm = ref.initial_warm(x)
+    wo = fo.initial_warm(x)
+    cost_terms = False
+    for k in range(40):
+        d = ref.prepare(x, warm)
+        rows = case in ("hard", "corridor")
+        same_step_data(fo.prepare(x, warm), d, atol=ASSEMBLY_TOL, sides=rows)
+        cost_terms |= d.H is not None and bool(np.abs(d.H).max() > 1e-6)
+        if case == "sqp" and k == 3:  # an SQP iterate: re-linearized at a plan of its own
+            res = ref._solve(d, warm)
+            around = (res.X.copy(), res.U.copy())
+            d2 = ref.prepare(x, warm, around=around, s_m=d.s_m)
+            same_step_data(fo.prepare(x, warm, around=around, s_m=d.s_m), d2, atol=ASSEMBLY_TOL, sides=False)
+        a = ref.step(x, warm)
+        b = fo.step(x, wo)
+        assert (a.status, a.fallback) == (b.status, b.fallback) == ("ok", "")
+        np.testing.assert_allclose(b.X_pred, a.X_pred, rtol=0, atol=LOOP_TOL)
+        np.testing.assert_allclose(b.u, a.u, rtol=0, atol=LOOP_TOL)
+        assert a.sqp_iterations == b.sqp_iterations
+        x = discrete_step(model, x, a.u, 0.1, "rk4")
+        warm, wo = a.warm, b.warm
+    if case in ("potential", "gaussian", "sqp"):
+        assert cost_terms, "the obstacle cost never entered the stage QP: the case tests nothing"
+
+
+def test_condensed_solver_keeps_the_obstacle_cost_when_the_step_runs_in_two_stages():
+    """A speed cap (or a lateral reference) runs the compiled step in two stages; the obstacles
+    the first selects for the cost formulations must reach the second (they once did not: the
+    compiled controller drove 0.63 m from the OSQP controller's plan, as if without obstacles)."""
+    model, ref, _, x = _controllers("potential", False)
+    x[0] = 3.0  # 3 m behind the obstacle, within its influence
+    fast = FastLtvMpc(model, ref.path, ref.problem, ref.config, obstacles=ref.obstacles, avoidance=ref.avoidance.config)
+    bare = FastLtvMpc(model, ref.path, ref.problem, ref.config)
+    for c in (ref, fast, bare):
+        c.set_speed_cap(30.0)
+    a = ref.step(x, ref.initial_warm(x))
+    b = fast.step(x, fast.initial_warm(x))
+    c = bare.step(x, bare.initial_warm(x))
+    assert np.abs(c.X_pred - a.X_pred).max() > 0.1  # the obstacle matters here
+    # the condensed QP's exact optimum against OSQP's at 1e-9 (test_fast_path's tolerance)
+    np.testing.assert_allclose(b.X_pred, a.X_pred, rtol=0, atol=1e-6)
+
+
+def test_factory_lets_osqp_solve_the_compiled_stage_qp_beyond_the_condensed_limits():
+    """Only the condensed solver's limits exclude the problem: the compiled step still assembles,
+    OSQP solves, and the notice says so."""
+    model = KinematicBicycle3(1.0)
+    path = StraightPath([0.0, 0.0], [20.0, 0.0])
+    pb = MpcProblem(3, 1, 200, 0.05, Q=np.diag([1.0, 5.0, 1.0]), R=1.0, u_min=-0.5, u_max=0.5)  # 200 variables
+    from mpcdrive.control.fast import FastSettings
+
+    with pytest.warns(FastPathUnavailable, match="condensed solver not used: .*max_variables=100.*OSQP solves"):
+        c = make_mpc(model, path, pb, backend="fast", fast_settings=FastSettings(max_variables=100))
+    assert isinstance(c, FastLtvMpc) and (c.backend_name, c.assembly) == ("osqp", "compiled")
+    ref = make_mpc(model, path, pb, backend="osqp", osqp_settings=OsqpSettings(eps_abs=1e-9, eps_rel=1e-9))
+    x = np.array([0.0, 0.3, 0.05])
+    a, b = ref.step(x, ref.initial_warm(x)), c.step(x, c.initial_warm(x))
+    assert a.status == b.status == "ok"
+    # c's OSQP runs at the default settings (1e-5 here): its stopping rule bounds the difference
+    np.testing.assert_allclose(b.u, a.u, rtol=0, atol=1e-3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert make_mpc(model, path, pb, backend="fast").backend_name == "fast"  # within the default limit
+    with pytest.raises(ValueError, match="solver must be"):
+        FastLtvMpc(model, path, pb, solver="ipopt")
