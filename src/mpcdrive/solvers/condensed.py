@@ -10,6 +10,9 @@ functions here only consume that data; none knows a model, a path or how the row
   slack) by the backward Riccati recursion, O(N); with :func:`plan_feasible` (input, rate and
   state bounds within a tolerance) the controller takes it as the QP's solution when it
   violates no bound, and skips condensing.
+* :func:`condensed_solve`: the whole solve of one step's stage QP -- the Riccati shortcut where
+  it applies, else condensing (Hessian by the backward recursion, gradient, state, road and
+  obstacle rows) and :func:`soft_solve` or the plain active-set solve.
 * :func:`soft_solve`: the condensed QP whose soft rows (grouped, one slack per group) get
   slacks only where they can be nonzero, by the exact-penalty condition on the multipliers of
   :func:`~mpcdrive.solvers.dense_qp.gi_solve`.
@@ -290,7 +293,307 @@ def soft_solve(
     return 3, iters
 
 
-# numba keys this module's cache to this file only; soft_solve links in code from dense_qp
+@njit(cache=True)
+def condensed_solve(
+    N, nx, nu, nz, x, u_prev, A, B, c, We, qt, Rm, Rc, uref, ulo, uhi, dmax, x_min, x_max, lane, lane_n, lane_b,
+    lane_lo, lane_hi, lane_dlo, lane_dhi, Xlin, nrow, rowa, rowb, use_riccati, gamma, m_const, r_rate0, C, b, rowcol,
+    rgrp, kpos, w2_lane, w1_lane, w2_obs, w1_obs, tol, max_iter, xf, P, lam, Vb, S, T2, Gam, H, g, z, L, J, Rq, d,
+    zdir, r, uq, sq, rown, lamq, active, isact, gsum, Kg, kf, PA, Mg, Gg, qv,
+):  # fmt: skip
+    """Solve one step's stage QP, condensed onto the inputs (and the slacks of the soft rows);
+    returns ``(code, iterations)`` (code 0: ok, 1 infeasible, 2 max_iter, 3 failed) with the
+    planned inputs in ``z[:N nu]``.
+
+    Stage data: initial state ``x`` (nx,), previous input ``u_prev`` (nu,); dynamics
+    ``x_{k+1} = A_k x_k + B_k u_k + c_k`` (A (N, nx, nx), B (N, nx, nu), c (N, nx)); state cost
+    of x_1..x_N ``x' We_k x - 2 qt_k' x`` (We (N, nx, nx), qt (N, nx)); input cost
+    ``(u - uref_k)' Rm (u - uref_k) + (u_k - u_{k-1})' Rc (...)`` from ``u_prev``; per-stage input
+    bounds ``ulo``, ``uhi`` (N, nu) (their rows are among the constant rows), rate limit ``dmax``
+    (nu,) per step, state bounds ``x_min``, ``x_max`` (nx,); with ``lane`` the road rows
+    ``lo_k + dlo_k (yaw - ybar_k) <= n_k . p_k - lane_b_k <= hi_k + dhi_k (yaw - ybar_k)`` (ybar
+    the yaw of the linearization trajectory ``Xlin`` (N+1, nx)) with slack weights ``w2_lane``
+    (quadratic), ``w1_lane`` (linear); ``nrow`` obstacle rows per step ``rowa . (x, y, yaw)_k >=
+    rowb`` (b = -inf: unused), slack weights ``w2_obs``, ``w1_obs``. ``C``, ``b``: the rows of
+    ``C z >= b``, the first ``m_const`` constant (input bounds, rates; the u_0 rate rows from row
+    ``r_rate0`` follow ``u_prev``). ``use_riccati``: try the unconstrained minimizer first (no
+    Rc, no soft rows); ``gamma``: there are state, road or obstacle rows. The rest is work
+    space, sized by the caller; nothing is allocated.
+    """
+    nzu = N * nu
+    # -- no Rc, no lane: try the unconstrained minimizer (Riccati, O(N)); if it satisfies every
+    # bound it is the QP's solution ---------------------------------------------------------------
+    if use_riccati:
+        if riccati(N, nx, nu, A, B, c, qt, uref, We, Rm, x, P, lam, Kg, kf, PA, Mg, Gg, qv, z):
+            if plan_feasible(N, nx, nu, z, lam, u_prev, ulo, uhi, dmax, x_min, x_max, tol):
+                return 0, 0
+
+    # -- condensing: x_k = xf_k + sum_j G_kj u_j ----------------------------------------------
+    for i in range(nx):
+        xf[0, i] = x[i]
+    for k in range(N):
+        for i in range(nx):
+            t = c[k, i]
+            for j in range(nx):
+                t += A[k, i, j] * xf[k, j]
+            xf[k + 1, i] = t
+    # P_N = W_N ; P_k = W_k + A_k' P_{k+1} A_k ; lam_k = W_k e_k + A_k' lam_{k+1}
+    for i in range(nx):
+        for j in range(nx):
+            P[N, i, j] = We[N - 1, i, j]
+    for i in range(nx):
+        t = -qt[N - 1, i]
+        for j in range(nx):
+            t += We[N - 1, i, j] * xf[N, j]
+        lam[N, i] = t
+    for k in range(N - 1, 0, -1):
+        for i in range(nx):
+            for j in range(nx):
+                t = 0.0
+                for l in range(nx):
+                    t += P[k + 1, i, l] * A[k, l, j]
+                T2[i, j] = t  # P_{k+1} A_k (T2 is nx x max(nx, nu))
+        for i in range(nx):
+            for j in range(nx):
+                t = We[k - 1, i, j]
+                for l in range(nx):
+                    t += A[k, l, i] * T2[l, j]
+                P[k, i, j] = t
+        for i in range(nx):
+            t = -qt[k - 1, i]
+            for j in range(nx):
+                t += We[k - 1, i, j] * xf[k, j] + A[k, j, i] * lam[k + 1, j]
+            lam[k, i] = t
+    # gradient
+    for k in range(N):
+        for a in range(nu):
+            t = 0.0
+            for i in range(nx):
+                t += B[k, i, a] * lam[k + 1, i]
+            for e in range(nu):
+                t -= Rm[a, e] * uref[k, e]
+            g[k * nu + a] = 2.0 * t
+    for a in range(nu):
+        t = 0.0
+        for e in range(nu):
+            t += Rc[a, e] * u_prev[e]
+        g[a] -= 2.0 * t
+    # Hessian blocks: H_jj = 2 (B_j' V_j + R + Rc terms) with V_j = P_{j+1} B_j, and for i < j
+    # H_ij = 2 B_i' T_ij, T_ij = A_{i+1}' T_{i+1,j}, T_{j-1,j} = A_j' V_j: all T_i. side by side
+    # in S (nx, N nu) so the products run along long rows
+    for j in range(N):
+        for i in range(nx):
+            for a in range(nu):
+                t = 0.0
+                for l in range(nx):
+                    t += P[j + 1, i, l] * B[j, l, a]
+                Vb[j, i, a] = t
+        rcw = 2.0 if j < N - 1 else 1.0
+        for a in range(nu):
+            for e in range(nu):
+                t = 0.0
+                for l in range(nx):
+                    t += B[j, l, a] * Vb[j, l, e]
+                H[j * nu + a, j * nu + e] = 2.0 * (t + Rm[a, e] + rcw * Rc[a, e])
+    cur = 0
+    for i in range(N - 2, -1, -1):
+        c0 = (i + 1) * nu
+        nxt = 1 - cur
+        for l in range(nx):
+            for a in range(nu):
+                S[cur, l, c0 + a] = Vb[i + 1, l, a]
+        for l in range(nx):
+            for cc in range(c0, nzu):
+                S[nxt, l, cc] = 0.0
+            for m_ in range(nx):
+                am = A[i + 1, m_, l]
+                if am != 0.0:
+                    for cc in range(c0, nzu):
+                        S[nxt, l, cc] += am * S[cur, m_, cc]
+        for a in range(nu):
+            row = i * nu + a
+            for cc in range(c0, nzu):
+                H[row, cc] = 0.0
+            for e in range(nu):
+                H[row, c0 + e] = -2.0 * Rc[a, e]
+            for l in range(nx):
+                bl = 2.0 * B[i, l, a]
+                if bl != 0.0:
+                    for cc in range(c0, nzu):
+                        H[row, cc] += bl * S[nxt, l, cc]
+            for cc in range(c0, nzu):
+                H[cc, row] = H[row, cc]
+        cur = nxt
+
+    # -- constraint rows that change each step -------------------------------------------------
+    r0 = r_rate0
+    for a in range(nu):
+        if math.isfinite(dmax[a]):
+            b[r0] = u_prev[a] - dmax[a]
+            b[r0 + 1] = -u_prev[a] - dmax[a]
+            r0 += 2
+    m = m_const
+    m_lane = m
+    if gamma:
+        # Gam[k] = d x_{k+1} / d z: Gam[k] = A_k Gam[k-1] in the first k blocks, B_k in block k,
+        # zero after it (never written)
+        for k in range(N):
+            for i in range(nx):
+                for cc in range(k * nu):
+                    Gam[k, i, cc] = 0.0
+                for l in range(nx):
+                    al = A[k, i, l]
+                    if al != 0.0:
+                        for cc in range(k * nu):
+                            Gam[k, i, cc] += al * Gam[k - 1, l, cc]
+                for a in range(nu):
+                    Gam[k, i, k * nu + a] = B[k, i, a]
+        for k in range(1, N + 1):
+            for i in range(nx):
+                if math.isfinite(x_min[i]):
+                    rowcol[m] = -1
+                    for jj in range(nzu):
+                        C[m, jj] = Gam[k - 1, i, jj]
+                    for jj in range(nzu, nz):
+                        C[m, jj] = 0.0
+                    b[m] = x_min[i] - xf[k, i]
+                    m += 1
+                if math.isfinite(x_max[i]):
+                    rowcol[m] = -1
+                    for jj in range(nzu):
+                        C[m, jj] = -Gam[k - 1, i, jj]
+                    for jj in range(nzu, nz):
+                        C[m, jj] = 0.0
+                    b[m] = xf[k, i] - x_max[i]
+                    m += 1
+        if lane == 1:
+            m_lane = m
+            Xl = Xlin
+            for k in range(1, N + 1):
+                # n . p - dhi yaw <= lane_b + hi - dhi yawbar (and the same with lo, >=): the
+                # road's bounds linearized in the yaw (scene.road.body_bounds)
+                n0, n1 = lane_n[k - 1, 0], lane_n[k - 1, 1]
+                dh, dl = lane_dhi[k - 1], lane_dlo[k - 1]
+                nxf = n0 * xf[k, 0] + n1 * xf[k, 1]
+                ybar = Xl[k, 2]
+                for jj in range(nzu):
+                    gp = n0 * Gam[k - 1, 0, jj] + n1 * Gam[k - 1, 1, jj]
+                    gy = Gam[k - 1, 2, jj]
+                    C[m, jj] = -(gp - dh * gy)
+                    C[m + 1, jj] = gp - dl * gy
+                for jj in range(nzu, nz):
+                    C[m, jj] = 0.0
+                    C[m + 1, jj] = 0.0
+                b[m] = nxf - dh * xf[k, 2] - lane_b[k - 1] - lane_hi[k - 1] + dh * ybar
+                b[m + 1] = lane_b[k - 1] + lane_lo[k - 1] - dl * ybar - (nxf - dl * xf[k, 2])
+                rgrp[m] = k - 1
+                rgrp[m + 1] = k - 1
+                rowcol[m] = -1
+                rowcol[m + 1] = -1
+                m += 2
+        if nrow > 0:
+            # obstacle half-planes a . (x_k, y_k, yaw_k) >= b of this step (b = -inf: unused)
+            if lane == 0:
+                m_lane = m
+            for k in range(1, N + 1):
+                for q in range(nrow):
+                    if not rowb[k - 1, q] > -math.inf:
+                        continue
+                    r0_, r1_, r2_ = rowa[k - 1, q, 0], rowa[k - 1, q, 1], rowa[k - 1, q, 2]
+                    for jj in range(nzu):
+                        C[m, jj] = r0_ * Gam[k - 1, 0, jj] + r1_ * Gam[k - 1, 1, jj] + r2_ * Gam[k - 1, 2, jj]
+                    for jj in range(nzu, nz):
+                        C[m, jj] = 0.0
+                    b[m] = rowb[k - 1, q] - (r0_ * xf[k, 0] + r1_ * xf[k, 1] + r2_ * xf[k, 2])
+                    rgrp[m] = N + k - 1
+                    rowcol[m] = -1
+                    m += 1
+
+    # -- solve, then the plan and the command --------------------------------------------------
+    if lane == 1 or nrow > 0:
+        # soft rows (slack groups: lane rows of step k in group k, obstacle rows in N + k) that
+        # the linearization trajectory is on or beyond (within 1 mm)
+        for k in range(2 * N):
+            kpos[k] = 0
+        if lane == 1:
+            for k in range(N):
+                px, py = Xlin[k + 1, 0], Xlin[k + 1, 1]
+                dev = lane_n[k, 0] * px + lane_n[k, 1] * py - lane_b[k]
+                if dev > lane_hi[k] - 1e-3 or dev < lane_lo[k] + 1e-3:
+                    kpos[k] = 1
+        if nrow > 0:
+            for k in range(N):
+                Xl = Xlin[k + 1]
+                for q in range(nrow):
+                    if rowb[k, q] > -math.inf and (
+                        rowa[k, q, 0] * Xl[0] + rowa[k, q, 1] * Xl[1] + rowa[k, q, 2] * Xl[2] < rowb[k, q] + 1e-3
+                    ):
+                        kpos[N + k] = 1
+        for f0 in range(0, 2 * N, N):  # and the 3 steps after each (RTI plans move a little)
+            for k in range(N - 1, 0, -1):
+                if kpos[f0 + k - 1] == 1 or (k >= 2 and kpos[f0 + k - 2] == 1) or (k >= 3 and kpos[f0 + k - 3] == 1):
+                    kpos[f0 + k] = 1
+        code, iters = soft_solve(
+            H,
+            g,
+            C,
+            b,
+            m,
+            m_lane,
+            rgrp,
+            N,
+            nzu,
+            kpos,
+            w2_lane,
+            w1_lane,
+            w2_obs,
+            w1_obs,
+            gsum,
+            z,
+            lamq,
+            active,
+            isact,
+            rowcol,
+            L,
+            J,
+            Rq,
+            d,
+            zdir,
+            r,
+            uq,
+            sq,
+            rown,
+            max_iter,
+            tol,
+        )
+    else:
+        code, iters = gi_solve(
+            H,
+            g,
+            C,
+            b,
+            m,
+            nz,
+            z,
+            lamq,
+            active,
+            isact,
+            rowcol,
+            L,
+            J,
+            Rq,
+            d,
+            zdir,
+            r,
+            uq,
+            sq,
+            rown,
+            max_iter,
+            tol,
+        )
+    return code, iters
+
+
+# numba keys this module's cache to this file only; soft_solve and condensed_solve link in code from dense_qp
 from .. import _jitcache  # noqa: E402
 from . import dense_qp as _dense_qp  # noqa: E402
 
