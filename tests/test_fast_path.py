@@ -84,8 +84,14 @@ def test_unsupported_scenarios_fall_back_to_osqp():
     assert set(FAST_SCENARIOS) | set(ROW_SCENARIOS) | set(TIGHT_DYNAMIC_SCENARIOS) <= set(builtin_ids())
     # prediction substeps (a built-in scenario's dynamic MPC asked for them) are declined by name
     b = build_experiment(_with_backend(load_scenario("track-raceway"), "osqp")).mpc
-    with pytest.warns(UserWarning, match="fast backend not used: .*prediction substeps need the OSQP controller"):
+    # (no compiled assembly: the stage QP is assembled in Python, the condensed solver solves it)
+    with pytest.warns(UserWarning, match="compiled step not used: .*prediction substeps need the OSQP controller"):
         ctrl = make_mpc(b.model, b.path, b.problem, replace(b.config, prediction_substeps=2), "fast")
+    assert isinstance(ctrl, LtvMpc) and (ctrl.backend_name, ctrl.assembly) == ("fast", "python")
+    # and where the condensed solver's limits exclude it too, OSQP
+    pb = replace(b.problem, R=0.0 * b.problem.R, Rc=0.0 * b.problem.Rc)
+    with pytest.warns(UserWarning, match="fast backend not used: .*prediction substeps"):
+        ctrl = make_mpc(b.model, b.path, pb, replace(b.config, prediction_substeps=2), "fast")
     assert ctrl.backend_name == "osqp"
 
 

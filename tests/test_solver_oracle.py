@@ -6,7 +6,8 @@ slacks are nonzero), and a static obstacle ahead in the lane whose ``hard`` half
 bind. For each step the OSQP controller (:class:`LtvMpc`: the sparse QP of ``ocp.qp``), the
 compiled controller (:class:`FastLtvMpc`: the condensed QP and its dual active-set solver) and
 the compiled controller with ``solver="osqp"`` (its compiled assembly's stage QP, checked field
-by field against the OSQP controller's, solved by OSQP) take the same measured state and warm
+by field against the OSQP controller's, solved by OSQP) and the OSQP controller's assembly solved
+by the condensed solver (``LtvMpc(..., FastSettings())``) take the same measured state and warm
 start, and their first inputs, plans and objective values are
 compared with the optimum of the same stage problem written here in cvxpy from
 :class:`MpcProblem`'s documented cost and constraints and solved with Clarabel.
@@ -61,6 +62,8 @@ class Case:
     x: np.ndarray
     #: the compiled assembly's stage QP solved by OSQP
     fast_osqp: FastLtvMpc
+    #: the Python assembly's stage QP solved by the condensed solver
+    py_condensed: LtvMpc
 
 
 #: where the obstacle is: ahead on the car's way back to the centre line, passed on the far side
@@ -156,7 +159,8 @@ def make_case(seed: int) -> Case:
     fast_osqp = FastLtvMpc(
         model, path, pb, cfg, FAST, obstacles=obstacles, avoidance=av, footprint=fp, solver="osqp", osqp_settings=OSQP
     )
-    return Case(ref, fast, x, fast_osqp)
+    py_condensed = LtvMpc(model, path, pb, cfg, FAST, obstacles=obstacles, avoidance=av, footprint=fp)
+    return Case(ref, fast, x, fast_osqp, py_condensed)
 
 
 # --------------------------------------------------------------------------------------------
@@ -383,12 +387,16 @@ def osqp_residuals(s: Sensitivity, settings: OsqpSettings, status: str) -> tuple
     return (eps_abs + eps_rel * s.scale_d, eps_abs + eps_rel * s.scale_p)
 
 
-def fast_residuals(fast: FastLtvMpc) -> tuple[float, float]:
+def fast_residuals(fast) -> tuple[float, float]:
     """The active-set solver's (dual, primal) residual bounds: stationarity to rounding,
     n eps_mach (n |H| |z| + |g|), and rows to feasibility_tol times their norm (the condensed rows
-    of the step, in its buffers)."""
-    w = fast._w
-    C, H, g, z = w[fs._W_C], w[fs._W_H], w[fs._W_G], w[fs._W_Z]
+    of the step, in the compiled controller's buffers or the condensed backend's work arrays)."""
+    if isinstance(fast, FastLtvMpc):
+        w = fast._w
+        C, H, g, z = w[fs._W_C], w[fs._W_H], w[fs._W_G], w[fs._W_Z]
+    else:
+        be = fast.backend
+        C, (H, g, z) = be._C, be._work[7:10]
     n = H.shape[0]
     r_d = n * np.finfo(float).eps * (n * np.abs(H).max() * np.abs(z).max() + np.abs(g).max())
     return float(r_d), float(FAST.feasibility_tol * max(1.0, np.linalg.norm(C, axis=1).max()))
@@ -509,6 +517,9 @@ def check_step(case: Case, x, warm) -> tuple[Oracle, object]:
     same_step_data(case.fast_osqp.prepare(x, warm), d)
     ofo = case.fast_osqp.step(x, warm)
     compare("OSQP", ofo, o, s, osqp_residuals(s, OSQP, ofo.status), pb, d, warm.u_prev)
+    # the Python assembly's stage QP solved by the condensed solver
+    opc = case.py_condensed.step(x, warm)
+    compare("compiled", opc, o, s, fast_residuals(case.py_condensed), pb, d, warm.u_prev)
     return o, out
 
 

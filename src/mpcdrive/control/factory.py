@@ -4,6 +4,7 @@ problem, else the OSQP reference, saying so."""
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 from typing import Literal
 
 from ..ocp.problem import MpcProblem
@@ -15,6 +16,14 @@ Backend = Literal["osqp", "fast"]
 BACKENDS: tuple[str, ...] = ("osqp", "fast")
 #: the compiled controller unless the caller asks for the OSQP reference (as scenarios and the CLI)
 DEFAULT_BACKEND: Backend = "fast"
+
+
+def _rows_per_step(obstacles, avoidance, footprint) -> int:
+    """The obstacle rows per step the controller's QP will have (0 without constraint rows)."""
+    from ..ocp.avoidance import AvoidanceConfig
+
+    av = avoidance or AvoidanceConfig()
+    return av.rows_per_step(footprint) if obstacles and av.uses_rows else 0
 
 
 class FastPathUnavailable(UserWarning):
@@ -70,6 +79,19 @@ def make_mpc(
                 stacklevel=2,
             )
         else:
+            from .condensed import condensed_unsupported_reason
+
+            rows = replace(problem, obstacle_rows=_rows_per_step(obstacles, avoidance, fp))
+            if condensed_unsupported_reason(rows, settings) is None:
+                # no compiled assembly, but the condensed solver takes the Python assembly's QP
+                warnings.warn(
+                    f"compiled step not used: {reason}; the stage QP is assembled in Python, "
+                    "solved by the condensed solver",
+                    FastPathUnavailable,
+                    stacklevel=2,
+                )
+                kw = {} if footprint is None else {"footprint": footprint}
+                return LtvMpc(model, path, problem, config, settings, obstacles=obstacles, avoidance=avoidance, **kw)
             warnings.warn(
                 f"fast backend not used: {reason}; using the OSQP controller", FastPathUnavailable, stacklevel=2
             )

@@ -10,6 +10,7 @@ fall back deliberately when the solve fails.
 from __future__ import annotations
 
 import math
+import sys
 import time
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Literal
@@ -37,6 +38,8 @@ from .fallback import FallbackConfig, FallbackLadder
 
 if TYPE_CHECKING:
     from ..ocp.qp import LtvQp
+    from .condensed import CondensedBackend
+    from .fast_setup import FastSettings
 from .base import TrackingWarmStart, checked_obstacles, checked_road, checked_speed_cap
 
 
@@ -174,7 +177,7 @@ class StageQpSolve:
     problem: MpcProblem
     dt_s: float
     qp: LtvQp
-    backend: OsqpBackend | ProjectedGradientBackend
+    backend: OsqpBackend | ProjectedGradientBackend | CondensedBackend
     fallback: FallbackLadder
     _du_step: np.ndarray
 
@@ -204,9 +207,12 @@ class StageQpSolve:
         return self.finish(d, warm, res, t0, it)
 
     def _solve(self, d: StepData, warm: WarmStart) -> SolveResult:
+        backend = self.backend
+        if not isinstance(backend, (OsqpBackend, ProjectedGradientBackend)):  # it takes the stage QP as it is
+            return backend.solve_stage(d, warm.u_prev)
         self.qp.load_step(d, warm.u_prev)
         # primal warm start: the linearization trajectory
-        return self.backend.solve(d.Xlin, d.Ubar)
+        return backend.solve(d.Xlin, d.Ubar)
 
     def finish(self, d: StepData, warm: WarmStart, res: SolveResult, t0: float, iterations: int = 1) -> ControlOutput:
         """Check the solve, pick the command (or fall back) and package the step's output."""
@@ -240,7 +246,12 @@ class StageQpSolve:
 
 class LtvMpc(StageQpSolve, TrackingWarmStart):
     """Tracking LTV-MPC of ``model`` along ``path`` solving ``problem`` with OSQP (or, given
-    :class:`~mpcdrive.solvers.ProjectedGradientSettings`, the paper's projected gradient descent).
+    :class:`~mpcdrive.solvers.ProjectedGradientSettings`, the paper's projected gradient descent;
+    given :class:`~mpcdrive.control.fast_setup.FastSettings`, the compiled condensed solver of
+    :mod:`mpcdrive.control.condensed`), each step's stage QP assembled here in Python: for any
+    model, path, speed reference and obstacle (the compiled step,
+    :class:`~mpcdrive.control.fast.FastLtvMpc`, assembles the same QP for those it has a compiled
+    form of).
 
     model : the controller's prediction model (states start with x, y, yaw; its ``reference``
     method gives the reference state of a path point at a speed); the QP is built once here and
@@ -260,7 +271,7 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
         path: ReferencePath,
         problem: MpcProblem,
         config: MpcConfig = MpcConfig(),
-        solver_settings: OsqpSettings | ProjectedGradientSettings = OsqpSettings(),
+        solver_settings: OsqpSettings | ProjectedGradientSettings | FastSettings = OsqpSettings(),
         obstacles: tuple[Obstacle, ...] = (),
         avoidance: AvoidanceConfig | None = None,
         footprint: Footprint = Footprint(),
@@ -295,11 +306,23 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
                 avoidance, list(obstacles), path, footprint, problem.N, problem.dt_s, problem.road
             )
         self.qp = LtvQp(problem)
-        self.backend: OsqpBackend | ProjectedGradientBackend
-        if isinstance(solver_settings, ProjectedGradientSettings):
+        # FastSettings: the compiled solver (its module, and numba, are loaded only when asked for:
+        # a FastSettings instance exists only once its module is)
+        fast_setup = sys.modules.get(f"{__package__}.fast_setup")
+        if fast_setup is not None and isinstance(solver_settings, fast_setup.FastSettings):
+            from .condensed import CondensedBackend
+
+            self.backend = CondensedBackend(problem, solver_settings)
+            self.backend_name = "fast"
+        elif isinstance(solver_settings, ProjectedGradientSettings):
             self.backend = ProjectedGradientBackend(self.qp, solver_settings)
-        else:
+        elif isinstance(solver_settings, OsqpSettings):
             self.backend = OsqpBackend(self.qp, solver_settings)
+        else:
+            raise ValueError(
+                "solver_settings must be OsqpSettings, ProjectedGradientSettings or FastSettings, "
+                f"got {type(solver_settings).__name__}"
+            )
         self._accel_index = list(model.input_names).index("accel") if "accel" in model.input_names else None
         N, nx, nu = self.N, self.nx, self.nu
         # per-step work buffers
