@@ -61,6 +61,17 @@ class TrackingWarmStart:
     def _check_state(self, x) -> np.ndarray:
         return check_state(x, tuple(self.model.state_names))
 
+    def _check_warm(self, warm: WarmStart) -> np.ndarray:
+        """``warm.u_prev`` as a float array, after checking it and ``warm.s_m``."""
+        u_prev = np.asarray(warm.u_prev, dtype=float)
+        if u_prev.shape != (self.nu,) or not np.all(np.isfinite(u_prev)):
+            raise ValueError(
+                f"warm.u_prev must be {self.nu} finite numbers {self.model.input_names}, got {warm.u_prev!r}"
+            )
+        if not math.isfinite(warm.s_m):
+            raise ValueError(f"warm.s_m must be finite, got {warm.s_m!r}")
+        return u_prev
+
 
 def checked_road(current: Road | None, road: Road) -> Road:
     """``road`` for a ``set_road`` call: a ValueError when the controller was built without a

@@ -564,13 +564,7 @@ class FastLtvMpc(StageQpSolve, TrackingWarmStart):
         the controller's buffers, valid until its next step; a step whose model or references are
         not finite gives NaN dynamics (any solver then fails it)."""
         x = self._check_state(x)
-        u_prev = np.asarray(warm.u_prev, dtype=float)
-        if u_prev.shape != (self.nu,) or not np.all(np.isfinite(u_prev)):
-            raise ValueError(
-                f"warm.u_prev must be {self.nu} finite numbers {self.model.input_names}, got {warm.u_prev!r}"
-            )
-        if not math.isfinite(warm.s_m):
-            raise ValueError(f"warm.s_m must be finite, got {warm.s_m!r}")
+        u_prev = self._check_warm(warm)
         N, nx, nu = self.N, self.nx, self.nu
         if around is not None:
             X, U, mode = around[0], around[1], MODE_ITERATE

@@ -391,16 +391,7 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
         avoidance, obstacles = checked_obstacles(self.avoidance, obstacles)
         avoidance.obstacles = list(obstacles)
 
-    # -- warm start: initial_warm and _check_state from TrackingWarmStart ---------------------
-    def _check_warm(self, warm: WarmStart) -> np.ndarray:
-        u_prev = np.asarray(warm.u_prev, dtype=float)
-        if u_prev.shape != (self.nu,) or not np.all(np.isfinite(u_prev)):
-            raise ValueError(
-                f"warm.u_prev must be {self.nu} finite numbers {self.model.input_names}, got {warm.u_prev!r}"
-            )
-        if not math.isfinite(warm.s_m):
-            raise ValueError(f"warm.s_m must be finite, got {warm.s_m!r}")
-        return u_prev
+    # -- warm start: initial_warm, _check_state and _check_warm from TrackingWarmStart ---------
 
     # -- one control step: step, _solve and finish from StageQpSolve ---------------------------
     def prepare(self, x, warm: WarmStart, around=None, s_m: float | None = None) -> StepData:
