@@ -5,8 +5,9 @@
 in Python for a model, path or obstacle the compiled step has no form of -- with the solver
 the compiled step runs (:func:`mpcdrive.solvers.condensed.condensed_solve`: the Riccati shortcut,
 condensing onto the inputs, the dual active-set method with slacks only where they can be
-nonzero). It allocates its work arrays once; a solve writes the stage data into them and
-allocates only the returned plan.
+nonzero; its limits: :func:`~mpcdrive.control.fast_setup.condensed_unsupported_reason`). It
+allocates its work arrays once; a solve writes the stage data into them and allocates only the
+returned plan.
 """
 
 from __future__ import annotations
@@ -18,25 +19,10 @@ import numpy as np
 
 from ..ocp.problem import MpcProblem
 from ..solvers.condensed import condensed_solve
-from ..solvers.dense_qp import STATUS_WORDS, single_nonzero_columns
+from ..solvers.dense_qp import STATUS_WORDS
 from ..types import SolveResult
-from .fast_setup import FastSettings, _constant_rows
-from .fast_step import input_bound_rows
-
-
-def condensed_unsupported_reason(problem: MpcProblem, settings: FastSettings = FastSettings()) -> str | None:
-    """Why the condensed solver cannot solve this problem's stage QP, or None (the limits of
-    :func:`~mpcdrive.control.fast_setup.fast_unsupported_reason` that are the solver's)."""
-    if np.linalg.eigvalsh(problem.R + problem.Rc).min() <= 1e-12 * max(1.0, float(np.abs(problem.R).max())):
-        return "R + Rc is not positive definite (the condensed QP needs a strictly convex cost in the inputs)"
-    if problem.lane and problem.lane_slack_weight <= 0:
-        return "lane_slack_weight is 0 (the slack needs a quadratic weight)"
-    if problem.obstacle_rows and problem.obstacle_slack_weight <= 0:
-        return "obstacle_slack_weight is 0 (the slack needs a quadratic weight)"
-    nz = problem.N * problem.nu + (problem.N if problem.lane else 0) + (problem.N if problem.obstacle_rows else 0)
-    if nz > settings.max_variables:
-        return f"the condensed QP has {nz} variables, more than max_variables={settings.max_variables}"
-    return None
+from .fast_setup import FastSettings, condensed_unsupported_reason, constant_rows
+from .fast_step import _write_plan, input_bound_rows
 
 
 class CondensedBackend:
@@ -46,7 +32,7 @@ class CondensedBackend:
     name = "condensed"
 
     def __init__(self, problem: MpcProblem, settings: FastSettings = FastSettings()):
-        reason = condensed_unsupported_reason(problem, settings)
+        reason = condensed_unsupported_reason(problem, settings, bool(problem.obstacle_rows))
         if reason is not None:
             raise ValueError(f"the condensed solver cannot solve this problem: {reason}")
         self.problem = pb = problem
@@ -57,17 +43,10 @@ class CondensedBackend:
         self._nrow = int(pb.obstacle_rows)
         nz = N * nu + (N if self._lane else 0) + (N if self._nrow else 0)
         self._nz = nz
-        crows, rhs, self._r_rate0, n_var, n_slack = _constant_rows(pb, nz, self._nrow)
-        self._m_const = len(crows)
-        mq = max(len(crows) + n_var + n_slack, 1)
-        self._C = np.zeros((mq, nz))
-        self._b = np.zeros(mq)
-        if crows:
-            self._C[: len(crows)] = np.array(crows)
-            self._b[: len(crows)] = rhs
-        self._rowcol = np.full(mq, -1, dtype=np.int64)
-        self._rowcol[: len(crows)] = single_nonzero_columns(self._C[: len(crows)])
-        self._gamma = n_var > 0
+        cr = constant_rows(pb, nz, self._nrow)
+        self._C, self._b, self._rowcol = cr.C, cr.b, cr.rowcol
+        self._m_const, self._r_rate0, self._gamma = cr.m_const, cr.r_rate0, cr.gamma
+        mq = cr.mq
         self._riccati = not self._lane and not self._nrow and not np.any(pb.Rc)
         self._Wq = np.stack([pb.Q] * (N - 1) + [pb.QN])
         self._We = self._Wq.copy()
@@ -114,6 +93,8 @@ class CondensedBackend:
         )
         self._rgrp = np.zeros(mq, dtype=np.int64)
         self._kpos = np.zeros(2 * N, dtype=np.int64)
+        #: the plan as the compiled step writes it: [u, X, U, xref]
+        self._out = np.empty(nu + (N + 1) * nx + N * nu + (N + 1) * nx)
 
     def solve_stage(self, d, u_prev: np.ndarray) -> SolveResult:
         """Solve the stage QP ``d`` (:class:`~mpcdrive.control.mpc.StepData`) after input
@@ -121,12 +102,12 @@ class CondensedBackend:
         t0 = time.perf_counter()
         pb, N, nx, nu = self.problem, self.N, self.nx, self.nu
         u_prev = np.ascontiguousarray(u_prev, dtype=float)
-        xref = d.xref
+        xref = np.ascontiguousarray(d.xref, dtype=float)
         We, qt = self._We, self._qt
         np.einsum("kij,kj->ki", self._Wq, xref[1:], out=qt)
-        We[...] = self._Wq
         if d.H is not None and d.g is not None and pb.position_cost:
             # 1/2 p'Hp + g.p on the positions, in the form x'We x - 2 qt'x
+            We[...] = self._Wq
             We[:, :2, :2] += 0.5 * d.H
             qt[:, :2] -= 0.5 * d.g
         ulo, uhi, C, b = self._ulo, self._uhi, self._C, self._b
@@ -161,9 +142,9 @@ class CondensedBackend:
             return SolveResult(
                 status, np.full((N + 1, nx), nan), np.full((N, nu), nan), nan, int(iters), time.perf_counter() - t0
             )
-        U = self._work[9][: N * nu].reshape(N, nu).copy()
-        X = np.empty((N + 1, nx))
-        X[0] = x
-        for k in range(N):
-            X[k + 1] = A[k] @ X[k] + B[k] @ U[k] + c[k]
+        out = self._out
+        _write_plan(N, nx, nu, x, self._work[9], A, B, c, xref, ulo, uhi, out)  # X rolled out through A, B, c
+        oU = nu + (N + 1) * nx
+        X = out[nu:oU].reshape(N + 1, nx).copy()
+        U = out[oU : oU + N * nu].reshape(N, nu).copy()
         return SolveResult(status, X, U, math.nan, int(iters), time.perf_counter() - t0)

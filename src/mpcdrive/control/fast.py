@@ -70,7 +70,7 @@ from ..paths.compiled import path_arrays
 from ..paths.profile_compiled import profile_array
 from ..scene.footprint import Footprint
 from ..scene.road import Road
-from ..solvers.dense_qp import STATUS_WORDS, single_nonzero_columns
+from ..solvers.dense_qp import STATUS_WORDS
 from ..solvers.osqp_backend import OsqpSettings
 from ..types import ControlOutput, WarmStart
 from .base import TrackingWarmStart, checked_obstacles, checked_road, checked_speed_cap
@@ -92,7 +92,7 @@ from .fast_layout import _F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_RMARGIN, _F_SLA
 from .fast_layout import _F_OSX, _F_OSY, _F_OINF, _F_OMARGIN, _F_HW, _F_HL, _F_RAMP, _F_OSLACK2, _F_OSLACK1, _F_BOFF
 from .fast_layout import _F_RPERIOD, _F_FRIC, _F_WHEELBASE, _NFP
 from .fast_setup import FastSettings, fast_unsupported_reason, obstacles_unsupported_reason  # importers use these
-from .fast_setup import _constant_rows, _obstacle_table
+from .fast_setup import _obstacle_table, constant_rows
 from .fast_step import _BAD_STATE, _control_step, follow_references_into  # the compiled step
 from .fallback import FALLBACK_HOLD, FALLBACK_RELAX, FallbackConfig, FallbackLadder, relaxed_problem
 from .mpc import MpcConfig, StageQpSolve, StepData
@@ -204,15 +204,8 @@ class FastLtvMpc(StageQpSolve, TrackingWarmStart):
         assert code is not None and pa is not None and prof is not None
         kind, mp = code
         nz = N * nu + (N if lane else 0) + (N if rows else 0)
-        crows, rhs, r_rate0, n_var, n_slack = _constant_rows(problem, nz, n_orow)
-        m_max = len(crows) + n_var + n_slack
-        mq = max(m_max, 1)
-        C = np.zeros((mq, nz))
-        b_ = np.zeros(mq)
-        if crows:
-            C[: len(crows)] = np.array(crows)
-            b_[: len(crows)] = rhs
-        need_gamma = n_var > 0
+        cr = constant_rows(problem, nz, n_orow)
+        mq, need_gamma = cr.mq, cr.gamma
         ip = np.zeros(_NIP, dtype=np.int64)
         ip[[_I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH]] = [kind, nx, nu, N, pa.kind]
         ip[_I_LIN] = 1 if config.linearization == "paper" else 0
@@ -220,8 +213,8 @@ class FastLtvMpc(StageQpSolve, TrackingWarmStart):
         ip[_I_HORIZON] = 1 if config.horizon == "paper" else 0
         ip[_I_FF] = 1 if config.feedforward == "curvature" else 0
         ip[_I_LANE] = int(lane)
-        ip[_I_MCONST] = len(crows)
-        ip[_I_RATE0] = r_rate0
+        ip[_I_MCONST] = cr.m_const
+        ip[_I_RATE0] = cr.r_rate0
         ip[_I_MAXITER] = settings.max_iter
         ip[_I_GAMMA] = int(need_gamma)
         ip[_I_NZ] = nz
@@ -268,8 +261,8 @@ class FastLtvMpc(StageQpSolve, TrackingWarmStart):
             _W_TABXY: pa.tab_xy,
             _W_TABH: pa.tab_h,
             _W_TABK: pa.tab_k,
-            _W_C: C,
-            _W_B: b_,
+            _W_C: cr.C,
+            _W_B: cr.b,
             _W_REFS: (N + 1, 4),
             _W_XREF: (N + 1, nx),
             _W_UREF: (N, nu),
@@ -352,15 +345,13 @@ class FastLtvMpc(StageQpSolve, TrackingWarmStart):
         # active-set work: active (nz), isact (mq), rowcol (mq: the constant rows' single nonzero
         # columns, -1 for a dense row; the step marks the rows it writes), kpos (2N), osel
         # (obstacles), rgrp (mq)
-        rowcol = np.full(mq, -1, dtype=np.int64)
-        rowcol[: len(crows)] = single_nonzero_columns(C[: len(crows)])
         self._ibuf = np.concatenate(
             [
                 ip,
                 fo,
                 fs.ravel(),
                 np.zeros(nz + mq, dtype=np.int64),
-                rowcol,
+                cr.rowcol,
                 np.zeros(2 * N + max(len(obstacles), 1) + mq, dtype=np.int64),
             ]
         )

@@ -23,6 +23,7 @@ from ..paths.base import ReferencePath
 from ..paths.compiled import path_arrays
 from ..paths.profile_compiled import profile_array
 from ..scene.obstacles import Circle, ConstantVelocity, Polygon, Static
+from ..solvers.dense_qp import single_nonzero_columns
 from .fast_step import input_bound_rows
 from .fast_layout import _OB_X, _OB_Y, _OB_VX, _OB_VY, _OB_RB, _OB_OX, _OB_OY, _OB_WIN, _NOB
 from .mpc import MpcConfig
@@ -127,14 +128,25 @@ def fast_unsupported_reason(
         limited = [i for i, n in enumerate(model.input_names) if n in ("steer", "accel")]
         if not np.all(np.isfinite(problem.u_min[limited]) & np.isfinite(problem.u_max[limited])):
             return "the friction circle needs finite steer and accel bounds on the compiled path"
-    lane = problem.lane
-    rows = bool(obstacles) and (avoidance or AvoidanceConfig()).uses_rows
-    if rows and not lane and (avoidance or AvoidanceConfig()).formulation == "corridor":
+    rows = uses_rows(obstacles, avoidance)
+    if rows and not problem.lane and (avoidance or AvoidanceConfig()).formulation == "corridor":
         return "the corridor formulation needs a road (MpcProblem.road)"
     if solver == "osqp":
         return None
+    return condensed_unsupported_reason(problem, settings, rows)
+
+
+def uses_rows(obstacles, avoidance: AvoidanceConfig | None) -> bool:
+    """Whether these obstacles enter the QP as constraint rows (``hard``, ``corridor``)."""
+    return bool(obstacles) and (avoidance or AvoidanceConfig()).uses_rows
+
+
+def condensed_unsupported_reason(problem: MpcProblem, settings: FastSettings, rows: bool) -> str | None:
+    """Why the condensed solver cannot solve the stage QPs of ``problem`` (with obstacle rows
+    when ``rows``), whoever assembles them, or None."""
     if np.linalg.eigvalsh(problem.R + problem.Rc).min() <= 1e-12 * max(1.0, float(np.abs(problem.R).max())):
         return "R + Rc is not positive definite (the condensed QP needs a strictly convex cost in the inputs)"
+    lane = problem.lane
     if lane and problem.lane_slack_weight <= 0:
         return "lane_slack_weight is 0 (the slack needs a quadratic weight)"
     if rows and problem.obstacle_slack_weight <= 0:
@@ -143,6 +155,38 @@ def fast_unsupported_reason(
     if nz > settings.max_variables:
         return f"the condensed QP has {nz} variables, more than max_variables={settings.max_variables}"
     return None
+
+
+@dataclass(frozen=True)
+class ConstantRows:
+    """The rows of ``C z >= b`` of the condensed QP, sized for every row a step can add:
+    ``C`` (mq, nz), ``b`` (mq,) hold the constant rows first (``m_const`` of them; the u_0 rate
+    rows from ``r_rate0`` have a b that follows u_prev); ``rowcol`` (mq,) the single nonzero
+    column of each constant row (-1: dense); ``gamma``: a step adds state, road or obstacle rows."""
+
+    C: np.ndarray
+    b: np.ndarray
+    rowcol: np.ndarray
+    m_const: int
+    r_rate0: int
+    gamma: bool
+
+    @property
+    def mq(self) -> int:
+        return len(self.b)
+
+
+def constant_rows(problem: MpcProblem, nz: int, n_orow: int = 0) -> ConstantRows:
+    """:func:`_constant_rows` as the arrays the condensed solve works in."""
+    crows, rhs, r_rate0, n_var, n_slack = _constant_rows(problem, nz, n_orow)
+    mq = max(len(crows) + n_var + n_slack, 1)
+    C, b = np.zeros((mq, nz)), np.zeros(mq)
+    if crows:
+        C[: len(crows)] = np.array(crows)
+        b[: len(crows)] = rhs
+    rowcol = np.full(mq, -1, dtype=np.int64)
+    rowcol[: len(crows)] = single_nonzero_columns(C[: len(crows)])
+    return ConstantRows(C, b, rowcol, len(crows), r_rate0, n_var > 0)
 
 
 def _constant_rows(problem: MpcProblem, nz: int, n_orow: int = 0):
