@@ -53,9 +53,8 @@ _OBS_NONE, _OBS_POTENTIAL, _OBS_GAUSSIAN = 0, 1, 2
 MODE_NO_PLAN, MODE_SHIFTED_PLAN, MODE_ITERATE = 0, 1, 2
 # stages of a step: all of it; up to the linearization trajectory (obstacle rows are built from it
 # in Python by ``ocp.avoidance``); the rest, with those rows in the buffers; of the rest, only
-# the stage costs and road rows (the stage QP complete in the buffers, for another solver); only
-# the condensed solve of the stage QP in the buffers
-STAGE_ALL, STAGE_LINEARIZE, STAGE_SOLVE, STAGE_COST, STAGE_CONDENSE = 0, 1, 2, 3, 4
+# the stage costs and road rows (the stage QP complete in the buffers, for another solver)
+STAGE_ALL, STAGE_LINEARIZE, STAGE_SOLVE, STAGE_COST = 0, 1, 2, 3
 # columns of an obstacle row: pose (x, y) [m] at t = 0, velocity (vx, vy) [m/s], bounding radius
 # [m], offset (x, y) [m] of the point projected for the path heading, projection window extra [m]
 _OB_X, _OB_Y, _OB_VX, _OB_VY, _OB_RB, _OB_OX, _OB_OY, _OB_WIN = range(8)

@@ -36,7 +36,7 @@ from .fast_layout import _I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH, _I_LIN, _I_METHO
 from .fast_layout import _I_RATE0, _I_MAXITER, _I_GAMMA, _I_NZ, _I_RICCATI, _I_MQ, _I_OFORM, _I_NOBS, _I_OMAX, _I_DETOUR
 from .fast_layout import _I_OROWS, _I_PROFILE, _I_ACCEL, _I_STEER, _I_FRICTION, _I_NSEL, _NIP
 from .fast_layout import _OBS_NONE, MODE_SHIFTED_PLAN, MODE_ITERATE, STAGE_LINEARIZE, STAGE_COST
-from .fast_layout import STAGE_ALL, STAGE_CONDENSE
+from .fast_layout import STAGE_ALL
 from .fast_layout import _W_FP, _W_MP, _W_BND, _W_GEO, _W_WQ, _W_RM, _W_RC, _W_TABS, _W_TABXY, _W_TABH, _W_TABK, _W_C
 from .fast_layout import _W_B, _W_REFS, _W_XREF, _W_UREF, _W_XBAR, _W_UBAR, _W_F, _W_A, _W_BD, _W_CD, _W_LANEN, _W_LANEB
 from .fast_layout import _W_XF, _W_P, _W_LAM, _W_VB, _W_S, _W_T2, _W_GAM, _W_H, _W_G, _W_Z, _W_L, _W_J, _W_RQ, _W_D
@@ -167,8 +167,7 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
     ``_W_XLIN`` buffer, horizon arc lengths in ``_W_SARR``), after which the caller writes the
     obstacle rows, lane bounds and detour offsets of the step and runs the rest (``STAGE_SOLVE``);
     or, of the rest, only the stage costs and road rows (``STAGE_COST``: the stage QP is then
-    complete in the buffers, for another solver) or only the condensed solve of the stage QP in
-    the buffers (``STAGE_CONDENSE``). A solve writes
+    complete in the buffers, for another solver). A solve writes
     ``out = [u (nu), X ((N+1) nx), U (N nu), xref ((N+1) nx)]`` and
     ``info = [s, e_y, e_psi, iterations]``. ``sides`` : passing side per obstacle (``_SIDE_*``),
     read and updated by the detour. ``wbuf`` holds every float array (constants and work),
@@ -416,18 +415,17 @@ def _control_step(x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, sides, wbuf, ibu
             )
         if stage == STAGE_LINEARIZE:
             return 0
-    elif stage != STAGE_CONDENSE:  # the detour of the rows, or a lateral reference, written between the stages
+    else:  # the detour of the rows, or a lateral reference, written between the stages
         e_ref = _v1(wbuf, fo, _W_EREF)
         for k in range(N + 1):
             if e_ref[k] != 0.0:
                 _shift_references(N, s_arr, refs, e_ref, xref)
                 break
-    if stage != STAGE_CONDENSE:
-        _stage_costs(N, nx, ip, fp, lane, Wq, We, qt, xref, obs, oproj, osel, t_s, dt, Xbar, F, pkind, geo,
-                     tab_s, tab_xy, tab_h, tab_k, lane_n, lane_b, lane_lo, lane_hi, lane_dlo, lane_dhi,
-                     _v2(wbuf, fo, fs, _W_RLIN), _v2(wbuf, fo, fs, _W_XLIN))  # fmt: skip
-        if stage == STAGE_COST:
-            return 0
+    _stage_costs(N, nx, ip, fp, lane, Wq, We, qt, xref, obs, oproj, osel, t_s, dt, Xbar, F, pkind, geo,
+                 tab_s, tab_xy, tab_h, tab_k, lane_n, lane_b, lane_lo, lane_hi, lane_dlo, lane_dhi,
+                 _v2(wbuf, fo, fs, _W_RLIN), _v2(wbuf, fo, fs, _W_XLIN))  # fmt: skip
+    if stage == STAGE_COST:
+        return 0
     code, iters = condensed_solve(
         N, nx, nu, nz, x, u_prev, A, B, c, We, qt, Rm, Rc, uref, ulo, uhi, dmax, x_min, x_max, lane, lane_n, lane_b,
         lane_lo, lane_hi, lane_dlo, lane_dhi, _v2(wbuf, fo, fs, _W_XLIN), nrow, rowa, rowb, ip[_I_RICCATI] == 1,
