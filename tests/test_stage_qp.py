@@ -32,11 +32,12 @@ from test_solver_oracle import same_step_data
 #: both OSQP solves at 1e-9 (the tolerances below follow from it)
 OSQP = OsqpSettings(eps_abs=1e-9, eps_rel=1e-9, max_iter=100000)
 #: the two assemblies compute the same numbers in a different order: they agree to rounding
-#: (measured: 1e-13 on these cases); 1e-9 is the room for rounding through the linearization
+#: (measured: 3e-11 at most on these cases, in fields of size up to 1e2); 1e-9 is the room for
+#: rounding through the linearization
 ASSEMBLY_TOL = 1e-9
 #: OSQP on two stage QPs equal to rounding, with the same settings and warm starts: the plans
 #: differ by rounding carried through its iterations and through the closed loop (measured:
-#: below 1e-12 m over 40 steps), far below its stopping rule's 1e-9 scaled by the problem's
+#: 5e-12 at most over 40 steps), far below its stopping rule's 1e-9 scaled by the problem's
 #: sensitivity; a wrong row, weight or bound moves a plan by centimetres
 LOOP_TOL = 1e-6
 

@@ -35,12 +35,12 @@ from ..solvers.projected_gradient import ProjectedGradientBackend, ProjectedGrad
 from ..types import ControlOutput, SolveResult, WarmStart
 from ..units import TWO_PI, wrap_angle
 from .fallback import FallbackConfig, FallbackLadder
+from .base import TrackingWarmStart, checked_obstacles, checked_road, checked_speed_cap
 
 if TYPE_CHECKING:
     from ..ocp.qp import LtvQp
     from .condensed import CondensedBackend
     from .fast_setup import FastSettings
-from .base import TrackingWarmStart, checked_obstacles, checked_road, checked_speed_cap
 
 
 def _shift_references(xref: np.ndarray, refs: np.ndarray, s_arr: np.ndarray, e: np.ndarray) -> None:
@@ -167,10 +167,10 @@ class MpcConfig:
 
 class StageQpSolve:
     """The step of a controller that assembles each step's stage QP (its ``prepare``, giving
-    :class:`StepData`) and hands it to a sparse solver backend (``qp``, an
-    :class:`~mpcdrive.ocp.qp.LtvQp`, and ``backend``, OSQP or projected gradient), with the SQP
-    iterations of ``config`` and the fallback ladder after a failed solve. The solver only solves:
-    it never rebuilds the problem and knows no model. Needs ``prepare``, ``qp``, ``backend``,
+    :class:`StepData`) and hands it to a solver ``backend``: OSQP or projected gradient on the
+    sparse layout ``qp`` (an :class:`~mpcdrive.ocp.qp.LtvQp`), or the condensed solver, which
+    takes the StepData as it is; with the SQP iterations of ``config`` and the fallback ladder
+    after a failed solve. The solver only solves: it never rebuilds the problem and knows no model. Needs ``prepare``, ``qp``, ``backend``,
     ``config``, ``problem``, ``dt_s``, ``fallback`` and ``_du_step`` on the instance."""
 
     config: MpcConfig
@@ -391,9 +391,8 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
         avoidance, obstacles = checked_obstacles(self.avoidance, obstacles)
         avoidance.obstacles = list(obstacles)
 
-    # -- warm start: initial_warm, _check_state and _check_warm from TrackingWarmStart ---------
-
-    # -- one control step: step, _solve and finish from StageQpSolve ---------------------------
+    # -- one control step (step, _solve and finish from StageQpSolve; initial_warm, _check_state
+    # and _check_warm from TrackingWarmStart) -------------------------------------------------
     def prepare(self, x, warm: WarmStart, around=None, s_m: float | None = None) -> StepData:
         """Projection, horizon references, linearization and obstacle terms for measured state
         ``x``: the part of a step every solver of this problem shares. ``around=(X, U)``
