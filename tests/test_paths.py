@@ -627,6 +627,52 @@ def test_waypoint_projection_is_the_nearest_table_point(closed):
     np.testing.assert_array_equal(np.c_[s_m, e_m], np.array(got))
 
 
+@pytest.mark.parametrize("closed", [False, True], ids=["open", "closed"])
+def test_waypoint_projection_steps_over_far_segments_exactly(closed):
+    """A long winding path (about 4,000 table segments) and points up to 60 m off it, searched
+    in windows of 1 m to the whole path: the projection, which steps over segments it can prove
+    farther, finds the nearest point of the segments in the window (the oracle's full scan;
+    where two segments meet at the nearest point, either)."""
+    t = np.linspace(0.0, 2.0 * np.pi, 60)[: -1 if closed else None]
+    pts = np.c_[(120.0 + 25.0 * np.sin(5.0 * t)) * np.cos(t), (80.0 + 25.0 * np.sin(5.0 * t)) * np.sin(t)]
+    path = WaypointPath(pts, closed=closed, ds_m=0.2)
+    rng = np.random.default_rng(5)
+    L, ds, m = path.length_m, path._ds, len(path._s) - 1
+    far = 0
+    for _ in range(300):
+        s_guess = float(rng.uniform(0.0, L))
+        window = float(np.exp(rng.uniform(0.0, np.log(L))))
+        p = path.position(float(rng.uniform(0.0, L))) + rng.normal(0.0, 20.0, 2)
+        s_n, e_n = path.project(p, s_guess, window)
+        # the oracle: every segment of the window (as the kernel picks them), each end of an
+        # open path extended along its tangent
+        i0, i1 = int(np.floor((s_guess - window) / ds)), int(np.ceil((s_guess + window) / ds))
+        if 2.0 * window >= L:
+            i0, i1 = 0, m - 1
+        elif not closed:
+            i0, i1 = min(max(i0, 0), m - 1), min(max(i1, 0), m - 1)
+        ii = np.arange(i0, i1 + 1)
+        j = ii % m if closed else ii
+        p0, d = path._xy[j], path._xy[j + 1] - path._xy[j]
+        tt = np.einsum("ij,ij->i", p - p0, d) / np.einsum("ij,ij->i", d, d)
+        lo, hi = np.zeros_like(tt), np.ones_like(tt)
+        if not closed:
+            lo[j == 0], hi[j == m - 1] = -np.inf, np.inf
+        tt = np.clip(tt, lo, hi)
+        r = p - p0 - tt[:, None] * d
+        dist = np.hypot(r[:, 0], r[:, 1])
+        ln = np.hypot(d[:, 0], d[:, 1])
+        near = np.flatnonzero(dist <= dist.min() + 1e-9)
+        s_o = path._s[j[near]] + tt[near] * ln[near]
+        e_o = (d[near, 0] * r[near, 1] - d[near, 1] * r[near, 0]) / ln[near]
+        ds_o = s_o - s_n
+        if closed:  # the lap is another test's business
+            ds_o = (ds_o + 0.5 * L) % L - 0.5 * L
+        assert np.any((np.abs(ds_o) <= 1e-9) & (np.abs(e_o - e_n) <= 1e-9)), (s_n, e_n, s_o, e_o)
+        far += dist.min() > 10.0
+    assert far > 100  # most points far from the path: most segments are stepped over
+
+
 @pytest.mark.parametrize("path", PROJECTION_PATHS, ids=PROJECTION_IDS)
 def test_project_track_chains_each_point_to_the_one_before(path):
     """project_track equals the generic per-point chain (each point searched near the previous

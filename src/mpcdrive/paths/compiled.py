@@ -17,7 +17,7 @@ from numba import njit
 
 KIND_STRAIGHT = 0  # geo: [start x, start y, t x, t y, n x, n y, heading, length]
 KIND_CIRCLE = 1  # geo: [centre x, centre y, radius, sign, start angle, length]
-KIND_WAYPOINTS = 2  # geo: [length, closed, ds, lap turn]
+KIND_WAYPOINTS = 2  # geo: [length, closed, ds, lap turn, longest segment]
 
 _PI = math.pi
 _TWO_PI = 2.0 * math.pi
@@ -167,6 +167,26 @@ def path_project(kind, geo, tab_s, tab_xy, s_guess, window_m, px, py):
     return _lap_shift(geo[0], geo[1] != 0.0, s_loc, s_guess), e_y
 
 
+@njit(cache=True, inline="always")
+def _segment_d2(tab_xy, j, m, closed, px, py):
+    """Squared distance from (px, py) to segment j of a waypoint path's ``m`` segments (those at
+    the ends of an open path extended along their tangents), with its parameter t, squared
+    length and the offset (rx, ry) from its nearest point."""
+    p0x, p0y = tab_xy[j, 0], tab_xy[j, 1]
+    dx, dy = tab_xy[j + 1, 0] - p0x, tab_xy[j + 1, 1] - p0y
+    qx, qy = px - p0x, py - p0y
+    dd = dx * dx + dy * dy
+    t_raw = (qx * dx + qy * dy) / dd
+    t = min(max(t_raw, 0.0), 1.0)
+    if not closed:
+        if j == 0 and t_raw < 0.0:
+            t = t_raw
+        if j == m - 1 and t_raw > 1.0:
+            t = t_raw
+    rx, ry = qx - t * dx, qy - t * dy
+    return rx * rx + ry * ry, t, dd, rx, ry
+
+
 @njit(cache=True)
 def waypoints_project_local(geo, tab_s, tab_xy, s_guess, window_m, px, py):
     """(local s [m], e_y [m]) of the nearest point of a waypoint path (``geo``, tables as
@@ -185,22 +205,33 @@ def waypoints_project_local(geo, tab_s, tab_xy, s_guess, window_m, px, py):
         if not closed:
             i0 = min(max(i0, 0), m - 1)
             i1 = min(max(i1, 0), m - 1)
+    # segments far from the point are stepped over: every point of the segments i..i+n-1 lies
+    # within n c of segment i's start (c = geo[4], the longest segment), so while the point is
+    # farther than that from segment i's start plus a distance some segment reaches, none of
+    # them is nearer. That distance comes first from every k-th segment (k ~ sqrt of their
+    # number), then from the nearest segment so far. The end segments (which an open path
+    # extends) are always searched, and skipped segments are strictly farther: the result is
+    # that of the full scan.
+    c = geo[4]
+    bound = math.inf
+    nseg = i1 - i0 + 1
+    if nseg > 64:
+        stride = int(math.sqrt(nseg))
+        for ii in range(i0, i1 + 1, stride):
+            bound = min(bound, _segment_d2(tab_xy, ii % m if closed else ii, m, closed, px, py)[0])
     best, bj, bt, bdd, brx, bry = math.inf, 0, 0.0, 1.0, 0.0, 0.0
-    for ii in range(i0, i1 + 1):
+    ii = i0
+    while ii <= i1:
         j = ii % m if closed else ii
-        p0x, p0y = tab_xy[j, 0], tab_xy[j, 1]
-        dx, dy = tab_xy[j + 1, 0] - p0x, tab_xy[j + 1, 1] - p0y
-        qx, qy = px - p0x, py - p0y
-        dd = dx * dx + dy * dy
-        t_raw = (qx * dx + qy * dy) / dd
-        t = min(max(t_raw, 0.0), 1.0)
-        if not closed:
-            if j == 0 and t_raw < 0.0:
-                t = t_raw
-            if j == m - 1 and t_raw > 1.0:
-                t = t_raw
-        rx, ry = qx - t * dx, qy - t * dy
-        d2 = rx * rx + ry * ry
+        if ii < i1 and (closed or ii > 0):
+            qx, qy = px - tab_xy[j, 0], py - tab_xy[j, 1]
+            r0 = math.sqrt(qx * qx + qy * qy)
+            n_far = int((r0 - math.sqrt(min(best, bound)) - 1e-9 * (1.0 + r0)) / c) - 1
+            if n_far > 0:
+                ii = min(ii + n_far, i1)
+                continue
+        ii += 1
+        d2, t, dd, rx, ry = _segment_d2(tab_xy, j, m, closed, px, py)
         if d2 < best:
             best, bj, bt, bdd, brx, bry = d2, j, t, dd, rx, ry
     sd = math.sqrt(bdd)

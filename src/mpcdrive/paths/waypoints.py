@@ -153,7 +153,9 @@ class WaypointPath(ReferencePath):
         # total heading change per lap (a multiple of 2*pi on a closed path)
         self._lap_turn = 2.0 * math.pi * round((self._h[-1] - self._h[0]) / (2.0 * math.pi)) if closed else 0.0
         #: the scalars of the compiled description (paths.compiled.PathArrays.geo)
-        self._geo = np.array([self.length_m, float(closed), self._ds, self._lap_turn])
+        #: (length, closed, table step, lap turn, longest table segment)
+        seg = float(np.max(np.hypot(*np.diff(self._xy, axis=0).T)))
+        self._geo = np.array([self.length_m, float(closed), self._ds, self._lap_turn, seg])
 
     # -- evaluation -----------------------------------------------------------------------
     def _split(self, s):
