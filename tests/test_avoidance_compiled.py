@@ -3,12 +3,14 @@ ocp.avoidance: selection, tracks and hard rows on random instances, and the term
 P4 drive."""
 
 import copy
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
 
 from mpcdrive.bench.problems import PROBLEMS
 from mpcdrive.bench.runner import make_controller
+from mpcdrive.ocp.avoidance_compiled import obstacle_table, pose_at
 from mpcdrive.ocp.avoidance import SIDE_BLOCKED, SIDE_LEFT, SIDE_RIGHT, Avoidance, AvoidanceConfig, AvoidanceMemory
 from mpcdrive.paths import CirclePath, StraightPath
 from mpcdrive.paths.waypoints import WaypointPath
@@ -51,9 +53,12 @@ def _scene(rng, path, n_obs, lifetimes, trajectories=False):
             m = None
         elif motion == 1:
             m = ConstantVelocity(float(rng.uniform(-3.0, 8.0)), float(rng.uniform(-1.0, 1.0)))
-        else:
-            ts = np.linspace(0.0, 5.0, 11)
-            m = TrajectoryMotion(ts, 3.0 * ts, 0.2 * ts, 0.05 * ts)
+        else:  # uneven samples, starting before or after t = 0 and ending within the horizon or
+            # after it (held before the first and after the last sample), turning
+            t0 = float(rng.uniform(-1.0, 1.0))
+            ts = t0 + np.cumsum(rng.uniform(0.05, 0.4, int(rng.integers(1, 16))))
+            v = rng.uniform(0.0, 8.0)
+            m = TrajectoryMotion(ts, v * (ts - t0), rng.normal(0.0, 0.3, len(ts)).cumsum(), 0.05 * (ts - t0))
         life = {}
         if lifetimes and rng.random() < 0.4:
             t0 = float(rng.uniform(-1.0, 1.5))
@@ -115,8 +120,8 @@ def test_compiled_tracks_match_numpy(name):
     rng = np.random.default_rng(11)
     path = _paths()[name]
     cfg = AvoidanceConfig("hard", margin_m=0.2, influence_m=50.0, max_obstacles=6)
-    for _ in range(20):
-        obstacles = _scene(rng, path, 6, lifetimes=False)
+    for trial in range(30):
+        obstacles = _scene(rng, path, 6, lifetimes=False, trajectories=trial % 3 == 2)
         comp, ref = _pair(obstacles, path, cfg)
         s_arr, _ = _state(rng, path)
         rel = list(rng.permutation(6)[: int(rng.integers(0, 7))])
@@ -150,7 +155,7 @@ def test_compiled_rows_match_numpy_for_every_side_and_mode(name):
         times = t_s + DT * np.arange(1, N + 1)
         present = {j: obstacles[j].present(times) if obstacles[j].has_lifetime else ref._always for j in rel}
         boxes, centers, world, packed = comp._tracks(rel, t_s, s_arr)
-        assert (packed is None) == any(isinstance(obstacles[j].motion, TrajectoryMotion) for j in rel)
+        assert packed is not None
         a1, b1 = (
             v.copy()
             for v in comp._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present, following, packed)
@@ -164,7 +169,29 @@ def test_compiled_rows_match_numpy_for_every_side_and_mode(name):
             np.testing.assert_allclose(b[np.isfinite(b2)], b2[np.isfinite(b2)], rtol=0, atol=TOL)
 
 
-def test_recorded_trajectories_keep_the_numpy_selection_and_tracks():
+@dataclass(frozen=True)
+class _Circling:
+    """A motion of the user's own (no compiled form): a circle of radius 3 m."""
+
+    def offset(self, t_s):
+        return 3.0 * np.cos(t_s) - 3.0, 3.0 * np.sin(t_s), 0.0 * np.asarray(t_s)
+
+
+def test_compiled_pose_equals_the_obstacle_motion():
+    """pose_at against Obstacle.pose_at (np.interp for recorded trajectories) at times before,
+    inside, on and after the samples."""
+    rng = np.random.default_rng(13)
+    obstacles = _scene(rng, _paths()["straight"], 40, lifetimes=False, trajectories=True)
+    tab = obstacle_table(obstacles)
+    assert tab.all_simple
+    for j, ob in enumerate(obstacles):
+        m = ob.motion
+        times = list(rng.uniform(-2.0, 8.0, 20)) + (list(m.t_s) if isinstance(m, TrajectoryMotion) else [])
+        for t in times:
+            np.testing.assert_allclose(pose_at(j, float(t), *tab.motion), ob.pose_at(float(t)), rtol=0, atol=TOL)
+
+
+def test_recorded_trajectories_are_compiled_and_other_motions_keep_numpy():
     rng = np.random.default_rng(3)
     path = _paths()["straight"]
     obstacles = _scene(rng, path, 6, lifetimes=True, trajectories=True)
@@ -173,10 +200,25 @@ def test_recorded_trajectories_keep_the_numpy_selection_and_tracks():
             Circle(1.0), (10.0, 0.0, 0.0), TrajectoryMotion(np.array([0.0, 1.0]), np.zeros(2), np.zeros(2), np.zeros(2))
         )
     )
-    comp, ref = _pair(obstacles, path, AvoidanceConfig("hard", influence_m=40.0, max_obstacles=7))
+    cfg = AvoidanceConfig("hard", influence_m=40.0, max_obstacles=8)
+    comp, ref = _pair(obstacles, path, cfg)
+    assert comp._obstacle_table().all_simple
+    for _ in range(5):
+        s_arr, Xlin = _state(rng, path)
+        assert comp._tracks(comp.relevant(0.4, Xlin[0, :2]), 0.4, s_arr)[3] is not None
+        _same_terms(
+            comp.terms(0.4, Xlin[0], Xlin, s_arr, AvoidanceMemory()),
+            ref.terms(0.4, Xlin[0], Xlin, s_arr, AvoidanceMemory()),
+        )
+    own = Obstacle(rectangle(4.0, 2.0), (12.0, 1.0, 0.0), _Circling())  # type: ignore[arg-type]
+    comp, ref = _pair([*obstacles, own], path, cfg)
     assert not comp._obstacle_table().all_simple
     for _ in range(5):
         s_arr, Xlin = _state(rng, path)
+        rel = comp.relevant(0.4, Xlin[0, :2])
+        assert rel == ref.relevant(0.4, Xlin[0, :2])
+        if len(obstacles) in rel:
+            assert comp._tracks(rel, 0.4, s_arr)[3] is None  # the numpy tracks
         _same_terms(
             comp.terms(0.4, Xlin[0], Xlin, s_arr, AvoidanceMemory()),
             ref.terms(0.4, Xlin[0], Xlin, s_arr, AvoidanceMemory()),

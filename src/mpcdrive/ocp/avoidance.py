@@ -200,9 +200,10 @@ class Avoidance:
         self._e_ref = np.zeros(N1)
         self._always = np.ones(N, bool)  # the presence of an obstacle without a lifetime
         #: build with the compiled kernels (``ocp.avoidance_compiled``) where they apply: the
-        #: selection when every obstacle is static or at constant velocity, the tracks of such
-        #: obstacles and the hard rows on a path ``path_arrays`` describes; False: the numpy
-        #: code everywhere (the reference the kernels are tested against)
+        #: selection when every obstacle is static, at constant velocity or on a recorded
+        #: trajectory, the tracks of such obstacles and the hard rows on a path ``path_arrays``
+        #: describes; False: the numpy code everywhere (the reference the kernels are tested
+        #: against)
         self.compiled = True
         self._table: _ac.ObstacleTable | None = None
         self._table_ids: tuple = ()
@@ -239,8 +240,7 @@ class Avoidance:
                     float(xy[1]),
                     t_s + self.N * self.dt_s,
                     self.config.influence_m,
-                    tab.pose,
-                    tab.vel,
+                    *tab.motion,
                     tab.bound_r,
                     tab.life,
                     tab.has_life,
@@ -318,7 +318,7 @@ class Avoidance:
     def _tracks_compiled(
         self, cpath: PathArrays, tab: _ac.ObstacleTable, rel: list[int], t_s: float, s_arr: np.ndarray
     ):
-        """:meth:`_tracks` of static and constant-velocity obstacles, compiled."""
+        """:meth:`_tracks` of static, constant-velocity and recorded obstacles, compiled."""
         n, K = len(rel), self.N + 1
         sel = np.array(rel, np.int64)
         centers_a = np.empty((n, K, 2))
@@ -335,8 +335,7 @@ class Avoidance:
             float(self.dt_s),
             s_arr,
             sel,
-            tab.pose,
-            tab.vel,
+            *tab.motion,
             tab.moving,
             tab.shape,
             tab.radius,

@@ -1,11 +1,11 @@
 """Compiled (numba) kernels of :mod:`mpcdrive.ocp.avoidance` for its hot, per-step part: the
-obstacle selection, the horizon tracks (placement and Frenet boxes) of static and
-constant-velocity obstacles, and the hard avoidance rows, on the paths
+obstacle selection, the horizon tracks (placement and Frenet boxes) of static,
+constant-velocity and recorded-trajectory obstacles, and the hard avoidance rows, on the paths
 :func:`mpcdrive.paths.compiled.path_arrays` describes (straight, circle, waypoints).
 
 They are the compiled form of the numpy code kept in ``ocp.avoidance`` (``Avoidance.relevant``,
-``Avoidance._tracks``, ``Avoidance._hard_rows``), which still serves every other case (recorded
-trajectories, other path types) and is the reference they are tested against; the rules (which
+``Avoidance._tracks``, ``Avoidance._hard_rows``), which still serves every other case (motions
+of other types, other path types) and is the reference they are tested against; the rules (which
 obstacle, which side, which row) are decided in one place, ``Avoidance.terms``, and these
 kernels only compute the numbers. Obstacles are described by arrays (see :class:`ObstacleTable`),
 the considered ones in the order of ``relevant``.
@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 
 from ..paths.compiled import path_eval, path_project
-from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Static
+from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Static, TrajectoryMotion
 
 SHAPE_CIRCLE, SHAPE_POLYGON = 0, 1
 #: the row of an obstacle: avoid it (nearest-point or lateral half-plane), stop behind it
@@ -36,11 +36,14 @@ STANDING_STEP_M = 0.05
 @dataclass(frozen=True, eq=False)
 class ObstacleTable:
     """The obstacles of a list as arrays, obstacle j in row j: ``pose`` (n, 3) at t = 0, ``vel``
-    (n, 2) world velocity [m/s] (0 when static), ``moving`` (n,), ``simple`` (n,) (static or
-    constant velocity: the compiled tracks place it), ``shape`` (n,) (SHAPE_*), ``radius`` (n,)
-    (circles), ``verts`` (n, V, 2) body-frame vertices of polygons (the first ``nverts`` (n,) of
-    V), ``bound_r`` (n,) bounding radii, ``life`` (n, 2) lifetimes, ``has_life`` (n,).
-    ``all_simple``: every obstacle is simple. ``obstacles`` keeps the list it was made of."""
+    (n, 2) world velocity [m/s] (0 when static or recorded), ``moving`` (n,), ``simple`` (n,)
+    (a motion the kernels evaluate: static, constant velocity or a recorded trajectory),
+    ``shape`` (n,) (SHAPE_*), ``radius`` (n,) (circles), ``verts`` (n, V, 2) body-frame
+    vertices of polygons (the first ``nverts`` (n,) of V), ``bound_r`` (n,) bounding radii,
+    ``life`` (n, 2) lifetimes, ``has_life`` (n,). A recorded trajectory's samples are rows
+    ``tr_lo[j]:tr_hi[j]`` of ``tr_t`` (T,) [s] and ``tr_d`` (T, 3) (dx m, dy m, dyaw rad);
+    ``tr_lo == tr_hi`` for the other motions (see :func:`pose_at`). ``all_simple``: every
+    obstacle is simple. ``obstacles`` keeps the list it was made of."""
 
     obstacles: tuple
     pose: np.ndarray
@@ -54,7 +57,16 @@ class ObstacleTable:
     bound_r: np.ndarray
     life: np.ndarray
     has_life: np.ndarray
+    tr_lo: np.ndarray
+    tr_hi: np.ndarray
+    tr_t: np.ndarray
+    tr_d: np.ndarray
     all_simple: bool
+
+    @property
+    def motion(self) -> tuple:
+        """The arguments of :func:`pose_at` after the obstacle and the time."""
+        return self.pose, self.vel, self.tr_lo, self.tr_hi, self.tr_t, self.tr_d
 
 
 def obstacle_table(obstacles: list[Obstacle]) -> ObstacleTable:
@@ -65,12 +77,23 @@ def obstacle_table(obstacles: list[Obstacle]) -> ObstacleTable:
     moving, simple, has_life = np.zeros(n, np.bool_), np.zeros(n, np.bool_), np.zeros(n, np.bool_)
     shape, nverts = np.zeros(n, np.int64), np.zeros(n, np.int64)
     radius, bound_r = np.zeros(n), np.zeros(n)
+    tr_lo, tr_hi = np.zeros(n, np.int64), np.zeros(n, np.int64)
+    tr_t: list[np.ndarray] = []
+    tr_d: list[np.ndarray] = []
+    used = 0
     for j, ob in enumerate(obstacles):
         pose[j] = ob.pose
         moving[j] = ob.moving
-        if type(ob.motion) is ConstantVelocity:
-            vel[j] = ob.motion.vx_mps, ob.motion.vy_mps
-        simple[j] = type(ob.motion) in (Static, ConstantVelocity)
+        m = ob.motion
+        tr_lo[j] = used
+        if type(m) is ConstantVelocity:
+            vel[j] = m.vx_mps, m.vy_mps
+        elif type(m) is TrajectoryMotion:
+            used += len(m.t_s)
+            tr_t.append(m.t_s)
+            tr_d.append(np.stack([m.dx_m, m.dy_m, m.dyaw_rad], axis=1))
+        tr_hi[j] = used
+        simple[j] = type(m) in (Static, ConstantVelocity, TrajectoryMotion)
         if isinstance(ob.shape, Circle):
             shape[j], radius[j] = SHAPE_CIRCLE, ob.shape.radius_m
         else:
@@ -93,25 +116,58 @@ def obstacle_table(obstacles: list[Obstacle]) -> ObstacleTable:
         bound_r,
         life,
         has_life,
+        tr_lo,
+        tr_hi,
+        np.concatenate(tr_t) if tr_t else np.zeros(1),
+        np.concatenate(tr_d) if tr_d else np.zeros((1, 3)),
         bool(simple.all()),
     )
 
 
 @njit(cache=True)
-def select(t_s, x, y, t_end, reach, pose, vel, bound_r, life, has_life, max_n, out):
+def pose_at(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d):
+    """Pose (x m, y m, yaw rad) of obstacle j of a :class:`ObstacleTable` at time ``t`` [s]
+    (``Obstacle.pose_at``): a recorded trajectory interpolated linearly in time, held before its
+    first and after its last sample (as ``np.interp``); else ``pose + vel t``."""
+    lo, hi = tr_lo[j], tr_hi[j]
+    if hi == lo:
+        return pose[j, 0] + vel[j, 0] * t, pose[j, 1] + vel[j, 1] * t, pose[j, 2] + 0.0
+    if t <= tr_t[lo]:
+        a = b = lo
+    elif t >= tr_t[hi - 1]:
+        a = b = hi - 1
+    else:  # tr_t[a] <= t < tr_t[b], b = a + 1
+        a, b = lo, hi - 1
+        while b - a > 1:
+            mid = (a + b) // 2
+            if tr_t[mid] <= t:
+                a = mid
+            else:
+                b = mid
+    if a == b:
+        return pose[j, 0] + tr_d[a, 0], pose[j, 1] + tr_d[a, 1], pose[j, 2] + tr_d[a, 2]
+    f = t - tr_t[a]
+    w = tr_t[b] - tr_t[a]
+    dx = (tr_d[b, 0] - tr_d[a, 0]) / w * f + tr_d[a, 0]
+    dy = (tr_d[b, 1] - tr_d[a, 1]) / w * f + tr_d[a, 1]
+    dyaw = (tr_d[b, 2] - tr_d[a, 2]) / w * f + tr_d[a, 2]
+    return pose[j, 0] + dx, pose[j, 1] + dy, pose[j, 2] + dyaw
+
+
+@njit(cache=True)
+def select(t_s, x, y, t_end, reach, pose, vel, tr_lo, tr_hi, tr_t, tr_d, bound_r, life, has_life, max_n, out):
     """``Avoidance.relevant``: indices of the obstacles present at some time of [t_s, t_end] [s]
     whose pose at ``t_s`` minus the bounding radius ``bound_r`` (n,) lies within ``reach`` [m]
     of (x, y), nearest first (ties by index), at most ``max_n``, into ``out``; returns how many.
-    pose (n, 3) at t = 0 and vel (n, 2) world velocity [m/s] (0 for a static obstacle);
-    life (n, 2) lifetimes [s], used where ``has_life``."""
+    pose ... tr_d: the motions (``ObstacleTable.motion``, :func:`pose_at`); life (n, 2)
+    lifetimes [s], used where ``has_life``."""
     n = pose.shape[0]
     dist = np.empty(n)
     ok = np.zeros(n, np.bool_)
     for j in range(n):
         if has_life[j] and (life[j, 1] < t_s or life[j, 0] > t_end):
             continue
-        ox = pose[j, 0] + vel[j, 0] * t_s
-        oy = pose[j, 1] + vel[j, 1] * t_s
+        ox, oy, _ = pose_at(j, t_s, pose, vel, tr_lo, tr_hi, tr_t, tr_d)
         d = math.hypot(ox - x, oy - y) - bound_r[j]
         if d <= reach:
             dist[j] = d
@@ -144,6 +200,10 @@ def tracks(
     sel,
     pose,
     vel,
+    tr_lo,
+    tr_hi,
+    tr_t,
+    tr_d,
     moving,
     shape,
     radius,
@@ -153,7 +213,7 @@ def tracks(
     outlines,
     box,
 ):
-    """``Avoidance._tracks`` of static and constant-velocity obstacles ``sel`` (n,) over the K =
+    """``Avoidance._tracks`` of the obstacles ``sel`` (n,) (motions as :func:`pose_at`) over the K =
     len(s_arr) horizon times ``t_s + k dt_s``: centres (n, K, 2), world vertices (n, K, V, 2) of
     polygons (the first ``nverts`` of V) and Frenet boxes (n, 5, K) (``frenet_boxes``: a disc's
     centre, a polygon's vertex mean projected near ``s_arr[k]``), into those arrays. A static
@@ -165,13 +225,7 @@ def tracks(
         nv = nverts[j]
         for k in range(nk):
             t = t_s + dt_s * k
-            if moving[j]:
-                x = pose[j, 0] + vel[j, 0] * t
-                y = pose[j, 1] + vel[j, 1] * t
-            else:
-                x = pose[j, 0] + 0.0
-                y = pose[j, 1] + 0.0
-            yaw = pose[j, 2] + 0.0
+            x, y, yaw = pose_at(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d)
             centers[i, k, 0] = x
             centers[i, k, 1] = y
             g = s_arr[k]
