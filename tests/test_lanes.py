@@ -7,9 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from mpcdrive.control.lanes import LaneConfig, LaneDecision, LateralRamp, decide_lane, lane_of
+from mpcdrive.control.lanes import LaneConfig, LaneDecision, LateralRamp, _tracks, decide_lane, lane_of
+from mpcdrive.ocp.avoidance_compiled import obstacle_table
+from mpcdrive.paths import CirclePath
+from mpcdrive.paths.compiled import path_arrays
 from mpcdrive.paths.straight import StraightPath
-from mpcdrive.scene.obstacles import ConstantVelocity, Obstacle, Static, rectangle
+from mpcdrive.paths.waypoints import WaypointPath
+from mpcdrive.scene.obstacles import Circle, ConstantVelocity, Obstacle, Polygon, Static, TrajectoryMotion, rectangle
 from mpcdrive.scene.road import Lane, Road
 
 W = 4.0  # lane width [m]
@@ -32,8 +36,21 @@ def car(x: float, lane: int, speed: float, **kw) -> Obstacle:
     return Obstacle(rectangle(5.0, 2.0), (x, lane * W, 0.0), ConstantVelocity(speed, 0.0), **kw)
 
 
+def _same_decision(a: LaneDecision, b: LaneDecision):
+    for f in ("lane", "current", "action", "free", "band", "called_back", "origin", "speed_cap_mps"):
+        assert getattr(a, f) == getattr(b, f), f
+    for f in ("free_m", "band_m", "stop_m", "since_s", "gap_m"):
+        assert getattr(a, f) == pytest.approx(getattr(b, f), abs=1e-9), f
+    for f in ("s0_m", "s1_m", "e0_m"):
+        assert getattr(a.ramp, f) == pytest.approx(getattr(b.ramp, f), abs=1e-9), f
+
+
 def decide(obstacles, *, x=100.0, e_y=0.0, v=30.0, t=0.0, previous=None, rd=None, cfg=CFG) -> LaneDecision:
-    return decide_lane(rd or road(), PATH, x, e_y, v, obstacles, t, previous, cfg)
+    """The decision with the obstacles tracked in numpy, checked against the compiled tracks'."""
+    d = decide_lane(rd or road(), PATH, x, e_y, v, obstacles, t, previous, cfg)
+    compiled = (obstacle_table(obstacles), path_arrays(PATH))
+    _same_decision(decide_lane(rd or road(), PATH, x, e_y, v, obstacles, t, previous, cfg, compiled=compiled), d)
+    return d
 
 
 def test_free_road_keeps_the_route_lane_and_reports_every_lane_free():
@@ -284,3 +301,70 @@ def test_a_change_that_cannot_clear_a_close_obstacle_at_speed_is_capped_until_pa
         LaneConfig(turn_out_mps=0.0)
     with pytest.raises(ValueError, match="pass_margin_m"):
         LaneConfig(pass_margin_m=-0.1)
+
+
+def _random_obstacles(rng, path, n):
+    """Circles, rectangles and pentagons near the first 150 m of ``path``: static, at constant
+    velocity or on uneven recorded trajectories (some ending or starting within the horizon),
+    some with lifetimes, some out of range."""
+    obstacles = []
+    for j in range(n):
+        s = rng.uniform(-20.0, 150.0) if j else 400.0  # the first one out of range
+        p = path.position(s) + rng.normal(0.0, 3.0, 2)
+        yaw = float(path.heading(s)) + rng.normal(0.0, 0.4)
+        kind = rng.integers(3)
+        if kind == 0:
+            shape = Circle(float(rng.uniform(0.3, 1.5)))
+        elif kind == 1:
+            shape = rectangle(float(rng.uniform(1.0, 5.0)), float(rng.uniform(0.5, 2.0)))
+        else:
+            a = np.sort(rng.uniform(0.0, 2 * np.pi, 5))
+            shape = Polygon(np.column_stack([np.cos(a), np.sin(a)]) * rng.uniform(0.5, 1.5))
+        m = rng.integers(3)
+        motion = (
+            Static()
+            if m == 0
+            else ConstantVelocity(*rng.uniform(-5.0, 15.0, 2))
+            if m == 1
+            else TrajectoryMotion(
+                (ts := float(rng.uniform(-2.0, 4.0)) + np.cumsum(rng.uniform(0.1, 1.0, int(rng.integers(1, 12))))),
+                rng.uniform(0.0, 12.0) * (ts - ts[0]),
+                rng.normal(0.0, 0.5, len(ts)).cumsum(),
+                rng.normal(0.0, 0.1, len(ts)).cumsum(),
+            )
+        )
+        life = {}
+        if rng.random() < 0.3:
+            t0 = float(rng.uniform(-2.0, 6.0))
+            life = {"t_start_s": t0, "t_end_s": t0 + float(rng.uniform(0.0, 5.0))}
+        obstacles.append(Obstacle(shape, (*p, yaw), motion, name=f"o{j}", **life))
+    return obstacles
+
+
+@pytest.mark.parametrize(
+    "path",
+    [
+        StraightPath((0.0, 0.0), (300.0, 40.0)),
+        CirclePath((0.0, 0.0), 60.0, ccw=False),
+        WaypointPath(np.column_stack([np.linspace(0.0, 300.0, 40), 8.0 * np.sin(np.linspace(0.0, 300.0, 40) / 30.0)])),
+    ],
+    ids=["straight", "circle", "waypoints"],
+)
+def test_compiled_tracks_equal_the_numpy_tracks(path):
+    """The obstacles' tracks along the path (s, e, half extents, presence), compiled and numpy,
+    on random scenes: the same obstacles kept, the same numbers to 1e-12."""
+    rng = np.random.default_rng(21)
+    taus = np.arange(0.0, CFG.horizon_s + 1e-9, CFG.dt_s)
+    kept = 0
+    for _ in range(40):
+        obstacles = _random_obstacles(rng, path, 12)
+        s_m, t_s = float(rng.uniform(0.0, 100.0)), float(rng.uniform(0.0, 3.0))
+        ref = _tracks(path, obstacles, t_s, taus, s_m, 120.0)
+        got = _tracks(path, obstacles, t_s, taus, s_m, 120.0, (obstacle_table(obstacles), path_arrays(path)))
+        assert got[0].shape == ref[0].shape
+        kept += len(ref[0])
+        assert np.array_equal(got[4], ref[4])
+        for u, w in zip(got[:4], ref[:4]):
+            assert np.array_equal(np.isnan(u), np.isnan(w))
+            np.testing.assert_allclose(u[~np.isnan(w)], w[~np.isnan(w)], rtol=0, atol=1e-12)
+    assert 100 < kept < 40 * 12  # most obstacles kept, some out of range or absent

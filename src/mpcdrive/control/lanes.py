@@ -41,7 +41,8 @@ decision was taken to the target lane's line (:func:`lane_line`: the path itself
 lane, whose table may be wider than the lane the path is in, e.g. a route that moves over a
 lane; a neighbour's centre), over the distance driven at the current speed
 in the time that keeps the peak lateral acceleration and jerk within bounds, no steeper than
-``max_slope`` and no shorter than ``turn_out_m``. numpy only.
+``max_slope`` and no shorter than ``turn_out_m``. numpy, with the obstacles' tracks along the
+path compiled (:func:`_tracks_kernel`) where the obstacles and the path have a compiled form.
 """
 
 from __future__ import annotations
@@ -51,7 +52,10 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+from numba import njit
 
+from ..ocp.avoidance_compiled import SHAPE_CIRCLE, ObstacleTable, pose_at, table_of
+from ..paths.compiled import PathArrays, path_arrays, path_eval, path_project
 from ..scene.obstacles import Circle, Obstacle
 from ..scene.road import Road
 
@@ -242,10 +246,19 @@ def _extent(ob: Obstacle, dyaw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.max(np.abs(c * p[:, 0] - s * p[:, 1]), axis=1), np.max(np.abs(s * p[:, 0] + c * p[:, 1]), axis=1)
 
 
-def _tracks(path, obstacles, t_s: float, taus: np.ndarray, s_m: float, range_m: float):
-    """Per obstacle within range (judged where it is first present): (s, e, half length, half
-    width, present) over ``taus``, NaN where it is absent."""
-    out = []
+#: the search margin [m] of each later pose of a track beyond the distance from the one before
+#: (``ReferencePath.project_track``)
+_TRACK_MARGIN_M = 2.0
+
+
+def _tracks(path, obstacles, t_s: float, taus: np.ndarray, s_m: float, range_m: float, compiled=None):
+    """The obstacles within range (judged where first present), one row each: arrays (n, K) of
+    s, e, half length, half width (NaN where absent) and presence over ``taus`` (K,).
+    ``compiled``: (ObstacleTable of ``obstacles``, PathArrays of ``path``) to compute them in
+    compiled code."""
+    if compiled is not None:
+        return _tracks_compiled(*compiled, t_s, taus, s_m, range_m)
+    out: list[tuple] = []
     t = t_s + taus
     for ob in obstacles:
         present = np.asarray(ob.present(t), bool)
@@ -254,14 +267,77 @@ def _tracks(path, obstacles, t_s: float, taus: np.ndarray, s_m: float, range_m: 
         ks = np.flatnonzero(present)
         poses = ob.poses_at(t[ks])
         # the first pose searched within range of the car, each later one near the one before
-        s_p, e_p = path.project_track(poses[:, :2], s_m, range_m)
+        s_p, e_p = path.project_track(poses[:, :2], s_m, range_m, _TRACK_MARGIN_M)
         if abs(s_p[0] - s_m) > range_m:
             continue  # out of range now
         S, E, HL, HW = (np.full(len(taus), np.nan) for _ in range(4))
         S[ks], E[ks] = s_p, e_p
         HL[ks], HW[ks] = _extent(ob, poses[:, 2] - np.asarray(path.heading(s_p), float))
         out.append((S, E, HL, HW, present))
-    return out
+    if not out:
+        return (*(np.zeros((0, len(taus))) for _ in range(4)), np.zeros((0, len(taus)), bool))
+    return tuple(np.array(a) for a in zip(*out))
+
+
+def _tracks_compiled(tab: ObstacleTable, pa: PathArrays, t_s: float, taus: np.ndarray, s_m: float, range_m: float):
+    n, K = len(tab.obstacles), len(taus)
+    tr = np.empty((n, 4, K))
+    present = np.empty((n, K), np.bool_)
+    keep = np.empty(n, np.bool_)
+    _tracks_kernel(
+        pa.kind, pa.geo, pa.tab_s, pa.tab_xy, pa.tab_h, pa.tab_k, float(t_s), np.ascontiguousarray(taus, dtype=float),
+        float(s_m), float(range_m), _TRACK_MARGIN_M, *tab.motion, tab.life, tab.has_life, tab.shape, tab.radius,
+        tab.verts, tab.nverts, tr, present, keep,
+    )  # fmt: skip
+    tr, present = tr[keep], present[keep]
+    return tr[:, 0], tr[:, 1], tr[:, 2], tr[:, 3], present
+
+
+@njit(cache=True)
+def _tracks_kernel(
+    kind, geo, tab_s, tab_xy, tab_h, tab_k, t_s, taus, s_m, range_m, margin_m, pose, vel, tr_lo, tr_hi, tr_t, tr_d,
+    life, has_life, shape, radius, verts, nverts, tr, present, keep,
+):  # fmt: skip
+    """:func:`_tracks` of every obstacle of an ``ObstacleTable``: ``tr`` (n, 4, K) (s, e, half
+    length, half width; NaN where absent), ``present`` (n, K) and ``keep`` (n,) (present at
+    some time and within range)."""
+    K = taus.shape[0]
+    for j in range(pose.shape[0]):
+        keep[j] = False
+        guess, window, px, py, first = s_m, range_m, 0.0, 0.0, True
+        for k in range(K):
+            t = t_s + taus[k]
+            ok = not has_life[j] or (life[j, 0] <= t and t <= life[j, 1])
+            present[j, k] = ok
+            for f in range(4):
+                tr[j, f, k] = math.nan
+            if not ok:
+                continue
+            x, y, yaw = pose_at(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d)
+            if not first:
+                window = math.hypot(x - px, y - py) + margin_m
+            s, e = path_project(kind, geo, tab_s, tab_xy, guess, window, x, y)
+            if first:
+                if abs(s - s_m) > range_m:
+                    break  # out of range now
+                keep[j] = True
+                first = False
+            guess, px, py = s, x, y
+            tr[j, 0, k] = s
+            tr[j, 1, k] = e
+            if shape[j] == SHAPE_CIRCLE:
+                tr[j, 2, k] = radius[j]
+                tr[j, 3, k] = radius[j]
+                continue
+            d = yaw - path_eval(kind, geo, tab_s, tab_xy, tab_h, tab_k, s)[2]
+            c, sn = math.cos(d), math.sin(d)
+            hl, hw = 0.0, 0.0
+            for m in range(nverts[j]):
+                vx, vy = verts[j, m, 0], verts[j, m, 1]
+                hl = max(hl, abs(c * vx - sn * vy))
+                hw = max(hw, abs(sn * vx + c * vy))
+            tr[j, 2, k] = hl
+            tr[j, 3, k] = hw
 
 
 def decide_lane(
@@ -276,6 +352,8 @@ def decide_lane(
     config: LaneConfig = LaneConfig(),
     desired_speed_mps: float | None = None,
     return_by_s: float | None = None,
+    *,
+    compiled: tuple[ObstacleTable, PathArrays] | None = None,
 ) -> LaneDecision:
     """Decide the lane for the ego at arc length ``s_m`` [m], lateral offset ``e_y_m`` [m] and
     speed ``speed_mps`` [m/s] on ``path`` (the road's reference path: ``project``, ``heading``)
@@ -284,7 +362,9 @@ def decide_lane(
     ``desired_speed_mps`` [m/s], when given, replaces the config's (e.g. the MPC's reference
     speed here: a car stopped behind an obstacle still looks as far ahead as it wants to drive).
     ``return_by_s`` [s]: the ego must be back in the route lane by then (a goal on it): from the
-    route lane no change starts whose way out and back (two ramps at the current speed) ends later."""
+    route lane no change starts whose way out and back (two ramps at the current speed) ends later.
+    ``compiled``: the obstacles' ``ObstacleTable`` and the path's ``PathArrays``, to track the
+    obstacles along the path in compiled code (the same numbers as without)."""
     if not road.lanes:
         raise ValueError("the road has no lanes")
     cfg, n = config, len(road.lanes)
@@ -326,30 +406,39 @@ def decide_lane(
 
     gap_now = math.inf  # nearest obstacle ahead in the ego's lane now, bumper to bumper
     blockers: list[list] = [[] for _ in range(n)]  # per lane, the tracks of the obstacles ahead in it
-    for S, E, HL, HW, present in _tracks(path, obstacles, t_s, taus, s_m, cfg.range_m):
-        k0 = int(np.argmax(present))
-        ahead = S[k0] >= s_ego[k0]
+    # the obstacles' tracks, one row each (n_obs, K): judged ahead or behind where first present
+    S, E, HL, HW, present = _tracks(path, obstacles, t_s, taus, s_m, cfg.range_m, compiled)
+    rows = np.arange(len(S))
+    k0 = np.argmax(present, axis=1)
+    ahead = S[rows, k0] >= s_ego[k0]
+    gap_ahead = S - s_ego - HL - half_l
+    gap_enter = S - s_keep - HL - half_l
+    gap_behind = s_keep - S - HL - half_l
+    if len(taus) > 1:  # the speed along the path of a follower present all along, else the ego's
+        v_follow = np.gradient(S, taus, axis=1)
+        v_follow[~np.isfinite(S).all(axis=1)] = v
+    else:
+        v_follow = np.full(S.shape, v)
+    # a follower keeps its time gap; one standing still (a parked car passed) only needs the
+    # body's clearance
+    vf = np.maximum(v_follow, 0.0)
+    gap_follow = np.minimum(cfg.standstill_m, BEHIND_CLEARANCE_M + vf) + cfg.rear_time_gap_s * vf
+    with np.errstate(invalid="ignore"):  # NaN where an obstacle is absent: never in the lane
         for i, (lo, hi) in enumerate(edges):
             inlane = present & (np.minimum(E + HW, hi) - np.maximum(E - HW, lo) > 0.1)
-            if not inlane.any():
-                continue
-            if ahead:
-                gap = S - s_ego - HL - half_l
-                free_m[i] = min(free_m[i], float(gap[inlane].min()))
-                blockers[i].append((S, E, HL, HW, inlane))
-                if np.any((S - s_keep - HL - half_l)[inlane & during[i]] < enter_gap):
+            there = inlane.any(axis=1)
+            front = np.flatnonzero(there & ahead)
+            if len(front):
+                il = inlane[front]
+                free_m[i] = min(free_m[i], float(np.where(il, gap_ahead[front], np.inf).min()))
+                blockers[i].extend((S[r], E[r], HL[r], HW[r], inlane[r]) for r in front)
+                if np.any((gap_enter[front] < enter_gap) & il & during[i]):
                     enter_ok[i] = False
-                if i == cur and inlane[0]:
-                    gap_now = min(gap_now, float(gap[0]))
-            elif i != cur:  # behind, in a neighbour lane: the follower must keep its gap
-                inlane &= during[i]
-                gap = s_keep[inlane] - S[inlane] - HL[inlane] - half_l
-                k = np.flatnonzero(inlane)
-                v_follow = np.gradient(S, taus)[k] if np.isfinite(S).all() else np.full(len(k), v)
-                # a follower keeps its time gap; one standing still (a parked car passed) only
-                # needs the body's clearance
-                vf = np.maximum(v_follow, 0.0)
-                if np.any(gap < np.minimum(cfg.standstill_m, BEHIND_CLEARANCE_M + vf) + cfg.rear_time_gap_s * vf):
+                if i == cur and il[:, 0].any():
+                    gap_now = min(gap_now, float(gap_ahead[front][il[:, 0], 0].min()))
+            if i != cur:  # behind, in a neighbour lane: the follower must keep its gap
+                back = there & ~ahead
+                if np.any((gap_behind < gap_follow)[back] & inlane[back] & during[i]):
                     enter_ok[i] = False
     blocked = free_m < need
     free = np.where(np.arange(n) == cur, ~blocked, enter_ok)
@@ -499,6 +588,9 @@ class LaneChoosingMpc:
         self._ramp: LateralRamp | None = None
         self._held_gap: float | None = None
         self._cap: float | None = None
+        self._table: ObstacleTable | None = None
+        #: the path's compiled form (None: a path type without one; the tracks are then numpy)
+        self._path_arrays = path_arrays(mpc.path)
         names = list(mpc.model.input_names)
         #: the controller's full braking [m/s^2] (0: a model without an acceleration input)
         self._decel_mps2 = max(-float(mpc.problem.u_min[names.index("accel")]), 0.0) if "accel" in names else 0.0
@@ -514,6 +606,11 @@ class LaneChoosingMpc:
         if np.all(np.isfinite(x[:3])):
             s_m, e_y = mpc.path.project(x[:2], warm.s_m, mpc.config.projection_window_m)
             v = float(mpc.model.speed(x))
+            compiled = None
+            if self._path_arrays is not None:
+                self._table = table_of(mpc.obstacles, self._table)
+                if self._table.all_simple:
+                    compiled = (self._table, self._path_arrays)
             self.decision = decide_lane(
                 self.road,
                 mpc.path,
@@ -526,6 +623,7 @@ class LaneChoosingMpc:
                 self.config,
                 self._desired_speed(s_m),
                 self.return_by_s,
+                compiled=compiled,
             )
             band = self.decision.band
             if band != self._band:

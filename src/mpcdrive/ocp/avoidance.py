@@ -206,7 +206,6 @@ class Avoidance:
         #: against)
         self.compiled = True
         self._table: _ac.ObstacleTable | None = None
-        self._table_ids: tuple = ()
         self._cpath: PathArrays | None = None
         self._cpath_of: ReferencePath | None = None
         self._sel = np.empty(config.max_obstacles, np.int64)
@@ -214,9 +213,7 @@ class Avoidance:
 
     # -- compiled descriptions (rebuilt when the obstacles or the path are replaced) ---------
     def _obstacle_table(self) -> _ac.ObstacleTable:
-        ids = tuple(map(id, self.obstacles))
-        if self._table is None or ids != self._table_ids:  # the table holds them: ids stay unique
-            self._table, self._table_ids = _ac.obstacle_table(self.obstacles), ids
+        self._table = _ac.table_of(self.obstacles, self._table)
         return self._table
 
     def _compiled_path(self) -> PathArrays | None:

@@ -124,6 +124,15 @@ def obstacle_table(obstacles: list[Obstacle]) -> ObstacleTable:
     )
 
 
+def table_of(obstacles, cached: ObstacleTable | None) -> ObstacleTable:
+    """``cached`` if it describes these very ``obstacles`` (the same objects, in order), else
+    their new :class:`ObstacleTable` (it holds them: the identities stay unique)."""
+    if cached is not None and len(cached.obstacles) == len(obstacles):
+        if all(a is b for a, b in zip(cached.obstacles, obstacles)):
+            return cached
+    return obstacle_table(obstacles)
+
+
 @njit(cache=True)
 def pose_at(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d):
     """Pose (x m, y m, yaw rad) of obstacle j of a :class:`ObstacleTable` at time ``t`` [s]
