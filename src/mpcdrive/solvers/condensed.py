@@ -166,7 +166,7 @@ def plan_feasible(N, nx, nu, z, Xr, u_prev, u_lo, u_hi, dmax, x_min, x_max, tol)
 
 @njit(cache=True)
 def _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, every) -> bool:
-    """Flag (kpos = 1) every slack group (``every``; else every group without a slack, kpos 0)
+    """Flag every slack group (``every``; else every group without a slack, kpos 0: flagged 2)
     whose rows' multipliers sum to more than its slack's l1 weight; True if none does (zero
     slacks are then optimal there)."""
     for grp in range(2 * N):
@@ -176,9 +176,29 @@ def _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, every) -> bool:
     done = True
     for grp in range(2 * N):
         if (every or kpos[grp] == 0) and gsum[grp] > (w1l if grp < N else w1o):
-            kpos[grp] = 1
+            kpos[grp] = 1 if every else 2
             done = False
     return done
+
+
+@njit(cache=True)
+def _flag_later_groups(kpos, m_soft, m, rgrp, N, gsum):
+    """After :func:`_group_excess` flagged groups (kpos = 2) that had no slack: flag every group
+    with rows that follows one of them in its half (lane groups 0..N-1, obstacle groups
+    N..2N-1). A row that needs a slack at step k mostly does at the steps after it too (the
+    obstacle is still there); a slack too many costs a variable (it stays zero), one too few
+    another solve. ``gsum`` (2N) is work space."""
+    for grp in range(2 * N):
+        gsum[grp] = 0.0
+    for rr in range(m_soft, m):
+        gsum[rgrp[rr]] = 1.0  # the group has rows
+    for f0 in range(0, 2 * N, N):
+        spread = False
+        for k in range(N):
+            grp = f0 + k
+            spread = spread or kpos[grp] == 2
+            if spread and gsum[grp] != 0.0:
+                kpos[grp] = 1
 
 
 @njit(cache=True)
@@ -225,12 +245,12 @@ def soft_solve(
     solves and no group's multipliers sum to more than its slack's l1 weight, zero slacks satisfy
     the optimality conditions of the soft problem (exact penalty), so it is its solution. Else
     slacks are given to the groups flagged in ``kpos`` (1 = slack; the caller flags those the
-    linearization violates), plus every group whose multipliers exceed the weight, and solved
-    again until no group without a slack exceeds it (or with a slack on every group that has
+    linearization violates), plus every group whose multipliers exceed the weight and the groups
+    with rows after it (:func:`_flag_later_groups`), and solved again until no group without a slack exceeds it (or with a slack on every group that has
     rows: the full problem). The slacks' sign rows follow row m (``rowcol`` names their single
     nonzero; the other rows written per step are marked dense there). z[:nzu] holds the inputs."""
     code, iters = gi_solve(
-        H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol
+        H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol, False
     )
     if code == 0 and _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, True):
         return 0, iters
@@ -276,9 +296,13 @@ def soft_solve(
             C[rr, nzu + a] = 1.0
             b[rr] = 0.0
             rowcol[rr] = nzu + a
+            isact[rr] = 0  # the slacks are renumbered: only the rows of C z >= b keep a guess
+        # the rows active at the end of the solve before (as a guess: the same rows, slacks on
+        # more groups) are added first
         code, it2 = gi_solve(
-            H, g, C, b, m + nk, n2, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol
-        )
+            H, g, C, b, m + nk, n2, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol,
+            True,
+        )  # fmt: skip
         iters += it2
         if code != 0:
             if full:
@@ -290,6 +314,7 @@ def soft_solve(
                 kpos[grp] = 1
         if _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, False):
             return 0, iters
+        _flag_later_groups(kpos, m_soft, m, rgrp, N, gsum)
     return 3, iters
 
 
@@ -589,6 +614,7 @@ def condensed_solve(
             rown,
             max_iter,
             tol,
+            False,
         )
     return code, iters
 
