@@ -588,9 +588,14 @@ class LaneChoosingMpc:
         self._ramp: LateralRamp | None = None
         self._held_gap: float | None = None
         self._cap: float | None = None
-        self._table: ObstacleTable | None = None
+        self._table: ObstacleTable | None = None  # the obstacles' compiled description
         #: the path's compiled form (None: a path type without one; the tracks are then numpy)
         self._path_arrays = path_arrays(mpc.path)
+        if self._path_arrays is not None and mpc.obstacles:  # load the kernel now, not in a step
+            self._table = table_of(mpc.obstacles, None)
+            if self._table.all_simple:
+                taus = np.arange(0.0, self.config.horizon_s + 1e-9, self.config.dt_s)
+                _tracks_compiled(self._table, self._path_arrays, 0.0, taus, 0.0, self.config.range_m)
         names = list(mpc.model.input_names)
         #: the controller's full braking [m/s^2] (0: a model without an acceleration input)
         self._decel_mps2 = max(-float(mpc.problem.u_min[names.index("accel")]), 0.0) if "accel" in names else 0.0

@@ -210,6 +210,17 @@ class Avoidance:
         self._cpath_of: ReferencePath | None = None
         self._sel = np.empty(config.max_obstacles, np.int64)
         self._present_all = np.ones((config.max_obstacles, N), bool)
+        self._warm_up()
+
+    def _warm_up(self) -> None:
+        """One discarded :meth:`terms` along the path's start, so that loading (or, on a first
+        run, compiling) the kernels it uses happens while building, not in the first control
+        step (about 10 ms a kernel)."""
+        if not self.obstacles:
+            return
+        s_arr = np.linspace(0.0, min(self.N, self.path.length_m), self.N + 1)
+        Xlin = np.column_stack([self.path.position(s_arr), np.asarray(self.path.heading(s_arr), float)])
+        self.terms(0.0, Xlin[0], Xlin, s_arr, AvoidanceMemory())
 
     # -- compiled descriptions (rebuilt when the obstacles or the path are replaced) ---------
     def _obstacle_table(self) -> _ac.ObstacleTable:
