@@ -64,7 +64,7 @@ class ObstacleTable:
     all_simple: bool
 
     @property
-    def motion(self) -> tuple:
+    def motion(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The arguments of :func:`pose_at` after the obstacle and the time."""
         return self.pose, self.vel, self.tr_lo, self.tr_hi, self.tr_t, self.tr_d
 
