@@ -207,6 +207,7 @@ def test_delay_compensator_predicts_the_plant_exactly_without_model_error():
     res = simulate(ctl, Plant(model, "rk4", 5, act), path, [0, 0, 0, 3.0, 0, 0], 0.05, 40, stop_at_path_end=False)
     pred = np.array(log)
     np.testing.assert_allclose(pred[:-2], res.x[2:], atol=1e-9)
+    assert np.all(res.solve_time_s > 0.0)  # the whole step's time: the inner one reports none
 
 
 # ------------------------------------------------------------------ baselines, mismatch adapter

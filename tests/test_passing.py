@@ -60,6 +60,20 @@ def test_parked_car_with_a_free_neighbour_lane_is_passed(backend):
     assert abs(res.e_y_m[-1]) < 0.2  # and back in the route lane
 
 
+def test_the_step_time_includes_the_lane_decision():
+    """solve_time_s is the whole step's: with an MPC that reports no time at all, the lane
+    controller's steps still take the decision's time."""
+    import dataclasses
+
+    exp = build_experiment(ScenarioSpec.model_validate(_spec([PARKED], "fast")))
+    mpc = exp.controller.mpc
+    inner = mpc.step
+    mpc.step = lambda x, warm: dataclasses.replace(inner(x, warm), solve_time_s=0.0)
+    warm = exp.controller.initial_warm(exp.x0)
+    out = exp.controller.step(np.asarray(exp.x0, float), warm)
+    assert out.status == "ok" and out.solve_time_s > 0.0
+
+
 def test_without_a_neighbour_lane_it_stops_behind_the_parked_car():
     res = run_experiment(build_experiment(ScenarioSpec.model_validate(_spec([PARKED], neighbours=False))))
     m = compute_metrics(res)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from dataclasses import dataclass
 from typing import Any, Protocol, TypeVar
 
@@ -132,6 +133,7 @@ class DelayCompensator:
         return x
 
     def step(self, x, warm: DelayWarmStart) -> ControlOutput:
+        t0 = time.perf_counter()
         x = np.asarray(x, float)
         if not isinstance(warm, DelayWarmStart) or warm.inner is None or warm.actuator is None:
             raise ValueError(
@@ -162,4 +164,12 @@ class DelayCompensator:
             t_s=warm.t_s + self.dt_s,
             pending=pending,
         )
-        return dataclasses.replace(out, u=u, s_m=fr.s_m, e_y_m=fr.e_y_m, e_psi_rad=fr.e_psi_rad, warm=new_warm)
+        return dataclasses.replace(
+            out,
+            u=u,
+            s_m=fr.s_m,
+            e_y_m=fr.e_y_m,
+            e_psi_rad=fr.e_psi_rad,
+            warm=new_warm,
+            solve_time_s=time.perf_counter() - t0,  # the whole step: the prediction too
+        )

@@ -47,7 +47,9 @@ path compiled (:func:`_tracks_kernel`) where the obstacles and the path have a c
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import time
 from dataclasses import dataclass
 from typing import Literal
 
@@ -251,13 +253,21 @@ def _extent(ob: Obstacle, dyaw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 _TRACK_MARGIN_M = 2.0
 
 
-def _tracks(path, obstacles, t_s: float, taus: np.ndarray, s_m: float, range_m: float, compiled=None):
+def _tracks(
+    path,
+    obstacles,
+    t_s: float,
+    taus: np.ndarray,
+    s_m: float,
+    range_m: float,
+    compiled: tuple[ObstacleTable, PathArrays] | None = None,
+):
     """The obstacles within range (judged where first present), one row each: arrays (n, K) of
     s, e, half length, half width (NaN where absent) and presence over ``taus`` (K,).
     ``compiled``: (ObstacleTable of ``obstacles``, PathArrays of ``path``) to compute them in
     compiled code."""
     if compiled is not None:
-        return _tracks_compiled(*compiled, t_s, taus, s_m, range_m)
+        return _tracks_compiled(compiled[0], compiled[1], t_s, taus, s_m, range_m)
     out: list[tuple] = []
     t = t_s + taus
     for ob in obstacles:
@@ -606,6 +616,7 @@ class LaneChoosingMpc:
         return getattr(self.mpc, name)
 
     def step(self, x, warm):
+        t0 = time.perf_counter()
         mpc = self.mpc
         x = np.asarray(x, float)
         if np.all(np.isfinite(x[:3])):
@@ -648,7 +659,8 @@ class LaneChoosingMpc:
             if d.speed_cap_mps != self._cap:  # a turn-out: slowly past the obstacle, braking hard to it
                 mpc.set_speed_cap(d.speed_cap_mps, self._decel_mps2 or None)
                 self._cap = d.speed_cap_mps
-        return mpc.step(x, warm)
+        # the step's time is the whole step's: the lane decision too
+        return dataclasses.replace(mpc.step(x, warm), solve_time_s=time.perf_counter() - t0)
 
     def _stop_gap(self, d: LaneDecision, v: float) -> float:
         """Extra room [m] the MPC's stop row keeps before the obstacle while the car is held in a
