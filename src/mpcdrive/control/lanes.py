@@ -418,38 +418,39 @@ def decide_lane(
     blockers: list[list] = [[] for _ in range(n)]  # per lane, the tracks of the obstacles ahead in it
     # the obstacles' tracks, one row each (n_obs, K): judged ahead or behind where first present
     S, E, HL, HW, present = _tracks(path, obstacles, t_s, taus, s_m, cfg.range_m, compiled)
-    rows = np.arange(len(S))
-    k0 = np.argmax(present, axis=1)
-    ahead = S[rows, k0] >= s_ego[k0]
-    gap_ahead = S - s_ego - HL - half_l
-    gap_enter = S - s_keep - HL - half_l
-    gap_behind = s_keep - S - HL - half_l
-    if len(taus) > 1:  # the speed along the path of a follower present all along, else the ego's
-        v_follow = np.gradient(S, taus, axis=1)
-        v_follow[~np.isfinite(S).all(axis=1)] = v
-    else:
-        v_follow = np.full(S.shape, v)
-    # a follower keeps its time gap; one standing still (a parked car passed) only needs the
-    # body's clearance
-    vf = np.maximum(v_follow, 0.0)
-    gap_follow = np.minimum(cfg.standstill_m, BEHIND_CLEARANCE_M + vf) + cfg.rear_time_gap_s * vf
-    with np.errstate(invalid="ignore"):  # NaN where an obstacle is absent: never in the lane
-        for i, (lo, hi) in enumerate(edges):
-            inlane = present & (np.minimum(E + HW, hi) - np.maximum(E - HW, lo) > 0.1)
-            there = inlane.any(axis=1)
-            front = np.flatnonzero(there & ahead)
-            if len(front):
-                il = inlane[front]
-                free_m[i] = min(free_m[i], float(np.where(il, gap_ahead[front], np.inf).min()))
-                blockers[i].extend((S[r], E[r], HL[r], HW[r], inlane[r]) for r in front)
-                if np.any((gap_enter[front] < enter_gap) & il & during[i]):
-                    enter_ok[i] = False
-                if i == cur and il[:, 0].any():
-                    gap_now = min(gap_now, float(gap_ahead[front][il[:, 0], 0].min()))
-            if i != cur:  # behind, in a neighbour lane: the follower must keep its gap
-                back = there & ~ahead
-                if np.any((gap_behind < gap_follow)[back] & inlane[back] & during[i]):
-                    enter_ok[i] = False
+    if len(S):  # (no obstacle in range: every lane free over the whole look-ahead)
+        rows = np.arange(len(S))
+        k0 = np.argmax(present, axis=1)
+        ahead = S[rows, k0] >= s_ego[k0]
+        gap_ahead = S - s_ego - HL - half_l
+        gap_enter = S - s_keep - HL - half_l
+        gap_behind = s_keep - S - HL - half_l
+        if len(taus) > 1:  # the speed along the path of a follower present all along, else the ego's
+            v_follow = np.gradient(S, taus, axis=1)
+            v_follow[~np.isfinite(S).all(axis=1)] = v
+        else:
+            v_follow = np.full(S.shape, v)
+        # a follower keeps its time gap; one standing still (a parked car passed) only needs the
+        # body's clearance
+        vf = np.maximum(v_follow, 0.0)
+        gap_follow = np.minimum(cfg.standstill_m, BEHIND_CLEARANCE_M + vf) + cfg.rear_time_gap_s * vf
+        with np.errstate(invalid="ignore"):  # NaN where an obstacle is absent: never in the lane
+            for i, (lo, hi) in enumerate(edges):
+                inlane = present & (np.minimum(E + HW, hi) - np.maximum(E - HW, lo) > 0.1)
+                there = inlane.any(axis=1)
+                front = np.flatnonzero(there & ahead)
+                if len(front):
+                    il = inlane[front]
+                    free_m[i] = min(free_m[i], float(np.where(il, gap_ahead[front], np.inf).min()))
+                    blockers[i].extend((S[r], E[r], HL[r], HW[r], inlane[r]) for r in front)
+                    if np.any((gap_enter[front] < enter_gap) & il & during[i]):
+                        enter_ok[i] = False
+                    if i == cur and il[:, 0].any():
+                        gap_now = min(gap_now, float(gap_ahead[front][il[:, 0], 0].min()))
+                if i != cur:  # behind, in a neighbour lane: the follower must keep its gap
+                    back = there & ~ahead
+                    if np.any((gap_behind < gap_follow)[back] & inlane[back] & during[i]):
+                        enter_ok[i] = False
     blocked = free_m < need
     free = np.where(np.arange(n) == cur, ~blocked, enter_ok)
     # a neighbour narrower than the ego here (a lane that has ended or not begun) is not free
@@ -601,7 +602,7 @@ class LaneChoosingMpc:
         self._table: ObstacleTable | None = None  # the obstacles' compiled description
         #: the path's compiled form (None: a path type without one; the tracks are then numpy)
         self._path_arrays = path_arrays(mpc.path)
-        if self._path_arrays is not None and mpc.obstacles:  # load the kernel now, not in a step
+        if self._path_arrays is not None:  # load the kernel now, not in a step
             self._table = table_of(mpc.obstacles, None)
             if self._table.all_simple:
                 taus = np.arange(0.0, self.config.horizon_s + 1e-9, self.config.dt_s)

@@ -216,8 +216,6 @@ class Avoidance:
         """One discarded :meth:`terms` along the path's start, so that loading (or, on a first
         run, compiling) the kernels it uses happens while building, not in the first control
         step (about 10 ms a kernel)."""
-        if not self.obstacles:
-            return
         s_arr = np.linspace(0.0, min(self.N, self.path.length_m), self.N + 1)
         Xlin = np.column_stack([self.path.position(s_arr), np.asarray(self.path.heading(s_arr), float)])
         self.terms(0.0, Xlin[0], Xlin, s_arr, AvoidanceMemory())
