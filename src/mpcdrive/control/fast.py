@@ -421,6 +421,10 @@ class FastLtvMpc(StageQpSolve, TrackingWarmStart):
                 out,
                 self._info,
             )
+        # the car-following references (a lane blocked ahead, a speed cap) come in mid-run: the
+        # step that first needs them would load them (the next step recomputes the references)
+        w = self._w
+        follow_references_into(float(x[2]), w[_W_SARR].copy(), w[_W_VARR].copy(), self._wbuf, self._ibuf)
 
     # -- obstacles ----------------------------------------------------------------------------
     @property

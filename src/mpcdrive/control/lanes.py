@@ -602,7 +602,8 @@ class LaneChoosingMpc:
         self._table: ObstacleTable | None = None  # the obstacles' compiled description
         #: the path's compiled form (None: a path type without one; the tracks are then numpy)
         self._path_arrays = path_arrays(mpc.path)
-        if self._path_arrays is not None:  # load the kernel now, not in a step
+        road.bounds(0.0, 0.0, 0.0, fp)  # load the road's kernel now: each band change uses it
+        if self._path_arrays is not None:  # and the lane tracks' kernel
             self._table = table_of(mpc.obstacles, None)
             if self._table.all_simple:
                 taus = np.arange(0.0, self.config.horizon_s + 1e-9, self.config.dt_s)
