@@ -690,3 +690,16 @@ class LaneChoosingMpc:
             return None
         prof = getattr(self.mpc.config, "speed_profile", None)
         return float(prof.speed(s_m)) if prof is not None else float(self.mpc.v_ref_mps)
+
+
+def _refresh_cache() -> None:
+    """numba keys this module's cache to this file only: the lane tracks link in code from these."""
+    from .. import _jitcache
+    from ..ocp import avoidance_compiled as _ac
+    from ..paths import compiled as _paths_compiled, profile_compiled as _profile_compiled
+
+    files = [m.__file__ for m in (_ac, _paths_compiled, _profile_compiled) if m.__file__ is not None]
+    _jitcache.refresh(_tracks_kernel, files)
+
+
+_refresh_cache()

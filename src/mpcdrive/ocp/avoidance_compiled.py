@@ -20,6 +20,7 @@ import numpy as np
 from numba import njit
 
 from ..paths.compiled import path_eval, path_project
+from ..paths.profile_compiled import np_interp
 from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Static, TrajectoryMotion
 
 SHAPE_CIRCLE, SHAPE_POLYGON = 0, 1
@@ -141,25 +142,10 @@ def pose_at(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d):
     lo, hi = tr_lo[j], tr_hi[j]
     if hi == lo:
         return pose[j, 0] + vel[j, 0] * t, pose[j, 1] + vel[j, 1] * t, pose[j, 2] + 0.0
-    if t <= tr_t[lo]:
-        a = b = lo
-    elif t >= tr_t[hi - 1]:
-        a = b = hi - 1
-    else:  # tr_t[a] <= t < tr_t[b], b = a + 1
-        a, b = lo, hi - 1
-        while b - a > 1:
-            mid = (a + b) // 2
-            if tr_t[mid] <= t:
-                a = mid
-            else:
-                b = mid
-    if a == b:
-        return pose[j, 0] + tr_d[a, 0], pose[j, 1] + tr_d[a, 1], pose[j, 2] + tr_d[a, 2]
-    f = t - tr_t[a]
-    w = tr_t[b] - tr_t[a]
-    dx = (tr_d[b, 0] - tr_d[a, 0]) / w * f + tr_d[a, 0]
-    dy = (tr_d[b, 1] - tr_d[a, 1]) / w * f + tr_d[a, 1]
-    dyaw = (tr_d[b, 2] - tr_d[a, 2]) / w * f + tr_d[a, 2]
+    ts = tr_t[lo:hi]
+    dx = np_interp(t, ts, tr_d[lo:hi, 0])
+    dy = np_interp(t, ts, tr_d[lo:hi, 1])
+    dyaw = np_interp(t, ts, tr_d[lo:hi, 2])
     return pose[j, 0] + dx, pose[j, 1] + dy, pose[j, 2] + dyaw
 
 
@@ -427,9 +413,10 @@ def hard_rows(
 
 def _refresh_cache() -> None:
     from .. import _jitcache
-    from ..paths import compiled as _paths_compiled
+    from ..paths import compiled as _paths_compiled, profile_compiled as _profile_compiled
 
-    _jitcache.refresh(hard_rows, [_paths_compiled.__file__])  # one file: one fingerprint for all
+    # one file: one fingerprint for all its functions
+    _jitcache.refresh(hard_rows, [m.__file__ for m in (_paths_compiled, _profile_compiled) if m.__file__ is not None])
 
 
 _refresh_cache()

@@ -49,7 +49,7 @@ def _clip(x, lo, hi):
 
 
 @njit(cache=True)
-def _interp(x, xp, fp):
+def np_interp(x, xp, fp):
     """np.interp(x, xp, fp) for one x, with numpy's handling of grid points and of infinite
     values in fp (xp increasing)."""
     n = xp.size
@@ -94,8 +94,8 @@ def _time_at(prof, s):
     if prof[_P_CLOSED] != 0.0:
         length = prof[_P_LENGTH]
         laps = np.floor(s / length)
-        return laps * tg[tg.size - 1] + _interp(s - laps * length, sg, tg)
-    return _interp(s, sg, tg)
+        return laps * tg[tg.size - 1] + np_interp(s - laps * length, sg, tg)
+    return np_interp(s, sg, tg)
 
 
 @njit(cache=True)
@@ -165,4 +165,4 @@ def profile_speed(prof, s_m):
         s = np.fmod(s, length)  # np.mod: the sign of the divisor
         if s != 0.0 and (s < 0.0) != (length < 0.0):
             s += length
-    return _interp(s, sg, v)
+    return np_interp(s, sg, v)
