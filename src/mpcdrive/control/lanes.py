@@ -291,6 +291,8 @@ def _tracks(
 
 def _tracks_compiled(tab: ObstacleTable, pa: PathArrays, t_s: float, taus: np.ndarray, s_m: float, range_m: float):
     n, K = len(tab.obstacles), len(taus)
+    if n == 0:
+        return (*(np.zeros((0, K)) for _ in range(4)), np.zeros((0, K), bool))
     tr = np.empty((n, 4, K))
     present = np.empty((n, K), np.bool_)
     keep = np.empty(n, np.bool_)
@@ -603,11 +605,11 @@ class LaneChoosingMpc:
         #: the path's compiled form (None: a path type without one; the tracks are then numpy)
         self._path_arrays = path_arrays(mpc.path)
         road.bounds(0.0, 0.0, 0.0, fp)  # load the road's kernel now: each band change uses it
-        if self._path_arrays is not None:  # and the lane tracks' kernel
-            self._table = table_of(mpc.obstacles, None)
-            if self._table.all_simple:
+        if self._path_arrays is not None:  # and the lane tracks' kernel (on one obstacle at least)
+            tab = table_of(list(mpc.obstacles) or [Obstacle(Circle(1.0), (0.0, 0.0, 0.0))], None)
+            if tab.all_simple:
                 taus = np.arange(0.0, self.config.horizon_s + 1e-9, self.config.dt_s)
-                _tracks_compiled(self._table, self._path_arrays, 0.0, taus, 0.0, self.config.range_m)
+                _tracks_compiled(tab, self._path_arrays, 0.0, taus, 0.0, self.config.range_m)
         names = list(mpc.model.input_names)
         #: the controller's full braking [m/s^2] (0: a model without an acceleration input)
         self._decel_mps2 = max(-float(mpc.problem.u_min[names.index("accel")]), 0.0) if "accel" in names else 0.0

@@ -214,16 +214,16 @@ def waypoints_project_local(geo, tab_s, tab_xy, s_guess, window_m, px, py):
     # that of the full scan.
     c = geo[4]
     bound = math.inf
-    nseg = i1 - i0 + 1
-    if nseg > 64:
-        stride = int(math.sqrt(nseg))
+    skip = i1 - i0 + 1 > 64  # (a short window is scanned: the test costs more than it saves)
+    if skip:
+        stride = int(math.sqrt(i1 - i0 + 1))
         for ii in range(i0, i1 + 1, stride):
             bound = min(bound, _segment_d2(tab_xy, ii % m if closed else ii, m, closed, px, py)[0])
     best, bj, bt, bdd, brx, bry = math.inf, 0, 0.0, 1.0, 0.0, 0.0
     ii = i0
     while ii <= i1:
         j = ii % m if closed else ii
-        if ii < i1 and (closed or ii > 0):
+        if skip and ii < i1 and (closed or ii > 0):
             qx, qy = px - tab_xy[j, 0], py - tab_xy[j, 1]
             r0 = math.sqrt(qx * qx + qy * qy)
             n_far = int((r0 - math.sqrt(min(best, bound)) - 1e-9 * (1.0 + r0)) / c) - 1
