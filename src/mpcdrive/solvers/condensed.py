@@ -245,15 +245,20 @@ def soft_solve(
     solves and no group's multipliers sum to more than its slack's l1 weight, zero slacks satisfy
     the optimality conditions of the soft problem (exact penalty), so it is its solution. Else
     slacks are given to the groups flagged in ``kpos`` (1 = slack; the caller flags those the
-    linearization violates), plus every group whose multipliers exceed the weight and the groups
-    with rows after it (:func:`_flag_later_groups`), and solved again until no group without a slack exceeds it (or with a slack on every group that has
-    rows: the full problem). The slacks' sign rows follow row m (``rowcol`` names their single
+    linearization violates) and every group whose multipliers exceed the weight, each with the
+    groups with rows after it (:func:`_flag_later_groups`), and solved again until no group
+    without a slack exceeds it (or with a slack on every group that has rows: the full problem). The slacks' sign rows follow row m (``rowcol`` names their single
     nonzero; the other rows written per step are marked dense there). z[:nzu] holds the inputs."""
     code, iters = gi_solve(
         H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol, False
     )
     if code == 0 and _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, True):
         return 0, iters
+    # the flags so far spread to the later groups with rows, as every later round's do
+    for grp in range(2 * N):
+        if kpos[grp] != 0:
+            kpos[grp] = 2
+    _flag_later_groups(kpos, m_soft, m, rgrp, N, gsum)
     full = False
     for _round in range(2 * N + 1):
         nk = 0
