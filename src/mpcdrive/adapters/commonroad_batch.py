@@ -198,10 +198,11 @@ def summary_markdown(rows: dict, header: str = "") -> str:
         "CommonRoad's solution checker). Feasible: under the solution's vehicle model, KS (ST for a "
         "drive on the ST plant).",
         "",
-        "Min clearance: footprint to obstacle over the checked drive (whole run in brackets when smaller).",
+        "Min clearance: footprint to obstacle over the checked drive (whole run in brackets when smaller). "
+        "Step: the controller's whole step (lane decision, obstacle terms, QP), wall time.",
         "",
         "| file | verdict | collision-free | road-compliant | feasible | goal reached | min clearance [m] | "
-        "solver failures | solve p50 / p99 [us] | wall [s] |",
+        "solver failures | step p50 / p99 [us] | wall [s] |",
         "|" + "---|" * 10,
     ]
     for name, r in rows.items():

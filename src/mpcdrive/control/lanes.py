@@ -290,6 +290,7 @@ def _tracks(
 
 
 def _tracks_compiled(tab: ObstacleTable, pa: PathArrays, t_s: float, taus: np.ndarray, s_m: float, range_m: float):
+    """:func:`_tracks` of the obstacles ``tab`` describes on the path ``pa`` describes, compiled."""
     n, K = len(tab.obstacles), len(taus)
     if n == 0:
         return (*(np.zeros((0, K)) for _ in range(4)), np.zeros((0, K), bool))
