@@ -21,7 +21,7 @@ from ..ocp.problem import MpcProblem
 from ..solvers.condensed import condensed_solve
 from ..solvers.dense_qp import STATUS_WORDS
 from ..types import SolveResult
-from .fast_setup import FastSettings, condensed_unsupported_reason, constant_rows
+from .fast_setup import FastSettings, condensed_unsupported_reason, condensed_variables, constant_rows, riccati_shortcut
 from .fast_step import _write_plan, input_bound_rows
 
 
@@ -41,13 +41,12 @@ class CondensedBackend:
         self.N, self.nx, self.nu = N, nx, nu
         self._lane = pb.lane
         self._nrow = int(pb.obstacle_rows)
-        nz = N * nu + (N if self._lane else 0) + (N if self._nrow else 0)
-        self._nz = nz
+        self._nz = nz = condensed_variables(pb, bool(self._nrow))
         cr = constant_rows(pb, nz, self._nrow)
         self._C, self._b, self._rowcol = cr.C, cr.b, cr.rowcol
         self._m_const, self._r_rate0, self._gamma = cr.m_const, cr.r_rate0, cr.gamma
         mq = cr.mq
-        self._riccati = not self._lane and not self._nrow and not np.any(pb.Rc)
+        self._riccati = riccati_shortcut(pb, bool(self._nrow))
         self._Wq = np.stack([pb.Q] * (N - 1) + [pb.QN])
         self._We = self._Wq.copy()
         self._qt = np.zeros((N, nx))

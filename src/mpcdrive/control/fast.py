@@ -92,7 +92,7 @@ from .fast_layout import _F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_RMARGIN, _F_SLA
 from .fast_layout import _F_OSX, _F_OSY, _F_OINF, _F_OMARGIN, _F_HW, _F_HL, _F_RAMP, _F_OSLACK2, _F_OSLACK1, _F_BOFF
 from .fast_layout import _F_RPERIOD, _F_FRIC, _F_WHEELBASE, _NFP
 from .fast_setup import FastSettings, fast_unsupported_reason, obstacles_unsupported_reason  # importers use these
-from .fast_setup import _obstacle_table, constant_rows
+from .fast_setup import _obstacle_table, condensed_variables, constant_rows, riccati_shortcut
 from .fast_step import _BAD_STATE, _control_step, follow_references_into  # the compiled step
 from .fallback import FALLBACK_HOLD, FALLBACK_RELAX, FallbackConfig, FallbackLadder, relaxed_problem
 from .mpc import MpcConfig, StageQpSolve, StepData
@@ -203,7 +203,7 @@ class FastLtvMpc(StageQpSolve, TrackingWarmStart):
         prof = np.zeros(1) if config.speed_profile is None else profile_array(config.speed_profile)
         assert code is not None and pa is not None and prof is not None
         kind, mp = code
-        nz = N * nu + (N if lane else 0) + (N if rows else 0)
+        nz = condensed_variables(problem, rows)
         cr = constant_rows(problem, nz, n_orow)
         mq, need_gamma = cr.mq, cr.gamma
         ip = np.zeros(_NIP, dtype=np.int64)
@@ -218,7 +218,7 @@ class FastLtvMpc(StageQpSolve, TrackingWarmStart):
         ip[_I_MAXITER] = settings.max_iter
         ip[_I_GAMMA] = int(need_gamma)
         ip[_I_NZ] = nz
-        ip[_I_RICCATI] = int(not lane and not rows and not np.any(problem.Rc))
+        ip[_I_RICCATI] = int(riccati_shortcut(problem, rows))
         ip[_I_MQ] = mq
         ip[_I_OROWS] = n_orow
         ip[_I_PROFILE] = int(config.speed_profile is not None)

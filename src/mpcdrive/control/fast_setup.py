@@ -151,10 +151,22 @@ def condensed_unsupported_reason(problem: MpcProblem, settings: FastSettings, ro
         return "lane_slack_weight is 0 (the slack needs a quadratic weight)"
     if rows and problem.obstacle_slack_weight <= 0:
         return "obstacle_slack_weight is 0 (the slack needs a quadratic weight)"
-    nz = problem.N * problem.nu + (problem.N if lane else 0) + (problem.N if rows else 0)
+    nz = condensed_variables(problem, rows)
     if nz > settings.max_variables:
         return f"the condensed QP has {nz} variables, more than max_variables={settings.max_variables}"
     return None
+
+
+def condensed_variables(problem: MpcProblem, rows: bool) -> int:
+    """The variables of the condensed QP: the inputs, and one slack per step for the road rows
+    and one for the obstacle rows (``rows``) where the problem has them."""
+    return problem.N * problem.nu + (problem.N if problem.lane else 0) + (problem.N if rows else 0)
+
+
+def riccati_shortcut(problem: MpcProblem, rows: bool) -> bool:
+    """Whether the condensed solve first tries the unconstrained minimizer (a Riccati recursion):
+    no input-change weight, no road rows, no obstacle rows (``rows``)."""
+    return not problem.lane and not rows and not np.any(problem.Rc)
 
 
 @dataclass(frozen=True)

@@ -241,7 +241,8 @@ def soft_solve(
     constraints, of which rows ``[m_soft, m)`` are soft: row ``rr`` belongs to slack group
     ``rgrp[rr]`` (the lane rows of step k to group k, slack weights ``w2l`` quadratic, ``w1l``
     linear; the obstacle rows of step k to group N + k, weights ``w2o``, ``w1o``), one slack per
-    group shared by its rows, as in ``ocp.qp``. First the inputs alone, soft rows hard: if that
+    group shared by its rows, as in ``ocp.qp``. Without soft rows (``m_soft == m``) that is one
+    solve of the hard QP. First the inputs alone, soft rows hard: if that
     solves and no group's multipliers sum to more than its slack's l1 weight, zero slacks satisfy
     the optimality conditions of the soft problem (exact penalty), so it is its solution. Else
     slacks are given to the groups flagged in ``kpos`` (1 = slack; the caller flags those the
@@ -252,6 +253,8 @@ def soft_solve(
     code, iters = gi_solve(
         H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol, False
     )
+    if m_soft == m:  # no soft rows: the QP is that one
+        return code, iters
     if code == 0 and _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, True):
         return 0, iters
     # the flags so far spread to the later groups with rows, as every later round's do
@@ -539,7 +542,9 @@ def condensed_solve(
                     m += 1
 
     # -- solve, then the plan and the command --------------------------------------------------
-    if lane == 1 or nrow > 0:
+    if lane == 0 and nrow == 0:
+        m_lane = m  # no soft rows (soft_solve then solves the hard QP once)
+    else:
         # soft rows (slack groups: lane rows of step k in group k, obstacle rows in N + k) that
         # the linearization trajectory is on or beyond (within 1 mm)
         for k in range(2 * N):
@@ -562,65 +567,39 @@ def condensed_solve(
             for k in range(N - 1, 0, -1):
                 if kpos[f0 + k - 1] == 1 or (k >= 2 and kpos[f0 + k - 2] == 1) or (k >= 3 and kpos[f0 + k - 3] == 1):
                     kpos[f0 + k] = 1
-        code, iters = soft_solve(
-            H,
-            g,
-            C,
-            b,
-            m,
-            m_lane,
-            rgrp,
-            N,
-            nzu,
-            kpos,
-            w2_lane,
-            w1_lane,
-            w2_obs,
-            w1_obs,
-            gsum,
-            z,
-            lamq,
-            active,
-            isact,
-            rowcol,
-            L,
-            J,
-            Rq,
-            d,
-            zdir,
-            r,
-            uq,
-            sq,
-            rown,
-            max_iter,
-            tol,
-        )
-    else:
-        code, iters = gi_solve(
-            H,
-            g,
-            C,
-            b,
-            m,
-            nz,
-            z,
-            lamq,
-            active,
-            isact,
-            rowcol,
-            L,
-            J,
-            Rq,
-            d,
-            zdir,
-            r,
-            uq,
-            sq,
-            rown,
-            max_iter,
-            tol,
-            False,
-        )
+    code, iters = soft_solve(
+        H,
+        g,
+        C,
+        b,
+        m,
+        m_lane,
+        rgrp,
+        N,
+        nzu,
+        kpos,
+        w2_lane,
+        w1_lane,
+        w2_obs,
+        w1_obs,
+        gsum,
+        z,
+        lamq,
+        active,
+        isact,
+        rowcol,
+        L,
+        J,
+        Rq,
+        d,
+        zdir,
+        r,
+        uq,
+        sq,
+        rown,
+        max_iter,
+        tol,
+    )
     return code, iters
 
 
