@@ -568,38 +568,9 @@ def condensed_solve(
                 if kpos[f0 + k - 1] == 1 or (k >= 2 and kpos[f0 + k - 2] == 1) or (k >= 3 and kpos[f0 + k - 3] == 1):
                     kpos[f0 + k] = 1
     code, iters = soft_solve(
-        H,
-        g,
-        C,
-        b,
-        m,
-        m_lane,
-        rgrp,
-        N,
-        nzu,
-        kpos,
-        w2_lane,
-        w1_lane,
-        w2_obs,
-        w1_obs,
-        gsum,
-        z,
-        lamq,
-        active,
-        isact,
-        rowcol,
-        L,
-        J,
-        Rq,
-        d,
-        zdir,
-        r,
-        uq,
-        sq,
-        rown,
-        max_iter,
-        tol,
-    )
+        H, g, C, b, m, m_lane, rgrp, N, nzu, kpos, w2_lane, w1_lane, w2_obs, w1_obs, gsum, z, lamq, active, isact,
+        rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol,
+    )  # fmt: skip
     return code, iters
 
 
