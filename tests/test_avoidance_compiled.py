@@ -15,9 +15,9 @@ from mpcdrive.ocp.avoidance import SIDE_BLOCKED, SIDE_LEFT, SIDE_RIGHT, Avoidanc
 from mpcdrive.paths import CirclePath, StraightPath
 from mpcdrive.paths.waypoints import WaypointPath
 from mpcdrive.scene import Circle, ConstantVelocity, Footprint, Obstacle, TrajectoryMotion, rectangle
-from mpcdrive.scene.obstacles import Polygon
 from mpcdrive.scene.road import Road
 from mpcdrive.sim import Plant
+from shapes import random_shape
 
 TOL = 1e-12
 N, DT = 20, 0.1
@@ -40,14 +40,7 @@ def _scene(rng, path, n_obs, lifetimes, trajectories=False):
         s = rng.uniform(0.0, 40.0)
         p = path.position(s) + rng.normal(0.0, 2.0, 2)
         yaw = float(path.heading(s)) + rng.normal(0.0, 0.3)
-        kind = rng.integers(3)
-        if kind == 0:
-            shape = Circle(float(rng.uniform(0.3, 1.5)))
-        elif kind == 1:
-            shape = rectangle(float(rng.uniform(1.0, 5.0)), float(rng.uniform(0.5, 2.0)))
-        else:
-            a = np.sort(rng.uniform(0.0, 2 * np.pi, 5))
-            shape = Polygon(np.column_stack([np.cos(a), np.sin(a)]) * rng.uniform(0.5, 1.5))
+        shape = random_shape(rng)
         motion = rng.integers(3 if trajectories else 2)
         if motion == 0:
             m = None

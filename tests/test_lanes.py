@@ -13,8 +13,9 @@ from mpcdrive.paths import CirclePath
 from mpcdrive.paths.compiled import path_arrays
 from mpcdrive.paths.straight import StraightPath
 from mpcdrive.paths.waypoints import WaypointPath
-from mpcdrive.scene.obstacles import Circle, ConstantVelocity, Obstacle, Polygon, Static, TrajectoryMotion, rectangle
+from mpcdrive.scene.obstacles import ConstantVelocity, Obstacle, Static, TrajectoryMotion, rectangle
 from mpcdrive.scene.road import Lane, Road
+from shapes import random_shape
 
 W = 4.0  # lane width [m]
 PATH = StraightPath((0.0, 0.0), (5000.0, 0.0))  # the route lane's centre, along +x
@@ -312,14 +313,7 @@ def _random_obstacles(rng, path, n):
         s = rng.uniform(-20.0, 150.0) if j else 400.0  # the first one out of range
         p = path.position(s) + rng.normal(0.0, 3.0, 2)
         yaw = float(path.heading(s)) + rng.normal(0.0, 0.4)
-        kind = rng.integers(3)
-        if kind == 0:
-            shape = Circle(float(rng.uniform(0.3, 1.5)))
-        elif kind == 1:
-            shape = rectangle(float(rng.uniform(1.0, 5.0)), float(rng.uniform(0.5, 2.0)))
-        else:
-            a = np.sort(rng.uniform(0.0, 2 * np.pi, 5))
-            shape = Polygon(np.column_stack([np.cos(a), np.sin(a)]) * rng.uniform(0.5, 1.5))
+        shape = random_shape(rng)
         m = rng.integers(3)
         motion = (
             Static()
