@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mpcdrive.control import LtvMpc, MpcConfig
+from mpcdrive.control import LtvMpc, MpcConfig, PythonLtvMpc
 from mpcdrive.scene.road import Road
 from mpcdrive.experiments import AVOIDANCE_SCENARIOS
 from mpcdrive.models import KinematicBicycle4, KinematicParams
@@ -85,12 +85,13 @@ def _p3_controllers():
 
     prob = p3()
     cfg = dataclasses.replace(prob.config, sqp_max_iterations=300, sqp_tol=1e-9, sqp_max_time_s=60.0)
-    sqp = LtvMpc(
+    sqp = PythonLtvMpc(
         prob.model,
         prob.path,
         prob.problem,
         cfg,
-        OsqpSettings(eps_abs=1e-9, eps_rel=1e-9, max_iter=100000),
+        "osqp",
+        osqp_settings=OsqpSettings(eps_abs=1e-9, eps_rel=1e-9, max_iter=100000),
         obstacles=prob.obstacles,
         avoidance=prob.avoidance,
         footprint=prob.footprint,
@@ -199,10 +200,12 @@ def test_corridor_requires_a_lane():
 
     prob = p1()
     with pytest.raises(ValueError, match="corridor"):
-        LtvMpc(
+        PythonLtvMpc(
             prob.model,
             path,
             prob.problem,
+            MpcConfig(),
+            "osqp",
             obstacles=(Obstacle(Circle(0.2), (3, 0, 0)),),
             avoidance=AvoidanceConfig("corridor"),
         )
@@ -414,8 +417,6 @@ def _circle_follower(path: CirclePath, s0: float, v: float, t_end: float) -> Obs
 def _bend_follower(follow_gap_s, backend: str, osqp: OsqpSettings = OsqpSettings()):
     """A car at 10 m/s closing on a car driving 6 m/s ahead in its lane on a 20 m circle: the
     controller (``backend``), the leader, the plant's start and its step count."""
-    from mpcdrive.control.factory import make_mpc
-
     path = CirclePath((0.0, 0.0), 20.0)
     model = KinematicBicycle4(KinematicParams(2.5, 2.5))
     dt, N, steps = 0.2, 15, 120
@@ -436,13 +437,13 @@ def _bend_follower(follow_gap_s, backend: str, osqp: OsqpSettings = OsqpSettings
     )
     leader = _circle_follower(path, 25.0, 6.0, dt * steps + 10.0)
     cfg = AvoidanceConfig("hard", margin_m=0.3, influence_m=30.0, follow_gap_s=follow_gap_s)
-    c = make_mpc(
+    c = LtvMpc(
         model,
         path,
         pb,
         MpcConfig(v_ref_mps=10.0, projection_window_m=6.0),
-        backend,
-        osqp,
+        "condensed" if backend == "fast" else "osqp",
+        osqp_settings=osqp,
         obstacles=(leader,),
         avoidance=cfg,
         footprint=CAR,
@@ -517,7 +518,9 @@ def test_set_obstacles_replaces_what_the_controller_avoids():
     )
     stopped_ahead = Obstacle(rectangle(5, 2), (20.0, 0.0, 0.0), name="stopped")
     cfg = AvoidanceConfig("hard", margin_m=0.3, influence_m=30.0, max_obstacles=2, follow_gap_s=1.0)
-    c = LtvMpc(model, path, pb, MpcConfig(v_ref_mps=10.0), obstacles=(stopped_ahead,), avoidance=cfg, footprint=CAR)
+    c = PythonLtvMpc(
+        model, path, pb, MpcConfig(v_ref_mps=10.0), "osqp", obstacles=(stopped_ahead,), avoidance=cfg, footprint=CAR
+    )
     x = np.array([0.0, 0.0, 0.0, 10.0])
     rows = c.qp.problem.obstacle_rows
     brake = c.step(x, c.initial_warm(x))
@@ -532,7 +535,7 @@ def test_set_obstacles_replaces_what_the_controller_avoids():
     assert c.qp.problem.obstacle_rows == rows == 2 * CAR.n_discs
     with pytest.raises(ValueError, match=r"obstacles\[1\] must be an Obstacle"):
         c.set_obstacles([moving, (1.0, 2.0)])
-    bare = LtvMpc(model, path, pb, MpcConfig(v_ref_mps=10.0))
+    bare = PythonLtvMpc(model, path, pb, MpcConfig(v_ref_mps=10.0), "osqp")
     assert bare.obstacles == ()
     with pytest.raises(ValueError, match="built without obstacles"):
         bare.set_obstacles([moving])

@@ -13,7 +13,7 @@ import yaml
 
 from mpcdrive.cli import main
 from mpcdrive.scene.road import Road
-from mpcdrive.control import DelayCompensator, FallbackConfig, LtvMpc, MpcConfig
+from mpcdrive.control import DelayCompensator, FallbackConfig, MpcConfig, PythonLtvMpc
 from mpcdrive.models import KinematicBicycle3, KinematicParams
 from mpcdrive.ocp import MpcProblem
 from mpcdrive.paths import CirclePath, StraightPath, WaypointPath
@@ -285,7 +285,7 @@ def test_bad_scenario_sources(tmp_path, cls, make, words):
 def _p1(**kw):
     model = KinematicBicycle3(1.0)
     pb = MpcProblem(3, 1, 5, 0.01, Q=np.ones(3), R=1.0, u_min=-1.0, u_max=1.0)
-    return model, LtvMpc(model, StraightPath([0, 0], [5, 0]), pb, MpcConfig(**kw))
+    return model, PythonLtvMpc(model, StraightPath([0, 0], [5, 0]), pb, MpcConfig(**kw), "osqp")
 
 
 def _sim(**kw):
@@ -318,7 +318,13 @@ API_CASES = [
     ("controller: NaN previous input", lambda: _step_warm([NAN]), "warm.u_prev must be 1 finite"),
     (
         "controller: model/problem size mismatch",
-        lambda: LtvMpc(KinematicBicycle3(), StraightPath([0, 0], [1, 0]), MpcProblem(4, 2, 5, 0.01, Q=1.0, R=1.0)),
+        lambda: PythonLtvMpc(
+            KinematicBicycle3(),
+            StraightPath([0, 0], [1, 0]),
+            MpcProblem(4, 2, 5, 0.01, Q=1.0, R=1.0),
+            MpcConfig(),
+            "osqp",
+        ),
         "problem is sized",
     ),
     (

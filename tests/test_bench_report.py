@@ -12,7 +12,8 @@ from mpcdrive.bench import run_bench
 from mpcdrive.bench.extras import cold_start, horizon_sweep, obstacle_sweep, step_allocations
 from mpcdrive.bench.problems import p3, p3_obstacles
 from mpcdrive.bench.runner import make_controller
-from mpcdrive.control.factory import BACKENDS, FastPathUnavailable
+from mpcdrive.bench.runner import BACKENDS
+from mpcdrive.control import FastPathUnavailable
 from mpcdrive.plots.bench import make_horizon_figure, make_obstacle_figure, plot_horizon_scaling, plot_obstacle_scaling
 from mpcdrive.report.bench import render_bench_report, write_bench_report
 

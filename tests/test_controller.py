@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mpcdrive.control import FallbackConfig, LtvMpc, MpcConfig
+from mpcdrive.control import FallbackConfig, MpcConfig, PythonLtvMpc
 from mpcdrive.models import KinematicBicycle3, KinematicBicycle4
 from mpcdrive.ocp import MpcProblem
 from mpcdrive.paths import CirclePath, StraightPath
@@ -20,7 +20,7 @@ STEER = math.radians(60)
 def p1_controller(**cfg):
     model = KinematicBicycle3(1.0)
     pb = MpcProblem(3, 1, 20, 0.01, Q=np.ones(3), R=1.0, u_min=-STEER, u_max=STEER, du_max_per_s=math.radians(300))
-    return LtvMpc(model, StraightPath([0, 0], [10, 0]), pb, MpcConfig(**cfg))
+    return PythonLtvMpc(model, StraightPath([0, 0], [10, 0]), pb, MpcConfig(**cfg), "osqp")
 
 
 @pytest.mark.parametrize("bad, field", [([np.nan, 0, 0], "x"), ([0, np.inf, 0], "y"), ([0, 0, -np.inf], "yaw")])
@@ -70,7 +70,7 @@ def test_infeasible_problem_falls_back_deliberately_and_is_counted():
     )
     path = StraightPath([0, 0], [50, 0])
     # the default ladder: the relaxed problem (no hard speed bounds) solves every step
-    c = LtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0))
+    c = PythonLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0), "osqp")
     r = simulate(c, Plant(model), path, [0, 0.2, 0, 3.0], 0.01, 30)
     m = compute_metrics(r)
     assert set(r.status) == {"infeasible"}
@@ -79,7 +79,9 @@ def test_infeasible_problem_falls_back_deliberately_and_is_counted():
     assert np.all(np.isfinite(r.u)) and np.all(np.abs(r.u[:, 1]) <= 0.1 + 1e-9)
     assert np.all(np.diff(r.v_mps) < 0)  # slowing towards the limit at the largest braking allowed
     # the paper-era ladder: no plan to shift, so the last input is held
-    c = LtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0, fallback=FallbackConfig(("shifted_plan", "hold_last"))))
+    c = PythonLtvMpc(
+        model, path, pb, MpcConfig(v_ref_mps=1.0, fallback=FallbackConfig(("shifted_plan", "hold_last"))), "osqp"
+    )
     r = simulate(c, Plant(model), path, [0, 0.2, 0, 3.0], 0.01, 30)
     m = compute_metrics(r)
     assert m["solver_failures"] == 30 and m["fallbacks"] == 30
@@ -91,7 +93,7 @@ def test_shifted_plan_fallback_after_a_good_solve():
     model = KinematicBicycle3(1.0)
     path = StraightPath([0, 0], [10, 0])
     pb = MpcProblem(3, 1, 10, 0.01, Q=np.ones(3), R=1.0, u_min=-STEER, u_max=STEER)
-    c = LtvMpc(model, path, pb, MpcConfig(fallback=FallbackConfig(("shifted_plan", "brake"))))
+    c = PythonLtvMpc(model, path, pb, MpcConfig(fallback=FallbackConfig(("shifted_plan", "brake"))), "osqp")
     x = np.array([0.0, 0.3, 0.0])
     out = c.step(x, c.initial_warm(x))
     assert out.status == "ok" and out.fallback == ""
@@ -119,7 +121,7 @@ def test_trajectory_linearization_is_at_least_as_good_as_the_papers_on_the_circl
     pb = MpcProblem(3, 1, 10, 0.01, Q=np.ones(3), R=1.0, u_min=-STEER, u_max=STEER)
     errs = {}
     for lin in ("trajectory", "paper"):
-        c = LtvMpc(model, path, pb, MpcConfig(linearization=lin))
+        c = PythonLtvMpc(model, path, pb, MpcConfig(linearization=lin), "osqp")
         r = simulate(c, Plant(model), path, [1.5, 0, math.pi / 2], 0.01, 1000)
         errs[lin] = compute_metrics(r)["converged_max_abs_lateral_error_m"]
     assert errs["trajectory"] <= errs["paper"] + 1e-4
@@ -130,10 +132,55 @@ def test_heading_reference_never_jumps_by_two_pi_over_several_laps():
     model = KinematicBicycle3(2.0)
     path = CirclePath(radius_m=1.5)
     pb = MpcProblem(3, 1, 10, 0.01, Q=np.ones(3), R=1.0, u_min=-STEER, u_max=STEER)
-    c = LtvMpc(model, path, pb)
+    c = PythonLtvMpc(model, path, pb, MpcConfig(), "osqp")
     r = simulate(c, Plant(model), path, [1.5, 0, math.pi / 2], 0.01, 1600)  # ~3.4 laps
     assert r.yaw_rad[-1] > 3 * 2 * math.pi  # yaw kept unwrapped by the plant
     ref_yaw = r.refs[:, 0, 2]
     assert np.max(np.abs(np.diff(ref_yaw))) < 0.1
     assert np.max(np.abs(r.e_y_m[800:])) < 0.01
     assert r.s_m[-1] > 3 * path.length_m
+
+
+def test_ltv_mpc_is_one_controller_for_every_assembly_and_solver():
+    """``LtvMpc(...)`` returns the controller that covers the problem: the compiled step with the
+    condensed solver by default, the Python assembly where asked for or needed (projected
+    gradient), OSQP where asked for; every one an ``LtvMpc`` with the same closed loop."""
+    import warnings
+
+    from mpcdrive.control import FastPathUnavailable, LtvMpc
+    from mpcdrive.control.fast import CompiledLtvMpc
+    from mpcdrive.solvers.osqp_backend import OsqpSettings
+
+    model = KinematicBicycle3(1.0)
+    path = CirclePath(radius_m=1.5)
+    pb = MpcProblem(3, 1, 10, 0.01, Q=np.ones(3), R=1.0, u_min=-STEER, u_max=STEER)
+    tight = OsqpSettings(eps_abs=1e-10, eps_rel=1e-10, max_iter=100000)
+    cases = {
+        (): (CompiledLtvMpc, "compiled", "fast"),
+        (("solver", "osqp"),): (CompiledLtvMpc, "compiled", "osqp"),
+        (("assembly", "python"),): (PythonLtvMpc, "python", "fast"),
+        (("assembly", "python"), ("solver", "osqp")): (PythonLtvMpc, "python", "osqp"),
+        (("solver", "projected_gradient"),): (PythonLtvMpc, "python", "pg"),
+    }
+    x0 = np.array([1.5, 0.0, math.pi / 2])
+    rms = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FastPathUnavailable)  # the default covers this problem
+        for kw, (cls, assembly, backend) in cases.items():
+            c = LtvMpc(model, path, pb, osqp_settings=tight, **dict(kw))
+            assert type(c) is cls and isinstance(c, LtvMpc)
+            assert (c.assembly, c.backend_name) == (assembly, backend)
+            res = simulate(c, Plant(model), path, x0=x0, dt_s=0.01, steps=200)
+            rms[kw] = compute_metrics(res).rms_lateral_error_m
+    exact = rms[()]
+    for kw, v in rms.items():
+        # the exact solvers agree to OSQP's stopping rule; projected gradient to its own (1e-6)
+        assert v == pytest.approx(exact, abs=1e-4 if kw == (("solver", "projected_gradient"),) else 1e-7), kw
+    with pytest.raises(ValueError, match="solver must be one of"):
+        LtvMpc(model, path, pb, solver="ipopt")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="config must be an MpcConfig, got str"):
+        LtvMpc(model, path, pb, "osqp")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="compiled step cannot assemble this problem: prediction substeps"):
+        LtvMpc(model, path, pb, MpcConfig(prediction_substeps=2), assembly="compiled")
+    with pytest.raises(ValueError, match="compiled step's solver must be one of"):
+        CompiledLtvMpc(model, path, pb, solver="projected_gradient")  # type: ignore[arg-type]

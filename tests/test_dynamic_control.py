@@ -14,7 +14,7 @@ import pytest
 from mpcdrive.control import (
     BaselineLimits,
     DelayCompensator,
-    LtvMpc,
+    PythonLtvMpc,
     MpcConfig,
     PurePursuit,
     StateAdapter,
@@ -62,12 +62,13 @@ def test_projected_gradient_reaches_the_osqp_optimum_on_the_dynamic_ltv_problem(
     path, prof = exp.path, exp.speed_profile
     model = DynamicBicycle(PRE.params)
     pb = _dyn_problem()
-    mpc = LtvMpc(
+    mpc = PythonLtvMpc(
         model,
         path,
         pb,
         MpcConfig(speed_profile=prof, discretization="exp"),
-        OsqpSettings(eps_abs=1e-9, eps_rel=1e-9, max_iter=20000),
+        "osqp",
+        osqp_settings=OsqpSettings(eps_abs=1e-9, eps_rel=1e-9, max_iter=20000),
     )
     # a state off the line entering a bend, steering saturating in the optimum
     s = 6.0
@@ -103,7 +104,9 @@ def test_projected_gradient_in_closed_loop_and_its_limits():
     model = KinematicBicycle4()
     path = WaypointPath([(0, 0), (4, 0), (8, 1), (12, 3)])
     pb = MpcProblem(nx=4, nu=2, N=15, dt_s=0.05, Q=[5, 5, 1, 1], R=[0.1, 0.1], u_min=[-0.5, -3], u_max=[0.5, 3])
-    mpc = LtvMpc(model, path, pb, MpcConfig(v_ref_mps=2.0), ProjectedGradientSettings())
+    mpc = PythonLtvMpc(
+        model, path, pb, MpcConfig(v_ref_mps=2.0), "projected_gradient", pg_settings=ProjectedGradientSettings()
+    )
     assert isinstance(mpc.backend, ProjectedGradientBackend)
     res = simulate(mpc, Plant(model), path, [0.0, 0.3, 0.0, 2.0], 0.05, 120)
     m = compute_metrics(res)
@@ -115,11 +118,20 @@ def test_projected_gradient_in_closed_loop_and_its_limits():
     ):
         pb_bad = MpcProblem(nx=4, nu=2, N=5, dt_s=0.05, Q=1.0, R=1.0, u_min=-1, u_max=1, **bad)
         with pytest.raises(ValueError, match=words):
-            LtvMpc(model, path, pb_bad, MpcConfig(v_ref_mps=1.0), ProjectedGradientSettings())
+            PythonLtvMpc(
+                model,
+                path,
+                pb_bad,
+                MpcConfig(v_ref_mps=1.0),
+                "projected_gradient",
+                pg_settings=ProjectedGradientSettings(),
+            )
 
 
 def test_osqp_backend_still_the_default():
-    mpc = LtvMpc(KinematicBicycle4(), WaypointPath([(0, 0), (5, 0)]), _dyn_problem_k4(), MpcConfig(v_ref_mps=1.0))
+    mpc = PythonLtvMpc(
+        KinematicBicycle4(), WaypointPath([(0, 0), (5, 0)]), _dyn_problem_k4(), MpcConfig(v_ref_mps=1.0), "osqp"
+    )
     assert isinstance(mpc.backend, OsqpBackend)
 
 
@@ -235,7 +247,7 @@ def test_state_adapter_runs_a_kinematic_controller_on_the_dynamic_plant():
     dyn = DynamicBicycle(PRE.params)
     path = WaypointPath([(0, 0), (4, 0), (8, 1), (12, 3)])
     pb = MpcProblem(nx=4, nu=2, N=15, dt_s=0.05, Q=[5, 5, 1, 1], R=[0.1, 0.1], u_min=[-0.4, -3], u_max=[0.4, 3])
-    ctl = StateAdapter(LtvMpc(kin, path, pb, MpcConfig(v_ref_mps=2.0)), kin, dyn)
+    ctl = StateAdapter(PythonLtvMpc(kin, path, pb, MpcConfig(v_ref_mps=2.0), "osqp"), kin, dyn)
     res = simulate(ctl, Plant(dyn, "rk4", 5), path, [0, 0.2, 0, 2.0, 0, 0], 0.05, 150)
     assert res.goal_reached and res.X_pred.shape[-1] == 6 and np.all(np.isfinite(res.x))
     assert compute_metrics(res)["converged_max_abs_lateral_error_m"] < 0.05
@@ -262,7 +274,7 @@ def test_stop_and_go_with_dynamic_mpc_never_produces_nan():
         v_end_mps=0.0,
     )
     pb = _dyn_problem(N=15, du_max_per_s=[3.2, np.inf], x_min=[-np.inf] * 3 + [0.0] + [-np.inf] * 2)
-    mpc = LtvMpc(model, path, pb, MpcConfig(speed_profile=prof, discretization="exp"))
+    mpc = PythonLtvMpc(model, path, pb, MpcConfig(speed_profile=prof, discretization="exp"), "osqp")
     res = simulate(mpc, Plant(model, "rk4", 5), path, np.zeros(6), 0.05, 160, stop_at_path_end=False)
     m = compute_metrics(res)
     assert np.all(np.isfinite(res.x)) and np.all(np.isfinite(res.u)) and np.isfinite(res.x_final).all()

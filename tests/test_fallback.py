@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from mpcdrive.control import FallbackConfig, LtvMpc, MpcConfig
+from mpcdrive.control import FallbackConfig, MpcConfig, PythonLtvMpc
 from mpcdrive.scene.road import Road
 from mpcdrive.control.fallback import check_ladder, relaxed_problem
 from mpcdrive.io import write_trajectory_csv
@@ -42,7 +42,7 @@ def speed_controller(ladder, **fb):
     )
     path = CirclePath(radius_m=1.5)
     cfg = MpcConfig(v_ref_mps=1.0, fallback=FallbackConfig(tuple(ladder), **fb))
-    return model, path, LtvMpc(model, path, pb, cfg)
+    return model, path, PythonLtvMpc(model, path, pb, cfg, "osqp")
 
 
 @pytest.mark.parametrize(
@@ -152,7 +152,7 @@ def test_constant_speed_brake_holds_the_last_steering_within_bounds():
     model = KinematicBicycle3(1.0)
     path = StraightPath([0, 0], [10, 0])
     pb = MpcProblem(3, 1, 10, 0.01, Q=np.ones(3), R=1.0, u_min=-0.3, u_max=0.3)
-    c = LtvMpc(model, path, pb, MpcConfig(fallback=FallbackConfig(("brake",))))
+    c = PythonLtvMpc(model, path, pb, MpcConfig(fallback=FallbackConfig(("brake",))), "osqp")
     c.backend.solve = lambda *a, **k: failing(10, 3, 1)
     x = np.array([0.0, 0.2, 0.0])
     warm = c.initial_warm(x)
@@ -168,7 +168,7 @@ def test_relax_rescues_a_solver_that_runs_out_of_iterations():
     model = KinematicBicycle3(1.0)
     path = StraightPath([0, 0], [10, 0])
     pb = MpcProblem(3, 1, 10, 0.01, Q=np.ones(3), R=1.0, u_min=-STEER, u_max=STEER)
-    c = LtvMpc(model, path, pb)
+    c = PythonLtvMpc(model, path, pb, MpcConfig(), "osqp")
     c.backend.solve = lambda *a, **k: failing(10, 3, 1)
     r = simulate(c, Plant(model), path, [0.0, 0.3, 0.0], 0.01, 50)
     assert set(r.fallback) == {"relax"}
@@ -216,11 +216,12 @@ def _straight_speed_controller(obstacles=(), road=None):
     model = KinematicBicycle4()
     pb = MpcProblem(4, 2, 10, 0.05, Q=[1, 1, 1, 1], R=0.1, u_min=[-STEER, -6.0], u_max=[STEER, 2.0], road=road)
     path = StraightPath([0, 0], [100, 0])
-    c = LtvMpc(
+    c = PythonLtvMpc(
         model,
         path,
         pb,
         MpcConfig(v_ref_mps=5.0),
+        "osqp",
         obstacles=tuple(obstacles),
         avoidance=AvoidanceConfig() if obstacles else None,
     )

@@ -20,8 +20,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from mpcdrive.control import FastPathUnavailable, LtvMpc, MpcConfig, make_mpc
-from mpcdrive.control.fast import FastLtvMpc, FastSettings, fast_unsupported_reason
+from mpcdrive.control import FastPathUnavailable, LtvMpc, MpcConfig, PythonLtvMpc
+from mpcdrive.control.fast import CompiledLtvMpc, CondensedSettings, fast_unsupported_reason
 from mpcdrive.models import KinematicBicycle3, KinematicBicycle4, KinematicParams
 from mpcdrive.models.discretize import discrete_step, discrete_step_and_jacobians
 from mpcdrive.ocp import MpcProblem
@@ -86,13 +86,16 @@ def test_unsupported_scenarios_fall_back_to_osqp():
     b = build_experiment(_with_backend(load_scenario("track-raceway"), "osqp")).mpc
     # (no compiled assembly: the stage QP is assembled in Python, the condensed solver solves it)
     with pytest.warns(UserWarning, match="compiled step not used: .*prediction substeps need the OSQP controller"):
-        ctrl = make_mpc(b.model, b.path, b.problem, replace(b.config, prediction_substeps=2), "fast")
+        ctrl = LtvMpc(b.model, b.path, b.problem, replace(b.config, prediction_substeps=2))
     assert isinstance(ctrl, LtvMpc) and (ctrl.backend_name, ctrl.assembly) == ("fast", "python")
     # and where the condensed solver's limits exclude it too, OSQP
     pb = replace(b.problem, R=0.0 * b.problem.R, Rc=0.0 * b.problem.Rc)
-    with pytest.warns(UserWarning, match="fast backend not used: .*prediction substeps"):
-        ctrl = make_mpc(b.model, b.path, pb, replace(b.config, prediction_substeps=2), "fast")
-    assert ctrl.backend_name == "osqp"
+    with pytest.warns(FastPathUnavailable) as told:
+        ctrl = LtvMpc(b.model, b.path, pb, replace(b.config, prediction_substeps=2))
+    said = [str(w.message) for w in told]
+    assert any(m.startswith("compiled step not used: prediction substeps") for m in said), said
+    assert any(m.startswith("condensed solver not used: R + Rc") for m in said), said
+    assert (ctrl.backend_name, ctrl.assembly) == ("osqp", "python")
 
 
 #: scenarios whose closed loop on OSQP at its scenario tolerance (1e-5) parts from OSQP's own at
@@ -107,7 +110,7 @@ def builtin_pair(request):
     spec = load_scenario(request.param)
     ref = build_experiment(_tight(spec) if request.param in LOOSE_OSQP_SCENARIOS else _with_backend(spec, "osqp"))
     fast = build_experiment(_with_backend(spec, "fast"))
-    assert isinstance(fast.mpc, FastLtvMpc), "every built-in scenario must run on the fast path"
+    assert isinstance(fast.mpc, CompiledLtvMpc), "every built-in scenario must run on the fast path"
     assert isinstance(ref.mpc, LtvMpc)
     return request.param, ref, fast, run_experiment(ref)
 
@@ -244,8 +247,8 @@ def test_fast_matches_osqp_with_every_supported_constraint(case):
     model, path, pb, cfg, x0 = _feature_cases()[case]
     # both keep the (default) body inside the road by the same rule, its yaw and the path's
     # curvature included
-    fast = FastLtvMpc(model, path, pb, cfg)
-    ref = LtvMpc(model, path, pb, cfg, TIGHT)
+    fast = CompiledLtvMpc(model, path, pb, cfg)
+    ref = PythonLtvMpc(model, path, pb, cfg, "osqp", osqp_settings=TIGHT)
     rng = np.random.default_rng(3)
     plant = Plant(model)
     x = x0.copy()
@@ -356,7 +359,7 @@ def test_infeasible_controller_problem_is_reported_and_falls_back_counted():
     ):
         cfg = MpcConfig(v_ref_mps=1.0, fallback=FallbackConfig(ladder))
         runs = {}
-        for ctrl in (FastLtvMpc(model, path, pb, cfg), LtvMpc(model, path, pb, cfg)):
+        for ctrl in (CompiledLtvMpc(model, path, pb, cfg), PythonLtvMpc(model, path, pb, cfg, "osqp")):
             r = simulate(ctrl, Plant(model), path, [0, 0.2, 0, 3.0], 0.01, 30)
             assert all(np.isfinite(r.u).ravel())
             runs[ctrl.backend_name] = r
@@ -379,16 +382,16 @@ def test_iteration_cap_gives_max_iter_and_a_deliberate_fallback():
     pb = MpcProblem(3, 1, 30, 0.01, Q=np.ones(3), R=1.0, u_min=-STEER, u_max=STEER, du_max_per_s=math.radians(90))
     path = StraightPath([1, 0], [11, 0])
     cfg = MpcConfig(v_ref_mps=1.0, fallback=FallbackConfig(("shifted_plan", "hold_last")))
-    ctrl = FastLtvMpc(model, path, pb, cfg, FastSettings(max_iter=2))
+    ctrl = CompiledLtvMpc(model, path, pb, cfg, condensed_settings=CondensedSettings(max_iter=2))
     x = np.array([2.0, -2.0, math.pi / 2])
     warm = ctrl.initial_warm(x)
     warm = WarmStart(warm.s_m, np.array([0.3]))
     out = ctrl.step(x, warm)
     assert out.status == "max_iter" and out.fallback == "hold_last"
     assert abs(out.u[0] - 0.3) <= math.radians(90) * 0.01 + 1e-12
-    full = FastLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0)).step(x, warm)
+    full = CompiledLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0)).step(x, warm)
     assert full.status == "ok"
-    plan = FastLtvMpc(model, path, pb, cfg, FastSettings(max_iter=2)).step(x, full.warm)
+    plan = CompiledLtvMpc(model, path, pb, cfg, condensed_settings=CondensedSettings(max_iter=2)).step(x, full.warm)
     assert plan.status == "max_iter" and plan.fallback == "shifted_plan"
     rate = math.radians(90) * 0.01
     np.testing.assert_allclose(plan.u, np.clip(full.warm.U[1], full.u - rate, full.u + rate))
@@ -398,7 +401,7 @@ def test_iteration_cap_gives_max_iter_and_a_deliberate_fallback():
 def test_non_finite_state_and_bad_warm_start_are_clear_value_errors(bad, field):
     model = KinematicBicycle3(1.0)
     pb = MpcProblem(3, 1, 10, 0.01, Q=np.ones(3), R=1.0, u_min=-STEER, u_max=STEER)
-    c = FastLtvMpc(model, StraightPath([0, 0], [10, 0]), pb)
+    c = CompiledLtvMpc(model, StraightPath([0, 0], [10, 0]), pb)
     warm = c.initial_warm([0.0, 0.0, 0.0])
     with pytest.raises(ValueError, match=f"state field\\(s\\) {field} not finite"):
         c.step(np.array(bad, float), warm)
@@ -418,19 +421,20 @@ def test_factory_falls_back_to_osqp_and_says_why():
     assert "positive definite" in fast_unsupported_reason(model, path, pb)
     # a limit of the condensed solver only: the compiled step assembles, OSQP solves
     with pytest.warns(FastPathUnavailable, match="condensed solver not used: .*positive definite"):
-        c = make_mpc(model, path, pb, backend="fast")
-    assert isinstance(c, FastLtvMpc) and (c.backend_name, c.assembly) == ("osqp", "compiled")
+        c = LtvMpc(model, path, pb)
+    assert isinstance(c, CompiledLtvMpc) and (c.backend_name, c.assembly) == ("osqp", "compiled")
     assert c.step(np.zeros(3), c.initial_warm(np.zeros(3))).status == "ok"
-    with pytest.raises(ValueError, match="fast backend cannot"):
-        FastLtvMpc(model, path, pb)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        assert make_mpc(model, path, MpcProblem(3, 1, 10, 0.01, Q=1.0, R=1.0), backend="fast").backend_name == "fast"
-        assert make_mpc(model, path, pb, backend="osqp").backend_name == "osqp"
+        assert LtvMpc(model, path, MpcProblem(3, 1, 10, 0.01, Q=1.0, R=1.0)).backend_name == "fast"
+        assert LtvMpc(model, path, pb, solver="osqp").backend_name == "osqp"
         # compiled unless the caller asks for OSQP, as scenarios and the CLI
-        assert make_mpc(model, path, MpcProblem(3, 1, 10, 0.01, Q=1.0, R=1.0)).backend_name == "fast"
-    with pytest.raises(ValueError, match="backend"):
-        make_mpc(model, path, pb, backend="gpu")
+        c = LtvMpc(model, path, MpcProblem(3, 1, 10, 0.01, Q=1.0, R=1.0))
+        assert (type(c), c.backend_name, c.assembly) == (CompiledLtvMpc, "fast", "compiled")
+    with pytest.raises(ValueError, match="solver must be one of"):
+        LtvMpc(model, path, pb, solver="gpu")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="assembly must be one of"):
+        LtvMpc(model, path, pb, assembly="gpu")  # type: ignore[arg-type]
 
 
 def test_speed_profiles_the_fast_path_declines_are_named():
@@ -530,7 +534,7 @@ def test_a_second_process_loads_the_compiled_step_from_the_cache():
     from mpcdrive.control import fast
 
     model = KinematicBicycle3(1.0)
-    c = FastLtvMpc(model, StraightPath([0, 0], [5, 0]), MpcProblem(3, 1, 5, 0.01, Q=1.0, R=1.0))
+    c = CompiledLtvMpc(model, StraightPath([0, 0], [5, 0]), MpcProblem(3, 1, 5, 0.01, Q=1.0, R=1.0))
     c.step(np.zeros(3), c.initial_warm(np.zeros(3)))
     cache_dir = Path(fast._control_step.stats.cache_path)
     assert any(cache_dir.glob("fast_step._control_step-*.nbi")), f"no cache index in {cache_dir}"
@@ -540,7 +544,7 @@ def test_a_second_process_loads_the_compiled_step_from_the_cache():
         "from mpcdrive.models import KinematicBicycle4\n"
         "from mpcdrive.ocp import MpcProblem\n"
         "from mpcdrive.paths import CirclePath\n"
-        "c = fast.FastLtvMpc(KinematicBicycle4(), CirclePath(), MpcProblem(4, 2, 7, 0.01, Q=1.0, R=1.0))\n"
+        "c = fast.CompiledLtvMpc(KinematicBicycle4(), CirclePath(), MpcProblem(4, 2, 7, 0.01, Q=1.0, R=1.0))\n"
         "x = np.array([1.5, 0.0, 1.6, 1.0])\n"
         "c.step(x, c.initial_warm(x))\n"
         "st = fast._control_step.stats\n"
@@ -653,8 +657,8 @@ def test_fast_matches_osqp_with_obstacle_costs(case):
     and plans are OSQP's, fed the states of OSQP's closed loop."""
     model, path, pb, cfg, x0, obstacles, av, max_sqp = _obstacle_cases()[case]
     fp = Footprint()
-    fast = make_mpc(model, path, pb, cfg, "fast", obstacles=obstacles, avoidance=av, footprint=fp)
-    ref = make_mpc(model, path, pb, cfg, "osqp", osqp_settings=TIGHT, obstacles=obstacles, avoidance=av, footprint=fp)
+    fast = LtvMpc(model, path, pb, cfg, obstacles=obstacles, avoidance=av, footprint=fp)
+    ref = LtvMpc(model, path, pb, cfg, "osqp", osqp_settings=TIGHT, obstacles=obstacles, avoidance=av, footprint=fp)
     assert fast.backend_name == "fast" and ref.backend_name == "osqp"
     plant = Plant(model)
     x = x0.copy()
@@ -688,8 +692,8 @@ def test_fast_path_obstacle_cost_changes_the_command():
 
     b = p3()
     x = np.array([4.2, 0.05, 0.0])
-    with_ob = make_mpc(b.model, b.path, b.problem, b.config, "fast", obstacles=b.obstacles, avoidance=b.avoidance)
-    without = make_mpc(b.model, b.path, b.problem, b.config, "fast")
+    with_ob = LtvMpc(b.model, b.path, b.problem, b.config, obstacles=b.obstacles, avoidance=b.avoidance)
+    without = LtvMpc(b.model, b.path, b.problem, b.config)
     u1 = with_ob.step(x, with_ob.initial_warm(x)).u
     u0 = without.step(x, without.initial_warm(x)).u
     assert abs(u1[0] - u0[0]) > 1e-3
@@ -731,7 +735,7 @@ def test_fast_constraint_rows_match_tight_osqp(sid):
     spec = load_scenario(sid)
     ref = build_experiment(_tight(spec))
     fast = build_experiment(_with_backend(spec, "fast"))
-    assert isinstance(fast.controller, FastLtvMpc)
+    assert isinstance(fast.controller, CompiledLtvMpc)
     assert fast.controller.avoidance.config.uses_rows
     ref_result = run_experiment(ref)
     rc, fc = ref.controller, fast.controller
@@ -772,7 +776,7 @@ def test_fast_dynamic_scenarios_match_tight_osqp(sid):
     c = spec.controller.model_copy(update={"backend": "osqp", "osqp_eps": 1e-10, "osqp_max_iter": 200000})
     ref = build_experiment(spec.model_copy(update={"controller": c}))
     fast = build_experiment(_with_backend(spec, "fast"))
-    assert isinstance(fast.mpc, FastLtvMpc)
+    assert isinstance(fast.mpc, CompiledLtvMpc)
     ref_result = run_experiment(ref)
     rc, fc = ref.controller, fast.controller
     warm = rc.initial_warm(ref_result.x[0])
@@ -812,7 +816,7 @@ def test_fast_controller_keeps_its_obstacles_as_the_osqp_one_does(sid):
     """Reports and adapters read ``controller.avoidance`` (config, obstacles): the same on both."""
     spec = load_scenario(sid)
     ref, fast = (build_experiment(_with_backend(spec, b)).controller for b in ("osqp", "fast"))
-    assert isinstance(fast, FastLtvMpc)
+    assert isinstance(fast, CompiledLtvMpc)
     assert fast.avoidance.config == ref.avoidance.config
     assert list(map(repr, fast.avoidance.obstacles)) == list(map(repr, ref.avoidance.obstacles))
     assert repr(fast.avoidance.road) == repr(ref.avoidance.road)
@@ -888,10 +892,10 @@ def test_the_relax_rung_avoids_the_obstacles_set_last():
     path = StraightPath([0, 0], [50, 0])
     far, near = Obstacle(Circle(0.3), (40.0, 0.0, 0.0)), Obstacle(Circle(0.3), (1.5, 0.1, 0.0))
     av = AvoidanceConfig("hard", influence_m=3.0)
-    moved = FastLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0), obstacles=(far,), avoidance=av)
+    moved = CompiledLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0), obstacles=(far,), avoidance=av)
     moved.set_obstacles((near,))
-    built = FastLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0), obstacles=(near,), avoidance=av)
-    kept = FastLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0), obstacles=(far,), avoidance=av)
+    built = CompiledLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0), obstacles=(near,), avoidance=av)
+    kept = CompiledLtvMpc(model, path, pb, MpcConfig(v_ref_mps=1.0), obstacles=(far,), avoidance=av)
     x = np.array([0.0, 0.0, 0.0, 3.0])
     outs = [c.step(x, c.initial_warm(x)) for c in (moved, built, kept)]
     assert [o.fallback for o in outs] == ["relax"] * 3

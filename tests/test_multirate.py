@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from mpcdrive.control import LtvMpc
+from mpcdrive.control import LtvMpc, MpcConfig, PythonLtvMpc
 from mpcdrive.io.results import read_trajectory_csv, write_trajectory_csv
 from mpcdrive.models import KinematicBicycle3
 from mpcdrive.ocp import MpcProblem
@@ -32,7 +32,7 @@ X0_CIRCLE = [1.5, 0.1, np.pi / 2]  # 0.1 m off the circle, on its normal
 
 def mpc(dt_s: float, path=CIRCLE, N: int = 10) -> LtvMpc:
     problem = MpcProblem(nx=3, nu=1, N=N, dt_s=dt_s, Q=[1, 1, 1], R=1.0, u_min=-MAX_STEER_RAD, u_max=MAX_STEER_RAD)
-    return LtvMpc(MODEL, path, problem)
+    return PythonLtvMpc(MODEL, path, problem, MpcConfig(), "osqp")
 
 
 class Recorder:

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpcdrive.control import LtvMpc
+from mpcdrive.control import MpcConfig, PythonLtvMpc
 from mpcdrive.scene.road import Road
 from mpcdrive.models import KinematicBicycle3
 from mpcdrive.ocp import MpcProblem
@@ -50,7 +50,7 @@ def circle_run(steps: int = 150, radius_m: float = 1.5, lane: float | None = 0.4
         u_max=np.radians(60),
         road=None if lane is None else Road.constant(2 * lane, 0.0),
     )
-    mpc = LtvMpc(model, path, problem)
+    mpc = PythonLtvMpc(model, path, problem, MpcConfig(), "osqp")
     return simulate(
         mpc,
         Plant(model),

@@ -4,10 +4,10 @@ Random instances of one step of the tracking MPC with everything that makes the 
 bounds and rate limits that bind, a car starting partly outside its road (the soft road rows'
 slacks are nonzero), and a static obstacle ahead in the lane whose ``hard`` half-plane rows
 bind. For each step the OSQP controller (:class:`LtvMpc`: the sparse QP of ``ocp.qp``), the
-compiled controller (:class:`FastLtvMpc`: the condensed QP and its dual active-set solver) and
+compiled controller (:class:`CompiledLtvMpc`: the condensed QP and its dual active-set solver) and
 the compiled controller with ``solver="osqp"`` (its compiled assembly's stage QP, checked field
 by field against the OSQP controller's, solved by OSQP) and the OSQP controller's assembly solved
-by the condensed solver (``LtvMpc(..., FastSettings())``) take the same measured state and warm
+by the condensed solver (``PythonLtvMpc(..., "condensed")``) take the same measured state and warm
 start, and their first inputs, plans and objective values are
 compared with the optimum of the same stage problem written here in cvxpy from
 :class:`MpcProblem`'s documented cost and constraints and solved with Clarabel.
@@ -30,9 +30,9 @@ import numpy as np
 import pytest
 import scipy.linalg as sla
 
-from mpcdrive.control import LtvMpc, MpcConfig
+from mpcdrive.control import LtvMpc, MpcConfig, PythonLtvMpc
 from mpcdrive.control import fast_step as fs
-from mpcdrive.control.fast import FastLtvMpc, FastSettings
+from mpcdrive.control.fast import CompiledLtvMpc, CondensedSettings
 from mpcdrive.models import KinematicBicycle3, KinematicBicycle4
 from mpcdrive.models.discretize import discrete_step
 from mpcdrive.ocp import MpcProblem
@@ -44,7 +44,7 @@ from mpcdrive.solvers.osqp_backend import OsqpSettings
 
 #: the OSQP controller's settings in these tests (the tolerances below follow from them)
 OSQP = OsqpSettings(eps_abs=1e-9, eps_rel=1e-9, max_iter=100000)
-FAST = FastSettings()
+FAST = CondensedSettings()
 #: Clarabel's tolerances, tightest first (it occasionally stalls short of the tightest)
 CLARABEL_TOLS = (1e-10, 1e-9, 1e-8)
 #: a constraint counts as active at the oracle's optimum within this (for the KKT matrix and
@@ -58,10 +58,10 @@ ACTIVE_TOL = 1e-7
 @dataclass
 class Case:
     ref: LtvMpc
-    fast: FastLtvMpc
+    fast: CompiledLtvMpc
     x: np.ndarray
     #: the compiled assembly's stage QP solved by OSQP
-    fast_osqp: FastLtvMpc
+    fast_osqp: CompiledLtvMpc
     #: the Python assembly's stage QP solved by the condensed solver
     py_condensed: LtvMpc
 
@@ -154,12 +154,27 @@ def make_case(seed: int) -> Case:
     av = AvoidanceConfig("hard", margin_m=0.1, influence_m=10.0, max_obstacles=2)
     cfg = MpcConfig(v_ref_mps=1.0)
     fp = Footprint()
-    ref = LtvMpc(model, path, pb, cfg, OSQP, obstacles=obstacles, avoidance=av, footprint=fp)
-    fast = FastLtvMpc(model, path, pb, cfg, FAST, obstacles=obstacles, avoidance=av, footprint=fp)
-    fast_osqp = FastLtvMpc(
-        model, path, pb, cfg, FAST, obstacles=obstacles, avoidance=av, footprint=fp, solver="osqp", osqp_settings=OSQP
+    ref = PythonLtvMpc(
+        model, path, pb, cfg, "osqp", osqp_settings=OSQP, obstacles=obstacles, avoidance=av, footprint=fp
     )
-    py_condensed = LtvMpc(model, path, pb, cfg, FAST, obstacles=obstacles, avoidance=av, footprint=fp)
+    fast = CompiledLtvMpc(
+        model, path, pb, cfg, condensed_settings=FAST, obstacles=obstacles, avoidance=av, footprint=fp
+    )
+    fast_osqp = CompiledLtvMpc(
+        model,
+        path,
+        pb,
+        cfg,
+        condensed_settings=FAST,
+        obstacles=obstacles,
+        avoidance=av,
+        footprint=fp,
+        solver="osqp",
+        osqp_settings=OSQP,
+    )
+    py_condensed = PythonLtvMpc(
+        model, path, pb, cfg, "condensed", condensed_settings=FAST, obstacles=obstacles, avoidance=av, footprint=fp
+    )
     return Case(ref, fast, x, fast_osqp, py_condensed)
 
 
@@ -391,7 +406,7 @@ def fast_residuals(fast) -> tuple[float, float]:
     """The active-set solver's (dual, primal) residual bounds: stationarity to rounding,
     n eps_mach (n |H| |z| + |g|), and rows to feasibility_tol times their norm (the condensed rows
     of the step, in the compiled controller's buffers or the condensed backend's work arrays)."""
-    if isinstance(fast, FastLtvMpc):
+    if isinstance(fast, CompiledLtvMpc):
         w = fast._w
         C, H, g, z = w[fs._W_C], w[fs._W_H], w[fs._W_G], w[fs._W_Z]
     else:
@@ -423,7 +438,7 @@ def constant_cost(pb: MpcProblem, d, u_prev) -> float:
 # --------------------------------------------------------------------------------------------
 # one step, both controllers against the oracle
 # --------------------------------------------------------------------------------------------
-def same_instance(fast: FastLtvMpc, d) -> None:
+def same_instance(fast: CompiledLtvMpc, d) -> None:
     """The compiled controller built the instance the oracle solves: the same affine model,
     references and rows as the OSQP controller's ``prepare``."""
     w = fast._w

@@ -1,4 +1,4 @@
-"""One stage QP, two solvers: the compiled assembly's stage QP (``FastLtvMpc.prepare``) is the
+"""One stage QP, two solvers: the compiled assembly's stage QP (``CompiledLtvMpc.prepare``) is the
 OSQP controller's (``LtvMpc.prepare``) field by field, and OSQP solving it (``solver="osqp"``)
 drives the closed loop the OSQP controller drives.
 
@@ -16,8 +16,8 @@ import warnings
 import numpy as np
 import pytest
 
-from mpcdrive.control import FastPathUnavailable, LtvMpc, MpcConfig, make_mpc
-from mpcdrive.control.fast import FastLtvMpc, FastSettings
+from mpcdrive.control import FastPathUnavailable, LtvMpc, MpcConfig, PythonLtvMpc
+from mpcdrive.control.fast import CompiledLtvMpc, CondensedSettings
 from mpcdrive.models import KinematicBicycle3, KinematicBicycle4
 from mpcdrive.models.discretize import discrete_step
 from mpcdrive.ocp import MpcProblem
@@ -78,8 +78,8 @@ def _controllers(case: str, curved: bool):
         p, h = path.position(s_ob), float(path.heading(s_ob))
         obstacles = (Obstacle(Circle(0.5), (p[0] - 0.3 * math.sin(h), p[1] + 0.3 * math.cos(h), 0.0)),)
         av = AvoidanceConfig(form[case], weight=50.0)
-    ref = LtvMpc(model, path, pb, cfg, OSQP, obstacles=obstacles, avoidance=av)
-    fo = FastLtvMpc(model, path, pb, cfg, obstacles=obstacles, avoidance=av, solver="osqp", osqp_settings=OSQP)
+    ref = PythonLtvMpc(model, path, pb, cfg, "osqp", osqp_settings=OSQP, obstacles=obstacles, avoidance=av)
+    fo = CompiledLtvMpc(model, path, pb, cfg, obstacles=obstacles, avoidance=av, solver="osqp", osqp_settings=OSQP)
     if case == "lateral-cap":
         for c in (ref, fo):
             c.set_lateral_reference(lambda s: 0.4 * np.sin(0.2 * np.asarray(s)))
@@ -123,8 +123,10 @@ def test_condensed_solver_keeps_the_obstacle_cost_when_the_step_runs_in_two_stag
     compiled controller drove 0.63 m from the OSQP controller's plan, as if without obstacles)."""
     model, ref, _, x = _controllers("potential", False)
     x[0] = 3.0  # 3 m behind the obstacle, within its influence
-    fast = FastLtvMpc(model, ref.path, ref.problem, ref.config, obstacles=ref.obstacles, avoidance=ref.avoidance.config)
-    bare = FastLtvMpc(model, ref.path, ref.problem, ref.config)
+    fast = CompiledLtvMpc(
+        model, ref.path, ref.problem, ref.config, obstacles=ref.obstacles, avoidance=ref.avoidance.config
+    )
+    bare = CompiledLtvMpc(model, ref.path, ref.problem, ref.config)
     for c in (ref, fast, bare):
         c.set_speed_cap(30.0)
     a = ref.step(x, ref.initial_warm(x))
@@ -141,12 +143,12 @@ def test_factory_lets_osqp_solve_the_compiled_stage_qp_beyond_the_condensed_limi
     model = KinematicBicycle3(1.0)
     path = StraightPath([0.0, 0.0], [20.0, 0.0])
     pb = MpcProblem(3, 1, 200, 0.05, Q=np.diag([1.0, 5.0, 1.0]), R=1.0, u_min=-0.5, u_max=0.5)  # 200 variables
-    from mpcdrive.control.fast import FastSettings
+    from mpcdrive.control.fast import CondensedSettings
 
     with pytest.warns(FastPathUnavailable, match="condensed solver not used: .*max_variables=100.*OSQP solves"):
-        c = make_mpc(model, path, pb, backend="fast", fast_settings=FastSettings(max_variables=100))
-    assert isinstance(c, FastLtvMpc) and (c.backend_name, c.assembly) == ("osqp", "compiled")
-    ref = make_mpc(model, path, pb, backend="osqp", osqp_settings=OsqpSettings(eps_abs=1e-9, eps_rel=1e-9))
+        c = LtvMpc(model, path, pb, condensed_settings=CondensedSettings(max_variables=100))
+    assert isinstance(c, CompiledLtvMpc) and (c.backend_name, c.assembly) == ("osqp", "compiled")
+    ref = LtvMpc(model, path, pb, solver="osqp", osqp_settings=OsqpSettings(eps_abs=1e-9, eps_rel=1e-9))
     x = np.array([0.0, 0.3, 0.05])
     a, b = ref.step(x, ref.initial_warm(x)), c.step(x, c.initial_warm(x))
     assert a.status == b.status == "ok"
@@ -154,21 +156,30 @@ def test_factory_lets_osqp_solve_the_compiled_stage_qp_beyond_the_condensed_limi
     np.testing.assert_allclose(b.u, a.u, rtol=0, atol=1e-3)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        assert make_mpc(model, path, pb, backend="fast").backend_name == "fast"  # within the default limit
+        assert LtvMpc(model, path, pb).backend_name == "fast"  # within the default limit
     with pytest.raises(ValueError, match="solver must be"):
-        FastLtvMpc(model, path, pb, solver="ipopt")
+        CompiledLtvMpc(model, path, pb, solver="ipopt")
 
 
 @pytest.mark.parametrize("curved", [False, True], ids=["straight", "circle"])
 @pytest.mark.parametrize("case", CASES)
 def test_condensed_solver_on_the_python_assembly_drives_the_compiled_controllers_loop(case, curved):
-    """``LtvMpc(..., FastSettings())``: the Python assembly's stage QP solved by the compiled
+    """``PythonLtvMpc(..., "condensed")``: the Python assembly's stage QP solved by the compiled
     condensed solver gives the compiled controller's plans (the same QP to rounding, the same
     exact active-set solver: measured 3e-12 m at most over 40 steps)."""
     model, ref, fo, x = _controllers(case, curved)
     av = ref.avoidance.config if ref.avoidance is not None else None
-    py = LtvMpc(model, ref.path, fo.problem, ref.config, FastSettings(), obstacles=ref.obstacles, avoidance=av)
-    fc = FastLtvMpc(model, ref.path, fo.problem, ref.config, obstacles=ref.obstacles, avoidance=av)
+    py = PythonLtvMpc(
+        model,
+        ref.path,
+        fo.problem,
+        ref.config,
+        "condensed",
+        condensed_settings=CondensedSettings(),
+        obstacles=ref.obstacles,
+        avoidance=av,
+    )
+    fc = CompiledLtvMpc(model, ref.path, fo.problem, ref.config, obstacles=ref.obstacles, avoidance=av)
     assert (py.backend_name, py.assembly, fc.assembly) == ("fast", "python", "compiled")
     if case == "lateral-cap":
         for c in (py, fc):
@@ -185,19 +196,17 @@ def test_condensed_solver_on_the_python_assembly_drives_the_compiled_controllers
 
 
 def test_a_problem_without_compiled_assembly_is_solved_by_the_condensed_solver():
-    """Prediction substeps have no compiled assembly: ``make_mpc(backend="fast")`` assembles in
+    """Prediction substeps have no compiled assembly: ``LtvMpc`` assembles in
     Python and solves with the condensed solver, says so, and drives OSQP's loop."""
     from dataclasses import replace
 
     model, ref, _, x = _controllers("hard", True)
     cfg = replace(ref.config, prediction_substeps=2)
     av = ref.avoidance.config
-    with pytest.warns(FastPathUnavailable, match="compiled step not used: prediction substeps.*condensed solver"):
-        c = make_mpc(
-            model, ref.path, _controllers("hard", True)[2].problem, cfg, "fast", obstacles=ref.obstacles, avoidance=av
-        )
+    with pytest.warns(FastPathUnavailable, match="compiled step not used: prediction substeps.*assembled in Python"):
+        c = LtvMpc(model, ref.path, _controllers("hard", True)[2].problem, cfg, obstacles=ref.obstacles, avoidance=av)
     assert isinstance(c, LtvMpc) and (c.backend_name, c.assembly) == ("fast", "python")
-    o = LtvMpc(model, ref.path, c.problem, cfg, OSQP, obstacles=ref.obstacles, avoidance=av)
+    o = PythonLtvMpc(model, ref.path, c.problem, cfg, "osqp", osqp_settings=OSQP, obstacles=ref.obstacles, avoidance=av)
     w1, w2 = c.initial_warm(x), o.initial_warm(x)
     for _ in range(30):
         a, b = c.step(x, w1), o.step(x, w2)

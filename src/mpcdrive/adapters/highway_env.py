@@ -23,8 +23,8 @@ episode's end); :class:`HighwayEnvMpcDriver` is the controller:
   :class:`~mpcdrive.control.lanes.LaneChoosingMpc`: its decision layer picks the lane on
   highway-v0's straight parallel lanes, and the MPC keeps the body inside the lanes the decision
   allows and follows its lateral ramp (docs/highway.md), as on every other road with lanes.
-* **Solver.** The compiled controller (:func:`~mpcdrive.control.factory.make_mpc`, ``fast``), the
-  default everywhere; OSQP with a one-line notice for a problem it does not cover.
+* **Solver.** The default :class:`~mpcdrive.control.mpc.LtvMpc` (compiled step, condensed
+  solver), as everywhere; a one-line notice names the reason where it does not cover a problem.
 
 :func:`drive_env` runs an episode (:func:`~mpcdrive.sim.simulate` with the plant, the road the
 run is judged on and the vehicle's footprint) and adds what the environment reported. Example::
@@ -44,9 +44,8 @@ from typing import Literal
 
 import numpy as np
 
-from ..control.factory import make_mpc
 from ..control.lanes import LaneChoosingMpc, LaneConfig, LaneDecision
-from ..control.mpc import MpcConfig
+from ..control.mpc import LtvMpc, MpcConfig
 from ..ocp.avoidance import AvoidanceConfig
 from ..ocp.problem import MpcProblem
 from ..paths.straight import StraightPath
@@ -335,12 +334,11 @@ class HighwayEnvMpcDriver:
         #: obstacles the MPC considered per step
         self.considered: list[int] = []
         self._obstacles = p.traffic(0.0)
-        mpc = make_mpc(
+        mpc = LtvMpc(
             self.model,
             self.path,
             problem,
             MpcConfig(v_ref_mps=v_ref, projection_window_m=window),
-            backend="fast",
             obstacles=self._obstacles,
             avoidance=s.avoidance,
             footprint=self.footprint,

@@ -16,9 +16,9 @@ import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from ..control.factory import BACKENDS, FastPathUnavailable
+from ..control.mpc import FastPathUnavailable
 from .problems import p1, p3_obstacles
-from .runner import make_controller, time_closed_loop
+from .runner import BACKENDS, make_controller, time_closed_loop
 
 HORIZONS = (10, 20, 30, 50, 100)
 OBSTACLE_COUNTS = (0, 1, 2, 5, 10, 20)

@@ -36,17 +36,21 @@ class BenchProblem:
     #: the problem's own closed-loop length (P4), else None: as many steps as asked
     steps: int | None = None
 
-    def controller(self, **config_changes) -> LtvMpc:
-        """mpcdrive's controller for this problem (config fields may be overridden)."""
+    def controller(self, solver: str = "osqp", assembly: str = "python", **config_changes) -> LtvMpc:
+        """mpcdrive's controller for this problem (config fields may be overridden); by default
+        the reference: the stage QP assembled in Python, solved by OSQP (the baselines take its
+        ``prepare``)."""
         cfg = replace(self.config, **config_changes) if config_changes else self.config
         return LtvMpc(
             self.model,
             self.path,
             self.problem,
             cfg,
+            solver,  # type: ignore[arg-type]
             obstacles=self.obstacles,
             avoidance=self.avoidance,
             footprint=self.footprint,
+            assembly=assembly,  # type: ignore[arg-type]
         )
 
 

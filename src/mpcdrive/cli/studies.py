@@ -247,7 +247,7 @@ def bench(
 
 def _bench_report(out_dir: Path, results: dict, log) -> None:
     from ..bench.extras import cold_start, horizon_sweep, obstacle_sweep, step_allocations
-    from ..control.factory import BACKENDS
+    from ..bench.runner import BACKENDS
     from ..io import write_json
     from ..io.atomic import atomic_output_dir
     from ..plots.bench import plot_horizon_scaling, plot_obstacle_scaling

@@ -1,18 +1,18 @@
-"""Controllers: the Controller protocol, LTV-MPC on the sparse QP (OSQP, the reference) and its
-compiled fast path (``mpcdrive.control.fast``, loaded on demand: it imports numba)."""
+"""Controllers: the Controller protocol and the LTV-MPC (``LtvMpc``: its stage QP assembled by
+the compiled step, ``mpcdrive.control.fast``, loaded on demand as it imports numba, or in Python;
+solved by the condensed solver, OSQP or projected gradient), baselines and wrappers."""
 
 from .adapters import StateAdapter
 from .base import Controller
 from .baselines import BaselineLimits, PurePursuit, Stanley
 from .delay import DelayCompensator, DelayWarmStart
-from .factory import BACKENDS, DEFAULT_BACKEND, FastPathUnavailable, make_mpc
 from .fallback import FALLBACK_KINDS, FallbackConfig
-from .mpc import LtvMpc, MpcConfig
+from .mpc import ASSEMBLIES, SOLVERS, FastPathUnavailable, LtvMpc, MpcConfig, PythonLtvMpc
 
 __all__ = [
-    "BACKENDS",
-    "DEFAULT_BACKEND",
+    "ASSEMBLIES",
     "FALLBACK_KINDS",
+    "SOLVERS",
     "BaselineLimits",
     "Controller",
     "DelayCompensator",
@@ -22,7 +22,7 @@ __all__ = [
     "LtvMpc",
     "MpcConfig",
     "PurePursuit",
+    "PythonLtvMpc",
     "StateAdapter",
     "Stanley",
-    "make_mpc",
 ]

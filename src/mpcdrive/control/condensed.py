@@ -21,7 +21,13 @@ from ..ocp.problem import MpcProblem
 from ..solvers.condensed import condensed_solve
 from ..solvers.dense_qp import STATUS_WORDS
 from ..types import SolveResult
-from .fast_setup import FastSettings, condensed_unsupported_reason, condensed_variables, constant_rows, riccati_shortcut
+from .fast_setup import (
+    CondensedSettings,
+    condensed_unsupported_reason,
+    condensed_variables,
+    constant_rows,
+    riccati_shortcut,
+)
 from .fast_step import _write_plan, input_bound_rows
 
 
@@ -31,7 +37,7 @@ class CondensedBackend:
 
     name = "condensed"
 
-    def __init__(self, problem: MpcProblem, settings: FastSettings = FastSettings()):
+    def __init__(self, problem: MpcProblem, settings: CondensedSettings = CondensedSettings()):
         reason = condensed_unsupported_reason(problem, settings, bool(problem.obstacle_rows))
         if reason is not None:
             raise ValueError(f"the condensed solver cannot solve this problem: {reason}")

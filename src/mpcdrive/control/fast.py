@@ -1,7 +1,7 @@
 """The compiled LTV-MPC step: the whole of :class:`~mpcdrive.control.mpc.LtvMpc`'s step behind
 one Python call.
 
-:class:`FastLtvMpc` solves the same problem as ``LtvMpc`` (same projection, horizon
+:class:`CompiledLtvMpc` solves the same problem as ``LtvMpc`` (same projection, horizon
 references with curvature feedforward and slip-corrected yaw -- at a constant reference speed or
 following a speed profile (:class:`~mpcdrive.paths.SpeedProfile` or
 :class:`~mpcdrive.paths.ConstantSpeed`, arc-length horizon: the references move along the path as
@@ -43,15 +43,16 @@ and inputs, as ``DynamicBicycle.reference`` computes them).
 Compiled functions use numba's on-disk cache, so only the first process on a machine compiles
 (tens of seconds); later processes load the machine code.
 
-Problems the compiled step does not cover (see :func:`~mpcdrive.control.fast_setup.fast_unsupported_reason`,
-importable from here too, as :class:`~mpcdrive.control.fast_setup.FastSettings` is) are refused here with a
-ValueError naming the reason; :func:`mpcdrive.control.factory.make_mpc` then uses the OSQP controller and says so.
+Problems the compiled step does not cover (see :func:`~mpcdrive.control.fast_setup.fast_unsupported_reason`)
+are refused here with a ValueError naming the reason; :class:`~mpcdrive.control.mpc.LtvMpc` then
+builds the Python assembly (:class:`~mpcdrive.control.mpc.PythonLtvMpc`) and says so.
 """
 
 from __future__ import annotations
 
 import math
 import time
+import warnings
 from dataclasses import replace
 from types import SimpleNamespace
 from typing import Literal
@@ -73,7 +74,7 @@ from ..scene.road import Road
 from ..solvers.dense_qp import STATUS_WORDS
 from ..solvers.osqp_backend import OsqpSettings
 from ..types import ControlOutput, WarmStart
-from .base import TrackingWarmStart, checked_obstacles, checked_road, checked_speed_cap
+from .base import checked_obstacles, checked_road, checked_speed_cap
 
 # the layout of the compiled step's buffers
 from .fast_layout import _I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH, _I_LIN, _I_METHOD, _I_HORIZON, _I_FF, _I_LANE, _I_MCONST
@@ -91,11 +92,11 @@ from .fast_layout import _W_UHI, _W_VLIN, _W_SLIN, _W_RLIN, _NW
 from .fast_layout import _F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_RMARGIN, _F_SLACK2, _F_SLACK1, _F_TOL, _F_OW, _F_OEPS
 from .fast_layout import _F_OSX, _F_OSY, _F_OINF, _F_OMARGIN, _F_HW, _F_HL, _F_RAMP, _F_OSLACK2, _F_OSLACK1, _F_BOFF
 from .fast_layout import _F_RPERIOD, _F_FRIC, _F_WHEELBASE, _NFP
-from .fast_setup import FastSettings, fast_unsupported_reason, obstacles_unsupported_reason  # importers use these
+from .fast_setup import CondensedSettings, fast_unsupported_reason, obstacles_unsupported_reason, uses_rows
 from .fast_setup import _obstacle_table, condensed_variables, constant_rows, riccati_shortcut
 from .fast_step import _BAD_STATE, _control_step, follow_references_into  # the compiled step
 from .fallback import FALLBACK_HOLD, FALLBACK_RELAX, FallbackConfig, FallbackLadder, relaxed_problem
-from .mpc import MpcConfig, StageQpSolve, StepData
+from .mpc import FastPathUnavailable, LtvMpc, MpcConfig, StageQpSolve, StepData, solver_in_reach
 
 
 _announced = [False]
@@ -119,20 +120,22 @@ def _announce_compile() -> None:
         )
 
 
-class FastLtvMpc(StageQpSolve, TrackingWarmStart):
-    """Tracking LTV-MPC of ``model`` along ``path``, every step compiled (see the module text).
+class CompiledLtvMpc(LtvMpc):
+    """:class:`~mpcdrive.control.mpc.LtvMpc` with every step compiled (see the module text).
 
-    Same interface and results as :class:`~mpcdrive.control.mpc.LtvMpc`; statuses ``ok``,
-    ``infeasible``, ``max_iter``, ``failed``; after a failed solve the ladder of
-    ``config.fallback`` as ``LtvMpc`` runs it (its ``relax`` rung on a second compiled controller
-    built here for the relaxed problem), the rung named in ``ControlOutput.fallback``. Obstacles with a cost
-    formulation (see :func:`~mpcdrive.control.fast_setup.obstacles_unsupported_reason`) enter each QP as the
-    cost's convex model at the linearization trajectory; the constraint formulations (``hard``, ``corridor``)
-    as rows built by ``ocp.avoidance`` between two compiled stages, their passing sides kept
-    in ``WarmStart.sides`` as ``LtvMpc`` keeps them; ``config.sqp_max_iterations > 1`` re-linearizes and
+    Same interface and results as the Python assembly
+    (:class:`~mpcdrive.control.mpc.PythonLtvMpc`); statuses ``ok``, ``infeasible``,
+    ``max_iter``, ``failed``; after a failed solve the ladder of ``config.fallback`` (its
+    ``relax`` rung on a second compiled controller built here for the relaxed problem), the rung
+    named in ``ControlOutput.fallback``. Obstacles with a cost formulation (see
+    :func:`~mpcdrive.control.fast_setup.obstacles_unsupported_reason`) enter each QP as the cost's
+    convex model at the linearization trajectory; the constraint formulations (``hard``,
+    ``corridor``) as rows built by ``ocp.avoidance`` between two compiled stages, their passing
+    sides kept in ``WarmStart.sides``; ``config.sqp_max_iterations > 1`` re-linearizes and
     re-solves (each iteration one compiled call) until the inputs move less than
-    ``config.sqp_tol``, as ``LtvMpc`` does. The body stays inside ``problem.road`` by the rule
-    of :mod:`mpcdrive.scene.road`, evaluated in the compiled step on the road's tables.
+    ``config.sqp_tol``. The body stays inside ``problem.road`` by the rule of
+    :mod:`mpcdrive.scene.road`, evaluated in the compiled step on the road's tables. Built
+    directly, a problem the compiled step does not cover is a ValueError naming the reason.
     """
 
     name = "ltv-mpc-fast"
@@ -147,19 +150,23 @@ class FastLtvMpc(StageQpSolve, TrackingWarmStart):
         path: ReferencePath,
         problem: MpcProblem,
         config: MpcConfig = MpcConfig(),
-        settings: FastSettings = FastSettings(),
+        solver: Literal["condensed", "osqp"] = "condensed",
+        *,
         obstacles=(),
         avoidance: AvoidanceConfig | None = None,
         footprint: Footprint = Footprint(),
-        *,
-        solver: Literal["condensed", "osqp"] = "condensed",
+        condensed_settings: CondensedSettings | None = None,
         osqp_settings: OsqpSettings = OsqpSettings(),
+        pg_settings=None,
+        assembly: str = "compiled",
     ):
         if solver not in SOLVERS:
-            raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
-        reason = fast_unsupported_reason(model, path, problem, config, settings, obstacles, avoidance, solver=solver)
+            raise ValueError(f"the compiled step's solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+        settings = condensed_settings if condensed_settings is not None else CondensedSettings()
+        reason = fast_unsupported_reason(model, path, problem, config, settings, obstacles, avoidance, solver="osqp")
         if reason is not None:
-            raise ValueError(f"the fast backend cannot solve this problem: {reason}")
+            raise ValueError(f"the compiled step cannot assemble this problem: {reason}")
+        solver = solver_in_reach(solver, problem, settings, uses_rows(obstacles, avoidance))  # type: ignore[assignment]
         self.solver = solver
         _announce_compile()
         self.model, self.path, self.problem, self.config, self.settings = model, path, problem, config, settings
@@ -376,18 +383,20 @@ class FastLtvMpc(StageQpSolve, TrackingWarmStart):
         # compiled controller without rate limits and state bounds, with a cheaper lane slack
         self._relaxed = None
         if FALLBACK_RELAX in config.fallback.ladder:
-            self._relaxed = FastLtvMpc(
-                model,
-                path,
-                relaxed_problem(problem, config.fallback.relax_slack_factor),
-                replace(config, sqp_max_iterations=1, fallback=FallbackConfig((FALLBACK_HOLD,))),
-                replace(settings, max_iter=2 * settings.max_iter),
-                obstacles,
-                avoidance,
-                footprint,
-                solver=solver,
-                osqp_settings=osqp_settings,
-            )
+            with warnings.catch_warnings():  # this controller's solver: already said above
+                warnings.simplefilter("ignore", FastPathUnavailable)
+                self._relaxed = CompiledLtvMpc(
+                    model,
+                    path,
+                    relaxed_problem(problem, config.fallback.relax_slack_factor),
+                    replace(config, sqp_max_iterations=1, fallback=FallbackConfig((FALLBACK_HOLD,))),
+                    solver,
+                    obstacles=obstacles,
+                    avoidance=avoidance,
+                    footprint=footprint,
+                    condensed_settings=replace(settings, max_iter=2 * settings.max_iter),
+                    osqp_settings=osqp_settings,
+                )
         self.fallback = FallbackLadder(
             self,
             config.fallback,
@@ -426,17 +435,7 @@ class FastLtvMpc(StageQpSolve, TrackingWarmStart):
         w = self._w
         follow_references_into(float(x[2]), w[_W_SARR].copy(), w[_W_VARR].copy(), self._wbuf, self._ibuf)
 
-    # -- obstacles ----------------------------------------------------------------------------
-    @property
-    def obstacles(self) -> tuple:
-        """The obstacles the controller avoids (empty without avoidance)."""
-        return () if self.avoidance is None else tuple(self.avoidance.obstacles)
-
-    @property
-    def road(self) -> Road | None:
-        """The road the body is kept inside (``problem.road``, or the last :meth:`set_road`)."""
-        return self._road
-
+    # -- obstacles and road (the properties from LtvMpc) ---------------------------------------
     def set_road(self, road: Road) -> None:
         """As :meth:`LtvMpc.set_road`: the compiled step reads the new edges from its tables."""
         self._road = checked_road(self._road, road)
@@ -461,14 +460,14 @@ class FastLtvMpc(StageQpSolve, TrackingWarmStart):
             self._relaxed.set_lateral_reference(offset)
 
     def set_speed_cap(self, v_mps: float | None, decel_mps2: float | None = None) -> None:
-        """As :meth:`LtvMpc.set_speed_cap <mpcdrive.control.mpc.LtvMpc.set_speed_cap>` (the step
+        """As :meth:`LtvMpc.set_speed_cap <mpcdrive.control.mpc.PythonLtvMpc.set_speed_cap>` (the step
         then runs in two stages, the capped references placed between them)."""
         self._speed_cap = checked_speed_cap(v_mps, decel_mps2, self._follow_decel)
         if self._relaxed is not None:
             self._relaxed.set_speed_cap(v_mps, decel_mps2)
 
     def set_obstacles(self, obstacles) -> None:
-        """Replace the obstacles, as :meth:`LtvMpc.set_obstacles <mpcdrive.control.mpc.LtvMpc.set_obstacles>`
+        """Replace the obstacles, as :meth:`LtvMpc.set_obstacles <mpcdrive.control.mpc.PythonLtvMpc.set_obstacles>`
         does (fresh predictions of moving ones each step; index j keeps naming the same
         obstacle; nothing is rebuilt). With a constraint formulation any number may be given;
         with a cost formulation the compiled obstacle table keeps the number given at
@@ -552,7 +551,7 @@ class FastLtvMpc(StageQpSolve, TrackingWarmStart):
         return code, new_sides
 
     def prepare(self, x, warm: WarmStart, around=None, s_m: float | None = None) -> StepData:
-        """The stage QP of one step, as :meth:`LtvMpc.prepare <mpcdrive.control.mpc.LtvMpc.prepare>`
+        """The stage QP of one step, as :meth:`LtvMpc.prepare <mpcdrive.control.mpc.PythonLtvMpc.prepare>`
         gives it (:class:`~mpcdrive.control.mpc.StepData`) but assembled by the compiled step:
         projection, references, linearization, road rows, obstacle rows or cost terms, per-stage
         input bounds. ``around=(X, U)`` re-linearizes at an SQP iterate. The arrays are views of

@@ -1,6 +1,6 @@
 """The layout of the buffers of the compiled step (:mod:`mpcdrive.control.fast_step`).
 
-:class:`~mpcdrive.control.fast.FastLtvMpc` keeps every float array of a controller in one buffer
+:class:`~mpcdrive.control.fast.CompiledLtvMpc` keeps every float array of a controller in one buffer
 (``wbuf``), and the integer parameters, the layout of ``wbuf`` and the active-set work in another
 (``ibuf``), both allocated at construction. The constants here name their parts: ``_I_*`` the
 integer parameters, ``_F_*`` the float parameters, ``_W_*`` the arrays of ``wbuf``, ``_OB_*``

@@ -1,10 +1,11 @@
 """What the compiled LTV-MPC step covers, and the parts of its setup that do not change per step.
 
 :func:`fast_unsupported_reason` (and :func:`obstacles_unsupported_reason` for the obstacles)
-says why :class:`~mpcdrive.control.fast.FastLtvMpc` cannot solve a problem exactly as
-:class:`~mpcdrive.control.mpc.LtvMpc` would, so that :func:`mpcdrive.control.factory.make_mpc`
-can use the OSQP controller instead; :class:`FastSettings` are the settings of the compiled QP
-solve. The rows of ``C z >= b`` that are the same every step and the compiled obstacle table
+says why :class:`~mpcdrive.control.fast.CompiledLtvMpc` cannot solve a problem exactly as
+:class:`~mpcdrive.control.mpc.PythonLtvMpc` would, so that :class:`~mpcdrive.control.mpc.LtvMpc`
+can use the Python assembly instead (:func:`condensed_unsupported_reason`: why the condensed
+solver cannot, so that OSQP solves); :class:`CondensedSettings` are the settings of the compiled
+QP solve. The rows of ``C z >= b`` that are the same every step and the compiled obstacle table
 (columns ``_OB_*`` of :mod:`mpcdrive.control.fast_layout`) are built here for the controller's
 buffers.
 """
@@ -30,7 +31,7 @@ from .mpc import MpcConfig
 
 
 @dataclass(frozen=True)
-class FastSettings:
+class CondensedSettings:
     """Settings of the compiled QP solve.
 
     max_iter : cap on active-set changes per step (status ``max_iter`` beyond it);
@@ -97,7 +98,7 @@ def fast_unsupported_reason(
     path: ReferencePath,
     problem: MpcProblem,
     config: MpcConfig = MpcConfig(),
-    settings: FastSettings = FastSettings(),
+    settings: CondensedSettings = CondensedSettings(),
     obstacles=(),
     avoidance: AvoidanceConfig | None = None,
     *,
@@ -141,7 +142,7 @@ def uses_rows(obstacles, avoidance: AvoidanceConfig | None) -> bool:
     return bool(obstacles) and (avoidance or AvoidanceConfig()).uses_rows
 
 
-def condensed_unsupported_reason(problem: MpcProblem, settings: FastSettings, rows: bool) -> str | None:
+def condensed_unsupported_reason(problem: MpcProblem, settings: CondensedSettings, rows: bool) -> str | None:
     """Why the condensed solver cannot solve the stage QPs of ``problem`` (with obstacle rows
     when ``rows``), whoever assembles them, or None."""
     if np.linalg.eigvalsh(problem.R + problem.Rc).min() <= 1e-12 * max(1.0, float(np.abs(problem.R).max())):

@@ -1,4 +1,4 @@
-"""The compiled step of :class:`~mpcdrive.control.fast.FastLtvMpc`.
+"""The compiled step of :class:`~mpcdrive.control.fast.CompiledLtvMpc`.
 
 :func:`_control_step` is one control step (or one SQP iteration of it) in one numba call:
 projection onto the path, horizon references (constant speed or a speed profile), the compiled
@@ -8,7 +8,7 @@ inputs (Hessian, gradient, constraint rows ``C z >= b``) and the solve, which it
 :mod:`mpcdrive.solvers`: the Riccati shortcut and the soft-row solve of
 :mod:`mpcdrive.solvers.condensed`, the dual active-set kernel of
 :mod:`mpcdrive.solvers.dense_qp`. It works in one float buffer (``wbuf``) and one integer
-buffer (``ibuf``) that :class:`~mpcdrive.control.fast.FastLtvMpc` allocates at construction;
+buffer (``ibuf``) that :class:`~mpcdrive.control.fast.CompiledLtvMpc` allocates at construction;
 the constants of :mod:`mpcdrive.control.fast_layout` name their parts (``_I_*``: integer
 parameters, ``_F_*``: float parameters, ``_W_*``: the arrays of ``wbuf``, ``_OB_*``: the
 columns of the obstacle table).
@@ -52,7 +52,7 @@ from .fast_obstacles import _detour, _obstacle_cost, _select_obstacles, _shift_r
 _TWO_PI = 2.0 * math.pi
 
 #: status code of a non-finite measured state (raised as ValueError by
-#: :meth:`FastLtvMpc.step <mpcdrive.control.fast.FastLtvMpc.step>`)
+#: :meth:`CompiledLtvMpc.step <mpcdrive.control.fast.CompiledLtvMpc.step>`)
 _BAD_STATE = 4
 
 

@@ -10,8 +10,8 @@ fall back deliberately when the solve fails.
 from __future__ import annotations
 
 import math
-import sys
 import time
+import warnings
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Literal
 
@@ -40,7 +40,7 @@ from .base import TrackingWarmStart, checked_obstacles, checked_road, checked_sp
 if TYPE_CHECKING:
     from ..ocp.qp import LtvQp
     from .condensed import CondensedBackend
-    from .fast_setup import FastSettings
+    from .fast_setup import CondensedSettings
 
 
 def _shift_references(xref: np.ndarray, refs: np.ndarray, s_arr: np.ndarray, e: np.ndarray) -> None:
@@ -244,24 +244,136 @@ class StageQpSolve:
         )
 
 
-class LtvMpc(StageQpSolve, TrackingWarmStart):
-    """Tracking LTV-MPC of ``model`` along ``path`` solving ``problem`` with OSQP (or, given
-    :class:`~mpcdrive.solvers.ProjectedGradientSettings`, the paper's projected gradient descent;
-    given :class:`~mpcdrive.control.fast_setup.FastSettings`, the compiled condensed solver of
-    :mod:`mpcdrive.control.condensed`), each step's stage QP assembled here in Python: for any
-    model, path, speed reference and obstacle (the compiled step,
-    :class:`~mpcdrive.control.fast.FastLtvMpc`, assembles the same QP for those it has a compiled
-    form of).
+class FastPathUnavailable(UserWarning):
+    """The compiled step or the condensed solver was asked for but does not cover the problem:
+    the message names the reason and who assembles and solves the stage QP instead."""
 
-    model : the controller's prediction model (states start with x, y, yaw; its ``reference``
-    method gives the reference state of a path point at a speed); the QP is built once here and
-    only updated in place in :meth:`step`.
-    obstacles / avoidance : the obstacles and how they enter the problem (see ocp.avoidance);
+
+#: the solvers of a controller's stage QP: the compiled condensed dual active-set solve (the
+#: default), OSQP on the sparse layout of ``ocp.qp`` (the reference), the paper's projected
+#: gradient descent
+SOLVERS: tuple[str, ...] = ("condensed", "osqp", "projected_gradient")
+#: who builds each step's stage QP: the compiled step where it covers the problem (``auto``)
+ASSEMBLIES: tuple[str, ...] = ("auto", "compiled", "python")
+Solver = Literal["condensed", "osqp", "projected_gradient"]
+Assembly = Literal["auto", "compiled", "python"]
+
+
+class LtvMpc(StageQpSolve, TrackingWarmStart):
+    """Tracking LTV-MPC of ``model`` along ``path`` solving ``problem``: the one public
+    controller.
+
+    ``LtvMpc(model, path, problem, config, solver=..., obstacles=..., avoidance=...,
+    footprint=...)`` returns the controller that covers the problem, an instance of one of two
+    subclasses that differ only in who assembles each step's stage QP (``assembly``):
+
+    - :class:`~mpcdrive.control.fast.CompiledLtvMpc` (``compiled``, the default wherever it
+      covers the problem): the whole step in numba-compiled code;
+    - :class:`PythonLtvMpc` (``python``): the same stage QP assembled in Python, for any model,
+      path, speed reference and obstacle (and prediction substeps).
+
+    ``solver`` names who solves it: ``condensed`` (default: the compiled condensed dual
+    active-set solver, exact), ``osqp`` (OSQP on the sparse layout, the reference), or
+    ``projected_gradient`` (the paper's, Python assembly only). Each has its settings argument
+    (``condensed_settings``, ``osqp_settings``, ``pg_settings``). ``assembly="python"`` or
+    ``"compiled"`` asks for one assembly (``compiled`` raises a ValueError naming the reason where
+    it does not cover the problem). Where the default cannot be used -- the compiled step does not
+    cover the problem, or the condensed solver's limits exclude it (R + Rc singular, a slack
+    without quadratic weight, more than ``condensed_settings.max_variables`` variables) -- a
+    :class:`FastPathUnavailable` warning names the reason and what runs instead (the Python
+    assembly; OSQP with ``osqp_settings``); no constraint or setting is ever dropped.
+    ``backend_name`` names the solver that runs (``fast``: the condensed one; ``osqp``; ``pg``) and
+    ``assembly`` who builds the QP. Both keep the body inside ``problem.road`` by the rule of
+    :mod:`mpcdrive.scene.road`.
+
+    obstacles / avoidance : the obstacles and how they enter the problem (see ``ocp.avoidance``);
     footprint : the vehicle body, kept inside ``problem.road`` (with the road's margin).
     """
 
     name = "ltv-mpc"
     backend_name = "osqp"
+    #: who builds each step's stage QP
+    assembly = "python"
+    avoidance: Avoidance | None
+    _road: Road | None
+
+    def __new__(
+        cls,
+        model: VehicleModel,
+        path: ReferencePath,
+        problem: MpcProblem,
+        config: MpcConfig = MpcConfig(),
+        solver: Solver = "condensed",
+        *,
+        obstacles=(),
+        avoidance: AvoidanceConfig | None = None,
+        footprint: Footprint = Footprint(),
+        condensed_settings: CondensedSettings | None = None,
+        osqp_settings: OsqpSettings = OsqpSettings(),
+        pg_settings: ProjectedGradientSettings = ProjectedGradientSettings(),
+        assembly: Assembly = "auto",
+    ):
+        if not isinstance(config, MpcConfig):
+            raise ValueError(f"config must be an MpcConfig, got {type(config).__name__}")
+        if cls is not LtvMpc:  # a subclass named directly
+            return super().__new__(cls)
+        if solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+        if assembly not in ASSEMBLIES:
+            raise ValueError(f"assembly must be one of {', '.join(ASSEMBLIES)}, got {assembly!r}")
+        from .fast import CompiledLtvMpc  # numba: loaded when a compiled controller may be built
+
+        if assembly == "python" or solver == "projected_gradient":
+            return super().__new__(PythonLtvMpc)
+        if assembly == "compiled":
+            return super().__new__(CompiledLtvMpc)
+        from .fast_setup import fast_unsupported_reason
+
+        reason = fast_unsupported_reason(
+            model, path, problem, config, obstacles=obstacles, avoidance=avoidance, solver="osqp"
+        )
+        if reason is None:
+            return super().__new__(CompiledLtvMpc)
+        warnings.warn(
+            f"compiled step not used: {reason}; the stage QP is assembled in Python", FastPathUnavailable, stacklevel=2
+        )
+        return super().__new__(PythonLtvMpc)
+
+    # -- obstacles and road ---------------------------------------------------------------------
+    @property
+    def obstacles(self) -> tuple[Obstacle, ...]:
+        """The obstacles the controller avoids (empty without avoidance)."""
+        return () if self.avoidance is None else tuple(self.avoidance.obstacles)
+
+    @property
+    def road(self) -> Road | None:
+        """The road the body is kept inside (``problem.road``, or the last :meth:`set_road`)."""
+        return self._road
+
+
+def solver_in_reach(solver: str, problem: MpcProblem, settings: CondensedSettings, rows: bool) -> str:
+    """The solver that solves ``problem``'s stage QPs (with obstacle rows when ``rows``) when
+    ``solver`` is asked for: OSQP, with a :class:`FastPathUnavailable` warning naming the reason,
+    where the condensed solver's limits exclude the problem."""
+    if solver != "condensed":
+        return solver
+    from .fast_setup import condensed_unsupported_reason
+
+    reason = condensed_unsupported_reason(problem, settings, rows)
+    if reason is None:
+        return solver
+    warnings.warn(f"condensed solver not used: {reason}; OSQP solves the stage QP", FastPathUnavailable, stacklevel=3)
+    return "osqp"
+
+
+class PythonLtvMpc(LtvMpc):
+    """:class:`LtvMpc` with each step's stage QP assembled here in Python: for any model, path,
+    speed reference and obstacle (the compiled step, :class:`~mpcdrive.control.fast.CompiledLtvMpc`,
+    assembles the same QP for those it has a compiled form of), solved by the condensed solver
+    (:mod:`mpcdrive.control.condensed`), OSQP or projected gradient descent. The QP is built
+    once here and only updated in place in :meth:`step`.
+    """
+
     #: who builds each step's stage QP
     assembly = "python"
 
@@ -271,11 +383,18 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
         path: ReferencePath,
         problem: MpcProblem,
         config: MpcConfig = MpcConfig(),
-        solver_settings: OsqpSettings | ProjectedGradientSettings | FastSettings = OsqpSettings(),
-        obstacles: tuple[Obstacle, ...] = (),
+        solver: Solver = "condensed",
+        *,
+        obstacles=(),
         avoidance: AvoidanceConfig | None = None,
         footprint: Footprint = Footprint(),
+        condensed_settings: CondensedSettings | None = None,
+        osqp_settings: OsqpSettings = OsqpSettings(),
+        pg_settings: ProjectedGradientSettings = ProjectedGradientSettings(),
+        assembly: Assembly = "auto",
     ):
+        if solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
         if (problem.nx, problem.nu) != (model.nx, model.nu):
             raise ValueError(
                 f"problem is sized nx={problem.nx}, nu={problem.nu} but the model has nx={model.nx}, nu={model.nu}"
@@ -306,23 +425,22 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
                 avoidance, list(obstacles), path, footprint, problem.N, problem.dt_s, problem.road
             )
         self.qp = LtvQp(problem)
-        # FastSettings: the compiled solver (its module, and numba, are loaded only when asked for:
-        # a FastSettings instance exists only once its module is)
-        fast_setup = sys.modules.get(f"{__package__}.fast_setup")
-        if fast_setup is not None and isinstance(solver_settings, fast_setup.FastSettings):
+        if solver == "condensed":
+            from .fast_setup import CondensedSettings
+
+            settings = condensed_settings if condensed_settings is not None else CondensedSettings()
+            solver = solver_in_reach(solver, problem, settings, bool(problem.obstacle_rows))  # type: ignore[assignment]
+        if solver == "condensed":
             from .condensed import CondensedBackend
 
-            self.backend = CondensedBackend(problem, solver_settings)
+            self.backend = CondensedBackend(problem, settings)
             self.backend_name = "fast"
-        elif isinstance(solver_settings, ProjectedGradientSettings):
-            self.backend = ProjectedGradientBackend(self.qp, solver_settings)
-        elif isinstance(solver_settings, OsqpSettings):
-            self.backend = OsqpBackend(self.qp, solver_settings)
+        elif solver == "projected_gradient":
+            self.backend = ProjectedGradientBackend(self.qp, pg_settings)
+            self.backend_name = "pg"
         else:
-            raise ValueError(
-                "solver_settings must be OsqpSettings, ProjectedGradientSettings or FastSettings, "
-                f"got {type(solver_settings).__name__}"
-            )
+            self.backend = OsqpBackend(self.qp, osqp_settings)
+            self.backend_name = "osqp"
         self._accel_index = list(model.input_names).index("accel") if "accel" in model.input_names else None
         N, nx, nu = self.N, self.nx, self.nu
         # per-step work buffers
@@ -348,17 +466,7 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
         self._friction = friction_bounds(problem, model)
         self.fallback = FallbackLadder(self, config.fallback, footprint=footprint, road=problem.road)
 
-    # -- obstacles ----------------------------------------------------------------------------
-    @property
-    def obstacles(self) -> tuple[Obstacle, ...]:
-        """The obstacles the controller avoids (empty without avoidance)."""
-        return () if self.avoidance is None else tuple(self.avoidance.obstacles)
-
-    @property
-    def road(self) -> Road | None:
-        """The road the body is kept inside (``problem.road``, or the last :meth:`set_road`)."""
-        return self._road
-
+    # -- obstacles and road (the properties from LtvMpc) ---------------------------------------
     def set_road(self, road: Road) -> None:
         """Keep the body inside ``road`` from the next step on (e.g. the lanes a decision layer
         allows now); it must have the knots of the problem's road. The QP is not rebuilt."""

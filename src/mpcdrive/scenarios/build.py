@@ -17,7 +17,6 @@ from ..control.fallback import FallbackConfig
 from ..control.lanes import LaneChoosingMpc, LaneConfig
 from ..control.mpc import LtvMpc, MpcConfig
 from ..models.dynamic import DynamicBicycle, DynamicParams
-from ..control.factory import make_mpc
 from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams, slip_terms
 from ..ocp.problem import MpcProblem
 from ..paths import CirclePath, ReferencePath, StraightPath, WaypointPath
@@ -442,17 +441,15 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
             check_plans=c.check_plans,
         ),
     )
-    if c.solver == "projected_gradient":
-        settings = ProjectedGradientSettings(max_iter=c.pg_max_iter, tol=c.pg_tol, accelerated=c.pg_accelerated)
-    else:
-        settings = OsqpSettings(
-            eps_abs=c.osqp_eps,
-            eps_rel=c.osqp_eps,
-            max_iter=c.osqp_max_iter,
-            polish=c.osqp_polish,
-            adaptive_rho=c.osqp_adaptive_rho,
-            time_limit_s=c.osqp_time_limit_s,
-        )
+    pg_settings = ProjectedGradientSettings(max_iter=c.pg_max_iter, tol=c.pg_tol, accelerated=c.pg_accelerated)
+    osqp_settings = OsqpSettings(
+        eps_abs=c.osqp_eps,
+        eps_rel=c.osqp_eps,
+        max_iter=c.osqp_max_iter,
+        polish=c.osqp_polish,
+        adaptive_rho=c.osqp_adaptive_rho,
+        time_limit_s=c.osqp_time_limit_s,
+    )
     footprint = Footprint(v.length_m, v.width_m, n_discs=v.footprint_discs)
     obstacles = tuple(build_obstacle(o) for o in spec.obstacles)
     av = spec.avoidance or AvoidanceSpec()
@@ -461,22 +458,22 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         config = replace(
             config, sqp_max_iterations=av.sqp_max_iterations, sqp_tol=av.sqp_tol, sqp_max_time_s=av.sqp_max_time_s
         )
-    if c.backend == "fast" and c.solver == "osqp":
-        mpc = make_mpc(
-            model,
-            path,
-            problem,
-            config,
-            "fast",
-            settings,
-            obstacles=obstacles,
-            avoidance=avoidance,
-            footprint=footprint,
-        )
-    else:
-        mpc = LtvMpc(
-            model, path, problem, config, settings, obstacles=obstacles, avoidance=avoidance, footprint=footprint
-        )
+    # backend fast: the default controller (compiled where it covers the problem, the condensed
+    # solver; OSQP with these settings beyond its limits); osqp: the reference, assembled in Python
+    reference = c.backend == "osqp" or c.solver == "projected_gradient"
+    mpc = LtvMpc(
+        model,
+        path,
+        problem,
+        config,
+        c.solver if reference else "condensed",
+        obstacles=obstacles,
+        avoidance=avoidance,
+        footprint=footprint,
+        osqp_settings=osqp_settings,
+        pg_settings=pg_settings,
+        assembly="python" if reference else "auto",
+    )
     # the plant: same or another model, parameters scaled, steering through an actuator
     pl = spec.plant
     # the true vehicle: the controller's unless the plant names other parameters (a model error)

@@ -394,8 +394,10 @@ class SpeedProfileSpec(_Strict):
 class ControllerSpec(_Strict):
     """LTV-MPC settings; weights are diagonals in the model's state / input order.
 
-    ``backend``: ``osqp`` (the sparse QP solved by OSQP, the reference) or ``fast`` (the whole step
-    compiled; falls back to ``osqp`` with a warning for a problem it does not cover).
+    ``backend``: ``fast`` (the default controller: the stage QP assembled by the compiled step and
+    solved by the condensed solver, each replaced with a warning naming the reason where it does
+    not cover the problem -- by the Python assembly, by OSQP with the ``osqp_*`` settings) or
+    ``osqp`` (the reference: the stage QP assembled in Python, solved by OSQP).
 
     ``speed_profile`` replaces the constant reference speed; ``solver``: ``osqp`` or the paper's
     ``projected_gradient`` (input bounds only; ``pg_*`` settings); ``delay_compensation``: predict the
