@@ -146,6 +146,8 @@ def test_projected_gradient_solver_selectable_from_a_scenario(tmp_path):
     data["path"] = {"type": "waypoints", "points": [[0, 0], [5, 0], [10, 2]]}
     exp = build_experiment(load_scenario(write(tmp_path, data)))
     assert exp.mpc.backend.name == "projected_gradient"
+    # the run records the solver that ran (it said osqp before)
+    assert (exp.mpc.assembly, exp.mpc.backend_name) == ("python", "pg")
 
 
 # ------------------------------------------------------------------ figures

@@ -158,7 +158,8 @@ class Metrics(Mapping[str, Any]):
     for CommonRoad the planning problem's goal and the checker's verdicts,
     :func:`apply_goal_region`); termination : why the run ended (``completed``,
     ``goal_reached`` or ``diverged``); controller_backend : the MPC implementation that ran
-    (``osqp`` or ``fast``, from ``meta["backend"]``; None if not recorded).
+    (``fast``: the condensed solver, ``osqp``, or ``pg``: projected gradient; from
+    ``meta["backend"]``; None if not recorded).
 
     External checkers:
 
