@@ -321,10 +321,10 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
             raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
         if assembly not in ASSEMBLIES:
             raise ValueError(f"assembly must be one of {', '.join(ASSEMBLIES)}, got {assembly!r}")
-        from .fast import CompiledLtvMpc  # numba: loaded when a compiled controller may be built
-
         if assembly == "python" or solver == "projected_gradient":
             return super().__new__(PythonLtvMpc)
+        from .fast import CompiledLtvMpc  # numba: loaded when a compiled controller may be built
+
         if assembly == "compiled":
             return super().__new__(CompiledLtvMpc)
         from .fast_setup import fast_unsupported_reason
