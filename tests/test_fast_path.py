@@ -536,8 +536,8 @@ def test_a_second_process_loads_the_compiled_step_from_the_cache():
     model = KinematicBicycle3(1.0)
     c = CompiledLtvMpc(model, StraightPath([0, 0], [5, 0]), MpcProblem(3, 1, 5, 0.01, Q=1.0, R=1.0))
     c.step(np.zeros(3), c.initial_warm(np.zeros(3)))
-    cache_dir = Path(fast._control_step.stats.cache_path)
-    assert any(cache_dir.glob("fast_step._control_step-*.nbi")), f"no cache index in {cache_dir}"
+    cache_dir = Path(fast.control_step.stats.cache_path)
+    assert any(cache_dir.glob("fast_step.control_step-*.nbi")), f"no cache index in {cache_dir}"
     code = (
         "import json, numpy as np\n"
         "from mpcdrive.control import fast\n"
@@ -547,7 +547,7 @@ def test_a_second_process_loads_the_compiled_step_from_the_cache():
         "c = fast.CompiledLtvMpc(KinematicBicycle4(), CirclePath(), MpcProblem(4, 2, 7, 0.01, Q=1.0, R=1.0))\n"
         "x = np.array([1.5, 0.0, 1.6, 1.0])\n"
         "c.step(x, c.initial_warm(x))\n"
-        "st = fast._control_step.stats\n"
+        "st = fast.control_step.stats\n"
         "import sys\n"
         "print(json.dumps({'hits': sum(st.cache_hits.values()), 'misses': sum(st.cache_misses.values()),\n"
         "                  'sparse': 'scipy.sparse' in sys.modules}))\n"

@@ -163,8 +163,6 @@ def test_road_rows_are_linearized_where_the_car_is_not_where_its_references_run(
     the references' (rows from a stretch of the bend the car is not on let a car held back gain
     ground sideways: it left the road on the outside of a left turn while yielding). Both
     controllers alike."""
-    from mpcdrive.control.fast_layout import _W_LANEB, _W_LANEN
-
     spec = _curve_spec({"lane_width_m": 3.5, "margin_m": 0.05})
     spec["initial_state"]["v_mps"] = 0.0
     mpcs = {}
@@ -182,5 +180,5 @@ def test_road_rows_are_linearized_where_the_car_is_not_where_its_references_run(
     np.testing.assert_allclose(d.lane_offset, d.lane_normal @ osqp.path.position(d.s_m), atol=1e-9)
     assert abs(h) < 1e-4
     fast.step(x, warm)
-    np.testing.assert_allclose(fast._w[_W_LANEN], d.lane_normal, atol=1e-9)
-    np.testing.assert_allclose(fast._w[_W_LANEB], d.lane_offset, atol=1e-9)
+    np.testing.assert_allclose(fast._qp.lane_n, d.lane_normal, atol=1e-9)
+    np.testing.assert_allclose(fast._qp.lane_b, d.lane_offset, atol=1e-9)

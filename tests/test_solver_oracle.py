@@ -31,7 +31,6 @@ import pytest
 import scipy.linalg as sla
 
 from mpcdrive.control import LtvMpc, MpcConfig, PythonLtvMpc
-from mpcdrive.control import fast_step as fs
 from mpcdrive.control.fast import CompiledLtvMpc, CondensedSettings
 from mpcdrive.models import KinematicBicycle3, KinematicBicycle4
 from mpcdrive.models.discretize import discrete_step
@@ -406,12 +405,8 @@ def fast_residuals(fast) -> tuple[float, float]:
     """The active-set solver's (dual, primal) residual bounds: stationarity to rounding,
     n eps_mach (n |H| |z| + |g|), and rows to feasibility_tol times their norm (the condensed rows
     of the step, in the compiled controller's buffers or the condensed backend's work arrays)."""
-    if isinstance(fast, CompiledLtvMpc):
-        w = fast._w
-        C, H, g, z = w[fs._W_C], w[fs._W_H], w[fs._W_G], w[fs._W_Z]
-    else:
-        be = fast.backend
-        C, (H, g, z) = be._C, be._work[7:10]
+    work = fast._work if isinstance(fast, CompiledLtvMpc) else fast.backend._work
+    C, H, g, z = work.C, work.H, work.g, work.z
     n = H.shape[0]
     r_d = n * np.finfo(float).eps * (n * np.abs(H).max() * np.abs(z).max() + np.abs(g).max())
     return float(r_d), float(FAST.feasibility_tol * max(1.0, np.linalg.norm(C, axis=1).max()))
@@ -441,27 +436,27 @@ def constant_cost(pb: MpcProblem, d, u_prev) -> float:
 def same_instance(fast: CompiledLtvMpc, d) -> None:
     """The compiled controller built the instance the oracle solves: the same affine model,
     references and rows as the OSQP controller's ``prepare``."""
-    w = fast._w
+    qp = fast._qp
     pairs = [
-        (fs._W_A, d.Ad),
-        (fs._W_BD, d.Bd),
-        (fs._W_CD, d.c),
-        (fs._W_XREF, d.xref),
-        (fs._W_UREF, d.uref),
-        (fs._W_LANEN, d.lane_normal),
-        (fs._W_LANEB, d.lane_offset),
-        (fs._W_LLO, d.lane_lo),
-        (fs._W_LHI, d.lane_hi),
-        (fs._W_LDLO, d.lane_slopes[0]),
-        (fs._W_LDHI, d.lane_slopes[1]),
-        (fs._W_XLIN, d.Xlin),
-        (fs._W_ROWA, d.rows_a),
+        (qp.A, d.Ad),
+        (qp.B, d.Bd),
+        (qp.c, d.c),
+        (qp.xref, d.xref),
+        (qp.uref, d.uref),
+        (qp.lane_n, d.lane_normal),
+        (qp.lane_b, d.lane_offset),
+        (qp.lane_lo, d.lane_lo),
+        (qp.lane_hi, d.lane_hi),
+        (qp.lane_dlo, d.lane_slopes[0]),
+        (qp.lane_dhi, d.lane_slopes[1]),
+        (qp.Xlin, d.Xlin),
+        (qp.rowa, d.rows_a),
     ]
-    for i, v in pairs:
-        np.testing.assert_allclose(w[i], v, rtol=0, atol=1e-10)
+    for got, v in pairs:
+        np.testing.assert_allclose(got, v, rtol=0, atol=1e-10)
     used = np.isfinite(d.rows_b)
-    np.testing.assert_array_equal(np.isfinite(w[fs._W_ROWB]), used)
-    np.testing.assert_allclose(w[fs._W_ROWB][used], d.rows_b[used], rtol=0, atol=1e-10)
+    np.testing.assert_array_equal(np.isfinite(qp.rowb), used)
+    np.testing.assert_allclose(qp.rowb[used], d.rows_b[used], rtol=0, atol=1e-10)
 
 
 def same_step_data(dc, d, atol=1e-10, sides=True) -> None:

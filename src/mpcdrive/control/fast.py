@@ -9,10 +9,13 @@ the profile does in time, take its speed, and an ``accel`` input gets its accele
 reference; see :mod:`mpcdrive.paths.profile_compiled`) --, linearization along the shifted
 previous plan or the paper's frozen point, Euler / RK4 / ``exp`` discrete models, cost, input /
 rate / state bounds, soft lane bound with slack, the fallback ladder of ``config.fallback`` --
-its ``relax`` rung on a second compiled controller for the relaxed problem) but runs every step in one numba-compiled
-function that works in buffers allocated at construction (the step in :mod:`mpcdrive.control.fast_step`, its
-obstacle terms in :mod:`mpcdrive.control.fast_obstacles`, the layout of its buffers in
-:mod:`mpcdrive.control.fast_layout`, the QP solve in :mod:`mpcdrive.solvers`). The QP is condensed onto the inputs
+its ``relax`` rung on a second compiled controller for the relaxed problem) but runs every step in one
+numba-compiled call (:func:`~mpcdrive.control.fast_step.control_step`) on typed containers allocated at
+construction: the step assembly's description and work (:class:`~mpcdrive.ocp.assembly.StepAssembly`; the
+assembly in :mod:`mpcdrive.ocp.assembly`, its obstacle cost terms in :mod:`mpcdrive.ocp.obstacle_cost_compiled`),
+the stage QP it writes (:class:`~mpcdrive.ocp.stage_qp.StageQp`) and the condensed solver's work space
+(:class:`~mpcdrive.solvers.condensed.CondensedWork`; the QP solve in :mod:`mpcdrive.solvers`). The QP is
+condensed onto the inputs
 (and lane slacks): the states are eliminated with the linearized dynamics, the Hessian is built
 by a backward recursion ``P_k = W_k + A_k' P_{k+1} A_k`` (O(N^2) blocks), and the dense QP is
 solved by the dual active-set method of :mod:`mpcdrive.solvers.dense_qp`, which is exact (no
@@ -76,25 +79,13 @@ from ..solvers.osqp_backend import OsqpSettings
 from ..types import ControlOutput, WarmStart
 from .base import checked_obstacles, checked_road, checked_speed_cap
 
-# the layout of the compiled step's buffers
-from .fast_layout import _I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH, _I_LIN, _I_METHOD, _I_HORIZON, _I_FF, _I_LANE, _I_MCONST
-from .fast_layout import _I_RATE0, _I_MAXITER, _I_GAMMA, _I_NZ, _I_RICCATI, _I_MQ, _I_OFORM, _I_NOBS, _I_OMAX, _I_DETOUR
-from .fast_layout import _I_OROWS, _I_PROFILE, _I_ACCEL, _I_STEER, _I_FRICTION, _NIP
-from .fast_layout import _SIDE_NONE, _OBS_POTENTIAL, _OBS_GAUSSIAN, MODE_NO_PLAN, MODE_SHIFTED_PLAN, MODE_ITERATE
-from .fast_layout import STAGE_ALL, STAGE_LINEARIZE, STAGE_SOLVE, STAGE_COST
-from .fast_layout import _W_FP, _W_MP, _W_BND, _W_GEO, _W_WQ, _W_RM, _W_RC, _W_TABS, _W_TABXY, _W_TABH, _W_TABK, _W_C
-from .fast_layout import _W_B, _W_REFS, _W_XREF, _W_UREF, _W_XBAR, _W_UBAR, _W_F, _W_A, _W_BD, _W_CD, _W_LANEN, _W_LANEB
-from .fast_layout import _W_XF, _W_P, _W_LAM, _W_VB, _W_S, _W_T2, _W_GAM, _W_H, _W_G, _W_Z, _W_L, _W_J, _W_RQ, _W_D
-from .fast_layout import _W_ZDIR, _W_R, _W_UQ, _W_SQ, _W_ROWN, _W_LAMQ, _W_DW, _W_KG, _W_KF, _W_PA, _W_MG, _W_GG, _W_QV
-from .fast_layout import _W_WE, _W_QT, _W_OBS, _W_ODIST, _W_OPROJ, _W_SARR, _W_EREF, _W_ROWA, _W_ROWB, _W_LLO, _W_LHI
-from .fast_layout import _W_XLIN, _W_GSUM, _W_PROF, _W_VARR, _W_REFW, _W_RDS, _W_RDL, _W_RDR, _W_LDLO, _W_LDHI, _W_ULO
-from .fast_layout import _W_UHI, _W_VLIN, _W_SLIN, _W_RLIN, _NW
-from .fast_layout import _F_DT, _F_VREF, _F_HSTEP, _F_WINDOW, _F_RMARGIN, _F_SLACK2, _F_SLACK1, _F_TOL, _F_OW, _F_OEPS
-from .fast_layout import _F_OSX, _F_OSY, _F_OINF, _F_OMARGIN, _F_HW, _F_HL, _F_RAMP, _F_OSLACK2, _F_OSLACK1, _F_BOFF
-from .fast_layout import _F_RPERIOD, _F_FRIC, _F_WHEELBASE, _NFP
-from .fast_setup import CondensedSettings, fast_unsupported_reason, obstacles_unsupported_reason, uses_rows
-from .fast_setup import _obstacle_table, condensed_variables, constant_rows, riccati_shortcut
-from .fast_step import _BAD_STATE, _control_step, follow_references_into  # the compiled step
+from ..ocp.assembly import MODE_ITERATE, MODE_NO_PLAN, MODE_SHIFTED_PLAN, StepAssembly, follow_references_into
+from ..ocp.assembly import set_road_margin
+from ..ocp.obstacle_cost_compiled import OBS_GAUSSIAN, OBS_NONE, OBS_POTENTIAL, SIDE_NONE, obstacle_table
+from ..ocp.stage_qp import new_stage_qp
+from ..solvers.condensed_setup import CondensedSettings, new_condensed_work
+from .fast_setup import fast_unsupported_reason, obstacles_unsupported_reason, uses_rows
+from .fast_step import _BAD_STATE, STAGE_ALL, STAGE_COST, STAGE_LINEARIZE, STAGE_SOLVE, CompiledStep, control_step
 from .fallback import FALLBACK_HOLD, FALLBACK_RELAX, FallbackConfig, FallbackLadder, relaxed_problem
 from .mpc import FastPathUnavailable, LtvMpc, MpcConfig, StageQpSolve, StepData, solver_in_reach
 
@@ -112,7 +103,7 @@ def _announce_compile() -> None:
     if _announced[0]:
         return
     _announced[0] = True
-    if not _jitcache.has_cache(_control_step):
+    if not _jitcache.has_cache(control_step):
         import logging
 
         logging.getLogger("mpcdrive").info(
@@ -173,7 +164,7 @@ class CompiledLtvMpc(LtvMpc):
         obstacles = tuple(obstacles)
         self.footprint = footprint
         #: passing sides are kept (in WarmStart.sides) only where a detour uses them
-        self._sides = np.full(max(len(obstacles), 1), _SIDE_NONE, dtype=np.int64)
+        self._sides = np.full(max(len(obstacles), 1), SIDE_NONE, dtype=np.int64)
         av = (avoidance or AvoidanceConfig()) if obstacles else None
         rows = av is not None and av.uses_rows
         #: the compiled detour (cost formulations; with rows ocp.avoidance shifts the references)
@@ -210,159 +201,86 @@ class CompiledLtvMpc(LtvMpc):
         prof = np.zeros(1) if config.speed_profile is None else profile_array(config.speed_profile)
         assert code is not None and pa is not None and prof is not None
         kind, mp = code
-        nz = condensed_variables(problem, rows)
-        cr = constant_rows(problem, nz, n_orow)
-        mq, need_gamma = cr.mq, cr.gamma
-        ip = np.zeros(_NIP, dtype=np.int64)
-        ip[[_I_MODEL, _I_NX, _I_NU, _I_N, _I_PATH]] = [kind, nx, nu, N, pa.kind]
-        ip[_I_LIN] = 1 if config.linearization == "paper" else 0
-        ip[_I_METHOD] = {"rk4": METHOD_RK4, "euler": METHOD_EULER, "exp": METHOD_EXP}[config.discretization]
-        ip[_I_HORIZON] = 1 if config.horizon == "paper" else 0
-        ip[_I_FF] = 1 if config.feedforward == "curvature" else 0
-        ip[_I_LANE] = int(lane)
-        ip[_I_MCONST] = cr.m_const
-        ip[_I_RATE0] = cr.r_rate0
-        ip[_I_MAXITER] = settings.max_iter
-        ip[_I_GAMMA] = int(need_gamma)
-        ip[_I_NZ] = nz
-        ip[_I_RICCATI] = int(riccati_shortcut(problem, rows))
-        ip[_I_MQ] = mq
-        ip[_I_OROWS] = n_orow
-        ip[_I_PROFILE] = int(config.speed_profile is not None)
-        ip[_I_ACCEL] = list(model.input_names).index("accel") if "accel" in model.input_names else -1
         fric = friction_bounds(problem, model)  # validates the model for the friction circle
-        if fric is not None:
-            ip[_I_FRICTION], ip[_I_STEER] = 1, fric.i_steer
-        if av is not None and not rows:
-            ip[_I_OFORM] = _OBS_POTENTIAL if av.formulation == "potential" else _OBS_GAUSSIAN
-            ip[_I_NOBS] = len(obstacles)
-            ip[_I_OMAX] = av.max_obstacles
-            ip[_I_DETOUR] = int(self._detour)
-        fp = np.zeros(_NFP)
-        fp[[_F_HW, _F_HL, _F_BOFF]] = (0.5 * footprint.width_m, 0.5 * footprint.length_m, footprint.center_offset_m)
-        if av is not None:
-            fp[[_F_OW, _F_OEPS, _F_OSX, _F_OSY, _F_OINF]] = (av.weight, av.epsilon_m2, *av.sigma_m, av.influence_m)
-            fp[[_F_OMARGIN, _F_RAMP]] = (av.margin_m, av.detour_ramp_m)
-        fp[_F_DT], fp[_F_VREF] = problem.dt_s, self.v_ref_mps
-        fp[_F_HSTEP], fp[_F_WINDOW] = config.horizon_step_m, config.projection_window_m
-        fp[_F_RMARGIN] = road.margin_m if road is not None else 0.0
-        fp[_F_RPERIOD] = road.period_m if road is not None else 0.0
-        fp[_F_SLACK2], fp[_F_SLACK1] = problem.lane_slack_weight, problem.lane_slack_weight_l1
-        fp[_F_OSLACK2], fp[_F_OSLACK1] = problem.obstacle_slack_weight, problem.obstacle_slack_weight_l1
-        fp[_F_TOL] = settings.feasibility_tol
-        if fric is not None:
-            fp[_F_FRIC], fp[_F_WHEELBASE] = fric.a_fric, fric.wheelbase_m
-        bnd = np.concatenate(
-            [problem.u_min, problem.u_max, problem.du_max_per_s * problem.dt_s, problem.x_min, problem.x_max]
+        cost_av = av if av is not None and not rows else None  # the compiled obstacle cost's settings
+        n_ob = max(len(obstacles), 1)
+        f = np.ascontiguousarray
+        #: the compiled step's containers: the assembly's description and work, the stage QP it
+        #: writes, the condensed solver's work space (the arrays are shared with their structs)
+        self._asm = StepAssembly(
+            N=N,
+            nx=nx,
+            nu=nu,
+            model=int(kind),
+            mp=f(mp, dtype=float),
+            method={"rk4": METHOD_RK4, "euler": METHOD_EULER, "exp": METHOD_EXP}[config.discretization],
+            dt=float(problem.dt_s),
+            path=int(pa.kind),
+            geo=f(pa.geo, dtype=float),
+            tab_s=f(pa.tab_s, dtype=float),
+            tab_xy=f(pa.tab_xy, dtype=float),
+            tab_h=f(pa.tab_h, dtype=float),
+            tab_k=f(pa.tab_k, dtype=float),
+            window=float(config.projection_window_m),
+            paper_horizon=config.horizon == "paper",
+            horizon_step=float(config.horizon_step_m),
+            v_ref=self.v_ref_mps,
+            has_profile=config.speed_profile is not None,
+            profile=f(prof, dtype=float),
+            feedforward=config.feedforward == "curvature",
+            paper_linearization=config.linearization == "paper",
+            Wq=np.stack([problem.Q] * (N - 1) + [problem.QN]).astype(float),
+            accel=list(model.input_names).index("accel") if "accel" in model.input_names else -1,
+            steer=int(fric.i_steer) if fric is not None else -1,
+            friction=fric is not None,
+            friction_accel=float(fric.a_fric) if fric is not None else 0.0,
+            wheelbase=float(fric.wheelbase_m) if fric is not None else 0.0,
+            lane=lane,
+            road_s=f(road.s_m, dtype=float) if road is not None else np.zeros(1),
+            road_left=f(road.left_m, dtype=float) if road is not None else np.zeros(1),
+            road_right=f(road.right_m, dtype=float) if road is not None else np.zeros(1),
+            road_period=float(road.period_m) if road is not None else 0.0,
+            road_margin=float(road.margin_m) if road is not None else 0.0,
+            half_width=0.5 * footprint.width_m,
+            half_length=0.5 * footprint.length_m,
+            body_offset=float(footprint.center_offset_m),
+            obstacle_form=OBS_NONE
+            if cost_av is None
+            else (OBS_POTENTIAL if cost_av.formulation == "potential" else OBS_GAUSSIAN),
+            nobs=len(obstacles) if cost_av is not None else 0,
+            omax=int(cost_av.max_obstacles) if cost_av is not None else 0,
+            obs=obstacle_table(obstacles) if cost_av is not None else np.zeros((1, 8)),
+            obstacle_influence=float(av.influence_m) if av is not None else 0.0,
+            obstacle_weight=float(av.weight) if av is not None else 0.0,
+            obstacle_epsilon=float(av.epsilon_m2) if av is not None else 0.0,
+            obstacle_sigma_x=float(av.sigma_m[0]) if av is not None else 1.0,
+            obstacle_sigma_y=float(av.sigma_m[1]) if av is not None else 1.0,
+            detour=self._detour,
+            obstacle_margin=float(av.margin_m) if av is not None else 0.0,
+            detour_ramp=float(av.detour_ramp_m) if av is not None else 0.0,
+            nsel=0,
+            osel=np.zeros(n_ob, dtype=np.int64),
+            odist=np.zeros(n_ob),
+            oproj=np.zeros((n_ob, 2)),
+            refs=np.zeros((N + 1, 4)),
+            refw=np.zeros((N + 1, 8)),
+            s_arr=np.zeros(N + 1),
+            v_arr=np.zeros(N + 1),
+            e_ref=np.zeros(N + 1),
+            Xbar=np.zeros((N, nx)),
+            Ubar=np.zeros((N, nu)),
+            F=np.zeros((N, nx)),
+            dw=np.zeros((7, nx + nu + 1, nx + nu + 1)),
+            vlin=np.zeros(N + 1),
+            s_lin=np.zeros(N + 1),
+            rlin=np.zeros((N + 1, 4)),
         )
-        nw = max(nx, nu)
-        arrays: dict[int, np.ndarray | tuple[int, ...]] = {  # initial values, or the shape of a work array
-            _W_FP: fp,
-            _W_MP: mp,
-            _W_BND: bnd,
-            _W_GEO: pa.geo,
-            _W_WQ: np.stack([problem.Q] * (N - 1) + [problem.QN]),
-            _W_RM: problem.R,
-            _W_RC: problem.Rc,
-            _W_TABS: pa.tab_s,
-            _W_TABXY: pa.tab_xy,
-            _W_TABH: pa.tab_h,
-            _W_TABK: pa.tab_k,
-            _W_C: cr.C,
-            _W_B: cr.b,
-            _W_REFS: (N + 1, 4),
-            _W_XREF: (N + 1, nx),
-            _W_UREF: (N, nu),
-            _W_XBAR: (N, nx),
-            _W_UBAR: (N, nu),
-            _W_F: (N, nx),
-            _W_A: (N, nx, nx),
-            _W_BD: (N, nx, nu),
-            _W_CD: (N, nx),
-            _W_LANEN: (N, 2),
-            _W_LANEB: (N,),
-            _W_XF: (N + 1, nx),
-            _W_P: (N + 1, nx, nx),
-            _W_LAM: (N + 1, nx),
-            _W_VB: (N, nx, nu),
-            _W_S: (2, nx, N * nu),
-            _W_T2: (nx, nw),
-            _W_GAM: (N, nx, N * nu) if need_gamma else (1, 1, 1),
-            _W_H: (nz, nz),
-            _W_G: (nz,),
-            _W_Z: (nz,),
-            _W_L: (nz, nz),
-            _W_J: (nz, nz),
-            _W_RQ: (nz, nz),
-            _W_D: (nz,),
-            _W_ZDIR: (nz,),
-            _W_R: (nz,),
-            _W_UQ: (nz,),
-            _W_SQ: (mq,),
-            _W_ROWN: (mq,),
-            _W_LAMQ: (mq,),
-            _W_DW: (7, nx + nu + 1, nx + nu + 1),
-            _W_KG: (N, nu, nx),
-            _W_KF: (N, nu),
-            _W_PA: (nx, nx),
-            _W_MG: (nu, nx),
-            _W_GG: (nu, nu),
-            _W_QV: (nx,),
-            _W_WE: np.stack([problem.Q] * (N - 1) + [problem.QN]),
-            _W_QT: (N, nx),
-            _W_OBS: _obstacle_table(obstacles),
-            _W_ODIST: (max(len(obstacles), 1),),
-            _W_OPROJ: (max(len(obstacles), 1), 2),
-            _W_SARR: (N + 1,),
-            _W_EREF: (N + 1,),
-            _W_ROWA: (N, max(n_orow, 1), 3),
-            _W_ROWB: np.full((N, max(n_orow, 1)), -np.inf),
-            _W_LLO: (N,),
-            _W_LHI: (N,),
-            _W_LDLO: (N,),
-            _W_LDHI: (N,),
-            _W_XLIN: (N + 1, nx),
-            _W_GSUM: (2 * N,),
-            _W_PROF: prof,
-            _W_VARR: (N + 1,),
-            _W_REFW: (N + 1, 8),
-            _W_RDS: road.s_m if road is not None else np.zeros(1),
-            _W_RDL: road.left_m if road is not None else np.zeros(1),
-            _W_RDR: road.right_m if road is not None else np.zeros(1),
-            _W_ULO: np.tile(problem.u_min, (N, 1)),
-            _W_UHI: np.tile(problem.u_max, (N, 1)),
-            _W_VLIN: (N + 1,),
-            _W_SLIN: (N + 1,),
-            _W_RLIN: (N + 1, 4),
-        }
-        shapes: list[tuple[int, ...]] = [
-            np.shape(a) if isinstance(a, np.ndarray) else a for a in (arrays[i] for i in range(_NW))
-        ]
-        sizes = [int(np.prod(sh)) for sh in shapes]
-        fo = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-        fs = np.ones((_NW, 3), dtype=np.int64)
-        for i, sh in enumerate(shapes):
-            fs[i, : len(sh)] = sh
-        self._wbuf = np.zeros(int(fo[-1]))
-        #: named views of the buffer (constants and work arrays), for inspection
-        self._w = {i: self._wbuf[fo[i] : fo[i + 1]].reshape(shapes[i]) for i in range(_NW)}
-        for i, v in arrays.items():
-            if isinstance(v, np.ndarray):
-                self._w[i][...] = v
-        # active-set work: active (nz), isact (mq), rowcol (mq: the constant rows' single nonzero
-        # columns, -1 for a dense row; the step marks the rows it writes), kpos (2N), osel
-        # (obstacles), rgrp (mq)
-        self._ibuf = np.concatenate(
-            [
-                ip,
-                fo,
-                fs.ravel(),
-                np.zeros(nz + mq, dtype=np.int64),
-                cr.rowcol,
-                np.zeros(2 * N + max(len(obstacles), 1) + mq, dtype=np.int64),
-            ]
-        )
+        self._qp = new_stage_qp(problem, n_orow)
+        self._work = new_condensed_work(problem, settings, n_orow)
         self._info = np.zeros(4)
+        self._asm_struct, self._qp_struct = self._asm.struct(), self._qp.struct()
+        self._step = CompiledStep(self._asm_struct, self._qp_struct, self._work.struct(), self._sides, self._info)
+        self._step_struct = self._step.struct()
         self._noX = np.zeros((N + 1, nx))
         self._noU = np.zeros((N, nu))
         self._o_X = nu
@@ -414,34 +332,24 @@ class CompiledLtvMpc(LtvMpc):
         if self.nx >= 4:  # the speed state: v (kinematic bicycle) or vx (dynamic bicycle)
             x[3] = self.v_ref_mps
         out = np.empty(self._out_size)
+        sides = self._sides.copy()
         for stage in (STAGE_ALL,) if self.solver == "condensed" else (STAGE_LINEARIZE, STAGE_COST):
-            _control_step(
-                x,
-                0.0,
-                0.0,
-                np.zeros(self.nu),
-                self._noX,
-                self._noU,
-                MODE_NO_PLAN,
-                stage,
-                self._sides.copy(),
-                self._wbuf,
-                self._ibuf,
-                out,
-                self._info,
+            control_step(
+                self._step_struct, x, 0.0, 0.0, np.zeros(self.nu), self._noX, self._noU, MODE_NO_PLAN, stage, out
             )
+        self._sides[:] = sides
         # the car-following references (a lane blocked ahead, a speed cap) come in mid-run: the
         # step that first needs them would load them (the next step recomputes the references)
-        w = self._w
-        follow_references_into(float(x[2]), w[_W_SARR].copy(), w[_W_VARR].copy(), self._wbuf, self._ibuf)
+        a = self._asm
+        follow_references_into(self._asm_struct, self._qp_struct, float(x[2]), a.s_arr.copy(), a.v_arr.copy())
 
     # -- obstacles and road (the properties from LtvMpc) ---------------------------------------
     def set_road(self, road: Road) -> None:
         """As :meth:`LtvMpc.set_road`: the compiled step reads the new edges from its tables."""
         self._road = checked_road(self._road, road)
-        self._w[_W_RDL][...] = road.left_m
-        self._w[_W_RDR][...] = road.right_m
-        self._w[_W_FP][_F_RMARGIN] = road.margin_m
+        self._asm.road_left[...] = road.left_m
+        self._asm.road_right[...] = road.right_m
+        set_road_margin(self._asm_struct, float(road.margin_m))
         if self.avoidance is not None:
             self.avoidance.road = road
         self.fallback.road = road
@@ -482,7 +390,7 @@ class CompiledLtvMpc(LtvMpc):
             reason = obstacles_unsupported_reason(obstacles, avoidance.config)
             if reason is not None:
                 raise ValueError(f"the fast backend cannot take these obstacles: {reason}")
-            self._w[_W_OBS][...] = _obstacle_table(obstacles)
+            self._asm.obs[...] = obstacle_table(obstacles)
         avoidance.obstacles = list(obstacles)
         if self._relaxed is not None:  # the relax rung avoids the same obstacles
             self._relaxed.set_obstacles(obstacles)
@@ -492,7 +400,7 @@ class CompiledLtvMpc(LtvMpc):
         """The side memory array of ``WarmStart.sides`` (untouched without a detour)."""
         arr = self._sides
         if self._detour:
-            arr[:] = _SIDE_NONE
+            arr[:] = SIDE_NONE
             for j, side in sides:
                 if 0 <= j < len(arr):
                     arr[j] = side
@@ -511,43 +419,40 @@ class CompiledLtvMpc(LtvMpc):
         ``ocp.avoidance``. Returns the status code and the passing sides for the next step.
         ``last=STAGE_COST``: only the stage QP, into the buffers (for :meth:`prepare`)."""
         sides = self._load_sides(warm_sides)
+        step = self._step_struct
         if last == STAGE_SOLVE and self._rows is None and self._lateral is None and self._speed_cap is None:
-            code = _control_step(
-                x, s_guess, t_s, u_prev, X, U, mode, STAGE_ALL, sides, self._wbuf, self._ibuf, out, self._info
-            )
+            code = control_step(step, x, s_guess, t_s, u_prev, X, U, mode, STAGE_ALL, out)
             if self._detour:
-                return code, tuple((j, int(v)) for j, v in enumerate(sides) if v != _SIDE_NONE)
+                return code, tuple((j, int(v)) for j, v in enumerate(sides) if v != SIDE_NONE)
             return code, warm_sides
-        code = _control_step(
-            x, s_guess, t_s, u_prev, X, U, mode, STAGE_LINEARIZE, sides, self._wbuf, self._ibuf, out, self._info
-        )
+        code = control_step(step, x, s_guess, t_s, u_prev, X, U, mode, STAGE_LINEARIZE, out)
         if code != 0:
             return code, warm_sides
-        w = self._w
-        w[_W_EREF][...] = 0.0
+        a, qp = self._asm, self._qp
+        a.e_ref[...] = 0.0
         new_sides = warm_sides
         s_max = None
         if self._rows is not None:
             memory = AvoidanceMemory(dict(warm_sides))
-            terms = self._rows.terms(t_s, x, w[_W_XLIN], w[_W_SARR], memory, w[_W_LLO], w[_W_LHI])
-            w[_W_ROWA][...] = terms.rows_a
-            w[_W_ROWB][...] = terms.rows_b
+            terms = self._rows.terms(t_s, x, qp.Xlin, a.s_arr, memory, qp.lane_lo, qp.lane_hi)
+            qp.rowa[...] = terms.rows_a
+            qp.rowb[...] = terms.rows_b
             if terms.lane_lo is not None and terms.lane_hi is not None:
-                narrow_road_rows(w[_W_LLO], w[_W_LHI], w[_W_LDLO], w[_W_LDHI], terms.lane_lo, terms.lane_hi)
+                narrow_road_rows(qp.lane_lo, qp.lane_hi, qp.lane_dlo, qp.lane_dhi, terms.lane_lo, terms.lane_hi)
             if terms.e_ref is not None:
-                w[_W_EREF][...] = terms.e_ref
+                a.e_ref[...] = terms.e_ref
             s_max = terms.s_max
             new_sides = tuple(sorted(memory.sides.items()))
         if s_max is not None or self._speed_cap is not None:
             # car following: the references approach the stop line behind the obstacle blocking
             # the lane ahead and move on with its prediction; and a speed cap (as LtvMpc.prepare)
             cap, decel = self._speed_cap or (math.inf, self._follow_decel)
-            follow = follow_references(w[_W_SARR], w[_W_VARR], s_max, float(self.model.speed(x)), self.dt_s, decel, cap)
+            follow = follow_references(a.s_arr, a.v_arr, s_max, float(self.model.speed(x)), self.dt_s, decel, cap)
             if follow is not None:
-                follow_references_into(float(x[2]), follow[0], follow[1], self._wbuf, self._ibuf)
+                follow_references_into(self._asm_struct, self._qp_struct, float(x[2]), follow[0], follow[1])
         if self._lateral is not None:
-            w[_W_EREF] += np.asarray(self._lateral(w[_W_SARR]), float)
-        code = _control_step(x, s_guess, t_s, u_prev, X, U, mode, last, sides, self._wbuf, self._ibuf, out, self._info)
+            a.e_ref[...] += np.asarray(self._lateral(a.s_arr), float)
+        code = control_step(step, x, s_guess, t_s, u_prev, X, U, mode, last, out)
         return code, new_sides
 
     def prepare(self, x, warm: WarmStart, around=None, s_m: float | None = None) -> StepData:
@@ -574,44 +479,44 @@ class CompiledLtvMpc(LtvMpc):
         code, sides = self._run(
             x, s_guess, float(warm.t_s), u_prev, X, U, mode, warm.sides, np.empty(self._out_size), last=STAGE_COST
         )
-        w, info = self._w, self._info
+        a, qp, info = self._asm, self._qp, self._info
         if code != 0:  # a non-finite model or references: no usable stage QP
-            w[_W_CD][...] = math.nan
-        Wq, xref = w[_W_WQ], w[_W_XREF]
+            qp.c[...] = math.nan
+        Wq, xref = a.Wq, qp.xref
         H = g = None
         if self.avoidance is not None and self._rows is None:  # the cost's model, added to the state weights
-            H = 2.0 * (w[_W_WE][:, :2, :2] - Wq[:, :2, :2])
-            g = -2.0 * (w[_W_QT][:, :2] - np.einsum("kij,kj->ki", Wq, xref[1:])[:, :2])
+            H = 2.0 * (qp.We[:, :2, :2] - Wq[:, :2, :2])
+            g = -2.0 * (qp.qt[:, :2] - np.einsum("kij,kj->ki", Wq, xref[1:])[:, :2])
         road = self._road is not None
         rows = self._rows is not None
-        friction = self._ibuf[_I_FRICTION] == 1
-        Xlin = w[_W_XLIN]
+        friction = a.friction
+        Xlin = qp.Xlin
         return StepData(
             x,
             float(info[0]),
             float(info[1]),
             float(info[2]),
             xref,
-            w[_W_UREF],
-            w[_W_XBAR],
-            w[_W_UBAR],
-            w[_W_F],
-            w[_W_A],
-            w[_W_BD],
-            w[_W_CD],
-            w[_W_LANEN],
-            w[_W_LANEB],
+            qp.uref,
+            a.Xbar,
+            a.Ubar,
+            a.F,
+            qp.A,
+            qp.B,
+            qp.c,
+            qp.lane_n,
+            qp.lane_b,
             Xlin,
-            w[_W_LLO] if road else None,
-            w[_W_LHI] if road else None,
-            w[_W_ROWA] if rows else None,
-            w[_W_ROWB] if rows else None,
+            qp.lane_lo if road else None,
+            qp.lane_hi if road else None,
+            qp.rowa if rows else None,
+            qp.rowb if rows else None,
             H,
             g,
             sides,
-            (w[_W_LDLO], w[_W_LDHI], Xlin[1:, 2]) if road else None,
-            w[_W_ULO] if friction else None,
-            w[_W_UHI] if friction else None,
+            (qp.lane_dlo, qp.lane_dhi, Xlin[1:, 2]) if road else None,
+            qp.ulo if friction else None,
+            qp.uhi if friction else None,
         )
 
     # -- one control step -----------------------------------------------------------------------
@@ -655,7 +560,7 @@ class CompiledLtvMpc(LtvMpc):
         while code == 0 and it < cfg.sqp_max_iterations and time.perf_counter() - t0 + t_qp < cfg.sqp_max_time_s:
             t1 = time.perf_counter()
             U_it = out[self._o_U : self._o_R].reshape(N, nu)
-            if float(np.max(np.abs(U_it - self._w[_W_UBAR]))) < cfg.sqp_tol:
+            if float(np.max(np.abs(U_it - self._asm.Ubar))) < cfg.sqp_tol:
                 break
             X_it = out[self._o_X : self._o_U].reshape(N + 1, nx)
             out = np.empty(self._out_size)
@@ -684,7 +589,7 @@ class CompiledLtvMpc(LtvMpc):
         if code == _BAD_STATE:
             self._check_state(x)  # raises, naming the field
         status = STATUS_WORDS[code]
-        refs = self._w[_W_XREF].copy()
+        refs = self._qp.xref.copy()
         u, name, new_warm, X_pred = self.fallback.run(SimpleNamespace(x=x, s_m=float(info[0])), warm)
         new_warm = replace(new_warm, t_s=t_next, sides=new_sides)
         return ControlOutput(

@@ -40,7 +40,7 @@ from .base import TrackingWarmStart, checked_obstacles, checked_road, checked_sp
 if TYPE_CHECKING:
     from ..ocp.qp import LtvQp
     from .condensed import CondensedBackend
-    from .fast_setup import CondensedSettings
+    from ..solvers.condensed_setup import CondensedSettings
 
 
 def _shift_references(xref: np.ndarray, refs: np.ndarray, s_arr: np.ndarray, e: np.ndarray) -> None:
@@ -357,7 +357,7 @@ def solver_in_reach(solver: str, problem: MpcProblem, settings: CondensedSetting
     where the condensed solver's limits exclude the problem."""
     if solver != "condensed":
         return solver
-    from .fast_setup import condensed_unsupported_reason
+    from ..solvers.condensed_setup import condensed_unsupported_reason
 
     reason = condensed_unsupported_reason(problem, settings, rows)
     if reason is None:
@@ -426,7 +426,7 @@ class PythonLtvMpc(LtvMpc):
             )
         self.qp = LtvQp(problem)
         if solver == "condensed":
-            from .fast_setup import CondensedSettings
+            from ..solvers.condensed_setup import CondensedSettings
 
             settings = condensed_settings if condensed_settings is not None else CondensedSettings()
             solver = solver_in_reach(solver, problem, settings, bool(problem.obstacle_rows))  # type: ignore[assignment]

@@ -24,9 +24,13 @@ per solve.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
+import numpy as np
 from numba import njit
+from numba.experimental import structref
 
+from .._structs import StructType, register_struct, to_struct
 from .dense_qp import gi_solve
 
 
@@ -327,35 +331,44 @@ def soft_solve(
 
 
 @njit(cache=True)
-def condensed_solve(
-    N, nx, nu, nz, x, u_prev, A, B, c, We, qt, Rm, Rc, uref, ulo, uhi, dmax, x_min, x_max, lane, lane_n, lane_b,
-    lane_lo, lane_hi, lane_dlo, lane_dhi, Xlin, nrow, rowa, rowb, use_riccati, gamma, m_const, r_rate0, C, b, rowcol,
-    rgrp, kpos, w2_lane, w1_lane, w2_obs, w1_obs, tol, max_iter, xf, P, lam, Vb, S, T2, Gam, H, g, z, L, J, Rq, d,
-    zdir, r, uq, sq, rown, lamq, active, isact, gsum, Kg, kf, PA, Mg, Gg, qv,
-):  # fmt: skip
-    """Solve one step's stage QP, condensed onto the inputs (and the slacks of the soft rows);
-    returns ``(code, iterations)`` (code 0: ok, 1 infeasible, 2 max_iter, 3 failed) with the
-    planned inputs in ``z[:N nu]``.
-
-    Stage data: initial state ``x`` (nx,), previous input ``u_prev`` (nu,); dynamics
-    ``x_{k+1} = A_k x_k + B_k u_k + c_k`` (A (N, nx, nx), B (N, nx, nu), c (N, nx)); state cost
-    of x_1..x_N ``x' We_k x - 2 qt_k' x`` (We (N, nx, nx), qt (N, nx)); input cost
-    ``(u - uref_k)' Rm (u - uref_k) + (u_k - u_{k-1})' Rc (...)`` from ``u_prev``; per-stage input
-    bounds ``ulo``, ``uhi`` (N, nu) (their rows are among the constant rows), rate limit ``dmax``
-    (nu,) per step, state bounds ``x_min``, ``x_max`` (nx,); with ``lane`` the road rows
-    ``lo_k + dlo_k (yaw - ybar_k) <= n_k . p_k - lane_b_k <= hi_k + dhi_k (yaw - ybar_k)`` (ybar
-    the yaw of the linearization trajectory ``Xlin`` (N+1, nx)) with slack weights ``w2_lane``
-    (quadratic), ``w1_lane`` (linear); ``nrow`` obstacle rows per step ``rowa . (x, y, yaw)_k >=
-    rowb`` (b = -inf: unused), slack weights ``w2_obs``, ``w1_obs``. ``C``, ``b``: the rows of
-    ``C z >= b``, the first ``m_const`` constant (input bounds, rates; the u_0 rate rows from row
-    ``r_rate0`` follow ``u_prev``). ``use_riccati``: try the unconstrained minimizer first (no
-    Rc, no soft rows); ``gamma``: there are state, road or obstacle rows. The rest is work
-    space, sized by the caller; nothing is allocated.
+def condensed_solve(qp, work, x, u_prev):
+    """Solve one step's stage QP ``qp`` (:class:`~mpcdrive.ocp.stage_qp.StageQp`, its struct)
+    from state ``x`` (nx,) after input ``u_prev`` (nu,), condensed onto the inputs (and the
+    slacks of the soft rows), in the work arrays of ``work`` (:class:`CondensedWork`, its
+    struct); returns ``(code, iterations)`` (code 0: ok, 1 infeasible, 2 max_iter, 3 failed)
+    with the planned inputs in ``work.z[:N nu]``. The rows of ``C z >= b``: the first
+    ``m_const`` constant (input bounds, their b from the stage's ``ulo``, ``uhi``; rates, the u_0
+    rate rows from row ``r_rate0`` following ``u_prev``), then the state, road and obstacle rows
+    of the step. ``riccati``: the unconstrained minimizer is tried first (no Rc, no soft rows);
+    ``gamma``: there are state, road or obstacle rows. Nothing is allocated.
     """
+    N, nx, nu, nz = qp.N, qp.nx, qp.nu, work.nz
+    A, B, c, We, qt, Rm, Rc, uref = qp.A, qp.B, qp.c, qp.We, qp.qt, qp.R, qp.Rc, qp.uref
+    ulo, uhi, dmax, x_min, x_max = qp.ulo, qp.uhi, qp.dmax, qp.x_min, qp.x_max
+    lane, lane_n, lane_b, lane_lo, lane_hi = qp.lane, qp.lane_n, qp.lane_b, qp.lane_lo, qp.lane_hi
+    lane_dlo, lane_dhi, Xlin, nrow, rowa, rowb = qp.lane_dlo, qp.lane_dhi, qp.Xlin, qp.nrow, qp.rowa, qp.rowb
+    C, b, rowcol, rgrp, kpos = work.C, work.b, work.rowcol, work.rgrp, work.kpos
+    xf, P, lam, Vb, S, T2, Gam = work.xf, work.P, work.lam, work.Vb, work.S, work.T2, work.Gam
+    H, g, z, L, J, Rq, d, zdir, r, uq = (
+        work.H,
+        work.g,
+        work.z,
+        work.L,
+        work.J,
+        work.Rq,
+        work.d,
+        work.zdir,
+        work.r,
+        work.uq,
+    )
+    sq, rown, lamq, active, isact, gsum = work.sq, work.rown, work.lamq, work.active, work.isact, work.gsum
+    Kg, kf, PA, Mg, Gg, qv = work.Kg, work.kf, work.PA, work.Mg, work.Gg, work.qv
+    tol = work.tol
+    input_bound_rows(N, nu, qp.u_min, qp.u_max, ulo, uhi, C, b, False)
     nzu = N * nu
     # -- no Rc, no lane: try the unconstrained minimizer (Riccati, O(N)); if it satisfies every
     # bound it is the QP's solution ---------------------------------------------------------------
-    if use_riccati:
+    if work.riccati:
         if riccati(N, nx, nu, A, B, c, qt, uref, We, Rm, x, P, lam, Kg, kf, PA, Mg, Gg, qv, z):
             if plan_feasible(N, nx, nu, z, lam, u_prev, ulo, uhi, dmax, x_min, x_max, tol):
                 return 0, 0
@@ -458,15 +471,15 @@ def condensed_solve(
         cur = nxt
 
     # -- constraint rows that change each step -------------------------------------------------
-    r0 = r_rate0
+    r0 = work.r_rate0
     for a in range(nu):
         if math.isfinite(dmax[a]):
             b[r0] = u_prev[a] - dmax[a]
             b[r0 + 1] = -u_prev[a] - dmax[a]
             r0 += 2
-    m = m_const
+    m = work.m_const
     m_lane = m
-    if gamma:
+    if work.gamma:
         # Gam[k] = d x_{k+1} / d z: Gam[k] = A_k Gam[k-1] in the first k blocks, B_k in block k,
         # zero after it (never written)
         for k in range(N):
@@ -498,7 +511,7 @@ def condensed_solve(
                         C[m, jj] = 0.0
                     b[m] = xf[k, i] - x_max[i]
                     m += 1
-        if lane == 1:
+        if lane:
             m_lane = m
             Xl = Xlin
             for k in range(1, N + 1):
@@ -525,7 +538,7 @@ def condensed_solve(
                 m += 2
         if nrow > 0:
             # obstacle half-planes a . (x_k, y_k, yaw_k) >= b of this step (b = -inf: unused)
-            if lane == 0:
+            if not lane:
                 m_lane = m
             for k in range(1, N + 1):
                 for q in range(nrow):
@@ -542,14 +555,14 @@ def condensed_solve(
                     m += 1
 
     # -- solve, then the plan and the command --------------------------------------------------
-    if lane == 0 and nrow == 0:
+    if not lane and nrow == 0:
         m_lane = m  # no soft rows (soft_solve then solves the hard QP once)
     else:
         # soft rows (slack groups: lane rows of step k in group k, obstacle rows in N + k) that
         # the linearization trajectory is on or beyond (within 1 mm)
         for k in range(2 * N):
             kpos[k] = 0
-        if lane == 1:
+        if lane:
             for k in range(N):
                 px, py = Xlin[k + 1, 0], Xlin[k + 1, 1]
                 dev = lane_n[k, 0] * px + lane_n[k, 1] * py - lane_b[k]
@@ -568,10 +581,137 @@ def condensed_solve(
                 if kpos[f0 + k - 1] == 1 or (k >= 2 and kpos[f0 + k - 2] == 1) or (k >= 3 and kpos[f0 + k - 3] == 1):
                     kpos[f0 + k] = 1
     code, iters = soft_solve(
-        H, g, C, b, m, m_lane, rgrp, N, nzu, kpos, w2_lane, w1_lane, w2_obs, w1_obs, gsum, z, lamq, active, isact,
-        rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol,
+        H, g, C, b, m, m_lane, rgrp, N, nzu, kpos, qp.w2_lane, qp.w1_lane, qp.w2_obs, qp.w1_obs, gsum, z, lamq, active, isact,
+        rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, work.max_iter, tol,
     )  # fmt: skip
     return code, iters
+
+
+@njit(cache=True)
+def input_bound_rows(N, nu, u_min, u_max, lo, hi, C, b, write_rows):
+    """The input-bound rows of ``C z >= b``, which lead the constant rows: stage by stage, input
+    by input, ``u_ka >= lo[k, a]`` then ``-u_ka >= -hi[k, a]``, each only where the problem's bound
+    (``u_min``, ``u_max``) is finite. Writes their ``b`` (and, with ``write_rows``, their unit
+    entries of C); returns how many there are."""
+    r = 0
+    for k in range(N):
+        for a in range(nu):
+            for upper in (False, True):
+                if not math.isfinite(u_max[a] if upper else u_min[a]):
+                    continue
+                if write_rows:
+                    C[r, k * nu + a] = -1.0 if upper else 1.0
+                b[r] = -hi[k, a] if upper else lo[k, a]
+                r += 1
+    return r
+
+
+@njit(cache=True)
+def write_plan(qp, z, x, out):
+    """The plan of the solution ``z`` of ``qp`` (its struct) from state ``x``: ``out = [u (nu) =
+    U_0 clipped to the first stage's input bounds, X ((N+1) nx) rolled out through the affine
+    model, U (N nu), xref ((N+1) nx)]``."""
+    N, nx, nu = qp.N, qp.nx, qp.nu
+    A, B, c, xref, ulo, uhi = qp.A, qp.B, qp.c, qp.xref, qp.ulo, qp.uhi
+    oX = nu
+    oU = oX + (N + 1) * nx
+    oR = oU + N * nu
+    for i in range(nx):
+        out[oX + i] = x[i]
+    for k in range(N):
+        for i in range(nx):
+            t = c[k, i]
+            for j in range(nx):
+                t += A[k, i, j] * out[oX + k * nx + j]
+            for a in range(nu):
+                t += B[k, i, a] * z[k * nu + a]
+            out[oX + (k + 1) * nx + i] = t
+    for j in range(N * nu):
+        out[oU + j] = z[j]
+    for k in range(N + 1):
+        for i in range(nx):
+            out[oR + k * nx + i] = xref[k, i]
+    for a in range(nu):
+        out[a] = min(max(z[a], ulo[0, a]), uhi[0, a])
+
+
+@dataclass(frozen=True, eq=False)
+class CondensedWork:
+    """What :func:`condensed_solve` works in, sized once for a problem (see
+    :func:`mpcdrive.solvers.condensed_setup.new_condensed_work`): ``nz`` variables (inputs and
+    slacks), ``mq`` rows of ``C z >= b`` at most, the first ``m_const`` constant (the u_0 rate
+    rows from ``r_rate0``), ``rowcol`` the single nonzero column of each constant row (-1:
+    dense); ``gamma``: the step adds state, road or obstacle rows; ``riccati``: try the
+    unconstrained minimizer first; ``max_iter`` active-set changes at most, ``tol`` the
+    feasibility tolerance of a row (scaled by its norm). The rest is work space: the condensing
+    (``xf``, ``P``, ``lam``, ``Vb``, ``S``, ``T2``, ``Gam``), the QP (``H``, ``g``, the solution
+    ``z``) and the active-set method (``L``, ``J``, ``Rq``, ``d``, ``zdir``, ``r``, ``uq``,
+    ``sq``, ``rown``, ``lamq``, ``active``, ``isact``, ``rgrp``, ``kpos``, ``gsum``), the
+    Riccati recursion (``Kg``, ``kf``, ``PA``, ``Mg``, ``Gg``, ``qv``)."""
+
+    nz: int
+    mq: int
+    m_const: int
+    r_rate0: int
+    gamma: bool
+    riccati: bool
+    max_iter: int
+    tol: float
+    C: np.ndarray
+    b: np.ndarray
+    rowcol: np.ndarray
+    xf: np.ndarray
+    P: np.ndarray
+    lam: np.ndarray
+    Vb: np.ndarray
+    S: np.ndarray
+    T2: np.ndarray
+    Gam: np.ndarray
+    H: np.ndarray
+    g: np.ndarray
+    z: np.ndarray
+    L: np.ndarray
+    J: np.ndarray
+    Rq: np.ndarray
+    d: np.ndarray
+    zdir: np.ndarray
+    r: np.ndarray
+    uq: np.ndarray
+    sq: np.ndarray
+    rown: np.ndarray
+    lamq: np.ndarray
+    active: np.ndarray
+    isact: np.ndarray
+    rgrp: np.ndarray
+    kpos: np.ndarray
+    gsum: np.ndarray
+    Kg: np.ndarray
+    kf: np.ndarray
+    PA: np.ndarray
+    Mg: np.ndarray
+    Gg: np.ndarray
+    qv: np.ndarray
+
+    def struct(self):
+        """The compiled struct of this work space (the same arrays)."""
+        return to_struct(self, _build_condensed_work)
+
+
+@structref.register
+class _CondensedWorkType(StructType):
+    pass
+
+
+class _CondensedWorkStruct(structref.StructRefProxy):
+    pass
+
+
+register_struct(CondensedWork, _CondensedWorkType, _CondensedWorkStruct)
+
+
+@njit(cache=True)
+def _build_condensed_work(values):
+    return _CondensedWorkStruct(*values)
 
 
 # numba keys this module's cache to this file only; soft_solve and condensed_solve link in code from dense_qp

@@ -1,11 +1,12 @@
-"""The compiled obstacle terms of the fast controller's step (:mod:`mpcdrive.control.fast_step`).
+"""The compiled obstacle cost terms of the step assembly (:mod:`mpcdrive.ocp.assembly`).
 
 For the cost formulations of :mod:`mpcdrive.ocp.avoidance` (``potential``, eq. 55, and
 ``gaussian``, eq. 56), as that module computes them for the OSQP controller: which obstacles a
 step considers (:func:`_select_obstacles`), the paper's trapezoidal detour of the references
-around static circles (:func:`_detour`, :func:`_shift_references`) and the cost's convex
+around static circles (:func:`_detour`, :func:`shift_references`) and the cost's convex
 second-order model at the linearization trajectory (:func:`_obstacle_cost`). They read the
-obstacle table and the float parameters named in :mod:`mpcdrive.control.fast_layout`.
+assembly's container (:class:`~mpcdrive.ocp.assembly.StepAssembly`, its struct ``asm``): its
+obstacle table (:func:`obstacle_table`, columns ``OB_*``), the cost's settings and the road.
 
 Compiled with numba's on-disk cache, which numba keys to this file only: the cache is dropped
 (by :mod:`mpcdrive._jitcache`) when a file whose code these functions link in changes.
@@ -15,27 +16,52 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 from ..paths.compiled import path_eval, path_project
+from ..scene.obstacles import Circle, ConstantVelocity
 from ..scene.road import _interp
 
-# the layout of the compiled step's buffers
-from .fast_layout import _SIDE_LEFT, _SIDE_RIGHT, _SIDE_BLOCKED, _OBS_POTENTIAL, _OBS_GAUSSIAN, _OB_X, _OB_Y, _OB_VX
-from .fast_layout import _OB_VY, _OB_RB, _OB_OX, _OB_OY, _OB_WIN
-from .fast_layout import _F_RMARGIN, _F_OW, _F_OEPS, _F_OSX, _F_OSY, _F_OINF, _F_OMARGIN, _F_HW, _F_HL, _F_RAMP
-from .fast_layout import _F_RPERIOD
+#: passing sides (as ocp.avoidance), and "not chosen yet" in the compiled side memory
+SIDE_LEFT, SIDE_RIGHT, SIDE_BLOCKED, SIDE_NONE = 1, -1, 0, 2
+#: obstacle cost formulations (``StepAssembly.obstacle_form``)
+OBS_NONE, OBS_POTENTIAL, OBS_GAUSSIAN = 0, 1, 2
+#: columns of a row of the obstacle table: pose (x, y) [m] at t = 0, velocity (vx, vy) [m/s],
+#: bounding radius [m], offset (x, y) [m] of the point projected for the path heading,
+#: projection window extra [m]
+OB_X, OB_Y, OB_VX, OB_VY, OB_RB, OB_OX, OB_OY, OB_WIN = range(8)
+_NOB = 8
+
+
+def obstacle_table(obstacles) -> np.ndarray:
+    """(n, 8) rows of the compiled obstacle description (columns ``OB_*``) of static or
+    constant-velocity circles and polygons; one zero row without obstacles."""
+    tab = np.zeros((max(len(obstacles), 1), _NOB))
+    for j, ob in enumerate(obstacles):
+        x0, y0, yaw0 = ob.pose
+        vx, vy = (ob.motion.vx_mps, ob.motion.vy_mps) if isinstance(ob.motion, ConstantVelocity) else (0.0, 0.0)
+        tab[j, [OB_X, OB_Y, OB_VX, OB_VY, OB_RB]] = x0, y0, vx, vy, ob.shape.bounding_radius_m
+        if isinstance(ob.shape, Circle):
+            tab[j, OB_WIN] = max(2.0, 2.0 * ob.shape.radius_m)
+        else:  # as ocp.avoidance.frenet_box: the vertex mean is projected (a fixed offset: no rotation)
+            pts = ob.at(0.0).points
+            tab[j, OB_OX], tab[j, OB_OY] = pts.mean(axis=0) - (x0, y0)
+            tab[j, OB_WIN] = 2.0 + float(np.ptp(pts))
+    return tab
 
 
 @njit(cache=True)
-def _select_obstacles(nobs, omax, obs, odist, oproj, osel, fp, t_s, x, s0, pkind, geo, tab_s, tab_xy, tab_h, tab_k):
+def select_obstacles(asm, t_s, x, s0):
     """The ``max_obstacles`` nearest obstacles within the influence distance of the vehicle at time
-    ``t_s`` (nearest first, ties by index, as ``ocp.avoidance``) into osel; returns how many.
-    oproj[j] = (s, e_y) of each one's projected point [m] (its Frenet position now)."""
-    reach = fp[_F_OINF]
+    ``t_s`` (nearest first, ties by index, as ``ocp.avoidance``) into ``asm.osel``; returns how
+    many. ``asm.oproj[j]`` = (s, e_y) of each one's projected point [m] (its Frenet position now)."""
+    nobs, omax, obs, odist, oproj, osel = asm.nobs, asm.omax, asm.obs, asm.odist, asm.oproj, asm.osel
+    pkind, geo, tab_s, tab_xy, tab_h, tab_k = asm.path, asm.geo, asm.tab_s, asm.tab_xy, asm.tab_h, asm.tab_k
+    reach = asm.obstacle_influence
     for j in range(nobs):
-        d = math.hypot(obs[j, _OB_X] + obs[j, _OB_VX] * t_s - x[0], obs[j, _OB_Y] + obs[j, _OB_VY] * t_s - x[1])
-        d -= obs[j, _OB_RB]
+        d = math.hypot(obs[j, OB_X] + obs[j, OB_VX] * t_s - x[0], obs[j, OB_Y] + obs[j, OB_VY] * t_s - x[1])
+        d -= obs[j, OB_RB]
         odist[j] = d if d <= reach else math.inf
     px0, py0, _h0, _k0 = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s0)
     nsel = 0
@@ -49,51 +75,54 @@ def _select_obstacles(nobs, omax, obs, odist, oproj, osel, fp, t_s, x, s0, pkind
         odist[j] = math.inf
         osel[nsel] = j
         nsel += 1
-        cx = obs[j, _OB_X] + obs[j, _OB_VX] * t_s + obs[j, _OB_OX]
-        cy = obs[j, _OB_Y] + obs[j, _OB_VY] * t_s + obs[j, _OB_OY]
+        cx = obs[j, OB_X] + obs[j, OB_VX] * t_s + obs[j, OB_OX]
+        cy = obs[j, OB_Y] + obs[j, OB_VY] * t_s + obs[j, OB_OY]
         oproj[j, 0], oproj[j, 1] = path_project(
-            pkind, geo, tab_s, tab_xy, s0, obs[j, _OB_WIN] + math.hypot(cx - px0, cy - py0), cx, cy
+            pkind, geo, tab_s, tab_xy, s0, obs[j, OB_WIN] + math.hypot(cx - px0, cy - py0), cx, cy
         )
     return nsel
 
 
 @njit(cache=True)
-def _detour(nsel, osel, obs, oproj, sides, fp, N, s_arr, refs, xref, e_ref, lane, rd_s, rd_l, rd_r):
+def detour(asm, xref, sides):
     """The paper's trapezoidal detour around the selected (static, circular) obstacles, as
     ``ocp.avoidance``: pick each one's passing side (kept from ``sides`` while it has room
     between the obstacle and the road's edge beside it, ``lane`` = 1 when there is a road: the
     body's half width, the road's margin, the obstacle margin and the body's half width again),
     shift the references sideways over the obstacle with ramps before and after it, and turn
-    their heading with the slope."""
-    margin, hw, hl, ramp = fp[_F_OMARGIN], fp[_F_HW], fp[_F_HL], fp[_F_RAMP]
+    their heading with the slope. ``xref`` (N+1, nx): the state references; ``sides``: the side
+    memory per obstacle."""
+    nsel, osel, obs, oproj, N = asm.nsel, asm.osel, asm.obs, asm.oproj, asm.N
+    s_arr, refs, e_ref, lane = asm.s_arr, asm.refs, asm.e_ref, asm.lane
+    margin, hw, hl, ramp = asm.obstacle_margin, asm.half_width, asm.half_length, asm.detour_ramp
     need = margin + hw  # as Avoidance.passing_room_m for the cost formulations, less the edge's share
     for k in range(N + 1):
         e_ref[k] = 0.0
     any_shift = False
     for a in range(nsel):
         j = osel[a]
-        r = obs[j, _OB_RB]
+        r = obs[j, OB_RB]
         s_ref, e_c = oproj[j, 0], oproj[j, 1]
         e_lo, e_hi = e_c - r, e_c + r
-        if lane == 1:
-            lim_l = _interp(rd_s, rd_l, s_ref, fp[_F_RPERIOD]) - hw - fp[_F_RMARGIN]
-            lim_r = _interp(rd_s, rd_r, s_ref, fp[_F_RPERIOD]) + hw + fp[_F_RMARGIN]
+        if lane:
+            lim_l = _interp(asm.road_s, asm.road_left, s_ref, asm.road_period) - hw - asm.road_margin
+            lim_r = _interp(asm.road_s, asm.road_right, s_ref, asm.road_period) + hw + asm.road_margin
             room_left, room_right = lim_l - e_hi, e_lo - lim_r
         else:
             room_left = room_right = math.inf
         prev = sides[j]
-        if prev == _SIDE_LEFT and room_left >= need:
-            side = _SIDE_LEFT
-        elif prev == _SIDE_RIGHT and room_right >= need:
-            side = _SIDE_RIGHT
+        if prev == SIDE_LEFT and room_left >= need:
+            side = SIDE_LEFT
+        elif prev == SIDE_RIGHT and room_right >= need:
+            side = SIDE_RIGHT
         elif max(room_left, room_right) < need:
-            side = _SIDE_BLOCKED
+            side = SIDE_BLOCKED
         else:
-            side = _SIDE_LEFT if room_left >= room_right else _SIDE_RIGHT
+            side = SIDE_LEFT if room_left >= room_right else SIDE_RIGHT
         sides[j] = side
-        if side == _SIDE_BLOCKED:
+        if side == SIDE_BLOCKED:
             continue
-        shift = (e_hi + hw + 2.0 * margin) if side == _SIDE_LEFT else (e_lo - hw - 2.0 * margin)
+        shift = (e_hi + hw + 2.0 * margin) if side == SIDE_LEFT else (e_lo - hw - 2.0 * margin)
         lo_s, hi_s = s_ref - r - hl, s_ref + r + hl
         rr = max(ramp, 1e-9)
         for k in range(N + 1):
@@ -103,11 +132,11 @@ def _detour(nsel, osel, obs, oproj, sides, fp, N, s_arr, refs, xref, e_ref, lane
                 e_ref[k] = cand
                 any_shift = any_shift or cand != 0.0
     if any_shift:
-        _shift_references(N, s_arr, refs, e_ref, xref)
+        shift_references(N, s_arr, refs, e_ref, xref)
 
 
 @njit(cache=True)
-def _shift_references(N, s_arr, refs, e_ref, xref):
+def shift_references(N, s_arr, refs, e_ref, xref):
     """The detour: shift the state references sideways by ``e_ref`` (N+1,) [m] from the path
     points ``refs`` and turn their heading with the slope of the shift."""
     for k in range(N + 1):
@@ -119,21 +148,23 @@ def _shift_references(N, s_arr, refs, e_ref, xref):
 
 
 @njit(cache=True)
-def _obstacle_cost(
-    form, nsel, osel, obs, oproj, fp, t_s, dt, Xbar, F, N, pkind, geo, tab_s, tab_xy, tab_h, tab_k, We, qt
-):
+def obstacle_cost(asm, t_s, We, qt):
     """Add the potential (eq. 55) or Gaussian (eq. 56) cost of the selected obstacles, its
     second-order model at the linearization trajectory (x_k = Xbar[k], x_N = F[N-1]) with the
     Hessian projected onto the PSD cone, to the state cost ``x' We x - 2 qt' x`` of x_1..x_N, as
     ``ocp.avoidance`` does for the OSQP controller: each obstacle predicted at constant velocity,
     Sigma aligned with the path where the obstacle is now."""
-    w, eps = fp[_F_OW], fp[_F_OEPS]
-    isx2, isy2 = 1.0 / (fp[_F_OSX] * fp[_F_OSX]), 1.0 / (fp[_F_OSY] * fp[_F_OSY])
+    form, nsel, osel, obs, oproj, N = asm.obstacle_form, asm.nsel, asm.osel, asm.obs, asm.oproj, asm.N
+    dt, Xbar, F = asm.dt, asm.Xbar, asm.F
+    pkind, geo, tab_s, tab_xy, tab_h, tab_k = asm.path, asm.geo, asm.tab_s, asm.tab_xy, asm.tab_h, asm.tab_k
+    w, eps = asm.obstacle_weight, asm.obstacle_epsilon
+    sx, sy = asm.obstacle_sigma_x, asm.obstacle_sigma_y
+    isx2, isy2 = 1.0 / (sx * sx), 1.0 / (sy * sy)
     s00, s01, s11 = 0.0, 0.0, 0.0
     for a in range(nsel):
         j = osel[a]
-        vx, vy = obs[j, _OB_VX], obs[j, _OB_VY]
-        if form == _OBS_GAUSSIAN:
+        vx, vy = obs[j, OB_VX], obs[j, OB_VY]
+        if form == OBS_GAUSSIAN:
             h = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, oproj[j, 0])[2]
             ch, sh = math.cos(h), math.sin(h)
             s00 = ch * ch * isx2 + sh * sh * isy2
@@ -145,9 +176,9 @@ def _obstacle_cost(
             else:
                 px, py = F[N - 1, 0], F[N - 1, 1]
             tk = t_s + dt * k
-            dx = px - (obs[j, _OB_X] + vx * tk)
-            dy = py - (obs[j, _OB_Y] + vy * tk)
-            if form == _OBS_POTENTIAL:
+            dx = px - (obs[j, OB_X] + vx * tk)
+            dy = py - (obs[j, OB_Y] + vy * tk)
+            if form == OBS_POTENTIAL:
                 den = dx * dx + dy * dy + eps
                 d2, d3 = den * den, den * den * den
                 g0, g1 = -2.0 * w * dx / d2, -2.0 * w * dy / d2
@@ -178,13 +209,12 @@ def _obstacle_cost(
             qt[k - 1, 1] -= 0.5 * (g1 - h01 * px - h11 * py)
 
 
-# numba caches these functions keyed to this file only; they inline code (and constants) from these
+# numba caches these functions keyed to this file only; they inline code from these
 from .. import _jitcache  # noqa: E402
-from . import fast_layout as _fast_layout  # noqa: E402
 from ..paths import compiled as _paths_compiled  # noqa: E402
 from ..scene import road as _road  # noqa: E402
 
 _jitcache.refresh(
-    _select_obstacles,  # one file: one fingerprint for all its functions
-    [m.__file__ for m in (_paths_compiled, _road, _fast_layout) if m.__file__ is not None],
+    select_obstacles,  # one file: one fingerprint for all its functions
+    [m.__file__ for m in (_paths_compiled, _road) if m.__file__ is not None],
 )

@@ -1,0 +1,424 @@
+"""The compiled step assembly: from the measured state to the step's stage QP.
+
+One step of the LTV-MPC is assembled in two compiled calls on a :class:`StepAssembly` (what the
+controller describes once: model, path, road, weights, obstacle cost, settings, and its work
+arrays) and writes a :class:`~mpcdrive.ocp.stage_qp.StageQp`:
+
+* :func:`linearize`: projection onto the path, horizon references (constant speed or a speed
+  profile), the obstacle selection and the compiled detour of the cost formulations, the
+  linearization trajectory (the shifted previous plan, an SQP iterate, the paper's frozen point,
+  or a roll-out of the references), the discrete affine model, the friction circle's per-stage
+  input bounds, and the road's bounds of the body at the linearization trajectory (the rule of
+  :mod:`mpcdrive.scene.road`).
+* :func:`stage_costs`: the references shifted by a detour written in between (obstacle rows of
+  ``ocp.avoidance``, a lateral reference), the stage costs with the obstacle cost's convex
+  model (:mod:`mpcdrive.ocp.obstacle_cost_compiled`) and the road rows.
+
+Between the two, Python code may write the obstacle rows and narrowed road bounds of
+``ocp.avoidance`` into the stage QP, the detour offsets into ``e_ref``, and car-following
+references (:func:`follow_references_into`). A solver then takes the stage QP (see
+:mod:`mpcdrive.solvers`). Compiled with numba's on-disk cache; numba keys it to this file only,
+so the cache is dropped (by :mod:`mpcdrive._jitcache`) when a file whose code it links in
+changes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from numba.experimental import structref
+
+from .._structs import StructType, register_struct, to_struct
+from ..models.compiled import METHOD_EXP, discrete_step_jacobians, model_references, model_speed, rollout_into
+from ..paths.compiled import path_eval, path_project, wrap_angle
+from ..paths.profile_compiled import profile_arc_lengths, profile_speed
+from ..scene.road import horizon_bounds, reach_first_step
+from .friction import friction_input_bounds
+from .obstacle_cost_compiled import OBS_NONE, detour, obstacle_cost, select_obstacles, shift_references
+
+_TWO_PI = 2.0 * math.pi
+
+#: linearization modes of a step: no plan (roll out the references), the previous step's plan
+#: shifted by one step (real-time iteration), the current SQP iterate as it is
+MODE_NO_PLAN, MODE_SHIFTED_PLAN, MODE_ITERATE = 0, 1, 2
+#: outputs of :func:`linearize` in ``info``: arc length [m], lateral and heading errors [m, rad]
+#: of the measured state, iterations of the solve
+INFO_S, INFO_EY, INFO_EPSI, INFO_ITER = range(4)
+
+
+@dataclass(frozen=True, eq=False)
+class StepAssembly:
+    """What the compiled assembly needs of a controller, described once.
+
+    Sizes ``N``, ``nx``, ``nu``; the model (``model`` code and parameters ``mp`` of
+    :mod:`mpcdrive.models.compiled`, discretization ``method``, step ``dt`` [s]); the path
+    (``path`` code, ``geo`` and tables of :mod:`mpcdrive.paths.compiled`; projection window
+    [m]); the horizon (``paper_horizon``: a fixed ``horizon_step`` [m] per step; else at the
+    reference speed ``v_ref`` [m/s], or the speed profile ``profile`` with ``has_profile``);
+    ``feedforward`` (curvature feedforward); ``paper_linearization`` (the frozen point); the
+    state weights ``Wq`` (N, nx, nx); ``accel``, ``steer``: input indices (-1: none); the friction
+    circle (``friction``, its acceleration [m/s^2] and the ``wheelbase`` [m]); the road (``lane``;
+    its tables ``road_s``, ``road_left``, ``road_right`` [m], ``road_period`` [m], the body kept
+    ``road_margin`` [m] inside; the body's ``half_width``, ``half_length`` and ``body_offset``
+    [m]); the obstacle cost (``obstacle_form`` ``OBS_*``, ``nobs`` obstacles in ``obs``, at most
+    ``omax`` considered, within ``obstacle_influence`` [m]; weight, epsilon [m^2], sigma [m];
+    the compiled ``detour`` with its margin and ramp [m]). The rest is work: references
+    ``refs`` (N+1, 4: x, y, heading, curvature), arc lengths ``s_arr`` and speeds ``v_arr``
+    (N+1,), the linearization ``Xbar``, ``Ubar``, ``F`` = f(Xbar, Ubar), the detour ``e_ref``,
+    the selected obstacles ``osel`` (``nsel`` of them), their distances and Frenet positions,
+    the road's arc lengths and path points at the linearization trajectory."""
+
+    N: int
+    nx: int
+    nu: int
+    model: int
+    mp: np.ndarray
+    method: int
+    dt: float
+    path: int
+    geo: np.ndarray
+    tab_s: np.ndarray
+    tab_xy: np.ndarray
+    tab_h: np.ndarray
+    tab_k: np.ndarray
+    window: float
+    paper_horizon: bool
+    horizon_step: float
+    v_ref: float
+    has_profile: bool
+    profile: np.ndarray
+    feedforward: bool
+    paper_linearization: bool
+    Wq: np.ndarray
+    accel: int
+    steer: int
+    friction: bool
+    friction_accel: float
+    wheelbase: float
+    lane: bool
+    road_s: np.ndarray
+    road_left: np.ndarray
+    road_right: np.ndarray
+    road_period: float
+    road_margin: float
+    half_width: float
+    half_length: float
+    body_offset: float
+    obstacle_form: int
+    nobs: int
+    omax: int
+    obs: np.ndarray
+    obstacle_influence: float
+    obstacle_weight: float
+    obstacle_epsilon: float
+    obstacle_sigma_x: float
+    obstacle_sigma_y: float
+    detour: bool
+    obstacle_margin: float
+    detour_ramp: float
+    nsel: int
+    osel: np.ndarray
+    odist: np.ndarray
+    oproj: np.ndarray
+    refs: np.ndarray
+    refw: np.ndarray
+    s_arr: np.ndarray
+    v_arr: np.ndarray
+    e_ref: np.ndarray
+    Xbar: np.ndarray
+    Ubar: np.ndarray
+    F: np.ndarray
+    dw: np.ndarray
+    vlin: np.ndarray
+    s_lin: np.ndarray
+    rlin: np.ndarray
+
+    def struct(self):
+        """The compiled struct of this assembly (the same arrays)."""
+        return to_struct(self, _build_step_assembly)
+
+
+@njit(cache=True)
+def set_road_margin(asm, margin_m):
+    """A new road margin [m] for the compiled assembly ``asm`` (its edges are arrays, written in
+    place)."""
+    asm.road_margin = margin_m
+
+
+@njit(cache=True, inline="always")
+def _place_references(asm, qp, yaw, s_arr, v_arr):
+    """The horizon references at arc lengths ``s_arr`` (N+1,) [m] driven at ``v_arr`` [m/s]:
+    the path points ``asm.refs`` (x, y, heading unwrapped next to the car's ``yaw``, curvature)
+    and the model's state and input references ``qp.xref``, ``qp.uref`` (``model.reference``:
+    path pose, speed states, the steady-state feedforward)."""
+    refs, N = asm.refs, asm.N
+    for k in range(N + 1):
+        px, py, hk, kap = path_eval(asm.path, asm.geo, asm.tab_s, asm.tab_xy, asm.tab_h, asm.tab_k, s_arr[k])
+        refs[k, 0] = px
+        refs[k, 1] = py
+        refs[k, 2] = hk
+        refs[k, 3] = kap
+    shift = _TWO_PI * np.rint((yaw - refs[0, 2]) / _TWO_PI)
+    for k in range(N + 1):
+        refs[k, 2] += shift
+    model_references(asm.model, asm.mp, refs, v_arr, N + 1, asm.feedforward, qp.xref, qp.uref, asm.refw)
+
+
+@njit(cache=True)
+def follow_references_into(asm, qp, yaw, s_arr, v_arr):
+    """Between the two calls of a step: the references of car following
+    (:func:`~mpcdrive.ocp.follow.follow_references`: arc lengths ``s_arr`` (N+1,) [m] and speeds
+    ``v_arr`` [m/s] behind a moving stop line) replace the step's, their speed changes the
+    acceleration reference (as ``LtvMpc`` does); the horizon arc lengths the rows were built on
+    stay."""
+    _place_references(asm, qp, yaw, s_arr, v_arr)
+    if asm.accel >= 0:
+        for k in range(asm.N):
+            qp.uref[k, asm.accel] += (v_arr[k + 1] - v_arr[k]) / asm.dt
+
+
+@njit(cache=True)
+def linearize(asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, info):
+    """The first half of a step's assembly at time ``t_s`` [s] from the measured state ``x``
+    (nx,) after input ``u_prev`` (nu,), the projection searched near ``s_guess`` [m]: references,
+    obstacle selection and detour (``sides``: the passing side per obstacle, read and updated),
+    linearization trajectory and affine model (``mode``, ``MODE_*``: what (Xw, Uw) is -- no plan,
+    the previous step's plan, the current SQP iterate), per-stage input bounds and the road's
+    bounds, written into ``asm`` and ``qp``; ``info[INFO_*]`` the projection. Returns 0, or 3
+    when the model or the references are not finite."""
+    N, nx, nu = asm.N, asm.nx, asm.nu
+    mkind, mp, dt, meth = asm.model, asm.mp, asm.dt, asm.method
+    pkind, geo, tab_s, tab_xy, tab_h, tab_k = asm.path, asm.geo, asm.tab_s, asm.tab_xy, asm.tab_h, asm.tab_k
+    s_arr, v_arr, prof = asm.s_arr, asm.v_arr, asm.profile
+    Xbar, Ubar, F, dw = asm.Xbar, asm.Ubar, asm.F, asm.dw
+    A, B, c, xref, uref, Xlin = qp.A, qp.B, qp.c, qp.xref, qp.uref, qp.Xlin
+    asm.nsel = 0
+    # -- projection and horizon references -----------------------------------------------------
+    s0, e_y = path_project(pkind, geo, tab_s, tab_xy, s_guess, asm.window, x[0], x[1])
+    h0 = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s0)[2]
+    info[INFO_S] = s0
+    info[INFO_EY] = e_y
+    info[INFO_EPSI] = wrap_angle(x[2] - h0)
+    info[INFO_ITER] = 0.0
+    # horizon arc lengths and reference speeds: as the profile moves in time, or the constant
+    # reference speed (or the paper's fixed step)
+    if asm.has_profile:
+        profile_arc_lengths(prof, s0, dt, s_arr)
+    acc = 0.0
+    vdt = abs(asm.v_ref) * dt
+    for k in range(N + 1):
+        if asm.has_profile:
+            v_arr[k] = profile_speed(prof, s_arr[k])
+        else:
+            s_arr[k] = s0 + asm.horizon_step * k if asm.paper_horizon else s0 + acc
+            acc += vdt
+            v_arr[k] = asm.v_ref
+    _place_references(asm, qp, x[2], s_arr, v_arr)
+    if asm.has_profile and asm.accel >= 0:  # the profile's speed changes as acceleration reference
+        for k in range(N):
+            uref[k, asm.accel] += (v_arr[k + 1] - v_arr[k]) / dt
+    if asm.obstacle_form != OBS_NONE:
+        asm.nsel = select_obstacles(asm, t_s, x, s0)
+        if asm.detour:
+            detour(asm, xref, sides)
+
+    # -- linearization points and discrete model -------------------------------------------------
+    if mode == MODE_ITERATE:
+        for i in range(nx):
+            Xbar[0, i] = x[i]
+        for k in range(1, N):
+            for i in range(nx):
+                Xbar[k, i] = Xw[k, i]
+        for k in range(N):
+            for a in range(nu):
+                Ubar[k, a] = Uw[k, a]
+    elif asm.paper_linearization:
+        for k in range(N):
+            for i in range(nx):
+                Xbar[k, i] = x[i]
+            for a in range(nu):
+                Ubar[k, a] = u_prev[a]
+    elif mode == MODE_SHIFTED_PLAN:
+        sh = _TWO_PI * np.rint((x[2] - Xw[1, 2]) / _TWO_PI)
+        for i in range(nx):
+            Xbar[0, i] = x[i]
+        for k in range(1, N):
+            for i in range(nx):
+                Xbar[k, i] = Xw[k + 1, i]
+            Xbar[k, 2] += sh
+        for k in range(N):
+            for a in range(nu):
+                Ubar[k, a] = Uw[min(k + 1, N - 1), a]
+    else:
+        for k in range(N):
+            for a in range(nu):
+                Ubar[k, a] = uref[k, a]
+        for i in range(nx):
+            Xbar[0, i] = x[i]
+        if meth == METHOD_EXP:
+            for k in range(N - 1):
+                discrete_step_jacobians(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
+                for i in range(nx):
+                    Xbar[k + 1, i] = F[k, i]
+        else:
+            rollout_into(mkind, mp, nx, Xbar, Ubar, N - 1, dt, meth, dw[0])
+    kmax = 1 if asm.paper_linearization and mode != MODE_ITERATE else N
+    for k in range(kmax):
+        discrete_step_jacobians(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
+    for k in range(kmax, N):
+        for i in range(nx):
+            F[k, i] = F[0, i]
+            for j in range(nx):
+                A[k, i, j] = A[0, i, j]
+            for a in range(nu):
+                B[k, i, a] = B[0, i, a]
+    finite = True
+    for k in range(N):
+        for i in range(nx):
+            t = F[k, i]
+            for j in range(nx):
+                t -= A[k, i, j] * Xbar[k, j]
+            for j in range(nu):
+                t -= B[k, i, j] * Ubar[k, j]
+            c[k, i] = t
+            finite = finite and math.isfinite(t) and math.isfinite(xref[k + 1, i])
+        for j in range(nu):
+            finite = finite and math.isfinite(uref[k, j])
+    if not finite:
+        return 3
+    for k in range(N):
+        for i in range(nx):
+            Xlin[k, i] = Xbar[k, i]
+    for i in range(nx):
+        Xlin[N, i] = F[N - 1, i]
+    if asm.friction:  # the friction circle as per-stage input bounds (ocp.friction)
+        vlin = asm.vlin
+        for k in range(N + 1):
+            vlin[k] = model_speed(mkind, mp, Xlin[k])
+        friction_input_bounds(
+            N,
+            vlin,
+            Ubar,
+            asm.steer,
+            asm.accel,
+            asm.wheelbase,
+            asm.friction_accel,
+            qp.u_min,
+            qp.u_max,
+            qp.dmax,
+            u_prev,
+            qp.ulo,
+            qp.uhi,
+        )
+    if asm.lane:
+        # the body inside the road where the linearization trajectory has the car, in its yaw
+        # (scene.road; as LtvMpc.prepare: its arc lengths, not the references')
+        s_lin, rlin = asm.s_lin, asm.rlin
+        s_lin[0] = s0
+        for k in range(N):
+            s_lin[k + 1] = s_lin[k] + math.hypot(Xlin[k + 1, 0] - Xlin[k, 0], Xlin[k + 1, 1] - Xlin[k, 1])
+        for k in range(N + 1):
+            px, py, ph, pk = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s_lin[k])
+            rlin[k, 0], rlin[k, 1], rlin[k, 2], rlin[k, 3] = px, py, ph, pk
+        horizon_bounds(
+            asm.road_s,
+            asm.road_left,
+            asm.road_right,
+            asm.road_period,
+            s_lin[1:],
+            rlin[1:, 2],
+            rlin[1:, 3],
+            Xlin[1:, 2],
+            asm.half_length,
+            asm.half_width,
+            asm.body_offset,
+            asm.road_margin,
+            qp.lane_lo,
+            qp.lane_hi,
+            qp.lane_dlo,
+            qp.lane_dhi,
+        )
+    return 0
+
+
+@njit(cache=True)
+def stage_costs(asm, qp, t_s, shifted):
+    """The second half of a step's assembly: with ``shifted``, the references moved sideways by
+    the detour written into ``asm.e_ref`` between the halves; then the state cost of x_1..x_N as
+    ``x' We x - 2 qt' x`` (the weights plus the obstacle cost's convex model at the linearization
+    trajectory), the road rows' normals and offsets where they are linearized, and the first
+    step's bounds made reachable. The stage QP is then complete."""
+    N, nx = asm.N, asm.nx
+    Wq, We, qt, xref = asm.Wq, qp.We, qp.qt, qp.xref
+    if shifted:
+        e_ref = asm.e_ref
+        for k in range(N + 1):
+            if e_ref[k] != 0.0:
+                shift_references(N, asm.s_arr, asm.refs, e_ref, xref)
+                break
+    for k in range(N):
+        for i in range(nx):
+            t = 0.0
+            for j in range(nx):
+                t += Wq[k, i, j] * xref[k + 1, j]
+            qt[k, i] = t
+    if asm.obstacle_form != OBS_NONE:
+        for k in range(N):
+            for i in range(nx):
+                for j in range(nx):
+                    We[k, i, j] = Wq[k, i, j]
+        obstacle_cost(asm, t_s, We, qt)
+    if asm.lane:
+        lane_n, lane_b, rlin, F = qp.lane_n, qp.lane_b, asm.rlin, asm.F
+        for k in range(N):
+            yaw = rlin[k + 1, 2]
+            lane_n[k, 0] = -math.sin(yaw)
+            lane_n[k, 1] = math.cos(yaw)
+            lane_b[k] = lane_n[k, 0] * rlin[k + 1, 0] + lane_n[k, 1] * rlin[k + 1, 1]
+        # the first step's bounds hold where the model puts the car with the first input of the
+        # linearization (F[0] = f(x, Ubar[0])): reachable, so never bought with slack
+        reach_first_step(
+            qp.lane_lo,
+            qp.lane_hi,
+            qp.lane_dlo,
+            qp.lane_dhi,
+            lane_n[0, 0] * F[0, 0] + lane_n[0, 1] * F[0, 1] - lane_b[0],
+            F[0, 2] - qp.Xlin[1, 2],
+        )
+
+
+@structref.register
+class _StepAssemblyType(StructType):
+    pass
+
+
+class _StepAssemblyStruct(structref.StructRefProxy):
+    pass
+
+
+register_struct(StepAssembly, _StepAssemblyType, _StepAssemblyStruct)
+
+
+@njit(cache=True)
+def _build_step_assembly(values):
+    return _StepAssemblyStruct(*values)
+
+
+# numba caches these functions keyed to this file only; they inline code from these
+from .. import _jitcache  # noqa: E402
+from ..models import compiled as _models_compiled, dynamic as _dynamic, kinematic as _kinematic  # noqa: E402
+from ..paths import compiled as _paths_compiled, profile_compiled as _profile_compiled  # noqa: E402
+from ..scene import road as _road  # noqa: E402
+from . import friction as _friction, obstacle_cost_compiled as _obstacle_cost_compiled  # noqa: E402
+
+#: the source files whose code the assembly links in (and so any compiled step that calls it)
+LINKED_SOURCES: list[str] = [
+    m.__file__
+    for m in (_kinematic, _dynamic, _models_compiled, _paths_compiled, _profile_compiled, _road, _friction)
+    if m.__file__ is not None
+] + [f for f in (_obstacle_cost_compiled.__file__,) if f is not None]
+
+_jitcache.refresh(linearize, LINKED_SOURCES)  # one file: one fingerprint for all its functions
