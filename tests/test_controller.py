@@ -17,6 +17,10 @@ from mpcdrive.types import SolveResult
 STEER = math.radians(60)
 
 
+class _UserModel(KinematicBicycle3):
+    """A model of the user's own: the compiled step knows only the built-in model types."""
+
+
 def p1_controller(**cfg):
     model = KinematicBicycle3(1.0)
     pb = MpcProblem(3, 1, 20, 0.01, Q=np.ones(3), R=1.0, u_min=-STEER, u_max=STEER, du_max_per_s=math.radians(300))
@@ -180,7 +184,9 @@ def test_ltv_mpc_is_one_controller_for_every_assembly_and_solver():
         LtvMpc(model, path, pb, solver="ipopt")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="config must be an MpcConfig, got str"):
         LtvMpc(model, path, pb, "osqp")  # type: ignore[arg-type]
-    with pytest.raises(ValueError, match="compiled step cannot assemble this problem: prediction substeps"):
-        LtvMpc(model, path, pb, MpcConfig(prediction_substeps=2), assembly="compiled")
+    with pytest.raises(
+        ValueError, match="compiled step cannot assemble this problem: model _UserModel has no compiled"
+    ):
+        LtvMpc(_UserModel(1.0), path, pb, assembly="compiled")
     with pytest.raises(ValueError, match="compiled step's solver must be one of"):
         CompiledLtvMpc(model, path, pb, solver="projected_gradient")  # type: ignore[arg-type]

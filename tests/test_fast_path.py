@@ -82,20 +82,48 @@ ROW_SCENARIOS = ["obstacle-overtake", "obstacle-slalom", "obstacle-crossing", "o
 
 def test_unsupported_scenarios_fall_back_to_osqp():
     assert set(FAST_SCENARIOS) | set(ROW_SCENARIOS) | set(TIGHT_DYNAMIC_SCENARIOS) <= set(builtin_ids())
-    # prediction substeps (a built-in scenario's dynamic MPC asked for them) are declined by name
+    # a speed profile on the paper's fixed-step horizon has no compiled form: declined by name
     b = build_experiment(_with_backend(load_scenario("track-raceway"), "osqp")).mpc
     # (no compiled assembly: the stage QP is assembled in Python, the condensed solver solves it)
-    with pytest.warns(UserWarning, match="compiled step not used: .*prediction substeps need the OSQP controller"):
-        ctrl = LtvMpc(b.model, b.path, b.problem, replace(b.config, prediction_substeps=2))
+    paper = replace(b.config, horizon="paper")
+    with pytest.warns(UserWarning, match="compiled step not used: a speed profile with the 'paper' horizon"):
+        ctrl = LtvMpc(b.model, b.path, b.problem, paper)
     assert isinstance(ctrl, LtvMpc) and (ctrl.backend_name, ctrl.assembly) == ("fast", "python")
     # and where the condensed solver's limits exclude it too, OSQP
     pb = replace(b.problem, R=0.0 * b.problem.R, Rc=0.0 * b.problem.Rc)
     with pytest.warns(FastPathUnavailable) as told:
-        ctrl = LtvMpc(b.model, b.path, pb, replace(b.config, prediction_substeps=2))
+        ctrl = LtvMpc(b.model, b.path, pb, paper)
     said = [str(w.message) for w in told]
-    assert any(m.startswith("compiled step not used: prediction substeps") for m in said), said
+    assert any(m.startswith("compiled step not used: a speed profile") for m in said), said
     assert any(m.startswith("condensed solver not used: R + Rc") for m in said), said
     assert (ctrl.backend_name, ctrl.assembly) == ("osqp", "python")
+
+
+@pytest.mark.parametrize("linearization", ["trajectory", "paper"])
+def test_prediction_substeps_are_compiled(linearization):
+    """Prediction substeps (each model step taken as several, the Jacobians chained) run on the
+    compiled step: the dynamic bicycle with its exact (``exp``) discretization on the raceway,
+    the stage QP the Python assembly's field by field, from a rolled-out first step (no plan)
+    and from the plan after it."""
+    from test_solver_oracle import same_step_data
+
+    b = build_experiment(_with_backend(load_scenario("track-raceway"), "osqp")).mpc
+    cfg = replace(b.config, prediction_substeps=3, linearization=linearization)
+    assert cfg.discretization == "exp"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FastPathUnavailable)
+        fast = LtvMpc(b.model, b.path, b.problem, cfg)
+    assert (fast.assembly, fast.backend_name) == ("compiled", "fast") and fast._asm.substeps == 3
+    ref = PythonLtvMpc(b.model, b.path, b.problem, cfg, "osqp")
+    x = np.array([0.0, 0.3, 0.1, 3.0, 0.1, 0.2])
+    warm = ref.initial_warm(x)
+    for _ in range(2):
+        d = ref.prepare(x, warm)
+        same_step_data(fast.prepare(x, warm), d, atol=1e-9, sides=False)
+        warm = ref.step(x, warm).warm
+    # three substeps are not one: the test above would see a model that ignored them
+    one = PythonLtvMpc(b.model, b.path, b.problem, replace(cfg, prediction_substeps=1), "osqp")
+    assert np.abs(one.prepare(x, warm).Ad - d.Ad).max() > 1e-6
 
 
 #: scenarios whose closed loop on OSQP at its scenario tolerance (1e-5) parts from OSQP's own at
@@ -452,14 +480,15 @@ def test_speed_profiles_the_fast_path_declines_are_named():
 
 
 # --------------------------------------------------------------- compiled models and paths
+@pytest.mark.parametrize("substeps", [1, 3])
 @pytest.mark.parametrize("model", [KinematicBicycle3(2.0, KinematicParams(0.2, 0.1)), KinematicBicycle4()])
 @pytest.mark.parametrize("method", ["rk4", "euler", "exp"])
-def test_compiled_discretization_equals_numpy(model, method):
+def test_compiled_discretization_equals_numpy(model, method, substeps):
     from mpcdrive.models.compiled import (
         METHOD_EULER,
         METHOD_EXP,
         METHOD_RK4,
-        discrete_step_jacobians,
+        discrete_step_jacobians_substeps,
         model_code,
         rollout_into,
     )
@@ -472,9 +501,16 @@ def test_compiled_discretization_equals_numpy(model, method):
     F, A, B = np.zeros((N, nx)), np.zeros((N, nx, nx)), np.zeros((N, nx, nu))
     code = {"rk4": METHOD_RK4, "euler": METHOD_EULER, "exp": METHOD_EXP}[method]
     nw = nx + nu + 1 if method == "exp" else nx
+    sub = (np.zeros((1, nx)), np.zeros((1, nu)), np.zeros((1, nx)), np.zeros((1, nx, nx)), np.zeros((1, nx, nu)))
     for k in range(N):
-        discrete_step_jacobians(kind, mp, nx, nu, X, U, k, 0.05, code, F, A, B, np.zeros((7, nw, nw)))
-    F0, A0, B0 = discrete_step_and_jacobians(model, X, U, 0.05, method)
+        discrete_step_jacobians_substeps(
+            kind, mp, nx, nu, X, U, k, 0.05, code, substeps, F, A, B, np.zeros((7, nw, nw)), *sub
+        )
+    if substeps == 1:
+        F0, A0, B0 = discrete_step_and_jacobians(model, X, U, 0.05, method)
+    else:  # the numpy form chains substeps one state at a time
+        steps = [discrete_step_and_jacobians(model, X[k], U[k], 0.05, method, substeps) for k in range(N)]
+        F0, A0, B0 = (np.array(v) for v in zip(*steps))
     np.testing.assert_allclose(F, F0, atol=1e-13)
     np.testing.assert_allclose(A, A0, atol=1e-13)
     np.testing.assert_allclose(B, B0, atol=1e-13)
@@ -482,9 +518,9 @@ def test_compiled_discretization_equals_numpy(model, method):
         return
     Xr = np.zeros((N, nx))
     Xr[0] = X[0]
-    rollout_into(kind, mp, nx, Xr, U, N - 1, 0.05, code, np.zeros((3, nx)))
+    rollout_into(kind, mp, nx, Xr, U, N - 1, 0.05, code, substeps, np.zeros((4, nx)))
     for k in range(N - 1):
-        np.testing.assert_allclose(Xr[k + 1], discrete_step(model, Xr[k], U[k], 0.05, method), atol=1e-13)
+        np.testing.assert_allclose(Xr[k + 1], discrete_step(model, Xr[k], U[k], 0.05, method, substeps), atol=1e-13)
 
 
 @pytest.mark.parametrize(

@@ -5,7 +5,8 @@ drives the closed loop the OSQP controller drives.
 The cases cover what the oracle test (``test_solver_oracle``, hard rows) does not: the cost
 formulations (their convex model enters the stage QP as the position cost ``H``, ``g``), the
 corridor, the friction circle's per-stage input bounds, the paper's frozen linearization, a
-lateral reference with a speed cap (the step in two stages), and SQP iterates.
+lateral reference with a speed cap (the step in two stages), SQP iterates, and prediction
+substeps (each step of the model taken as three, their Jacobians chained).
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ ASSEMBLY_TOL = 1e-9
 #: sensitivity; a wrong row, weight or bound moves a plan by centimetres
 LOOP_TOL = 1e-6
 
-CASES = ["plain", "potential", "gaussian", "hard", "corridor", "friction", "paper", "lateral-cap", "sqp"]
+CASES = ["plain", "potential", "gaussian", "hard", "corridor", "friction", "paper", "lateral-cap", "sqp", "substeps"]
 
 
 def _controllers(case: str, curved: bool):
@@ -64,6 +65,7 @@ def _controllers(case: str, curved: bool):
         linearization="paper" if case == "paper" else "trajectory",
         sqp_max_iterations=3 if case == "sqp" else 1,
         sqp_tol=1e-9,
+        prediction_substeps=3 if case == "substeps" else 1,
     )
     obstacles, av = (), None
     form = {
@@ -196,14 +198,16 @@ def test_condensed_solver_on_the_python_assembly_drives_the_compiled_controllers
 
 
 def test_a_problem_without_compiled_assembly_is_solved_by_the_condensed_solver():
-    """Prediction substeps have no compiled assembly: ``LtvMpc`` assembles in
-    Python and solves with the condensed solver, says so, and drives OSQP's loop."""
+    """A speed profile with the paper's fixed-step horizon has no compiled assembly: ``LtvMpc``
+    assembles in Python and solves with the condensed solver, says so, and drives OSQP's loop."""
     from dataclasses import replace
 
+    from mpcdrive.paths import ConstantSpeed
+
     model, ref, _, x = _controllers("hard", True)
-    cfg = replace(ref.config, prediction_substeps=2)
+    cfg = replace(ref.config, v_ref_mps=None, speed_profile=ConstantSpeed(5.0), horizon="paper", horizon_step_m=0.5)
     av = ref.avoidance.config
-    with pytest.warns(FastPathUnavailable, match="compiled step not used: prediction substeps.*assembled in Python"):
+    with pytest.warns(FastPathUnavailable, match="compiled step not used: a speed profile with the 'paper' horizon"):
         c = LtvMpc(model, ref.path, _controllers("hard", True)[2].problem, cfg, obstacles=ref.obstacles, avoidance=av)
     assert isinstance(c, LtvMpc) and (c.backend_name, c.assembly) == ("fast", "python")
     o = PythonLtvMpc(model, ref.path, c.problem, cfg, "osqp", osqp_settings=OSQP, obstacles=ref.obstacles, avoidance=av)

@@ -69,8 +69,6 @@ def fast_unsupported_reason(
             return f"speed profile {type(prof).__name__} has no compiled form"
         if config.horizon != "arc_length":
             return f"a speed profile with the {config.horizon!r} horizon needs the OSQP controller"
-    if config.prediction_substeps != 1:
-        return "prediction substeps need the OSQP controller"
     reason = obstacles_unsupported_reason(obstacles, avoidance)
     if reason is not None:
         return reason

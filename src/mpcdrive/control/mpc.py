@@ -270,7 +270,7 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
     - :class:`~mpcdrive.control.fast.CompiledLtvMpc` (``compiled``, the default wherever it
       covers the problem): the whole step in numba-compiled code;
     - :class:`PythonLtvMpc` (``python``): the same stage QP assembled in Python, for any model,
-      path, speed reference and obstacle (and prediction substeps).
+      path, speed reference and obstacle.
 
     ``solver`` names who solves it: ``condensed`` (default: the compiled condensed dual
     active-set solver, exact), ``osqp`` (OSQP on the sparse layout, the reference), or

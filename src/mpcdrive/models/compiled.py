@@ -345,29 +345,73 @@ def discrete_step_jacobians(kind, mp, nx, nu, X, U, k, dt, method, F, A, B, W):
 
 
 @njit(cache=True)
-def rollout_into(kind, mp, nx, X, U, n, dt, method, w):
+def rollout_into(kind, mp, nx, X, U, n, dt, method, substeps, w):
     """X[k + 1] = F(X[k], U[k]) for k < n (no Jacobians) by Euler or RK4 (``exp`` needs the
-    Jacobians: :func:`discrete_step_jacobians`). w : work array (3, nx)."""
+    Jacobians: :func:`discrete_step_jacobians_substeps`), each step taken as ``substeps`` equal
+    steps of dt / substeps. w : work array (4, nx)."""
+    h_sub = dt / substeps
     for k in range(n):
         beta, _ = _step_slip(kind, mp, U, k)
         for i in range(nx):
-            w[0, i] = X[k, i]
-        for stage in range(4 if method == METHOD_RK4 else 1):
-            h = 0.5 * dt if stage < 2 else dt
-            _rhs_into(kind, mp, w, U, k, beta)
-            wgt = 1.0 if (stage == 0 or stage == 3) else 2.0
+            w[3, i] = X[k, i]  # the state at the start of a substep
+        for _sub in range(substeps):
             for i in range(nx):
-                if stage == 0:
-                    w[2, i] = w[1, i]
+                w[0, i] = w[3, i]
+            for stage in range(4 if method == METHOD_RK4 else 1):
+                h = 0.5 * h_sub if stage < 2 else h_sub
+                _rhs_into(kind, mp, w, U, k, beta)
+                wgt = 1.0 if (stage == 0 or stage == 3) else 2.0
+                for i in range(nx):
+                    if stage == 0:
+                        w[2, i] = w[1, i]
+                    else:
+                        w[2, i] += wgt * w[1, i]
+                    if stage < 3:
+                        w[0, i] = w[3, i] + h * w[1, i]
+            for i in range(nx):
+                if method == METHOD_RK4:
+                    w[3, i] = w[3, i] + h_sub / 6.0 * w[2, i]
                 else:
-                    w[2, i] += wgt * w[1, i]
-                if stage < 3:
-                    w[0, i] = X[k, i] + h * w[1, i]
+                    w[3, i] = w[3, i] + h_sub * w[1, i]
         for i in range(nx):
-            if method == METHOD_RK4:
-                X[k + 1, i] = X[k, i] + dt / 6.0 * w[2, i]
-            else:
-                X[k + 1, i] = X[k, i] + dt * w[1, i]
+            X[k + 1, i] = w[3, i]
+
+
+@njit(cache=True)
+def discrete_step_jacobians_substeps(kind, mp, nx, nu, X, U, k, dt, method, substeps, F, A, B, W, sx, su, sf, sa, sb):
+    """:func:`discrete_step_jacobians` with the step taken as ``substeps`` equal steps of
+    dt / substeps, their Jacobians chained as :func:`mpcdrive.models.discretize.discrete_step_and_jacobians`
+    chains them (A = A_n ... A_1, B = A_n (... (A_2 B_1 + B_2) ...) + B_n). Work: sx (1, nx),
+    su (1, nu), sf (1, nx), sa (1, nx, nx), sb (1, nx, nu)."""
+    if substeps == 1:
+        discrete_step_jacobians(kind, mp, nx, nu, X, U, k, dt, method, F, A, B, W)
+        return
+    h = dt / substeps
+    discrete_step_jacobians(kind, mp, nx, nu, X, U, k, h, method, F, A, B, W)
+    for a in range(nu):
+        su[0, a] = U[k, a]
+    for _sub in range(substeps - 1):
+        for i in range(nx):
+            sx[0, i] = F[k, i]
+        discrete_step_jacobians(kind, mp, nx, nu, sx, su, 0, h, method, sf, sa, sb, W)
+        # A <- A_i A, B <- A_i B + B_i (W[_WTX], W[_WTU] as scratch: free after the step)
+        for i in range(nx):
+            for j in range(nx):
+                t = 0.0
+                for l in range(nx):
+                    t += sa[0, i, l] * A[k, l, j]
+                W[_WTX, i, j] = t
+            for j in range(nu):
+                t = 0.0
+                for l in range(nx):
+                    t += sa[0, i, l] * B[k, l, j]
+                W[_WTU, i, j] = t + sb[0, i, j]
+        for i in range(nx):
+            F[k, i] = sf[0, i]
+            for j in range(nx):
+                A[k, i, j] = W[_WTX, i, j]
+            for j in range(nu):
+                B[k, i, j] = W[_WTU, i, j]
 
 
 @njit(cache=True)

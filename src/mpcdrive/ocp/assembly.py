@@ -32,7 +32,7 @@ from numba import njit
 from numba.experimental import structref
 
 from .._structs import StructType, register_struct, to_struct
-from ..models.compiled import METHOD_EXP, discrete_step_jacobians, model_references, model_speed, rollout_into
+from ..models.compiled import METHOD_EXP, discrete_step_jacobians_substeps, model_references, model_speed, rollout_into
 from ..paths.compiled import path_eval, path_project, wrap_angle
 from ..paths.profile_compiled import profile_arc_lengths, profile_speed
 from ..scene.road import horizon_bounds, reach_first_step
@@ -54,7 +54,8 @@ class StepAssembly:
     """What the compiled assembly needs of a controller, described once.
 
     Sizes ``N``, ``nx``, ``nu``; the model (``model`` code and parameters ``mp`` of
-    :mod:`mpcdrive.models.compiled`, discretization ``method``, step ``dt`` [s]); the path
+    :mod:`mpcdrive.models.compiled`, discretization ``method``, step ``dt`` [s] taken as
+    ``substeps`` equal steps in the prediction); the path
     (``path`` code, ``geo`` and tables of :mod:`mpcdrive.paths.compiled`; projection window
     [m]); the horizon (``paper_horizon``: a fixed ``horizon_step`` [m] per step; else at the
     reference speed ``v_ref`` [m/s], or the speed profile ``profile`` with ``has_profile``);
@@ -69,7 +70,8 @@ class StepAssembly:
     ``refs`` (N+1, 4: x, y, heading, curvature), arc lengths ``s_arr`` and speeds ``v_arr``
     (N+1,), the linearization ``Xbar``, ``Ubar``, ``F`` = f(Xbar, Ubar), the detour ``e_ref``,
     the selected obstacles ``osel`` (``nsel`` of them), their distances and Frenet positions,
-    the road's arc lengths and path points at the linearization trajectory."""
+    the road's arc lengths and path points at the linearization trajectory, the discretization's
+    work (``dw``; ``sub_*`` for substeps)."""
 
     N: int
     nx: int
@@ -77,6 +79,7 @@ class StepAssembly:
     model: int
     mp: np.ndarray
     method: int
+    substeps: int
     dt: float
     path: int
     geo: np.ndarray
@@ -132,6 +135,11 @@ class StepAssembly:
     Ubar: np.ndarray
     F: np.ndarray
     dw: np.ndarray
+    sub_x: np.ndarray
+    sub_u: np.ndarray
+    sub_f: np.ndarray
+    sub_a: np.ndarray
+    sub_b: np.ndarray
     vlin: np.ndarray
     s_lin: np.ndarray
     rlin: np.ndarray
@@ -178,6 +186,15 @@ def follow_references_into(asm, qp, yaw, s_arr, v_arr):
     if asm.accel >= 0:
         for k in range(asm.N):
             qp.uref[k, asm.accel] += (v_arr[k + 1] - v_arr[k]) / asm.dt
+
+
+@njit(cache=True, inline="always")
+def _discrete_step(asm, X, U, k, A, B):
+    """asm.F[k], A[k], B[k]: the discrete model and its Jacobians at (X[k], U[k])."""
+    discrete_step_jacobians_substeps(
+        asm.model, asm.mp, asm.nx, asm.nu, X, U, k, asm.dt, asm.method, asm.substeps, asm.F, A, B, asm.dw,
+        asm.sub_x, asm.sub_u, asm.sub_f, asm.sub_a, asm.sub_b,
+    )  # fmt: skip
 
 
 @njit(cache=True)
@@ -260,14 +277,14 @@ def linearize(asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, info):
             Xbar[0, i] = x[i]
         if meth == METHOD_EXP:
             for k in range(N - 1):
-                discrete_step_jacobians(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
+                _discrete_step(asm, Xbar, Ubar, k, A, B)
                 for i in range(nx):
                     Xbar[k + 1, i] = F[k, i]
         else:
-            rollout_into(mkind, mp, nx, Xbar, Ubar, N - 1, dt, meth, dw[0])
+            rollout_into(mkind, mp, nx, Xbar, Ubar, N - 1, dt, meth, asm.substeps, dw[0])
     kmax = 1 if asm.paper_linearization and mode != MODE_ITERATE else N
     for k in range(kmax):
-        discrete_step_jacobians(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
+        _discrete_step(asm, Xbar, Ubar, k, A, B)
     for k in range(kmax, N):
         for i in range(nx):
             F[k, i] = F[0, i]
