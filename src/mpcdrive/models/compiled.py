@@ -382,7 +382,9 @@ def discrete_step_jacobians_substeps(kind, mp, nx, nu, X, U, k, dt, method, subs
     """:func:`discrete_step_jacobians` with the step taken as ``substeps`` equal steps of
     dt / substeps, their Jacobians chained as :func:`mpcdrive.models.discretize.discrete_step_and_jacobians`
     chains them (A = A_n ... A_1, B = A_n (... (A_2 B_1 + B_2) ...) + B_n). Work: sx (1, nx),
-    su (1, nu), sf (1, nx), sa (1, nx, nx), sb (1, nx, nu)."""
+    su (1, nu), sf (1, nx), sa (1, nx, nx), sb (1, nx, nu). With one substep a caller calls
+    :func:`discrete_step_jacobians` itself: each array handed to a compiled call costs a
+    reference count, about 2 us a step at N = 30."""
     if substeps == 1:
         discrete_step_jacobians(kind, mp, nx, nu, X, U, k, dt, method, F, A, B, W)
         return

@@ -32,7 +32,8 @@ from numba import njit
 from numba.experimental import structref
 
 from .._structs import StructType, register_struct, to_struct
-from ..models.compiled import METHOD_EXP, discrete_step_jacobians_substeps, model_references, model_speed, rollout_into
+from ..models.compiled import METHOD_EXP, discrete_step_jacobians, discrete_step_jacobians_substeps, model_references
+from ..models.compiled import model_speed, rollout_into
 from ..paths.compiled import path_eval, path_project, wrap_angle
 from ..paths.profile_compiled import profile_arc_lengths, profile_speed
 from ..scene.road import horizon_bounds, reach_first_step
@@ -189,12 +190,16 @@ def follow_references_into(asm, qp, yaw, s_arr, v_arr):
 
 
 @njit(cache=True, inline="always")
-def _discrete_step(asm, X, U, k, A, B):
-    """asm.F[k], A[k], B[k]: the discrete model and its Jacobians at (X[k], U[k])."""
-    discrete_step_jacobians_substeps(
-        asm.model, asm.mp, asm.nx, asm.nu, X, U, k, asm.dt, asm.method, asm.substeps, asm.F, A, B, asm.dw,
-        asm.sub_x, asm.sub_u, asm.sub_f, asm.sub_a, asm.sub_b,
-    )  # fmt: skip
+def _discrete_step(kind, mp, nx, nu, X, U, k, dt, method, substeps, F, A, B, W, sx, su, sf, sa, sb):
+    """F[k], A[k], B[k] of the prediction model at (X[k], U[k]): one step of ``dt`` [s] in
+    ``substeps``; without substeps the single step's kernel is called directly (the substeps'
+    kernel, a call deeper, would add a reference count per array)."""
+    if substeps == 1:
+        discrete_step_jacobians(kind, mp, nx, nu, X, U, k, dt, method, F, A, B, W)
+    else:
+        discrete_step_jacobians_substeps(
+            kind, mp, nx, nu, X, U, k, dt, method, substeps, F, A, B, W, sx, su, sf, sa, sb
+        )
 
 
 @njit(cache=True)
@@ -211,6 +216,7 @@ def linearize(asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, info):
     pkind, geo, tab_s, tab_xy, tab_h, tab_k = asm.path, asm.geo, asm.tab_s, asm.tab_xy, asm.tab_h, asm.tab_k
     s_arr, v_arr, prof = asm.s_arr, asm.v_arr, asm.profile
     Xbar, Ubar, F, dw = asm.Xbar, asm.Ubar, asm.F, asm.dw
+    nsub, sx, su, sf, sa, sb = asm.substeps, asm.sub_x, asm.sub_u, asm.sub_f, asm.sub_a, asm.sub_b
     A, B, c, xref, uref, Xlin = qp.A, qp.B, qp.c, qp.xref, qp.uref, qp.Xlin
     asm.nsel = 0
     # -- projection and horizon references -----------------------------------------------------
@@ -277,14 +283,14 @@ def linearize(asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, info):
             Xbar[0, i] = x[i]
         if meth == METHOD_EXP:
             for k in range(N - 1):
-                _discrete_step(asm, Xbar, Ubar, k, A, B)
+                _discrete_step(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, nsub, F, A, B, dw, sx, su, sf, sa, sb)
                 for i in range(nx):
                     Xbar[k + 1, i] = F[k, i]
         else:
-            rollout_into(mkind, mp, nx, Xbar, Ubar, N - 1, dt, meth, asm.substeps, dw[0])
+            rollout_into(mkind, mp, nx, Xbar, Ubar, N - 1, dt, meth, nsub, dw[0])
     kmax = 1 if asm.paper_linearization and mode != MODE_ITERATE else N
     for k in range(kmax):
-        _discrete_step(asm, Xbar, Ubar, k, A, B)
+        _discrete_step(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, nsub, F, A, B, dw, sx, su, sf, sa, sb)
     for k in range(kmax, N):
         for i in range(nx):
             F[k, i] = F[0, i]
