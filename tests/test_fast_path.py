@@ -739,7 +739,7 @@ def test_obstacle_formulations_the_fast_path_declines_are_named():
     from mpcdrive.control.fast import obstacles_unsupported_reason
     from mpcdrive.ocp.avoidance import AvoidanceConfig
     from mpcdrive.scene import Circle, Obstacle
-    from mpcdrive.scene.obstacles import TrajectoryMotion
+    from mpcdrive.scene.obstacles import ConstantVelocity, TrajectoryMotion
 
     ob = Obstacle(Circle(0.2), (1.0, 0.0, 0.0))
     assert obstacles_unsupported_reason((ob,), AvoidanceConfig("gaussian")) is None
@@ -752,7 +752,13 @@ def test_obstacle_formulations_the_fast_path_declines_are_named():
         m4, StraightPath((0, 0), (5, 0)), pb, obstacles=(ob,), avoidance=AvoidanceConfig("corridor")
     )
     rec = Obstacle(Circle(0.2), (1.0, 0.0, 0.0), TrajectoryMotion([0.0, 1.0], [0.0, 1.0], [0.0, 0.0], [0.0, 0.0]))
-    assert "TrajectoryMotion" in obstacles_unsupported_reason((rec,), AvoidanceConfig("potential"))
+    assert obstacles_unsupported_reason((rec,), AvoidanceConfig("potential")) is None  # recorded: compiled
+
+    class Swerving(ConstantVelocity):
+        """A motion of the user's own: the compiled kernels know only the built-in ones."""
+
+    own = Obstacle(Circle(0.2), (1.0, 0.0, 0.0), Swerving(0.5, 0.0))
+    assert "follows a Swerving (no compiled form)" in obstacles_unsupported_reason((own,), AvoidanceConfig("potential"))
 
 
 # --------------------------------------------------------------- obstacle constraint rows

@@ -5,8 +5,9 @@ drives the closed loop the OSQP controller drives.
 The cases cover what the oracle test (``test_solver_oracle``, hard rows) does not: the cost
 formulations (their convex model enters the stage QP as the position cost ``H``, ``g``), the
 corridor, the friction circle's per-stage input bounds, the paper's frozen linearization, a
-lateral reference with a speed cap (the step in two stages), SQP iterates, and prediction
-substeps (each step of the model taken as three, their Jacobians chained).
+lateral reference with a speed cap (the step in two stages), SQP iterates, prediction
+substeps (each step of the model taken as three, their Jacobians chained), and the cost
+formulations on recorded trajectories (a turning box with a lifetime, a drifting disc).
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from mpcdrive.models.discretize import discrete_step
 from mpcdrive.ocp import MpcProblem
 from mpcdrive.ocp.avoidance import AvoidanceConfig
 from mpcdrive.paths import CirclePath, StraightPath
-from mpcdrive.scene import Circle, Obstacle
+from mpcdrive.scene import Circle, Obstacle, Polygon, TrajectoryMotion
 from mpcdrive.scene.road import Road
 from mpcdrive.solvers.osqp_backend import OsqpSettings
 
@@ -42,7 +43,20 @@ ASSEMBLY_TOL = 1e-9
 #: sensitivity; a wrong row, weight or bound moves a plan by centimetres
 LOOP_TOL = 1e-6
 
-CASES = ["plain", "potential", "gaussian", "hard", "corridor", "friction", "paper", "lateral-cap", "sqp", "substeps"]
+CASES = [
+    "plain",
+    "potential",
+    "gaussian",
+    "hard",
+    "corridor",
+    "friction",
+    "paper",
+    "lateral-cap",
+    "sqp",
+    "substeps",
+    "recorded-potential",
+    "recorded-gaussian",
+]
 
 
 def _controllers(case: str, curved: bool):
@@ -80,6 +94,10 @@ def _controllers(case: str, curved: bool):
         p, h = path.position(s_ob), float(path.heading(s_ob))
         obstacles = (Obstacle(Circle(0.5), (p[0] - 0.3 * math.sin(h), p[1] + 0.3 * math.cos(h), 0.0)),)
         av = AvoidanceConfig(form[case], weight=50.0)
+    if case.startswith("recorded-"):
+        obstacles = _recorded_obstacles(path)
+        # Sigma longer along the path than across: the path's heading at the box enters the cost
+        av = AvoidanceConfig(case.removeprefix("recorded-"), weight=50.0, sigma_m=(1.2, 0.5))
     ref = PythonLtvMpc(model, path, pb, cfg, "osqp", osqp_settings=OSQP, obstacles=obstacles, avoidance=av)
     fo = CompiledLtvMpc(model, path, pb, cfg, obstacles=obstacles, avoidance=av, solver="osqp", osqp_settings=OSQP)
     if case == "lateral-cap":
@@ -88,6 +106,25 @@ def _controllers(case: str, curved: bool):
             c.set_speed_cap(3.0, 2.0)
     x0 = np.array([*path.position(0.0), float(path.heading(0.0)), 5.0])
     return model, ref, fo, x0
+
+
+def _recorded_obstacles(path):
+    """A box that a recording moves across the path ahead while turning, present from 0.5 s to
+    2.5 s (its lifetime starts and ends inside the horizons of the drive), and a disc that
+    drifts along beside the path for the whole drive."""
+    t = np.array([0.0, 1.0, 2.0, 3.0])
+    p, h = path.position(9.0), float(path.heading(9.0))
+    n = np.array([-math.sin(h), math.cos(h)])
+    box = Obstacle(
+        Polygon(np.array([[-0.2, -0.4], [1.4, -0.4], [1.4, 0.4], [-0.2, 0.4]])),  # its vertex mean off its pose
+        (*(p + 1.5 * n), h + 0.3),
+        TrajectoryMotion(t, -0.6 * t * n[0], -0.6 * t * n[1], np.array([0.0, 0.2, 0.5, 0.6])),
+        t_start_s=0.5,
+        t_end_s=2.5,
+    )
+    q = path.position(14.0)
+    disc = Obstacle(Circle(0.4), (*(q - 0.9 * n), 0.0), TrajectoryMotion(t, 0.8 * t, 0.1 * t, np.zeros(4)))
+    return (box, disc)
 
 
 @pytest.mark.parametrize("curved", [False, True], ids=["straight", "circle"])
@@ -115,7 +152,7 @@ def test_compiled_assembly_is_the_osqp_controllers_stage_qp_and_drives_the_same_
         assert a.sqp_iterations == b.sqp_iterations
         x = discrete_step(model, x, a.u, 0.1, "rk4")
         warm, wo = a.warm, b.warm
-    if case in ("potential", "gaussian", "sqp"):
+    if case in ("potential", "gaussian", "sqp") or case.startswith("recorded-"):
         assert cost_terms, "the obstacle cost never entered the stage QP: the case tests nothing"
 
 
@@ -219,3 +256,32 @@ def test_a_problem_without_compiled_assembly_is_solved_by_the_condensed_solver()
         np.testing.assert_allclose(a.X_pred, b.X_pred, rtol=0, atol=1e-6)
         x = discrete_step(model, x, a.u, 0.1, "rk4")
         w1, w2 = a.warm, b.warm
+
+
+def test_replaced_recorded_obstacles_reach_the_compiled_cost():
+    """``set_obstacles`` with recordings of other lengths (the compiled arrays change shape, so
+    the assembly's struct is made anew) and with the same shapes (written in place): the
+    compiled stage QP stays the Python assembly's."""
+    model, ref, fo, x = _controllers("recorded-potential", True)
+    warm = ref.initial_warm(x)
+    box, disc = ref.obstacles
+    t = np.linspace(0.0, 3.0, 7)
+
+    def recorded_box(vx, vy):
+        motion = TrajectoryMotion(t, vx * t, vy * t, 0.1 * t)
+        return Obstacle(box.shape, box.pose, motion, t_start_s=box.t_start_s, t_end_s=box.t_end_s)
+
+    longer, moved = recorded_box(-0.5, 0.2), recorded_box(-0.4, -0.3)
+    used = 0
+    for k in range(12):
+        if k in (3, 8):
+            new = (longer, disc) if k == 3 else (moved, disc)
+            ref.set_obstacles(new)
+            fo.set_obstacles(new)
+        d = ref.prepare(x, warm)
+        same_step_data(fo.prepare(x, warm), d, atol=ASSEMBLY_TOL, sides=False)
+        used += k >= 3 and d.H is not None and bool(np.abs(d.H).max() > 1e-6)
+        a = ref.step(x, warm)
+        x = discrete_step(model, x, a.u, 0.1, "rk4")
+        warm = a.warm
+    assert used, "the replaced obstacles never entered the cost: the test tests nothing"

@@ -24,8 +24,9 @@ constraint is active. The soft lane's slacks enter that QP only where they can b
 (:func:`~mpcdrive.solvers.condensed.soft_solve`: first without slacks, checked by the exact-penalty condition), so a car
 inside its lane pays for N nu variables, not N (nu + 1).
 
-Obstacles with the potential (eq. 55) or Gaussian (eq. 56) cost -- static or at constant
-velocity, circles or polygons -- add their convex second-order model at the linearization
+Obstacles with the potential (eq. 55) or Gaussian (eq. 56) cost -- static, at constant
+velocity or on a recorded trajectory, with or without a lifetime, circles or polygons -- add
+their convex second-order model at the linearization
 trajectory to the state weights of each step, exactly as ``ocp.avoidance`` does for the OSQP
 controller; SQP iterations (``MpcConfig.sqp_max_iterations``) re-run the compiled step around
 the current iterate.
@@ -81,7 +82,7 @@ from .base import checked_obstacles, checked_road, checked_speed_cap
 
 from ..ocp.assembly import MODE_ITERATE, MODE_NO_PLAN, MODE_SHIFTED_PLAN, StepAssembly, follow_references_into
 from ..ocp.assembly import set_road_margin
-from ..ocp.obstacle_cost_compiled import OBS_GAUSSIAN, OBS_NONE, OBS_POTENTIAL, SIDE_NONE, obstacle_table
+from ..ocp.obstacle_cost_compiled import OBS_GAUSSIAN, OBS_NONE, OBS_POTENTIAL, SIDE_NONE, cost_obstacle_arrays
 from ..ocp.stage_qp import new_stage_qp
 from ..solvers.condensed_setup import CondensedSettings, new_condensed_work
 from .fast_setup import fast_unsupported_reason, obstacles_unsupported_reason, uses_rows
@@ -248,9 +249,8 @@ class CompiledLtvMpc(LtvMpc):
             obstacle_form=OBS_NONE
             if cost_av is None
             else (OBS_POTENTIAL if cost_av.formulation == "potential" else OBS_GAUSSIAN),
-            nobs=len(obstacles) if cost_av is not None else 0,
             omax=int(cost_av.max_obstacles) if cost_av is not None else 0,
-            obs=obstacle_table(obstacles) if cost_av is not None else np.zeros((1, 8)),
+            **cost_obstacle_arrays(obstacles if cost_av is not None else ()),
             obstacle_influence=float(av.influence_m) if av is not None else 0.0,
             obstacle_weight=float(av.weight) if av is not None else 0.0,
             obstacle_epsilon=float(av.epsilon_m2) if av is not None else 0.0,
@@ -396,10 +396,24 @@ class CompiledLtvMpc(LtvMpc):
             reason = obstacles_unsupported_reason(obstacles, avoidance.config)
             if reason is not None:
                 raise ValueError(f"the fast backend cannot take these obstacles: {reason}")
-            self._asm.obs[...] = obstacle_table(obstacles)
+            self._load_cost_obstacles(obstacles)
         avoidance.obstacles = list(obstacles)
         if self._relaxed is not None:  # the relax rung avoids the same obstacles
             self._relaxed.set_obstacles(obstacles)
+
+    def _load_cost_obstacles(self, obstacles) -> None:
+        """The compiled obstacle cost's arrays for ``obstacles``: written in place where their
+        shapes are the same, else a new assembly struct (a recorded trajectory of another
+        length, polygons of more vertices)."""
+        arrays = cost_obstacle_arrays(obstacles)
+        if all(getattr(self._asm, k).shape == v.shape for k, v in arrays.items()):
+            for k, v in arrays.items():
+                getattr(self._asm, k)[...] = v
+            return
+        self._asm = replace(self._asm, **arrays)
+        self._asm_struct = self._asm.struct()
+        self._step = replace(self._step, assembly=self._asm_struct)
+        self._step_struct = self._step.struct()
 
     # -- warm start: initial_warm and _check_state from TrackingWarmStart ---------------------
     def _load_sides(self, sides: tuple) -> np.ndarray:

@@ -18,7 +18,7 @@ from ..ocp.problem import MpcProblem
 from ..paths.base import ReferencePath
 from ..paths.compiled import path_arrays
 from ..paths.profile_compiled import profile_array
-from ..scene.obstacles import Circle, ConstantVelocity, Polygon, Static
+from ..scene.obstacles import Circle, ConstantVelocity, Polygon, Static, TrajectoryMotion
 from ..solvers.condensed_setup import CondensedSettings, condensed_unsupported_reason
 from .mpc import MpcConfig
 
@@ -27,10 +27,11 @@ def obstacles_unsupported_reason(obstacles, avoidance: AvoidanceConfig | None) -
     """Why the compiled step cannot take these obstacles as ``LtvMpc`` would, or None.
 
     Covered: the cost formulations (``potential``, ``gaussian``) on circle and polygon obstacles
-    that stand still or move at constant velocity, compiled; with the trapezoidal detour
-    reference, on static circles. The constraint formulations (``hard``, ``corridor``) on any
-    obstacle, their rows (and, with car following, ``follow_gap_s``, the references behind the
-    stop line) built by ``ocp.avoidance`` between two compiled stages."""
+    that stand still, move at constant velocity or follow a recorded trajectory, with or without
+    a lifetime, compiled; with the trapezoidal detour reference, on static circles. The
+    constraint formulations (``hard``, ``corridor``) on any obstacle, their rows (and, with car
+    following, ``follow_gap_s``, the references behind the stop line) built by
+    ``ocp.avoidance`` between two compiled stages."""
     if not obstacles:
         return None
     av = avoidance or AvoidanceConfig()
@@ -39,10 +40,8 @@ def obstacles_unsupported_reason(obstacles, avoidance: AvoidanceConfig | None) -
     for ob in obstacles:
         if av.detour != "none" and not (isinstance(ob.motion, Static) and isinstance(ob.shape, Circle)):
             return f"the {av.detour!r} detour around obstacle {ob.name or '?'} (not a static circle) needs the OSQP controller"
-        if ob.has_lifetime:
-            return f"obstacle {ob.name or '?'} has a lifetime (present only from t_start_s to t_end_s)"
-        if not isinstance(ob.motion, (Static, ConstantVelocity)):
-            return f"obstacle {ob.name or '?'} follows a {type(ob.motion).__name__} (only static or constant velocity)"
+        if type(ob.motion) not in (Static, ConstantVelocity, TrajectoryMotion):
+            return f"obstacle {ob.name or '?'} follows a {type(ob.motion).__name__} (no compiled form)"
         if not isinstance(ob.shape, (Circle, Polygon)):
             return f"obstacle {ob.name or '?'} has a {type(ob.shape).__name__} shape"
     return None

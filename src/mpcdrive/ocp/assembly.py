@@ -65,9 +65,10 @@ class StepAssembly:
     circle (``friction``, its acceleration [m/s^2] and the ``wheelbase`` [m]); the road (``lane``;
     its tables ``road_s``, ``road_left``, ``road_right`` [m], ``road_period`` [m], the body kept
     ``road_margin`` [m] inside; the body's ``half_width``, ``half_length`` and ``body_offset``
-    [m]); the obstacle cost (``obstacle_form`` ``OBS_*``, ``nobs`` obstacles in ``obs``, at most
-    ``omax`` considered, within ``obstacle_influence`` [m]; weight, epsilon [m^2], sigma [m];
-    the compiled ``detour`` with its margin and ramp [m]). The rest is work: references
+    [m]); the obstacle cost (``obstacle_form`` ``OBS_*``, the obstacles in the ``ob_*`` arrays of
+    :func:`~mpcdrive.ocp.obstacle_cost_compiled.cost_obstacle_arrays`, at most ``omax``
+    considered, within ``obstacle_influence`` [m]; weight, epsilon [m^2], sigma [m]; the
+    compiled ``detour`` with its margin and ramp [m]). The rest is work: references
     ``refs`` (N+1, 4: x, y, heading, curvature), arc lengths ``s_arr`` and speeds ``v_arr``
     (N+1,), the linearization ``Xbar``, ``Ubar``, ``F`` = f(Xbar, Ubar), the detour ``e_ref``,
     the selected obstacles ``osel`` (``nsel`` of them), their distances and Frenet positions,
@@ -112,9 +113,20 @@ class StepAssembly:
     half_length: float
     body_offset: float
     obstacle_form: int
-    nobs: int
     omax: int
-    obs: np.ndarray
+    ob_pose: np.ndarray
+    ob_vel: np.ndarray
+    ob_tr_lo: np.ndarray
+    ob_tr_hi: np.ndarray
+    ob_tr_t: np.ndarray
+    ob_tr_d: np.ndarray
+    ob_bound_r: np.ndarray
+    ob_life: np.ndarray
+    ob_has_life: np.ndarray
+    ob_shape: np.ndarray
+    ob_radius: np.ndarray
+    ob_verts: np.ndarray
+    ob_nverts: np.ndarray
     obstacle_influence: float
     obstacle_weight: float
     obstacle_epsilon: float
@@ -435,13 +447,14 @@ from .. import _jitcache  # noqa: E402
 from ..models import compiled as _models_compiled, dynamic as _dynamic, kinematic as _kinematic  # noqa: E402
 from ..paths import compiled as _paths_compiled, profile_compiled as _profile_compiled  # noqa: E402
 from ..scene import road as _road  # noqa: E402
-from . import friction as _friction, obstacle_cost_compiled as _obstacle_cost_compiled  # noqa: E402
+from . import avoidance_compiled as _avoidance_compiled, friction as _friction  # noqa: E402
+from . import obstacle_cost_compiled as _obstacle_cost_compiled  # noqa: E402
 
 #: the source files whose code the assembly links in (and so any compiled step that calls it)
 LINKED_SOURCES: list[str] = [
     m.__file__
     for m in (_kinematic, _dynamic, _models_compiled, _paths_compiled, _profile_compiled, _road, _friction)
     if m.__file__ is not None
-] + [f for f in (_obstacle_cost_compiled.__file__,) if f is not None]
+] + [f for f in (_obstacle_cost_compiled.__file__, _avoidance_compiled.__file__) if f is not None]
 
 _jitcache.refresh(linearize, LINKED_SOURCES)  # one file: one fingerprint for all its functions

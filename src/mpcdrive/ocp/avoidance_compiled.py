@@ -151,31 +151,40 @@ def pose_at(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d):
 
 @njit(cache=True)
 def select(t_s, x, y, t_end, reach, pose, vel, tr_lo, tr_hi, tr_t, tr_d, bound_r, life, has_life, max_n, out):
-    """``Avoidance.relevant``: indices of the obstacles present at some time of [t_s, t_end] [s]
-    whose pose at ``t_s`` minus the bounding radius ``bound_r`` (n,) lies within ``reach`` [m]
-    of (x, y), nearest first (ties by index), at most ``max_n``, into ``out``; returns how many.
-    pose ... tr_d: the motions (``ObstacleTable.motion``, :func:`pose_at`); life (n, 2)
-    lifetimes [s], used where ``has_life``."""
+    """``Avoidance.relevant``: :func:`select_into` with its work array allocated here."""
+    dist = np.empty(pose.shape[0])
+    return select_into(
+        t_s, x, y, t_end, reach, pose, vel, tr_lo, tr_hi, tr_t, tr_d, bound_r, life, has_life, max_n, out, dist
+    )
+
+
+@njit(cache=True)
+def select_into(
+    t_s, x, y, t_end, reach, pose, vel, tr_lo, tr_hi, tr_t, tr_d, bound_r, life, has_life, max_n, out, dist
+):
+    """The obstacles present at some time of [t_s, t_end] [s] whose pose at ``t_s`` minus the
+    bounding radius ``bound_r`` (n,) lies within ``reach`` [m] of (x, y), nearest first (ties by
+    index), at most ``max_n``, into ``out``; returns how many. pose ... tr_d: the motions
+    (``ObstacleTable.motion``, :func:`pose_at`); life (n, 2) lifetimes [s], used where
+    ``has_life``; dist (n,): work."""
     n = pose.shape[0]
-    dist = np.empty(n)
-    ok = np.zeros(n, np.bool_)
     for j in range(n):
+        dist[j] = math.inf
         if has_life[j] and (life[j, 1] < t_s or life[j, 0] > t_end):
             continue
         ox, oy, _ = pose_at(j, t_s, pose, vel, tr_lo, tr_hi, tr_t, tr_d)
         d = math.hypot(ox - x, oy - y) - bound_r[j]
         if d <= reach:
             dist[j] = d
-            ok[j] = True
     count = 0
     while count < max_n:
         best = -1
         for j in range(n):
-            if ok[j] and (best < 0 or dist[j] < dist[best]):
+            if dist[j] < math.inf and (best < 0 or dist[j] < dist[best]):
                 best = j
         if best < 0:
             break
-        ok[best] = False
+        dist[best] = math.inf
         out[count] = best
         count += 1
     return count

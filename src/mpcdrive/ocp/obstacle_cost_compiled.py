@@ -2,11 +2,13 @@
 
 For the cost formulations of :mod:`mpcdrive.ocp.avoidance` (``potential``, eq. 55, and
 ``gaussian``, eq. 56), as that module computes them for the OSQP controller: which obstacles a
-step considers (:func:`_select_obstacles`), the paper's trapezoidal detour of the references
-around static circles (:func:`_detour`, :func:`shift_references`) and the cost's convex
-second-order model at the linearization trajectory (:func:`_obstacle_cost`). They read the
+step considers (:func:`select_obstacles`), the paper's trapezoidal detour of the references
+around static circles (:func:`detour`, :func:`shift_references`) and the cost's convex
+second-order model at the linearization trajectory (:func:`obstacle_cost`). They read the
 assembly's container (:class:`~mpcdrive.ocp.assembly.StepAssembly`, its struct ``asm``): its
-obstacle table (:func:`obstacle_table`, columns ``OB_*``), the cost's settings and the road.
+obstacles (the arrays of :func:`cost_obstacle_arrays`: static, constant-velocity and recorded
+motions, lifetimes, circles and polygons, evaluated by the kernels of
+:mod:`mpcdrive.ocp.avoidance_compiled`), the cost's settings and the road.
 
 Compiled with numba's on-disk cache, which numba keys to this file only: the cache is dropped
 (by :mod:`mpcdrive._jitcache`) when a file whose code these functions link in changes.
@@ -15,70 +17,85 @@ Compiled with numba's on-disk cache, which numba keys to this file only: the cac
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numba import njit
 
 from ..paths.compiled import path_eval, path_project
-from ..scene.obstacles import Circle, ConstantVelocity
 from ..scene.road import _interp
+from .avoidance_compiled import SHAPE_CIRCLE, obstacle_table, pose_at, select_into
 
 #: passing sides (as ocp.avoidance), and "not chosen yet" in the compiled side memory
 SIDE_LEFT, SIDE_RIGHT, SIDE_BLOCKED, SIDE_NONE = 1, -1, 0, 2
 #: obstacle cost formulations (``StepAssembly.obstacle_form``)
 OBS_NONE, OBS_POTENTIAL, OBS_GAUSSIAN = 0, 1, 2
-#: columns of a row of the obstacle table: pose (x, y) [m] at t = 0, velocity (vx, vy) [m/s],
-#: bounding radius [m], offset (x, y) [m] of the point projected for the path heading,
-#: projection window extra [m]
-OB_X, OB_Y, OB_VX, OB_VY, OB_RB, OB_OX, OB_OY, OB_WIN = range(8)
-_NOB = 8
 
 
-def obstacle_table(obstacles) -> np.ndarray:
-    """(n, 8) rows of the compiled obstacle description (columns ``OB_*``) of static or
-    constant-velocity circles and polygons; one zero row without obstacles."""
-    tab = np.zeros((max(len(obstacles), 1), _NOB))
-    for j, ob in enumerate(obstacles):
-        x0, y0, yaw0 = ob.pose
-        vx, vy = (ob.motion.vx_mps, ob.motion.vy_mps) if isinstance(ob.motion, ConstantVelocity) else (0.0, 0.0)
-        tab[j, [OB_X, OB_Y, OB_VX, OB_VY, OB_RB]] = x0, y0, vx, vy, ob.shape.bounding_radius_m
-        if isinstance(ob.shape, Circle):
-            tab[j, OB_WIN] = max(2.0, 2.0 * ob.shape.radius_m)
-        else:  # as ocp.avoidance.frenet_box: the vertex mean is projected (a fixed offset: no rotation)
-            pts = ob.at(0.0).points
-            tab[j, OB_OX], tab[j, OB_OY] = pts.mean(axis=0) - (x0, y0)
-            tab[j, OB_WIN] = 2.0 + float(np.ptp(pts))
-    return tab
+def cost_obstacle_arrays(obstacles) -> dict[str, Any]:
+    """The ``ob_*`` fields of :class:`~mpcdrive.ocp.assembly.StepAssembly` for ``obstacles``
+    (their :class:`~mpcdrive.ocp.avoidance_compiled.ObstacleTable`, as C-contiguous float64 and
+    int64 arrays; one placeholder obstacle, never selected, when there are none)."""
+    tab = obstacle_table(list(obstacles))
+    n = len(obstacles)
+    f, i = (lambda a: np.ascontiguousarray(a, dtype=np.float64)), (lambda a: np.ascontiguousarray(a, dtype=np.int64))
+    if n == 0:
+        return {
+            "ob_pose": np.zeros((1, 3)), "ob_vel": np.zeros((1, 2)), "ob_tr_lo": np.zeros(1, np.int64),
+            "ob_tr_hi": np.zeros(1, np.int64), "ob_tr_t": np.zeros(1), "ob_tr_d": np.zeros((1, 3)),
+            "ob_bound_r": np.zeros(1), "ob_life": np.array([[np.inf, -np.inf]]), "ob_has_life": np.ones(1, np.int64),
+            "ob_shape": np.zeros(1, np.int64), "ob_radius": np.zeros(1), "ob_verts": np.zeros((1, 3, 2)),
+            "ob_nverts": np.zeros(1, np.int64),
+        }  # fmt: skip
+    return {
+        "ob_pose": f(tab.pose), "ob_vel": f(tab.vel), "ob_tr_lo": i(tab.tr_lo), "ob_tr_hi": i(tab.tr_hi),
+        "ob_tr_t": f(tab.tr_t), "ob_tr_d": f(tab.tr_d), "ob_bound_r": f(tab.bound_r), "ob_life": f(tab.life),
+        "ob_has_life": i(tab.has_life), "ob_shape": i(tab.shape), "ob_radius": f(tab.radius),
+        "ob_verts": f(tab.verts), "ob_nverts": i(tab.nverts),
+    }  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def _pose(asm, j, t):
+    """Pose (x m, y m, yaw rad) of obstacle j at time ``t`` [s]."""
+    return pose_at(j, t, asm.ob_pose, asm.ob_vel, asm.ob_tr_lo, asm.ob_tr_hi, asm.ob_tr_t, asm.ob_tr_d)
 
 
 @njit(cache=True)
 def select_obstacles(asm, t_s, x, s0):
-    """The ``max_obstacles`` nearest obstacles within the influence distance of the vehicle at time
-    ``t_s`` (nearest first, ties by index, as ``ocp.avoidance``) into ``asm.osel``; returns how
-    many. ``asm.oproj[j]`` = (s, e_y) of each one's projected point [m] (its Frenet position now)."""
-    nobs, omax, obs, odist, oproj, osel = asm.nobs, asm.omax, asm.obs, asm.odist, asm.oproj, asm.osel
+    """The ``max_obstacles`` nearest obstacles present at some time of the horizon and within the
+    influence distance of the vehicle at time ``t_s`` (nearest first, ties by index, as
+    ``Avoidance.relevant``) into ``asm.osel``; returns how many. ``asm.oproj[j]`` = (s, e_y) [m]
+    of each one's projected point now (its centre, or a polygon's vertex mean, as
+    ``ocp.frenet.frenet_boxes`` projects it, searched near ``s0``)."""
+    osel, oproj = asm.osel, asm.oproj
+    nsel = select_into(
+        t_s, x[0], x[1], t_s + asm.N * asm.dt, asm.obstacle_influence, asm.ob_pose, asm.ob_vel, asm.ob_tr_lo,
+        asm.ob_tr_hi, asm.ob_tr_t, asm.ob_tr_d, asm.ob_bound_r, asm.ob_life, asm.ob_has_life, asm.omax, osel,
+        asm.odist,
+    )  # fmt: skip
     pkind, geo, tab_s, tab_xy, tab_h, tab_k = asm.path, asm.geo, asm.tab_s, asm.tab_xy, asm.tab_h, asm.tab_k
-    reach = asm.obstacle_influence
-    for j in range(nobs):
-        d = math.hypot(obs[j, OB_X] + obs[j, OB_VX] * t_s - x[0], obs[j, OB_Y] + obs[j, OB_VY] * t_s - x[1])
-        d -= obs[j, OB_RB]
-        odist[j] = d if d <= reach else math.inf
     px0, py0, _h0, _k0 = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s0)
-    nsel = 0
-    for _slot in range(min(omax, nobs)):
-        j, best = -1, math.inf
-        for jj in range(nobs):
-            if odist[jj] < best:
-                j, best = jj, odist[jj]
-        if j < 0:
-            break
-        odist[j] = math.inf
-        osel[nsel] = j
-        nsel += 1
-        cx = obs[j, OB_X] + obs[j, OB_VX] * t_s + obs[j, OB_OX]
-        cy = obs[j, OB_Y] + obs[j, OB_VY] * t_s + obs[j, OB_OY]
+    verts = asm.ob_verts
+    for a in range(nsel):
+        j = osel[a]
+        ox, oy, oyaw = _pose(asm, j, t_s)
+        if asm.ob_shape[j] == SHAPE_CIRCLE:
+            cx, cy, win = ox, oy, max(2.0, 2.0 * asm.ob_radius[j])
+        else:  # the world outline now: its vertex mean, and its extent for the search window
+            co, so = math.cos(oyaw), math.sin(oyaw)
+            sx, sy, lo, hi = 0.0, 0.0, math.inf, -math.inf
+            m = asm.ob_nverts[j]
+            for v in range(m):
+                wx = ox + co * verts[j, v, 0] - so * verts[j, v, 1]
+                wy = oy + so * verts[j, v, 0] + co * verts[j, v, 1]
+                sx += wx
+                sy += wy
+                lo = min(lo, wx, wy)
+                hi = max(hi, wx, wy)
+            cx, cy, win = sx / m, sy / m, 2.0 + (hi - lo)
         oproj[j, 0], oproj[j, 1] = path_project(
-            pkind, geo, tab_s, tab_xy, s0, obs[j, OB_WIN] + math.hypot(cx - px0, cy - py0), cx, cy
+            pkind, geo, tab_s, tab_xy, s0, win + math.hypot(cx - px0, cy - py0), cx, cy
         )
     return nsel
 
@@ -92,7 +109,7 @@ def detour(asm, xref, sides):
     shift the references sideways over the obstacle with ramps before and after it, and turn
     their heading with the slope. ``xref`` (N+1, nx): the state references; ``sides``: the side
     memory per obstacle."""
-    nsel, osel, obs, oproj, N = asm.nsel, asm.osel, asm.obs, asm.oproj, asm.N
+    nsel, osel, oproj, N = asm.nsel, asm.osel, asm.oproj, asm.N
     s_arr, refs, e_ref, lane = asm.s_arr, asm.refs, asm.e_ref, asm.lane
     margin, hw, hl, ramp = asm.obstacle_margin, asm.half_width, asm.half_length, asm.detour_ramp
     need = margin + hw  # as Avoidance.passing_room_m for the cost formulations, less the edge's share
@@ -101,7 +118,7 @@ def detour(asm, xref, sides):
     any_shift = False
     for a in range(nsel):
         j = osel[a]
-        r = obs[j, OB_RB]
+        r = asm.ob_bound_r[j]
         s_ref, e_c = oproj[j, 0], oproj[j, 1]
         e_lo, e_hi = e_c - r, e_c + r
         if lane:
@@ -152,9 +169,9 @@ def obstacle_cost(asm, t_s, We, qt):
     """Add the potential (eq. 55) or Gaussian (eq. 56) cost of the selected obstacles, its
     second-order model at the linearization trajectory (x_k = Xbar[k], x_N = F[N-1]) with the
     Hessian projected onto the PSD cone, to the state cost ``x' We x - 2 qt' x`` of x_1..x_N, as
-    ``ocp.avoidance`` does for the OSQP controller: each obstacle predicted at constant velocity,
-    Sigma aligned with the path where the obstacle is now."""
-    form, nsel, osel, obs, oproj, N = asm.obstacle_form, asm.nsel, asm.osel, asm.obs, asm.oproj, asm.N
+    ``ocp.avoidance`` does for the OSQP controller: each obstacle predicted by its motion, no cost
+    at the steps outside its lifetime, Sigma aligned with the path where the obstacle is now."""
+    form, nsel, osel, oproj, N = asm.obstacle_form, asm.nsel, asm.osel, asm.oproj, asm.N
     dt, Xbar, F = asm.dt, asm.Xbar, asm.F
     pkind, geo, tab_s, tab_xy, tab_h, tab_k = asm.path, asm.geo, asm.tab_s, asm.tab_xy, asm.tab_h, asm.tab_k
     w, eps = asm.obstacle_weight, asm.obstacle_epsilon
@@ -163,7 +180,8 @@ def obstacle_cost(asm, t_s, We, qt):
     s00, s01, s11 = 0.0, 0.0, 0.0
     for a in range(nsel):
         j = osel[a]
-        vx, vy = obs[j, OB_VX], obs[j, OB_VY]
+        life = asm.ob_has_life[j] != 0
+        t_on, t_off = asm.ob_life[j, 0], asm.ob_life[j, 1]
         if form == OBS_GAUSSIAN:
             h = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, oproj[j, 0])[2]
             ch, sh = math.cos(h), math.sin(h)
@@ -176,8 +194,11 @@ def obstacle_cost(asm, t_s, We, qt):
             else:
                 px, py = F[N - 1, 0], F[N - 1, 1]
             tk = t_s + dt * k
-            dx = px - (obs[j, OB_X] + vx * tk)
-            dy = py - (obs[j, OB_Y] + vy * tk)
+            if life and not (t_on <= tk <= t_off):
+                continue
+            ox, oy, _ = _pose(asm, j, tk)
+            dx = px - ox
+            dy = py - oy
             if form == OBS_POTENTIAL:
                 den = dx * dx + dy * dy + eps
                 d2, d3 = den * den, den * den * den
@@ -211,10 +232,11 @@ def obstacle_cost(asm, t_s, We, qt):
 
 # numba caches these functions keyed to this file only; they inline code from these
 from .. import _jitcache  # noqa: E402
-from ..paths import compiled as _paths_compiled  # noqa: E402
+from ..paths import compiled as _paths_compiled, profile_compiled as _profile_compiled  # noqa: E402
 from ..scene import road as _road  # noqa: E402
+from . import avoidance_compiled as _avoidance_compiled  # noqa: E402
 
 _jitcache.refresh(
     select_obstacles,  # one file: one fingerprint for all its functions
-    [m.__file__ for m in (_paths_compiled, _road) if m.__file__ is not None],
+    [m.__file__ for m in (_paths_compiled, _profile_compiled, _road, _avoidance_compiled) if m.__file__ is not None],
 )
