@@ -201,17 +201,15 @@ def follow_references_into(asm, qp, yaw, s_arr, v_arr):
             qp.uref[k, asm.accel] += (v_arr[k + 1] - v_arr[k]) / asm.dt
 
 
-@njit(cache=True, inline="always")
-def _discrete_step(kind, mp, nx, nu, X, U, k, dt, method, substeps, F, A, B, W, sx, su, sf, sa, sb):
-    """F[k], A[k], B[k] of the prediction model at (X[k], U[k]): one step of ``dt`` [s] in
-    ``substeps``; without substeps the single step's kernel is called directly (the substeps'
-    kernel, a call deeper, would add a reference count per array)."""
-    if substeps == 1:
-        discrete_step_jacobians(kind, mp, nx, nu, X, U, k, dt, method, F, A, B, W)
-    else:
-        discrete_step_jacobians_substeps(
-            kind, mp, nx, nu, X, U, k, dt, method, substeps, F, A, B, W, sx, su, sf, sa, sb
-        )
+@njit(cache=True)
+def _discrete_substeps(asm, X, U, k, A, B):
+    """asm.F[k], A[k], B[k] of the prediction model at (X[k], U[k]) taken in ``asm.substeps``
+    steps. A step without substeps calls ``discrete_step_jacobians`` itself: each array handed
+    on through one more compiled call costs reference counts, about 2 us a step at N = 30."""
+    discrete_step_jacobians_substeps(
+        asm.model, asm.mp, asm.nx, asm.nu, X, U, k, asm.dt, asm.method, asm.substeps, asm.F, A, B, asm.dw,
+        asm.sub_x, asm.sub_u, asm.sub_f, asm.sub_a, asm.sub_b,
+    )  # fmt: skip
 
 
 @njit(cache=True)
@@ -228,7 +226,7 @@ def linearize(asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, info):
     pkind, geo, tab_s, tab_xy, tab_h, tab_k = asm.path, asm.geo, asm.tab_s, asm.tab_xy, asm.tab_h, asm.tab_k
     s_arr, v_arr, prof = asm.s_arr, asm.v_arr, asm.profile
     Xbar, Ubar, F, dw = asm.Xbar, asm.Ubar, asm.F, asm.dw
-    nsub, sx, su, sf, sa, sb = asm.substeps, asm.sub_x, asm.sub_u, asm.sub_f, asm.sub_a, asm.sub_b
+    nsub = asm.substeps
     A, B, c, xref, uref, Xlin = qp.A, qp.B, qp.c, qp.xref, qp.uref, qp.Xlin
     asm.nsel = 0
     # -- projection and horizon references -----------------------------------------------------
@@ -295,14 +293,20 @@ def linearize(asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, info):
             Xbar[0, i] = x[i]
         if meth == METHOD_EXP:
             for k in range(N - 1):
-                _discrete_step(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, nsub, F, A, B, dw, sx, su, sf, sa, sb)
+                if nsub == 1:
+                    discrete_step_jacobians(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
+                else:
+                    _discrete_substeps(asm, Xbar, Ubar, k, A, B)
                 for i in range(nx):
                     Xbar[k + 1, i] = F[k, i]
         else:
             rollout_into(mkind, mp, nx, Xbar, Ubar, N - 1, dt, meth, nsub, dw[0])
     kmax = 1 if asm.paper_linearization and mode != MODE_ITERATE else N
     for k in range(kmax):
-        _discrete_step(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, nsub, F, A, B, dw, sx, su, sf, sa, sb)
+        if nsub == 1:
+            discrete_step_jacobians(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
+        else:
+            _discrete_substeps(asm, Xbar, Ubar, k, A, B)
     for k in range(kmax, N):
         for i in range(nx):
             F[k, i] = F[0, i]

@@ -55,12 +55,6 @@ def cost_obstacle_arrays(obstacles) -> dict[str, Any]:
     }  # fmt: skip
 
 
-@njit(cache=True, inline="always")
-def _pose(asm, j, t):
-    """Pose (x m, y m, yaw rad) of obstacle j at time ``t`` [s]."""
-    return pose_at(j, t, asm.ob_pose, asm.ob_vel, asm.ob_tr_lo, asm.ob_tr_hi, asm.ob_tr_t, asm.ob_tr_d)
-
-
 @njit(cache=True)
 def select_obstacles(asm, t_s, x, s0):
     """The ``max_obstacles`` nearest obstacles present at some time of the horizon and within the
@@ -77,9 +71,11 @@ def select_obstacles(asm, t_s, x, s0):
     pkind, geo, tab_s, tab_xy, tab_h, tab_k = asm.path, asm.geo, asm.tab_s, asm.tab_xy, asm.tab_h, asm.tab_k
     px0, py0, _h0, _k0 = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s0)
     verts = asm.ob_verts
+    # the motions' arrays as locals: a struct's field read in a loop costs a reference count
+    pose, vel, tr_lo, tr_hi, tr_t, tr_d = asm.ob_pose, asm.ob_vel, asm.ob_tr_lo, asm.ob_tr_hi, asm.ob_tr_t, asm.ob_tr_d
     for a in range(nsel):
         j = osel[a]
-        ox, oy, oyaw = _pose(asm, j, t_s)
+        ox, oy, oyaw = pose_at(j, t_s, pose, vel, tr_lo, tr_hi, tr_t, tr_d)
         if asm.ob_shape[j] == SHAPE_CIRCLE:
             cx, cy, win = ox, oy, max(2.0, 2.0 * asm.ob_radius[j])
         else:  # the world outline now: its vertex mean, and its extent for the search window
@@ -177,11 +173,13 @@ def obstacle_cost(asm, t_s, We, qt):
     w, eps = asm.obstacle_weight, asm.obstacle_epsilon
     sx, sy = asm.obstacle_sigma_x, asm.obstacle_sigma_y
     isx2, isy2 = 1.0 / (sx * sx), 1.0 / (sy * sy)
+    pose, vel, tr_lo, tr_hi, tr_t, tr_d = asm.ob_pose, asm.ob_vel, asm.ob_tr_lo, asm.ob_tr_hi, asm.ob_tr_t, asm.ob_tr_d
+    has_life, lives = asm.ob_has_life, asm.ob_life
     s00, s01, s11 = 0.0, 0.0, 0.0
     for a in range(nsel):
         j = osel[a]
-        life = asm.ob_has_life[j] != 0
-        t_on, t_off = asm.ob_life[j, 0], asm.ob_life[j, 1]
+        life = has_life[j] != 0
+        t_on, t_off = lives[j, 0], lives[j, 1]
         if form == OBS_GAUSSIAN:
             h = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, oproj[j, 0])[2]
             ch, sh = math.cos(h), math.sin(h)
@@ -196,7 +194,7 @@ def obstacle_cost(asm, t_s, We, qt):
             tk = t_s + dt * k
             if life and not (t_on <= tk <= t_off):
                 continue
-            ox, oy, _ = _pose(asm, j, tk)
+            ox, oy, _ = pose_at(j, tk, pose, vel, tr_lo, tr_hi, tr_t, tr_d)
             dx = px - ox
             dy = py - oy
             if form == OBS_POTENTIAL:
