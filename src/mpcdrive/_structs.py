@@ -4,14 +4,10 @@ A container is a frozen dataclass of numpy arrays and scalars: Python code reads
 arrays by name, and :func:`to_struct` hands the same memory to numba-compiled code as a numba
 ``StructRef`` whose fields have the dataclass's names (one unboxing per call, whatever the number
 of arrays, where a tuple of arrays would unbox each). The dataclass is the one list of fields;
-each container module registers its struct type and a cached constructor with
-:func:`register_struct`'s three lines (numba caches a constructor only when it is defined in a
-file, so it cannot be made here)::
+each container module defines its struct with :func:`define_struct` and a cached constructor
+(numba caches a constructor only when it is defined in a file, so it cannot be made here)::
 
-    @structref.register
-    class _StageQpType(StructType): ...
-    class _StageQpStruct(structref.StructRefProxy): ...
-    register_struct(StageQp, _StageQpType, _StageQpStruct)
+    _StageQpType, _StageQpStruct = define_struct(StageQp, __name__)
 
     @njit(cache=True)
     def _build_stage_qp(values):
@@ -24,6 +20,7 @@ that compiled code must see change is written through a compiled setter.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import fields, is_dataclass
 from typing import Any
 
@@ -44,10 +41,19 @@ def field_names(container_class) -> list[str]:
     return [f.name for f in fields(container_class)]
 
 
-def register_struct(container_class, struct_type, proxy_class) -> None:
-    """Make ``proxy_class`` the Python handle of ``struct_type`` with the fields of
-    ``container_class`` (a dataclass)."""
-    structref.define_proxy(proxy_class, struct_type, field_names(container_class))
+def define_struct(container_class, module: str):
+    """The numba struct type class and Python handle (proxy) class of ``container_class`` (a
+    dataclass), registered with numba and bound in ``module`` (the container's module, by its
+    name) as ``_<Name>Type`` and ``_<Name>Struct``: numba's on-disk cache finds a struct type by
+    its module and name."""
+    name = container_class.__name__
+    type_name, proxy_name = f"_{name}Type", f"_{name}Struct"
+    struct_type = structref.register(type(type_name, (StructType,), {"__module__": module, "__qualname__": type_name}))
+    proxy = type(proxy_name, (structref.StructRefProxy,), {"__module__": module, "__qualname__": proxy_name})
+    structref.define_proxy(proxy, struct_type, field_names(container_class))
+    setattr(sys.modules[module], type_name, struct_type)
+    setattr(sys.modules[module], proxy_name, proxy)
+    return struct_type, proxy
 
 
 def struct_values(container) -> tuple[Any, ...]:

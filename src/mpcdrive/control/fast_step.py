@@ -19,9 +19,8 @@ from typing import Any
 
 import numpy as np
 from numba import njit
-from numba.experimental import structref
 
-from .._structs import StructType, register_struct, to_struct
+from .._structs import define_struct, to_struct
 from ..ocp.assembly import linearize, stage_costs
 from ..solvers.condensed import condensed_solve, write_plan
 
@@ -84,16 +83,7 @@ def control_step(step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out):
     return 0
 
 
-@structref.register
-class _CompiledStepType(StructType):
-    pass
-
-
-class _CompiledStepStruct(structref.StructRefProxy):
-    pass
-
-
-register_struct(CompiledStep, _CompiledStepType, _CompiledStepStruct)
+_CompiledStepType, _CompiledStepStruct = define_struct(CompiledStep, __name__)
 
 
 @njit(cache=True)

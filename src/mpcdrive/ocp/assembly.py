@@ -29,9 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from numba.experimental import structref
 
-from .._structs import StructType, register_struct, to_struct
+from .._structs import define_struct, to_struct
 from ..models.compiled import METHOD_EXP, discrete_step_jacobians, discrete_step_jacobians_substeps, model_references
 from ..models.compiled import model_speed, rollout_into
 from ..paths.compiled import path_eval, path_project, wrap_angle
@@ -429,16 +428,7 @@ def stage_costs(asm, qp, t_s, shifted):
         )
 
 
-@structref.register
-class _StepAssemblyType(StructType):
-    pass
-
-
-class _StepAssemblyStruct(structref.StructRefProxy):
-    pass
-
-
-register_struct(StepAssembly, _StepAssemblyType, _StepAssemblyStruct)
+_StepAssemblyType, _StepAssemblyStruct = define_struct(StepAssembly, __name__)
 
 
 @njit(cache=True)

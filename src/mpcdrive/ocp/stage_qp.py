@@ -14,9 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from numba.experimental import structref
 
-from .._structs import StructType, register_struct, to_struct
+from .._structs import define_struct, to_struct
 from .problem import MpcProblem
 
 
@@ -128,16 +127,7 @@ def new_stage_qp(problem: MpcProblem, obstacle_rows: int = 0) -> StageQp:
     )
 
 
-@structref.register
-class _StageQpType(StructType):
-    pass
-
-
-class _StageQpStruct(structref.StructRefProxy):
-    pass
-
-
-register_struct(StageQp, _StageQpType, _StageQpStruct)
+_StageQpType, _StageQpStruct = define_struct(StageQp, __name__)
 
 
 @njit(cache=True)

@@ -28,9 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from numba.experimental import structref
 
-from .._structs import StructType, register_struct, to_struct
+from .._structs import define_struct, to_struct
 from .dense_qp import gi_solve
 
 
@@ -697,16 +696,7 @@ class CondensedWork:
         return to_struct(self, _build_condensed_work)
 
 
-@structref.register
-class _CondensedWorkType(StructType):
-    pass
-
-
-class _CondensedWorkStruct(structref.StructRefProxy):
-    pass
-
-
-register_struct(CondensedWork, _CondensedWorkType, _CondensedWorkStruct)
+_CondensedWorkType, _CondensedWorkStruct = define_struct(CondensedWork, __name__)
 
 
 @njit(cache=True)
