@@ -139,7 +139,7 @@ def test_compiled_discrete_step_equals_numpy(tire, method):
         return
     Xr = np.zeros((N, nx))
     Xr[0] = X[0]
-    rollout_into(kind, mp, nx, Xr, U, N - 1, dt, code, np.zeros((3, nx)))
+    rollout_into(kind, mp, nx, Xr, U, N - 1, dt, code, 1, np.zeros((4, nx)))
     for k in range(N - 1):
         _close(Xr[k + 1], discrete_step(model, Xr[k], U[k], dt, method), JAC_TOL)
 
