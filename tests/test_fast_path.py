@@ -501,7 +501,7 @@ def test_compiled_discretization_equals_numpy(model, method, substeps):
     F, A, B = np.zeros((N, nx)), np.zeros((N, nx, nx)), np.zeros((N, nx, nu))
     code = {"rk4": METHOD_RK4, "euler": METHOD_EULER, "exp": METHOD_EXP}[method]
     nw = nx + nu + 1 if method == "exp" else nx
-    sub = (np.zeros((1, nx)), np.zeros((1, nu)), np.zeros((1, nx)), np.zeros((1, nx, nx)), np.zeros((1, nx, nu)))
+    sub = (np.zeros((N, nx)), np.zeros((N, nx)), np.zeros((N, nx, nx)), np.zeros((N, nx, nu)))
     for k in range(N):
         discrete_step_jacobians_substeps(
             kind, mp, nx, nu, X, U, k, 0.05, code, substeps, F, A, B, np.zeros((7, nw, nw)), *sub

@@ -378,38 +378,37 @@ def rollout_into(kind, mp, nx, X, U, n, dt, method, substeps, w):
 
 
 @njit(cache=True)
-def discrete_step_jacobians_substeps(kind, mp, nx, nu, X, U, k, dt, method, substeps, F, A, B, W, sx, su, sf, sa, sb):
+def discrete_step_jacobians_substeps(kind, mp, nx, nu, X, U, k, dt, method, substeps, F, A, B, W, sx, sf, sa, sb):
     """:func:`discrete_step_jacobians` with the step taken as ``substeps`` equal steps of
     dt / substeps, their Jacobians chained as :func:`mpcdrive.models.discretize.discrete_step_and_jacobians`
-    chains them (A = A_n ... A_1, B = A_n (... (A_2 B_1 + B_2) ...) + B_n). Work: sx (1, nx),
-    su (1, nu), sf (1, nx), sa (1, nx, nx), sb (1, nx, nu). With one substep a caller calls
-    :func:`discrete_step_jacobians` itself: each array handed to a compiled call costs a
-    reference count, about 2 us a step at N = 30."""
+    chains them (A = A_n ... A_1, B = A_n (... (A_2 B_1 + B_2) ...) + B_n). Work, shaped as the
+    outputs, row k used: sx, sf (N, nx), sa (N, nx, nx), sb (N, nx, nu) (every call of the
+    single-step kernel then has the same argument types: numba compiles it once). With one
+    substep a caller calls :func:`discrete_step_jacobians` itself: each array handed on through
+    one more compiled call costs reference counts, about 2 us a step at N = 30."""
     if substeps == 1:
         discrete_step_jacobians(kind, mp, nx, nu, X, U, k, dt, method, F, A, B, W)
         return
     h = dt / substeps
     discrete_step_jacobians(kind, mp, nx, nu, X, U, k, h, method, F, A, B, W)
-    for a in range(nu):
-        su[0, a] = U[k, a]
     for _sub in range(substeps - 1):
         for i in range(nx):
-            sx[0, i] = F[k, i]
-        discrete_step_jacobians(kind, mp, nx, nu, sx, su, 0, h, method, sf, sa, sb, W)
+            sx[k, i] = F[k, i]
+        discrete_step_jacobians(kind, mp, nx, nu, sx, U, k, h, method, sf, sa, sb, W)
         # A <- A_i A, B <- A_i B + B_i (W[_WTX], W[_WTU] as scratch: free after the step)
         for i in range(nx):
             for j in range(nx):
                 t = 0.0
                 for l in range(nx):
-                    t += sa[0, i, l] * A[k, l, j]
+                    t += sa[k, i, l] * A[k, l, j]
                 W[_WTX, i, j] = t
             for j in range(nu):
                 t = 0.0
                 for l in range(nx):
-                    t += sa[0, i, l] * B[k, l, j]
-                W[_WTU, i, j] = t + sb[0, i, j]
+                    t += sa[k, i, l] * B[k, l, j]
+                W[_WTU, i, j] = t + sb[k, i, j]
         for i in range(nx):
-            F[k, i] = sf[0, i]
+            F[k, i] = sf[k, i]
             for j in range(nx):
                 A[k, i, j] = W[_WTX, i, j]
             for j in range(nu):

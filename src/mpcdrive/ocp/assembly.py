@@ -148,7 +148,6 @@ class StepAssembly:
     F: np.ndarray
     dw: np.ndarray
     sub_x: np.ndarray
-    sub_u: np.ndarray
     sub_f: np.ndarray
     sub_a: np.ndarray
     sub_b: np.ndarray
@@ -207,7 +206,7 @@ def _discrete_substeps(asm, X, U, k, A, B):
     on through one more compiled call costs reference counts, about 2 us a step at N = 30."""
     discrete_step_jacobians_substeps(
         asm.model, asm.mp, asm.nx, asm.nu, X, U, k, asm.dt, asm.method, asm.substeps, asm.F, A, B, asm.dw,
-        asm.sub_x, asm.sub_u, asm.sub_f, asm.sub_a, asm.sub_b,
+        asm.sub_x, asm.sub_f, asm.sub_a, asm.sub_b,
     )  # fmt: skip
 
 
