@@ -285,3 +285,20 @@ def test_replaced_recorded_obstacles_reach_the_compiled_cost():
         x = discrete_step(model, x, a.u, 0.1, "rk4")
         warm = a.warm
     assert used, "the replaced obstacles never entered the cost: the test tests nothing"
+
+
+def test_a_new_road_margin_survives_new_obstacle_arrays():
+    """``set_road`` with another margin, then recordings of another length (the assembly's struct
+    is made anew from its arrays): the compiled road bounds keep the new margin, as the Python
+    assembly's do."""
+    model, ref, fo, x = _controllers("recorded-potential", True)
+    warm = ref.initial_warm(x)
+    wider = Road.constant(4.0, 0.4)
+    box, disc = ref.obstacles
+    t = np.linspace(0.0, 3.0, 7)
+    longer = Obstacle(disc.shape, disc.pose, TrajectoryMotion(t, 0.5 * t, 0.1 * t, 0.0 * t))
+    for c in (ref, fo):
+        c.set_road(wider)
+        c.set_obstacles((box, longer))
+    d = ref.prepare(x, warm)
+    same_step_data(fo.prepare(x, warm), d, atol=ASSEMBLY_TOL, sides=False)

@@ -14,8 +14,9 @@ each container module defines its struct with :func:`define_struct` and a cached
         return _StageQpStruct(*values)
 
 Arrays are stored C-contiguous as given (the dataclass's arrays *are* the struct's memory: a
-write on either side is seen on the other); a scalar field is copied into the struct, so one
-that compiled code must see change is written through a compiled setter.
+write on either side is seen on the other); a scalar field is copied into the struct when it
+is made, so a value that Python changes afterwards is kept as a one-element array (a setter on
+the struct alone would be lost when the struct is made anew from the dataclass).
 """
 
 from __future__ import annotations

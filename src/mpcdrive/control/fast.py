@@ -81,7 +81,6 @@ from ..types import ControlOutput, WarmStart
 from .base import checked_obstacles, checked_road, checked_speed_cap
 
 from ..ocp.assembly import MODE_ITERATE, MODE_NO_PLAN, MODE_SHIFTED_PLAN, StepAssembly, follow_references_into
-from ..ocp.assembly import set_road_margin
 from ..ocp.obstacle_cost_compiled import OBS_GAUSSIAN, OBS_NONE, OBS_POTENTIAL, SIDE_NONE, cost_obstacle_arrays
 from ..ocp.stage_qp import new_stage_qp
 from ..solvers.condensed_setup import CondensedSettings, new_condensed_work
@@ -242,7 +241,7 @@ class CompiledLtvMpc(LtvMpc):
             road_left=f(road.left_m, dtype=float) if road is not None else np.zeros(1),
             road_right=f(road.right_m, dtype=float) if road is not None else np.zeros(1),
             road_period=float(road.period_m) if road is not None else 0.0,
-            road_margin=float(road.margin_m) if road is not None else 0.0,
+            road_margin=np.array([road.margin_m if road is not None else 0.0], dtype=float),
             half_width=0.5 * footprint.width_m,
             half_length=0.5 * footprint.length_m,
             body_offset=float(footprint.center_offset_m),
@@ -354,7 +353,7 @@ class CompiledLtvMpc(LtvMpc):
         self._road = checked_road(self._road, road)
         self._asm.road_left[...] = road.left_m
         self._asm.road_right[...] = road.right_m
-        set_road_margin(self._asm_struct, float(road.margin_m))
+        self._asm.road_margin[0] = road.margin_m
         if self.avoidance is not None:
             self.avoidance.road = road
         self.fallback.road = road

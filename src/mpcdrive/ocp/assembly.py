@@ -63,7 +63,8 @@ class StepAssembly:
     state weights ``Wq`` (N, nx, nx); ``accel``, ``steer``: input indices (-1: none); the friction
     circle (``friction``, its acceleration [m/s^2] and the ``wheelbase`` [m]); the road (``lane``;
     its tables ``road_s``, ``road_left``, ``road_right`` [m], ``road_period`` [m], the body kept
-    ``road_margin`` [m] inside; the body's ``half_width``, ``half_length`` and ``body_offset``
+    ``road_margin[0]`` [m] inside (an array: ``set_road`` changes it in place); the body's
+    ``half_width``, ``half_length`` and ``body_offset``
     [m]); the obstacle cost (``obstacle_form`` ``OBS_*``, the obstacles in the ``ob_*`` arrays of
     :func:`~mpcdrive.ocp.obstacle_cost_compiled.cost_obstacle_arrays`, at most ``omax``
     considered, within ``obstacle_influence`` [m]; weight, epsilon [m^2], sigma [m]; the
@@ -107,7 +108,7 @@ class StepAssembly:
     road_left: np.ndarray
     road_right: np.ndarray
     road_period: float
-    road_margin: float
+    road_margin: np.ndarray
     half_width: float
     half_length: float
     body_offset: float
@@ -158,13 +159,6 @@ class StepAssembly:
     def struct(self):
         """The compiled struct of this assembly (the same arrays)."""
         return to_struct(self, _build_step_assembly)
-
-
-@njit(cache=True)
-def set_road_margin(asm, margin_m):
-    """A new road margin [m] for the compiled assembly ``asm`` (its edges are arrays, written in
-    place)."""
-    asm.road_margin = margin_m
 
 
 @njit(cache=True, inline="always")
@@ -372,7 +366,7 @@ def linearize(asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, info):
             asm.half_length,
             asm.half_width,
             asm.body_offset,
-            asm.road_margin,
+            asm.road_margin[0],
             qp.lane_lo,
             qp.lane_hi,
             qp.lane_dlo,

@@ -108,18 +108,26 @@ def detour(asm, xref, sides):
     nsel, osel, oproj, N = asm.nsel, asm.osel, asm.oproj, asm.N
     s_arr, refs, e_ref, lane = asm.s_arr, asm.refs, asm.e_ref, asm.lane
     margin, hw, hl, ramp = asm.obstacle_margin, asm.half_width, asm.half_length, asm.detour_ramp
+    road_s, road_l, road_r, period, edge = (
+        asm.road_s,
+        asm.road_left,
+        asm.road_right,
+        asm.road_period,
+        asm.road_margin[0],
+    )
+    bound_r = asm.ob_bound_r
     need = margin + hw  # as Avoidance.passing_room_m for the cost formulations, less the edge's share
     for k in range(N + 1):
         e_ref[k] = 0.0
     any_shift = False
     for a in range(nsel):
         j = osel[a]
-        r = asm.ob_bound_r[j]
+        r = bound_r[j]
         s_ref, e_c = oproj[j, 0], oproj[j, 1]
         e_lo, e_hi = e_c - r, e_c + r
         if lane:
-            lim_l = _interp(asm.road_s, asm.road_left, s_ref, asm.road_period) - hw - asm.road_margin
-            lim_r = _interp(asm.road_s, asm.road_right, s_ref, asm.road_period) + hw + asm.road_margin
+            lim_l = _interp(road_s, road_l, s_ref, period) - hw - edge
+            lim_r = _interp(road_s, road_r, s_ref, period) + hw + edge
             room_left, room_right = lim_l - e_hi, e_lo - lim_r
         else:
             room_left = room_right = math.inf
