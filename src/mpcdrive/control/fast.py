@@ -230,7 +230,7 @@ class CompiledLtvMpc(LtvMpc):
             profile=f(prof, dtype=float),
             feedforward=config.feedforward == "curvature",
             paper_linearization=config.linearization == "paper",
-            Wq=np.stack([problem.Q] * (N - 1) + [problem.QN]).astype(float),
+            Wq=problem.stage_weights(),
             accel=list(model.input_names).index("accel") if "accel" in model.input_names else -1,
             steer=int(fric.i_steer) if fric is not None else -1,
             friction=fric is not None,

@@ -438,10 +438,9 @@ from . import avoidance_compiled as _avoidance_compiled, friction as _friction  
 from . import obstacle_cost_compiled as _obstacle_cost_compiled  # noqa: E402
 
 #: the source files whose code the assembly links in (and so any compiled step that calls it)
+_LINKED = (_kinematic, _dynamic, _models_compiled, _paths_compiled, _profile_compiled, _road, _friction)
 LINKED_SOURCES: list[str] = [
-    m.__file__
-    for m in (_kinematic, _dynamic, _models_compiled, _paths_compiled, _profile_compiled, _road, _friction)
-    if m.__file__ is not None
-] + [f for f in (_obstacle_cost_compiled.__file__, _avoidance_compiled.__file__) if f is not None]
+    m.__file__ for m in (*_LINKED, _obstacle_cost_compiled, _avoidance_compiled) if m.__file__ is not None
+]
 
 _jitcache.refresh(linearize, LINKED_SOURCES)  # one file: one fingerprint for all its functions

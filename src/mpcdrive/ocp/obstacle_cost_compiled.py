@@ -33,26 +33,32 @@ OBS_NONE, OBS_POTENTIAL, OBS_GAUSSIAN = 0, 1, 2
 
 
 def cost_obstacle_arrays(obstacles) -> dict[str, Any]:
-    """The ``ob_*`` fields of :class:`~mpcdrive.ocp.assembly.StepAssembly` for ``obstacles``
-    (their :class:`~mpcdrive.ocp.avoidance_compiled.ObstacleTable`, as C-contiguous float64 and
-    int64 arrays; one placeholder obstacle, never selected, when there are none)."""
+    """The ``ob_*`` fields of :class:`~mpcdrive.ocp.assembly.StepAssembly` for ``obstacles``: the
+    arrays of their :class:`~mpcdrive.ocp.avoidance_compiled.ObstacleTable` (``has_life`` as
+    int64: the containers hold float64 and int64 arrays)."""
     tab = obstacle_table(list(obstacles))
-    n = len(obstacles)
-    f, i = (lambda a: np.ascontiguousarray(a, dtype=np.float64)), (lambda a: np.ascontiguousarray(a, dtype=np.int64))
-    if n == 0:
-        return {
-            "ob_pose": np.zeros((1, 3)), "ob_vel": np.zeros((1, 2)), "ob_tr_lo": np.zeros(1, np.int64),
-            "ob_tr_hi": np.zeros(1, np.int64), "ob_tr_t": np.zeros(1), "ob_tr_d": np.zeros((1, 3)),
-            "ob_bound_r": np.zeros(1), "ob_life": np.array([[np.inf, -np.inf]]), "ob_has_life": np.ones(1, np.int64),
-            "ob_shape": np.zeros(1, np.int64), "ob_radius": np.zeros(1), "ob_verts": np.zeros((1, 3, 2)),
-            "ob_nverts": np.zeros(1, np.int64),
-        }  # fmt: skip
     return {
-        "ob_pose": f(tab.pose), "ob_vel": f(tab.vel), "ob_tr_lo": i(tab.tr_lo), "ob_tr_hi": i(tab.tr_hi),
-        "ob_tr_t": f(tab.tr_t), "ob_tr_d": f(tab.tr_d), "ob_bound_r": f(tab.bound_r), "ob_life": f(tab.life),
-        "ob_has_life": i(tab.has_life), "ob_shape": i(tab.shape), "ob_radius": f(tab.radius),
-        "ob_verts": f(tab.verts), "ob_nverts": i(tab.nverts),
-    }  # fmt: skip
+        f"ob_{k}": np.ascontiguousarray(getattr(tab, k), dtype=np.int64 if k == "has_life" else None)
+        for k in _COST_FIELDS
+    }
+
+
+#: the fields of an ObstacleTable the compiled cost reads
+_COST_FIELDS = (
+    "pose",
+    "vel",
+    "tr_lo",
+    "tr_hi",
+    "tr_t",
+    "tr_d",
+    "bound_r",
+    "life",
+    "has_life",
+    "shape",
+    "radius",
+    "verts",
+    "nverts",
+)
 
 
 @njit(cache=True)
@@ -70,18 +76,18 @@ def select_obstacles(asm, t_s, x, s0):
     )  # fmt: skip
     pkind, geo, tab_s, tab_xy, tab_h, tab_k = asm.path, asm.geo, asm.tab_s, asm.tab_xy, asm.tab_h, asm.tab_k
     px0, py0, _h0, _k0 = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s0)
-    verts = asm.ob_verts
-    # the motions' arrays as locals: a struct's field read in a loop costs a reference count
+    # the arrays as locals: a struct's field read in a loop costs a reference count
     pose, vel, tr_lo, tr_hi, tr_t, tr_d = asm.ob_pose, asm.ob_vel, asm.ob_tr_lo, asm.ob_tr_hi, asm.ob_tr_t, asm.ob_tr_d
+    shape, radius, verts, nverts = asm.ob_shape, asm.ob_radius, asm.ob_verts, asm.ob_nverts
     for a in range(nsel):
         j = osel[a]
         ox, oy, oyaw = pose_at(j, t_s, pose, vel, tr_lo, tr_hi, tr_t, tr_d)
-        if asm.ob_shape[j] == SHAPE_CIRCLE:
-            cx, cy, win = ox, oy, max(2.0, 2.0 * asm.ob_radius[j])
+        if shape[j] == SHAPE_CIRCLE:
+            cx, cy, win = ox, oy, max(2.0, 2.0 * radius[j])
         else:  # the world outline now: its vertex mean, and its extent for the search window
             co, so = math.cos(oyaw), math.sin(oyaw)
             sx, sy, lo, hi = 0.0, 0.0, math.inf, -math.inf
-            m = asm.ob_nverts[j]
+            m = nverts[j]
             for v in range(m):
                 wx = ox + co * verts[j, v, 0] - so * verts[j, v, 1]
                 wy = oy + so * verts[j, v, 0] + co * verts[j, v, 1]

@@ -179,6 +179,11 @@ class MpcProblem:
         if f is not None and not (math.isfinite(f) and f > 0):
             raise ValueError(f"friction_accel_mps2 must be a positive finite number or None, got {f!r}")
 
+    def stage_weights(self) -> np.ndarray:
+        """(N, nx, nx) the state weights of x_1..x_N: Q for the first N-1, QN for the last (a new
+        array)."""
+        return np.stack([self.Q] * (self.N - 1) + [self.QN]).astype(float)
+
     @property
     def lane(self) -> bool:
         """True when the problem has the soft road rows."""

@@ -127,7 +127,7 @@ class LtvQp:
         if self.n_sig:
             self._q_const[self.isig(1) : self.isig(1) + N] = pb.obstacle_slack_weight_l1
         self.q[:] = self._q_const
-        self._Qstack = np.stack([pb.Q] * (N - 1) + [pb.QN])  # (N, nx, nx) weights of x_1..x_N
+        self._Qstack = pb.stage_weights()  # (N, nx, nx) weights of x_1..x_N
 
     # -- constraints --------------------------------------------------------------------
     def _build_constraints(self):

@@ -85,10 +85,6 @@ def new_stage_qp(problem: MpcProblem, obstacle_rows: int = 0) -> StageQp:
     N, nx, nu = problem.N, problem.nx, problem.nu
     z = np.zeros
     f = np.ascontiguousarray
-
-    def weights():
-        return np.stack([problem.Q] * (N - 1) + [problem.QN]).astype(float)
-
     return StageQp(
         N=N,
         nx=nx,
@@ -96,7 +92,7 @@ def new_stage_qp(problem: MpcProblem, obstacle_rows: int = 0) -> StageQp:
         A=z((N, nx, nx)),
         B=z((N, nx, nu)),
         c=z((N, nx)),
-        We=weights(),
+        We=problem.stage_weights(),
         qt=z((N, nx)),
         xref=z((N + 1, nx)),
         R=f(problem.R, dtype=float),

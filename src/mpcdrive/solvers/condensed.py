@@ -348,18 +348,8 @@ def condensed_solve(qp, work, x, u_prev):
     lane_dlo, lane_dhi, Xlin, nrow, rowa, rowb = qp.lane_dlo, qp.lane_dhi, qp.Xlin, qp.nrow, qp.rowa, qp.rowb
     C, b, rowcol, rgrp, kpos = work.C, work.b, work.rowcol, work.rgrp, work.kpos
     xf, P, lam, Vb, S, T2, Gam = work.xf, work.P, work.lam, work.Vb, work.S, work.T2, work.Gam
-    H, g, z, L, J, Rq, d, zdir, r, uq = (
-        work.H,
-        work.g,
-        work.z,
-        work.L,
-        work.J,
-        work.Rq,
-        work.d,
-        work.zdir,
-        work.r,
-        work.uq,
-    )
+    H, g, z, L, J, Rq = work.H, work.g, work.z, work.L, work.J, work.Rq
+    d, zdir, r, uq = work.d, work.zdir, work.r, work.uq
     sq, rown, lamq, active, isact, gsum = work.sq, work.rown, work.lamq, work.active, work.isact, work.gsum
     Kg, kf, PA, Mg, Gg, qv = work.Kg, work.kf, work.PA, work.Mg, work.Gg, work.qv
     tol = work.tol
