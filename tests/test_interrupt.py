@@ -12,8 +12,8 @@ import pytest
 import mpcdrive.scenarios
 from mpcdrive.cli import main
 
-LONG = (
-    "id: long\nduration_s: 600.0\n"
+LONG = (  # long enough (minutes) that a signal the command lost shows as a resend, not an end
+    "id: long\nduration_s: 3600.0\n"
     "path: {type: circle, radius_m: 1.5}\n"
     "initial_state: {x_m: 1.5, y_m: 0.0, yaw_deg: 90}\n"
     "controller: {horizon: 10, Q: [1, 1, 1], R: [1]}\n"
@@ -127,3 +127,51 @@ def test_exception_mid_run_leaves_no_output_and_says_so(tmp_path, capsys, monkey
     assert sum(1 for line in err.splitlines() if line.startswith("mpcdrive:")) == 1
     assert not out.exists() and list(tmp_path.iterdir()) == []
     assert len(calls) == (2 if args[0] == "reproduce" else 1)
+
+
+def test_an_interrupt_lost_where_it_landed_still_stops_the_run(tmp_path, capsys, monkeypatch):
+    """The signal handler records the interrupt, so that a KeyboardInterrupt dropped by the code
+    it was raised in (C code that clears errors) still stops the run at its next step."""
+    from mpcdrive.cli import common
+
+    def swallowed(k, total):  # the handler ran inside code that drops the exception
+        if k == 20:
+            try:
+                common._interrupted(signal.SIGTERM, None)
+            except KeyboardInterrupt:
+                pass
+
+    real = mpcdrive.scenarios.run_experiment
+    steps = []
+
+    def run(exp, progress=None):
+        def both(k, total):
+            steps.append(k)
+            swallowed(k, total)
+            progress(k, total)
+
+        return real(exp, progress=both)
+
+    monkeypatch.setattr(mpcdrive.scenarios, "run_experiment", run)
+    monkeypatch.setattr(common, "_INTERRUPTS", [])
+    out = tmp_path / "out"
+    monkeypatch.setattr(sys, "argv", ["mpcdrive", "run", "paper-exp3", "--out", str(out), "-q"])
+    with pytest.raises(SystemExit) as ex:
+        with monkeypatch.context() as m:
+            m.setattr(os, "_exit", lambda code: sys.exit(code))  # in-process: no hard exit
+            main()
+    assert ex.value.code == 130
+    assert steps[-1] == 20  # stopped at the step the signal came in, not at the end
+    assert "interrupted; no partial output was kept" in capsys.readouterr().err
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_an_interrupt_recorded_after_the_last_step_commits_nothing(tmp_path, monkeypatch):
+    from mpcdrive.cli import common
+
+    monkeypatch.setattr(common, "_INTERRUPTS", [signal.SIGTERM])
+    out = tmp_path / "out"
+    with pytest.raises(KeyboardInterrupt):
+        with common._output_dir(out) as tmp:
+            (tmp / "metrics.json").write_text("{}")
+    assert not out.exists() and list(tmp_path.iterdir()) == []

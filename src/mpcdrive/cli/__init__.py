@@ -15,7 +15,7 @@ from typing import NoReturn
 
 import typer
 
-from .common import BadInput, OutputAbandoned, app
+from .common import BadInput, OutputAbandoned, _interrupted, app
 
 # the commands, registered on app in the order `mpcdrive --help` lists them
 from . import drive, studies, batch  # noqa: F401
@@ -79,10 +79,9 @@ def main() -> None:
     ``run --check`` that collided, left the road or missed its goal, 130 interrupted."""
     import signal
 
-    def _terminated(signum, frame):  # SIGTERM cleans up like Ctrl-C: no partial output is kept
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGTERM, _terminated)
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # (not when started ignoring it)
+        signal.signal(signal.SIGINT, _interrupted)
+    signal.signal(signal.SIGTERM, _interrupted)  # cleans up like Ctrl-C: no partial output is kept
     _log_to_stderr()
     _scenario_warnings_as_lines()
     if len(sys.argv) == 1:  # a bare `mpcdrive` shows the help as it is, not folded into a usage error

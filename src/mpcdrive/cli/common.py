@@ -25,6 +25,24 @@ app = typer.Typer(
 )
 
 
+_INTERRUPTS: list[int] = []  # the signals the console entry point took, in order
+
+
+def _interrupted(signum, frame) -> None:
+    """Ctrl-C and SIGTERM: record the signal, then raise KeyboardInterrupt (the command cleans up:
+    no partial output is kept). The record is checked again at every simulation step and before
+    an output directory is committed, since a KeyboardInterrupt raised from a handler is lost
+    where the code it lands in drops exceptions (C code that clears errors): a signal is never
+    taken and forgotten."""
+    _INTERRUPTS.append(signum)
+    raise KeyboardInterrupt
+
+
+def _raise_if_interrupted() -> None:
+    if _INTERRUPTS:
+        raise KeyboardInterrupt
+
+
 def _print_version(value: bool) -> None:
     if value:
         from .. import __version__
@@ -48,9 +66,10 @@ class BadInput(Exception):
 
 @contextmanager
 def _progress(enabled: bool, label: str, total: int):
-    """A progress bar on stderr (a no-op callback when disabled)."""
+    """A progress bar on stderr; enabled or not, the step callback raises KeyboardInterrupt once
+    an interrupt was recorded (:func:`_interrupted`)."""
     if not enabled:
-        yield None
+        yield lambda k, n: _raise_if_interrupted()
         return
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
@@ -67,6 +86,7 @@ def _progress(enabled: bool, label: str, total: int):
 
         def cb(k: int, n: int) -> None:
             now = time.monotonic()
+            _raise_if_interrupted()
             if k == n or now - last[0] > 0.1:
                 last[0] = now
                 prog.update(task, completed=k)
@@ -121,7 +141,7 @@ def _run_into(spec, out_dir: Path, show_progress: bool, source: str | None = Non
         return run_into(
             spec,
             out_dir,
-            (lambda label, n: _progress(True, label, n)) if show_progress else None,
+            lambda label, n: _progress(show_progress, label, n),
             source=source,
             extra_outputs=extra_outputs,
         )
@@ -141,6 +161,7 @@ def _output_dir(out_dir: Path):
     with atomic_output_dir(out_dir) as tmp:
         try:
             yield tmp
+            _raise_if_interrupted()  # not committed after an interrupt, wherever it landed
         except (BadInput, KeyboardInterrupt, OutputAbandoned):
             raise
         except Exception as e:
