@@ -76,7 +76,7 @@ def test_projected_gradient_reaches_the_osqp_optimum_on_the_dynamic_ltv_problem(
     x = np.array([p[0] - 0.15 * math.sin(h), p[1] + 0.15 * math.cos(h), h + 0.1, float(prof.speed(s)), 0.0, 0.0])
     warm = mpc.initial_warm(x)
     d = mpc.prepare(x, warm)
-    mpc.qp.update(d.x, d.Ad, d.Bd, d.c, d.xref, d.uref, warm.u_prev, d.lane_normal, d.lane_offset)
+    mpc.qp.load_stage(d.qp, d.x, warm.u_prev)
     osqp = mpc.backend.solve()
     assert osqp.status == "ok"
     fast = ProjectedGradientBackend(mpc.qp, ProjectedGradientSettings(max_iter=20000, tol=1e-10))

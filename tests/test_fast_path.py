@@ -123,7 +123,7 @@ def test_prediction_substeps_are_compiled(linearization):
         warm = ref.step(x, warm).warm
     # three substeps are not one: the test above would see a model that ignored them
     one = PythonLtvMpc(b.model, b.path, b.problem, replace(cfg, prediction_substeps=1), "osqp")
-    assert np.abs(one.prepare(x, warm).Ad - d.Ad).max() > 1e-6
+    assert np.abs(one.prepare(x, warm).qp.A - d.qp.A).max() > 1e-6
 
 
 #: scenarios whose closed loop on OSQP at its scenario tolerance (1e-5) parts from OSQP's own at

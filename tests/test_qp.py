@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 
 from mpcdrive.models import KinematicBicycle3, KinematicBicycle4, discrete_jacobians, discrete_step
 from mpcdrive.ocp import LtvQp, MpcProblem
+from mpcdrive.ocp.stage_qp import new_stage_qp
 from mpcdrive.scene.road import Road
 from mpcdrive.solvers import OsqpBackend, OsqpSettings
 
@@ -35,9 +36,22 @@ def lane_rows(pb: MpcProblem):
     return (None, None) if w is None else (np.full(pb.N, -w), np.full(pb.N, w))
 
 
+def load(qp: LtvQp, x0, Ad, Bd, c, xref, uref, u_prev, lane_normal=None, lane_offset=None, lane_lo=None, lane_hi=None):
+    """Write one step into ``qp`` as the controllers do, through a stage QP: the affine model,
+    the references with the problem's weights (qt = We xref), the road rows of the lane."""
+    pb = qp.problem
+    st = new_stage_qp(pb, int(pb.obstacle_rows))
+    st.A[...], st.B[...], st.c[...], st.xref[...], st.uref[...] = Ad, Bd, c, xref, uref
+    np.einsum("kij,kj->ki", st.We, st.xref[1:], out=st.qt)
+    if st.lane:
+        st.lane_n[...], st.lane_b[...], st.lane_lo[...], st.lane_hi[...] = lane_normal, lane_offset, lane_lo, lane_hi
+    qp.load_stage(st, x0, u_prev)
+    return st
+
+
 def solve_osqp(pb: MpcProblem, x0, Ad, Bd, c, xref, uref, u_prev, lane_normal=None, lane_offset=None):
     qp = LtvQp(pb)
-    qp.update(x0, Ad, Bd, c, xref, uref, u_prev, lane_normal, lane_offset, *lane_rows(pb))
+    load(qp, x0, Ad, Bd, c, xref, uref, u_prev, lane_normal, lane_offset, *lane_rows(pb))
     res = OsqpBackend(qp, TIGHT).solve()
     assert res.status == "ok", res.status
     assert res.ok
@@ -373,7 +387,8 @@ def compare_with_cvxpy(pb, d, tol=1e-4):
 def test_qp_matches_cvxpy_generic(seed, lane, rate, xbounds, rc):
     pb, d = make_instance(seed, kind="generic", lane=lane, rate=rate, xbounds=xbounds, rc=rc)
     qp = LtvQp(pb)
-    qp.update(
+    load(
+        qp,
         d["x0"],
         d["Ad"],
         d["Bd"],
@@ -489,7 +504,7 @@ def test_ltvqp_pattern_fixed_and_updates_in_place():
         offset = rng.normal(size=N)
         x0 = rng.normal(size=nx)
         u_prev = rng.normal(size=nu)
-        qp.update(x0, Ad, Bd, c, d["xref"], d["uref"], u_prev, normal, offset, *lane_rows(pb))
+        load(qp, x0, Ad, Bd, c, d["xref"], d["uref"], u_prev, normal, offset, *lane_rows(pb))
         assert qp.A.shape == shape and qp.A.nnz == nnz
         np.testing.assert_array_equal(qp.A.indices, indices)
         np.testing.assert_array_equal(qp.A.indptr, indptr)
@@ -548,7 +563,7 @@ def test_backend_updates_match_fresh_solves():
         dd["u_prev"] = np.clip(d["u_prev"] + 0.02 * rng.normal(size=pb.nu), pb.u_min, pb.u_max)
         ang = rng.uniform(-3, 3, pb.N)
         dd["lane_normal"] = np.column_stack([-np.sin(ang), np.cos(ang)])
-        qp.update(**dd, **dict(zip(("lane_lo", "lane_hi"), lane_rows(pb))))
+        load(qp, **dd, **dict(zip(("lane_lo", "lane_hi"), lane_rows(pb))))
         res = backend.solve(*(prev if prev is not None else (None, None)))
         fresh = solve_osqp(pb, **dd)
         assert res.status == "ok"
@@ -634,11 +649,19 @@ def test_mpc_problem_normalizes_inputs():
     MpcProblem(nx=1, nu=1, N=3, dt_s=0.1, Q=1.0, R=0.0, u_min=-1, u_max=1)
 
 
-def test_lane_update_requires_normals():
+@pytest.mark.parametrize("other", ["horizon", "no road", "obstacle rows"])
+def test_a_stage_qp_of_another_problem_is_refused(other):
+    from dataclasses import replace
+
     pb, d = make_instance(3, kind="kinematic", lane=True)
     qp = LtvQp(pb)
-    with pytest.raises(ValueError):
-        qp.update(d["x0"], d["Ad"], d["Bd"], d["c"], d["xref"], d["uref"], d["u_prev"])
+    wrong = {
+        "horizon": replace(pb, N=pb.N + 1),
+        "no road": replace(pb, road=None),
+        "obstacle rows": replace(pb, obstacle_rows=2),
+    }[other]
+    with pytest.raises(ValueError, match="does not fit this QP"):
+        qp.load_stage(new_stage_qp(wrong, int(wrong.obstacle_rows)), d["x0"], d["u_prev"])
 
 
 def test_ctrl_c_inside_an_osqp_solve_is_raised_not_a_failed_step(monkeypatch):
@@ -650,7 +673,7 @@ def test_ctrl_c_inside_an_osqp_solve_is_raised_not_a_failed_step(monkeypatch):
     pb, d = make_instance(3, kind="kinematic", lane=False, rate=True, xbounds=False, rc=False)
     qp = LtvQp(pb)
     backend = OsqpBackend(qp, TIGHT)
-    qp.update(**d)
+    load(qp, **d)
     assert backend.solve().status == "ok"
     real = backend._solver.solve
 

@@ -173,12 +173,12 @@ def test_road_rows_are_linearized_where_the_car_is_not_where_its_references_run(
     x = np.array([0.0, 0.0, 0.0, 0.0])
     warm = osqp.initial_warm(x)
     d = osqp.prepare(x, warm)
-    assert d.xref[-1, 2] > 0.5  # the references' heading, well round the bend
-    assert np.abs(d.Xlin[:, 0]).max() < 1e-9  # the car stays where it stands
+    assert d.qp.xref[-1, 2] > 0.5  # the references' heading, well round the bend
+    assert np.abs(d.qp.Xlin[:, 0]).max() < 1e-9  # the car stays where it stands
     h = float(osqp.path.heading(d.s_m))  # the path where the car stands (heading 0 to 2e-5)
-    np.testing.assert_allclose(d.lane_normal, np.tile([-math.sin(h), math.cos(h)], (osqp.N, 1)), atol=1e-9)
-    np.testing.assert_allclose(d.lane_offset, d.lane_normal @ osqp.path.position(d.s_m), atol=1e-9)
+    np.testing.assert_allclose(d.qp.lane_n, np.tile([-math.sin(h), math.cos(h)], (osqp.N, 1)), atol=1e-9)
+    np.testing.assert_allclose(d.qp.lane_b, d.qp.lane_n @ osqp.path.position(d.s_m), atol=1e-9)
     assert abs(h) < 1e-4
     fast.step(x, warm)
-    np.testing.assert_allclose(fast._qp.lane_n, d.lane_normal, atol=1e-9)
-    np.testing.assert_allclose(fast._qp.lane_b, d.lane_offset, atol=1e-9)
+    np.testing.assert_allclose(fast._qp.lane_n, d.qp.lane_n, atol=1e-9)
+    np.testing.assert_allclose(fast._qp.lane_b, d.qp.lane_b, atol=1e-9)

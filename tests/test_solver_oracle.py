@@ -21,6 +21,7 @@ documentation, not taken from either controller's matrices.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 from dataclasses import dataclass
@@ -197,17 +198,17 @@ class Oracle:
 def road_excess(d, X):
     """(N,) how far the lateral offsets of X[1:] lie outside the road rows: the documented
     ``lo_k + dlo_k (yaw_k - yawbar_k) <= n_k . p_k - offset_k <= hi_k + dhi_k (yaw_k - yawbar_k)``."""
-    dlo, dhi, ybar = d.lane_slopes
-    e = np.einsum("ki,ki->k", d.lane_normal, X[1:, :2]) - d.lane_offset
+    dlo, dhi, ybar = d.qp.lane_dlo, d.qp.lane_dhi, d.qp.Xlin[1:, 2]
+    e = np.einsum("ki,ki->k", d.qp.lane_n, X[1:, :2]) - d.qp.lane_b
     dy = X[1:, 2] - ybar
-    return np.maximum.reduce([e - d.lane_hi - dhi * dy, d.lane_lo + dlo * dy - e, np.zeros_like(e)])
+    return np.maximum.reduce([e - d.qp.lane_hi - dhi * dy, d.qp.lane_lo + dlo * dy - e, np.zeros_like(e)])
 
 
 def obstacle_excess(d, X):
     """(N,) the largest violation of the obstacle rows ``a . (x_k, y_k, yaw_k) >= b`` per step."""
-    used = np.isfinite(d.rows_b)
-    lhs = np.einsum("kmi,ki->km", d.rows_a, X[1:, :3])
-    gap = np.where(used, d.rows_b - lhs, -np.inf)
+    used = np.isfinite(d.qp.rowb)
+    lhs = np.einsum("kmi,ki->km", d.qp.rowa, X[1:, :3])
+    gap = np.where(used, d.qp.rowb - lhs, -np.inf)
     return np.maximum(gap.max(axis=1), 0.0)
 
 
@@ -216,11 +217,11 @@ def documented_cost(pb: MpcProblem, d, X, U, eps, sig, u_prev) -> float:
     N = pb.N
     J = 0.0
     for k in range(1, N + 1):
-        e = X[k] - d.xref[k]
+        e = X[k] - d.qp.xref[k]
         J += e @ (pb.QN if k == N else pb.Q) @ e
     up = u_prev
     for k in range(N):
-        du = U[k] - d.uref[k]
+        du = U[k] - d.qp.uref[k]
         dd = U[k] - up
         J += du @ pb.R @ du + dd @ pb.Rc @ dd
         up = U[k]
@@ -242,15 +243,15 @@ def solve_oracle(pb: MpcProblem, d, u_prev) -> Oracle:
     sig = cp.Variable(N)
     cons = [X[0] == d.x, eps >= 0, sig >= 0]
     for k in range(N):
-        cons.append(X[k + 1] == d.Ad[k] @ X[k] + d.Bd[k] @ U[k] + d.c[k])
+        cons.append(X[k + 1] == d.qp.A[k] @ X[k] + d.qp.B[k] @ U[k] + d.qp.c[k])
     cost = 0
     for k in range(1, N + 1):
-        cost += cp.quad_form(X[k] - d.xref[k], cp.psd_wrap(pb.QN if k == N else pb.Q))
+        cost += cp.quad_form(X[k] - d.qp.xref[k], cp.psd_wrap(pb.QN if k == N else pb.Q))
     bounds, rates = [], []
     dmax = pb.du_max_per_s * pb.dt_s
     for k in range(N):
         prev = u_prev if k == 0 else U[k - 1]
-        cost += cp.quad_form(U[k] - d.uref[k], cp.psd_wrap(pb.R)) + cp.quad_form(U[k] - prev, cp.psd_wrap(pb.Rc))
+        cost += cp.quad_form(U[k] - d.qp.uref[k], cp.psd_wrap(pb.R)) + cp.quad_form(U[k] - prev, cp.psd_wrap(pb.Rc))
         bounds += [U[k] >= pb.u_min, U[k] <= pb.u_max]
         rates += [U[k] - prev <= dmax, prev - U[k] <= dmax]
     cons += bounds + rates
@@ -262,17 +263,17 @@ def solve_oracle(pb: MpcProblem, d, u_prev) -> Oracle:
                 cons.append(X[k, i] <= pb.x_max[i])
     # the soft road rows (one slack per step for both sides) and the obstacle rows (one slack per
     # step shared by its rows; b = -inf: an unused row)
-    dlo, dhi, ybar = d.lane_slopes
+    dlo, dhi, ybar = d.qp.lane_dlo, d.qp.lane_dhi, d.qp.Xlin[1:, 2]
     obstacle_rows = []
     for k in range(1, N + 1):
-        e = d.lane_normal[k - 1] @ X[k, :2] - d.lane_offset[k - 1]
+        e = d.qp.lane_n[k - 1] @ X[k, :2] - d.qp.lane_b[k - 1]
         dy = X[k, 2] - ybar[k - 1]
         cons += [
-            e <= d.lane_hi[k - 1] + dhi[k - 1] * dy + eps[k - 1],
-            e >= d.lane_lo[k - 1] + dlo[k - 1] * dy - eps[k - 1],
+            e <= d.qp.lane_hi[k - 1] + dhi[k - 1] * dy + eps[k - 1],
+            e >= d.qp.lane_lo[k - 1] + dlo[k - 1] * dy - eps[k - 1],
         ]
-        for m in np.flatnonzero(np.isfinite(d.rows_b[k - 1])):
-            obstacle_rows.append(d.rows_a[k - 1, m] @ X[k, :3] + sig[k - 1] >= d.rows_b[k - 1, m])
+        for m in np.flatnonzero(np.isfinite(d.qp.rowb[k - 1])):
+            obstacle_rows.append(d.qp.rowa[k - 1, m] @ X[k, :3] + sig[k - 1] >= d.qp.rowb[k - 1, m])
     cons += obstacle_rows
     cost += pb.lane_slack_weight * cp.sum_squares(eps) + pb.lane_slack_weight_l1 * cp.sum(eps)
     cost += pb.obstacle_slack_weight * cp.sum_squares(sig) + pb.obstacle_slack_weight_l1 * cp.sum(sig)
@@ -425,54 +426,37 @@ def pack(o: Oracle) -> np.ndarray:
 def constant_cost(pb: MpcProblem, d, u_prev) -> float:
     """The documented cost's terms that do not depend on the decision variables (the QP drops them)."""
     N = pb.N
-    c = sum(d.xref[k] @ (pb.QN if k == N else pb.Q) @ d.xref[k] for k in range(1, N + 1))
-    c += sum(d.uref[k] @ pb.R @ d.uref[k] for k in range(N)) + u_prev @ pb.Rc @ u_prev
+    c = sum(d.qp.xref[k] @ (pb.QN if k == N else pb.Q) @ d.qp.xref[k] for k in range(1, N + 1))
+    c += sum(d.qp.uref[k] @ pb.R @ d.qp.uref[k] for k in range(N)) + u_prev @ pb.Rc @ u_prev
     return float(c)
 
 
 # --------------------------------------------------------------------------------------------
 # one step, both controllers against the oracle
 # --------------------------------------------------------------------------------------------
+def same_stage_qp(a, b, atol=1e-10) -> None:
+    """Two stage QPs (:class:`~mpcdrive.ocp.stage_qp.StageQp`) agree field by field."""
+    for f in dataclasses.fields(b):
+        np.testing.assert_allclose(getattr(a, f.name), getattr(b, f.name), rtol=0, atol=atol, err_msg=f"qp.{f.name}")
+
+
 def same_instance(fast: CompiledLtvMpc, d) -> None:
-    """The compiled controller built the instance the oracle solves: the same affine model,
-    references and rows as the OSQP controller's ``prepare``."""
-    qp = fast._qp
-    pairs = [
-        (qp.A, d.Ad),
-        (qp.B, d.Bd),
-        (qp.c, d.c),
-        (qp.xref, d.xref),
-        (qp.uref, d.uref),
-        (qp.lane_n, d.lane_normal),
-        (qp.lane_b, d.lane_offset),
-        (qp.lane_lo, d.lane_lo),
-        (qp.lane_hi, d.lane_hi),
-        (qp.lane_dlo, d.lane_slopes[0]),
-        (qp.lane_dhi, d.lane_slopes[1]),
-        (qp.Xlin, d.Xlin),
-        (qp.rowa, d.rows_a),
-    ]
-    for got, v in pairs:
-        np.testing.assert_allclose(got, v, rtol=0, atol=1e-10)
-    used = np.isfinite(d.rows_b)
-    np.testing.assert_array_equal(np.isfinite(qp.rowb), used)
-    np.testing.assert_allclose(qp.rowb[used], d.rows_b[used], rtol=0, atol=1e-10)
+    """The compiled controller built the instance the oracle solves: the stage QP of the OSQP
+    controller's ``prepare``, every field."""
+    same_stage_qp(fast._qp, d.qp)
 
 
 def same_step_data(dc, d, atol=1e-10, sides=True) -> None:
-    """The compiled assembly's stage QP ``dc`` is the OSQP controller's ``d``
-    (:class:`~mpcdrive.control.mpc.StepData`, every field; None where ``d`` has None; the
+    """The compiled assembly's step ``dc`` is the OSQP controller's ``d``
+    (:class:`~mpcdrive.control.mpc.StepData`, every field, and every field of its stage QP; the
     passing sides unless ``sides`` is False: the compiled cost formulations keep them only for
     a detour, where they matter)."""
     for f in dataclasses.fields(d):
         a, b = getattr(dc, f.name), getattr(d, f.name)
-        if b is None:
-            assert a is None, f.name
-        elif f.name == "sides":
+        if f.name == "sides":
             assert not sides or a == b
-        elif isinstance(b, tuple):
-            for ai, bi in zip(a, b, strict=True):
-                np.testing.assert_allclose(ai, bi, rtol=0, atol=atol, err_msg=f.name)
+        elif f.name == "qp":
+            same_stage_qp(a, b, atol)
         else:
             np.testing.assert_allclose(a, b, rtol=0, atol=atol, err_msg=f.name)
 
@@ -499,14 +483,14 @@ def check_step(case: Case, x, warm) -> tuple[Oracle, object]:
     solution and the output the next step starts from (the OSQP controller's)."""
     ref, fast = case.ref, case.fast
     pb = ref.problem  # with the obstacle rows the controller added
-    d = ref.prepare(x, warm)
+    d = copy.deepcopy(ref.prepare(x, warm))  # (its arrays are the controller's: the step rewrites them)
     o = solve_oracle(pb, d, warm.u_prev)
     assert documented_cost(pb, d, o.X, o.U, o.eps, o.sig, warm.u_prev) == pytest.approx(o.J, rel=1e-9, abs=1e-9)
     # the QP the OSQP controller assembles for this step: the oracle's optimum is feasible for it
     # (to its own primal residual: the rows are the same up to their sign and order, the factor 10
     # is room for the rows' rounding), and its objective there is the documented cost less the
     # constant terms
-    ref.qp.load_step(d, warm.u_prev)
+    ref.qp.load_stage(d.qp, d.x, warm.u_prev)
     qp = ref.qp
     z = pack(o)
     s = sensitivity(qp, z)

@@ -138,7 +138,7 @@ def test_compiled_assembly_is_the_osqp_controllers_stage_qp_and_drives_the_same_
         d = ref.prepare(x, warm)
         rows = case in ("hard", "corridor")
         same_step_data(fo.prepare(x, warm), d, atol=ASSEMBLY_TOL, sides=rows)
-        cost_terms |= d.H is not None and bool(np.abs(d.H).max() > 1e-6)
+        cost_terms |= bool(np.abs(d.qp.We - ref.problem.stage_weights()).max() > 1e-6)
         if case == "sqp" and k == 3:  # an SQP iterate: re-linearized at a plan of its own
             res = ref._solve(d, warm)
             around = (res.X.copy(), res.U.copy())
@@ -280,7 +280,7 @@ def test_replaced_recorded_obstacles_reach_the_compiled_cost():
             fo.set_obstacles(new)
         d = ref.prepare(x, warm)
         same_step_data(fo.prepare(x, warm), d, atol=ASSEMBLY_TOL, sides=False)
-        used += k >= 3 and d.H is not None and bool(np.abs(d.H).max() > 1e-6)
+        used += k >= 3 and bool(np.abs(d.qp.We - ref.problem.stage_weights()).max() > 1e-6)
         a = ref.step(x, warm)
         x = discrete_step(model, x, a.u, 0.1, "rk4")
         warm = a.warm

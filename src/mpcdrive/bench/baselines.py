@@ -56,13 +56,13 @@ class CvxpyRebuildMpc:
         dmax = pb.du_max_per_s * pb.dt_s  # largest input change per step
         cons = [X[0] == d.x]
         for k in range(N):
-            cons.append(X[k + 1] == d.Ad[k] @ X[k] + d.Bd[k] @ U[k] + d.c[k])
-            cost += cp.quad_form(U[k] - d.uref[k], pb.R)
+            cons.append(X[k + 1] == d.qp.A[k] @ X[k] + d.qp.B[k] @ U[k] + d.qp.c[k])
+            cost += cp.quad_form(U[k] - d.qp.uref[k], pb.R)
             prev = warm.u_prev if k == 0 else U[k - 1]
             if np.any(pb.Rc):
                 cost += cp.quad_form(U[k] - prev, pb.Rc)
             W = pb.QN if k == N - 1 else pb.Q
-            cost += cp.quad_form(X[k + 1] - d.xref[k + 1], W)
+            cost += cp.quad_form(X[k + 1] - d.qp.xref[k + 1], W)
             for i in range(nu):
                 if np.isfinite(dmax[i]):  # the input-rate rows
                     cons.append(cp.abs(U[k, i] - prev[i]) <= dmax[i])
@@ -198,22 +198,22 @@ class CasadiIpoptMpc:
         d = self.core.prepare(x, warm)
         opti = self.opti
         opti.set_value(self.x0, d.x)
-        opti.set_value(self.xref, d.xref.T)
-        opti.set_value(self.uref, d.uref.T)
+        opti.set_value(self.xref, d.qp.xref.T)
+        opti.set_value(self.uref, d.qp.uref.T)
         opti.set_value(self.uprev, warm.u_prev)
         if self.lane_n is not None:
-            opti.set_value(self.lane_n, d.lane_normal.T)
-            opti.set_value(self.lane_b, d.lane_offset)
-            dlo, dhi, yaw = d.lane_slopes
-            opti.set_value(self.lane_rows, np.vstack([d.lane_lo, d.lane_hi, dlo, dhi, yaw]))
+            opti.set_value(self.lane_n, d.qp.lane_n.T)
+            opti.set_value(self.lane_b, d.qp.lane_b)
+            dlo, dhi, yaw = d.qp.lane_dlo, d.qp.lane_dhi, d.qp.Xlin[1:, 2]
+            opti.set_value(self.lane_rows, np.vstack([d.qp.lane_lo, d.qp.lane_hi, dlo, dhi, yaw]))
         if self.rows_a is not None:
             for k, a in enumerate(self.rows_a):
-                opti.set_value(a, d.rows_a[k])
+                opti.set_value(a, d.qp.rowa[k])
             # an unused row (b = -inf) as a row that always holds
-            opti.set_value(self.rows_b, np.where(np.isfinite(d.rows_b), d.rows_b, _UNUSED_ROW_B).T)
+            opti.set_value(self.rows_b, np.where(np.isfinite(d.qp.rowb), d.qp.rowb, _UNUSED_ROW_B).T)
         for ob, c in self.obs_c:
             opti.set_value(c, np.array([ob.pose_at(warm.t_s + (k + 1) * self.core.dt_s)[:2] for k in range(self.N)]).T)
-        opti.set_initial(self.X, np.vstack([d.Xbar, d.Fbar[-1:]]).T)
+        opti.set_initial(self.X, d.qp.Xlin.T)
         opti.set_initial(self.U, d.Ubar.T)
         try:
             sol = opti.solve()

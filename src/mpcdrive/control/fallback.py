@@ -148,7 +148,7 @@ class FallbackLadder:
     for ``relax``, ``backend.settings`` -- unless ``relax`` is given: a callable ``(d, warm)``
     returning ``(u, WarmStart, X_pred)`` from the controller's own relaxed solve, or None when it
     fails. The rungs read ``x`` and ``s_m`` of the step data ``d`` (and, for the built-in
-    ``relax``, the linearization: :class:`~mpcdrive.control.mpc.StepData`).
+    ``relax``, its stage QP and linearization: :class:`~mpcdrive.control.mpc.StepData`).
     """
 
     def __init__(
@@ -214,9 +214,8 @@ class FallbackLadder:
         qp, be = self.relax_qp, self.relax_backend
         assert qp is not None and be is not None  # built in __init__ for the relax rung without relax_fn
         # obstacles stay in the relaxed problem (their slacks keep it feasible)
-        qp.load_step(d, warm.u_prev)
-        Xws = np.vstack([d.Xbar, d.Fbar[-1:]])
-        res: SolveResult = be.solve(Xws, d.Ubar)
+        qp.load_stage(d.qp, d.x, warm.u_prev)
+        res: SolveResult = be.solve(d.qp.Xlin, d.Ubar)
         if not (res.ok and np.all(np.isfinite(res.U)) and np.all(np.isfinite(res.X))):
             return None
         u = self._bound(res.U[0], warm.u_prev)

@@ -477,9 +477,9 @@ class CompiledLtvMpc(LtvMpc):
         """The stage QP of one step, as :meth:`LtvMpc.prepare <mpcdrive.control.mpc.PythonLtvMpc.prepare>`
         gives it (:class:`~mpcdrive.control.mpc.StepData`) but assembled by the compiled step:
         projection, references, linearization, road rows, obstacle rows or cost terms, per-stage
-        input bounds. ``around=(X, U)`` re-linearizes at an SQP iterate. The arrays are views of
-        the controller's buffers, valid until its next step; a step whose model or references are
-        not finite gives NaN dynamics (any solver then fails it)."""
+        input bounds. ``around=(X, U)`` re-linearizes at an SQP iterate. The stage QP is the one
+        the compiled step solves, valid until the controller's next step; a step whose model or
+        references are not finite gives NaN dynamics (any solver then fails it)."""
         x = self._check_state(x)
         u_prev = self._check_warm(warm)
         N, nx, nu = self.N, self.nx, self.nu
@@ -497,45 +497,10 @@ class CompiledLtvMpc(LtvMpc):
         code, sides = self._run(
             x, s_guess, float(warm.t_s), u_prev, X, U, mode, warm.sides, np.empty(self._out_size), last=STAGE_COST
         )
-        a, qp, info = self._asm, self._qp, self._info
+        qp, info = self._qp, self._info
         if code != 0:  # a non-finite model or references: no usable stage QP
             qp.c[...] = math.nan
-        Wq, xref = a.Wq, qp.xref
-        H = g = None
-        if self.avoidance is not None and self._rows is None:  # the cost's model, added to the state weights
-            H = 2.0 * (qp.We[:, :2, :2] - Wq[:, :2, :2])
-            g = -2.0 * (qp.qt[:, :2] - np.einsum("kij,kj->ki", Wq, xref[1:])[:, :2])
-        road = self._road is not None
-        rows = self._rows is not None
-        friction = a.friction
-        Xlin = qp.Xlin
-        return StepData(
-            x,
-            float(info[0]),
-            float(info[1]),
-            float(info[2]),
-            xref,
-            qp.uref,
-            a.Xbar,
-            a.Ubar,
-            a.F,
-            qp.A,
-            qp.B,
-            qp.c,
-            qp.lane_n,
-            qp.lane_b,
-            Xlin,
-            qp.lane_lo if road else None,
-            qp.lane_hi if road else None,
-            qp.rowa if rows else None,
-            qp.rowb if rows else None,
-            H,
-            g,
-            sides,
-            (qp.lane_dlo, qp.lane_dhi, Xlin[1:, 2]) if road else None,
-            qp.ulo if friction else None,
-            qp.uhi if friction else None,
-        )
+        return StepData(x, float(info[0]), float(info[1]), float(info[2]), qp, self._asm.Ubar, sides)
 
     # -- one control step -----------------------------------------------------------------------
     def step(self, x, warm: WarmStart) -> ControlOutput:

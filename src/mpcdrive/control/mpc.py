@@ -24,6 +24,7 @@ from ..ocp.follow import follow_references
 from ..ocp.friction import friction_bounds
 from ..ocp.problem import MpcProblem
 from ..ocp.road_rows import RoadRows
+from ..ocp.stage_qp import StageQp, new_stage_qp
 from ..paths.base import ReferencePath
 from ..scene.footprint import Footprint
 from ..scene.obstacles import Obstacle
@@ -54,44 +55,20 @@ def _shift_references(xref: np.ndarray, refs: np.ndarray, s_arr: np.ndarray, e: 
 
 @dataclass(frozen=True)
 class StepData:
-    """What :meth:`LtvMpc.prepare` computes for one step (arrays in the model's units).
-
-    x : (nx,) measured state; s_m, e_y_m, e_psi_rad : its path coordinates; xref : (N+1, nx) and
-    uref : (N, nu) references; Xbar, Ubar : (N, nx), (N, nu) linearization points; Fbar : (N, nx)
-    the model's prediction from them; Ad, Bd, c : the affine model x+ = Ad x + Bd u + c;
-    lane_normal : (N, 2), lane_offset : (N,) the lane rows (used when the problem has a lane);
-    Xlin : (N+1, nx) linearization trajectory; lane_lo/hi : (N,) road bounds [m] (the body
-    inside the road, narrowed by a corridor) with ``lane_slopes`` (their yaw slopes and
-    linearization yaws, :class:`~mpcdrive.ocp.road_rows.RoadRows`);
-    rows_a/rows_b : obstacle half-planes; H, g : position cost model; sides : passing sides;
-    u_lo, u_hi : (N, nu) per-stage input bounds of the friction circle (None: the problem's).
-    """
+    """One step as a controller's ``prepare`` gives it: the measured state ``x`` (nx,), its path
+    coordinates ``s_m`` [m], ``e_y_m`` [m], ``e_psi_rad`` [rad], the step's stage QP ``qp``
+    (:class:`~mpcdrive.ocp.stage_qp.StageQp`: the affine model, costs, bounds, road and
+    obstacle rows and the linearization trajectory ``qp.Xlin``, which every solver consumes as
+    it is), the linearization inputs ``Ubar`` (N, nu) and the passing sides for the next step.
+    The arrays are the controller's, valid until its next step."""
 
     x: np.ndarray
     s_m: float
     e_y_m: float
     e_psi_rad: float
-    xref: np.ndarray
-    uref: np.ndarray
-    Xbar: np.ndarray
+    qp: StageQp
     Ubar: np.ndarray
-    Fbar: np.ndarray
-    Ad: np.ndarray
-    Bd: np.ndarray
-    c: np.ndarray
-    lane_normal: np.ndarray
-    lane_offset: np.ndarray
-    Xlin: np.ndarray
-    lane_lo: np.ndarray | None = None
-    lane_hi: np.ndarray | None = None
-    rows_a: np.ndarray | None = None
-    rows_b: np.ndarray | None = None
-    H: np.ndarray | None = None
-    g: np.ndarray | None = None
     sides: tuple = ()
-    lane_slopes: tuple | None = None
-    u_lo: np.ndarray | None = None
-    u_hi: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -167,11 +144,13 @@ class MpcConfig:
 
 class StageQpSolve:
     """The step of a controller that assembles each step's stage QP (its ``prepare``, giving
-    :class:`StepData`) and hands it to a solver ``backend``: OSQP or projected gradient on the
-    sparse layout ``qp`` (an :class:`~mpcdrive.ocp.qp.LtvQp`), or the condensed solver, which
-    takes the StepData as it is; with the SQP iterations of ``config`` and the fallback ladder
-    after a failed solve. The solver only solves: it never rebuilds the problem and knows no model. Needs ``prepare``, ``qp``, ``backend``,
-    ``config``, ``problem``, ``dt_s``, ``fallback`` and ``_du_step`` on the instance."""
+    :class:`StepData` with the :class:`~mpcdrive.ocp.stage_qp.StageQp`) and hands it to a
+    solver ``backend``: OSQP or projected gradient on the sparse layout ``qp`` (an
+    :class:`~mpcdrive.ocp.qp.LtvQp`, written from the stage QP), or the condensed solver, which
+    takes the stage QP as it is; with the SQP iterations of ``config`` and the fallback ladder
+    after a failed solve. The solver only solves: it never rebuilds the problem and knows no
+    model. Needs ``prepare``, ``qp``, ``backend``, ``config``, ``problem``, ``dt_s``,
+    ``fallback`` and ``_du_step`` on the instance."""
 
     config: MpcConfig
     problem: MpcProblem
@@ -209,19 +188,18 @@ class StageQpSolve:
     def _solve(self, d: StepData, warm: WarmStart) -> SolveResult:
         backend = self.backend
         if not isinstance(backend, (OsqpBackend, ProjectedGradientBackend)):  # it takes the stage QP as it is
-            return backend.solve_stage(d, warm.u_prev)
-        self.qp.load_step(d, warm.u_prev)
+            return backend.solve_stage(d.qp, d.x, warm.u_prev)
+        self.qp.load_stage(d.qp, d.x, warm.u_prev)
         # primal warm start: the linearization trajectory
-        return backend.solve(d.Xlin, d.Ubar)
+        return backend.solve(d.qp.Xlin, d.Ubar)
 
     def finish(self, d: StepData, warm: WarmStart, res: SolveResult, t0: float, iterations: int = 1) -> ControlOutput:
         """Check the solve, pick the command (or fall back) and package the step's output."""
-        pb = self.problem
         t_next = warm.t_s + self.dt_s
         if res.ok and np.all(np.isfinite(res.U[0])):
             # exactly within the bounds, whatever the solver's tolerance
             u_prev = warm.u_prev
-            lo, hi = (pb.u_min, pb.u_max) if d.u_lo is None or d.u_hi is None else (d.u_lo[0], d.u_hi[0])
+            lo, hi = d.qp.ulo[0], d.qp.uhi[0]  # the step's (the friction circle's, else the problem's)
             u = np.clip(np.clip(res.U[0], u_prev - self._du_step, u_prev + self._du_step), lo, hi)
             fallback = ""
             new_warm = WarmStart(s_m=d.s_m, u_prev=u, X=res.X, U=res.U, t_s=t_next, sides=d.sides)
@@ -238,7 +216,7 @@ class StageQpSolve:
             e_y_m=d.e_y_m,
             e_psi_rad=d.e_psi_rad,
             X_pred=X_pred,
-            refs=d.xref.copy(),
+            refs=d.qp.xref.copy(),
             warm=new_warm,
             sqp_iterations=iterations,
         )
@@ -443,15 +421,11 @@ class PythonLtvMpc(LtvMpc):
             self.backend_name = "osqp"
         self._accel_index = list(model.input_names).index("accel") if "accel" in model.input_names else None
         N, nx, nu = self.N, self.nx, self.nu
-        # per-step work buffers
-        self._xref = np.zeros((N + 1, nx))
-        self._uref = np.zeros((N, nu))
+        # the stage QP each step writes (what the solvers consume) and the linearization points
+        self._stage = new_stage_qp(problem, int(problem.obstacle_rows))
+        self._Wq = self._stage.We.copy()  # the problem's state weights, before an obstacle cost's model
         self._Xbar = np.zeros((N, nx))
         self._Ubar = np.zeros((N, nu))
-        self._Xws = np.zeros((N + 1, nx))
-        self._lane_n = np.zeros((N, 2))
-        self._lane_b = np.zeros(N)
-        self._Xlin = np.zeros((N + 1, nx))
         # the road's bounds of the reference point, per step (the body inside: scene.road)
         self.footprint = footprint
         self._road_rows = RoadRows.empty(N)
@@ -519,7 +493,8 @@ class PythonLtvMpc(LtvMpc):
         # references over the horizon
         s_arr, v_arr = self._horizon(s0)
         refs = self._references(s_arr, v_arr, x[2], cfg.speed_profile is not None)
-        xref, uref = self._xref, self._uref
+        st = self._stage
+        xref, uref = st.xref, st.uref
         # linearization points
         Xbar, Ubar = self._Xbar, self._Ubar
         if around is not None:
@@ -540,7 +515,7 @@ class PythonLtvMpc(LtvMpc):
             Ubar[-1] = warm.U[-1]
         Fbar, Ad, Bd = discrete_step_and_jacobians(model, Xbar, Ubar, dt, cfg.discretization, cfg.prediction_substeps)
         c = Fbar - np.einsum("kij,kj->ki", Ad, Xbar) - np.einsum("kij,kj->ki", Bd, Ubar)
-        Xlin = self._Xlin
+        Xlin = st.Xlin
         Xlin[:N] = Xbar
         Xlin[N] = Fbar[-1]
         u_lo = u_hi = None
@@ -580,42 +555,35 @@ class PythonLtvMpc(LtvMpc):
         if self._lateral is not None:  # a lateral reference (set_lateral_reference): the same shift
             _shift_references(xref, refs, s_arr, np.asarray(self._lateral(s_arr), float))
         # lane normals at the (undetoured) centreline where the road rows are linearized
-        if self.qp.lane:
+        if st.lane:
             at = refs if rows is None else refs_lin
             yaw = at[1:, 2]
-            self._lane_n[:, 0] = -np.sin(yaw)
-            self._lane_n[:, 1] = np.cos(yaw)
-            self._lane_b[:] = np.einsum("ki,ki->k", self._lane_n, at[1:, :2])
+            st.lane_n[:, 0] = -np.sin(yaw)
+            st.lane_n[:, 1] = np.cos(yaw)
+            st.lane_b[:] = np.einsum("ki,ki->k", st.lane_n, at[1:, :2])
             if rows is not None:  # the first step's bounds hold where f(x, Ubar[0]) puts the car
-                e1 = float(self._lane_n[0] @ Fbar[0, :2] - self._lane_b[0])
+                e1 = float(st.lane_n[0] @ Fbar[0, :2] - st.lane_b[0])
                 reach_first_step(rows.lo, rows.hi, rows.dlo, rows.dhi, e1, float(Fbar[0, 2] - Xlin[1, 2]))
-        return StepData(
-            x,
-            float(s0),
-            float(e_y),
-            float(e_psi),
-            xref,
-            uref,
-            Xbar,
-            Ubar,
-            Fbar,
-            Ad,
-            Bd,
-            c,
-            self._lane_n,
-            self._lane_b,
-            Xlin,
-            None if rows is None else rows.lo,
-            None if rows is None else rows.hi,
-            None if terms is None else terms.rows_a,
-            None if terms is None else terms.rows_b,
-            None if terms is None else terms.H,
-            None if terms is None else terms.g,
-            sides,
-            None if rows is None else (rows.dlo, rows.dhi, rows.yaw),
-            u_lo,
-            u_hi,
-        )
+                st.lane_lo[:] = rows.lo
+                st.lane_hi[:] = rows.hi
+                st.lane_dlo[:] = rows.dlo
+                st.lane_dhi[:] = rows.dhi
+        # the stage QP: the affine model, the costs (an obstacle cost's convex model 1/2 p'Hp +
+        # g.p on the positions, in the form x'We x - 2 qt'x), the input bounds, the obstacle rows
+        st.A[...] = Ad
+        st.B[...] = Bd
+        st.c[...] = c
+        st.We[...] = self._Wq
+        np.einsum("kij,kj->ki", self._Wq, xref[1:], out=st.qt)
+        if terms is not None and terms.H is not None and terms.g is not None:
+            st.We[:, :2, :2] += 0.5 * terms.H
+            st.qt[:, :2] -= 0.5 * terms.g
+        st.ulo[...] = self.problem.u_min if u_lo is None else u_lo
+        st.uhi[...] = self.problem.u_max if u_hi is None else u_hi
+        if st.nrow and terms is not None and terms.rows_a is not None and terms.rows_b is not None:
+            st.rowa[...] = terms.rows_a
+            st.rowb[...] = terms.rows_b
+        return StepData(x, float(s0), float(e_y), float(e_psi), st, Ubar, sides)
 
     def _references(self, s_arr: np.ndarray, v_arr: np.ndarray, yaw_now: float, accel_ff: bool) -> np.ndarray:
         """Fill the state and input references for path points at arc lengths ``s_arr`` (N+1,)
@@ -623,10 +591,11 @@ class PythonLtvMpc(LtvMpc):
         acceleration reference); returns the path states ``[x, y, yaw, kappa]`` (N+1, 4)."""
         refs = horizon_states(self.path, s_arr, yaw_now)
         xr, ur = self.model.reference(refs[:, :3], refs[:, 3], v_arr, self.config.feedforward == "curvature")
-        self._xref[:] = xr
-        self._uref[:] = ur[: self.N]
+        st = self._stage
+        st.xref[:] = xr
+        st.uref[:] = ur[: self.N]
         if accel_ff and self._accel_index is not None:
-            self._uref[:, self._accel_index] += np.diff(v_arr) / self.dt_s
+            st.uref[:, self._accel_index] += np.diff(v_arr) / self.dt_s
         return refs
 
     def _horizon(self, s0: float) -> tuple[np.ndarray, np.ndarray]:

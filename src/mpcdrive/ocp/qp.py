@@ -3,8 +3,9 @@
 Decision vector ``z = [x_0..x_N, u_0..u_{N-1}, eps_1..eps_N, sigma_1..sigma_N]`` (lane slacks
 ``eps`` only with a lane bound, obstacle slacks ``sigma`` only with obstacle rows). The QP is
 ``min 1/2 z'Pz + q'z  s.t.  l <= Az <= u`` (OSQP's form). The sparsity patterns of ``P`` and
-``A`` never change; each step only numbers change, written through fixed maps ("slots") into
-the CSC data arrays.
+``A`` never change; each step only numbers change: :meth:`LtvQp.load_stage` writes a step's
+stage QP (:class:`~mpcdrive.ocp.stage_qp.StageQp`, what every solver consumes) through fixed
+maps ("slots") into the CSC data arrays.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .problem import MpcProblem
+from .stage_qp import StageQp
 
 
 @dataclass(frozen=True)
@@ -96,15 +98,13 @@ class LtvQp:
     def _build_cost(self):
         pb, N, nx = self.problem, self.N, self.nx
         pat = _Pattern()
-        # states x_1..x_N: the full upper triangle of each block is a slot (non-convex costs add
-        # (x, y) Hessians there); x_0 is fixed by a constraint and has no cost
+        # states x_1..x_N: the full upper triangle of each block is a slot (a stage's weights We
+        # hold an obstacle cost's (x, y) Hessian there); x_0 is fixed by a constraint and has no cost
         iu_, ju_ = np.triu_indices(nx)
         self._slot_Px = np.empty((N, iu_.size), dtype=np.intp)
         for k in range(1, N + 1):
             W = pb.QN if k == N else pb.Q
             self._slot_Px[k - 1] = pat.add(self.ix(k) + iu_, self.ix(k) + ju_, 2.0 * W[iu_, ju_])
-        if nx >= 2:
-            self._Pxy = [int(np.flatnonzero((iu_ == a) & (ju_ == b))[0]) for a, b in ((0, 0), (0, 1), (1, 1))]
         # inputs: R on each u_k, Rc on differences (u_0 - u_prev is handled in q)
         D = sp.eye(N, format="csc") - sp.eye(N, k=-1, format="csc")
         Puu = sp.triu(sp.kron(sp.eye(N), pb.R) + sp.kron(D.T @ D, pb.Rc), format="coo")
@@ -118,7 +118,6 @@ class LtvQp:
             pat.add(j, j, 2.0 * pb.obstacle_slack_weight)
         self.P, self._P_base, self._perm_P = pat.freeze((self.n_var, self.n_var))
         self._P_vals = self._P_base.copy()
-        self._P_has_terms = False  # step terms added to _P_vals since the last reset
         self._P_dirty = False  # _P_vals differs from P.data
         self.q = np.zeros(self.n_var)
         self._q_const = np.zeros(self.n_var)
@@ -127,7 +126,7 @@ class LtvQp:
         if self.n_sig:
             self._q_const[self.isig(1) : self.isig(1) + N] = pb.obstacle_slack_weight_l1
         self.q[:] = self._q_const
-        self._Qstack = pb.stage_weights()  # (N, nx, nx) weights of x_1..x_N
+        self._We = pb.stage_weights()  # (N, nx, nx) the state weights of x_1..x_N in P
 
     # -- constraints --------------------------------------------------------------------
     def _build_constraints(self):
@@ -232,135 +231,65 @@ class LtvQp:
             self._rate_base_hi = self.u[self.r_rate : self.r_rate + nu].copy()
 
     # -- per-step update --------------------------------------------------------------------
-    def update(
-        self,
-        x0,
-        Ad,
-        Bd,
-        c,
-        xref,
-        uref,
-        u_prev,
-        lane_normal=None,
-        lane_offset=None,
-        lane_lo=None,
-        lane_hi=None,
-        lane_slopes=None,
-    ) -> None:
-        """Write one step's numbers into ``q``, ``l``, ``u`` and ``A.data`` in place.
+    def load_stage(self, st: StageQp, x0: np.ndarray, u_prev: np.ndarray) -> None:
+        """Write one step's stage QP ``st`` (:class:`~mpcdrive.ocp.stage_qp.StageQp`, the data
+        every solver consumes) into ``q``, ``l``, ``u``, ``A.data`` and, where its state weights
+        changed, ``P``, in place; ``x0`` (nx,) is the measured state, ``u_prev`` (nu,) the input
+        applied before it.
 
-        x0 : (nx,) measured state; Ad : (N, nx, nx), Bd : (N, nx, nu), c : (N, nx) the affine
-        prediction model ``x_{k+1} = Ad_k x_k + Bd_k u_k + c_k``; xref : (N+1, nx) state references
-        (row 0 unused); uref : (N, nu) input references; u_prev : (nu,) last applied input;
-        lane_normal : (N, 2) unit left normals of the path at steps 1..N; lane_offset : (N,)
-        ``n_k . p_ref,k`` [m] (the path); lane_lo, lane_hi : (N,) lateral bounds [m] relative to
-        the path (the road's, possibly narrowed); lane_slopes : optional ``(dlo, dhi, yaw)``
-        (N,) each: the bounds' slopes [m/rad] in the yaw at linearization yaws ``yaw`` [rad],
-        making the rows ``n . p - dhi yaw_k <= offset + hi - dhi yaw`` (and the same for lo);
-        :class:`~mpcdrive.ocp.road_rows.RoadRows`.
-        Obstacle rows and cost terms are written separately (:meth:`set_obstacle_rows`,
-        :meth:`add_position_cost`) after this call.
-        """
+        From ``st`` this reads what changes per step: the affine model, the state weights ``We``
+        and their linear terms ``qt`` (the cost ``x' We x - 2 qt' x``), the input references, the
+        per-stage input bounds, the road rows (linearized in the yaw at ``Xlin``, when the model
+        has one) and the obstacle rows. The slack weights, rate limits and state bounds are this
+        QP's problem's (the relaxed problem of the fallback reads the same stage data). Raises
+        ``ValueError`` when ``st`` is not sized for this QP."""
         N, nx, nu = self.N, self.nx, self.nu
+        if (st.N, st.nx, st.nu) != (N, nx, nu) or st.nrow != self.n_obs_rows or st.lane != self.lane:
+            raise ValueError(
+                f"the stage QP (N={st.N}, nx={st.nx}, nu={st.nu}, {st.nrow} obstacle rows, road rows "
+                f"{st.lane}) does not fit this QP (N={N}, nx={nx}, nu={nu}, {self.n_obs_rows} obstacle "
+                f"rows, road rows {self.lane})"
+            )
         pb = self.problem
         self.l[self.r_init : self.r_init + nx] = x0
         self.u[self.r_init : self.r_init + nx] = x0
-        cflat = np.ravel(c)
+        cflat = st.c.reshape(-1)
         self.l[self.r_dyn : self.r_dyn + N * nx] = cflat
         self.u[self.r_dyn : self.r_dyn + N * nx] = cflat
-        self._coo_vals[self._slot_A] = -np.ravel(Ad)
-        self._coo_vals[self._slot_B] = -np.ravel(Bd)
-        # cost: q_x = -2 W r ; q_u = -2 R ur ; minus 2 Rc u_prev on u_0
+        self._coo_vals[self._slot_A] = -st.A.reshape(-1)
+        self._coo_vals[self._slot_B] = -st.B.reshape(-1)
+        # cost: P_x = 2 We, q_x = -2 qt ; q_u = -2 R ur ; minus 2 Rc u_prev on u_0
+        if not np.array_equal(st.We, self._We):
+            self._We[...] = st.We
+            iu_, ju_ = np.triu_indices(nx)
+            self._P_vals[self._slot_Px] = 2.0 * st.We[:, iu_, ju_]
+            self._P_dirty = True
         self.q[:] = self._q_const
-        qx = self.q[nx : self.n_x].reshape(N, nx)
-        np.einsum("kij,kj->ki", self._Qstack, xref[1:], out=qx)
-        qx *= -2.0
+        np.multiply(st.qt, -2.0, out=self.q[nx : self.n_x].reshape(N, nx))
         qu = self.q[self.n_x : self.n_x + self.n_u].reshape(N, nu)
-        np.matmul(uref, pb.R.T, out=qu)
+        np.matmul(st.uref, pb.R.T, out=qu)
         qu *= -2.0
         qu[0] -= 2.0 * (pb.Rc @ u_prev)
         if self.r_rate is not None:
             self.l[self.r_rate : self.r_rate + nu] = self._rate_base_lo + u_prev
             self.u[self.r_rate : self.r_rate + nu] = self._rate_base_hi + u_prev
+        self.l[self.r_ubound : self.r_ubound + N * nu] = st.ulo.reshape(-1)
+        self.u[self.r_ubound : self.r_ubound + N * nu] = st.uhi.reshape(-1)
         if self.lane:
-            if lane_normal is None or lane_offset is None or lane_lo is None or lane_hi is None:
-                raise ValueError("this problem has a road: pass lane_normal, lane_offset, lane_lo and lane_hi")
-            n2 = np.repeat(lane_normal[:, None, :], 2, axis=1)  # (N, 2 rows, 2)
+            n2 = np.repeat(st.lane_n[:, None, :], 2, axis=1)  # (N, 2 rows, 2)
             self._coo_vals[self._slot_n] = n2.ravel()
+            hi, lo = st.lane_b + st.lane_hi, st.lane_b + st.lane_lo
             if self.lane_yaw:
-                dlo, dhi, yaw = (np.zeros(N),) * 3 if lane_slopes is None else lane_slopes
-                self._coo_vals[self._slot_yaw] = np.column_stack([-dhi, -dlo]).ravel()
-                self.u[self.r_lane : self.r_lane + 2 * N : 2] = lane_offset + lane_hi - dhi * yaw
-                self.l[self.r_lane + 1 : self.r_lane + 2 * N : 2] = lane_offset + lane_lo - dlo * yaw
-            else:
-                self.u[self.r_lane : self.r_lane + 2 * N : 2] = lane_offset + lane_hi
-                self.l[self.r_lane + 1 : self.r_lane + 2 * N : 2] = lane_offset + lane_lo
-        if self.n_obs_rows:
-            self.l[self.r_obs : self.r_obs + N * self.n_obs_rows] = -np.inf
-        if self._P_has_terms:
-            self._P_vals[:] = self._P_base
-            self._P_has_terms = False
-            self._P_dirty = True
+                yaw = st.Xlin[1:, 2]
+                self._coo_vals[self._slot_yaw] = np.column_stack([-st.lane_dhi, -st.lane_dlo]).ravel()
+                hi = hi - st.lane_dhi * yaw
+                lo = lo - st.lane_dlo * yaw
+            self.u[self.r_lane : self.r_lane + 2 * N : 2] = hi
+            self.l[self.r_lane + 1 : self.r_lane + 2 * N : 2] = lo
+        if self.n_obs_rows:  # a_km . (x_k, y_k, yaw_k) + sigma_k >= b_km (b -inf: unused)
+            self._coo_vals[self._slot_o] = st.rowa.reshape(-1)
+            self.l[self.r_obs : self.r_obs + N * self.n_obs_rows] = st.rowb.reshape(-1)
         np.take(self._coo_vals, self._perm, out=self.A.data)
-
-    def load_step(self, d, u_prev) -> None:
-        """Everything of one step's data ``d`` (:class:`~mpcdrive.control.mpc.StepData`: the
-        affine model, references, road rows, per-stage input bounds, obstacle rows, position cost)
-        into the QP, the input
-        applied before it being ``u_prev``."""
-        self.update(
-            d.x,
-            d.Ad,
-            d.Bd,
-            d.c,
-            d.xref,
-            d.uref,
-            u_prev,
-            d.lane_normal,
-            d.lane_offset,
-            d.lane_lo,
-            d.lane_hi,
-            d.lane_slopes,
-        )
-        if d.u_lo is not None and d.u_hi is not None:
-            self.set_input_bounds(d.u_lo, d.u_hi)
-        if d.rows_a is not None and d.rows_b is not None and self.n_obs_rows:  # set together (AvoidanceTerms)
-            self.set_obstacle_rows(d.rows_a, d.rows_b)
-        if d.H is not None and d.g is not None and self.problem.position_cost:
-            self.add_position_cost(d.H, d.g)
-
-    def set_input_bounds(self, lo: np.ndarray, hi: np.ndarray) -> None:
-        """Per-stage input bounds ``lo[k] <= u_k <= hi[k]`` (N, nu) for this step (e.g. the
-        friction circle's, :mod:`mpcdrive.ocp.friction`), in place of the problem's."""
-        n = self.N * self.nu
-        self.l[self.r_ubound : self.r_ubound + n] = np.ravel(lo)
-        self.u[self.r_ubound : self.r_ubound + n] = np.ravel(hi)
-
-    def set_obstacle_rows(self, a: np.ndarray, b: np.ndarray) -> None:
-        """Obstacle half-planes ``a[k-1, m] . (x_k, y_k, yaw_k) >= b[k-1, m]`` (soft, slack sigma_k).
-
-        a : (N, M, 3); b : (N, M) with -inf for unused rows. Call after :meth:`update`."""
-        N, M = self.N, self.n_obs_rows
-        if a.shape != (N, M, 3) or b.shape != (N, M):
-            raise ValueError(f"obstacle rows must have shapes ({N}, {M}, 3) and ({N}, {M})")
-        self._coo_vals[self._slot_o] = a.reshape(-1)
-        self.l[self.r_obs : self.r_obs + N * M] = b.reshape(-1)
-        np.take(self._coo_vals, self._perm, out=self.A.data)
-
-    def add_position_cost(self, H: np.ndarray, g: np.ndarray) -> None:
-        """Add ``sum_k 1/2 p_k' H_k p_k + g_k . p_k`` on positions p_k = (x_k, y_k), k = 1..N.
-
-        H : (N, 2, 2) positive semidefinite; g : (N, 2). Call after :meth:`update`."""
-        if not self.problem.position_cost:
-            raise ValueError("this problem was built without position_cost=True")
-        i00, i01, i11 = self._Pxy
-        self._P_vals[self._slot_Px[:, i00]] += H[:, 0, 0]
-        self._P_vals[self._slot_Px[:, i01]] += H[:, 0, 1]
-        self._P_vals[self._slot_Px[:, i11]] += H[:, 1, 1]
-        qx = self.q[self.nx : self.n_x].reshape(self.N, self.nx)
-        qx[:, :2] += g
-        self._P_has_terms = True
-        self._P_dirty = True
 
     def finalize_cost(self) -> bool:
         """Write the P values into ``P.data``; True when P changed since the last solve."""
