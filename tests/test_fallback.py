@@ -270,3 +270,49 @@ def test_plan_check_can_be_switched_off():
     x = np.array([0.0, 0.0, 0.0, 5.0])
     c.fallback.relax_backend.solve = lambda *a, **k: _plan(_drive_straight(0.0, 5.0, 10, 0.05, 0.3))
     assert c.step(x, c.initial_warm(x)).fallback == "relax"
+
+
+def test_relax_on_the_condensed_solver_solves_the_step_posed_for_the_relaxed_problem():
+    """A controller on the condensed solver relaxes with the same solver (no OSQP): the step's
+    stage QP posed for the relaxed problem, whose plan is the one a controller built on the
+    relaxed problem makes, and not the plan of the problem itself (the rate limit binds)."""
+    from dataclasses import replace
+
+    model, path, ref = speed_controller(["relax", "brake"])
+    pb, cfg = ref.problem, ref.config
+    c = PythonLtvMpc(model, path, pb, cfg, "condensed")
+    assert c.backend_name == "fast" and c.fallback.relax_qp is None
+    relaxed = PythonLtvMpc(model, path, relaxed_problem(pb, cfg.fallback.relax_slack_factor), cfg, "condensed")
+    x = np.array([1.5, 0.2, math.pi / 2 + 0.3, 1.9])
+    warm = replace(c.initial_warm(x), u_prev=np.array([-0.8, 0.0]))  # far from the plan: the rate limit binds
+    plain = c.step(x, warm)
+    assert plain.fallback == ""
+    c.backend.solve_stage = lambda *a, **k: failing(pb.N, 4, 2)
+    out = c.step(x, warm)
+    want = relaxed.step(x, warm)
+    assert out.fallback == "relax" and want.fallback == ""
+    np.testing.assert_allclose(out.warm.U, want.warm.U, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(out.X_pred, want.X_pred, rtol=0, atol=1e-9)
+    assert np.abs(plain.warm.U - want.warm.U).max() > 1e-3  # the relaxed constants made a difference
+
+
+def test_the_condensed_solver_refuses_a_stage_qp_of_another_problem():
+    """Its work space holds the rows of its own problem: a stage QP posed for another (here the
+    relaxed one, without rate limits) or sized for another is a clear error, not a solve that
+    reads past them."""
+    from dataclasses import replace
+
+    from mpcdrive.control.condensed import CondensedBackend
+    from mpcdrive.ocp.stage_qp import new_stage_qp
+
+    pb = speed_controller(["brake"])[2].problem
+    be = CondensedBackend(pb)
+    x, u = np.array([1.5, 0.0, math.pi / 2, 1.0]), np.zeros(2)
+    with pytest.raises(ValueError, match="posed for another problem"):
+        be.solve_stage(new_stage_qp(relaxed_problem(pb, 10.0)), x, u)
+    longer = replace(pb, N=pb.N + 1)
+    with pytest.raises(ValueError, match="does not fit this solver"):
+        be.solve_stage(new_stage_qp(longer), x, u)
+    with pytest.raises(ValueError, match="cannot be posed"):
+        new_stage_qp(pb).posed_for(longer)
+    assert be.solve_stage(new_stage_qp(relaxed_problem(pb, 10.0)).posed_for(pb), x, u).status == "ok"

@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from ..ocp.problem import MpcProblem
-from ..ocp.stage_qp import StageQp
+from ..ocp.stage_qp import CONSTANT_FIELDS, StageQp, new_stage_qp
 from ..solvers.condensed import condensed_solve, write_plan
 from ..solvers.condensed_setup import CondensedSettings, condensed_unsupported_reason, new_condensed_work
 from ..solvers.dense_qp import STATUS_WORDS
@@ -40,11 +40,31 @@ class CondensedBackend:
         self.N, self.nx, self.nu = N, nx, nu
         self._work = new_condensed_work(pb, settings, int(pb.obstacle_rows))
         self._work_struct = self._work.struct()
+        self._constants = new_stage_qp(pb, int(pb.obstacle_rows))  # the problem's constant parts
         #: the stage QP last solved and its struct (a controller writes the same one every step)
         self._stage: StageQp | None = None
         self._stage_struct = None
         #: the plan as the compiled step writes it: [u, X, U, xref]
         self._out = np.empty(nu + (N + 1) * nx + N * nu + (N + 1) * nx)
+
+    def _check_fits(self, stage: StageQp) -> None:
+        """ValueError unless ``stage`` is sized and posed for this solver's problem: its work
+        space holds the rows that problem's bounds, rate limits and slacks make (a stage QP of
+        another problem would be read past them)."""
+        N, nx, nu, nrow = self.N, self.nx, self.nu, int(self.problem.obstacle_rows)
+        if (stage.N, stage.nx, stage.nu, stage.nrow, stage.lane) != (N, nx, nu, nrow, bool(self.problem.lane)):
+            raise ValueError(
+                f"the stage QP (N={stage.N}, nx={stage.nx}, nu={stage.nu}, {stage.nrow} obstacle rows, road rows "
+                f"{stage.lane}) does not fit this solver (N={N}, nx={nx}, nu={nu}, {nrow} obstacle rows, road "
+                f"rows {bool(self.problem.lane)})"
+            )
+        mine = self._constants
+        for f in CONSTANT_FIELDS:
+            if not np.array_equal(getattr(stage, f), getattr(mine, f)):
+                raise ValueError(
+                    f"the stage QP was posed for another problem ({f} differs): pose it for this "
+                    "solver's problem (StageQp.posed_for)"
+                )
 
     def solve_stage(self, stage: StageQp, x: np.ndarray, u_prev: np.ndarray) -> SolveResult:
         """Solve the stage QP ``stage`` (:class:`~mpcdrive.ocp.stage_qp.StageQp`, as it is) from
@@ -53,11 +73,7 @@ class CondensedBackend:
         t0 = time.perf_counter()
         N, nx, nu = self.N, self.nx, self.nu
         if stage is not self._stage:
-            if (stage.N, stage.nx, stage.nu, stage.nrow) != (N, nx, nu, int(self.problem.obstacle_rows)):
-                raise ValueError(
-                    f"the stage QP (N={stage.N}, nx={stage.nx}, nu={stage.nu}, {stage.nrow} obstacle rows) "
-                    f"does not fit this solver (N={N}, nx={nx}, nu={nu}, {self.problem.obstacle_rows} rows)"
-                )
+            self._check_fits(stage)
             self._stage, self._stage_struct = stage, stage.struct()
         u_prev = np.ascontiguousarray(u_prev, dtype=float)
         x = np.ascontiguousarray(x, dtype=float)

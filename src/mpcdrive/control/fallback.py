@@ -35,11 +35,12 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
 from ..ocp.problem import MpcProblem
+from ..ocp.stage_qp import StageQp
 from ..scene.footprint import Footprint
 from ..scene.geometry import shape_distance
 from ..scene.road import Road
@@ -54,6 +55,10 @@ from ..types import (  # noqa: F401  (the rung names are re-exported here, their
     SolveResult,
     WarmStart,
 )
+
+if TYPE_CHECKING:
+    from ..ocp.qp import LtvQp
+    from .condensed import CondensedBackend
 
 #: rungs that always yield a command
 TERMINAL_FALLBACKS: tuple[str, ...] = (FALLBACK_BRAKE, FALLBACK_HOLD)
@@ -145,7 +150,10 @@ class FallbackLadder:
     """Runs a :class:`FallbackConfig` ladder for one controller (the relaxed QP is built once here).
 
     ``controller`` provides ``model``, ``problem``, ``N``, ``dt_s``, ``config.discretization`` and,
-    for ``relax``, ``backend.settings`` -- unless ``relax`` is given: a callable ``(d, warm)``
+    for ``relax``, ``backend`` (the built-in rung solves the step's stage QP for the relaxed
+    problem with the controller's solver: the condensed one on the stage QP posed for it, twice
+    the iterations; else OSQP on a second sparse QP, looser tolerance) -- unless ``relax`` is
+    given: a callable ``(d, warm)``
     returning ``(u, WarmStart, X_pred)`` from the controller's own relaxed solve, or None when it
     fails. The rungs read ``x`` and ``s_m`` of the step data ``d`` (and, for the built-in
     ``relax``, its stage QP and linearization: :class:`~mpcdrive.control.mpc.StepData`).
@@ -176,12 +184,25 @@ class FallbackLadder:
         if self.brake_decel_mps2 is None:
             full = -float(pb.u_min[self._ia]) if self._ia is not None else math.nan
             self.brake_decel_mps2 = full if math.isfinite(full) and full > 0 else 1.0
-        self.relax_qp = self.relax_backend = None
+        self.relax_qp: LtvQp | None = None
+        self.relax_backend: OsqpBackend | CondensedBackend | None = None
+        self._relaxed_pb: MpcProblem | None = None
+        #: (the controller's stage QP, it posed for the relaxed problem), made at the first relax
+        self._posed: tuple[StageQp, StageQp] | None = None
         if FALLBACK_RELAX in config.ladder and relax is None:
-            from ..ocp.qp import LtvQp  # scipy.sparse: imported when an OSQP controller is built
+            self._relaxed_pb = rpb = relaxed_problem(pb, config.relax_slack_factor)
+            backend = controller.backend
+            if getattr(backend, "name", None) == "condensed":
+                # the controller's own solver, on the step's stage QP posed for the relaxed problem
+                from .condensed import CondensedBackend
 
-            self.relax_qp = LtvQp(relaxed_problem(pb, config.relax_slack_factor))
-            self.relax_backend = OsqpBackend(self.relax_qp, relaxed_settings(controller.backend.settings))
+                s = backend.settings
+                self.relax_backend = CondensedBackend(rpb, dataclasses.replace(s, max_iter=2 * s.max_iter))
+            else:
+                from ..ocp.qp import LtvQp  # scipy.sparse: imported when an OSQP controller is built
+
+                self.relax_qp = LtvQp(rpb)
+                self.relax_backend = OsqpBackend(self.relax_qp, relaxed_settings(controller.backend.settings))
 
     # -- helpers --------------------------------------------------------------------------------
     def _bound(self, u_raw: np.ndarray, u_prev: np.ndarray) -> np.ndarray:
@@ -212,10 +233,18 @@ class FallbackLadder:
             u = self._bound(u, warm.u_prev)
             return u, dataclasses.replace(new_warm, u_prev=u), X
         qp, be = self.relax_qp, self.relax_backend
-        assert qp is not None and be is not None  # built in __init__ for the relax rung without relax_fn
+        assert be is not None and self._relaxed_pb is not None  # built in __init__ for relax without relax_fn
         # obstacles stay in the relaxed problem (their slacks keep it feasible)
-        qp.load_stage(d.qp, d.x, warm.u_prev)
-        res: SolveResult = be.solve(d.qp.Xlin, d.Ubar)
+        res: SolveResult
+        if qp is None:  # the condensed solver: the step's stage QP as it is, the relaxed constants
+            assert not isinstance(be, OsqpBackend)
+            if self._posed is None or self._posed[0] is not d.qp:
+                self._posed = (d.qp, d.qp.posed_for(self._relaxed_pb))
+            res = be.solve_stage(self._posed[1], d.x, warm.u_prev)
+        else:
+            assert isinstance(be, OsqpBackend)
+            qp.load_stage(d.qp, d.x, warm.u_prev)
+            res = be.solve(d.qp.Xlin, d.Ubar)
         if not (res.ok and np.all(np.isfinite(res.U)) and np.all(np.isfinite(res.X))):
             return None
         u = self._bound(res.U[0], warm.u_prev)

@@ -10,7 +10,7 @@ place; :meth:`StageQp.struct` is the same memory as one numba struct (see
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numba import njit
@@ -76,6 +76,24 @@ class StageQp:
     def struct(self):
         """The compiled struct of this stage QP (the same arrays)."""
         return to_struct(self, _build_stage_qp)
+
+    def posed_for(self, problem: MpcProblem) -> StageQp:
+        """This step posed for ``problem``, a problem of the same size (e.g. the fallback's
+        relaxed one, :func:`mpcdrive.control.fallback.relaxed_problem`): this stage QP's per-step
+        arrays (the same arrays, not copies: what is written here is seen there) with
+        ``problem``'s constant parts (:data:`CONSTANT_FIELDS`). Raises ``ValueError`` for a
+        problem of another size."""
+        if (problem.N, problem.nx, problem.nu, bool(problem.lane)) != (self.N, self.nx, self.nu, self.lane):
+            raise ValueError(
+                f"a stage QP of N={self.N}, nx={self.nx}, nu={self.nu} cannot be posed for a problem of "
+                f"N={problem.N}, nx={problem.nx}, nu={problem.nu}"
+            )
+        other = new_stage_qp(problem, self.nrow)
+        return replace(self, **{f: getattr(other, f) for f in CONSTANT_FIELDS})
+
+
+#: the fields of a :class:`StageQp` that its problem sets once (the rest are written each step)
+CONSTANT_FIELDS = ("R", "Rc", "u_min", "u_max", "dmax", "x_min", "x_max", "w2_lane", "w1_lane", "w2_obs", "w1_obs")
 
 
 def new_stage_qp(problem: MpcProblem, obstacle_rows: int = 0) -> StageQp:
