@@ -145,17 +145,21 @@ def test_compiled_rows_match_numpy_for_every_side_and_mode(name):
         rel = list(rng.permutation(5)[: int(rng.integers(0, 6))])
         sides = {j: int(rng.choice([SIDE_LEFT, SIDE_RIGHT, SIDE_BLOCKED])) for j in rel}
         following = {j for j in rel if rng.random() < 0.3}
+        ahead = {j: bool(rng.random() < 0.7) for j in rel}  # where a blocked one gets a stop row
         times = t_s + DT * np.arange(1, N + 1)
         present = {j: obstacles[j].present(times) if obstacles[j].has_lifetime else ref._always for j in rel}
         boxes, centers, world, packed = comp._tracks(rel, t_s, s_arr)
         assert packed is not None
         a1, b1 = (
             v.copy()
-            for v in comp._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present, following, packed)
+            for v in comp._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present, following, packed, ahead)
         )
-        a3, b3 = (v.copy() for v in comp._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present, following))
+        a3, b3 = (
+            v.copy()
+            for v in comp._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present, following, None, ahead)
+        )
         boxes, centers, world, _ = ref._tracks(rel, t_s, s_arr)
-        a2, b2 = ref._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present, following)
+        a2, b2 = ref._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present, following, None, ahead)
         for a, b in ((a1, b1), (a3, b3)):
             np.testing.assert_allclose(a, a2, rtol=0, atol=TOL)
             assert np.array_equal(np.isinf(b), np.isinf(b2))
@@ -262,3 +266,63 @@ def test_p4_drive_rows_compiled_equal_numpy(backend):
         np.testing.assert_allclose(a1, a2, rtol=0, atol=TOL)
         assert np.array_equal(np.isinf(b1), np.isinf(b2))
         np.testing.assert_allclose(b1[np.isfinite(b2)], b2[np.isfinite(b2)], rtol=0, atol=TOL)
+
+
+def _decide(boxes, moving, prev=None, *, road=3.5, follow=False, e_car=0.0):
+    """The compiled decisions for boxes given as (s_ref, s_lo, s_hi, e_lo, e_hi) arrays (K,)
+    each, on s_arr 0, 2, .., 8 m, dt 0.1 s, a road +-``road`` m (None: no road), passing room
+    2 m, reach 3 m, body 4 x 1.7 m, stop distance 1 m."""
+    from mpcdrive.ocp.avoidance_compiled import SIDE_NONE, decide
+
+    n = len(boxes)
+    box = np.array([[np.broadcast_to(np.asarray(v, float), (5,)) for v in b] for b in boxes]).reshape(n, 5, 5)
+    side, fol, ahead = np.empty(n, np.int64), np.empty(n, np.bool_), np.empty(n, np.bool_)
+    prev = np.full(n, SIDE_NONE, np.int64) if prev is None else np.array(prev, np.int64)
+    tab = np.zeros(1)
+    decide(
+        box, np.array(moving, np.bool_), np.arange(0.0, 10.0, 2.0), road is not None, tab,
+        tab + (road or 0.0), tab - (road or 0.0), 0.0, 2.0, 3.0, 0.1, 1.0, follow, e_car, 0.85, 2.0, 1.0,
+        prev, side, fol, ahead,
+    )  # fmt: skip
+    return side.tolist(), fol.tolist(), ahead.tolist()
+
+
+def test_decisions_pass_on_the_roomier_side_keep_a_side_with_room_and_block_without():
+    right_roomier = (5.0, 4.0, 6.0, 0.5, 1.5)  # room left 2.0 (just enough), right 4.0
+    no_room = (5.0, 4.0, 6.0, -1.0, 1.0)
+    assert _decide([right_roomier], [False])[0] == [SIDE_RIGHT]
+    assert _decide([right_roomier], [False], [SIDE_LEFT])[0] == [SIDE_LEFT]  # kept: it still has room
+    assert _decide([no_room], [False], road=2.5)[0] == [SIDE_BLOCKED]  # 1.5 m each side < 2 m
+    assert _decide([no_room], [False])[0] == [SIDE_LEFT]  # 2.5 m each side: a tie goes left
+    assert _decide([no_room], [False], road=None)[0] == [SIDE_LEFT]  # no road: no edge to run out of
+
+
+def test_decisions_yield_to_oncoming_and_crossing_traffic_on_the_road_only():
+    s = np.array([10.0, 8.0, 6.0, 4.0, 2.0])  # 20 m/s towards the car, met at step 2
+    oncoming = (s, s - 2.0, s + 2.0, -0.5, 0.5)
+    beside_the_road = (s, s - 2.0, s + 2.0, 4.0, 5.0)
+    e = np.array([-8.0, -6.0, -4.0, -2.0, 0.0])  # crossing the road at 20 m/s, standing in s
+    crossing = (6.0, 5.0, 7.0, e - 0.5, e + 0.5)
+    assert _decide([oncoming, beside_the_road, crossing], [True, True, True])[0] == [
+        SIDE_BLOCKED,
+        SIDE_RIGHT,
+        SIDE_BLOCKED,
+    ]
+    # without a road there is nothing to yield on: passed beside
+    assert _decide([oncoming], [True], road=None)[0] == [SIDE_LEFT]
+    # the same car standing (not moving) is passed, not yielded to
+    assert _decide([(6.0, 4.0, 8.0, -0.5, 0.5)], [False])[0] == [SIDE_LEFT]
+
+
+def test_decisions_find_followers_and_stop_lines():
+    behind = (-5.0, -6.0, -3.0, -0.5, 0.5)  # wholly behind the rear (s0 - 2 m), in the lane
+    behind_beside = (-5.0, -6.0, -3.0, 1.0, 2.0)  # behind, in the next lane
+    touching = (-2.0, -3.0, -1.5, -0.5, 0.5)  # its front beyond the car's rear
+    ahead_near = (6.0, 5.0, 7.0, -0.5, 0.5)
+    ahead_far = (12.0, 9.5, 14.0, -0.5, 0.5)  # near end beyond the last reference + 1 m
+    boxes = [behind, behind_beside, touching, ahead_near, ahead_far]
+    _, fol, ahead = _decide(boxes, [False] * 5, follow=True)
+    assert fol == [True, False, False, False, False]
+    assert ahead == [False, False, False, True, False]
+    assert _decide(boxes, [False] * 5, follow=False)[1] == [False] * 5
+    assert _decide([behind_beside], [False], follow=True, e_car=1.2)[1] == [True]  # the car beside it

@@ -81,7 +81,8 @@ from ..types import ControlOutput, WarmStart
 from .base import checked_obstacles, checked_road, checked_speed_cap
 
 from ..ocp.assembly import MODE_ITERATE, MODE_NO_PLAN, MODE_SHIFTED_PLAN, StepAssembly, follow_references_into
-from ..ocp.obstacle_cost_compiled import OBS_GAUSSIAN, OBS_NONE, OBS_POTENTIAL, SIDE_NONE, cost_obstacle_arrays
+from ..ocp.avoidance_compiled import SIDE_NONE
+from ..ocp.obstacle_cost_compiled import OBS_GAUSSIAN, OBS_NONE, OBS_POTENTIAL, cost_obstacle_arrays
 from ..ocp.stage_qp import new_stage_qp
 from ..solvers.condensed_setup import CondensedSettings, new_condensed_work
 from .fast_setup import fast_unsupported_reason, obstacles_unsupported_reason, uses_rows

@@ -54,7 +54,7 @@ __all__ = [
 ]
 
 Formulation = Literal["hard", "corridor", "potential", "gaussian"]
-SIDE_LEFT, SIDE_RIGHT, SIDE_BLOCKED = 1, -1, 0
+SIDE_LEFT, SIDE_RIGHT, SIDE_BLOCKED = _ac.SIDE_LEFT, _ac.SIDE_RIGHT, _ac.SIDE_BLOCKED
 #: an obstacle coming towards the car along its path, or crossing its road, faster than this
 #: [m/s], on the car's road where they meet, is yielded to (a stop row before it), not passed beside
 ONCOMING_MPS = 1.0
@@ -199,6 +199,7 @@ class Avoidance:
         self._g = np.zeros((N, 2))
         self._e_ref = np.zeros(N1)
         self._always = np.ones(N, bool)  # the presence of an obstacle without a lifetime
+        self._no_road = np.zeros(1)  # the road tables passed to the compiled decisions without a road
         #: build with the compiled kernels (``ocp.avoidance_compiled``) where they apply: the
         #: selection when every obstacle is static, at constant velocity or on a recorded
         #: trajectory, the tracks of such obstacles and the hard rows on a path ``path_arrays``
@@ -267,20 +268,6 @@ class Avoidance:
         d.sort()
         return [j for _, j in d[: self.config.max_obstacles]]
 
-    def _following(self, box: FrenetBox, xy: np.ndarray, s_m: float) -> bool:
-        """True when the obstacle with Frenet box ``box`` (now) follows the car at arc length
-        ``s_m``, position ``xy``: the box lies wholly behind the rear of the body and overlaps the
-        body's lateral extent (directly behind, in the car's own lane). A car behind in another
-        lane stays avoided: it may pass beside or cut in ahead."""
-        if not self.path.closed and s_m <= 0.0:
-            return False  # no path behind the start to judge on
-        if box.s_hi >= s_m - self.half_length:
-            return False
-        h = float(self.path.heading(s_m))
-        p = self.path.position(s_m)
-        e = -math.sin(h) * (xy[0] - p[0]) + math.cos(h) * (xy[1] - p[1])
-        return box.e_lo < e + self.half_width and box.e_hi > e - self.half_width
-
     @property
     def passing_room_m(self) -> float:
         """Width [m] of the gap between an obstacle and the lane edge that passing it needs: the
@@ -291,22 +278,63 @@ class Avoidance:
         margin = self.road.margin_m if self.road is not None else 0.0
         return self.half_width + margin + self.config.margin_m + obstacle_side
 
-    def _choose_side(self, j: int, box: FrenetBox, memory: AvoidanceMemory) -> int:
-        needed = self.passing_room_m
-        if self.road is None:
-            room_left = room_right = np.inf
-        else:  # the road's edges beside the obstacle
-            left, right = self.road.edges(box.s_ref)
-            room_left = float(left) - box.e_hi
-            room_right = box.e_lo - float(right)
-        prev = memory.sides.get(j)
-        if prev == SIDE_LEFT and room_left >= needed:
-            return SIDE_LEFT
-        if prev == SIDE_RIGHT and room_right >= needed:
-            return SIDE_RIGHT
-        if max(room_left, room_right) < needed:
-            return SIDE_BLOCKED
-        return SIDE_LEFT if room_left >= room_right else SIDE_RIGHT
+    def _decide(self, rel: list[int], boxes, packed, x: np.ndarray, s_arr: np.ndarray, memory: AvoidanceMemory):
+        """The decisions of one step (compiled: :func:`~mpcdrive.ocp.avoidance_compiled.decide`)
+        for the obstacles ``rel`` with Frenet boxes ``boxes`` over the horizon (``packed``: the
+        compiled tracks, or None): the passing sides (dict; SIDE_BLOCKED for an obstacle coming
+        towards the car or across its road where they meet, which the car yields to), the cars
+        following in the lane (a set: kept behind by a longitudinal row only, never swerved or
+        braked for) and which obstacles a stop line can be put before (dict)."""
+        n, K = len(rel), self.N + 1
+        box = packed[5] if packed is not None else self._box_array(rel, boxes)
+        moving = np.array([self.obstacles[j].moving for j in rel], np.bool_)
+        prev = np.array([memory.sides.get(j, _ac.SIDE_NONE) for j in rel], np.int64)
+        side, fol, ahead = np.empty(n, np.int64), np.empty(n, np.bool_), np.empty(n, np.bool_)
+        s0 = float(s_arr[0])
+        follow = self.config.uses_rows and (self.path.closed or s0 > 0.0)  # no path behind an open start
+        e_car = 0.0
+        if follow:
+            h, p = float(self.path.heading(s0)), self.path.position(s0)
+            e_car = -math.sin(h) * (x[0] - p[0]) + math.cos(h) * (x[1] - p[1])
+        road = self.road
+        if road is None:
+            road_s = road_left = road_right = self._no_road
+            period = 0.0
+        else:
+            road_s, road_left, road_right, period = road.s_m, road.left_m, road.right_m, road.period_m
+        _ac.decide(
+            box,
+            moving,
+            np.ascontiguousarray(s_arr[:K], dtype=float),
+            road is not None,
+            road_s,
+            road_left,
+            road_right,
+            period,
+            self.passing_room_m,
+            self.r_disc + self.config.margin_m + self.half_length,
+            float(self.dt_s),
+            ONCOMING_MPS,
+            follow,
+            e_car,
+            self.half_width,
+            self.half_length,
+            self.stop_distance_m,
+            prev,
+            side,
+            fol,
+            ahead,
+        )
+        return (
+            dict(zip(rel, side.tolist())),
+            {j for j, f in zip(rel, fol.tolist()) if f},
+            dict(zip(rel, ahead.tolist())),
+        )
+
+    def _box_array(self, rel: list[int], boxes) -> np.ndarray:
+        """The Frenet boxes of obstacles ``rel`` as an array (n, 5, K), fields in BOX_* order."""
+        fields = ("s_ref", "s_lo", "s_hi", "e_lo", "e_hi")
+        return np.array([[getattr(boxes[j], f) for f in fields] for j in rel], float).reshape(len(rel), 5, self.N + 1)
 
     # -- one step ---------------------------------------------------------------------
     def _tracks(self, rel: list[int], t_s: float, s_arr: np.ndarray):
@@ -436,24 +464,13 @@ class Avoidance:
         corridor narrows (None: no road)."""
         cfg = self.config
         rel = self.relevant(t_s, x[:2])
-        sides: dict[int, int] = {}
         boxes, centers, world, packed = self._tracks(rel, t_s, s_arr)
-        for j in rel:
-            bx = boxes[j]
-            # a moving obstacle is judged where the car meets it: the horizon step at which the
-            # car's reference is nearest to it along the path
-            meet = int(np.argmin(np.abs(bx.s_ref - s_arr))) if self.obstacles[j].moving else 0
-            sides[j] = SIDE_BLOCKED if self._oncoming(bx, meet, s_arr) else self._choose_side(j, bx[meet], memory)
+        sides, following, ahead = self._decide(rel, boxes, packed, x, s_arr, memory)
         memory.sides.update(sides)
-        # cars following in the lane: kept behind by a longitudinal row only (never swerved or
-        # braked for)
-        following = {j for j in rel if cfg.uses_rows and self._following(boxes[j][0], x[:2], float(s_arr[0]))}
         # horizon steps 1..N at which each obstacle exists (its lifetime)
         times = t_s + self.dt_s * np.arange(1, self.N + 1) if any(self.obstacles[j].has_lifetime for j in rel) else None
         present = {j: self.obstacles[j].present(times) if self.obstacles[j].has_lifetime else self._always for j in rel}
-        if following and any(
-            sides[j] == SIDE_BLOCKED and j not in following and self._blocks_ahead(boxes[j][0], s_arr) for j in rel
-        ):
+        if following and any(sides[j] == SIDE_BLOCKED and j not in following and ahead[j] for j in rel):
             # braking for an obstacle ahead: keeping clear of a car following is its driver's job
             # (its keep-ahead row would forbid the braking)
             present.update({j: np.zeros(self.N, bool) for j in following})
@@ -461,14 +478,16 @@ class Avoidance:
         if cfg.detour == "trapezoid":
             e_ref = self._detour(s_arr, {j: b for j, b in boxes.items() if j not in following}, sides)
         if cfg.formulation == "hard":
-            rows_a, rows_b = self._hard_rows(Xlin, s_arr, rel, boxes, centers, world, sides, present, following, packed)
+            rows_a, rows_b = self._hard_rows(
+                Xlin, s_arr, rel, boxes, centers, world, sides, present, following, packed, ahead
+            )
         elif cfg.formulation == "corridor":
             lo, hi, rows_a, rows_b = self._corridor(
-                Xlin, s_arr, [j for j in rel if j not in following], boxes, sides, present, road_lo, road_hi
+                Xlin, s_arr, [j for j in rel if j not in following], boxes, sides, present, road_lo, road_hi, ahead
             )
         else:
             H, g = position_cost(cfg, self.path, Xlin, rel, boxes, centers, present, self._H, self._g)
-        s_max = None if cfg.follow_gap_s is None else self._stop_lines(s_arr, rel, boxes, sides, gap_s=cfg.follow_gap_s)
+        s_max = None if cfg.follow_gap_s is None else self._stop_lines(rel, boxes, sides, ahead, gap_s=cfg.follow_gap_s)
         return AvoidanceTerms(rows_a, rows_b, lo, hi, H, g, e_ref, sides, s_max)
 
     @property
@@ -480,43 +499,12 @@ class Avoidance:
             return self.r_disc + self.config.margin_m + float(np.max(self.offsets))
         return self.config.margin_m + self.half_length
 
-    def _oncoming(self, bx: FrenetBoxes, meet: int, s_arr: np.ndarray) -> bool:
-        """Whether an obstacle (Frenet boxes over the horizon) comes towards the car along its
-        path or crosses its road (faster than ONCOMING_MPS where they meet) and their predictions
-        conflict: at some step it is on the car's road where the car's reference is (within the
-        body's half length and the clearance along the path). The car yields to it (stops before
-        it) instead of squeezing past beside or ahead of it."""
-        if self.road is None or len(bx.s_ref) < 2:
-            return False
-        k0, k1 = max(meet - 1, 0), min(meet + 1, len(bx.s_ref) - 1)  # k1 > k0: two or more steps
-        span = (k1 - k0) * self.dt_s
-        v_s = (bx.s_ref[k1] - bx.s_ref[k0]) / span
-        left, right = self.road.edges(bx.s_ref)
-        # across the road: the offset moves that fast from the path and from both edges beside it
-        # (where the path moves over a lane, a car along its lane drifts at the path's slope in the
-        # path's frame but keeps its offset to the edges; to one edge where the other one bends)
-        d_e = 0.5 * ((bx.e_lo[k1] + bx.e_hi[k1]) - (bx.e_lo[k0] + bx.e_hi[k0]))
-        v_e = min(abs(d_e), abs(d_e - (left[k1] - left[k0])), abs(d_e - (right[k1] - right[k0]))) / span
-        if v_s > -ONCOMING_MPS and v_e < ONCOMING_MPS:
-            return False
-        reach = self.r_disc + self.config.margin_m + self.half_length
-        there = (bx.s_lo - reach <= s_arr) & (s_arr <= bx.s_hi + reach)
-        return bool(np.any((bx.e_lo < left) & (bx.e_hi > right) & there))
-
-    def _blocks_ahead(self, box0: FrenetBox, s_arr: np.ndarray) -> bool:
-        """A blocking obstacle (Frenet box now) gets a stop line: its centre is ahead of the car's
-        (``s_arr[0]``) and its near end within reach of the horizon (the stop line is no farther
-        than the last reference). Farther along the path -- on a closed track that may be a
-        stretch of road that only passes near by -- the path turns and a stop half-plane would
-        cut across the car's road."""
-        return s_arr[0] <= box0.s_ref and box0.s_lo <= s_arr[-1] + self.stop_distance_m
-
-    def _stop_lines(self, s_arr, rel, boxes, sides, *, gap_s: float) -> np.ndarray | None:
+    def _stop_lines(self, rel, boxes, sides, ahead, *, gap_s: float) -> np.ndarray | None:
         """(N+1,) furthest reference arc lengths behind the blocking obstacles ahead (or None)."""
         s_max = None
         dt, gap = self.dt_s, gap_s
         for j in rel:
-            if sides[j] != SIDE_BLOCKED or not self._blocks_ahead(boxes[j][0], s_arr):
+            if sides[j] != SIDE_BLOCKED or not ahead[j]:
                 continue
             s_lo = boxes[j].s_lo
             v = np.maximum(np.diff(s_lo) / dt, 0.0)
@@ -579,13 +567,13 @@ class Avoidance:
         t = np.column_stack([np.cos(h), np.sin(h)])
         return t, self.path.position(s_bar) + t * (s_lo - s_bar)[:, None]
 
-    def _hard_rows(self, Xlin, s_arr, rel, boxes, centers, world, sides, present, following=frozenset(), packed=None):
+    def _hard_rows(self, Xlin, s_arr, rel, boxes, centers, world, sides, present, following, packed, ahead):
         """The hard rows (N, M, 3), (N, M) of the obstacles ``rel``: compiled on a path
         ``path_arrays`` describes (``packed``: the tracks as :meth:`_packed` gives them, made
         from the others when None), else :meth:`_hard_rows_numpy`."""
         cpath = self._compiled_path()
         if cpath is None:
-            return self._hard_rows_numpy(Xlin, s_arr, rel, boxes, centers, world, sides, present, following)
+            return self._hard_rows_numpy(Xlin, s_arr, rel, boxes, centers, world, sides, present, following, ahead)
         a, b = self._a, self._b
         if packed is None:
             packed = self._packed(rel, boxes, centers, world)
@@ -593,7 +581,7 @@ class Avoidance:
         side = np.array([sides[j] for j in rel], np.int64)
         mode = np.zeros(n, np.int64)
         for i, j in enumerate(rel):  # the stop and keep-ahead rows, as _hard_rows_numpy picks them
-            if sides[j] == SIDE_BLOCKED and self._blocks_ahead(boxes[j][0], s_arr):
+            if sides[j] == SIDE_BLOCKED and ahead[j]:
                 mode[i] = _ac.MODE_STOP
             elif j in following:
                 mode[i] = _ac.MODE_AHEAD
@@ -631,7 +619,7 @@ class Avoidance:
         )
         return a, b
 
-    def _hard_rows_numpy(self, Xlin, s_arr, rel, boxes, centers, world, sides, present, following=frozenset()):
+    def _hard_rows_numpy(self, Xlin, s_arr, rel, boxes, centers, world, sides, present, following, ahead):
         a, b = self._a, self._b
         a[:] = 0.0
         b[:] = -np.inf
@@ -673,7 +661,7 @@ class Avoidance:
         q = np.where(lateral[..., None], q_lat, q)
         active |= lateral
         for i, j in enumerate(rel):
-            if sides[j] == SIDE_BLOCKED and self._blocks_ahead(boxes[j][0], s_arr):
+            if sides[j] == SIDE_BLOCKED and ahead[j]:
                 # stop behind an obstacle now ahead: the disc's arc length at most its near end
                 # less the clearance (the nearest-point normal points forward once the
                 # linearization passes it)
@@ -712,7 +700,7 @@ class Avoidance:
         b[:, :m] = rows(rhs, -np.inf)
         return a, b
 
-    def _corridor(self, Xlin, s_arr, rel, boxes, sides, present, road_lo, road_hi):
+    def _corridor(self, Xlin, s_arr, rel, boxes, sides, present, road_lo, road_hi, ahead):
         lo, hi = self._lo, self._hi
         if road_lo is None or road_hi is None:
             lo[:], hi[:] = -1e3, 1e3
@@ -722,7 +710,6 @@ class Avoidance:
         a[:] = 0.0
         b[:] = -np.inf
         m = self.config.margin_m
-        ahead = {j: self._blocks_ahead(boxes[j][0], s_arr) for j in rel}
         s_lin = self._lin_arc_lengths(Xlin, s_arr[0])
         for k in range(1, self.N + 1):
             sk = s_arr[k]

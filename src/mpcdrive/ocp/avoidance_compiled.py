@@ -3,11 +3,12 @@ obstacle selection, the horizon tracks (placement and Frenet boxes) of static,
 constant-velocity and recorded-trajectory obstacles, and the hard avoidance rows, on the paths
 :func:`mpcdrive.paths.compiled.path_arrays` describes (straight, circle, waypoints).
 
-They are the compiled form of the numpy code kept in ``ocp.avoidance`` (``Avoidance.relevant``,
-``Avoidance._tracks``, ``Avoidance._hard_rows``), which still serves every other case (motions
-of other types, other path types) and is the reference they are tested against; the rules (which
-obstacle, which side, which row) are decided in one place, ``Avoidance.terms``, and these
-kernels only compute the numbers. Obstacles are described by arrays (see :class:`ObstacleTable`),
+The selection, tracks and rows are the compiled form of the numpy code kept in ``ocp.avoidance``
+(``Avoidance.relevant``, ``Avoidance._tracks``, ``Avoidance._hard_rows``), which still serves
+every other case (motions of other types, other path types) and is the reference they are
+tested against. The decisions of a step -- which side to pass each obstacle on
+(:func:`pick_side`, also the rule of the compiled detour), which to yield to, which car follows
+in the lane, where a stop line can go -- exist only here (:func:`decide`), for every case. Obstacles are described by arrays (see :class:`ObstacleTable`),
 the considered ones in the order of ``relevant``.
 """
 
@@ -21,9 +22,12 @@ from numba import njit
 
 from ..paths.compiled import path_eval, path_project
 from ..paths.profile_compiled import np_interp
+from ..scene.road import _interp
 from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Static, TrajectoryMotion
 
 SHAPE_CIRCLE, SHAPE_POLYGON = 0, 1
+#: the passing side of an obstacle (``SIDE_NONE``: none decided yet)
+SIDE_LEFT, SIDE_RIGHT, SIDE_BLOCKED, SIDE_NONE = 1, -1, 0, 2
 #: the row of an obstacle: avoid it (nearest-point or lateral half-plane), stop behind it
 #: (blocked lane ahead), keep ahead of it (a car following in the lane)
 MODE_AVOID, MODE_STOP, MODE_AHEAD = 0, 1, 2
@@ -420,12 +424,96 @@ def hard_rows(
                 b[k, row] = rhs
 
 
+@njit(cache=True)
+def pick_side(prev, room_left, room_right, need):
+    """The passing side of an obstacle with ``room_left`` / ``room_right`` [m] between it and
+    the road's edges beside it, when passing needs ``need`` [m]: the side ``prev`` (SIDE_*)
+    while it keeps the room, else the roomier side, SIDE_BLOCKED when neither has it."""
+    if prev == SIDE_LEFT and room_left >= need:
+        return SIDE_LEFT
+    if prev == SIDE_RIGHT and room_right >= need:
+        return SIDE_RIGHT
+    if max(room_left, room_right) < need:
+        return SIDE_BLOCKED
+    return SIDE_LEFT if room_left >= room_right else SIDE_RIGHT
+
+
+@njit(cache=True)
+def decide(
+    box, moving, s_arr, has_road, road_s, road_left, road_right, road_period, need, reach, dt, oncoming_mps,
+    follow, e_car, half_width, half_length, stop_m, prev, side, following, ahead,
+):  # fmt: skip
+    """The decisions of ``ocp.avoidance.Avoidance.terms`` for n obstacles with Frenet boxes
+    ``box`` (n, 5, K) over the horizon arc lengths ``s_arr`` (K,), ``moving`` (n,):
+
+    - ``side`` (n,): SIDE_BLOCKED for an obstacle coming towards the car along its path or
+      across its road (faster than ``oncoming_mps`` [m/s] where the car meets it: the step its
+      reference is nearest to it, step 0 for a standing one) whose prediction is on the road
+      where the car's reference is (within ``reach`` [m] along the path); else
+      :func:`pick_side` at that step (``prev`` (n,): the sides of the step before, SIDE_NONE),
+      the room beside it measured to the road's edges (tables ``road_*``; none without a road);
+    - ``following`` (n,): with ``follow``, a car directly behind in the car's lane (its box now
+      wholly behind the body's rear, overlapping the body's lateral extent around the car's
+      offset ``e_car`` [m]; never at the start of an open path, ``s_arr[0]`` <= 0 and
+      ``road_period`` = 0 -- the caller passes ``follow`` False there);
+    - ``ahead`` (n,): a stop line is possible: its centre ahead of the car, its near end within
+      ``stop_m`` [m] of the last reference."""
+    n, K = box.shape[0], box.shape[2]
+    s0, s_end = s_arr[0], s_arr[K - 1]
+    for i in range(n):
+        meet = 0
+        if moving[i]:
+            best = math.inf
+            for k in range(K):
+                d = abs(box[i, BOX_S_REF, k] - s_arr[k])
+                if d < best:
+                    best, meet = d, k
+        blocked = False
+        if has_road and K >= 2:
+            k0, k1 = max(meet - 1, 0), min(meet + 1, K - 1)
+            span = (k1 - k0) * dt
+            v_s = (box[i, BOX_S_REF, k1] - box[i, BOX_S_REF, k0]) / span
+            l0 = _interp(road_s, road_left, box[i, BOX_S_REF, k0], road_period)
+            l1 = _interp(road_s, road_left, box[i, BOX_S_REF, k1], road_period)
+            r0 = _interp(road_s, road_right, box[i, BOX_S_REF, k0], road_period)
+            r1 = _interp(road_s, road_right, box[i, BOX_S_REF, k1], road_period)
+            d_e = 0.5 * ((box[i, BOX_E_LO, k1] + box[i, BOX_E_HI, k1]) - (box[i, BOX_E_LO, k0] + box[i, BOX_E_HI, k0]))
+            v_e = min(abs(d_e), abs(d_e - (l1 - l0)), abs(d_e - (r1 - r0))) / span
+            if v_s <= -oncoming_mps or v_e >= oncoming_mps:
+                for k in range(K):
+                    if box[i, BOX_S_LO, k] - reach <= s_arr[k] <= box[i, BOX_S_HI, k] + reach:
+                        sr = box[i, BOX_S_REF, k]
+                        if box[i, BOX_E_LO, k] < _interp(road_s, road_left, sr, road_period) and box[
+                            i, BOX_E_HI, k
+                        ] > _interp(road_s, road_right, sr, road_period):
+                            blocked = True
+                            break
+        if blocked:
+            side[i] = SIDE_BLOCKED
+        else:
+            room_left = room_right = math.inf
+            if has_road:
+                sr = box[i, BOX_S_REF, meet]
+                room_left = _interp(road_s, road_left, sr, road_period) - box[i, BOX_E_HI, meet]
+                room_right = box[i, BOX_E_LO, meet] - _interp(road_s, road_right, sr, road_period)
+            side[i] = pick_side(prev[i], room_left, room_right, need)
+        following[i] = (
+            follow
+            and box[i, BOX_S_HI, 0] < s0 - half_length
+            and box[i, BOX_E_LO, 0] < e_car + half_width
+            and box[i, BOX_E_HI, 0] > e_car - half_width
+        )
+        ahead[i] = s0 <= box[i, BOX_S_REF, 0] and box[i, BOX_S_LO, 0] <= s_end + stop_m
+
+
 def _refresh_cache() -> None:
     from .. import _jitcache
     from ..paths import compiled as _paths_compiled, profile_compiled as _profile_compiled
+    from ..scene import road as _road
 
     # one file: one fingerprint for all its functions
-    _jitcache.refresh(hard_rows, [m.__file__ for m in (_paths_compiled, _profile_compiled) if m.__file__ is not None])
+    deps = (_paths_compiled, _profile_compiled, _road)
+    _jitcache.refresh(hard_rows, [m.__file__ for m in deps if m.__file__ is not None])
 
 
 _refresh_cache()

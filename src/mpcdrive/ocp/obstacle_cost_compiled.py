@@ -24,10 +24,9 @@ from numba import njit
 
 from ..paths.compiled import path_eval, path_project
 from ..scene.road import _interp
-from .avoidance_compiled import SHAPE_CIRCLE, obstacle_table, pose_at, select_into
+from .avoidance_compiled import SHAPE_CIRCLE, SIDE_BLOCKED, SIDE_LEFT, obstacle_table, pick_side, pose_at, select_into
 
 #: passing sides (as ocp.avoidance), and "not chosen yet" in the compiled side memory
-SIDE_LEFT, SIDE_RIGHT, SIDE_BLOCKED, SIDE_NONE = 1, -1, 0, 2
 #: obstacle cost formulations (``StepAssembly.obstacle_form``)
 OBS_NONE, OBS_POTENTIAL, OBS_GAUSSIAN = 0, 1, 2
 
@@ -137,15 +136,7 @@ def detour(asm, xref, sides):
             room_left, room_right = lim_l - e_hi, e_lo - lim_r
         else:
             room_left = room_right = math.inf
-        prev = sides[j]
-        if prev == SIDE_LEFT and room_left >= need:
-            side = SIDE_LEFT
-        elif prev == SIDE_RIGHT and room_right >= need:
-            side = SIDE_RIGHT
-        elif max(room_left, room_right) < need:
-            side = SIDE_BLOCKED
-        else:
-            side = SIDE_LEFT if room_left >= room_right else SIDE_RIGHT
+        side = pick_side(sides[j], room_left, room_right, need)
         sides[j] = side
         if side == SIDE_BLOCKED:
             continue
