@@ -348,8 +348,9 @@ class PythonLtvMpc(LtvMpc):
     """:class:`LtvMpc` with each step's stage QP assembled here in Python: for any model, path,
     speed reference and obstacle (the compiled step, :class:`~mpcdrive.control.fast.CompiledLtvMpc`,
     assembles the same QP for those it has a compiled form of), solved by the condensed solver
-    (:mod:`mpcdrive.control.condensed`), OSQP or projected gradient descent. The QP is built
-    once here and only updated in place in :meth:`step`.
+    (:mod:`mpcdrive.control.condensed`, which reads the stage QP as it is), OSQP or projected
+    gradient descent (on the sparse QP of ``ocp.qp``, built here for those two only). Both are
+    built once here and only updated in place in :meth:`step`.
     """
 
     #: who builds each step's stage QP
@@ -388,8 +389,6 @@ class PythonLtvMpc(LtvMpc):
             self.v_ref_mps = float(model.speed(np.zeros(model.nx)))
         if not np.isfinite(self.v_ref_mps):
             raise ValueError(f"reference speed must be finite, got {self.v_ref_mps}")
-        from ..ocp.qp import LtvQp  # scipy.sparse: imported when an OSQP controller is built
-
         self.avoidance: Avoidance | None = None
         if obstacles:
             avoidance = avoidance or AvoidanceConfig()
@@ -402,7 +401,6 @@ class PythonLtvMpc(LtvMpc):
             self.avoidance = Avoidance(
                 avoidance, list(obstacles), path, footprint, problem.N, problem.dt_s, problem.road
             )
-        self.qp = LtvQp(problem)
         if solver == "condensed":
             from ..solvers.condensed_setup import CondensedSettings
 
@@ -411,14 +409,18 @@ class PythonLtvMpc(LtvMpc):
         if solver == "condensed":
             from .condensed import CondensedBackend
 
-            self.backend = CondensedBackend(problem, settings)
+            self.backend = CondensedBackend(problem, settings)  # it reads the stage QP as it is
             self.backend_name = "fast"
-        elif solver == "projected_gradient":
-            self.backend = ProjectedGradientBackend(self.qp, pg_settings)
-            self.backend_name = "pg"
-        else:
-            self.backend = OsqpBackend(self.qp, osqp_settings)
-            self.backend_name = "osqp"
+        else:  # the sparse QP, written from the stage QP each step
+            from ..ocp.qp import LtvQp  # scipy.sparse: imported when an OSQP controller is built
+
+            self.qp = LtvQp(problem)
+            if solver == "projected_gradient":
+                self.backend = ProjectedGradientBackend(self.qp, pg_settings)
+                self.backend_name = "pg"
+            else:
+                self.backend = OsqpBackend(self.qp, osqp_settings)
+                self.backend_name = "osqp"
         self._accel_index = list(model.input_names).index("accel") if "accel" in model.input_names else None
         N, nx, nu = self.N, self.nx, self.nu
         # the stage QP each step writes (what the solvers consume) and the linearization points

@@ -200,6 +200,16 @@ class Avoidance:
         self._e_ref = np.zeros(N1)
         self._always = np.ones(N, bool)  # the presence of an obstacle without a lifetime
         self._no_road = np.zeros(1)  # the road tables passed to the compiled decisions without a road
+        #: the compiled decisions' arrays per considered obstacle: moving, previous side, side,
+        #: following, stop line possible (updated in place each step)
+        m = config.max_obstacles
+        self._decisions = (
+            np.zeros(m, np.bool_),
+            np.zeros(m, np.int64),
+            np.zeros(m, np.int64),
+            np.zeros(m, np.bool_),
+            np.zeros(m, np.bool_),
+        )
         #: build with the compiled kernels (``ocp.avoidance_compiled``) where they apply: the
         #: selection when every obstacle is static, at constant velocity or on a recorded
         #: trajectory, the tracks of such obstacles and the hard rows on a path ``path_arrays``
@@ -285,11 +295,12 @@ class Avoidance:
         towards the car or across its road where they meet, which the car yields to), the cars
         following in the lane (a set: kept behind by a longitudinal row only, never swerved or
         braked for) and which obstacles a stop line can be put before (dict)."""
-        n, K = len(rel), self.N + 1
+        n = len(rel)
         box = packed[5] if packed is not None else self._box_array(rel, boxes)
-        moving = np.array([self.obstacles[j].moving for j in rel], np.bool_)
-        prev = np.array([memory.sides.get(j, _ac.SIDE_NONE) for j in rel], np.int64)
-        side, fol, ahead = np.empty(n, np.int64), np.empty(n, np.bool_), np.empty(n, np.bool_)
+        moving, prev, side, fol, ahead = (v[:n] for v in self._decisions)
+        for i, j in enumerate(rel):
+            moving[i] = self.obstacles[j].moving
+            prev[i] = memory.sides.get(j, _ac.SIDE_NONE)
         s0 = float(s_arr[0])
         follow = self.config.uses_rows and (self.path.closed or s0 > 0.0)  # no path behind an open start
         e_car = 0.0
@@ -305,7 +316,7 @@ class Avoidance:
         _ac.decide(
             box,
             moving,
-            np.ascontiguousarray(s_arr[:K], dtype=float),
+            np.ascontiguousarray(s_arr, dtype=float),
             road is not None,
             road_s,
             road_left,
@@ -403,10 +414,7 @@ class Avoidance:
                 shape[i], nverts[i] = _ac.SHAPE_POLYGON, o.shape[1]
                 outlines_a[i, :, : o.shape[1]] = o
         centers_a = np.array([centers[j] for j in rel], float).reshape(n, K, 2)
-        box = np.array(
-            [[getattr(boxes[j], f) for f in ("s_ref", "s_lo", "s_hi", "e_lo", "e_hi")] for j in rel], float
-        ).reshape(n, 5, K)
-        return shape, radius, centers_a, outlines_a, nverts, box
+        return shape, radius, centers_a, outlines_a, nverts, self._box_array(rel, boxes)
 
     def _tracks_numpy(self, rel: list[int], t_s: float, s_arr: np.ndarray):
         K = self.N + 1

@@ -60,8 +60,8 @@ class MpcProblem:
 
     Obstacles: ``obstacle_rows`` half-plane rows per step ``a . (x_k, y_k, yaw_k) + sigma_k >= b``
     with one slack ``sigma_k >= 0`` per step, penalized by ``obstacle_slack_weight`` (quadratic)
-    and ``obstacle_slack_weight_l1`` (linear); ``position_cost=True`` reserves per-step 2x2
-    (x, y) Hessian entries for non-convex obstacle costs approximated each step (SQP).
+    and ``obstacle_slack_weight_l1`` (linear); ``position_cost=True`` marks a problem whose
+    stage weights carry a non-convex obstacle cost's (x, y) Hessian, approximated each step (SQP).
 
     Friction: with ``friction_accel_mps2`` set, the input bounds of each stage are narrowed to
     the friction circle ``a^2 + (v^2 tan(delta) / L)^2 <= friction_accel_mps2^2`` at the stage's

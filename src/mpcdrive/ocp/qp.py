@@ -100,7 +100,7 @@ class LtvQp:
         pat = _Pattern()
         # states x_1..x_N: the full upper triangle of each block is a slot (a stage's weights We
         # hold an obstacle cost's (x, y) Hessian there); x_0 is fixed by a constraint and has no cost
-        iu_, ju_ = np.triu_indices(nx)
+        self._triu = iu_, ju_ = np.triu_indices(nx)
         self._slot_Px = np.empty((N, iu_.size), dtype=np.intp)
         for k in range(1, N + 1):
             W = pb.QN if k == N else pb.Q
@@ -261,7 +261,7 @@ class LtvQp:
         # cost: P_x = 2 We, q_x = -2 qt ; q_u = -2 R ur ; minus 2 Rc u_prev on u_0
         if not np.array_equal(st.We, self._We):
             self._We[...] = st.We
-            iu_, ju_ = np.triu_indices(nx)
+            iu_, ju_ = self._triu
             self._P_vals[self._slot_Px] = 2.0 * st.We[:, iu_, ju_]
             self._P_dirty = True
         self.q[:] = self._q_const

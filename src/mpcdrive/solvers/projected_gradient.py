@@ -12,7 +12,7 @@ step. The method handles input bounds only: problems with input-rate limits, sta
 lane bound are refused at construction (use OSQP for those).
 
 The backend reads the QP's current numbers (``A``, ``l``, ``q``) after
-:meth:`~mpcdrive.ocp.qp.LtvQp.update`, exactly like the OSQP backend, and returns the same
+:meth:`~mpcdrive.ocp.qp.LtvQp.load_stage`, exactly like the OSQP backend, and returns the same
 :class:`~mpcdrive.types.SolveResult`; ``cost`` is the QP objective ``1/2 z'Pz + q'z`` as OSQP
 reports it, so the two can be compared on the same problem.
 """
