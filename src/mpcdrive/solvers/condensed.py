@@ -35,6 +35,17 @@ from .dense_qp import gi_solve
 
 @njit(cache=True)
 def riccati(N, nx, nu, A, B, c, qt, uref, Wq, Rm, x, P, p, K, kf, PA, M, G, q, z):
+    """:func:`_riccati`; the sizes of the kinematic vehicle models (3 states / 1 input, 4 / 2)
+    are handed on as constants, so the compiler unrolls the small matrix loops."""
+    if nx == 3 and nu == 1:
+        return _riccati(N, 3, 1, A, B, c, qt, uref, Wq, Rm, x, P, p, K, kf, PA, M, G, q, z)
+    if nx == 4 and nu == 2:
+        return _riccati(N, 4, 2, A, B, c, qt, uref, Wq, Rm, x, P, p, K, kf, PA, M, G, q, z)
+    return _riccati(N, nx, nu, A, B, c, qt, uref, Wq, Rm, x, P, p, K, kf, PA, M, G, q, z)
+
+
+@njit(cache=True)
+def _riccati(N, nx, nu, A, B, c, qt, uref, Wq, Rm, x, P, p, K, kf, PA, M, G, q, z):
     """Unconstrained minimizer of the tracking cost (no Rc, no slack) by the backward Riccati
     recursion ``V_k(x) = x'P_k x + 2 p_k'x + const``, ``u_k = K_k x_k + kf_k``: O(N) work.
     The state cost of x_k is ``x' Wq[k-1] x - 2 qt[k-1]' x``.
@@ -253,8 +264,10 @@ def soft_solve(
     groups with rows after it (:func:`_flag_later_groups`), and solved again until no group
     without a slack exceeds it (or with a slack on every group that has rows: the full problem). The slacks' sign rows follow row m (``rowcol`` names their single
     nonzero; the other rows written per step are marked dense there). z[:nzu] holds the inputs."""
+    for i in range(m):
+        isact[i] = 0  # no guess of the active set
     code, iters = gi_solve(
-        H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol, False
+        H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol
     )
     if m_soft == m:  # no soft rows: the QP is that one
         return code, iters
@@ -311,9 +324,8 @@ def soft_solve(
         # the rows active at the end of the solve before (as a guess: the same rows, slacks on
         # more groups) are added first
         code, it2 = gi_solve(
-            H, g, C, b, m + nk, n2, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol,
-            True,
-        )  # fmt: skip
+            H, g, C, b, m + nk, n2, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol
+        )
         iters += it2
         if code != 0:
             if full:

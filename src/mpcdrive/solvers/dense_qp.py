@@ -109,7 +109,7 @@ def _givens(a, b):
 
 
 @njit(cache=True, fastmath=_FM)
-def gi_solve(H, g, C, b, m, n, z, lam, active, isact, rowcol, L, Jt, R, d, zdir, r, u, s, rownorm, max_iter, tol, warm):
+def gi_solve(H, g, C, b, m, n, z, lam, active, isact, rowcol, L, Jt, R, d, zdir, r, u, s, rownorm, max_iter, tol):
     """Solve ``min 1/2 z'Hz + g'z  s.t.  C[:m, :n] z >= b[:m]``; returns (status, iterations).
 
     H : (>=n, >=n) SPD (lower triangle read); g : (n,); C : (>=m, >=n); b : (m,);
@@ -120,12 +120,13 @@ def gi_solve(H, g, C, b, m, n, z, lam, active, isact, rowcol, L, Jt, R, d, zdir,
     active : (n,) int, indices of the active rows (first ``q`` entries, q = number active).
     Work buffers: L, Jt, R (n x n), d, zdir, r, u (n,), s, rownorm (m,), isact (m,) int.
     tol : feasibility tolerance on the violation of a row scaled by its norm.
-    warm : ``isact`` holds a guess of the active set on entry (1: active, e.g. the rows a
-    similar QP ended with): the most violated of those rows is added before any other row is,
+    isact on entry : a guess of the active set (1: active, e.g. the rows a similar QP ended
+    with; all 0 for none): the most violated of those rows is added before any other row is,
     which rebuilds such an active set with few drops. Any order of adding violated rows leads
     to the same optimum (every iterate is dual feasible); the guess only saves iterations.
-    On return ``isact`` marks the active rows (1) and, with ``warm``, the guessed rows never
-    added (2).
+    On return ``isact`` marks the active rows (1) and the guessed rows never added (2).
+    (The guess is data, not a flag: a constant flag would make the compiler build this solver
+    once per value.)
     """
     if not cholesky_lower(H, L, n):
         return QP_FAILED, 0
@@ -135,7 +136,7 @@ def gi_solve(H, g, C, b, m, n, z, lam, active, isact, rowcol, L, Jt, R, d, zdir,
     _unconstrained(L, g, z, n)
     for i in range(m):
         lam[i] = 0.0
-        isact[i] = 2 if warm and isact[i] == 1 else 0  # 2: guessed active, not yet added
+        isact[i] = 2 if isact[i] == 1 else 0  # 2: guessed active, not yet added
         j1 = rowcol[i]
         if j1 >= 0:
             t = C[i, j1] * C[i, j1]
@@ -385,12 +386,11 @@ class DenseQpSolver:
         z = np.zeros(n)
         lam = np.zeros(max(m, 1))
         rowcol = single_nonzero_columns(C)
-        warm = active_guess is not None
-        if warm:
+        self._isact[:] = 0
+        if active_guess is not None:
             guess = np.asarray(active_guess, dtype=np.int64).ravel()
             if guess.size and (guess.min() < 0 or guess.max() >= m):
                 raise ValueError(f"active_guess must index rows 0..{m - 1}")
-            self._isact[:] = 0
             self._isact[guess] = 1
         v = self._vec
         code, it = gi_solve(
@@ -416,7 +416,6 @@ class DenseQpSolver:
             self._norm,
             self.max_iter,
             self.tol,
-            warm,
         )
         obj = float(0.5 * z @ H @ z + g @ z) if code == QP_OK else float("nan")
         return DenseQpResult(STATUS_WORDS[code], z, lam[:m].copy(), obj, int(it))
