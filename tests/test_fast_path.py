@@ -500,7 +500,7 @@ def test_compiled_discretization_equals_numpy(model, method, substeps):
     U = rng.uniform(-1, 1, size=(N, nu))
     F, A, B = np.zeros((N, nx)), np.zeros((N, nx, nx)), np.zeros((N, nx, nu))
     code = {"rk4": METHOD_RK4, "euler": METHOD_EULER, "exp": METHOD_EXP}[method]
-    nw = nx + nu + 1 if method == "exp" else nx
+    nw = nx + nu + 1 if method == "exp" else nx + nu
     sub = (np.zeros((N, nx)), np.zeros((N, nx)), np.zeros((N, nx, nx)), np.zeros((N, nx, nu)))
     for k in range(N):
         discrete_step_jacobians_substeps(

@@ -75,7 +75,8 @@ for _helper in (
 ):
     register_jitable(_helper)
 _dyn_rhs = njit(cache=True, inline="always")(dynamic_rhs)
-_dyn_partials = njit(cache=True, inline="always")(dynamic_rhs_and_partials)
+# not inlined: the kinematic models' copies of the step kernels then carry no dynamic code
+_dyn_partials = njit(cache=True)(dynamic_rhs_and_partials)
 _axle_tire = dynamic.axle_tire
 _smoothstep = dynamic._smoothstep
 # parameter indices of mp for the dynamic bicycle
@@ -263,9 +264,20 @@ def discrete_step_jacobians(kind, mp, nx, nu, X, U, k, dt, method, F, A, B, W):
     :func:`mpcdrive.models.discretize.discrete_step_and_jacobians` at (X[k], U[k]) and its
     exact Jacobians.
 
-    W : work array (7, nw, nw), nw >= nx (nu <= nx) for Euler and RK4, nw >= nx + nu + 1 for
-    ``exp``. Works by index, without array views (each view costs a reference count in compiled
-    code)."""
+    W : work array (7, nw, nw), nw >= nx + nu for Euler and RK4, nw >= nx + nu + 1 for ``exp``.
+    Works by index, without array views (each view costs a reference count in compiled code).
+    RK4 for the kinematic models gets their sizes as constants: the compiler then unrolls the
+    small matrix loops of :func:`_rk4_jacobians` (on P1 this halves the time of the Jacobians;
+    each such call compiles one more copy of that function, so only the RK4 step has them)."""
+    if method == METHOD_RK4 and kind == KIND_KINEMATIC3:
+        _rk4_jacobians(KIND_KINEMATIC3, mp, 3, 1, X, U, k, dt, F, A, B, W)
+        return
+    if method == METHOD_RK4 and kind == KIND_KINEMATIC4:
+        _rk4_jacobians(KIND_KINEMATIC4, mp, 4, 2, X, U, k, dt, F, A, B, W)
+        return
+    if method == METHOD_RK4:
+        _rk4_jacobians(kind, mp, nx, nu, X, U, k, dt, F, A, B, W)
+        return
     beta, dbeta = _step_slip(kind, mp, U, k)
     # stage state in W[_WV, 0], stage derivative in W[_WV, 1]
     for i in range(nx):
@@ -291,57 +303,62 @@ def discrete_step_jacobians(kind, mp, nx, nu, X, U, k, dt, method, F, A, B, W):
             for j in range(nu):
                 B[k, i, j] = W[_WJU, i, nx + j]
         return
-    if method == METHOD_EULER:
-        for i in range(nx):
-            F[k, i] = X[k, i] + dt * W[_WV, 1, i]
-            for j in range(nx):
-                A[k, i, j] = (1.0 if i == j else 0.0) + dt * W[_WA, i, j]
-            for j in range(nu):
-                B[k, i, j] = dt * W[_WB, i, j]
-        return
-    # RK4: accumulate (k1 + 2 k2 + 2 k3 + k4) in F[k], the stage Jacobians in A[k], B[k]
+    # Euler
+    for i in range(nx):
+        F[k, i] = X[k, i] + dt * W[_WV, 1, i]
+        for j in range(nx):
+            A[k, i, j] = (1.0 if i == j else 0.0) + dt * W[_WA, i, j]
+        for j in range(nu):
+            B[k, i, j] = dt * W[_WB, i, j]
+
+
+@njit(cache=True)
+def _rk4_jacobians(kind, mp, nx, nu, X, U, k, dt, F, A, B, W):
+    """:func:`discrete_step_jacobians` by RK4 for sizes nx, nu."""
+    beta, dbeta = _step_slip(kind, mp, U, k)
+    for i in range(nx):
+        W[_WV, 0, i] = X[k, i]
+    _stage_into(kind, mp, W, U, k, beta, dbeta)
+    # RK4: the stage Jacobian [J_x | J_u] in W[_WJX, :, :nx + nu], the weighted sum of the
+    # stages' Jacobians (k1 + 2 k2 + 2 k3 + k4) in W[_WJU], of their derivatives in F[k]
+    n = nx + nu
     for i in range(nx):
         F[k, i] = W[_WV, 1, i]
         for j in range(nx):
             W[_WJX, i, j] = W[_WA, i, j]
-            A[k, i, j] = W[_WA, i, j]
         for j in range(nu):
-            W[_WJU, i, j] = W[_WB, i, j]
-            B[k, i, j] = W[_WB, i, j]
+            W[_WJX, i, nx + j] = W[_WB, i, j]
+        for j in range(n):
+            W[_WJU, i, j] = W[_WJX, i, j]
     for stage in range(3):
         h = dt if stage == 2 else 0.5 * dt
         wgt = 1.0 if stage == 2 else 2.0
         for i in range(nx):
             W[_WV, 0, i] = X[k, i] + h * W[_WV, 1, i]
         _stage_into(kind, mp, W, U, k, beta, dbeta)
-        # J_next_x = A_s (I + h J_x) ; J_next_u = A_s (h J_u) + B_s
+        # [J_x | J_u] <- A_s [I + h J_x | h J_u] + [0 | B_s]
         for i in range(nx):
             for j in range(nx):
                 W[_WTX, i, j] = W[_WA, i, j]
             for j in range(nu):
-                W[_WTU, i, j] = W[_WB, i, j]
+                W[_WTX, i, nx + j] = W[_WB, i, j]
             for l in range(nx):
                 ha = h * W[_WA, i, l]
                 if ha != 0.0:  # continuous Jacobians are sparse
-                    for j in range(nx):
+                    for j in range(n):
                         W[_WTX, i, j] += ha * W[_WJX, l, j]
-                    for j in range(nu):
-                        W[_WTU, i, j] += ha * W[_WJU, l, j]
         for i in range(nx):
             F[k, i] += wgt * W[_WV, 1, i]
-            for j in range(nx):
+            for j in range(n):
                 W[_WJX, i, j] = W[_WTX, i, j]
-                A[k, i, j] += wgt * W[_WTX, i, j]
-            for j in range(nu):
-                W[_WJU, i, j] = W[_WTU, i, j]
-                B[k, i, j] += wgt * W[_WTU, i, j]
+                W[_WJU, i, j] += wgt * W[_WTX, i, j]
     c6 = dt / 6.0
     for i in range(nx):
         F[k, i] = X[k, i] + c6 * F[k, i]
         for j in range(nx):
-            A[k, i, j] = (1.0 if i == j else 0.0) + c6 * A[k, i, j]
+            A[k, i, j] = (1.0 if i == j else 0.0) + c6 * W[_WJU, i, j]
         for j in range(nu):
-            B[k, i, j] = c6 * B[k, i, j]
+            B[k, i, j] = c6 * W[_WJU, i, nx + j]
 
 
 @njit(cache=True)
