@@ -168,8 +168,10 @@ def _place_references(asm, qp, yaw, s_arr, v_arr):
     and the model's state and input references ``qp.xref``, ``qp.uref`` (``model.reference``:
     path pose, speed states, the steady-state feedforward)."""
     refs, N = asm.refs, asm.N
+    # the struct's arrays read once, out of the loop (each read costs a reference count)
+    pkind, geo, tab_s, tab_xy, tab_h, tab_k = asm.path, asm.geo, asm.tab_s, asm.tab_xy, asm.tab_h, asm.tab_k
     for k in range(N + 1):
-        px, py, hk, kap = path_eval(asm.path, asm.geo, asm.tab_s, asm.tab_xy, asm.tab_h, asm.tab_k, s_arr[k])
+        px, py, hk, kap = path_eval(pkind, geo, tab_s, tab_xy, tab_h, tab_k, s_arr[k])
         refs[k, 0] = px
         refs[k, 1] = py
         refs[k, 2] = hk
@@ -189,8 +191,9 @@ def follow_references_into(asm, qp, yaw, s_arr, v_arr):
     stay."""
     _place_references(asm, qp, yaw, s_arr, v_arr)
     if asm.accel >= 0:
+        uref, ia, dt = qp.uref, asm.accel, asm.dt
         for k in range(asm.N):
-            qp.uref[k, asm.accel] += (v_arr[k + 1] - v_arr[k]) / asm.dt
+            uref[k, ia] += (v_arr[k + 1] - v_arr[k]) / dt
 
 
 @njit(cache=True)
