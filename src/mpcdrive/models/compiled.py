@@ -219,23 +219,31 @@ def model_jacobians(kind, mp, x, u, A, B):
 
 
 @njit(cache=True, inline="always")
-def _matmul_into(W, n, ia, ib, io):
-    """W[io, :n, :n] = W[ia, :n, :n] @ W[ib, :n, :n] (io differs from ia and ib)."""
-    for i in range(n):
+def _matmul_top_into(W, n, r, ia, ib, io):
+    """The first r rows of W[ia, :n, :n] @ W[ib, :n, :n] into W[io] (io differs from ia and ib),
+    where the rows r.. of W[ib] are those of the identity: the sum runs over the first r rows of
+    W[ib] and adds W[ia, i, j] for j >= r. Every term the full product would add besides is an
+    exact zero, so the result is the same to the last bit."""
+    for i in range(r):
         for j in range(n):
             t = 0.0
-            for l in range(n):
+            for l in range(r):
                 t += W[ia, i, l] * W[ib, l, j]
+            if j >= r:
+                t += W[ia, i, j]
             W[io, i, j] = t
 
 
 @njit(cache=True)
-def expm_into(W, n, im, ie, it):
+def expm_into(W, n, im, ie, it, r):
     """W[ie, :n, :n] = expm(W[im, :n, :n]) as :func:`mpcdrive.models.discretize._expm` computes it:
-    scaling the norm under 1/2, a degree-12 Taylor polynomial (Horner), squaring back. W[im] is
-    overwritten with the scaled matrix, W[it] is scratch."""
+    scaling the norm under 1/2, a degree-12 Taylor polynomial (Horner), squaring back. The rows
+    r.. of W[im] are zero (an augmented linearization [[A, B, f], [0, 0, 0]]): the powers then
+    keep identity rows r.., and only the first r rows are multiplied (for 6 states, 2 inputs:
+    6 x 6 x 9 products in place of 9 x 9 x 9). W[im] is overwritten with the scaled matrix,
+    W[it] is scratch."""
     norm = 0.0
-    for i in range(n):
+    for i in range(r):
         t = 0.0
         for j in range(n):
             t += abs(W[im, i, j])
@@ -247,13 +255,13 @@ def expm_into(W, n, im, ie, it):
             W[im, i, j] = W[im, i, j] / scale
             W[ie, i, j] = (1.0 if i == j else 0.0) + W[im, i, j] / 12.0
     for p in range(11, 0, -1):  # E = I + X E / p
-        _matmul_into(W, n, im, ie, it)
-        for i in range(n):
+        _matmul_top_into(W, n, r, im, ie, it)
+        for i in range(r):
             for j in range(n):
                 W[ie, i, j] = (1.0 if i == j else 0.0) + W[it, i, j] / p
     for _ in range(sq):
-        _matmul_into(W, n, ie, ie, it)
-        for i in range(n):
+        _matmul_top_into(W, n, r, ie, ie, it)
+        for i in range(r):
             for j in range(n):
                 W[ie, i, j] = W[it, i, j]
 
@@ -295,7 +303,7 @@ def discrete_step_jacobians(kind, mp, nx, nu, X, U, k, dt, method, F, A, B, W):
             for j in range(nu):
                 W[_WJX, i, nx + j] = W[_WB, i, j] * dt
             W[_WJX, i, n - 1] = W[_WV, 1, i] * dt
-        expm_into(W, n, _WJX, _WJU, _WTX)
+        expm_into(W, n, _WJX, _WJU, _WTX, nx)
         for i in range(nx):
             F[k, i] = X[k, i] + W[_WJU, i, n - 1]
             for j in range(nx):
