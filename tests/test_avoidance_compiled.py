@@ -326,3 +326,54 @@ def test_decisions_find_followers_and_stop_lines():
     assert ahead == [False, False, False, True, False]
     assert _decide(boxes, [False] * 5, follow=False)[1] == [False] * 5
     assert _decide([behind_beside], [False], follow=True, e_car=1.2)[1] == [True]  # the car beside it
+
+
+def _corridor(boxes, use, side, present=None, lo=-3.0, hi=3.0):
+    """The compiled corridor bounds of steps 1..4 for boxes as in :func:`_decide`, on s_arr 0, 2,
+    .., 8 m, margin 0.5 m, body 4 x 1.7 m (reach 2.5 m, clearance 1.35 m), road bounds lo, hi."""
+    from mpcdrive.ocp.avoidance_compiled import corridor_bounds
+
+    n = len(boxes)
+    box = np.array([[np.broadcast_to(np.asarray(v, float), (5,)) for v in b] for b in boxes]).reshape(n, 5, 5)
+    pres = np.ones((n, 4), np.bool_) if present is None else np.array(present, np.bool_)
+    lo_a, hi_a = np.full(4, lo), np.full(4, hi)
+    corridor_bounds(
+        box,
+        np.array(use, np.bool_),
+        np.array(side, np.int64),
+        pres,
+        np.arange(0.0, 10.0, 2.0),
+        0.5,
+        2.0,
+        0.85,
+        lo_a,
+        hi_a,
+    )
+    return lo_a.tolist(), hi_a.tolist()
+
+
+def test_corridor_bounds_narrow_the_road_beside_obstacles_within_reach():
+    # s 4..6 m, e 0.5..1.5 m: reaches the references at s 2, 4, 6, 8 (steps 1..4) within 2.5 m
+    box = (5.0, 4.0, 6.0, 0.5, 1.5)
+    lo, hi = _corridor([box], [True], [SIDE_RIGHT])
+    assert hi == pytest.approx([0.5 - 1.35] * 4) and lo == [-3.0] * 4
+    lo, hi = _corridor([box], [True], [SIDE_LEFT])
+    assert lo == pytest.approx([1.5 + 1.35] * 4) and hi == [3.0] * 4
+    # out of reach of s 8 m at steps 3, 4 once it ends at 5 m: s_hi 5 + 2.5 = 7.5 < 8
+    short = (4.0, 3.0, 5.0, 0.5, 1.5)
+    assert _corridor([short], [True], [SIDE_RIGHT])[1] == pytest.approx([-0.85, -0.85, -0.85, 3.0])
+    # not used (a car following), absent at a step, blocked: no bound from it
+    assert _corridor([box], [False], [SIDE_RIGHT]) == ([-3.0] * 4, [3.0] * 4)
+    assert _corridor([box], [True], [SIDE_RIGHT], [[True, False, True, True]])[1] == pytest.approx(
+        [-0.85, 3.0, -0.85, -0.85]
+    )
+    assert _corridor([box], [True], [SIDE_BLOCKED]) == ([-3.0] * 4, [3.0] * 4)
+
+
+def test_corridor_bounds_keep_the_tube_non_empty_and_take_the_tightest():
+    left_of = (5.0, 4.0, 6.0, -1.0, 0.0)  # passed on the left: lo = 1.35
+    right_of = (5.0, 4.0, 6.0, 0.5, 1.0)  # passed on the right: hi = -0.85
+    lo, hi = _corridor([left_of, right_of], [True, True], [SIDE_LEFT, SIDE_RIGHT])
+    assert lo == hi and lo == pytest.approx([0.25] * 4)  # crossed: both at the middle
+    tighter = (5.0, 4.0, 6.0, 0.2, 1.0)  # hi = -1.15
+    assert _corridor([right_of, tighter], [True, True], [SIDE_RIGHT, SIDE_RIGHT])[1] == pytest.approx([0.2 - 1.35] * 4)

@@ -199,6 +199,11 @@ class Avoidance:
         self._g = np.zeros((N, 2))
         self._e_ref = np.zeros(N1)
         self._always = np.ones(N, bool)  # the presence of an obstacle without a lifetime
+        self._box = np.zeros((0, 5, N1))  # the Frenet boxes of the step's obstacles (set by _decide)
+        #: the corridor's arrays per considered obstacle: used (not a car following), present at
+        #: steps 1..N
+        self._use = np.zeros(config.max_obstacles, np.bool_)
+        self._present = np.zeros((config.max_obstacles, N), np.bool_)
         self._no_road = np.zeros(1)  # the road tables passed to the compiled decisions without a road
         #: the compiled decisions' arrays per considered obstacle: moving, previous side, side,
         #: following, stop line possible (updated in place each step)
@@ -336,6 +341,7 @@ class Avoidance:
             fol,
             ahead,
         )
+        self._box = box
         return (
             dict(zip(rel, side.tolist())),
             {j for j, f in zip(rel, fol.tolist()) if f},
@@ -491,7 +497,7 @@ class Avoidance:
             )
         elif cfg.formulation == "corridor":
             lo, hi, rows_a, rows_b = self._corridor(
-                Xlin, s_arr, [j for j in rel if j not in following], boxes, sides, present, road_lo, road_hi, ahead
+                Xlin, s_arr, rel, sides, present, following, road_lo, road_hi, ahead
             )
         else:
             H, g = position_cost(cfg, self.path, Xlin, rel, boxes, centers, present, self._H, self._g)
@@ -708,7 +714,11 @@ class Avoidance:
         b[:, :m] = rows(rhs, -np.inf)
         return a, b
 
-    def _corridor(self, Xlin, s_arr, rel, boxes, sides, present, road_lo, road_hi, ahead):
+    def _corridor(self, Xlin, s_arr, rel, sides, present, following, road_lo, road_hi, ahead):
+        """The corridor formulation of one step: the lateral bounds (compiled:
+        :func:`~mpcdrive.ocp.avoidance_compiled.corridor_bounds`, on the step's box array from
+        :meth:`_decide`) and the stop-before half-planes of the blocked obstacles ahead, one slot
+        per obstacle not in ``following``."""
         lo, hi = self._lo, self._hi
         if road_lo is None or road_hi is None:
             lo[:], hi[:] = -1e3, 1e3
@@ -718,31 +728,30 @@ class Avoidance:
         a[:] = 0.0
         b[:] = -np.inf
         m = self.config.margin_m
-        s_lin = self._lin_arc_lengths(Xlin, s_arr[0])
-        for k in range(1, self.N + 1):
-            sk = s_arr[k]
-            for j in rel:
-                box = boxes[j][k]
-                if not present[j][k - 1]:
-                    continue
-                if not (box.s_lo - m - self.half_length <= sk <= box.s_hi + m + self.half_length):
-                    continue
-                if sides[j] == SIDE_LEFT:
-                    lo[k - 1] = max(lo[k - 1], box.e_hi + m + self.half_width)
-                elif sides[j] == SIDE_RIGHT:
-                    hi[k - 1] = min(hi[k - 1], box.e_lo - m - self.half_width)
-            for slot, j in enumerate(rel):
-                box = boxes[j][k]
-                if sides[j] != SIDE_BLOCKED or not ahead[j] or not present[j][k - 1]:
-                    continue
+        n = len(rel)
+        side, use, pres = self._decisions[2][:n], self._use[:n], self._present[:n]
+        for i, j in enumerate(rel):
+            use[i] = j not in following
+            pres[i] = present[j]
+        s_c = np.ascontiguousarray(s_arr, dtype=float)
+        _ac.corridor_bounds(self._box, use, side, pres, s_c, m, self.half_length, self.half_width, lo, hi)
+        s_lin = None
+        slot = 0
+        for i, j in enumerate(rel):
+            if not use[i]:
+                continue
+            if sides[j] == SIDE_BLOCKED and ahead[j]:
                 # stop before it: s(p) <= s_lo - margin - half length, i.e. t . p <= t . q - that
-                t, q = self._stop_plane(np.array([box.s_lo]), s_lin[k - 1 : k], m + self.half_length)
-                a[k - 1, slot, :2] = -t[0]
-                b[k - 1, slot] = -(t[0] @ q[0]) + m + self.half_length
-        # keep the tube non-empty: if the bounds cross, centre them (the slack handles the rest)
-        bad = lo > hi
-        mid = 0.5 * (lo + hi)
-        lo[bad] = hi[bad] = mid[bad]
+                if s_lin is None:
+                    s_lin = self._lin_arc_lengths(Xlin, s_arr[0])
+                s_lo = self._box[i, _ac.BOX_S_LO]
+                for k in range(1, self.N + 1):
+                    if not present[j][k - 1]:
+                        continue
+                    t, q = self._stop_plane(s_lo[k : k + 1], s_lin[k - 1 : k], m + self.half_length)
+                    a[k - 1, slot, :2] = -t[0]
+                    b[k - 1, slot] = -(t[0] @ q[0]) + m + self.half_length
+            slot += 1
         return lo, hi, a, b
 
     def _detour(self, s_arr, boxes, sides):

@@ -425,6 +425,37 @@ def hard_rows(
 
 
 @njit(cache=True)
+def corridor_bounds(box, use, side, present, s_arr, margin, half_length, half_width, lo, hi):
+    """The corridor formulation's lateral bounds: ``lo``, ``hi`` (N,) [m], the bounds on e_y of
+    steps 1..N (the road's on entry), narrowed in place by every obstacle i with ``use[i]``
+    present at that step (``present`` (n, N) bool) whose box (``box`` (n, 5, N+1), BOX_* fields)
+    reaches the step's reference arc length ``s_arr[k]`` within ``margin`` plus half the body
+    length: passed on the left (``side[i]``, SIDE_*), e_y stays ``margin`` plus half the body
+    width above the box; on the right, as far below it. Where the bounds cross, both are set to
+    their middle (the tube stays non-empty; the slack handles the rest)."""
+    N = lo.shape[0]
+    n = use.shape[0]
+    reach = margin + half_length
+    clear = margin + half_width
+    for k in range(1, N + 1):
+        sk = s_arr[k]
+        for i in range(n):
+            if not use[i] or not present[i, k - 1]:
+                continue
+            if not (box[i, BOX_S_LO, k] - reach <= sk <= box[i, BOX_S_HI, k] + reach):
+                continue
+            if side[i] == SIDE_LEFT:
+                lo[k - 1] = max(lo[k - 1], box[i, BOX_E_HI, k] + clear)
+            elif side[i] == SIDE_RIGHT:
+                hi[k - 1] = min(hi[k - 1], box[i, BOX_E_LO, k] - clear)
+    for k in range(N):
+        if lo[k] > hi[k]:
+            mid = 0.5 * (lo[k] + hi[k])
+            lo[k] = mid
+            hi[k] = mid
+
+
+@njit(cache=True)
 def pick_side(prev, room_left, room_right, need):
     """The passing side of an obstacle with ``room_left`` / ``room_right`` [m] between it and
     the road's edges beside it, when passing needs ``need`` [m]: the side ``prev`` (SIDE_*)
