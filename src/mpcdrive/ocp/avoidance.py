@@ -187,6 +187,7 @@ class Avoidance:
         self.stop_gap_m = 0.0
         self.M = config.rows_per_step(footprint)
         self.offsets = footprint.disc_offsets_m
+        self._max_offset = float(np.max(self.offsets))
         self.r_disc = footprint.disc_radius_m
         self.half_width = 0.5 * footprint.width_m
         self.half_length = 0.5 * footprint.length_m
@@ -490,7 +491,7 @@ class Avoidance:
             present.update({j: np.zeros(self.N, bool) for j in following})
         rows_a = rows_b = lo = hi = H = g = e_ref = None
         if cfg.detour == "trapezoid":
-            e_ref = self._detour(s_arr, {j: b for j, b in boxes.items() if j not in following}, sides)
+            e_ref = self._detour(s_arr, rel, following)
         if cfg.formulation == "hard":
             rows_a, rows_b = self._hard_rows(
                 Xlin, s_arr, rel, boxes, centers, world, sides, present, following, packed, ahead
@@ -510,7 +511,7 @@ class Avoidance:
         back by the stop constraint: the front disc's clearance (hard) or margin plus half the
         body (corridor)."""
         if self.config.formulation == "hard":
-            return self.r_disc + self.config.margin_m + float(np.max(self.offsets))
+            return self.r_disc + self.config.margin_m + self._max_offset
         return self.config.margin_m + self.half_length
 
     def _stop_lines(self, rel, boxes, sides, ahead, *, gap_s: float) -> np.ndarray | None:
@@ -754,31 +755,27 @@ class Avoidance:
             slot += 1
         return lo, hi, a, b
 
-    def _detour(self, s_arr, boxes, sides):
-        """The paper's trapezoidal detour: the reference shifts sideways by the room each obstacle
-        needs, ramping over ``detour_ramp_m`` before and after it."""
-        e = self._e_ref
-        e[:] = 0.0
-        ramp = self.config.detour_ramp_m
-        for j, bx in boxes.items():
-            side = sides[j]
-            if side == SIDE_BLOCKED:
-                continue
-            box = bx[0]
-            shift = (
-                (box.e_hi + self.half_width + 2 * self.config.margin_m)
-                if side == SIDE_LEFT
-                else (box.e_lo - self.half_width - 2 * self.config.margin_m)
-            )
-            lo_s, hi_s = box.s_lo - self.half_length, box.s_hi + self.half_length
-            f = np.clip(
-                np.minimum((s_arr - (lo_s - ramp)) / max(ramp, 1e-9), ((hi_s + ramp) - s_arr) / max(ramp, 1e-9)),
-                0.0,
-                1.0,
-            )
-            cand = shift * f
-            e[:] = np.where(np.abs(cand) > np.abs(e), cand, e)
-        return e
+    def _detour(self, s_arr, rel, following):
+        """The paper's trapezoidal detour (compiled: :func:`~mpcdrive.ocp.avoidance_compiled.detour_offsets`,
+        on the step's box array and passing sides from :meth:`_decide`): the reference shifts
+        sideways by the room each obstacle not in ``following`` needs, ramping over
+        ``detour_ramp_m`` before and after it."""
+        n = len(rel)
+        use = self._use[:n]
+        for i, j in enumerate(rel):
+            use[i] = j not in following
+        _ac.detour_offsets(
+            self._box,
+            use,
+            self._decisions[2][:n],
+            np.ascontiguousarray(s_arr, dtype=float),
+            self.half_width,
+            self.half_length,
+            self.config.margin_m,
+            self.config.detour_ramp_m,
+            self._e_ref,
+        )
+        return self._e_ref
 
 
 def _radius(ob: Obstacle) -> float:

@@ -425,6 +425,42 @@ def hard_rows(
 
 
 @njit(cache=True)
+def trapezoid_into(e_ref, s_arr, shift, s_lo, s_hi, ramp):
+    """The paper's trapezoidal detour of one obstacle: the lateral shift ``shift`` [m] over the
+    arc lengths [s_lo, s_hi] [m], ramping from 0 over ``ramp`` [m] before and after; written into
+    ``e_ref`` (N+1,) at the references ``s_arr`` where it is larger in magnitude than what is
+    there (the widest detour wins; a tie keeps the earlier obstacle's). Returns whether any
+    written value is non-zero."""
+    rr = max(ramp, 1e-9)
+    any_shift = False
+    for k in range(e_ref.shape[0]):
+        f = min(max(min((s_arr[k] - (s_lo - ramp)) / rr, ((s_hi + ramp) - s_arr[k]) / rr), 0.0), 1.0)
+        cand = shift * f
+        if abs(cand) > abs(e_ref[k]):
+            e_ref[k] = cand
+            any_shift = any_shift or cand != 0.0
+    return any_shift
+
+
+@njit(cache=True)
+def detour_offsets(box, use, side, s_arr, half_width, half_length, margin, ramp, e_ref):
+    """The detour of the row formulations: ``e_ref`` (N+1,) [m], the references' lateral shift
+    around every obstacle i with ``use[i]`` passed on a side (``side[i]``; none for
+    SIDE_BLOCKED), from its box now (``box`` (n, 5, N+1), time 0): beside it by ``2 margin``
+    plus half the body width, along it by half the body length (:func:`trapezoid_into`)."""
+    for k in range(e_ref.shape[0]):
+        e_ref[k] = 0.0
+    for i in range(use.shape[0]):
+        if not use[i] or side[i] == SIDE_BLOCKED:
+            continue
+        if side[i] == SIDE_LEFT:
+            shift = box[i, BOX_E_HI, 0] + half_width + 2.0 * margin
+        else:
+            shift = box[i, BOX_E_LO, 0] - half_width - 2.0 * margin
+        trapezoid_into(e_ref, s_arr, shift, box[i, BOX_S_LO, 0] - half_length, box[i, BOX_S_HI, 0] + half_length, ramp)
+
+
+@njit(cache=True)
 def corridor_bounds(box, use, side, present, s_arr, margin, half_length, half_width, lo, hi):
     """The corridor formulation's lateral bounds: ``lo``, ``hi`` (N,) [m], the bounds on e_y of
     steps 1..N (the road's on entry), narrowed in place by every obstacle i with ``use[i]``

@@ -24,7 +24,16 @@ from numba import njit
 
 from ..paths.compiled import path_eval, path_project
 from ..scene.road import _interp
-from .avoidance_compiled import SHAPE_CIRCLE, SIDE_BLOCKED, SIDE_LEFT, obstacle_table, pick_side, pose_at, select_into
+from .avoidance_compiled import (
+    SHAPE_CIRCLE,
+    SIDE_BLOCKED,
+    SIDE_LEFT,
+    obstacle_table,
+    pick_side,
+    pose_at,
+    select_into,
+    trapezoid_into,
+)
 
 #: passing sides (as ocp.avoidance), and "not chosen yet" in the compiled side memory
 #: obstacle cost formulations (``StepAssembly.obstacle_form``)
@@ -141,14 +150,8 @@ def detour(asm, xref, sides):
         if side == SIDE_BLOCKED:
             continue
         shift = (e_hi + hw + 2.0 * margin) if side == SIDE_LEFT else (e_lo - hw - 2.0 * margin)
-        lo_s, hi_s = s_ref - r - hl, s_ref + r + hl
-        rr = max(ramp, 1e-9)
-        for k in range(N + 1):
-            f = min(max(min((s_arr[k] - (lo_s - ramp)) / rr, ((hi_s + ramp) - s_arr[k]) / rr), 0.0), 1.0)
-            cand = shift * f
-            if abs(cand) > abs(e_ref[k]):
-                e_ref[k] = cand
-                any_shift = any_shift or cand != 0.0
+        if trapezoid_into(e_ref, s_arr, shift, s_ref - r - hl, s_ref + r + hl, ramp):
+            any_shift = True
     if any_shift:
         shift_references(N, s_arr, refs, e_ref, xref)
 
