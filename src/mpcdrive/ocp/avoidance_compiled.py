@@ -425,16 +425,20 @@ def hard_rows(
 
 
 @njit(cache=True)
-def trapezoid_into(e_ref, s_arr, shift, s_lo, s_hi, ramp):
-    """The paper's trapezoidal detour of one obstacle: the lateral shift ``shift`` [m] over the
-    arc lengths [s_lo, s_hi] [m], ramping from 0 over ``ramp`` [m] before and after; written into
-    ``e_ref`` (N+1,) at the references ``s_arr`` where it is larger in magnitude than what is
-    there (the widest detour wins; a tie keeps the earlier obstacle's). Returns whether any
+def trapezoid_into(e_ref, s_arr, side, s_lo, s_hi, e_lo, e_hi, half_width, half_length, margin, ramp):
+    """The paper's trapezoidal detour around one obstacle spanning [s_lo, s_hi] x [e_lo, e_hi]
+    [m] along / across the path, passed on ``side`` (SIDE_LEFT, else right): the lateral shift
+    that keeps ``2 margin`` plus half the body width beside it, held along it (and half the body
+    length before and after) and ramping from 0 over ``ramp`` [m] before and after; written
+    into ``e_ref`` (N+1,) at the references ``s_arr`` where it is larger in magnitude than what
+    is there (the widest detour wins; a tie keeps the earlier obstacle's). Returns whether any
     written value is non-zero."""
+    shift = (e_hi + half_width + 2.0 * margin) if side == SIDE_LEFT else (e_lo - half_width - 2.0 * margin)
+    lo_s, hi_s = s_lo - half_length, s_hi + half_length
     rr = max(ramp, 1e-9)
     any_shift = False
     for k in range(e_ref.shape[0]):
-        f = min(max(min((s_arr[k] - (s_lo - ramp)) / rr, ((s_hi + ramp) - s_arr[k]) / rr), 0.0), 1.0)
+        f = min(max(min((s_arr[k] - (lo_s - ramp)) / rr, ((hi_s + ramp) - s_arr[k]) / rr), 0.0), 1.0)
         cand = shift * f
         if abs(cand) > abs(e_ref[k]):
             e_ref[k] = cand
@@ -445,19 +449,16 @@ def trapezoid_into(e_ref, s_arr, shift, s_lo, s_hi, ramp):
 @njit(cache=True)
 def detour_offsets(box, use, side, s_arr, half_width, half_length, margin, ramp, e_ref):
     """The detour of the row formulations: ``e_ref`` (N+1,) [m], the references' lateral shift
-    around every obstacle i with ``use[i]`` passed on a side (``side[i]``; none for
-    SIDE_BLOCKED), from its box now (``box`` (n, 5, N+1), time 0): beside it by ``2 margin``
-    plus half the body width, along it by half the body length (:func:`trapezoid_into`)."""
+    (:func:`trapezoid_into`) around every obstacle i with ``use[i]`` passed on a side
+    (``side[i]``; none for SIDE_BLOCKED), from its box now (``box`` (n, 5, N+1), time 0)."""
     for k in range(e_ref.shape[0]):
         e_ref[k] = 0.0
     for i in range(use.shape[0]):
-        if not use[i] or side[i] == SIDE_BLOCKED:
-            continue
-        if side[i] == SIDE_LEFT:
-            shift = box[i, BOX_E_HI, 0] + half_width + 2.0 * margin
-        else:
-            shift = box[i, BOX_E_LO, 0] - half_width - 2.0 * margin
-        trapezoid_into(e_ref, s_arr, shift, box[i, BOX_S_LO, 0] - half_length, box[i, BOX_S_HI, 0] + half_length, ramp)
+        if use[i] and side[i] != SIDE_BLOCKED:
+            trapezoid_into(
+                e_ref, s_arr, side[i], box[i, BOX_S_LO, 0], box[i, BOX_S_HI, 0], box[i, BOX_E_LO, 0],
+                box[i, BOX_E_HI, 0], half_width, half_length, margin, ramp,
+            )  # fmt: skip
 
 
 @njit(cache=True)

@@ -27,7 +27,6 @@ from ..scene.road import _interp
 from .avoidance_compiled import (
     SHAPE_CIRCLE,
     SIDE_BLOCKED,
-    SIDE_LEFT,
     obstacle_table,
     pick_side,
     pose_at,
@@ -35,7 +34,6 @@ from .avoidance_compiled import (
     trapezoid_into,
 )
 
-#: passing sides (as ocp.avoidance), and "not chosen yet" in the compiled side memory
 #: obstacle cost formulations (``StepAssembly.obstacle_form``)
 OBS_NONE, OBS_POTENTIAL, OBS_GAUSSIAN = 0, 1, 2
 
@@ -147,10 +145,9 @@ def detour(asm, xref, sides):
             room_left = room_right = math.inf
         side = pick_side(sides[j], room_left, room_right, need)
         sides[j] = side
-        if side == SIDE_BLOCKED:
-            continue
-        shift = (e_hi + hw + 2.0 * margin) if side == SIDE_LEFT else (e_lo - hw - 2.0 * margin)
-        if trapezoid_into(e_ref, s_arr, shift, s_ref - r - hl, s_ref + r + hl, ramp):
+        if side != SIDE_BLOCKED and trapezoid_into(
+            e_ref, s_arr, side, s_ref - r, s_ref + r, e_lo, e_hi, hw, hl, margin, ramp
+        ):
             any_shift = True
     if any_shift:
         shift_references(N, s_arr, refs, e_ref, xref)
