@@ -200,9 +200,8 @@ class Avoidance:
         self._g = np.zeros((N, 2))
         self._e_ref = np.zeros(N1)
         self._always = np.ones(N, bool)  # the presence of an obstacle without a lifetime
-        self._box = np.zeros((0, 5, N1))  # the Frenet boxes of the step's obstacles (set by _decide)
-        #: the corridor's arrays per considered obstacle: used (not a car following), present at
-        #: steps 1..N
+        #: per considered obstacle, filled each step: not a car following (:meth:`_not_following`),
+        #: present at steps 1..N (:meth:`_presence`)
         self._use = np.zeros(config.max_obstacles, np.bool_)
         self._present = np.zeros((config.max_obstacles, N), np.bool_)
         self._no_road = np.zeros(1)  # the road tables passed to the compiled decisions without a road
@@ -300,7 +299,9 @@ class Avoidance:
         compiled tracks, or None): the passing sides (dict; SIDE_BLOCKED for an obstacle coming
         towards the car or across its road where they meet, which the car yields to), the cars
         following in the lane (a set: kept behind by a longitudinal row only, never swerved or
-        braked for) and which obstacles a stop line can be put before (dict)."""
+        braked for), which obstacles a stop line can be put before (dict), and for the compiled
+        kernels after it the Frenet boxes as an array (n, 5, N+1) and the sides as an array (n,),
+        both in the order of ``rel``."""
         n = len(rel)
         box = packed[5] if packed is not None else self._box_array(rel, boxes)
         moving, prev, side, fol, ahead = (v[:n] for v in self._decisions)
@@ -342,11 +343,12 @@ class Avoidance:
             fol,
             ahead,
         )
-        self._box = box
         return (
             dict(zip(rel, side.tolist())),
             {j for j, f in zip(rel, fol.tolist()) if f},
             dict(zip(rel, ahead.tolist())),
+            box,
+            side,
         )
 
     def _box_array(self, rel: list[int], boxes) -> np.ndarray:
@@ -480,7 +482,7 @@ class Avoidance:
         cfg = self.config
         rel = self.relevant(t_s, x[:2])
         boxes, centers, world, packed = self._tracks(rel, t_s, s_arr)
-        sides, following, ahead = self._decide(rel, boxes, packed, x, s_arr, memory)
+        sides, following, ahead, box, side = self._decide(rel, boxes, packed, x, s_arr, memory)
         memory.sides.update(sides)
         # horizon steps 1..N at which each obstacle exists (its lifetime)
         times = t_s + self.dt_s * np.arange(1, self.N + 1) if any(self.obstacles[j].has_lifetime for j in rel) else None
@@ -490,16 +492,16 @@ class Avoidance:
             # (its keep-ahead row would forbid the braking)
             present.update({j: np.zeros(self.N, bool) for j in following})
         rows_a = rows_b = lo = hi = H = g = e_ref = None
+        use = self._not_following(rel, following)
         if cfg.detour == "trapezoid":
-            e_ref = self._detour(s_arr, rel, following)
+            e_ref = self._detour(s_arr, box, side, use)
         if cfg.formulation == "hard":
             rows_a, rows_b = self._hard_rows(
                 Xlin, s_arr, rel, boxes, centers, world, sides, present, following, packed, ahead
             )
         elif cfg.formulation == "corridor":
-            lo, hi, rows_a, rows_b = self._corridor(
-                Xlin, s_arr, rel, sides, present, following, road_lo, road_hi, ahead
-            )
+            pres = self._presence(rel, present)
+            lo, hi, rows_a, rows_b = self._corridor(Xlin, s_arr, rel, box, side, use, pres, ahead, road_lo, road_hi)
         else:
             H, g = position_cost(cfg, self.path, Xlin, rel, boxes, centers, present, self._H, self._g)
         s_max = None if cfg.follow_gap_s is None else self._stop_lines(rel, boxes, sides, ahead, gap_s=cfg.follow_gap_s)
@@ -600,10 +602,7 @@ class Avoidance:
                 mode[i] = _ac.MODE_STOP
             elif j in following:
                 mode[i] = _ac.MODE_AHEAD
-        if all(present[j] is self._always for j in rel):
-            pres = self._present_all[:n]
-        else:
-            pres = np.array([present[j] for j in rel], bool).reshape(n, self.N)
+        pres = self._presence(rel, present)
         shape, radius, centers_a, outlines_a, nverts, box = packed
         _ac.hard_rows(
             cpath.kind,
@@ -715,11 +714,30 @@ class Avoidance:
         b[:, :m] = rows(rhs, -np.inf)
         return a, b
 
-    def _corridor(self, Xlin, s_arr, rel, sides, present, following, road_lo, road_hi, ahead):
-        """The corridor formulation of one step: the lateral bounds (compiled:
-        :func:`~mpcdrive.ocp.avoidance_compiled.corridor_bounds`, on the step's box array from
-        :meth:`_decide`) and the stop-before half-planes of the blocked obstacles ahead, one slot
-        per obstacle not in ``following``."""
+    def _not_following(self, rel, following) -> np.ndarray:
+        """(n,) bool in the order of ``rel``: the obstacle is not a car following in the lane."""
+        use = self._use[: len(rel)]
+        for i, j in enumerate(rel):
+            use[i] = j not in following
+        return use
+
+    def _presence(self, rel, present) -> np.ndarray:
+        """(n, N) bool in the order of ``rel``: the obstacle exists at steps 1..N (``present``
+        per obstacle; all true without lifetimes, without a copy)."""
+        n = len(rel)
+        if all(present[j] is self._always for j in rel):
+            return self._present_all[:n]
+        pres = self._present[:n]
+        for i, j in enumerate(rel):
+            pres[i] = present[j]
+        return pres
+
+    def _corridor(self, Xlin, s_arr, rel, box, side, use, pres, ahead, road_lo, road_hi):
+        """The corridor formulation of one step for the obstacles ``rel`` (Frenet boxes ``box``,
+        passing sides ``side``, ``use``: not a car following, ``pres``: presence, as
+        :meth:`_decide`, :meth:`_not_following` and :meth:`_presence` give them): the lateral
+        bounds (compiled: :func:`~mpcdrive.ocp.avoidance_compiled.corridor_bounds`) and the
+        stop-before half-planes of the blocked obstacles ahead, one slot per obstacle used."""
         lo, hi = self._lo, self._hi
         if road_lo is None or road_hi is None:
             lo[:], hi[:] = -1e3, 1e3
@@ -729,25 +747,20 @@ class Avoidance:
         a[:] = 0.0
         b[:] = -np.inf
         m = self.config.margin_m
-        n = len(rel)
-        side, use, pres = self._decisions[2][:n], self._use[:n], self._present[:n]
-        for i, j in enumerate(rel):
-            use[i] = j not in following
-            pres[i] = present[j]
         s_c = np.ascontiguousarray(s_arr, dtype=float)
-        _ac.corridor_bounds(self._box, use, side, pres, s_c, m, self.half_length, self.half_width, lo, hi)
+        _ac.corridor_bounds(box, use, side, pres, s_c, m, self.half_length, self.half_width, lo, hi)
         s_lin = None
         slot = 0
         for i, j in enumerate(rel):
             if not use[i]:
                 continue
-            if sides[j] == SIDE_BLOCKED and ahead[j]:
+            if side[i] == SIDE_BLOCKED and ahead[j]:
                 # stop before it: s(p) <= s_lo - margin - half length, i.e. t . p <= t . q - that
                 if s_lin is None:
                     s_lin = self._lin_arc_lengths(Xlin, s_arr[0])
-                s_lo = self._box[i, _ac.BOX_S_LO]
+                s_lo = box[i, _ac.BOX_S_LO]
                 for k in range(1, self.N + 1):
-                    if not present[j][k - 1]:
+                    if not pres[i, k - 1]:
                         continue
                     t, q = self._stop_plane(s_lo[k : k + 1], s_lin[k - 1 : k], m + self.half_length)
                     a[k - 1, slot, :2] = -t[0]
@@ -755,19 +768,15 @@ class Avoidance:
             slot += 1
         return lo, hi, a, b
 
-    def _detour(self, s_arr, rel, following):
-        """The paper's trapezoidal detour (compiled: :func:`~mpcdrive.ocp.avoidance_compiled.detour_offsets`,
-        on the step's box array and passing sides from :meth:`_decide`): the reference shifts
-        sideways by the room each obstacle not in ``following`` needs, ramping over
+    def _detour(self, s_arr, box, side, use):
+        """The paper's trapezoidal detour (compiled: :func:`~mpcdrive.ocp.avoidance_compiled.detour_offsets`)
+        around the obstacles with Frenet boxes ``box`` passed on ``side`` where ``use`` (not a car
+        following): the reference shifts sideways by the room each one needs, ramping over
         ``detour_ramp_m`` before and after it."""
-        n = len(rel)
-        use = self._use[:n]
-        for i, j in enumerate(rel):
-            use[i] = j not in following
         _ac.detour_offsets(
-            self._box,
+            box,
             use,
-            self._decisions[2][:n],
+            side,
             np.ascontiguousarray(s_arr, dtype=float),
             self.half_width,
             self.half_length,
