@@ -31,6 +31,7 @@ import numpy as np
 from numba import njit
 from numba.extending import register_jitable
 
+from .._subroutine import subroutine
 from . import dynamic
 from .dynamic import (
     DYNAMIC_A_ENTRIES,
@@ -60,11 +61,11 @@ METHOD_EULER = 0
 METHOD_RK4 = 1
 METHOD_EXP = 2
 
-_slip = njit(cache=True, inline="always")(slip_terms)
-_dslip = njit(cache=True, inline="always")(slip_angle_derivative)
-_rhs = njit(cache=True, inline="always")(kinematic_rhs_at_slip)
-_partials = njit(cache=True, inline="always")(kinematic_partials_at_slip)
-_ss = njit(cache=True)(steady_state_equations)
+_slip = subroutine(slip_terms)
+_dslip = subroutine(slip_angle_derivative)
+_rhs = subroutine(kinematic_rhs_at_slip)
+_partials = subroutine(kinematic_partials_at_slip)
+_ss = subroutine(steady_state_equations)
 # the dynamic equations call these helpers of their module: callable from compiled code as they are
 for _helper in (
     dynamic._pacejka,
@@ -74,9 +75,9 @@ for _helper in (
     dynamic.axle_tire,
 ):
     register_jitable(_helper)
-_dyn_rhs = njit(cache=True, inline="always")(dynamic_rhs)
+_dyn_rhs = subroutine(dynamic_rhs)
 # not inlined: the kinematic models' copies of the step kernels then carry no dynamic code
-_dyn_partials = njit(cache=True)(dynamic_rhs_and_partials)
+_dyn_partials = subroutine(dynamic_rhs_and_partials)
 _axle_tire = dynamic.axle_tire
 _smoothstep = dynamic._smoothstep
 # parameter indices of mp for the dynamic bicycle
@@ -115,7 +116,7 @@ def model_code(model) -> tuple[int, np.ndarray] | None:
 _WA, _WB, _WJX, _WJU, _WTX, _WTU, _WV = range(7)
 
 
-@njit(cache=True, inline="always")
+@subroutine
 def _stage_into(kind, mp, W, U, k, beta, dbeta):
     """W[_WA] = df/dx (nx, nx), W[_WB][:, :nu] = df/du (their leading nx x nx and nx x 2 blocks
     written: the entries the steps read) and W[_WV, 1] = f, at the state W[_WV, 0] and input U[k]; beta, dbeta : the slip
@@ -154,7 +155,7 @@ def _stage_into(kind, mp, W, U, k, beta, dbeta):
         W[_WV, 1, 3] = U[k, 1]
 
 
-@njit(cache=True, inline="always")
+@subroutine
 def _step_slip(kind, mp, U, k):
     """(slip terms, d beta / d steer) of the kinematic models for the step's input U[k] (dummies
     for the dynamic model, which needs none)."""
@@ -163,7 +164,7 @@ def _step_slip(kind, mp, U, k):
     return _slip(U[k, 0], mp[0], np), _dslip(U[k, 0], mp[0], np)
 
 
-@njit(cache=True, inline="always")
+@subroutine
 def _rhs_into(kind, mp, w, U, k, beta):
     """w[1] = f(w[0], U[k]) (without Jacobians); beta : the slip terms of U[k, 0] (kinematic)."""
     if kind == KIND_DYNAMIC:
@@ -180,7 +181,7 @@ def _rhs_into(kind, mp, w, U, k, beta):
         w[1, 3] = U[k, 1]
 
 
-@njit(cache=True, inline="always")
+@subroutine
 def model_speed(kind, mp, x):
     """The speed [m/s] of state x, as the model's ``speed``: the constant ``mp[2]`` (kinematic3),
     ``v`` (kinematic4), ``hypot(vx, vy)`` (dynamic)."""
@@ -218,7 +219,7 @@ def model_jacobians(kind, mp, x, u, A, B):
     B[:, :] = W[_WB, :, : B.shape[1]]
 
 
-@njit(cache=True, inline="always")
+@subroutine
 def _matmul_top_into(W, n, r, ia, ib, io):
     """The first r rows of W[ia, :n, :n] @ W[ib, :n, :n] into W[io] (io differs from ia and ib),
     where the rows r.. of W[ib] are those of the identity: the sum runs over the first r rows of
@@ -234,7 +235,7 @@ def _matmul_top_into(W, n, r, ia, ib, io):
             W[io, i, j] = t
 
 
-@njit(cache=True)
+@subroutine
 def expm_into(W, n, im, ie, it, r):
     """W[ie, :n, :n] = expm(W[im, :n, :n]) as :func:`mpcdrive.models.discretize._expm` computes it:
     scaling the norm under 1/2, a degree-12 Taylor polynomial (Horner), squaring back. The rows
@@ -266,7 +267,7 @@ def expm_into(W, n, im, ie, it, r):
                 W[ie, i, j] = W[it, i, j]
 
 
-@njit(cache=True)
+@subroutine
 def discrete_step_jacobians(kind, mp, nx, nu, X, U, k, dt, method, F, A, B, W):
     """F[k] = x_{k+1} (nx,), A[k] (nx, nx), B[k] (nx, nu): the discrete map of
     :func:`mpcdrive.models.discretize.discrete_step_and_jacobians` at (X[k], U[k]) and its
@@ -319,7 +320,7 @@ def discrete_step_jacobians(kind, mp, nx, nu, X, U, k, dt, method, F, A, B, W):
             B[k, i, j] = dt * W[_WB, i, j]
 
 
-@njit(cache=True)
+@subroutine
 def _rk4_jacobians(kind, mp, nx, nu, X, U, k, dt, F, A, B, W):
     """:func:`discrete_step_jacobians` by RK4 for sizes nx, nu."""
     beta, dbeta = _step_slip(kind, mp, U, k)
@@ -368,7 +369,7 @@ def _rk4_jacobians(kind, mp, nx, nu, X, U, k, dt, F, A, B, W):
             B[k, i, j] = c6 * W[_WJU, i, nx + j]
 
 
-@njit(cache=True)
+@subroutine
 def rollout_into(kind, mp, nx, X, U, n, dt, method, substeps, w):
     """X[k + 1] = F(X[k], U[k]) for k < n (no Jacobians) by Euler or RK4 (``exp`` needs the
     Jacobians: :func:`discrete_step_jacobians_substeps`), each step taken as ``substeps`` equal
@@ -401,7 +402,7 @@ def rollout_into(kind, mp, nx, X, U, n, dt, method, substeps, w):
             X[k + 1, i] = w[3, i]
 
 
-@njit(cache=True)
+@subroutine
 def discrete_step_jacobians_substeps(kind, mp, nx, nu, X, U, k, dt, method, substeps, F, A, B, W, sx, sf, sa, sb):
     """:func:`discrete_step_jacobians` with the step taken as ``substeps`` equal steps of
     dt / substeps, their Jacobians chained as :func:`mpcdrive.models.discretize.discrete_step_and_jacobians`
@@ -439,7 +440,7 @@ def discrete_step_jacobians_substeps(kind, mp, nx, nu, X, U, k, dt, method, subs
                 B[k, i, j] = W[_WTU, i, j]
 
 
-@njit(cache=True)
+@subroutine
 def _inverse_tire(n, front, mp):
     """Slip angle [rad] at which the front (``front`` true) or rear axle gives the normalized force
     Fy / Fz = n (clipped below the peak): ``DynamicBicycle._inverse_tire`` for one value."""
@@ -460,7 +461,7 @@ def _inverse_tire(n, front, mp):
     return z / B
 
 
-@njit(cache=True)
+@subroutine
 def _solve_given_accel(mp, kappa, v, a, beta, delta):
     """One pass of ``DynamicBicycle.steady_state_full``'s inner solve at curvature kappa [1/m],
     speed v [m/s] and drive acceleration a [m/s^2] (which sets the axle loads), from the slip
@@ -495,7 +496,7 @@ def _solve_given_accel(mp, kappa, v, a, beta, delta):
 _SD, _SB, _SA0, _SG0, _SA1, _SG1, _SAN, _SLEAD = range(8)
 
 
-@njit(cache=True)
+@subroutine
 def dynamic_steady_states(mp, refs, v, n, ws):
     """``DynamicBicycle.steady_state_full`` of the points k < n at curvature refs[k, 3] [1/m] and
     speed v[k] [m/s], as one numpy batch: the secant iteration on the acceleration stops when all
@@ -549,7 +550,7 @@ def dynamic_steady_states(mp, refs, v, n, ws):
         ws[k, 2] = w * a
 
 
-@njit(cache=True)
+@subroutine
 def model_references(kind, mp, refs, v, n, feedforward, xref, uref, ws):
     """``model.reference`` of the path points k < n (``refs[k] = [x m, y m, heading rad, kappa
     1/m]``, speeds ``v[k]`` [m/s]): xref[k] (nx,) for k < n, uref[k] (nu,) for k < n - 1 (the

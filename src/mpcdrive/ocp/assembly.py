@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from .._subroutine import subroutine
 from .._structs import define_struct, to_struct
 from ..models.compiled import METHOD_EXP, discrete_step_jacobians, discrete_step_jacobians_substeps, model_references
 from ..models.compiled import model_speed, rollout_into
@@ -161,7 +162,7 @@ class StepAssembly:
         return to_struct(self, _build_step_assembly)
 
 
-@njit(cache=True, inline="always")
+@subroutine
 def _place_references(asm, qp, yaw, s_arr, v_arr):
     """The horizon references at arc lengths ``s_arr`` (N+1,) [m] driven at ``v_arr`` [m/s]:
     the path points ``asm.refs`` (x, y, heading unwrapped next to the car's ``yaw``, curvature)
@@ -196,7 +197,7 @@ def follow_references_into(asm, qp, yaw, s_arr, v_arr):
             uref[k, ia] += (v_arr[k + 1] - v_arr[k]) / dt
 
 
-@njit(cache=True)
+@subroutine
 def _discrete_substeps(asm, X, U, k, A, B):
     """asm.F[k], A[k], B[k] of the prediction model at (X[k], U[k]) taken in ``asm.substeps``
     steps. A step without substeps calls ``discrete_step_jacobians`` itself: each array handed
@@ -207,7 +208,7 @@ def _discrete_substeps(asm, X, U, k, A, B):
     )  # fmt: skip
 
 
-@njit(cache=True)
+@subroutine
 def linearize(asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, info):
     """The first half of a step's assembly at time ``t_s`` [s] from the measured state ``x``
     (nx,) after input ``u_prev`` (nu,), the projection searched near ``s_guess`` [m]: references,
@@ -378,7 +379,7 @@ def linearize(asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, info):
     return 0
 
 
-@njit(cache=True)
+@subroutine
 def stage_costs(asm, qp, t_s, shifted):
     """The second half of a step's assembly: with ``shifted``, the references moved sideways by
     the detour written into ``asm.e_ref`` between the halves; then the state cost of x_1..x_N as

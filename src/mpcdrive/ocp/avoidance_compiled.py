@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from .._subroutine import subroutine
 from ..paths.compiled import path_eval, path_project
 from ..paths.profile_compiled import np_interp
 from ..scene.road import _interp
@@ -138,7 +139,7 @@ def table_of(obstacles, cached: ObstacleTable | None) -> ObstacleTable:
     return obstacle_table(obstacles)
 
 
-@njit(cache=True)
+@subroutine
 def pose_at(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d):
     """Pose (x m, y m, yaw rad) of obstacle j of a :class:`ObstacleTable` at time ``t`` [s]
     (``Obstacle.pose_at``): a recorded trajectory interpolated linearly in time, held before its
@@ -162,7 +163,7 @@ def select(t_s, x, y, t_end, reach, pose, vel, tr_lo, tr_hi, tr_t, tr_d, bound_r
     )
 
 
-@njit(cache=True)
+@subroutine
 def select_into(
     t_s, x, y, t_end, reach, pose, vel, tr_lo, tr_hi, tr_t, tr_d, bound_r, life, has_life, max_n, out, dist
 ):
@@ -292,7 +293,7 @@ def tracks(
                 box[i, f, k] = box[i, f, 0]
 
 
-@njit(cache=True)
+@subroutine
 def _nearest(px, py, shape, radius, centers, outlines, nv, i, k):
     """Signed distance [m] and nearest boundary point of (px, py) to obstacle i at time k
     (``Avoidance._nearest``: a disc, or a convex ccw polygon as ``points_polygons``)."""
@@ -424,7 +425,7 @@ def hard_rows(
                 b[k, row] = rhs
 
 
-@njit(cache=True)
+@subroutine
 def trapezoid_into(e_ref, s_arr, side, s_lo, s_hi, e_lo, e_hi, half_width, half_length, margin, ramp):
     """The paper's trapezoidal detour around one obstacle spanning [s_lo, s_hi] x [e_lo, e_hi]
     [m] along / across the path, passed on ``side`` (SIDE_LEFT, else right): the lateral shift
@@ -492,7 +493,7 @@ def corridor_bounds(box, use, side, present, s_arr, margin, half_length, half_wi
             hi[k] = mid
 
 
-@njit(cache=True)
+@subroutine
 def pick_side(prev, room_left, room_right, need):
     """The passing side of an obstacle with ``room_left`` / ``room_right`` [m] between it and
     the road's edges beside it, when passing needs ``need`` [m]: the side ``prev`` (SIDE_*)

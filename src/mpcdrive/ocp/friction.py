@@ -28,10 +28,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from .._subroutine import subroutine
 
 
-@njit(cache=True)
+@subroutine
 def friction_input_bounds(
     N, speed, Ubar, i_steer, i_accel, wheelbase_m, a_fric, u_min, u_max, dmax, u_prev, lo, hi
 ):  # pragma: no cover - compiled

@@ -20,8 +20,8 @@ import math
 from typing import Any
 
 import numpy as np
-from numba import njit
 
+from .._subroutine import subroutine
 from ..paths.compiled import path_eval, path_project
 from ..scene.road import _interp
 from .avoidance_compiled import (
@@ -67,7 +67,7 @@ _COST_FIELDS = (
 )
 
 
-@njit(cache=True)
+@subroutine
 def select_obstacles(asm, t_s, x, s0):
     """The ``max_obstacles`` nearest obstacles present at some time of the horizon and within the
     influence distance of the vehicle at time ``t_s`` (nearest first, ties by index, as
@@ -108,7 +108,7 @@ def select_obstacles(asm, t_s, x, s0):
     return nsel
 
 
-@njit(cache=True)
+@subroutine
 def detour(asm, xref, sides):
     """The paper's trapezoidal detour around the selected (static, circular) obstacles, as
     ``ocp.avoidance``: pick each one's passing side (kept from ``sides`` while it has room
@@ -153,7 +153,7 @@ def detour(asm, xref, sides):
         shift_references(N, s_arr, refs, e_ref, xref)
 
 
-@njit(cache=True)
+@subroutine
 def shift_references(N, s_arr, refs, e_ref, xref):
     """The detour: shift the state references sideways by ``e_ref`` (N+1,) [m] from the path
     points ``refs`` and turn their heading with the slope of the shift."""
@@ -165,7 +165,7 @@ def shift_references(N, s_arr, refs, e_ref, xref):
         xref[k, 2] += math.atan((e_ref[k] - e_ref[k - 1]) / max(s_arr[k] - s_arr[k - 1], 1e-9))
 
 
-@njit(cache=True)
+@subroutine
 def obstacle_cost(asm, t_s, We, qt):
     """Add the potential (eq. 55) or Gaussian (eq. 56) cost of the selected obstacles, its
     second-order model at the linearization trajectory (x_k = Xbar[k], x_N = F[N-1]) with the

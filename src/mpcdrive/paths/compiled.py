@@ -15,6 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from .._subroutine import subroutine
+
 KIND_STRAIGHT = 0  # geo: [start x, start y, t x, t y, n x, n y, heading, length]
 KIND_CIRCLE = 1  # geo: [centre x, centre y, radius, sign, start angle, length]
 KIND_WAYPOINTS = 2  # geo: [length, closed, ds, lap turn, longest segment]
@@ -59,7 +61,7 @@ def path_arrays(path) -> PathArrays | None:
     return None
 
 
-@njit(cache=True)
+@subroutine
 def wrap_angle(a):
     """``mpcdrive.units.wrap_angle`` for one angle [rad]: to (-pi, pi]."""
     w = np.mod(a + _PI, _TWO_PI) - _PI
@@ -68,7 +70,7 @@ def wrap_angle(a):
     return w
 
 
-@njit(cache=True)
+@subroutine
 def _interp(s, tab_s, vals, ds):
     """np.interp on a uniform table (clamped at both ends)."""
     m = tab_s.shape[0]
@@ -88,7 +90,7 @@ def _interp(s, tab_s, vals, ds):
     return vals[i] + t * (vals[i + 1] - vals[i])
 
 
-@njit(cache=True)
+@subroutine
 def _interp_xy(s, tab_s, xy, ds):
     m = tab_s.shape[0]
     if s <= tab_s[0]:
@@ -106,7 +108,7 @@ def _interp_xy(s, tab_s, xy, ds):
     return xy[i, 0] + t * (xy[i + 1, 0] - xy[i, 0]), xy[i, 1] + t * (xy[i + 1, 1] - xy[i, 1])
 
 
-@njit(cache=True)
+@subroutine
 def _split(geo, s):
     """(local s, laps) on a closed waypoint path; (s, 0) on an open one."""
     if geo[1] != 0.0:
@@ -115,7 +117,7 @@ def _split(geo, s):
     return s, 0.0
 
 
-@njit(cache=True)
+@subroutine
 def path_eval(kind, geo, tab_s, tab_xy, tab_h, tab_k, s):
     """(x [m], y [m], heading [rad] continuous in s, curvature [1/m]) at arc length s [m]."""
     if kind == KIND_STRAIGHT:
@@ -142,14 +144,14 @@ def path_eval(kind, geo, tab_s, tab_xy, tab_h, tab_k, s):
     return x, y, h, k
 
 
-@njit(cache=True)
+@subroutine
 def _lap_shift(geo_len, closed, s_local, s_guess):
     if not closed:
         return s_local
     return s_local + geo_len * np.rint((s_guess - s_local) / geo_len)
 
 
-@njit(cache=True)
+@subroutine
 def path_project(kind, geo, tab_s, tab_xy, s_guess, window_m, px, py):
     """(s [m], e_y [m]) of the nearest path point to (px, py) searched within s_guess +- window_m,
     as ``Path.project(xy, s_guess, window_m)``."""
@@ -167,7 +169,7 @@ def path_project(kind, geo, tab_s, tab_xy, s_guess, window_m, px, py):
     return _lap_shift(geo[0], geo[1] != 0.0, s_loc, s_guess), e_y
 
 
-@njit(cache=True, inline="always")
+@subroutine
 def _segment_d2(tab_xy, j, m, closed, px, py):
     """Squared distance from (px, py) to segment j of a waypoint path's ``m`` segments (those at
     the ends of an open path extended along their tangents), with its parameter t, squared
@@ -187,7 +189,7 @@ def _segment_d2(tab_xy, j, m, closed, px, py):
     return rx * rx + ry * ry, t, dd, rx, ry
 
 
-@njit(cache=True)
+@subroutine
 def waypoints_project_local(geo, tab_s, tab_xy, s_guess, window_m, px, py):
     """(local s [m], e_y [m]) of the nearest point of a waypoint path (``geo``, tables as
     :class:`PathArrays`) to (px, py), searched on the segments within s_guess +- window_m

@@ -15,8 +15,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from .._subroutine import subroutine
 from .speed_profile import ConstantSpeed, SpeedProfile
 
 PROFILE_CONSTANT = 0  # speed v_mps everywhere
@@ -40,7 +40,7 @@ def profile_array(profile) -> np.ndarray | None:
     return None
 
 
-@njit(cache=True, inline="always")
+@subroutine
 def _clip(x, lo, hi):
     """np.clip of one number (NaN in, NaN out)."""
     if x != x or lo != lo or hi != hi:
@@ -48,7 +48,7 @@ def _clip(x, lo, hi):
     return min(max(x, lo), hi)
 
 
-@njit(cache=True)
+@subroutine
 def np_interp(x, xp, fp):
     """np.interp(x, xp, fp) for one x, with numpy's handling of grid points and of infinite
     values in fp (xp increasing)."""
@@ -80,14 +80,14 @@ def np_interp(x, xp, fp):
     return y
 
 
-@njit(cache=True, inline="always")
+@subroutine
 def _tables(prof):
     m = int(prof[_P_M])
     o = _NHEAD
     return prof[o : o + m], prof[o + m : o + 2 * m], prof[o + 2 * m : o + 3 * m]
 
 
-@njit(cache=True)
+@subroutine
 def _time_at(prof, s):
     """Time [s] from the profile's start to arc length s [m] (laps counted on a closed path)."""
     sg, tg, _ = _tables(prof)
@@ -98,7 +98,7 @@ def _time_at(prof, s):
     return np_interp(s, sg, tg)
 
 
-@njit(cache=True)
+@subroutine
 def _s_at_time(prof, t):
     """Arc length [m] at time t [s] from the profile's start (within one lap on a closed path)."""
     sg, tg, v = _tables(prof)
@@ -131,7 +131,7 @@ def _s_at_time(prof, t):
     return s
 
 
-@njit(cache=True)
+@subroutine
 def profile_arc_lengths(prof, s0_m, dt_s, out):
     """out[k] = the arc length [m] the profile reaches from s0_m after k dt_s [s], k < out.size
     (``arc_length_after(s0_m, dt_s * arange(out.size))``)."""
@@ -153,7 +153,7 @@ def profile_arc_lengths(prof, s0_m, dt_s, out):
             out[k] = _s_at_time(prof, t)
 
 
-@njit(cache=True)
+@subroutine
 def profile_speed(prof, s_m):
     """Reference speed [m/s] at arc length s_m [m] (``speed(s_m)``)."""
     if prof[_P_KIND] == PROFILE_CONSTANT:

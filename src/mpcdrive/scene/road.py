@@ -32,13 +32,14 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from .._subroutine import subroutine
 from .footprint import Footprint
 
 #: points sampled along each long side of the body (rear corner, ..., front corner)
 BODY_SAMPLES = 5
 
 
-@njit(cache=True)
+@subroutine
 def _value_slope(tab_s, tab_v, s, period):
     """(value, d/ds) of the piecewise-linear table (tab_s increasing) at s: constant beyond the
     ends (slope 0), or periodic with ``period`` [m] when it is > 0 (a closed path; the table
@@ -64,13 +65,13 @@ def _value_slope(tab_s, tab_v, s, period):
     return tab_v[lo] + slope * (s - tab_s[lo]), slope
 
 
-@njit(cache=True)
+@subroutine
 def _interp(tab_s, tab_v, s, period):
     """The value of :func:`_value_slope`."""
     return _value_slope(tab_s, tab_v, s, period)[0]
 
 
-@njit(cache=True)
+@subroutine
 def body_bounds(
     tab_s, tab_left, tab_right, period, s, kappa, yaw_rel, half_length_m, half_width_m, center_offset_m, margin_m
 ):
@@ -151,7 +152,7 @@ def lin_arc_lengths(Xlin, s0_m: float) -> np.ndarray:
     return s0_m + np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(Xlin[:, :2], axis=0).T))])
 
 
-@njit(cache=True)
+@subroutine
 def horizon_bounds(
     tab_s,
     tab_left,
@@ -191,7 +192,7 @@ def horizon_bounds(
         )
 
 
-@njit(cache=True)
+@subroutine
 def reach_first_step(lo, hi, dlo, dhi, e1_m, dyaw1_rad):
     """Widen the road bounds of an MPC horizon's first step x_1 (``lo[0]``, ``hi[0]`` [m], yaw
     slopes ``dlo[0]``, ``dhi[0]``, of :func:`horizon_bounds`) to hold the body where the model puts

@@ -29,11 +29,12 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from .._subroutine import subroutine
 from .._structs import define_struct, to_struct
 from .dense_qp import gi_solve
 
 
-@njit(cache=True)
+@subroutine
 def riccati(N, nx, nu, A, B, c, qt, uref, Wq, Rm, x, P, p, K, kf, PA, M, G, q, z):
     """:func:`_riccati`; the sizes of the kinematic vehicle models (3 states / 1 input, 4 / 2)
     are handed on as constants, so the compiler unrolls the small matrix loops."""
@@ -44,7 +45,7 @@ def riccati(N, nx, nu, A, B, c, qt, uref, Wq, Rm, x, P, p, K, kf, PA, M, G, q, z
     return _riccati(N, nx, nu, A, B, c, qt, uref, Wq, Rm, x, P, p, K, kf, PA, M, G, q, z)
 
 
-@njit(cache=True)
+@subroutine
 def _riccati(N, nx, nu, A, B, c, qt, uref, Wq, Rm, x, P, p, K, kf, PA, M, G, q, z):
     """Unconstrained minimizer of the tracking cost (no Rc, no slack) by the backward Riccati
     recursion ``V_k(x) = x'P_k x + 2 p_k'x + const``, ``u_k = K_k x_k + kf_k``: O(N) work.
@@ -159,7 +160,7 @@ def _riccati(N, nx, nu, A, B, c, qt, uref, Wq, Rm, x, P, p, K, kf, PA, M, G, q, 
     return True
 
 
-@njit(cache=True)
+@subroutine
 def plan_feasible(N, nx, nu, z, Xr, u_prev, u_lo, u_hi, dmax, x_min, x_max, tol):
     """Whether inputs z (N nu) and states Xr[1..N] satisfy the per-stage input bounds u_lo,
     u_hi (N, nu), the rate and the state bounds within tol (NaN never does)."""
@@ -178,7 +179,7 @@ def plan_feasible(N, nx, nu, z, Xr, u_prev, u_lo, u_hi, dmax, x_min, x_max, tol)
     return True
 
 
-@njit(cache=True)
+@subroutine
 def _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, every) -> bool:
     """Flag every slack group (``every``; else every group without a slack, kpos 0: flagged 2)
     whose rows' multipliers sum to more than its slack's l1 weight; True if none does (zero
@@ -195,7 +196,7 @@ def _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, every) -> bool:
     return done
 
 
-@njit(cache=True)
+@subroutine
 def _flag_later_groups(kpos, m_soft, m, rgrp, N, gsum):
     """After :func:`_group_excess` flagged groups (kpos = 2) that had no slack: flag every group
     with rows that follows one of them in its half (lane groups 0..N-1, obstacle groups
@@ -215,7 +216,7 @@ def _flag_later_groups(kpos, m_soft, m, rgrp, N, gsum):
                 kpos[grp] = 1
 
 
-@njit(cache=True)
+@subroutine
 def soft_solve(
     H,
     g,
@@ -341,7 +342,7 @@ def soft_solve(
     return 3, iters
 
 
-@njit(cache=True)
+@subroutine
 def condensed_solve(qp, work, x, u_prev):
     """Solve one step's stage QP ``qp`` (:class:`~mpcdrive.ocp.stage_qp.StageQp`, its struct)
     from state ``x`` (nx,) after input ``u_prev`` (nu,), condensed onto the inputs (and the
@@ -588,7 +589,7 @@ def condensed_solve(qp, work, x, u_prev):
     return code, iters
 
 
-@njit(cache=True)
+@subroutine
 def input_bound_rows(N, nu, u_min, u_max, lo, hi, C, b, write_rows):
     """The input-bound rows of ``C z >= b``, which lead the constant rows: stage by stage, input
     by input, ``u_ka >= lo[k, a]`` then ``-u_ka >= -hi[k, a]``, each only where the problem's bound
@@ -607,7 +608,7 @@ def input_bound_rows(N, nu, u_min, u_max, lo, hi, C, b, write_rows):
     return r
 
 
-@njit(cache=True)
+@subroutine
 def write_plan(qp, z, x, out):
     """The plan of the solution ``z`` of ``qp`` (its struct) from state ``x``: ``out = [u (nu) =
     U_0 clipped to the first stage's input bounds, X ((N+1) nx) rolled out through the affine

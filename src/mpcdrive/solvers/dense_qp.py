@@ -31,7 +31,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+
+from .._subroutine import subroutine
 
 #: status codes of :func:`gi_solve` (mapped to the status words of ``mpcdrive.types``)
 QP_OK = 0
@@ -46,7 +47,7 @@ STATUS_WORDS = ("ok", "infeasible", "max_iter", "failed")
 _FM = {"reassoc", "contract"}
 
 
-@njit(cache=True, fastmath=_FM)
+@subroutine(fastmath=_FM)
 def cholesky_lower(H, L, n) -> bool:
     """L (lower triangle of the n x n leading block) with H = L L'; False if H is not
     numerically positive definite. Only the lower triangle of H is read."""
@@ -67,7 +68,7 @@ def cholesky_lower(H, L, n) -> bool:
     return True
 
 
-@njit(cache=True, fastmath=_FM)
+@subroutine(fastmath=_FM)
 def _unconstrained(L, g, z, n):
     """z = -H^{-1} g from the Cholesky factor L (forward then backward substitution)."""
     for i in range(n):
@@ -82,7 +83,7 @@ def _unconstrained(L, g, z, n):
         z[i] = t / L[i, i]
 
 
-@njit(cache=True, fastmath=_FM)
+@subroutine(fastmath=_FM)
 def _inverse_lower(L, Jt, n):
     """Jt = L^{-1} (lower triangular), row by row: row i is (e_i - sum_{l<i} L[i, l] row l) / L[i, i].
     This is J' for the initial ``J = L^{-T}``."""
@@ -100,7 +101,7 @@ def _inverse_lower(L, Jt, n):
         Jt[i, i] = inv
 
 
-@njit(cache=True, fastmath=_FM)
+@subroutine(fastmath=_FM)
 def _givens(a, b):
     h = math.hypot(a, b)
     if h == 0.0:
@@ -108,7 +109,7 @@ def _givens(a, b):
     return a / h, b / h, h
 
 
-@njit(cache=True, fastmath=_FM)
+@subroutine(fastmath=_FM)
 def gi_solve(H, g, C, b, m, n, z, lam, active, isact, rowcol, L, Jt, R, d, zdir, r, u, s, rownorm, max_iter, tol):
     """Solve ``min 1/2 z'Hz + g'z  s.t.  C[:m, :n] z >= b[:m]``; returns (status, iterations).
 

@@ -1,0 +1,190 @@
+"""Compiled helpers that are compiled only inside the compiled functions that call them.
+
+numba compiles a ``@njit`` function called from another compiled function as a function of its
+own: it optimizes that function's whole module (its callees linked in) and emits machine code for
+it, and then optimizes and emits the same code again inside every caller, at every level of the
+call tree. The controller's step is such a tree (step -> assembly -> linearization -> Jacobians
+-> model terms; step -> solver -> active set -> Cholesky), so most of a first compile was spent
+on machine code that no one calls.
+
+:func:`subroutine` marks a function that compiled code calls. In compiled code it is typed and
+lowered once per argument types, like a ``@njit`` function (constant arguments are typed as
+literals, so a call with constant sizes gets its own specialized copy, as before); its code is
+linked into the caller and optimized and emitted only with the compiled function that Python
+calls (``@njit(cache=True)``, whose on-disk cache therefore holds it too). Called from Python, a
+subroutine runs through a ``@njit(cache=True)`` copy of itself, compiled on the first such call.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import llvmlite.binding as ll
+from numba import njit, types
+from numba.core import compiler, ir
+from numba.core.compiler_machinery import FunctionPass, register_pass
+from numba.core.compiler_lock import global_compiler_lock
+from numba.core.cpu import CPUTargetOptions
+from numba.core.registry import cpu_target
+from numba.core.typing.templates import AbstractTemplate
+from numba.core.untyped_passes import IRProcessing
+from numba.extending import lower_builtin, typeof_impl
+
+
+@register_pass(mutates_CFG=True, analysis_only=False)
+class _ConstantArguments(FunctionPass):
+    """An argument typed as an integer or boolean literal becomes that constant in the function
+    body, before numba's dead-branch pruning: a branch on it (``if kind == KIND_DYNAMIC:``) is
+    then decided at compile time and the code of the branch not taken is never typed, lowered or
+    optimized. (numba itself prunes such branches only for ``None`` arguments.)"""
+
+    _name = "mpcdrive_constant_arguments"
+
+    def __init__(self) -> None:
+        FunctionPass.__init__(self)
+
+    def run_pass(self, state: Any) -> bool:
+        constants = {
+            i: t.literal_value
+            for i, t in enumerate(state.args)
+            if isinstance(t, (types.IntegerLiteral, types.BooleanLiteral))
+        }
+        changed = False
+        for block in state.func_ir.blocks.values():
+            for stmt in block.body:
+                if isinstance(stmt, ir.Assign) and isinstance(stmt.value, ir.Arg) and stmt.value.index in constants:
+                    stmt.value = ir.Const(constants[stmt.value.index], stmt.value.loc)
+                    changed = True
+        return changed
+
+
+class _Pipeline(compiler.CompilerBase):
+    """numba's nopython pipeline with :class:`_ConstantArguments` after the IR is built."""
+
+    def define_pipelines(self) -> list:
+        pm = compiler.DefaultPassBuilder.define_nopython_pipeline(self.state)
+        pm.add_pass_after(_ConstantArguments, IRProcessing)
+        pm.finalize()
+        return [pm]
+
+
+class _Unfinalized:
+    """Stands in for a subroutine's numba code library where a caller links it: hands over the
+    library's code (optimized function by function, as numba does before linking) without
+    finalizing the library, which numba would otherwise do first (optimize its whole module and
+    emit machine code for it). The caller's own finalization optimizes and emits it."""
+
+    def __init__(self, library: Any) -> None:
+        self._library = library
+        self._module: Any = None
+
+    @property
+    def _reload_init(self) -> set:
+        found = set(self._library._reload_init)
+        for dep in self._library._linking_libraries:
+            found.update(dep._reload_init)
+        return found
+
+    def _ensure_finalized(self) -> None:
+        """Nothing: linked unfinalized on purpose."""
+
+    def _get_module_for_linking(self) -> Any:
+        """The library's module with what it links in; its definitions made ``linkonce_odr`` (as
+        numba does for shared code), so a function linked in along two paths is kept once."""
+        if self._module is None:
+            mod = self._library._final_module.clone()
+            for dep in self._library._linking_libraries:
+                mod.link_in(dep._get_module_for_linking(), preserve=True)
+            for fn in mod.functions:
+                if not fn.is_declaration and fn.linkage == ll.Linkage.external:
+                    fn.linkage = "linkonce_odr"
+            self._module = mod
+        return self._module
+
+
+class Subroutine:
+    """A function compiled inside its compiled callers (see the module docstring); ``py_func``
+    is the Python function. Made by :func:`subroutine`."""
+
+    def __init__(self, py_func: Callable[..., Any], options: dict[str, Any]) -> None:
+        self.py_func = py_func
+        self.__name__ = py_func.__name__
+        self.__qualname__ = py_func.__qualname__
+        self.__module__ = py_func.__module__
+        self.__doc__ = py_func.__doc__
+        self._options = options
+        self._compiled: dict[tuple, Any] = {}
+        self._links: dict[tuple, _Unfinalized] = {}
+        self._python_entry: Any = None
+        sub = self
+
+        class _Template(AbstractTemplate):
+            key = sub
+            prefer_literal = True  # constant arguments specialize, as for a @njit callee
+
+            def generic(self, args, kws):
+                if kws:
+                    return None
+                return sub._compile(tuple(args)).signature
+
+        self._numba_type = types.Function(_Template)
+
+        @lower_builtin(self, types.VarArg(types.Any))
+        def _call(context, builder, sig, args):
+            args_key = tuple(sig.args)
+            cres = sub._compiled[args_key]
+            context.active_code_library.add_linking_library(sub._links[args_key])
+            return context.call_internal(builder, cres.fndesc, sig, args)
+
+    def _compile(self, args: tuple) -> Any:
+        """Type and lower the function for ``args`` (numba types) into a library of its own that
+        is linked into callers and never finalized by itself."""
+        cres = self._compiled.get(args)
+        if cres is not None:
+            return cres
+        with global_compiler_lock:
+            cres = self._compiled.get(args)
+            if cres is None:
+                flags = CPUTargetOptions.parse_as_flags(compiler.Flags(), {"nopython": True, **self._options})
+                flags.no_compile = True
+                flags.no_cpython_wrapper = True
+                flags.no_cfunc_wrapper = True
+                context = cpu_target.target_context
+                library = context.codegen().create_library(self.__qualname__)
+                cres = compiler.compile_extra(
+                    cpu_target.typing_context,
+                    context,
+                    self.py_func,
+                    args,
+                    None,
+                    flags,
+                    {},
+                    library=library,
+                    pipeline_class=_Pipeline,
+                )
+                self._compiled[args] = cres
+                self._links[args] = _Unfinalized(library)
+        return cres
+
+    def __call__(self, *args: Any) -> Any:
+        entry = self._python_entry
+        if entry is None:
+            entry = self._python_entry = njit(cache=True, **self._options)(self.py_func)
+        return entry(*args)
+
+    def __repr__(self) -> str:
+        return f"<subroutine {self.__module__}.{self.__qualname__}>"
+
+
+@typeof_impl.register(Subroutine)
+def _typeof_subroutine(val: Subroutine, c: Any) -> Any:
+    return val._numba_type
+
+
+def subroutine(py_func: Callable[..., Any] | None = None, **options: Any) -> Any:
+    """Decorator: ``@subroutine`` or ``@subroutine(fastmath=...)`` (numba's ``njit`` options)
+    for a function that compiled code calls; see the module docstring."""
+    if py_func is None:
+        return lambda f: Subroutine(f, options)
+    return Subroutine(py_func, options)
