@@ -569,11 +569,13 @@ def test_a_second_process_loads_the_compiled_step_from_the_cache():
     on-disk cache (cache hits, no misses) instead of recompiling."""
     from mpcdrive.control import fast
 
-    model = KinematicBicycle3(1.0)
-    c = CompiledLtvMpc(model, StraightPath([0, 0], [5, 0]), MpcProblem(3, 1, 5, 0.01, Q=1.0, R=1.0))
-    c.step(np.zeros(3), c.initial_warm(np.zeros(3)))
-    cache_dir = Path(fast.control_step.stats.cache_path)
-    assert any(cache_dir.glob("fast_step.control_step-*.nbi")), f"no cache index in {cache_dir}"
+    from mpcdrive.control import fast_step
+
+    c = CompiledLtvMpc(KinematicBicycle4(), StraightPath([0, 0], [5, 0]), MpcProblem(4, 2, 5, 0.01, Q=1.0, R=1.0))
+    x0 = np.array([0.0, 0.0, 0.0, 1.0])
+    c.step(x0, c.initial_warm(x0))
+    cache_dir = Path(fast_step.control_step_kinematic4.stats.cache_path)
+    assert any(cache_dir.glob("fast_step.control_step_kinematic4-*.nbi")), f"no cache index in {cache_dir}"
     code = (
         "import json, numpy as np\n"
         "from mpcdrive.control import fast\n"
@@ -583,7 +585,7 @@ def test_a_second_process_loads_the_compiled_step_from_the_cache():
         "c = fast.CompiledLtvMpc(KinematicBicycle4(), CirclePath(), MpcProblem(4, 2, 7, 0.01, Q=1.0, R=1.0))\n"
         "x = np.array([1.5, 0.0, 1.6, 1.0])\n"
         "c.step(x, c.initial_warm(x))\n"
-        "st = fast.control_step.stats\n"
+        "st = fast.CONTROL_STEPS[(4, False)].stats\n"
         "import sys\n"
         "print(json.dumps({'hits': sum(st.cache_hits.values()), 'misses': sum(st.cache_misses.values()),\n"
         "                  'sparse': 'scipy.sparse' in sys.modules}))\n"
@@ -600,6 +602,62 @@ def test_a_second_process_loads_the_compiled_step_from_the_cache():
     # the machine code came from the cache, and the process never loaded the sparse QP stack
     # (scipy.sparse is for the OSQP controller; it would add a few tenths of a second to start-up)
     assert stats == {"hits": 1, "misses": 0, "sparse": False}, stats
+
+
+@pytest.mark.slow
+def test_a_kinematic_step_compiles_without_the_other_models_code(tmp_path):
+    """The step of a kinematic model without obstacle cost is compiled with the model and its
+    sizes as constants: the dynamic model's code, the obstacle cost and the Riccati copies of
+    other sizes are never compiled (a fresh cache, so this process compiles instead of loading)."""
+    code = (
+        "import gc, json, numpy as np\n"
+        "from mpcdrive.bench.problems import p1\n"
+        "from mpcdrive.control import LtvMpc\n"
+        "from mpcdrive._subroutine import Subroutine\n"
+        "bp = p1()\n"
+        "c = LtvMpc(bp.model, bp.path, bp.problem, bp.config)\n"
+        "subs = {s.__name__: [[str(t) for t in a] for a in s._compiled] for s in gc.get_objects()\n"
+        "        if isinstance(s, Subroutine)}\n"
+        "print(json.dumps(subs))\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        check=True,
+        env={**__import__("os").environ, "NUMBA_CACHE_DIR": str(tmp_path)},
+    )
+    compiled = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert compiled["linearize"] and compiled["condensed_solve"]  # it did compile the step
+    for name in ("dynamic_steady_states", "dynamic_rhs_and_partials", "obstacle_cost", "select_obstacles"):
+        assert compiled[name] == [], name
+    # one Riccati copy, at P1's constant sizes (3 states, 1 input)
+    assert [sig[1:3] for sig in compiled["_riccati"]] == [["Literal[int](3)", "Literal[int](1)"]]
+
+
+def test_the_step_without_obstacle_cost_refuses_an_assembly_with_one():
+    """Each compiled step is made for an obstacle cost or none; the wrong one fails loudly
+    (status 3) instead of ignoring the cost."""
+    from mpcdrive.control import fast_step
+    from mpcdrive.ocp.assembly import MODE_NO_PLAN
+    from mpcdrive.ocp.avoidance import AvoidanceConfig
+    from mpcdrive.scene import Circle, Obstacle
+
+    model = KinematicBicycle3(1.0)
+    obstacle = Obstacle(Circle(0.25), (3.0, 0.0, 0.0))
+    c = CompiledLtvMpc(
+        model,
+        StraightPath([0, 0], [10, 0]),
+        MpcProblem(3, 1, 10, 0.05, Q=1.0, R=1.0),
+        obstacles=(obstacle,),
+        avoidance=AvoidanceConfig("gaussian"),
+    )
+    assert c._step_fn is fast_step.CONTROL_STEPS[(3, True)]
+    out = np.empty(c._out_size)
+    x = np.zeros(3)
+    args = (c._step_struct, x, 0.0, 0.0, np.zeros(1), c._noX, c._noU, MODE_NO_PLAN, fast_step.STAGE_ALL, out)
+    assert fast_step.CONTROL_STEPS[(3, False)](*args) == 3
+    assert c._step_fn(*args) == 0
 
 
 def test_stale_cache_files_are_dropped_when_a_dependency_changes(tmp_path):

@@ -139,7 +139,8 @@ def test_sweep_reports_progress_when_stderr_is_not_a_terminal(tmp_path):
 
 
 def test_first_compile_is_announced_once(tmp_path):
-    """Before numba builds the fast controller (no cache for its sources yet), one line says so."""
+    """Before numba builds the fast controller's step for a model (no cache for its sources yet),
+    one line says so, once per model."""
     import logging
 
     from mpcdrive.control import fast
@@ -152,18 +153,22 @@ def test_first_compile_is_announced_once(tmp_path):
     old_level = log.level
     log.setLevel(logging.INFO)
     try:
-        fast._announced[0] = False
+        announced = set(fast._announced)
+        fast._announced.clear()
         real = fast._jitcache.has_cache
         fast._jitcache.has_cache = lambda dispatcher: False
         try:
-            fast._announce_compile()
-            fast._announce_compile()
+            fast._announce_compile(fast.CONTROL_STEPS[(3, False)])
+            fast._announce_compile(fast.CONTROL_STEPS[(3, False)])
+            fast._announce_compile(fast.CONTROL_STEPS[(6, False)])  # another model: its own step, its own line
         finally:
             fast._jitcache.has_cache = real
+            fast._announced.clear()
+            fast._announced.update(announced)
     finally:
         log.removeHandler(handler)
         log.setLevel(old_level)
-    assert len(records) == 1 and "compiling the fast controller" in records[0].getMessage()
+    assert len(records) == 2 and all("compiling the fast controller" in r.getMessage() for r in records)
 
 
 def test_has_cache_finds_numba_index_files(tmp_path):

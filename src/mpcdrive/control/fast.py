@@ -10,8 +10,8 @@ reference; see :mod:`mpcdrive.paths.profile_compiled`) --, linearization along t
 previous plan or the paper's frozen point, Euler / RK4 / ``exp`` discrete models, cost, input /
 rate / state bounds, soft lane bound with slack, the fallback ladder of ``config.fallback`` --
 its ``relax`` rung on a second compiled controller for the relaxed problem) but runs every step in one
-numba-compiled call (:func:`~mpcdrive.control.fast_step.control_step`) on typed containers allocated at
-construction: the step assembly's description and work (:class:`~mpcdrive.ocp.assembly.StepAssembly`; the
+numba-compiled call (one of :data:`~mpcdrive.control.fast_step.CONTROL_STEPS`, compiled for the
+vehicle model and whether there is an obstacle cost) on typed containers allocated at construction: the step assembly's description and work (:class:`~mpcdrive.ocp.assembly.StepAssembly`; the
 assembly in :mod:`mpcdrive.ocp.assembly`, its obstacle cost terms in :mod:`mpcdrive.ocp.obstacle_cost_compiled`),
 the stage QP it writes (:class:`~mpcdrive.ocp.stage_qp.StageQp`) and the condensed solver's work space
 (:class:`~mpcdrive.solvers.condensed.CondensedWork`; the QP solve in :mod:`mpcdrive.solvers`). The QP is
@@ -80,31 +80,41 @@ from ..solvers.osqp_backend import OsqpSettings
 from ..types import ControlOutput, WarmStart
 from .base import checked_obstacles, checked_road, checked_speed_cap
 
-from ..ocp.assembly import MODE_ITERATE, MODE_NO_PLAN, MODE_SHIFTED_PLAN, StepAssembly, follow_references_into
+from ..ocp.assembly import MODE_ITERATE, MODE_NO_PLAN, MODE_SHIFTED_PLAN, StepAssembly
 from ..ocp.avoidance_compiled import SIDE_NONE
 from ..ocp.obstacle_cost_compiled import OBS_GAUSSIAN, OBS_NONE, OBS_POTENTIAL, cost_obstacle_arrays
 from ..ocp.stage_qp import new_stage_qp
 from ..solvers.condensed_setup import CondensedSettings, new_condensed_work
 from .fast_setup import fast_unsupported_reason, obstacles_unsupported_reason, uses_rows
-from .fast_step import _BAD_STATE, STAGE_ALL, STAGE_COST, STAGE_LINEARIZE, STAGE_SOLVE, CompiledStep, control_step
+from .fast_step import (
+    _BAD_STATE,
+    CONTROL_STEPS,
+    STAGE_ALL,
+    STAGE_COST,
+    STAGE_FOLLOW,
+    STAGE_LINEARIZE,
+    STAGE_SOLVE,
+    CompiledStep,
+)
 from .fallback import FALLBACK_HOLD, FALLBACK_RELAX, FallbackConfig, FallbackLadder, relaxed_problem
 from .mpc import FastPathUnavailable, LtvMpc, MpcConfig, StageQpSolve, StepData, solver_in_reach
 
 
-_announced = [False]
+_announced: set = set()
 
 #: the solvers of the compiled controller's stage QP: the condensed dual active-set solve in the
 #: compiled step, or OSQP on the sparse layout of ``ocp.qp``
 SOLVERS: tuple[str, ...] = ("condensed", "osqp")
 
 
-def _announce_compile() -> None:
-    """Log one line (logger ``mpcdrive``, INFO; the CLI prints it) before the first compile on a
-    machine: the compiled step is built from numba's cache when one exists for these sources."""
-    if _announced[0]:
+def _announce_compile(step_fn) -> None:
+    """Log one line (logger ``mpcdrive``, INFO; the CLI prints it) before the first compile of
+    the compiled step ``step_fn`` (one per vehicle model) on a machine: it is built from numba's
+    cache when one exists for these sources."""
+    if step_fn in _announced:
         return
-    _announced[0] = True
-    if not _jitcache.has_cache(control_step):
+    _announced.add(step_fn)
+    if not _jitcache.has_cache(step_fn):
         import logging
 
         logging.getLogger("mpcdrive").info(
@@ -160,7 +170,6 @@ class CompiledLtvMpc(LtvMpc):
             raise ValueError(f"the compiled step cannot assemble this problem: {reason}")
         solver = solver_in_reach(solver, problem, settings, uses_rows(obstacles, avoidance))  # type: ignore[assignment]
         self.solver = solver
-        _announce_compile()
         self.model, self.path, self.problem, self.config, self.settings = model, path, problem, config, settings
         obstacles = tuple(obstacles)
         self.footprint = footprint
@@ -204,6 +213,10 @@ class CompiledLtvMpc(LtvMpc):
         kind, mp = code
         fric = friction_bounds(problem, model)  # validates the model for the friction circle
         cost_av = av if av is not None and not rows else None  # the compiled obstacle cost's settings
+        #: the compiled step of this model, with the obstacle cost if there is one (numba compiles
+        #: one per model kind and obstacle cost or not)
+        self._step_fn = CONTROL_STEPS[(int(kind), cost_av is not None)]
+        _announce_compile(self._step_fn)
         n_ob = max(len(obstacles), 1)
         f = np.ascontiguousarray
         #: the compiled step's containers: the assembly's description and work, the stage QP it
@@ -267,6 +280,8 @@ class CompiledLtvMpc(LtvMpc):
             refw=np.zeros((N + 1, 8)),
             s_arr=np.zeros(N + 1),
             v_arr=np.zeros(N + 1),
+            follow_s=np.zeros(N + 1),
+            follow_v=np.zeros(N + 1),
             e_ref=np.zeros(N + 1),
             Xbar=np.zeros((N, nx)),
             Ubar=np.zeros((N, nu)),
@@ -339,14 +354,18 @@ class CompiledLtvMpc(LtvMpc):
         out = np.empty(self._out_size)
         sides = self._sides.copy()
         for stage in (STAGE_ALL,) if self.solver == "condensed" else (STAGE_LINEARIZE, STAGE_COST):
-            control_step(
+            self._step_fn(
                 self._step_struct, x, 0.0, 0.0, np.zeros(self.nu), self._noX, self._noU, MODE_NO_PLAN, stage, out
             )
         self._sides[:] = sides
         # the car-following references (a lane blocked ahead, a speed cap) come in mid-run: the
         # step that first needs them would load them (the next step recomputes the references)
         a = self._asm
-        follow_references_into(self._asm_struct, self._qp_struct, float(x[2]), a.s_arr.copy(), a.v_arr.copy())
+        a.follow_s[:] = a.s_arr
+        a.follow_v[:] = a.v_arr
+        self._step_fn(
+            self._step_struct, x, 0.0, 0.0, np.zeros(self.nu), self._noX, self._noU, MODE_NO_PLAN, STAGE_FOLLOW, out
+        )
 
     # -- obstacles and road (the properties from LtvMpc) ---------------------------------------
     def set_road(self, road: Road) -> None:
@@ -440,11 +459,11 @@ class CompiledLtvMpc(LtvMpc):
         sides = self._load_sides(warm_sides)
         step = self._step_struct
         if last == STAGE_SOLVE and self._rows is None and self._lateral is None and self._speed_cap is None:
-            code = control_step(step, x, s_guess, t_s, u_prev, X, U, mode, STAGE_ALL, out)
+            code = self._step_fn(step, x, s_guess, t_s, u_prev, X, U, mode, STAGE_ALL, out)
             if self._detour:
                 return code, tuple((j, int(v)) for j, v in enumerate(sides) if v != SIDE_NONE)
             return code, warm_sides
-        code = control_step(step, x, s_guess, t_s, u_prev, X, U, mode, STAGE_LINEARIZE, out)
+        code = self._step_fn(step, x, s_guess, t_s, u_prev, X, U, mode, STAGE_LINEARIZE, out)
         if code != 0:
             return code, warm_sides
         a, qp = self._asm, self._qp
@@ -468,10 +487,12 @@ class CompiledLtvMpc(LtvMpc):
             cap, decel = self._speed_cap or (math.inf, self._follow_decel)
             follow = follow_references(a.s_arr, a.v_arr, s_max, float(self.model.speed(x)), self.dt_s, decel, cap)
             if follow is not None:
-                follow_references_into(self._asm_struct, self._qp_struct, float(x[2]), follow[0], follow[1])
+                a.follow_s[:] = follow[0]
+                a.follow_v[:] = follow[1]
+                self._step_fn(step, x, s_guess, t_s, u_prev, X, U, mode, STAGE_FOLLOW, out)
         if self._lateral is not None:
             a.e_ref[...] += np.asarray(self._lateral(a.s_arr), float)
-        code = control_step(step, x, s_guess, t_s, u_prev, X, U, mode, last, out)
+        code = self._step_fn(step, x, s_guess, t_s, u_prev, X, U, mode, last, out)
         return code, new_sides
 
     def prepare(self, x, warm: WarmStart, around=None, s_m: float | None = None) -> StepData:

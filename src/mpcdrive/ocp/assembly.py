@@ -38,7 +38,7 @@ from ..paths.compiled import path_eval, path_project, wrap_angle
 from ..paths.profile_compiled import profile_arc_lengths, profile_speed
 from ..scene.road import horizon_bounds, reach_first_step
 from .friction import friction_input_bounds
-from .obstacle_cost_compiled import OBS_NONE, detour, obstacle_cost, select_obstacles, shift_references
+from .obstacle_cost_compiled import detour, obstacle_cost, select_obstacles, shift_references
 
 _TWO_PI = 2.0 * math.pi
 
@@ -71,7 +71,7 @@ class StepAssembly:
     considered, within ``obstacle_influence`` [m]; weight, epsilon [m^2], sigma [m]; the
     compiled ``detour`` with its margin and ramp [m]). The rest is work: references
     ``refs`` (N+1, 4: x, y, heading, curvature), arc lengths ``s_arr`` and speeds ``v_arr``
-    (N+1,), the linearization ``Xbar``, ``Ubar``, ``F`` = f(Xbar, Ubar), the detour ``e_ref``,
+    (N+1,), those of car following (``follow_s``, ``follow_v``, written by the caller), the linearization ``Xbar``, ``Ubar``, ``F`` = f(Xbar, Ubar), the detour ``e_ref``,
     the selected obstacles ``osel`` (``nsel`` of them), their distances and Frenet positions,
     the road's arc lengths and path points at the linearization trajectory, the discretization's
     work (``dw``; ``sub_*`` for substeps)."""
@@ -144,6 +144,8 @@ class StepAssembly:
     refw: np.ndarray
     s_arr: np.ndarray
     v_arr: np.ndarray
+    follow_s: np.ndarray
+    follow_v: np.ndarray
     e_ref: np.ndarray
     Xbar: np.ndarray
     Ubar: np.ndarray
@@ -163,8 +165,9 @@ class StepAssembly:
 
 
 @subroutine
-def _place_references(asm, qp, yaw, s_arr, v_arr):
-    """The horizon references at arc lengths ``s_arr`` (N+1,) [m] driven at ``v_arr`` [m/s]:
+def _place_references(kind, asm, qp, yaw, s_arr, v_arr):
+    """The horizon references at arc lengths ``s_arr`` (N+1,) [m] driven at ``v_arr`` [m/s] for
+    the model ``kind`` (``KIND_*`` of :mod:`mpcdrive.models.compiled`, ``asm.model``):
     the path points ``asm.refs`` (x, y, heading unwrapped next to the car's ``yaw``, curvature)
     and the model's state and input references ``qp.xref``, ``qp.uref`` (``model.reference``:
     path pose, speed states, the steady-state feedforward)."""
@@ -180,17 +183,18 @@ def _place_references(asm, qp, yaw, s_arr, v_arr):
     shift = _TWO_PI * np.rint((yaw - refs[0, 2]) / _TWO_PI)
     for k in range(N + 1):
         refs[k, 2] += shift
-    model_references(asm.model, asm.mp, refs, v_arr, N + 1, asm.feedforward, qp.xref, qp.uref, asm.refw)
+    model_references(kind, asm.mp, refs, v_arr, N + 1, asm.feedforward, qp.xref, qp.uref, asm.refw)
 
 
-@njit(cache=True)
-def follow_references_into(asm, qp, yaw, s_arr, v_arr):
+@subroutine
+def follow_references_into(kind, asm, qp, yaw):
     """Between the two calls of a step: the references of car following
-    (:func:`~mpcdrive.ocp.follow.follow_references`: arc lengths ``s_arr`` (N+1,) [m] and speeds
-    ``v_arr`` [m/s] behind a moving stop line) replace the step's, their speed changes the
-    acceleration reference (as ``LtvMpc`` does); the horizon arc lengths the rows were built on
-    stay."""
-    _place_references(asm, qp, yaw, s_arr, v_arr)
+    (:func:`~mpcdrive.ocp.follow.follow_references`: arc lengths ``asm.follow_s`` (N+1,) [m]
+    and speeds ``asm.follow_v`` [m/s] behind a moving stop line) replace the step's, their speed
+    changes the acceleration reference (as ``LtvMpc`` does); the horizon arc lengths the rows
+    were built on stay."""
+    s_arr, v_arr = asm.follow_s, asm.follow_v
+    _place_references(kind, asm, qp, yaw, s_arr, v_arr)
     if asm.accel >= 0:
         uref, ia, dt = qp.uref, asm.accel, asm.dt
         for k in range(asm.N):
@@ -198,27 +202,30 @@ def follow_references_into(asm, qp, yaw, s_arr, v_arr):
 
 
 @subroutine
-def _discrete_substeps(asm, X, U, k, A, B):
-    """asm.F[k], A[k], B[k] of the prediction model at (X[k], U[k]) taken in ``asm.substeps``
+def _discrete_substeps(kind, asm, X, U, k, A, B):
+    """asm.F[k], A[k], B[k] of the prediction model ``kind`` at (X[k], U[k]) taken in ``asm.substeps``
     steps. A step without substeps calls ``discrete_step_jacobians`` itself: each array handed
     on through one more compiled call costs reference counts, about 2 us a step at N = 30."""
     discrete_step_jacobians_substeps(
-        asm.model, asm.mp, asm.nx, asm.nu, X, U, k, asm.dt, asm.method, asm.substeps, asm.F, A, B, asm.dw,
+        kind, asm.mp, asm.nx, asm.nu, X, U, k, asm.dt, asm.method, asm.substeps, asm.F, A, B, asm.dw,
         asm.sub_x, asm.sub_f, asm.sub_a, asm.sub_b,
     )  # fmt: skip
 
 
 @subroutine
-def linearize(asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, info):
+def linearize(kind, cost_obstacles, asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, info):
     """The first half of a step's assembly at time ``t_s`` [s] from the measured state ``x``
     (nx,) after input ``u_prev`` (nu,), the projection searched near ``s_guess`` [m]: references,
     obstacle selection and detour (``sides``: the passing side per obstacle, read and updated),
     linearization trajectory and affine model (``mode``, ``MODE_*``: what (Xw, Uw) is -- no plan,
     the previous step's plan, the current SQP iterate), per-stage input bounds and the road's
     bounds, written into ``asm`` and ``qp``; ``info[INFO_*]`` the projection. Returns 0, or 3
-    when the model or the references are not finite."""
+    when the model or the references are not finite. ``kind`` is ``asm.model``;
+    ``cost_obstacles``: ``asm.obstacle_form`` is not ``OBS_NONE`` (the obstacle cost and the
+    compiled detour). Handed in as constants, they leave the code of the other models (and of
+    the obstacle cost, where there is none) out of the compiled step."""
     N, nx, nu = asm.N, asm.nx, asm.nu
-    mkind, mp, dt, meth = asm.model, asm.mp, asm.dt, asm.method
+    mp, dt, meth = asm.mp, asm.dt, asm.method
     pkind, geo, tab_s, tab_xy, tab_h, tab_k = asm.path, asm.geo, asm.tab_s, asm.tab_xy, asm.tab_h, asm.tab_k
     s_arr, v_arr, prof = asm.s_arr, asm.v_arr, asm.profile
     Xbar, Ubar, F, dw = asm.Xbar, asm.Ubar, asm.F, asm.dw
@@ -245,11 +252,11 @@ def linearize(asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, info):
             s_arr[k] = s0 + asm.horizon_step * k if asm.paper_horizon else s0 + acc
             acc += vdt
             v_arr[k] = asm.v_ref
-    _place_references(asm, qp, x[2], s_arr, v_arr)
+    _place_references(kind, asm, qp, x[2], s_arr, v_arr)
     if asm.has_profile and asm.accel >= 0:  # the profile's speed changes as acceleration reference
         for k in range(N):
             uref[k, asm.accel] += (v_arr[k + 1] - v_arr[k]) / dt
-    if asm.obstacle_form != OBS_NONE:
+    if cost_obstacles:
         asm.nsel = select_obstacles(asm, t_s, x, s0)
         if asm.detour:
             detour(asm, xref, sides)
@@ -290,19 +297,19 @@ def linearize(asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, info):
         if meth == METHOD_EXP:
             for k in range(N - 1):
                 if nsub == 1:
-                    discrete_step_jacobians(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
+                    discrete_step_jacobians(kind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
                 else:
-                    _discrete_substeps(asm, Xbar, Ubar, k, A, B)
+                    _discrete_substeps(kind, asm, Xbar, Ubar, k, A, B)
                 for i in range(nx):
                     Xbar[k + 1, i] = F[k, i]
         else:
-            rollout_into(mkind, mp, nx, Xbar, Ubar, N - 1, dt, meth, nsub, dw[0])
+            rollout_into(kind, mp, nx, Xbar, Ubar, N - 1, dt, meth, nsub, dw[0])
     kmax = 1 if asm.paper_linearization and mode != MODE_ITERATE else N
     for k in range(kmax):
         if nsub == 1:
-            discrete_step_jacobians(mkind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
+            discrete_step_jacobians(kind, mp, nx, nu, Xbar, Ubar, k, dt, meth, F, A, B, dw)
         else:
-            _discrete_substeps(asm, Xbar, Ubar, k, A, B)
+            _discrete_substeps(kind, asm, Xbar, Ubar, k, A, B)
     for k in range(kmax, N):
         for i in range(nx):
             F[k, i] = F[0, i]
@@ -332,7 +339,7 @@ def linearize(asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, info):
     if asm.friction:  # the friction circle as per-stage input bounds (ocp.friction)
         vlin = asm.vlin
         for k in range(N + 1):
-            vlin[k] = model_speed(mkind, mp, Xlin[k])
+            vlin[k] = model_speed(kind, mp, Xlin[k])
         friction_input_bounds(
             N,
             vlin,
@@ -380,12 +387,13 @@ def linearize(asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, info):
 
 
 @subroutine
-def stage_costs(asm, qp, t_s, shifted):
+def stage_costs(cost_obstacles, asm, qp, t_s, shifted):
     """The second half of a step's assembly: with ``shifted``, the references moved sideways by
     the detour written into ``asm.e_ref`` between the halves; then the state cost of x_1..x_N as
     ``x' We x - 2 qt' x`` (the weights plus the obstacle cost's convex model at the linearization
     trajectory), the road rows' normals and offsets where they are linearized, and the first
-    step's bounds made reachable. The stage QP is then complete."""
+    step's bounds made reachable. The stage QP is then complete. ``cost_obstacles``: as for
+    :func:`linearize`."""
     N, nx = asm.N, asm.nx
     Wq, We, qt, xref = asm.Wq, qp.We, qp.qt, qp.xref
     if shifted:
@@ -400,7 +408,7 @@ def stage_costs(asm, qp, t_s, shifted):
             for j in range(nx):
                 t += Wq[k, i, j] * xref[k + 1, j]
             qt[k, i] = t
-    if asm.obstacle_form != OBS_NONE:
+    if cost_obstacles:
         for k in range(N):
             for i in range(nx):
                 for j in range(nx):

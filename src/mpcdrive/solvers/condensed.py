@@ -343,7 +343,7 @@ def soft_solve(
 
 
 @subroutine
-def condensed_solve(qp, work, x, u_prev):
+def condensed_solve(qp, work, x, u_prev, nx, nu):
     """Solve one step's stage QP ``qp`` (:class:`~mpcdrive.ocp.stage_qp.StageQp`, its struct)
     from state ``x`` (nx,) after input ``u_prev`` (nu,), condensed onto the inputs (and the
     slacks of the soft rows), in the work arrays of ``work`` (:class:`CondensedWork`, its
@@ -352,9 +352,14 @@ def condensed_solve(qp, work, x, u_prev):
     ``m_const`` constant (input bounds, their b from the stage's ``ulo``, ``uhi``; rates, the u_0
     rate rows from row ``r_rate0`` following ``u_prev``), then the state, road and obstacle rows
     of the step. ``riccati``: the unconstrained minimizer is tried first (no Rc, no soft rows);
-    ``gamma``: there are state, road or obstacle rows. Nothing is allocated.
+    ``gamma``: there are state, road or obstacle rows. Nothing is allocated. ``nx``, ``nu``: the
+    sizes ``qp.nx``, ``qp.nu`` (code 3 otherwise); a caller that hands them in as constants gets
+    a copy of the solver specialized to them (the Riccati shortcut's small loops unrolled, the
+    other sizes' copies left out).
     """
-    N, nx, nu, nz = qp.N, qp.nx, qp.nu, work.nz
+    if nx != qp.nx or nu != qp.nu:
+        return 3, 0
+    N, nz = qp.N, work.nz
     A, B, c, We, qt, Rm, Rc, uref = qp.A, qp.B, qp.c, qp.We, qp.qt, qp.R, qp.Rc, qp.uref
     ulo, uhi, dmax, x_min, x_max = qp.ulo, qp.uhi, qp.dmax, qp.x_min, qp.x_max
     lane, lane_n, lane_b, lane_lo, lane_hi = qp.lane, qp.lane_n, qp.lane_b, qp.lane_lo, qp.lane_hi
