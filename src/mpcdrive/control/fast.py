@@ -118,7 +118,7 @@ def _announce_compile(step_fn) -> None:
         import logging
 
         logging.getLogger("mpcdrive").info(
-            "compiling the fast controller for this machine (once: numba caches it; about 40-100 s on 2 cores)"
+            "compiling the fast controller for this vehicle model (once: numba caches it; about 25-40 s on 2 cores)"
         )
 
 
