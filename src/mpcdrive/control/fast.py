@@ -107,10 +107,10 @@ _announced: set = set()
 SOLVERS: tuple[str, ...] = ("condensed", "osqp")
 
 
-def _announce_compile(step_fn) -> None:
+def _announce_compile(step_fn, what: str = "") -> None:
     """Log one line (logger ``mpcdrive``, INFO; the CLI prints it) before the first compile of
-    the compiled step ``step_fn`` (one per vehicle model) on a machine: it is built from numba's
-    cache when one exists for these sources."""
+    the compiled step ``step_fn`` (one per vehicle model and obstacle cost) on a machine: it is built from numba's
+    cache when one exists for these sources. ``what`` names the step (model, obstacle cost)."""
     if step_fn in _announced:
         return
     _announced.add(step_fn)
@@ -118,7 +118,7 @@ def _announce_compile(step_fn) -> None:
         import logging
 
         logging.getLogger("mpcdrive").info(
-            "compiling the fast controller for this vehicle model (once: numba caches it; about 25-40 s on 2 cores)"
+            f"compiling the fast controller{what} (once: numba caches it; about 25-40 s on 2 cores)"
         )
 
 
@@ -216,7 +216,10 @@ class CompiledLtvMpc(LtvMpc):
         #: the compiled step of this model, with the obstacle cost if there is one (numba compiles
         #: one per model kind and obstacle cost or not)
         self._step_fn = CONTROL_STEPS[(int(kind), cost_av is not None)]
-        _announce_compile(self._step_fn)
+        _announce_compile(
+            self._step_fn,
+            f" for the {type(model).__name__} {'with' if cost_av is not None else 'without'} obstacle cost",
+        )
         n_ob = max(len(obstacles), 1)
         f = np.ascontiguousarray
         #: the compiled step's containers: the assembly's description and work, the stage QP it
