@@ -660,6 +660,17 @@ def test_the_step_without_obstacle_cost_refuses_an_assembly_with_one():
     assert c._step_fn(*args) == 0
 
 
+def test_modules_of_subroutines_keep_their_cache_fingerprint(tmp_path):
+    """The dependency fingerprint is kept for a module whose anchor function is a subroutine
+    (``ocp.assembly``: ``linearize``), located through numba's own cache locator."""
+    code = "import mpcdrive.ocp.assembly, mpcdrive.solvers.condensed, mpcdrive.models.compiled"
+    subprocess.run(
+        [sys.executable, "-c", code], check=True, env={**__import__("os").environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    )
+    for stem in ("assembly", "condensed", "compiled"):
+        assert list(tmp_path.rglob(f"{stem}.deps-sha1")), stem
+
+
 def test_stale_cache_files_are_dropped_when_a_dependency_changes(tmp_path):
     """numba watches only a function's own file; the controller's cache must also follow the
     files whose code it inlines."""

@@ -1,7 +1,7 @@
 """Keep numba's on-disk cache honest about dependencies.
 
 numba invalidates a cached function when *its own* source file changes, not when a function it
-calls or inlines (in another file) changes. The compiled controller inlines the model equations,
+calls or inlines (in another file) changes. The compiled controller links in the model equations,
 the path geometry and the QP solver from other modules, so after an edit of one of those a stale
 cache would silently keep the old machine code. :func:`drop_stale_cache` fingerprints the
 dependency sources and deletes the module's cache files when the fingerprint changed.
@@ -40,24 +40,37 @@ def drop_stale_cache(cache_dir: str | Path, stem: str, dependencies: Iterable[st
     return True
 
 
-def refresh(dispatcher, dependencies: Iterable[str | Path]) -> None:
-    """:func:`drop_stale_cache` for the module of a numba ``dispatcher`` (cache=True), located
-    through numba's cache object; does nothing if this numba keeps it elsewhere."""
+def _cache_location(function) -> tuple[Path, str] | None:
+    """(cache directory, file stem) of a compiled ``function``'s module -- a ``@njit`` dispatcher
+    or a ``@subroutine``, both with ``py_func`` -- as numba's own cache locator finds it for the
+    Python function; None if this numba cannot say."""
     try:
-        cache_dir = dispatcher._cache._cache_path
-        stem = Path(dispatcher.py_func.__code__.co_filename).stem
-    except AttributeError:
+        from numba.core.caching import FunctionCache
+
+        py_func = function.py_func
+        return Path(FunctionCache(py_func)._cache_path), Path(py_func.__code__.co_filename).stem
+    except (AttributeError, ImportError, RuntimeError):
+        return None
+
+
+def refresh(function, dependencies: Iterable[str | Path]) -> None:
+    """:func:`drop_stale_cache` for the module of a compiled ``function`` (see
+    :func:`_cache_location`): its own file, the ``dependencies`` and the subroutine mechanism
+    (``_subroutine.py``, which shapes all compiled code) are fingerprinted. Does nothing if
+    numba cannot locate the cache."""
+    where = _cache_location(function)
+    if where is None:
         return
-    drop_stale_cache(cache_dir, stem, [*dependencies, dispatcher.py_func.__code__.co_filename])
+    cache_dir, stem = where
+    own = function.py_func.__code__.co_filename
+    drop_stale_cache(cache_dir, stem, [*dependencies, own, Path(__file__).with_name("_subroutine.py")])
 
 
 def has_cache(dispatcher) -> bool:
     """True when numba's cache holds an index for ``dispatcher`` (a later process loads it instead
     of compiling); False when none is found or this numba keeps it elsewhere."""
-    try:
-        cache_dir = Path(dispatcher._cache._cache_path)
-        stem = Path(dispatcher.py_func.__code__.co_filename).stem
-        name = dispatcher.py_func.__name__
-    except AttributeError:
+    where = _cache_location(dispatcher)
+    if where is None:
         return False
-    return any(cache_dir.glob(f"{stem}.{name}-*.nbi"))
+    cache_dir, stem = where
+    return any(cache_dir.glob(f"{stem}.{dispatcher.py_func.__name__}-*.nbi"))
