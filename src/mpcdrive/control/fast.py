@@ -11,7 +11,8 @@ previous plan or the paper's frozen point, Euler / RK4 / ``exp`` discrete models
 rate / state bounds, soft lane bound with slack, the fallback ladder of ``config.fallback`` --
 its ``relax`` rung on a second compiled controller for the relaxed problem) but runs every step in one
 numba-compiled call (one of :data:`~mpcdrive.control.fast_step.CONTROL_STEPS`, compiled for the
-vehicle model and whether there is an obstacle cost) on typed containers allocated at construction: the step assembly's description and work (:class:`~mpcdrive.ocp.assembly.StepAssembly`; the
+vehicle model and whether there is an obstacle cost) on typed containers allocated at
+construction: the step assembly's description and work (:class:`~mpcdrive.ocp.assembly.StepAssembly`; the
 assembly in :mod:`mpcdrive.ocp.assembly`, its obstacle cost terms in :mod:`mpcdrive.ocp.obstacle_cost_compiled`),
 the stage QP it writes (:class:`~mpcdrive.ocp.stage_qp.StageQp`) and the condensed solver's work space
 (:class:`~mpcdrive.solvers.condensed.CondensedWork`; the QP solve in :mod:`mpcdrive.solvers`). The QP is
@@ -109,8 +110,8 @@ SOLVERS: tuple[str, ...] = ("condensed", "osqp")
 
 def _announce_compile(step_fn, what: str = "") -> None:
     """Log one line (logger ``mpcdrive``, INFO; the CLI prints it) before the first compile of
-    the compiled step ``step_fn`` (one per vehicle model and obstacle cost) on a machine: it is built from numba's
-    cache when one exists for these sources. ``what`` names the step (model, obstacle cost)."""
+    the compiled step ``step_fn`` (one per vehicle model and obstacle cost) on a machine: it is
+    built from numba's cache when one exists for these sources. ``what`` names the step."""
     if step_fn in _announced:
         return
     _announced.add(step_fn)
@@ -118,7 +119,7 @@ def _announce_compile(step_fn, what: str = "") -> None:
         import logging
 
         logging.getLogger("mpcdrive").info(
-            f"compiling the fast controller{what} (once: numba caches it; about 25-40 s on 2 cores)"
+            f"compiling the fast controller{what} (once: numba caches it; about 20-35 s on 2 cores)"
         )
 
 

@@ -60,11 +60,11 @@ class CompiledStep:
 
 
 @subroutine
-def _control_step(kind, nx, nu, cost_obstacles, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out):
+def _control_step(kind, cost_obstacles, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out):
     """One control step (or one SQP iteration of it) at time ``t_s`` [s] for the model ``kind``
-    (``KIND_*`` of :mod:`mpcdrive.models.compiled`) of ``nx`` states and ``nu`` inputs, with
-    the compiled obstacle cost and detour if ``cost_obstacles`` (code 3 if the assembly has an
-    obstacle cost and the step does not); returns a status code (0 ok, 1 infeasible, 2 max_iter,
+    (``KIND_*`` of :mod:`mpcdrive.models.compiled`), with the compiled obstacle cost and detour
+    if ``cost_obstacles`` (code 3 if the assembly has an obstacle cost and the step does not);
+    returns a status code (0 ok, 1 infeasible, 2 max_iter,
     3 failed, 4 non-finite state). ``mode`` says what (Xw, Uw) is (``MODE_*`` of
     :mod:`mpcdrive.ocp.assembly`: no plan, the previous step's plan, the current SQP iterate).
     ``stage`` (``STAGE_*``): the whole step; or only up to the linearization trajectory, after
@@ -74,6 +74,10 @@ def _control_step(kind, nx, nu, cost_obstacles, step, x, s_guess, t_s, u_prev, X
     car following (``STAGE_FOLLOW``). A solve writes
     ``out = [u (nu), X ((N+1) nx), U (N nu), xref ((N+1) nx)]``."""
     asm, qp, work, info = step.assembly, step.qp, step.work, step.info
+    # a kind's code is its number of states; the kinematic bicycle at constant speed has one
+    # input, the others two (constants where kind is one: the solver is specialized to them)
+    nx = kind
+    nu = 1 if kind == KIND_KINEMATIC3 else 2
     for i in range(nx):
         if not math.isfinite(x[i]):
             return _BAD_STATE
@@ -98,7 +102,7 @@ def _control_step(kind, nx, nu, cost_obstacles, step, x, s_guess, t_s, u_prev, X
 
 
 # One compiled step per vehicle model, with and without the compiled obstacle cost, each with
-# the model, its sizes and that choice as constants: a program compiles (or loads) only the
+# the model and that choice as constants: a program compiles (or loads) only the
 # steps it uses, with none of the other models' code (and no obstacle-cost code where there is
 # no obstacle cost). ``CONTROL_STEPS[(kind, cost_obstacles)]`` is the one to use.
 
@@ -106,37 +110,37 @@ def _control_step(kind, nx, nu, cost_obstacles, step, x, s_guess, t_s, u_prev, X
 @njit(cache=True)
 def control_step_kinematic3(step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out):
     """:func:`_control_step` of the kinematic bicycle at constant speed (3 states, 1 input)."""
-    return _control_step(KIND_KINEMATIC3, 3, 1, False, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out)
+    return _control_step(KIND_KINEMATIC3, False, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out)
 
 
 @njit(cache=True)
 def control_step_kinematic3_cost(step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out):
     """:func:`control_step_kinematic3` with the compiled obstacle cost."""
-    return _control_step(KIND_KINEMATIC3, 3, 1, True, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out)
+    return _control_step(KIND_KINEMATIC3, True, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out)
 
 
 @njit(cache=True)
 def control_step_kinematic4(step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out):
     """:func:`_control_step` of the kinematic bicycle with speed (4 states, 2 inputs)."""
-    return _control_step(KIND_KINEMATIC4, 4, 2, False, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out)
+    return _control_step(KIND_KINEMATIC4, False, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out)
 
 
 @njit(cache=True)
 def control_step_kinematic4_cost(step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out):
     """:func:`control_step_kinematic4` with the compiled obstacle cost."""
-    return _control_step(KIND_KINEMATIC4, 4, 2, True, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out)
+    return _control_step(KIND_KINEMATIC4, True, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out)
 
 
 @njit(cache=True)
 def control_step_dynamic(step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out):
     """:func:`_control_step` of the dynamic bicycle (6 states, 2 inputs)."""
-    return _control_step(KIND_DYNAMIC, 6, 2, False, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out)
+    return _control_step(KIND_DYNAMIC, False, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out)
 
 
 @njit(cache=True)
 def control_step_dynamic_cost(step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out):
     """:func:`control_step_dynamic` with the compiled obstacle cost."""
-    return _control_step(KIND_DYNAMIC, 6, 2, True, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out)
+    return _control_step(KIND_DYNAMIC, True, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out)
 
 
 #: the compiled step of each model kind, without and with the compiled obstacle cost
@@ -164,7 +168,7 @@ from .. import _jitcache  # noqa: E402
 from ..ocp import assembly as _assembly  # noqa: E402
 from ..solvers import condensed as _condensed, dense_qp as _dense_qp  # noqa: E402
 
-_jitcache.refresh(  # one file: one fingerprint for its three steps
+_jitcache.refresh(  # one file: one fingerprint for its six steps
     control_step_kinematic3,
     [*_assembly.LINKED_SOURCES, *(m.__file__ for m in (_assembly, _condensed, _dense_qp) if m.__file__ is not None)],
 )

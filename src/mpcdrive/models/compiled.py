@@ -76,7 +76,6 @@ for _helper in (
 ):
     register_jitable(_helper)
 _dyn_rhs = subroutine(dynamic_rhs)
-# not inlined: the kinematic models' copies of the step kernels then carry no dynamic code
 _dyn_partials = subroutine(dynamic_rhs_and_partials)
 _axle_tire = dynamic.axle_tire
 _smoothstep = dynamic._smoothstep

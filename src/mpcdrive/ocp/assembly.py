@@ -71,7 +71,8 @@ class StepAssembly:
     considered, within ``obstacle_influence`` [m]; weight, epsilon [m^2], sigma [m]; the
     compiled ``detour`` with its margin and ramp [m]). The rest is work: references
     ``refs`` (N+1, 4: x, y, heading, curvature), arc lengths ``s_arr`` and speeds ``v_arr``
-    (N+1,), those of car following (``follow_s``, ``follow_v``, written by the caller), the linearization ``Xbar``, ``Ubar``, ``F`` = f(Xbar, Ubar), the detour ``e_ref``,
+    (N+1,), those of car following (``follow_s``, ``follow_v``, written by the caller), the
+    linearization ``Xbar``, ``Ubar``, ``F`` = f(Xbar, Ubar), the detour ``e_ref``,
     the selected obstacles ``osel`` (``nsel`` of them), their distances and Frenet positions,
     the road's arc lengths and path points at the linearization trajectory, the discretization's
     work (``dw``; ``sub_*`` for substeps)."""
@@ -203,8 +204,8 @@ def follow_references_into(kind, asm, qp, yaw):
 
 @subroutine
 def _discrete_substeps(kind, asm, X, U, k, A, B):
-    """asm.F[k], A[k], B[k] of the prediction model ``kind`` at (X[k], U[k]) taken in ``asm.substeps``
-    steps. A step without substeps calls ``discrete_step_jacobians`` itself: each array handed
+    """asm.F[k], A[k], B[k] of the prediction model ``kind`` at (X[k], U[k]) taken in
+    ``asm.substeps`` steps. A step without substeps calls ``discrete_step_jacobians`` itself: each array handed
     on through one more compiled call costs reference counts, about 2 us a step at N = 30."""
     discrete_step_jacobians_substeps(
         kind, asm.mp, asm.nx, asm.nu, X, U, k, asm.dt, asm.method, asm.substeps, asm.F, A, B, asm.dw,
