@@ -574,7 +574,8 @@ def test_a_second_process_loads_the_compiled_step_from_the_cache():
     c = CompiledLtvMpc(KinematicBicycle4(), StraightPath([0, 0], [5, 0]), MpcProblem(4, 2, 5, 0.01, Q=1.0, R=1.0))
     x0 = np.array([0.0, 0.0, 0.0, 1.0])
     c.step(x0, c.initial_warm(x0))
-    cache_dir = Path(fast_step.control_step_kinematic4.stats.cache_path)
+    assert c.step_spec == fast_step.StepSpec(4)
+    cache_dir = Path(c._step_fn.stats.cache_path)
     assert any(cache_dir.glob("fast_step.control_step_kinematic4-*.nbi")), f"no cache index in {cache_dir}"
     code = (
         "import json, numpy as np\n"
@@ -585,7 +586,7 @@ def test_a_second_process_loads_the_compiled_step_from_the_cache():
         "c = fast.CompiledLtvMpc(KinematicBicycle4(), CirclePath(), MpcProblem(4, 2, 7, 0.01, Q=1.0, R=1.0))\n"
         "x = np.array([1.5, 0.0, 1.6, 1.0])\n"
         "c.step(x, c.initial_warm(x))\n"
-        "st = fast.CONTROL_STEPS[(4, False)].stats\n"
+        "st = fast.control_step(fast.StepSpec(4)).stats\n"
         "import sys\n"
         "print(json.dumps({'hits': sum(st.cache_hits.values()), 'misses': sum(st.cache_misses.values()),\n"
         "                  'sparse': 'scipy.sparse' in sys.modules}))\n"
@@ -606,9 +607,11 @@ def test_a_second_process_loads_the_compiled_step_from_the_cache():
 
 @pytest.mark.slow
 def test_a_kinematic_step_compiles_without_the_other_models_code(tmp_path):
-    """The step of a kinematic model without obstacle cost is compiled with the model and its
-    sizes as constants: the dynamic model's code, the obstacle cost and the Riccati copies of
-    other sizes are never compiled (a fresh cache, so this process compiles instead of loading)."""
+    """The step of P1 (a kinematic model, no obstacle, no road, no state bound) is compiled with
+    the model, its sizes and its spec as constants: the dynamic model's code, the obstacle cost,
+    the constraint rows (road rows, soft rows), the speed profile, the friction circle and the
+    Riccati copies of other sizes are never compiled (a fresh cache, so this process compiles
+    instead of loading)."""
     code = (
         "import gc, json, numpy as np\n"
         "from mpcdrive.bench.problems import p1\n"
@@ -618,7 +621,7 @@ def test_a_kinematic_step_compiles_without_the_other_models_code(tmp_path):
         "c = LtvMpc(bp.model, bp.path, bp.problem, bp.config)\n"
         "subs = {s.__name__: [[str(t) for t in a] for a in s._compiled] for s in gc.get_objects()\n"
         "        if isinstance(s, Subroutine)}\n"
-        "print(json.dumps(subs))\n"
+        "print(json.dumps({'spec': c.step_spec.name, 'compiled': subs}))\n"
     )
     proc = subprocess.run(
         [sys.executable, "-c", code],
@@ -627,37 +630,90 @@ def test_a_kinematic_step_compiles_without_the_other_models_code(tmp_path):
         check=True,
         env={**__import__("os").environ, "NUMBA_CACHE_DIR": str(tmp_path)},
     )
-    compiled = json.loads(proc.stdout.strip().splitlines()[-1])
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert result["spec"] == "control_step_kinematic3"
+    compiled = result["compiled"]
     assert compiled["linearize"] and compiled["condensed_solve"]  # it did compile the step
-    for name in ("dynamic_steady_states", "dynamic_rhs_and_partials", "obstacle_cost", "select_obstacles"):
+    dead = ("dynamic_steady_states", "dynamic_rhs_and_partials", "obstacle_cost", "select_obstacles")
+    dead += ("horizon_bounds", "reach_first_step", "_group_excess", "_flag_later_groups")
+    dead += ("profile_arc_lengths", "profile_speed", "friction_input_bounds")
+    for name in dead:
         assert compiled[name] == [], name
     # one Riccati copy, at P1's constant sizes (3 states, 1 input)
     assert [sig[1:3] for sig in compiled["_riccati"]] == [["Literal[int](3)", "Literal[int](1)"]]
 
 
-def test_the_step_without_obstacle_cost_refuses_an_assembly_with_one():
-    """Each compiled step is made for an obstacle cost or none; the wrong one fails loudly
-    (status 3) instead of ignoring the cost."""
-    from mpcdrive.control import fast_step
-    from mpcdrive.ocp.assembly import MODE_NO_PLAN
+def _guard_cases():
+    """Controllers whose assembly needs one feature more than a smaller spec has: (controller
+    arguments, keywords, its spec[, the smaller spec; else its spec without extras])."""
+    from mpcdrive.control.fast_step import StepSpec
     from mpcdrive.ocp.avoidance import AvoidanceConfig
     from mpcdrive.scene import Circle, Obstacle
 
-    model = KinematicBicycle3(1.0)
-    obstacle = Obstacle(Circle(0.25), (3.0, 0.0, 0.0))
-    c = CompiledLtvMpc(
-        model,
-        StraightPath([0, 0], [10, 0]),
-        MpcProblem(3, 1, 10, 0.05, Q=1.0, R=1.0),
-        obstacles=(obstacle,),
-        avoidance=AvoidanceConfig("gaussian"),
-    )
-    assert c._step_fn is fast_step.CONTROL_STEPS[(3, True)]
+    m3, m4 = KinematicBicycle3(1.0), KinematicBicycle4()
+    line = StraightPath([0, 0], [10, 0])
+    kin3 = dict(Q=1.0, R=1.0, u_min=-STEER, u_max=STEER)
+    speed = dict(Q=1.0, R=1.0, u_min=[-STEER, -3.0], u_max=[STEER, 3.0], x_min=[-np.inf] * 3 + [0.0])
+    profile = MpcConfig(speed_profile=SpeedProfile(WaypointPath([[0, 0], [5, 0.5], [10, 0]]), 2.0, 1.0, 1.5, 1.3))
+    return {
+        "obstacle cost": (
+            (m3, line, MpcProblem(3, 1, 10, 0.05, road=_lane(0.9), **kin3)),
+            dict(obstacles=(Obstacle(Circle(0.25), (3.0, 0.5, 0.0)),), avoidance=AvoidanceConfig("gaussian")),
+            StepSpec(3, obstacle_cost=True, extras=True),
+            StepSpec(3, extras=True),
+        ),
+        "road rows": ((m3, line, MpcProblem(3, 1, 10, 0.05, road=_lane(0.9), **kin3)), {}, StepSpec(3, extras=True)),
+        "state bounds": ((m4, line, MpcProblem(4, 2, 10, 0.05, **speed)), {}, StepSpec(4, extras=True)),
+        "speed profile": ((m3, line, MpcProblem(3, 1, 10, 0.05, **kin3), profile), {}, StepSpec(3, extras=True)),
+        "friction circle": (
+            (
+                m4,
+                line,
+                MpcProblem(
+                    4, 2, 10, 0.05, Q=1.0, R=1.0, u_min=[-STEER, -3.0], u_max=[STEER, 3.0], friction_accel_mps2=4.0
+                ),
+            ),
+            {},
+            StepSpec(4, extras=True),
+        ),
+    }
+
+
+@pytest.mark.parametrize("case", list(_guard_cases()))
+def test_a_step_refuses_an_assembly_that_needs_more_than_its_spec(case):
+    """Each compiled step is compiled for its StepSpec, the code of what it leaves out left out;
+    a step handed an assembly that needs one of those fails loudly (status 3) instead of
+    ignoring it, and the controller's own step solves it."""
+    from mpcdrive.control import fast_step
+    from mpcdrive.ocp.assembly import MODE_NO_PLAN
+
+    args, kwargs, spec, *smaller = _guard_cases()[case]
+    smaller = smaller[0] if smaller else replace(spec, extras=False)
+    c = CompiledLtvMpc(*args, **kwargs)
+    assert c.step_spec == spec and c._step_fn is fast_step.control_step(spec)
     out = np.empty(c._out_size)
-    x = np.zeros(3)
-    args = (c._step_struct, x, 0.0, 0.0, np.zeros(1), c._noX, c._noU, MODE_NO_PLAN, fast_step.STAGE_ALL, out)
-    assert fast_step.CONTROL_STEPS[(3, False)](*args) == 3
-    assert c._step_fn(*args) == 0
+    x = np.zeros(c.nx)
+    if c.nx == 4:
+        x[3] = 1.0
+    call = (c._step_struct, x, 0.0, 0.0, np.zeros(c.nu), c._noX, c._noU, MODE_NO_PLAN, fast_step.STAGE_ALL, out)
+    assert fast_step.control_step(smaller)(*call) == 3
+    assert c._step_fn(*call) == 0
+
+
+def test_step_specs_name_their_compiled_function():
+    """Each spec has its own function name (numba's cache files are named after it) and says in
+    words what it has; a model kind without a compiled step is refused."""
+    from mpcdrive.control.fast_step import StepSpec, control_step
+
+    assert StepSpec(3).name == "control_step_kinematic3"
+    assert StepSpec(6, obstacle_cost=True, extras=True).name == "control_step_dynamic_obstacle_cost_extras"
+    assert StepSpec(3).describe() == "for tracking alone"
+    assert StepSpec(4, extras=True).describe() == "with constraint rows, speed profile and friction circle"
+    assert StepSpec(3, obstacle_cost=True).describe() == "with the obstacle cost"
+    assert control_step(StepSpec(3)) is control_step(StepSpec(3))
+    assert control_step(StepSpec(3)).py_func.__name__ == "control_step_kinematic3"
+    with pytest.raises(ValueError, match="kind 5"):
+        StepSpec(5)
 
 
 def test_modules_of_subroutines_keep_their_cache_fingerprint(tmp_path):
@@ -1012,3 +1068,21 @@ def test_the_relax_rung_avoids_the_obstacles_set_last():
     assert [o.fallback for o in outs] == ["relax"] * 3
     np.testing.assert_array_equal(outs[0].u, outs[1].u)
     assert np.abs(outs[0].u - outs[2].u).max() > 1e-6  # the obstacle matters to this command
+
+
+def test_the_relax_rung_shares_its_parents_compiled_step():
+    """The relax rung's controller drops the state bounds, so its problem alone would need a
+    smaller step: it runs its parent's instead of compiling another; a spec that lacks a feature
+    the problem needs is refused."""
+    from mpcdrive.control.fast_step import StepSpec
+
+    bounds = dict(Q=1.0, R=1.0, u_min=[-STEER, -3.0], u_max=[STEER, 3.0], x_min=[-np.inf] * 3 + [0.0])
+    args = (KinematicBicycle4(), StraightPath([0, 0], [10, 0]), MpcProblem(4, 2, 10, 0.05, **bounds))
+    c = CompiledLtvMpc(*args)
+    assert c.step_spec == StepSpec(4, extras=True)
+    assert c._relaxed is not None and c._relaxed.step_spec == c.step_spec
+    assert c._relaxed._step_fn is c._step_fn
+    with pytest.raises(ValueError, match="lacks what this problem needs"):
+        CompiledLtvMpc(*args, step_spec=StepSpec(4))
+    with pytest.raises(ValueError, match="lacks what this problem needs"):
+        CompiledLtvMpc(*args, step_spec=StepSpec(3, extras=True))

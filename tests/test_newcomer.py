@@ -139,8 +139,8 @@ def test_sweep_reports_progress_when_stderr_is_not_a_terminal(tmp_path):
 
 
 def test_first_compile_is_announced_once(tmp_path):
-    """Before numba builds the fast controller's step for a model (no cache for its sources yet),
-    one line says so, once per model."""
+    """Before numba builds the fast controller's step for a spec (no cache for its sources yet),
+    one line says so, once per spec."""
     import logging
 
     from mpcdrive.control import fast
@@ -158,9 +158,10 @@ def test_first_compile_is_announced_once(tmp_path):
         real = fast._jitcache.has_cache
         fast._jitcache.has_cache = lambda dispatcher: False
         try:
-            fast._announce_compile(fast.CONTROL_STEPS[(3, False)])
-            fast._announce_compile(fast.CONTROL_STEPS[(3, False)])
-            fast._announce_compile(fast.CONTROL_STEPS[(6, False)])  # another model: its own step, its own line
+            fast._announce_compile(fast.control_step(fast.StepSpec(3)))
+            fast._announce_compile(fast.control_step(fast.StepSpec(3)))
+            # another spec: its own step, its own line
+            fast._announce_compile(fast.control_step(fast.StepSpec(3, extras=True)))
         finally:
             fast._jitcache.has_cache = real
             fast._announced.clear()
@@ -182,3 +183,27 @@ def test_has_cache_finds_numba_index_files(tmp_path):
     r = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert r.stdout.split() == ["False", "True"]
+
+
+def test_has_cache_tells_the_steps_of_two_specs_apart(tmp_path):
+    """The compiled steps of all specs are made by one function in one file; numba names each
+    one's cache index after the step's own name, so an index of one spec does not make another
+    look cached (an empty cache directory: nothing is compiled here)."""
+    code = (
+        "from mpcdrive import _jitcache\n"
+        "from mpcdrive.control.fast_step import StepSpec, control_step\n"
+        "a, b = control_step(StepSpec(3)), control_step(StepSpec(3, extras=True))\n"
+        "before = [_jitcache.has_cache(a), _jitcache.has_cache(b)]\n"
+        "where, stem = _jitcache._cache_location(a)\n"
+        "where.mkdir(parents=True, exist_ok=True)\n"
+        "(where / f'{stem}.{a.py_func.__name__}-{a.py_func.__code__.co_firstlineno}.py311.nbi').write_bytes(b'')\n"
+        "print(*before, _jitcache.has_cache(a), _jitcache.has_cache(b))\n"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)},
+    )
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["False", "False", "True", "False"]

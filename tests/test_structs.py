@@ -53,7 +53,7 @@ def test_writes_on_the_python_side_reach_the_compiled_solve():
     for target in (0.5, 1.0):
         qp.xref[...] = [target, 0.0]
         np.einsum("kij,kj->ki", qp.We, qp.xref[1:], out=qp.qt)
-        code, _ = condensed_solve(qs, ws, x, np.zeros(1), qp.nx, qp.nu)
+        code, _ = condensed_solve(qs, ws, x, np.zeros(1), qp.nx, qp.nu, True)
         assert code == 0
         out = np.empty(1 + 11 * 2 + 10 + 11 * 2)
         write_plan(qs, work.z, x, out)

@@ -77,7 +77,7 @@ class CondensedBackend:
             self._stage, self._stage_struct = stage, stage.struct()
         u_prev = np.ascontiguousarray(u_prev, dtype=float)
         x = np.ascontiguousarray(x, dtype=float)
-        code, iters = condensed_solve(self._stage_struct, self._work_struct, x, u_prev, nx, nu)
+        code, iters = condensed_solve(self._stage_struct, self._work_struct, x, u_prev, nx, nu, True)
         status = STATUS_WORDS[code]
         if code != 0:
             nan = math.nan

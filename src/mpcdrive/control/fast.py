@@ -10,8 +10,9 @@ reference; see :mod:`mpcdrive.paths.profile_compiled`) --, linearization along t
 previous plan or the paper's frozen point, Euler / RK4 / ``exp`` discrete models, cost, input /
 rate / state bounds, soft lane bound with slack, the fallback ladder of ``config.fallback`` --
 its ``relax`` rung on a second compiled controller for the relaxed problem) but runs every step in one
-numba-compiled call (one of :data:`~mpcdrive.control.fast_step.CONTROL_STEPS`, compiled for the
-vehicle model and whether there is an obstacle cost) on typed containers allocated at
+numba-compiled call (:func:`~mpcdrive.control.fast_step.control_step` of its
+:class:`~mpcdrive.control.fast_step.StepSpec`, compiled for the
+vehicle model and the features the problem uses) on typed containers allocated at
 construction: the step assembly's description and work (:class:`~mpcdrive.ocp.assembly.StepAssembly`; the
 assembly in :mod:`mpcdrive.ocp.assembly`, its obstacle cost terms in :mod:`mpcdrive.ocp.obstacle_cost_compiled`),
 the stage QP it writes (:class:`~mpcdrive.ocp.stage_qp.StageQp`) and the condensed solver's work space
@@ -89,13 +90,14 @@ from ..solvers.condensed_setup import CondensedSettings, new_condensed_work
 from .fast_setup import fast_unsupported_reason, obstacles_unsupported_reason, uses_rows
 from .fast_step import (
     _BAD_STATE,
-    CONTROL_STEPS,
     STAGE_ALL,
     STAGE_COST,
     STAGE_FOLLOW,
     STAGE_LINEARIZE,
     STAGE_SOLVE,
     CompiledStep,
+    StepSpec,
+    control_step,
 )
 from .fallback import FALLBACK_HOLD, FALLBACK_RELAX, FallbackConfig, FallbackLadder, relaxed_problem
 from .mpc import FastPathUnavailable, LtvMpc, MpcConfig, StageQpSolve, StepData, solver_in_reach
@@ -110,7 +112,7 @@ SOLVERS: tuple[str, ...] = ("condensed", "osqp")
 
 def _announce_compile(step_fn, what: str = "") -> None:
     """Log one line (logger ``mpcdrive``, INFO; the CLI prints it) before the first compile of
-    the compiled step ``step_fn`` (one per vehicle model and obstacle cost) on a machine: it is
+    the compiled step ``step_fn`` (one per :class:`~mpcdrive.control.fast_step.StepSpec`) on a machine: it is
     built from numba's cache when one exists for these sources. ``what`` names the step."""
     if step_fn in _announced:
         return
@@ -139,6 +141,12 @@ class CompiledLtvMpc(LtvMpc):
     ``config.sqp_tol``. The body stays inside ``problem.road`` by the rule of
     :mod:`mpcdrive.scene.road`, evaluated in the compiled step on the road's tables. Built
     directly, a problem the compiled step does not cover is a ValueError naming the reason.
+
+    ``step_spec``: the compiled step to run (:class:`~mpcdrive.control.fast_step.StepSpec`);
+    None: the least one the problem needs (``self.step_spec``). A spec with more features runs
+    the same problem with the same results, and lets controllers share one compiled step (the
+    relax rung's controller takes its parent's); one that lacks a feature the problem needs is
+    a ValueError.
     """
 
     name = "ltv-mpc-fast"
@@ -162,6 +170,7 @@ class CompiledLtvMpc(LtvMpc):
         osqp_settings: OsqpSettings = OsqpSettings(),
         pg_settings=None,
         assembly: str = "compiled",
+        step_spec: StepSpec | None = None,
     ):
         if solver not in SOLVERS:
             raise ValueError(f"the compiled step's solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
@@ -214,13 +223,6 @@ class CompiledLtvMpc(LtvMpc):
         kind, mp = code
         fric = friction_bounds(problem, model)  # validates the model for the friction circle
         cost_av = av if av is not None and not rows else None  # the compiled obstacle cost's settings
-        #: the compiled step of this model, with the obstacle cost if there is one (numba compiles
-        #: one per model kind and obstacle cost or not)
-        self._step_fn = CONTROL_STEPS[(int(kind), cost_av is not None)]
-        _announce_compile(
-            self._step_fn,
-            f" for the {type(model).__name__} {'with' if cost_av is not None else 'without'} obstacle cost",
-        )
         n_ob = max(len(obstacles), 1)
         f = np.ascontiguousarray
         #: the compiled step's containers: the assembly's description and work, the stage QP it
@@ -301,6 +303,17 @@ class CompiledLtvMpc(LtvMpc):
         )
         self._qp = new_stage_qp(problem, n_orow)
         self._work = new_condensed_work(problem, settings, n_orow)
+        #: what the compiled step is compiled for (numba compiles one per spec, then caches it)
+        needed = StepSpec(
+            int(kind),
+            obstacle_cost=cost_av is not None,
+            extras=self._work.gamma or config.speed_profile is not None or fric is not None,
+        )
+        if step_spec is not None and not step_spec.covers(needed):
+            raise ValueError(f"step_spec {step_spec} lacks what this problem needs: a step {needed.describe()}")
+        self.step_spec = needed if step_spec is None else step_spec
+        self._step_fn = control_step(self.step_spec)
+        _announce_compile(self._step_fn, f" for the {type(model).__name__} {self.step_spec.describe()}")
         self._info = np.zeros(4)
         self._asm_struct, self._qp_struct = self._asm.struct(), self._qp.struct()
         self._step = CompiledStep(self._asm_struct, self._qp_struct, self._work.struct(), self._sides, self._info)
@@ -338,6 +351,7 @@ class CompiledLtvMpc(LtvMpc):
                     footprint=footprint,
                     condensed_settings=replace(settings, max_iter=2 * settings.max_iter),
                     osqp_settings=osqp_settings,
+                    step_spec=self.step_spec,  # its own (fewer rows) would be another compile
                 )
         self.fallback = FallbackLadder(
             self,

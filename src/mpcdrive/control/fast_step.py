@@ -1,14 +1,16 @@
 """The compiled step of :class:`~mpcdrive.control.fast.CompiledLtvMpc`.
 
-:func:`control_step_kinematic3` (and its siblings in :data:`CONTROL_STEPS`, one per vehicle
-model, with or without the compiled obstacle cost) is one control step (or one SQP iteration of
-it) in one numba call: the step assembly of :mod:`mpcdrive.ocp.assembly` writes the stage QP
+:func:`control_step` gives the compiled step of a :class:`StepSpec` (the vehicle model, and
+whether there is an obstacle cost; constraint rows, a speed profile or the friction circle): one
+control step (or one SQP iteration of it) in one numba call, compiled with that spec as
+constants, so it holds no code of the models and features it leaves out: the step assembly of :mod:`mpcdrive.ocp.assembly` writes the stage QP
 (:class:`~mpcdrive.ocp.stage_qp.StageQp`), the condensed solver of :mod:`mpcdrive.solvers`
 solves it (:func:`~mpcdrive.solvers.condensed.condensed_solve`) and the plan is written out. It
 takes one :class:`CompiledStep`: the controller's assembly, stage QP and solver work space as
 typed containers (numba structs over arrays allocated once at construction).
 
-Compiled functions use numba's on-disk cache; numba keys it to this file only, so the cache
+Compiled functions use numba's on-disk cache, each spec's step under its own name; numba keys it
+to this file only, so the cache
 is dropped (by :mod:`mpcdrive._jitcache`) when a file whose code the step links in changes.
 """
 
@@ -59,13 +61,60 @@ class CompiledStep:
         return to_struct(self, _build_compiled_step)
 
 
+@dataclass(frozen=True)
+class StepSpec:
+    """What a compiled step is compiled for; each field is a constant of its code, so the code of
+    what is off is left out of it (and each distinct spec is compiled once, then cached).
+
+    ``kind``: the vehicle model (``KIND_*`` of :mod:`mpcdrive.models.compiled`);
+    ``obstacle_cost``: the compiled obstacle cost and detour; ``extras``: constraint rows beyond
+    the input bounds and rates (state bounds, the road's rows, obstacle rows), a speed profile
+    and the friction circle's per-stage input bounds. The three extras share one flag: a step
+    without them is the plain tracking step (as P1 and most of the paper's experiments run);
+    separate flags would have a program that runs several scenarios compile more distinct
+    steps, for little more code left out. A step handed an assembly that needs something its spec leaves out returns status 3.
+    """
+
+    kind: int
+    obstacle_cost: bool = False
+    extras: bool = False
+
+    def __post_init__(self):
+        if self.kind not in _KIND_NAMES:
+            raise ValueError(f"no compiled step for model kind {self.kind!r}; kinds: {sorted(_KIND_NAMES)}")
+
+    @property
+    def name(self) -> str:
+        """The compiled function's name, e.g. ``control_step_kinematic3_extras``."""
+        flags = [f for f in ("obstacle_cost", "extras") if getattr(self, f)]
+        return "_".join(["control_step", _KIND_NAMES[self.kind], *flags])
+
+    def covers(self, other: StepSpec) -> bool:
+        """Whether this spec's step runs what ``other``'s does: the same model kind, and every
+        feature of ``other`` on here too."""
+        return self.kind == other.kind and all(
+            getattr(self, f) or not getattr(other, f) for f in ("obstacle_cost", "extras")
+        )
+
+    def describe(self) -> str:
+        """What the step has, in words: "with the obstacle cost", "for tracking alone"..."""
+        on = [words for f, words in _FEATURE_WORDS.items() if getattr(self, f)]
+        return f"with {' and '.join(on)}" if on else "for tracking alone"
+
+
+_KIND_NAMES = {KIND_KINEMATIC3: "kinematic3", KIND_KINEMATIC4: "kinematic4", KIND_DYNAMIC: "dynamic"}
+_FEATURE_WORDS = {
+    "obstacle_cost": "the obstacle cost",
+    "extras": "constraint rows, speed profile and friction circle",
+}
+
+
 @subroutine
-def _control_step(kind, cost_obstacles, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out):
-    """One control step (or one SQP iteration of it) at time ``t_s`` [s] for the model ``kind``
-    (``KIND_*`` of :mod:`mpcdrive.models.compiled`), with the compiled obstacle cost and detour
-    if ``cost_obstacles`` (code 3 if the assembly has an obstacle cost and the step does not);
-    returns a status code (0 ok, 1 infeasible, 2 max_iter,
-    3 failed, 4 non-finite state). ``mode`` says what (Xw, Uw) is (``MODE_*`` of
+def _control_step(kind, cost_obstacles, extras, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out):
+    """One control step (or one SQP iteration of it) at time ``t_s`` [s], compiled for the
+    :class:`StepSpec` (``kind``, ``cost_obstacles``, ``extras``; code 3 if the assembly needs
+    what the spec leaves out); returns a status code (0 ok, 1 infeasible,
+    2 max_iter, 3 failed, 4 non-finite state). ``mode`` says what (Xw, Uw) is (``MODE_*`` of
     :mod:`mpcdrive.ocp.assembly`: no plan, the previous step's plan, the current SQP iterate).
     ``stage`` (``STAGE_*``): the whole step; or only up to the linearization trajectory, after
     which the caller writes the obstacle rows, road bounds and detour offsets of the step and
@@ -83,17 +132,19 @@ def _control_step(kind, cost_obstacles, step, x, s_guess, t_s, u_prev, Xw, Uw, m
             return _BAD_STATE
     if not cost_obstacles and asm.obstacle_form != OBS_NONE:
         return 3
+    if not extras and (work.gamma or asm.has_profile or asm.friction):
+        return 3
     if stage == STAGE_FOLLOW:
         follow_references_into(kind, asm, qp, x[2])
         return 0
     if stage == STAGE_LINEARIZE or stage == STAGE_ALL:
-        code = linearize(kind, cost_obstacles, asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mode, step.sides, info)
+        code = linearize(kind, cost_obstacles, extras, asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mode, step.sides, info)
         if code != 0 or stage == STAGE_LINEARIZE:
             return code
-    stage_costs(cost_obstacles, asm, qp, t_s, stage != STAGE_ALL)
+    stage_costs(cost_obstacles, extras, asm, qp, t_s, stage != STAGE_ALL)
     if stage == STAGE_COST:
         return 0
-    code, iters = condensed_solve(qp, work, x, u_prev, nx, nu)
+    code, iters = condensed_solve(qp, work, x, u_prev, nx, nu, extras)
     info[3] = iters
     if code != 0:
         return code
@@ -101,57 +152,27 @@ def _control_step(kind, cost_obstacles, step, x, s_guess, t_s, u_prev, Xw, Uw, m
     return 0
 
 
-# One compiled step per vehicle model, with and without the compiled obstacle cost, each with
-# the model and that choice as constants: a program compiles (or loads) only the
-# steps it uses, with none of the other models' code (and no obstacle-cost code where there is
-# no obstacle cost). ``CONTROL_STEPS[(kind, cost_obstacles)]`` is the one to use.
+#: the compiled steps made so far, by spec
+_STEPS: dict[StepSpec, Any] = {}
 
 
-@njit(cache=True)
-def control_step_kinematic3(step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out):
-    """:func:`_control_step` of the kinematic bicycle at constant speed (3 states, 1 input)."""
-    return _control_step(KIND_KINEMATIC3, False, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out)
+def control_step(spec: StepSpec) -> Any:
+    """The compiled step for ``spec``: a ``@njit(cache=True)`` function ``(step, x, s_guess, t_s,
+    u_prev, Xw, Uw, mode, stage, out)`` that calls :func:`_control_step` with the spec's fields
+    as constants. A program compiles (or loads from numba's cache) only the specs it uses, each
+    without the code of what it leaves out; numba caches each under its own name
+    (:attr:`StepSpec.name`), keyed also to the constants."""
+    fn = _STEPS.get(spec)
+    if fn is None:
+        kind, cost, extras = int(spec.kind), bool(spec.obstacle_cost), bool(spec.extras)
 
+        def entry(step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out):
+            return _control_step(kind, cost, extras, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out)
 
-@njit(cache=True)
-def control_step_kinematic3_cost(step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out):
-    """:func:`control_step_kinematic3` with the compiled obstacle cost."""
-    return _control_step(KIND_KINEMATIC3, True, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out)
-
-
-@njit(cache=True)
-def control_step_kinematic4(step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out):
-    """:func:`_control_step` of the kinematic bicycle with speed (4 states, 2 inputs)."""
-    return _control_step(KIND_KINEMATIC4, False, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out)
-
-
-@njit(cache=True)
-def control_step_kinematic4_cost(step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out):
-    """:func:`control_step_kinematic4` with the compiled obstacle cost."""
-    return _control_step(KIND_KINEMATIC4, True, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out)
-
-
-@njit(cache=True)
-def control_step_dynamic(step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out):
-    """:func:`_control_step` of the dynamic bicycle (6 states, 2 inputs)."""
-    return _control_step(KIND_DYNAMIC, False, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out)
-
-
-@njit(cache=True)
-def control_step_dynamic_cost(step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out):
-    """:func:`control_step_dynamic` with the compiled obstacle cost."""
-    return _control_step(KIND_DYNAMIC, True, step, x, s_guess, t_s, u_prev, Xw, Uw, mode, stage, out)
-
-
-#: the compiled step of each model kind, without and with the compiled obstacle cost
-CONTROL_STEPS = {
-    (KIND_KINEMATIC3, False): control_step_kinematic3,
-    (KIND_KINEMATIC3, True): control_step_kinematic3_cost,
-    (KIND_KINEMATIC4, False): control_step_kinematic4,
-    (KIND_KINEMATIC4, True): control_step_kinematic4_cost,
-    (KIND_DYNAMIC, False): control_step_dynamic,
-    (KIND_DYNAMIC, True): control_step_dynamic_cost,
-}
+        entry.__name__ = entry.__qualname__ = spec.name
+        entry.__doc__ = f":func:`_control_step` {spec.describe()}, for model kind {kind}."
+        fn = _STEPS[spec] = njit(cache=True)(entry)
+    return fn
 
 
 _CompiledStepType, _CompiledStepStruct = define_struct(CompiledStep, __name__)
@@ -168,7 +189,7 @@ from .. import _jitcache  # noqa: E402
 from ..ocp import assembly as _assembly  # noqa: E402
 from ..solvers import condensed as _condensed, dense_qp as _dense_qp  # noqa: E402
 
-_jitcache.refresh(  # one file: one fingerprint for its six steps
-    control_step_kinematic3,
+_jitcache.refresh(  # one file: one fingerprint for all its steps
+    _build_compiled_step,
     [*_assembly.LINKED_SOURCES, *(m.__file__ for m in (_assembly, _condensed, _dense_qp) if m.__file__ is not None)],
 )

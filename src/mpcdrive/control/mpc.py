@@ -290,11 +290,14 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
         osqp_settings: OsqpSettings = OsqpSettings(),
         pg_settings: ProjectedGradientSettings = ProjectedGradientSettings(),
         assembly: Assembly = "auto",
+        **options,
     ):
         if not isinstance(config, MpcConfig):
             raise ValueError(f"config must be an MpcConfig, got {type(config).__name__}")
-        if cls is not LtvMpc:  # a subclass named directly
+        if cls is not LtvMpc:  # a subclass named directly (its own options go to its __init__)
             return super().__new__(cls)
+        if options:
+            raise TypeError(f"LtvMpc() got unexpected keyword arguments: {', '.join(sorted(options))}")
         if solver not in SOLVERS:
             raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
         if assembly not in ASSEMBLIES:

@@ -214,7 +214,7 @@ def _discrete_substeps(kind, asm, X, U, k, A, B):
 
 
 @subroutine
-def linearize(kind, cost_obstacles, asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, info):
+def linearize(kind, cost_obstacles, extras, asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mode, sides, info):
     """The first half of a step's assembly at time ``t_s`` [s] from the measured state ``x``
     (nx,) after input ``u_prev`` (nu,), the projection searched near ``s_guess`` [m]: references,
     obstacle selection and detour (``sides``: the passing side per obstacle, read and updated),
@@ -223,8 +223,10 @@ def linearize(kind, cost_obstacles, asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mo
     bounds, written into ``asm`` and ``qp``; ``info[INFO_*]`` the projection. Returns 0, or 3
     when the model or the references are not finite. ``kind`` is ``asm.model``;
     ``cost_obstacles``: ``asm.obstacle_form`` is not ``OBS_NONE`` (the obstacle cost and the
-    compiled detour). Handed in as constants, they leave the code of the other models (and of
-    the obstacle cost, where there is none) out of the compiled step."""
+    compiled detour); ``extras``: there may be road rows (``asm.lane``), a speed profile
+    (``asm.has_profile``) or the friction circle (``asm.friction``). Handed in as constants (a
+    step's ``StepSpec``), they leave the code of the other models and of what is off out of the
+    compiled step."""
     N, nx, nu = asm.N, asm.nx, asm.nu
     mp, dt, meth = asm.mp, asm.dt, asm.method
     pkind, geo, tab_s, tab_xy, tab_h, tab_k = asm.path, asm.geo, asm.tab_s, asm.tab_xy, asm.tab_h, asm.tab_k
@@ -242,19 +244,19 @@ def linearize(kind, cost_obstacles, asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mo
     info[INFO_ITER] = 0.0
     # horizon arc lengths and reference speeds: as the profile moves in time, or the constant
     # reference speed (or the paper's fixed step)
-    if asm.has_profile:
+    if extras and asm.has_profile:
         profile_arc_lengths(prof, s0, dt, s_arr)
     acc = 0.0
     vdt = abs(asm.v_ref) * dt
     for k in range(N + 1):
-        if asm.has_profile:
+        if extras and asm.has_profile:
             v_arr[k] = profile_speed(prof, s_arr[k])
         else:
             s_arr[k] = s0 + asm.horizon_step * k if asm.paper_horizon else s0 + acc
             acc += vdt
             v_arr[k] = asm.v_ref
     _place_references(kind, asm, qp, x[2], s_arr, v_arr)
-    if asm.has_profile and asm.accel >= 0:  # the profile's speed changes as acceleration reference
+    if extras and asm.has_profile and asm.accel >= 0:  # the profile's speed changes as acceleration reference
         for k in range(N):
             uref[k, asm.accel] += (v_arr[k + 1] - v_arr[k]) / dt
     if cost_obstacles:
@@ -337,7 +339,7 @@ def linearize(kind, cost_obstacles, asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mo
             Xlin[k, i] = Xbar[k, i]
     for i in range(nx):
         Xlin[N, i] = F[N - 1, i]
-    if asm.friction:  # the friction circle as per-stage input bounds (ocp.friction)
+    if extras and asm.friction:  # the friction circle as per-stage input bounds (ocp.friction)
         vlin = asm.vlin
         for k in range(N + 1):
             vlin[k] = model_speed(kind, mp, Xlin[k])
@@ -356,7 +358,7 @@ def linearize(kind, cost_obstacles, asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mo
             qp.ulo,
             qp.uhi,
         )
-    if asm.lane:
+    if extras and asm.lane:
         # the body inside the road where the linearization trajectory has the car, in its yaw
         # (scene.road; as LtvMpc.prepare: its arc lengths, not the references')
         s_lin, rlin = asm.s_lin, asm.rlin
@@ -388,13 +390,13 @@ def linearize(kind, cost_obstacles, asm, qp, x, s_guess, t_s, u_prev, Xw, Uw, mo
 
 
 @subroutine
-def stage_costs(cost_obstacles, asm, qp, t_s, shifted):
+def stage_costs(cost_obstacles, extras, asm, qp, t_s, shifted):
     """The second half of a step's assembly: with ``shifted``, the references moved sideways by
     the detour written into ``asm.e_ref`` between the halves; then the state cost of x_1..x_N as
     ``x' We x - 2 qt' x`` (the weights plus the obstacle cost's convex model at the linearization
     trajectory), the road rows' normals and offsets where they are linearized, and the first
-    step's bounds made reachable. The stage QP is then complete. ``cost_obstacles``: as for
-    :func:`linearize`."""
+    step's bounds made reachable. The stage QP is then complete. ``cost_obstacles``,
+    ``extras``: as for :func:`linearize`."""
     N, nx = asm.N, asm.nx
     Wq, We, qt, xref = asm.Wq, qp.We, qp.qt, qp.xref
     if shifted:
@@ -415,7 +417,7 @@ def stage_costs(cost_obstacles, asm, qp, t_s, shifted):
                 for j in range(nx):
                     We[k, i, j] = Wq[k, i, j]
         obstacle_cost(asm, t_s, We, qt)
-    if asm.lane:
+    if extras and asm.lane:
         lane_n, lane_b, rlin, F = qp.lane_n, qp.lane_b, asm.rlin, asm.F
         for k in range(N):
             yaw = rlin[k + 1, 2]

@@ -249,6 +249,7 @@ def soft_solve(
     rown,
     max_iter,
     tol,
+    soft,
 ):
     """The condensed QP with soft rows, their slacks only where they can be nonzero.
 
@@ -264,13 +265,15 @@ def soft_solve(
     linearization violates) and every group whose multipliers exceed the weight, each with the
     groups with rows after it (:func:`_flag_later_groups`), and solved again until no group
     without a slack exceeds it (or with a slack on every group that has rows: the full problem). The slacks' sign rows follow row m (``rowcol`` names their single
-    nonzero; the other rows written per step are marked dense there). z[:nzu] holds the inputs."""
+    nonzero; the other rows written per step are marked dense there). z[:nzu] holds the inputs.
+    ``soft``: there may be soft rows; a constant False leaves the code of the slacks out (then
+    ``m_soft`` must be ``m``)."""
     for i in range(m):
         isact[i] = 0  # no guess of the active set
     code, iters = gi_solve(
         H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol
     )
-    if m_soft == m:  # no soft rows: the QP is that one
+    if not soft or m_soft == m:  # no soft rows: the QP is that one
         return code, iters
     if code == 0 and _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, True):
         return 0, iters
@@ -343,7 +346,7 @@ def soft_solve(
 
 
 @subroutine
-def condensed_solve(qp, work, x, u_prev, nx, nu):
+def condensed_solve(qp, work, x, u_prev, nx, nu, rows):
     """Solve one step's stage QP ``qp`` (:class:`~mpcdrive.ocp.stage_qp.StageQp`, its struct)
     from state ``x`` (nx,) after input ``u_prev`` (nu,), condensed onto the inputs (and the
     slacks of the soft rows), in the work arrays of ``work`` (:class:`CondensedWork`, its
@@ -355,9 +358,13 @@ def condensed_solve(qp, work, x, u_prev, nx, nu):
     ``gamma``: there are state, road or obstacle rows. Nothing is allocated. ``nx``, ``nu``: the
     sizes ``qp.nx``, ``qp.nu`` (code 3 otherwise); a caller that hands them in as constants gets
     a copy of the solver specialized to them (the Riccati shortcut's small loops unrolled, the
-    other sizes' copies left out).
+    other sizes' copies left out). ``rows``: the step may have rows after the constant ones
+    (``work.gamma``; code 3 if it has and ``rows`` is False); a constant False leaves their code
+    (and that of the soft rows) out.
     """
     if nx != qp.nx or nu != qp.nu:
+        return 3, 0
+    if not rows and work.gamma:
         return 3, 0
     N, nz = qp.N, work.nz
     A, B, c, We, qt, Rm, Rc, uref = qp.A, qp.B, qp.c, qp.We, qp.qt, qp.R, qp.Rc, qp.uref
@@ -486,7 +493,7 @@ def condensed_solve(qp, work, x, u_prev, nx, nu):
             r0 += 2
     m = work.m_const
     m_lane = m
-    if work.gamma:
+    if rows and work.gamma:
         # Gam[k] = d x_{k+1} / d z: Gam[k] = A_k Gam[k-1] in the first k blocks, B_k in block k,
         # zero after it (never written)
         for k in range(N):
@@ -562,7 +569,7 @@ def condensed_solve(qp, work, x, u_prev, nx, nu):
                     m += 1
 
     # -- solve, then the plan and the command --------------------------------------------------
-    if not lane and nrow == 0:
+    if not rows or (not lane and nrow == 0):
         m_lane = m  # no soft rows (soft_solve then solves the hard QP once)
     else:
         # soft rows (slack groups: lane rows of step k in group k, obstacle rows in N + k) that
@@ -589,7 +596,7 @@ def condensed_solve(qp, work, x, u_prev, nx, nu):
                     kpos[f0 + k] = 1
     code, iters = soft_solve(
         H, g, C, b, m, m_lane, rgrp, N, nzu, kpos, qp.w2_lane, qp.w1_lane, qp.w2_obs, qp.w1_obs, gsum, z, lamq, active, isact,
-        rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, work.max_iter, tol,
+        rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, work.max_iter, tol, rows,
     )  # fmt: skip
     return code, iters
 
