@@ -708,8 +708,10 @@ def test_step_specs_name_their_compiled_function():
     assert StepSpec(3).name == "control_step_kinematic3"
     assert StepSpec(6, obstacle_cost=True, extras=True).name == "control_step_dynamic_obstacle_cost_extras"
     assert StepSpec(3).describe() == "for tracking alone"
-    assert StepSpec(4, extras=True).describe() == "with constraint rows, speed profile and friction circle"
-    assert StepSpec(3, obstacle_cost=True).describe() == "with the obstacle cost"
+    extras = "constraint rows, speed profiles and the friction circle"
+    assert StepSpec(4, extras=True).describe() == f"with code for {extras}"
+    assert StepSpec(3, obstacle_cost=True).describe() == "with code for the obstacle cost"
+    assert StepSpec(3, obstacle_cost=True, extras=True).describe() == f"with code for the obstacle cost, {extras}"
     assert control_step(StepSpec(3)) is control_step(StepSpec(3))
     assert control_step(StepSpec(3)).py_func.__name__ == "control_step_kinematic3"
     with pytest.raises(ValueError, match="kind 5"):

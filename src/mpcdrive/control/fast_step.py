@@ -72,7 +72,8 @@ class StepSpec:
     and the friction circle's per-stage input bounds. The three extras share one flag: a step
     without them is the plain tracking step (as P1 and most of the paper's experiments run);
     separate flags would have a program that runs several scenarios compile more distinct
-    steps, for little more code left out. A step handed an assembly that needs something its spec leaves out returns status 3.
+    steps, for little more code left out. A step handed an assembly that needs something its
+    spec leaves out returns status 3.
     """
 
     kind: int
@@ -86,27 +87,27 @@ class StepSpec:
     @property
     def name(self) -> str:
         """The compiled function's name, e.g. ``control_step_kinematic3_extras``."""
-        flags = [f for f in ("obstacle_cost", "extras") if getattr(self, f)]
+        flags = [f for f in _FLAGS if getattr(self, f)]
         return "_".join(["control_step", _KIND_NAMES[self.kind], *flags])
 
     def covers(self, other: StepSpec) -> bool:
         """Whether this spec's step runs what ``other``'s does: the same model kind, and every
         feature of ``other`` on here too."""
-        return self.kind == other.kind and all(
-            getattr(self, f) or not getattr(other, f) for f in ("obstacle_cost", "extras")
-        )
+        return self.kind == other.kind and all(getattr(self, f) or not getattr(other, f) for f in _FLAGS)
 
     def describe(self) -> str:
-        """What the step has, in words: "with the obstacle cost", "for tracking alone"..."""
-        on = [words for f, words in _FEATURE_WORDS.items() if getattr(self, f)]
-        return f"with {' and '.join(on)}" if on else "for tracking alone"
+        """What the step has code for, in words: "for tracking alone", "with code for the
+        obstacle cost", ..."""
+        if self.obstacle_cost and self.extras:
+            return f"with code for the obstacle cost, {_EXTRAS_WORDS}"
+        if self.obstacle_cost or self.extras:
+            return f"with code for {'the obstacle cost' if self.obstacle_cost else _EXTRAS_WORDS}"
+        return "for tracking alone"
 
 
+_FLAGS = ("obstacle_cost", "extras")
 _KIND_NAMES = {KIND_KINEMATIC3: "kinematic3", KIND_KINEMATIC4: "kinematic4", KIND_DYNAMIC: "dynamic"}
-_FEATURE_WORDS = {
-    "obstacle_cost": "the obstacle cost",
-    "extras": "constraint rows, speed profile and friction circle",
-}
+_EXTRAS_WORDS = "constraint rows, speed profiles and the friction circle"
 
 
 @subroutine
