@@ -118,7 +118,9 @@ def _constant_rows(problem: MpcProblem, nz: int, n_orow: int = 0):
     n_bound = N * int(np.isfinite(problem.u_min).sum() + np.isfinite(problem.u_max).sum())
     Cb, bb = np.zeros((n_bound, nz)), np.zeros(n_bound)
     lo, hi = np.tile(problem.u_min, (N, 1)), np.tile(problem.u_max, (N, 1))
-    input_bound_rows(N, nu, problem.u_min, problem.u_max, lo, hi, Cb, bb, True)
+    # the Python function itself, once per controller: a compiled copy for this one call would
+    # cost about a second of the first build
+    input_bound_rows.py_func(N, nu, problem.u_min, problem.u_max, lo, hi, Cb, bb, True)
     rows += list(Cb)
     rhs += bb.tolist()
     r_rate0 = len(rows)
