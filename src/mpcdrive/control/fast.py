@@ -304,11 +304,7 @@ class CompiledLtvMpc(LtvMpc):
         self._qp = new_stage_qp(problem, n_orow)
         self._work = new_condensed_work(problem, settings, n_orow)
         #: what the compiled step is compiled for (numba compiles one per spec, then caches it)
-        needed = StepSpec(
-            int(kind),
-            obstacle_cost=cost_av is not None,
-            extras=self._work.gamma or config.speed_profile is not None or fric is not None,
-        )
+        needed = StepSpec.needed_by(self._asm, self._work)
         if step_spec is not None and not step_spec.covers(needed):
             raise ValueError(f"step_spec {step_spec} lacks what this problem needs: a step {needed.describe()}")
         self.step_spec = needed if step_spec is None else step_spec

@@ -3,15 +3,16 @@
 :func:`control_step` gives the compiled step of a :class:`StepSpec` (the vehicle model, and
 whether there is an obstacle cost; constraint rows, a speed profile or the friction circle): one
 control step (or one SQP iteration of it) in one numba call, compiled with that spec as
-constants, so it holds no code of the models and features it leaves out: the step assembly of :mod:`mpcdrive.ocp.assembly` writes the stage QP
-(:class:`~mpcdrive.ocp.stage_qp.StageQp`), the condensed solver of :mod:`mpcdrive.solvers`
-solves it (:func:`~mpcdrive.solvers.condensed.condensed_solve`) and the plan is written out. It
-takes one :class:`CompiledStep`: the controller's assembly, stage QP and solver work space as
-typed containers (numba structs over arrays allocated once at construction).
+constants, so it holds no code of the models and features it leaves out. The step assembly of
+:mod:`mpcdrive.ocp.assembly` writes the stage QP (:class:`~mpcdrive.ocp.stage_qp.StageQp`),
+the condensed solver of :mod:`mpcdrive.solvers` solves it
+(:func:`~mpcdrive.solvers.condensed.condensed_solve`) and the plan is written out. It takes one
+:class:`CompiledStep`: the controller's assembly, stage QP and solver work space as typed
+containers (numba structs over arrays allocated once at construction).
 
 Compiled functions use numba's on-disk cache, each spec's step under its own name; numba keys it
-to this file only, so the cache
-is dropped (by :mod:`mpcdrive._jitcache`) when a file whose code the step links in changes.
+to this file only, so the cache is dropped (by :mod:`mpcdrive._jitcache`) when a file whose code
+the step links in changes.
 """
 
 from __future__ import annotations
@@ -80,6 +81,18 @@ class StepSpec:
     obstacle_cost: bool = False
     extras: bool = False
 
+    @classmethod
+    def needed_by(cls, assembly, work) -> StepSpec:
+        """The least spec whose step runs a controller's ``assembly``
+        (:class:`~mpcdrive.ocp.assembly.StepAssembly`) and solver ``work``
+        (:class:`~mpcdrive.solvers.condensed.CondensedWork`): read from the fields that
+        :func:`_control_step` checks against its spec."""
+        return cls(
+            int(assembly.model),
+            obstacle_cost=assembly.obstacle_form != OBS_NONE,
+            extras=bool(work.gamma or assembly.has_profile or assembly.friction),
+        )
+
     def __post_init__(self):
         if self.kind not in _KIND_NAMES:
             raise ValueError(f"no compiled step for model kind {self.kind!r}; kinds: {sorted(_KIND_NAMES)}")
@@ -131,6 +144,7 @@ def _control_step(kind, cost_obstacles, extras, step, x, s_guess, t_s, u_prev, X
     for i in range(nx):
         if not math.isfinite(x[i]):
             return _BAD_STATE
+    # what the assembly needs that the spec leaves out (the fields StepSpec.needed_by reads)
     if not cost_obstacles and asm.obstacle_form != OBS_NONE:
         return 3
     if not extras and (work.gamma or asm.has_profile or asm.friction):
