@@ -1088,3 +1088,26 @@ def test_the_relax_rung_shares_its_parents_compiled_step():
         CompiledLtvMpc(*args, step_spec=StepSpec(4))
     with pytest.raises(ValueError, match="lacks what this problem needs"):
         CompiledLtvMpc(*args, step_spec=StepSpec(3, extras=True))
+
+
+def test_a_spec_with_more_features_runs_the_problem_the_same():
+    """``step_spec`` may name a step with more code than the problem needs (the relax rung runs
+    its parent's): the branches it adds are off for this assembly, so the plans are the same."""
+    from mpcdrive.bench.problems import p1
+    from mpcdrive.control.fast_step import StepSpec
+
+    bp = p1(N=10)
+    plain = CompiledLtvMpc(bp.model, bp.path, bp.problem, bp.config)
+    full = CompiledLtvMpc(
+        bp.model, bp.path, bp.problem, bp.config, step_spec=StepSpec(3, obstacle_cost=True, extras=True)
+    )
+    assert plain.step_spec == StepSpec(3) and full._step_fn is not plain._step_fn
+    x_a = x_b = bp.x0.copy()
+    warm_a, warm_b = plain.initial_warm(x_a), full.initial_warm(x_b)
+    for _ in range(5):
+        out_a, out_b = plain.step(x_a, warm_a), full.step(x_b, warm_b)
+        assert out_a.status == out_b.status == "ok"
+        np.testing.assert_allclose(out_b.u, out_a.u, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(out_b.X_pred, out_a.X_pred, rtol=0, atol=1e-12)
+        x_a = x_b = out_a.X_pred[1]
+        warm_a, warm_b = out_a.warm, out_b.warm
