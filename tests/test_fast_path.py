@@ -606,7 +606,7 @@ def test_a_second_process_loads_the_compiled_step_from_the_cache():
 
 
 @pytest.mark.slow
-def test_a_kinematic_step_compiles_without_the_other_models_code(tmp_path):
+def test_a_kinematic_step_compiles_without_the_other_models_code(run_with_empty_numba_cache):
     """The step of P1 (a kinematic model, no obstacle, no road, no state bound) is compiled with
     the model, its sizes and its spec as constants: the dynamic model's code, the obstacle cost,
     the constraint rows (road rows, soft rows), the speed profile, the friction circle and the
@@ -623,14 +623,7 @@ def test_a_kinematic_step_compiles_without_the_other_models_code(tmp_path):
         "        if isinstance(s, Subroutine)}\n"
         "print(json.dumps({'spec': c.step_spec.name, 'compiled': subs}))\n"
     )
-    proc = subprocess.run(
-        [sys.executable, "-c", code],
-        capture_output=True,
-        text=True,
-        check=True,
-        env={**__import__("os").environ, "NUMBA_CACHE_DIR": str(tmp_path)},
-    )
-    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    result = json.loads(run_with_empty_numba_cache(code).strip().splitlines()[-1])
     assert result["spec"] == "control_step_kinematic3"
     compiled = result["compiled"]
     assert compiled["linearize"] and compiled["condensed_solve"]  # it did compile the step
@@ -718,13 +711,10 @@ def test_step_specs_name_their_compiled_function():
         StepSpec(5)
 
 
-def test_modules_of_subroutines_keep_their_cache_fingerprint(tmp_path):
+def test_modules_of_subroutines_keep_their_cache_fingerprint(tmp_path, run_with_empty_numba_cache):
     """The dependency fingerprint is kept for a module whose anchor function is a subroutine
     (``ocp.assembly``: ``linearize``), located through numba's own cache locator."""
-    code = "import mpcdrive.ocp.assembly, mpcdrive.solvers.condensed, mpcdrive.models.compiled"
-    subprocess.run(
-        [sys.executable, "-c", code], check=True, env={**__import__("os").environ, "NUMBA_CACHE_DIR": str(tmp_path)}
-    )
+    run_with_empty_numba_cache("import mpcdrive.ocp.assembly, mpcdrive.solvers.condensed, mpcdrive.models.compiled")
     for stem in ("assembly", "condensed", "compiled"):
         assert list(tmp_path.rglob(f"{stem}.deps-sha1")), stem
 

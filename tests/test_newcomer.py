@@ -185,7 +185,7 @@ def test_has_cache_finds_numba_index_files(tmp_path):
     assert r.stdout.split() == ["False", "True"]
 
 
-def test_has_cache_tells_the_steps_of_two_specs_apart(tmp_path):
+def test_has_cache_tells_the_steps_of_two_specs_apart(run_with_empty_numba_cache):
     """The compiled steps of all specs are made by one function in one file; numba names each
     one's cache index after the step's own name, so an index of one spec does not make another
     look cached (an empty cache directory: nothing is compiled here)."""
@@ -199,11 +199,4 @@ def test_has_cache_tells_the_steps_of_two_specs_apart(tmp_path):
         "(where / f'{stem}.{a.py_func.__name__}-{a.py_func.__code__.co_firstlineno}.py311.nbi').write_bytes(b'')\n"
         "print(*before, _jitcache.has_cache(a), _jitcache.has_cache(b))\n"
     )
-    r = subprocess.run(
-        [sys.executable, "-c", code],
-        capture_output=True,
-        text=True,
-        env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)},
-    )
-    assert r.returncode == 0, r.stderr
-    assert r.stdout.split() == ["False", "False", "True", "False"]
+    assert run_with_empty_numba_cache(code).split() == ["False", "False", "True", "False"]
