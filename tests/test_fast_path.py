@@ -794,7 +794,7 @@ def _obstacle_cases():
             b3.model,
             b3.path,
             b3.problem,
-            replace(b3.config, sqp_max_iterations=8, sqp_tol=1e-6, sqp_max_time_s=10.0),
+            replace(b3.config, sqp_max_iterations=8, sqp_tol=1e-6),
             np.array([2.0, 0.3, 0.0]),
             b3.obstacles,
             b3.avoidance,

@@ -575,8 +575,9 @@ class CompiledLtvMpc(LtvMpc):
         cfg = self.config
         it = 1
         e_y, e_psi = info[1], info[2]
+        cap = cfg.sqp_max_time_s  # real-time mode only (None: the iteration cap alone)
         t_qp = time.perf_counter() - t0  # the last QP's time: no new QP that would end past the cap
-        while code == 0 and it < cfg.sqp_max_iterations and time.perf_counter() - t0 + t_qp < cfg.sqp_max_time_s:
+        while code == 0 and it < cfg.sqp_max_iterations and (cap is None or time.perf_counter() - t0 + t_qp < cap):
             t1 = time.perf_counter()
             U_it = out[self._o_U : self._o_R].reshape(N, nu)
             if float(np.max(np.abs(U_it - self._asm.Ubar))) < cfg.sqp_tol:

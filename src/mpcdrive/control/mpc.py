@@ -94,8 +94,12 @@ class MpcConfig:
     projection_window_m : half-width of the arc-length window searched around the last s [m];
     sqp_max_iterations : QPs per step: 1 is the real-time iteration (one QP on the model and
         obstacle terms linearized along the shifted previous plan); more re-linearize at each new
-        solution until the inputs move less than ``sqp_tol`` [input units]; no iteration starts
-        that would end past ``sqp_max_time_s`` of wall time (judged by the last one's time).
+        solution until the inputs move less than ``sqp_tol`` [input units] or ``sqp_max_iterations``
+        QPs ran: an iteration cap, so a closed loop gives the same numbers on every machine;
+    sqp_max_time_s : real-time mode, opt-in (default None: off): no SQP iteration starts that
+        would end past this much wall time [s] (judged by the last one's time). The number of QPs
+        per step then depends on the machine's speed and load, and so does the closed loop: a
+        setting for a car with a deadline, never for tests, reproductions or sweeps.
     prediction_substeps : integration substeps per control step in the prediction model (stiff
         models such as the dynamic bicycle need them at long steps).
     fallback : what to do, in order, when a solve fails (:class:`~mpcdrive.control.fallback.FallbackConfig`).
@@ -110,7 +114,7 @@ class MpcConfig:
     projection_window_m: float = 2.0
     sqp_max_iterations: int = 1
     sqp_tol: float = 1e-4
-    sqp_max_time_s: float = 0.05
+    sqp_max_time_s: float | None = None
     speed_profile: SpeedReference | None = None
     prediction_substeps: int = 1
     fallback: FallbackConfig = FallbackConfig()
@@ -124,6 +128,15 @@ class MpcConfig:
             raise ValueError(f"horizon must be 'arc_length' or 'paper', got {self.horizon!r}")
         if self.sqp_max_iterations < 1:
             raise ValueError(f"sqp_max_iterations must be >= 1, got {self.sqp_max_iterations}")
+        if self.sqp_max_time_s is not None and not (
+            isinstance(self.sqp_max_time_s, (int, float))
+            and not isinstance(self.sqp_max_time_s, bool)
+            and math.isfinite(self.sqp_max_time_s)
+            and self.sqp_max_time_s > 0
+        ):
+            raise ValueError(
+                f"sqp_max_time_s must be None (no wall-time cap) or a positive time [s], got {self.sqp_max_time_s!r}"
+            )
         if self.feedforward not in ("curvature", "none"):
             raise ValueError(f"feedforward must be 'curvature' or 'none', got {self.feedforward!r}")
         if self.speed_profile is not None and not callable(getattr(self.speed_profile, "speed", None)):
@@ -169,12 +182,9 @@ class StageQpSolve:
         d = self.prepare(x, warm)
         res = self._solve(d, warm)
         it = 1
+        cap = self.config.sqp_max_time_s  # real-time mode only (None: the iteration cap alone)
         t_qp = time.perf_counter() - t0  # the last iteration's time: none that would end past the cap
-        while (
-            it < self.config.sqp_max_iterations
-            and res.ok
-            and time.perf_counter() - t0 + t_qp < self.config.sqp_max_time_s
-        ):
+        while it < self.config.sqp_max_iterations and res.ok and (cap is None or time.perf_counter() - t0 + t_qp < cap):
             dU = float(np.max(np.abs(res.U - d.Ubar)))
             if dU < self.config.sqp_tol:
                 break

@@ -283,7 +283,7 @@ class AvoidanceSpec(_Strict):
     follow_decel_mps2: Positive = _AV.follow_decel_mps2
     sqp_max_iterations: int = Field(1, ge=1, le=100)
     sqp_tol: Positive = 1e-4
-    sqp_max_time_s: Positive = 0.05
+    sqp_max_time_s: Positive | None = None  # real-time mode (opt-in): a wall-time cap per step [s]
 
 
 class InitialState(_Strict):
