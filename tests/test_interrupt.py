@@ -129,49 +129,40 @@ def test_exception_mid_run_leaves_no_output_and_says_so(tmp_path, capsys, monkey
     assert len(calls) == (2 if args[0] == "reproduce" else 1)
 
 
-def test_an_interrupt_lost_where_it_landed_still_stops_the_run(tmp_path, capsys, monkeypatch):
-    """The signal handler records the interrupt, so that a KeyboardInterrupt dropped by the code
-    it was raised in (C code that clears errors) still stops the run at its next step."""
-    from mpcdrive.cli import common
+def test_the_signal_handler_leaves_nothing_uncommitted_and_ends_with_130(tmp_path, monkeypatch, capfd):
+    """The command line's handler ends the process at once (no exception unwinds the code it
+    interrupted): it removes every output not committed yet -- an output directory, a file being
+    written, the parent directories made for them -- and keeps what is committed."""
+    from mpcdrive.cli import interrupt
+    from mpcdrive.io.atomic import atomic_output_dir, atomic_write_text
 
-    def swallowed(k, total):  # the handler ran inside code that drops the exception
-        if k == 20:
-            try:
-                common._interrupted(signal.SIGTERM, None)
-            except KeyboardInterrupt:
-                pass
+    seen = {}
 
-    real = mpcdrive.scenarios.run_experiment
-    steps = []
+    def fake_exit(code):  # what is on disk when the process would end
+        seen["code"] = code
+        seen["left"] = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
+        raise SystemExit(code)
 
-    def run(exp, progress=None):
-        def both(k, total):
-            steps.append(k)
-            swallowed(k, total)
-            progress(k, total)
-
-        return real(exp, progress=both)
-
-    monkeypatch.setattr(mpcdrive.scenarios, "run_experiment", run)
-    monkeypatch.setattr(common, "_INTERRUPTS", [])
-    out = tmp_path / "out"
-    monkeypatch.setattr(sys, "argv", ["mpcdrive", "run", "paper-exp3", "--out", str(out), "-q"])
-    with pytest.raises(SystemExit) as ex:
-        with monkeypatch.context() as m:
-            m.setattr(os, "_exit", lambda code: sys.exit(code))  # in-process: no hard exit
-            main()
-    assert ex.value.code == 130
-    assert steps[-1] == 20  # stopped at the step the signal came in, not at the end
-    assert "interrupted; no partial output was kept" in capsys.readouterr().err
-    assert not out.exists() and list(tmp_path.iterdir()) == []
-
-
-def test_an_interrupt_recorded_after_the_last_step_commits_nothing(tmp_path, monkeypatch):
-    from mpcdrive.cli import common
-
-    monkeypatch.setattr(common, "_INTERRUPTS", [signal.SIGTERM])
-    out = tmp_path / "out"
-    with pytest.raises(KeyboardInterrupt):
-        with common._output_dir(out) as tmp:
+    monkeypatch.setattr(os, "_exit", fake_exit)
+    monkeypatch.setattr(signal, "signal", lambda *a: None)  # (the test process keeps its handlers)
+    atomic_write_text(tmp_path / "done" / "kept.txt", "committed")
+    with pytest.raises(SystemExit):
+        with atomic_output_dir(tmp_path / "runs" / "deep" / "out") as tmp:
             (tmp / "metrics.json").write_text("{}")
-    assert not out.exists() and list(tmp_path.iterdir()) == []
+            atomic_write_text(tmp / "sub" / "trajectory.csv", "t\n0\n")
+            interrupt.exit_interrupted(signal.SIGTERM, None)
+    assert seen == {"code": 130, "left": ["done", "done/kept.txt"]}
+    assert capfd.readouterr().err.splitlines()[-1] == interrupt.MESSAGE
+
+
+def test_a_failed_output_takes_the_parent_directories_made_for_it(tmp_path):
+    from mpcdrive.io.atomic import atomic_output_dir
+
+    with pytest.raises(RuntimeError):
+        with atomic_output_dir(tmp_path / "runs" / "out") as tmp:
+            (tmp / "metrics.json").write_text("{}")
+            raise RuntimeError("failed part-way")
+    assert list(tmp_path.iterdir()) == []
+    with atomic_output_dir(tmp_path / "runs" / "out") as tmp:
+        (tmp / "metrics.json").write_text("{}")
+    assert [p.name for p in (tmp_path / "runs" / "out").iterdir()] == ["metrics.json"]

@@ -5,22 +5,36 @@ failures.
 The commands live by kind, each module registering its own on :data:`app`: ``drive`` (``list``,
 ``run``), ``studies`` (``reproduce``, ``compare-avoidance``, ``bench``, ``compare-models``) and
 ``batch`` (``sweep``, ``commonroad``); ``common`` holds the app and what the commands share, this
-module the console entry point :func:`main` (also ``python -m mpcdrive.cli``)."""
+module the console entry point :func:`main` (also ``python -m mpcdrive.cli``).
+
+Importing this module imports nothing but the standard library and :mod:`.interrupt`: the console
+script and ``python -m mpcdrive`` import it before :func:`main` runs, and :func:`main` installs
+the signal handlers before the commands (and numpy, numba, typer) are imported. ``app``,
+``BadInput`` and ``OutputAbandoned`` are loaded on first use."""
 
 from __future__ import annotations
 
-import os
 import sys
-from typing import NoReturn
 
-import typer
-
-from .common import BadInput, OutputAbandoned, _interrupted, app
-
-# the commands, registered on app in the order `mpcdrive --help` lists them
-from . import drive, studies, batch  # noqa: F401
+from . import interrupt
 
 __all__ = ["BadInput", "OutputAbandoned", "app", "main"]
+
+
+def __getattr__(name: str):
+    if name in __all__:
+        return getattr(_commands(), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def _commands():
+    """The app with every command registered (imports the commands and what they need)."""
+    from . import common
+
+    # the commands, registered on app in the order `mpcdrive --help` lists them
+    from . import drive, studies, batch  # noqa: F401
+
+    return common
 
 
 def _log_to_stderr() -> None:
@@ -42,6 +56,8 @@ def _scenario_warnings_as_lines() -> None:
     ``mpcdrive: warning: <file>: <field>: <problem>`` (other warnings as Python prints them)."""
     import warnings
 
+    import typer
+
     from ..types import ScenarioWarning
 
     shown = warnings.showwarning
@@ -55,33 +71,22 @@ def _scenario_warnings_as_lines() -> None:
     warnings.showwarning = show
 
 
-def _ignore_further_interrupts() -> None:
-    """Once the interrupt is handled (the output cleaned up), a second Ctrl-C or SIGTERM while
-    the interpreter shuts down is ignored: it would end the process with the signal itself
-    instead of exit code 130 (seen on a loaded machine, where the shutdown took seconds)."""
-    import signal
-
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, signal.SIG_IGN)
-
-
-def _exit_interrupted() -> NoReturn:
-    """End the process with exit code 130 now that the interrupt is handled (the output cleaned
-    up, the message written). Not through the interpreter's shutdown: on some machines a process
-    interrupted once still ended killed by SIGINT (exit -2) from there, about one run in three."""
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(130)
-
-
 def main() -> None:
     """Console-script entry point. Exit codes: 0 done, 1 other failures, 2 bad input, 3 a
-    ``run --check`` that collided, left the road or missed its goal, 130 interrupted."""
-    import signal
+    ``run --check`` that collided, left the road or missed its goal, 130 interrupted (Ctrl-C or
+    SIGTERM at any moment, :mod:`.interrupt`)."""
+    interrupt.install()  # first: before the imports below, which take seconds on a loaded machine
+    try:
+        _main()
+    except KeyboardInterrupt:  # raised where stopping needs unwinding (worker pools), or by OSQP
+        interrupt.exit_interrupted()
 
-    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # (not when started ignoring it)
-        signal.signal(signal.SIGINT, _interrupted)
-    signal.signal(signal.SIGTERM, _interrupted)  # cleans up like Ctrl-C: no partial output is kept
+
+def _main() -> None:
+    import typer
+
+    common = _commands()
+    app, BadInput, OutputAbandoned = common.app, common.BadInput, common.OutputAbandoned
     _log_to_stderr()
     _scenario_warnings_as_lines()
     if len(sys.argv) == 1:  # a bare `mpcdrive` shows the help as it is, not folded into a usage error
@@ -103,10 +108,6 @@ def main() -> None:
         sys.exit(1)
     except typer.Exit as e:
         sys.exit(e.exit_code)
-    except KeyboardInterrupt:
-        _ignore_further_interrupts()
-        typer.echo("mpcdrive: interrupted; no partial output was kept", err=True)
-        _exit_interrupted()
     except Exception as e:
         fmt = getattr(e, "format_message", None)
         code = getattr(e, "exit_code", None)
@@ -115,9 +116,7 @@ def main() -> None:
             where = ctx.command_path if ctx is not None else "mpcdrive"
             typer.echo(f"{where}: {' '.join(fmt().split())}", err=True)
             sys.exit(code)
-        if type(e).__name__ == "Abort":
-            _ignore_further_interrupts()
-            typer.echo("mpcdrive: aborted; no partial output was kept", err=True)
-            _exit_interrupted()
+        if type(e).__name__ == "Abort":  # click's answer to a KeyboardInterrupt it caught
+            interrupt.exit_interrupted()
         typer.echo(f"mpcdrive: error: {type(e).__name__}: {e}", err=True)
         sys.exit(1)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import typer
 
-from .common import BadInput, _check_vehicle_flags, _default_out, _load, _output_dir, _stderr_console, app
+from .common import BadInput, _check_vehicle_flags, _default_out, _load, _output_dir, _shown, _stderr_console, app
 
 
 @app.command()
@@ -95,16 +95,19 @@ def _sweep_progress(enabled: bool, total: int):
         return
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("runs"),
-        TextColumn("{task.fields[failed]} failed"),
-        TimeRemainingColumn(),
-        transient=True,
-        console=_stderr_console(),
-    ) as prog:
+    with (
+        _shown(),
+        Progress(
+            TextColumn("{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("runs"),
+            TextColumn("{task.fields[failed]} failed"),
+            TimeRemainingColumn(),
+            transient=True,
+            console=_stderr_console(),
+        ) as prog,
+    ):
         task = prog.add_task("sweep", total=total, failed=0)
         failed = [0]
 

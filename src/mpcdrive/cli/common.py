@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 import typer
 
 from ..scenarios import ScenarioError, load_scenario
+from . import interrupt
 
 if TYPE_CHECKING:
     from ..sim import Metrics
@@ -23,24 +24,6 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     rich_markup_mode=None,  # plain click help: flags without a '<bool>' metavar
 )
-
-
-_INTERRUPTS: list[int] = []  # the signals the console entry point took, in order
-
-
-def _interrupted(signum, frame) -> None:
-    """Ctrl-C and SIGTERM: record the signal, then raise KeyboardInterrupt (the command cleans up:
-    no partial output is kept). The record is checked again at every simulation step and before
-    an output directory is committed, since a KeyboardInterrupt raised from a handler is lost
-    where the code it lands in drops exceptions (C code that clears errors): a signal is never
-    taken and forgotten."""
-    _INTERRUPTS.append(signum)
-    raise KeyboardInterrupt
-
-
-def _raise_if_interrupted() -> None:
-    if _INTERRUPTS:
-        raise KeyboardInterrupt
 
 
 def _print_version(value: bool) -> None:
@@ -66,32 +49,43 @@ class BadInput(Exception):
 
 @contextmanager
 def _progress(enabled: bool, label: str, total: int):
-    """A progress bar on stderr; enabled or not, the step callback raises KeyboardInterrupt once
-    an interrupt was recorded (:func:`_interrupted`)."""
+    """A progress bar on stderr (a step callback that does nothing when disabled)."""
     if not enabled:
-        yield lambda k, n: _raise_if_interrupted()
+        yield None
         return
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        TextColumn("{task.completed}/{task.total} steps"),
-        TimeRemainingColumn(),
-        transient=True,
-        console=_stderr_console(),
-    ) as prog:
+    with (
+        _shown(),
+        Progress(
+            TextColumn("{task.description}"),
+            BarColumn(),
+            TextColumn("{task.completed}/{task.total} steps"),
+            TimeRemainingColumn(),
+            transient=True,
+            console=_stderr_console(),
+        ) as prog,
+    ):
         task = prog.add_task(label, total=total)
         last = [0.0]
 
         def cb(k: int, n: int) -> None:
             now = time.monotonic()
-            _raise_if_interrupted()
             if k == n or now - last[0] > 0.1:
                 last[0] = now
                 prog.update(task, completed=k)
 
         yield cb
+
+
+@contextmanager
+def _shown():
+    """A progress bar is on the terminal in this block (an interrupt shows the cursor again)."""
+    interrupt.progress_shown = True
+    try:
+        yield
+    finally:
+        interrupt.progress_shown = False
 
 
 def _stderr_console():
@@ -161,7 +155,6 @@ def _output_dir(out_dir: Path):
     with atomic_output_dir(out_dir) as tmp:
         try:
             yield tmp
-            _raise_if_interrupted()  # not committed after an interrupt, wherever it landed
         except (BadInput, KeyboardInterrupt, OutputAbandoned):
             raise
         except Exception as e:

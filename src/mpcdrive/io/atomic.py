@@ -4,18 +4,82 @@ Files are written to a temporary sibling, flushed to disk (``fsync``) and moved 
 ``os.replace`` (atomic on POSIX and Windows when source and target share a file system, which a
 sibling always does).  :func:`atomic_output_dir` does the same for a whole run directory, so an
 interrupted run leaves either its complete output or nothing.
+
+Every temporary path (and every parent directory made for one) is known to :func:`discard_unfinished`
+from before it exists until it is committed or removed: a process that must end at once (a signal
+handler that cannot let an exception unwind through the code it interrupted) calls it to leave
+nothing half-written behind.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import secrets
 import shutil
-import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_output_dir", "atomic_write_bytes", "atomic_write_text"]
+__all__ = ["atomic_output_dir", "atomic_write_bytes", "atomic_write_text", "discard_unfinished"]
+
+#: temporary paths that exist (or are about to) and are not committed yet, and the parent
+#: directories made for them, in the order made: what :func:`discard_unfinished` removes
+_UNFINISHED: dict[Path, None] = {}
+_MADE_PARENTS: dict[Path, None] = {}
+
+
+def discard_unfinished() -> None:
+    """Remove every temporary file and directory this process has not committed yet, then every
+    parent directory made for one that is empty now. Safe to call at any moment (also from a
+    signal handler, between any two statements of the writer: a path not created yet or already
+    renamed is skipped); never raises."""
+    for tmp in list(_UNFINISHED):
+        if tmp.is_dir() and not tmp.is_symlink():
+            shutil.rmtree(tmp, ignore_errors=True)
+        else:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+    _remove_made_parents()
+
+
+def _remove_made_parents() -> None:
+    for parent in reversed(list(_MADE_PARENTS)):
+        with contextlib.suppress(OSError):
+            parent.rmdir()  # only when empty
+            _MADE_PARENTS.pop(parent, None)
+
+
+def _make_parents(directory: Path) -> None:
+    """``directory.mkdir(parents=True, exist_ok=True)``, remembering the directories it made."""
+    missing = [d for d in (directory, *directory.parents) if not d.exists()]
+    for d in reversed(missing):
+        _MADE_PARENTS[d] = None
+        d.mkdir(exist_ok=True)
+
+
+def _forget_parents(committed: Path) -> None:
+    """Once ``committed`` is in place, the parents made for it belong to it and are no longer
+    discarded -- up to an unfinished output it lies in, whose parents are still that output's."""
+    unfinished = {u.resolve() for u in _UNFINISHED}  # (resolved: a path may be given through a link)
+    made = {m.resolve(): m for m in _MADE_PARENTS}
+    for d in committed.resolve().parents:
+        if d in unfinished:
+            return
+        if d in made:
+            _MADE_PARENTS.pop(made[d], None)
+
+
+def _reserve(directory: Path, prefix: str, make) -> Path:
+    """A new temporary path ``directory/<prefix><random>.tmp``, registered before ``make(path)``
+    creates it (so an interruption between the two cannot leave it unknown)."""
+    while True:
+        tmp = directory / f"{prefix}{secrets.token_hex(4)}.tmp"
+        _UNFINISHED[tmp] = None
+        try:
+            make(tmp)
+            return tmp
+        except FileExistsError:
+            _UNFINISHED.pop(tmp, None)
 
 
 def _fsync_dir(directory: Path) -> None:
@@ -32,12 +96,6 @@ def _fsync_dir(directory: Path) -> None:
         os.close(fd)
 
 
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically; create the parent directory if needed.
 
@@ -46,19 +104,27 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     Returns the path written.
     """
     target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    _make_parents(target.parent.absolute())
+    fds: list[int] = []
+    tmp = _reserve(
+        target.parent.absolute(),
+        f".{target.name}.",
+        lambda p: fds.append(os.open(p, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)),  # umask applies
+    )
     try:
-        os.fchmod(fd, 0o666 & ~_umask())  # as open() would make it (mkstemp makes 0600)
-        with os.fdopen(fd, "wb") as fh:
+        with os.fdopen(fds[0], "wb") as fh:
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
-        os.replace(tmp_name, target)
+        os.replace(tmp, target)
+        _forget_parents(target.absolute())
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp_name)
+            tmp.unlink()
+        _remove_made_parents()
         raise
+    finally:
+        _UNFINISHED.pop(tmp, None)
     _fsync_dir(target.parent)
     return target
 
@@ -94,16 +160,19 @@ def atomic_output_dir(final_dir: str | os.PathLike) -> Iterator[Path]:
     """
     final = Path(final_dir).absolute()
     _check_free(final)
-    final.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".tmp", dir=final.parent))
+    _make_parents(final.parent)
+    tmp = _reserve(final.parent, f".{final.name}.", lambda p: p.mkdir(0o777))  # umask applies
     try:
-        tmp.chmod(0o777 & ~_umask())  # mkdtemp makes 0700
         yield tmp
         _check_free(final)
         if final.exists():
             final.rmdir()  # empty (checked above); rename onto a directory is not portable
         os.replace(tmp, final)
+        _forget_parents(final)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
+        _remove_made_parents()
         raise
+    finally:
+        _UNFINISHED.pop(tmp, None)
     _fsync_dir(final.parent)

@@ -300,6 +300,31 @@ def _mp_context():
     return multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
 
 
+def _raise_interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def _signals_raise():
+    """In the block, Ctrl-C (SIGINT) and SIGTERM raise KeyboardInterrupt (a signal ignored stays
+    ignored), whatever the process's handlers are: the block's cleanup stops the workers or
+    cancels the tasks before the interrupt goes on (a handler that ends the process at once,
+    as the command line's does, would leave them running). Only in the main thread."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    sigs = [signal.SIGINT] + ([signal.SIGTERM] if hasattr(signal, "SIGTERM") else [])
+    old = {s: signal.getsignal(s) for s in sigs}
+    try:
+        for s in sigs:
+            if old[s] is not signal.SIG_IGN:
+                signal.signal(s, _raise_interrupt)
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
 @contextlib.contextmanager
 def _signals_deferred():
     """Hold Ctrl-C (SIGINT) and SIGTERM back until the block ends, then raise KeyboardInterrupt
@@ -326,34 +351,40 @@ def _run_local(tasks, workers: int, progress: Progress | None, fn=run_task) -> l
     if workers == 1 or len(tasks) == 1:
         return _run_inline(tasks, progress, fn)
     before = set(multiprocessing.active_children())
-    ex = ProcessPoolExecutor(max_workers=workers, mp_context=_mp_context(), initializer=_ignore_sigint)
     rows: list[dict] = []
-    try:
-        with _signals_deferred():  # workers start inside submit(): never leave one half-started
-            pending = {ex.submit(fn, t) for t in tasks}
-        while pending:
-            done, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
-            for f in done:
-                rows.append(f.result())
-                if progress is not None:
-                    progress(len(rows), len(tasks), rows[-1])
-    except BaseException:  # Ctrl-C or an error: stop the workers now, not after their runs
-        terminate = getattr(ex, "terminate_workers", None)  # Python >= 3.14
-        if terminate is not None:
-            terminate()
-        else:
-            # the pool's workers, including one whose start Ctrl-C interrupted before the pool
-            # registered it
-            procs = set((getattr(ex, "_processes", None) or {}).values())
-            procs |= set(multiprocessing.active_children()) - before
-            ex.shutdown(wait=False, cancel_futures=True)
-            for p in procs:
-                p.terminate()
-            for p in procs:
-                p.join(timeout=5)
-        raise
-    ex.shutdown(wait=True)
+    with _signals_raise():
+        ex = ProcessPoolExecutor(max_workers=workers, mp_context=_mp_context(), initializer=_ignore_sigint)
+        try:
+            with _signals_deferred():  # workers start inside submit(): never leave one half-started
+                pending = {ex.submit(fn, t) for t in tasks}
+            while pending:
+                done, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+                for f in done:
+                    rows.append(f.result())
+                    if progress is not None:
+                        progress(len(rows), len(tasks), rows[-1])
+        except BaseException:  # Ctrl-C or an error: stop the workers now, not after their runs
+            _stop_pool(ex, before)
+            raise
+        ex.shutdown(wait=True)
     return rows
+
+
+def _stop_pool(ex, before: set) -> None:
+    """Stop the workers of pool ``ex`` now (those not among ``before``, the processes alive before
+    it), not after their runs."""
+    terminate = getattr(ex, "terminate_workers", None)  # Python >= 3.14
+    if terminate is not None:
+        terminate()
+        return
+    # the pool's workers, including one whose start Ctrl-C interrupted before the pool registered it
+    procs = set((getattr(ex, "_processes", None) or {}).values())
+    procs |= set(multiprocessing.active_children()) - before
+    ex.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
+        p.terminate()
+    for p in procs:
+        p.join(timeout=5)
 
 
 def _run_ray(tasks, address: str | None, progress: Progress | None, fn=run_task) -> list[dict]:
@@ -361,6 +392,11 @@ def _run_ray(tasks, address: str | None, progress: Progress | None, fn=run_task)
         import ray
     except ImportError:
         raise SweepError("--backend ray: Ray is not installed (pip install 'mpcdrive[ray]')") from None
+    with _signals_raise():
+        return _ray_rows(ray, tasks, address, progress, fn)
+
+
+def _ray_rows(ray, tasks, address: str | None, progress: Progress | None, fn) -> list[dict]:
     started = False
     if not ray.is_initialized():
         kwargs = {"address": address} if address else {"include_dashboard": False}
