@@ -5,11 +5,13 @@ commands table against each command's ``--help``, every other shell example and 
 run (with the step counts of ``SMALLER`` where the README's own would take minutes), the
 scenario-file YAML validated, and every key a built-in scenario uses shown in the README."""
 
+import json
 import re
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -148,3 +150,86 @@ def test_every_key_of_the_built_in_scenarios_is_shown():
             if leaf not in shown and key not in shown:
                 missing.add(key)
     assert not missing, f"built-in scenarios use keys the README never shows: {sorted(missing)}"
+
+
+def _run_example(path: Path, out: Path) -> tuple[subprocess.CompletedProcess, dict, np.ndarray]:
+    r = subprocess.run(
+        [sys.executable, "-m", "mpcdrive", "run", str(path), "--out", str(out), "-q", "--check"],
+        capture_output=True,
+        text=True,
+    )
+    metrics = json.loads((out / "metrics.json").read_text()) if (out / "metrics.json").exists() else {}
+    rows = np.genfromtxt(out / "trajectory.csv", delimiter=",", names=True) if metrics else np.empty(0)
+    return r, metrics, rows
+
+
+def _body_radii(rows, footprint, center) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest and farthest distance [m] of the body (the footprint's rectangle at each logged
+    pose) from the point ``center``: exactly, the farthest at a corner, the nearest on an edge."""
+    corners = footprint.corners()
+    c, s = np.cos(rows["yaw"])[:, None], np.sin(rows["yaw"])[:, None]
+    px = rows["x"][:, None] + c * corners[:, 0] - s * corners[:, 1] - center[0]
+    py = rows["y"][:, None] + s * corners[:, 0] + c * corners[:, 1] - center[1]
+    far = np.hypot(px, py).max(axis=1)
+    ax, ay = px, py
+    bx, by = np.roll(px, -1, axis=1), np.roll(py, -1, axis=1)
+    ex, ey = bx - ax, by - ay
+    u = np.clip(-(ax * ex + ay * ey) / (ex * ex + ey * ey), 0.0, 1.0)  # nearest point of each edge
+    near = np.hypot(ax + u * ex, ay + u * ey).min(axis=1)
+    return near, far
+
+
+def _obstacle_centres(ob: dict, t: np.ndarray) -> np.ndarray:
+    v = np.asarray(ob.get("velocity_mps") or [0.0, 0.0])
+    return np.asarray(ob["position"])[None, :] + t[:, None] * v[None, :]
+
+
+def _inner_radius(ob: dict) -> float:
+    """The radius [m] of the largest disc about an obstacle's centre inside it."""
+    if ob["shape"] == "circle":
+        return ob["radius_m"]
+    assert ob["shape"] == "rectangle", "add the shape here"
+    return 0.5 * min(ob["length_m"], ob["width_m"])
+
+
+def test_the_scenario_example_is_safe_with_margin_and_its_obstacles_matter(tmp_path):
+    """The README's scenario file, as written: ``run --check`` passes (no collision, inside the
+    lane, no failed solve) with room to spare -- the body at least the road's margin inside its
+    lane at every step (measured exactly on the circular lane), the obstacles' margin kept --
+    and every obstacle is in the way: without the obstacles the car would drive into each of
+    them, with them it steers around, inside its lane."""
+    from mpcdrive.scenarios import build_experiment, load_scenario
+
+    text = blocks("yaml")[0]
+    spec = yaml.safe_load(text)
+    path = tmp_path / "example.yaml"
+    path.write_text(text)
+    r, m, rows = _run_example(path, tmp_path / "out")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert not r.stdout.startswith("UNSAFE"), r.stdout
+    assert m["collisions"] == 0 and m["max_lane_excess_m"] == 0 and m["solver_failures"] == 0, m
+    assert m["min_obstacle_clearance_m"] >= 0.5 * spec["avoidance"]["margin_m"], m
+
+    assert spec["path"]["type"] == "circle", "the margin check below measures a circular lane"
+    radius, half = spec["path"]["radius_m"], 0.5 * spec["road"]["lane_width_m"]
+    footprint = build_experiment(load_scenario(path)).footprint
+    near, far = _body_radii(rows, footprint, spec["path"]["center"])
+    margin = spec["road"]["margin_m"]
+    assert near.min() >= radius - half + margin and far.max() <= radius + half - margin, (
+        f"the body came within {min(near.min() - radius + half, radius + half - far.max()):.3f} m of the "
+        f"lane's edge (the road's margin is {margin} m)"
+    )
+
+    free = {k: v for k, v in spec.items() if k not in ("obstacles", "avoidance")}
+    free_path = tmp_path / "free.yaml"
+    free_path.write_text(yaml.safe_dump(free))
+    r_free, _, free_rows = _run_example(free_path, tmp_path / "free")
+    assert r_free.returncode == 0, r_free.stderr
+    car_half_width = 0.5 * footprint.width_m  # a disc this wide around the reference point is inside the body
+    assert footprint.length_m >= footprint.width_m
+    for ob in spec["obstacles"]:
+        c = _obstacle_centres(ob, free_rows["t"])
+        gap = np.hypot(free_rows["x"] - c[:, 0], free_rows["y"] - c[:, 1]) - _inner_radius(ob) - car_half_width
+        assert gap.min() < 0, f"{ob['name']}: the car without obstacles passes {gap.min():.3f} m clear of it"
+        t_hit = free_rows["t"][int(np.argmin(gap))]  # with the obstacle the car is well off the path there
+        assert np.abs(rows["e_y"][np.abs(rows["t"] - t_hit) <= 0.5]).max() > 0.15, f"{ob['name']}: no deviation"
