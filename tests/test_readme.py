@@ -37,11 +37,42 @@ def _commands_table() -> list[str]:
     return re.findall(r"^\| `(mpcdrive [^`]+)` \|", README, re.M)
 
 
-def _help(cmd: str) -> str:
-    args = ["--help"] if cmd.startswith("--") else [cmd, "--help"]  # `mpcdrive --version`: the root's
-    r = subprocess.run([sys.executable, "-m", "mpcdrive.cli", *args], capture_output=True, text=True)
-    assert r.returncode == 0, f"mpcdrive {cmd} --help: {r.stderr}"
+def _help(cmd: str | None) -> str:
+    """``mpcdrive CMD --help`` (the root's with None)."""
+    args = ["--help"] if cmd is None else [cmd, "--help"]
+    r = subprocess.run([sys.executable, "-m", "mpcdrive", *args], capture_output=True, text=True)
+    assert r.returncode == 0, f"mpcdrive {cmd or ''} --help: {r.stderr}"
     return r.stdout
+
+
+FLAG = r"(?<![\w-])--?[a-z][a-z-]*"
+
+
+def _help_flags(text: str) -> set[str]:
+    """Every flag an ``--help`` text lists in its Options section (long and short, both halves
+    of an on/off pair), but ``--help``."""
+    options = text.split("\nOptions:\n", 1)[1].split("\nCommands:\n", 1)[0]
+    flags = set()
+    for line in options.splitlines():
+        m = re.match(r"^  (-\S.*?)(?:\s{2,}|$)", line)  # the option's names, before its help text
+        if m:
+            flags |= set(re.findall(FLAG, m.group(1)))
+    return flags - {"--help"}
+
+
+def _table_rows() -> dict[str | None, set[str]]:
+    """The README's commands table: command (None for the root's row) -> the flags its usage shows."""
+    rows: dict[str | None, set[str]] = {}
+    for usage in _commands_table():
+        words = usage.split()
+        cmd = None if words[1].startswith("-") else words[1]
+        assert cmd not in rows, f"two rows for mpcdrive {cmd or '(root)'}"
+        rows[cmd] = set(re.findall(FLAG, usage.replace("\\|", " ")))
+    return rows
+
+
+def _commands() -> list[str]:
+    return re.findall(r"^  ([a-z][a-z-]+)\s{2,}", _help(None).split("\nCommands:\n")[1], re.M)
 
 
 def test_first_block_is_the_two_set_up_commands():
@@ -57,25 +88,29 @@ def test_every_substitution_still_matches_the_readme():
         assert text in README, f"{text!r} no longer in the README: update SMALLER"
 
 
-@pytest.mark.parametrize("usage", _commands_table())
-def test_commands_table_matches_the_help(usage):
-    words = usage.split()
-    cmd = words[1]
-    text = _help(cmd)
-    flags = set(re.findall(r"--[a-z][a-z-]*", usage))
-    missing = [f for f in sorted(flags) if not re.search(rf"(?<![\w-]){re.escape(f)}(?![\w-])", text)]
-    assert not missing, f"README shows {missing} for 'mpcdrive {cmd}', its --help does not"
-    for token in re.findall(r"(--[a-z-]+) [A-Z_]+ \.\.\.", usage):
-        pytest.fail(
-            f"README shows '{token} X ...' (several values after one flag); the flag takes one: write '[{token} X]...'"
-        )
+def test_commands_table_has_one_row_per_command_and_the_root():
+    rows, commands = _table_rows(), _commands()
+    assert commands, "mpcdrive --help lists no commands"
+    assert set(rows) == {None, *commands}, (
+        f"commands without a row: {sorted(set(commands) - set(rows))}; rows without a command: "
+        f"{sorted(str(c) for c in set(rows) - {None, *commands})}"
+    )
 
 
-def test_commands_table_lists_every_command():
-    r = subprocess.run([sys.executable, "-m", "mpcdrive.cli", "--help"], capture_output=True, text=True)
-    listed = {u.split()[1] for u in _commands_table()}
-    commands = set(re.findall(r"^  ([a-z][a-z-]+)\s{2,}", r.stdout.split("Commands:")[1], re.M))
-    assert commands and commands <= listed, f"not in the README's table: {sorted(commands - listed)}"
+@pytest.mark.parametrize("cmd", [None, *_commands()], ids=lambda c: c or "root")
+def test_commands_table_shows_exactly_the_flags_of_the_help(cmd):
+    shown, helped = _table_rows().get(cmd, set()), _help_flags(_help(cmd))
+    where = f"mpcdrive {cmd or '(root)'}"
+    assert not helped - shown, f"{where} --help has {sorted(helped - shown)}, the README's table does not"
+    assert not shown - helped, f"the README's table shows {sorted(shown - helped)} for {where}, its --help does not"
+
+
+def test_commands_table_takes_one_value_per_flag():
+    for usage in _commands_table():
+        for token in re.findall(r"(--[a-z-]+) [A-Z_=]+ \.\.\.", usage):
+            pytest.fail(
+                f"README shows '{token} X ...' (several values after one flag); the flag takes one: write '[{token} X]...'"
+            )
 
 
 def _shell_examples() -> list[str]:
