@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import pytest
+import yaml
 
 REQUIRED_COLUMNS = ["t", "x", "y", "yaw", "v", "steer", "accel", "s", "e_y", "e_psi", "solve_time_us", "status"]
 REQUIRED_METRICS = [
@@ -96,7 +97,9 @@ def test_run_fast_uses_the_compiled_controller_with_the_same_commands(tmp_path):
             list(csv.DictReader((out / "trajectory.csv").read_text().splitlines())),
         )
     assert runs["fast"][0]["controller_backend"] == "fast" and runs["ref"][0]["controller_backend"] == "osqp"
-    assert "backend: fast" in (tmp_path / "fast" / "scenario.yaml").read_text()
+    resolved = {k: yaml.safe_load((tmp_path / k / "scenario.yaml").read_text())["controller"] for k in runs}
+    assert resolved["fast"]["backend"] == "fast" and "solver" not in resolved["fast"]  # says what ran
+    assert resolved["ref"]["backend"] == "osqp" and resolved["ref"]["solver"] == "osqp"
     steer = {k: [float(row["steer"]) for row in v[1]] for k, v in runs.items()}
     assert max(abs(a - b) for a, b in zip(steer["fast"], steer["ref"])) < 1e-4
 

@@ -106,6 +106,22 @@ def test_resolved_scenario_round_trips():
         assert again == spec
 
 
+@pytest.mark.parametrize(
+    "backend, solver, shown",
+    [("fast", "osqp", None), ("osqp", "osqp", "osqp"), ("fast", "projected_gradient", "projected_gradient")],
+)
+def test_the_resolved_scenario_names_the_solver_only_where_it_ran(backend, solver, shown):
+    """The condensed solver runs on backend fast: a ``solver: osqp`` beside it would read as if
+    OSQP had; the reference's solver is written where it solves (and the file loads back)."""
+    data = yaml.safe_load(yaml.safe_dump(BASE))
+    data["controller"].update(backend=backend, solver=solver)
+    spec = ScenarioSpec.model_validate(data)
+    resolved = yaml.safe_load(dump_scenario(spec))
+    assert resolved["controller"]["backend"] == backend
+    assert resolved["controller"].get("solver") == shown
+    assert ScenarioSpec.model_validate(resolved) == spec
+
+
 @settings(max_examples=30, deadline=None)
 @given(
     horizon=st.integers(1, 60),

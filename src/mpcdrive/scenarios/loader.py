@@ -191,6 +191,12 @@ def load_scenario(name_or_path: str | Path) -> ScenarioSpec:
 
 
 def dump_scenario(spec: ScenarioSpec) -> str:
-    """The fully resolved scenario (all defaults filled in) as YAML text."""
+    """The fully resolved scenario (all defaults filled in) as YAML text, saying what ran:
+    ``controller.solver`` (the reference's QP solver) only where it solves the QP -- on the
+    ``osqp`` backend, or ``projected_gradient`` on either -- not next to ``backend: fast``, whose
+    condensed solver it is not. Loading the text gives ``spec`` back."""
     data = spec.model_dump(mode="json")
+    c = data.get("controller")
+    if c is not None and c["backend"] == "fast" and c["solver"] == "osqp":
+        del c["solver"]
     return yaml.safe_dump(data, sort_keys=False)
