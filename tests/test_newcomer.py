@@ -6,6 +6,7 @@ import os
 import stat
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -18,8 +19,8 @@ def cli(*args, cwd, env=None):
     )
 
 
-def _short(tmp_path):
-    p = tmp_path / "short.yaml"
+def _short(tmp_path, name="short.yaml"):
+    p = tmp_path / name
     p.write_text(
         "id: short\nduration_s: 0.3\npath: {type: circle, radius_m: 1.5}\n"
         "initial_state: {x_m: 1.5, y_m: 0.0, yaw_deg: 90}\nroad: {lane_width_m: 1.0}\n"
@@ -35,15 +36,17 @@ def _only_dir(parent):
 
 
 def test_run_with_the_default_output_folder_from_another_directory(tmp_path):
-    """The default --out is relative (runs/<id>-<timestamp>); the HTML report used to join the
-    report folder to figure paths already relative to the working directory and crashed."""
-    scenario = _short(tmp_path)
+    """The default --out is relative, named after the file (runs/<file stem>-<timestamp>, not the
+    id inside it, as the README says); the HTML report used to join the report folder to figure
+    paths already relative to the working directory and crashed."""
+    scenario = _short(tmp_path, "my-first.yaml")  # (its id: short)
     work = tmp_path / "work"
     work.mkdir()
     r = cli("run", str(scenario), "-q", cwd=work)
     assert r.returncode == 0, r.stderr
     out = _only_dir(work / "runs")
-    assert out.name.startswith("short-")
+    assert out.name.startswith("my-first-")
+    assert f"wrote {Path('runs') / out.name}" in r.stdout
     for name in ("trajectory.csv", "metrics.json", "scenario.yaml", "report.html", "trajectory.png"):
         assert (out / name).is_file(), name
     assert "<img" in (out / "report.html").read_text(encoding="utf-8")

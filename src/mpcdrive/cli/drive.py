@@ -46,7 +46,11 @@ def run(
         ..., metavar="SCENARIO", help="built-in scenario id, a YAML scenario file or a CommonRoad .xml"
     ),
     out: Path | None = typer.Option(
-        None, "--out", metavar="DIR", help="output directory (default runs/<id>-<timestamp>)"
+        None,
+        "--out",
+        metavar="DIR",
+        help="output directory (default runs/<file name without extension>-<timestamp>; "
+        "for a built-in, runs/<id>-<timestamp>)",
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
     fast: bool = typer.Option(
@@ -88,8 +92,8 @@ def run(
     else:
         spec = _load(scenario)
     spec = _on_backend(spec, fast, osqp)
-    # a CommonRoad run is named after the file passed, not the benchmark id inside it
-    out_dir = out or _default_out(_file_stem(scenario) if extra is not None else spec.id)
+    # a file's run is named after the file passed (not the id or benchmark id inside it)
+    out_dir = out or _default_out(spec.id if scenario in builtin_ids() else _file_stem(scenario))
     with _output_dir(out_dir) as tmp:
         _, metrics, _, _ = _run_into(spec, tmp, not quiet, source=scenario, extra_outputs=extra)
     typer.echo(_summary_line(spec.id, metrics))
