@@ -77,10 +77,10 @@ SCENARIO_CASES = [
     ("negative horizon", _set(["controller", "horizon"], -3), "controller.horizon", "greater than or equal to 1"),
     ("zero horizon", _set(["controller", "horizon"], 0), "controller.horizon", "greater than or equal to 1"),
     ("negative duration", _set(["duration_s"], -1.0), "duration_s", "greater than 0"),
-    ("duration shorter than one step", _set(["duration_s"], 0.001), "", "shorter than one step"),
+    ("duration shorter than one step", _set(["duration_s"], 0.001), "duration_s", "shorter than one step"),
     ("negative seed", _set(["seed"], -1), "seed", "greater than or equal to 0"),
     ("bad id", _set(["id"], "a b/c"), "id", "pattern"),
-    ("weights of the wrong length", _set(["controller", "Q"], [1, 1]), "", "Q needs 3 entries"),
+    ("weights of the wrong length", _set(["controller", "Q"], [1, 1]), "controller.Q", "needs 3 entries"),
     ("negative weight", _set(["controller", "R"], [-1]), "controller.R.0", "greater than or equal to 0"),
     (
         "impossible: steering limit >= 90 deg",
@@ -176,7 +176,7 @@ SCENARIO_CASES = [
     (
         "noise: wrong length",
         _set(["measurement_noise"], {"distribution": "normal", "std": [1, 1]}),
-        "",
+        "measurement_noise.std",
         "needs 3 entries",
     ),
     ("fallback: unknown rung", _set(["controller", "fallback"], ["relax", "pray"]), "controller.fallback.1", "relax"),
@@ -195,7 +195,7 @@ SCENARIO_CASES = [
     (
         "plant: speed error on a speed-state model",
         _k4(["plant", "speed_mps"], 1.2),
-        "",
+        "plant.speed_mps",
         "only for the constant-speed model",
     ),
     ("plant: negative axle distance", _set(["plant", "lr_m"], -0.1), "plant.lr_m", "greater than 0"),
@@ -229,7 +229,7 @@ SCENARIO_CASES = [
         "overlaps the car's footprint at the start",
     ),
     ("YAML: duplicate key", "id: t\nid: u\n", "line 2", "duplicate key 'id'"),
-    ("YAML: malformed", "id: [unclosed\n", "line", "not valid YAML"),
+    ("YAML: malformed", "id: [unclosed\n", "line 2", "not valid YAML"),
     ("YAML: two documents", "id: t\n---\nid: u\n", "", "not valid YAML"),
     ("YAML: not a mapping", "- 1\n- 2\n", "", "mapping"),
     ("YAML: empty file", "", "", "mapping"),
@@ -253,8 +253,8 @@ def test_bad_scenario_files(tmp_path, capsys, monkeypatch, cls, mutate, field, w
     with pytest.raises(ScenarioError) as e:
         load_scenario(p)
     msg = str(e.value)
-    assert "\n" not in msg and msg.startswith(f"{p}: ")
-    assert field in msg and words.lower() in msg.lower(), msg
+    assert "\n" not in msg and msg.startswith(f"{p}: {field}: " if field else f"{p}: "), msg  # where exactly
+    assert words.lower() in msg.lower() and "(top level)" not in msg, msg
     # the CLI: exit code 2, one line on stderr naming the file, nothing written
     monkeypatch.setattr(sys, "argv", ["mpcdrive", "run", str(p), "--out", str(tmp_path / "out"), "-q"])
     with pytest.raises(SystemExit) as ex:

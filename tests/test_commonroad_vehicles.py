@@ -107,7 +107,7 @@ def test_apply_vehicle_rejects_unknown_names():
                 "vehicle": {"model": "kinematic3", "speed_mps": 10.0},
                 "controller": {"horizon": 20, "Q": [1, 1, 2], "R": [10]},
             },
-            "(top level)",
+            "vehicle.model",
             "observed as kinematic4",
         ),
         (
@@ -115,7 +115,7 @@ def test_apply_vehicle_rejects_unknown_names():
                 "plant": {"model": "commonroad_st", "vehicle": "bmw_320i"},
                 "disturbance": {"distribution": "normal", "std": [0.0, 0.0, 0.0, 0.0]},
             },
-            "(top level)",
+            "disturbance",
             "use measurement_noise",
         ),
     ],
@@ -124,7 +124,7 @@ def test_bad_commonroad_plant_is_one_clear_line(change, field, message):
     with pytest.raises(ScenarioError) as e:
         validate_scenario_data({**ROAD, **change}, "f.yaml")
     line = str(e.value)
-    assert "\n" not in line and message in line and field in line, line
+    assert "\n" not in line and message in line and line.startswith(f"f.yaml: {field}: "), line
 
 
 # ---------------------------------------------------------------- the plant

@@ -124,7 +124,7 @@ def test_bad_track_file_content_is_reported_at_build(tmp_path):
             ),
             "inputs of size",
         ),
-        (lambda d: d["controller"].update(Q=[1, 1, 1, 1]), "Q needs 6 entries"),
+        (lambda d: d["controller"].update(Q=[1, 1, 1, 1]), "controller.Q: needs 6 entries"),
         (lambda d: d["vehicle"].update(preset="trabant"), "vehicle.preset"),
         (lambda d: d["vehicle"].update(v_blend_low_mps=2.0), "v_blend_low_mps"),
         (lambda d: d["controller"]["speed_profile"].update(lateral_accel_fraction=1.5), "lateral_accel_fraction"),

@@ -9,7 +9,7 @@ path, a lane narrower than the car) are rejected with the reason.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal
+from typing import Annotated, Literal, NoReturn
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 from pydantic_core import InitErrorDetails, PydanticCustomError
@@ -627,69 +627,87 @@ class ScenarioSpec(_Strict):
 
     @model_validator(mode="after")
     def _sizes(self):
+        """What holds between fields of several sections; each problem is raised at the field to
+        change (``controller.Q``, ``laps``, ...), so the message names it."""
         nx, nu = model_size(self.vehicle.model)
         c = self.controller
         for name, w, n in (("Q", c.Q, nx), ("QN", c.QN, nx), ("R", c.R, nu), ("Rc", c.Rc, nu)):
             if w is not None and len(w) != n:
-                raise ValueError(f"controller.{name} needs {n} entries for {self.vehicle.model}, got {len(w)}")
+                _raise_at(("controller", name), w, f"needs {n} entries for {self.vehicle.model}, got {len(w)}")
         plant_nx, plant_nu = model_size(self.plant_model)
         if self.plant_model in COMMONROAD_PLANTS:
             if self.vehicle.model != "kinematic4":
-                raise ValueError(
+                _raise_at(
+                    ("vehicle", "model"),
+                    self.vehicle.model,
                     f"plant.model {self.plant_model} is observed as kinematic4 (x, y, yaw, v at the "
-                    f"centre of gravity); vehicle.model {self.vehicle.model} cannot be; use kinematic4"
+                    f"centre of gravity); {self.vehicle.model} cannot be; use kinematic4",
                 )
             if self.disturbance is not None:
-                raise ValueError(
-                    f"disturbance (added to the plant state) is not supported with plant.model "
-                    f"{self.plant_model}; use measurement_noise"
+                _raise_at(
+                    ("disturbance",),
+                    None,
+                    f"not supported with plant.model {self.plant_model} (it is added to the plant "
+                    "state); use measurement_noise",
                 )
         if plant_nu != nu:
-            raise ValueError(
-                f"plant.model {self.plant_model} has inputs of size {plant_nu} but the controller's "
-                f"{self.vehicle.model} has {nu}; use a model with steering and acceleration"
+            _raise_at(
+                ("plant", "model"),
+                self.plant.model,
+                f"{self.plant_model} has inputs of size {plant_nu} but the controller's "
+                f"{self.vehicle.model} has {nu}; use a model with steering and acceleration",
             )
         if self.plant.param_scale is not None and not self.plant_model.startswith("dynamic"):
-            raise ValueError("plant.param_scale needs a dynamic plant model")
+            _raise_at(("plant", "param_scale"), None, "needs a dynamic plant model")
         if c.delay_compensation and self.plant.steering_actuator is None:
-            raise ValueError("controller.delay_compensation needs plant.steering_actuator (the delay to compensate)")
+            _raise_at(
+                ("controller", "delay_compensation"),
+                True,
+                "needs plant.steering_actuator (the delay to compensate)",
+            )
         for name, spec in (("disturbance", self.disturbance), ("measurement_noise", self.measurement_noise)):
             if spec is not None:
                 for field in ("low", "high", "std"):
                     v = getattr(spec, field)
                     if v is not None and len(v) != plant_nx:
-                        raise ValueError(f"{name}.{field} needs {plant_nx} entries (one per plant state), got {len(v)}")
+                        _raise_at((name, field), v, f"needs {plant_nx} entries (one per plant state), got {len(v)}")
         if self.laps is not None and self.path.type in ("straight",):
-            raise ValueError("laps needs a closed path")
+            _raise_at(("laps",), self.laps, "needs a closed path")
         if self.avoidance is not None and self.avoidance.formulation == "corridor" and self.road is None:
-            raise ValueError("avoidance.formulation corridor needs a road (road.lane_width_m)")
+            _raise_at(("avoidance", "formulation"), "corridor", "corridor needs a road (road.lane_width_m)")
         if self.duration_s / self.dt_s > 1_000_000:
-            raise ValueError("duration_s / dt_s exceeds 1,000,000 steps")
+            _raise_at(("duration_s",), self.duration_s, f"more than 1,000,000 steps of dt_s {self.dt_s}")
         if self.vehicle.model != "kinematic3" and self.plant.speed_mps is not None:
-            raise ValueError(
-                "plant.speed_mps is only for the constant-speed model kinematic3 "
-                f"({self.vehicle.model} has the speed as a state)"
+            _raise_at(
+                ("plant", "speed_mps"),
+                self.plant.speed_mps,
+                f"only for the constant-speed model kinematic3 ({self.vehicle.model} has the speed as a state)",
             )
         if self.duration_s < self.dt_s:
-            raise ValueError(f"duration_s {self.duration_s} is shorter than one step dt_s {self.dt_s}")
+            _raise_at(("duration_s",), self.duration_s, f"{self.duration_s} is shorter than one step dt_s {self.dt_s}")
         if self.road is not None and self.road.min_width_m <= self.vehicle.width_m:
-            raise ValueError(
+            _raise_at(
+                ("road",),
+                None,
                 f"the road ({self.road.min_width_m:g} m where narrowest) is not wider than the car "
-                f"(vehicle.width_m {self.vehicle.width_m} m)"
+                f"(vehicle.width_m {self.vehicle.width_m} m)",
             )
         d = _distance_to_path(self.path, (self.initial_state.x_m, self.initial_state.y_m))
         if d > MAX_INITIAL_DISTANCE_M:
-            raise ValueError(
-                f"initial_state: position ({self.initial_state.x_m}, {self.initial_state.y_m}) is "
+            _raise_at(
+                ("initial_state",),
+                None,
+                f"position ({self.initial_state.x_m}, {self.initial_state.y_m}) is "
                 f"{d:.4g} m from the path (more than {MAX_INITIAL_DISTANCE_M:g} m): check the "
-                "coordinates and their units"
+                "coordinates and their units",
             )
         return self
 
 
-def _raise_at(loc: tuple, value, problem: str):
-    """Raise a validation error at ``loc`` inside the field being validated (so the message names
-    e.g. ``controller.period_s``, not the enclosing model)."""
+def _raise_at(loc: tuple, value, problem: str) -> NoReturn:
+    """Raise a validation error at ``loc`` (inside the field being validated, or from a model
+    validator of the whole scenario) so the message names e.g. ``controller.period_s``, not the
+    enclosing model."""
     err = PydanticCustomError("value_error", "{problem}", {"problem": problem})
     raise ValidationError.from_exception_data("ScenarioSpec", [InitErrorDetails(type=err, loc=loc, input=value)])
 
