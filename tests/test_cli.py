@@ -234,3 +234,21 @@ def test_run_summary_states_the_safety_outcome(tmp_path):
     assert r.returncode == 0, r.stderr
     line = r.stdout.splitlines()[0]
     assert line.startswith("short: inside the lane; no failed solves | 30 steps"), line
+
+
+@pytest.mark.parametrize(
+    "args",
+    [["run", "SHORT"], ["reproduce", "--only", "paper-exp3"], ["sweep", "SHORT", "--runs", "2"], ["compare-models"]],
+    ids=["run", "reproduce", "sweep", "compare-models"],
+)
+def test_an_out_that_cannot_be_made_is_bad_input_naming_out(tmp_path, args):
+    """A file where the output folder's parent must be: exit 2 and one line naming --out and the
+    path as given (not the hidden temporary name), before anything runs; nothing is written."""
+    scenario = short_scenario(tmp_path)
+    (tmp_path / "afile").write_text("in the way")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    args = [str(scenario) if a == "SHORT" else a for a in args]
+    r = cli(*args, "--out", "afile/out", "-q" if args[0] != "compare-models" else "--no-robustness", cwd=tmp_path)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.strip() == "mpcdrive: --out: cannot write afile/out: afile is a file, not a folder", r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == before

@@ -214,6 +214,21 @@ def test_atomic_output_dir_replaces_empty_target(tmp_path):
     assert (final / "a.txt").exists()
 
 
+def test_an_output_that_cannot_be_made_names_the_path_given(tmp_path):
+    from mpcdrive.io.atomic import OutputPathError
+
+    (tmp_path / "afile").write_text("in the way")
+    for write in (
+        lambda: atomic_output_dir(tmp_path / "afile" / "deeper" / "out").__enter__(),
+        lambda: atomic_write_text(tmp_path / "afile" / "deeper" / "x.json", "{}"),
+    ):
+        with pytest.raises(OutputPathError) as e:
+            write()
+        assert str(e.value).startswith(f"cannot write {tmp_path / 'afile' / 'deeper'}/")
+        assert str(e.value).endswith(f"{tmp_path / 'afile'} is a file, not a folder") and ".tmp" not in str(e.value)
+    assert [p.name for p in tmp_path.iterdir()] == ["afile"]
+
+
 # ------------------------------------------------------------------ figures
 def _check_axes(fig):
     axes = fig.get_axes()

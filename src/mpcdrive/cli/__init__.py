@@ -85,6 +85,8 @@ def main() -> None:
 def _main() -> None:
     import typer
 
+    from ..io.atomic import OutputPathError
+
     common = _commands()
     app, BadInput, OutputAbandoned = common.app, common.BadInput, common.OutputAbandoned
     _log_to_stderr()
@@ -102,6 +104,9 @@ def _main() -> None:
         sys.exit(2)
     except FileExistsError as e:
         typer.echo(f"mpcdrive: --out: {e}", err=True)
+        sys.exit(2)
+    except OutputPathError as e:  # an output file or folder that cannot be made where it was asked for
+        typer.echo(f"mpcdrive: {e}", err=True)
         sys.exit(2)
     except OutputAbandoned as e:
         typer.echo(f"mpcdrive: error: {e}", err=True)

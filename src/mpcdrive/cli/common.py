@@ -148,20 +148,24 @@ class OutputAbandoned(Exception):
 
 
 @contextmanager
-def _output_dir(out_dir: Path):
-    """:func:`atomic_output_dir` that, when the block fails, says no partial output was kept."""
-    from ..io.atomic import atomic_output_dir
+def _output_dir(out_dir: Path, flag: str = "--out"):
+    """:func:`atomic_output_dir` that, when the block fails, says no partial output was kept; an
+    output directory that cannot be made is bad input naming ``flag`` (before the block runs)."""
+    from ..io.atomic import OutputPathError, atomic_output_dir
 
-    with atomic_output_dir(out_dir) as tmp:
-        try:
-            yield tmp
-        except (BadInput, KeyboardInterrupt, OutputAbandoned):
-            raise
-        except Exception as e:
-            msg = " ".join(str(e).split())
-            raise OutputAbandoned(
-                f"{type(e).__name__}: {msg}; no partial output was kept ({out_dir} not written)"
-            ) from e
+    try:
+        with atomic_output_dir(out_dir) as tmp:
+            try:
+                yield tmp
+            except (BadInput, KeyboardInterrupt, OutputAbandoned):
+                raise
+            except Exception as e:
+                msg = " ".join(str(e).split())
+                raise OutputAbandoned(
+                    f"{type(e).__name__}: {msg}; no partial output was kept ({out_dir} not written)"
+                ) from e
+    except OutputPathError as e:  # (raised only on entering: the block's errors are OutputAbandoned)
+        raise BadInput(f"{flag}: {e}") from None
 
 
 def _default_out(stem: str) -> Path:

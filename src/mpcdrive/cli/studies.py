@@ -249,7 +249,6 @@ def _bench_report(out_dir: Path, results: dict, log) -> None:
     from ..bench.extras import cold_start, horizon_sweep, obstacle_sweep, step_allocations
     from ..bench.runner import BACKENDS
     from ..io import write_json
-    from ..io.atomic import atomic_output_dir
     from ..plots.bench import plot_horizon_scaling, plot_obstacle_scaling
     from ..report.bench import write_bench_report
 
@@ -264,7 +263,7 @@ def _bench_report(out_dir: Path, results: dict, log) -> None:
         "Timings on a shared machine vary from run to run: compare ratios measured in one run, and "
         "the medians of repeated runs."
     )
-    with atomic_output_dir(out_dir) as tmp:
+    with _output_dir(out_dir, flag="--report") as tmp:
         plot_horizon_scaling(sweep, tmp / "horizon.png")
         plot_obstacle_scaling(obstacles, tmp / "obstacles.png")
         write_json(
@@ -319,22 +318,24 @@ def compare_models_cmd(
     out_dir = out or _default_out("compare-models")
     log = lambda msg: typer.echo(msg, err=True)  # noqa: E731
     t0 = time.perf_counter()
-    sections = {
-        f"Controllers on the Pacejka dynamic plant at {lateral_fraction:g} mu g": compare_models(
-            tracks, lateral_fraction, log=log
-        )
-    }
-    if robustness:
-        sections[f"Parameter mismatch (dynamic MPC, {tracks[0]}, {lateral_fraction:g} mu g)"] = mismatch_study(
-            tracks[0], lateral_fraction, log=log
-        )
-        sections[f"Steering delay (dynamic MPC, {tracks[0]}, 0.7 mu g, 0.05 s lag)"] = delay_study(tracks[0], log=log)
     intro = (
         "F1TENTH car (F1TENTH gym parameters) on the Pacejka dynamic bicycle plant, speed profile limited "
         "by curvature and friction, 0.05 s control period. Road excess: how far the footprint left the "
         "road (0 = stayed on it). Produced by `mpcdrive compare-models`."
     )
-    with _output_dir(out_dir) as tmp:
+    with _output_dir(out_dir) as tmp:  # (made first: an --out that cannot be made stops it before the runs)
+        sections = {
+            f"Controllers on the Pacejka dynamic plant at {lateral_fraction:g} mu g": compare_models(
+                tracks, lateral_fraction, log=log
+            )
+        }
+        if robustness:
+            sections[f"Parameter mismatch (dynamic MPC, {tracks[0]}, {lateral_fraction:g} mu g)"] = mismatch_study(
+                tracks[0], lateral_fraction, log=log
+            )
+            sections[f"Steering delay (dynamic MPC, {tracks[0]}, 0.7 mu g, 0.05 s lag)"] = delay_study(
+                tracks[0], log=log
+            )
         write_study(tmp, sections, intro)
     typer.echo(
         f"{sum(len(r) for r in sections.values())} runs in {time.perf_counter() - t0:.1f} s; "

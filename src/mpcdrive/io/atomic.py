@@ -20,7 +20,20 @@ import shutil
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_output_dir", "atomic_write_bytes", "atomic_write_text", "discard_unfinished"]
+__all__ = ["OutputPathError", "atomic_output_dir", "atomic_write_bytes", "atomic_write_text", "discard_unfinished"]
+
+
+class OutputPathError(OSError):
+    """An output cannot be made where it was asked for (a file where a folder must be, no
+    permission, a read-only file system); the message names the path as given and why, never
+    the temporary name. Nothing was written."""
+
+
+def _unwritable(given: Path, e: OSError) -> OutputPathError:
+    blocker = next((a for a in (given, *given.parents) if a.exists()), None)
+    why = f"{blocker} is a file, not a folder" if blocker is not None and not blocker.is_dir() else e.strerror or str(e)
+    return OutputPathError(f"cannot write {given}: {why}")
+
 
 #: temporary paths that exist (or are about to) and are not committed yet, and the parent
 #: directories made for them, in the order made: what :func:`discard_unfinished` removes
@@ -100,17 +113,21 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically; create the parent directory if needed.
 
     The bytes go to a temporary file in the same directory, which is fsynced and then renamed
-    over ``path``.  On any error the temporary file is removed and ``path`` is left untouched.
-    Returns the path written.
+    over ``path``.  On any error the temporary file is removed and ``path`` is left untouched
+    (:class:`OutputPathError` when the file cannot be made there). Returns the path written.
     """
     target = Path(path)
-    _make_parents(target.parent.absolute())
     fds: list[int] = []
-    tmp = _reserve(
-        target.parent.absolute(),
-        f".{target.name}.",
-        lambda p: fds.append(os.open(p, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)),  # umask applies
-    )
+    try:
+        _make_parents(target.parent.absolute())
+        tmp = _reserve(
+            target.parent.absolute(),
+            f".{target.name}.",
+            lambda p: fds.append(os.open(p, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)),  # umask applies
+        )
+    except OSError as e:
+        _remove_made_parents()
+        raise _unwritable(target, e) from None
     try:
         with os.fdopen(fds[0], "wb") as fh:
             fh.write(data)
@@ -156,12 +173,17 @@ def atomic_output_dir(final_dir: str | os.PathLike) -> Iterator[Path]:
     gets the permissions the user's umask gives a new directory.
 
     Raises ``FileExistsError`` (before the block runs, and again before the rename) when
-    ``final_dir`` exists and is not an empty directory.  An existing empty directory is replaced.
+    ``final_dir`` exists and is not an empty directory, :class:`OutputPathError` (before the
+    block runs) when it cannot be made there.  An existing empty directory is replaced.
     """
     final = Path(final_dir).absolute()
     _check_free(final)
-    _make_parents(final.parent)
-    tmp = _reserve(final.parent, f".{final.name}.", lambda p: p.mkdir(0o777))  # umask applies
+    try:
+        _make_parents(final.parent)
+        tmp = _reserve(final.parent, f".{final.name}.", lambda p: p.mkdir(0o777))  # umask applies
+    except OSError as e:
+        _remove_made_parents()
+        raise _unwritable(Path(final_dir), e) from None
     try:
         yield tmp
         _check_free(final)
