@@ -432,7 +432,16 @@ def _plan(vary=(), set_=(), runs=2, seed=0, scenario="paper-exp3"):
 
 
 SWEEP_CASES = [
-    ("--vary without =", lambda: _plan(["initial_state.y_m"]), "expected NAME=VALUE"),
+    (
+        "--vary without =",
+        lambda: _plan(["initial_state.y_m"]),
+        "--vary 'initial_state.y_m': expected NAME=DISTRIBUTION (e.g. initial_state.y_m=uniform(-0.5, 0.5))",
+    ),
+    (  # its own example, not one of --vary's
+        "--set without =",
+        lambda: _plan(set_=["road.lane_width_m"]),
+        "--set 'road.lane_width_m': expected NAME=VALUE (e.g. road.lane_width_m=0.8)",
+    ),
     ("--vary bad name", lambda: _plan(["initial state=uniform(0,1)"]), "dotted path"),
     ("--vary unknown field", lambda: _plan(["initial_state.z_m=uniform(0,1)"]), "initial_state has no key 'z_m'"),
     (

@@ -118,7 +118,10 @@ def _parse_distribution(option: str, name: str, text: str) -> Distribution:
 
 def _split_assignment(option: str, text: str) -> tuple[str, str]:
     if "=" not in text:
-        raise SweepError(f"{option} {text!r}: expected NAME=VALUE (e.g. initial_state.y_m=uniform(-0.5, 0.5))")
+        example = {"--vary": "NAME=DISTRIBUTION (e.g. initial_state.y_m=uniform(-0.5, 0.5))"}.get(
+            option, "NAME=VALUE (e.g. road.lane_width_m=0.8)"
+        )
+        raise SweepError(f"{option} {text!r}: expected {example}")
     name, value = text.split("=", 1)
     name = name.strip()
     if not _NAME.match(name):
