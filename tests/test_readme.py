@@ -268,3 +268,21 @@ def test_the_scenario_example_is_safe_with_margin_and_its_obstacles_matter(tmp_p
         assert gap.min() < 0, f"{ob['name']}: the car without obstacles passes {gap.min():.3f} m clear of it"
         t_hit = free_rows["t"][int(np.argmin(gap))]  # with the obstacle the car is well off the path there
         assert np.abs(rows["e_y"][np.abs(rows["t"] - t_hit) <= 0.5]).max() > 0.15, f"{ob['name']}: no deviation"
+
+
+def test_the_obstacle_keys_shown_are_the_schemas():
+    """The scenario example's obstacle comment names every key an obstacle takes (and a recorded
+    trajectory's), and each shape's keys in parentheses are keys of the schema."""
+    from mpcdrive.scenarios.schema import ObstacleSpec, TrajectorySpec
+
+    text = blocks("yaml")[0]
+    block = re.search(r"^# obstacles:.*?(?=^[^#])", text, re.S | re.M)  # a comment block before the key
+    inline = re.search(r"^obstacles:.*?#(.*)$", text, re.M)  # or a comment on the key's line
+    comment = (block.group(0) if block else "") + (inline.group(1) if inline else "")
+    assert comment, "the scenario example does not say what an obstacle takes"
+    words = set(re.findall(r"[a-z_]+", comment))
+    fields = set(ObstacleSpec.model_fields) | set(TrajectorySpec.model_fields)
+    assert fields <= words, f"obstacle keys the README never shows: {sorted(fields - words)}"
+    for shape, keys in re.findall(r"\b(circle|rectangle|polygon) \(([a-z_]+(?:, [a-z_]+)*)[:)]", comment):
+        for key in keys.split(", "):
+            assert key in ObstacleSpec.model_fields, f"{shape}: {key!r} is not an obstacle key"
