@@ -112,7 +112,7 @@ SCENARIO_CASES = [
         "controller.speed_limits_mps",
         "must be positive",
     ),
-    ("impossible: lane narrower than the car", _set(["road"], {"lane_width_m": 0.2}), "", "not wider than the car"),
+    ("impossible: lane narrower than the car", _set(["road"], {"lane_width_m": 0.2}), "road", "not wider than the car"),
     ("impossible: zero vehicle speed", _set(["vehicle", "speed_mps"], 0.0), "vehicle.speed_mps", "greater than 0"),
     ("path: straight with equal ends", _set(["path", "end"], [0, 0]), "path", "differ"),
     (
@@ -142,7 +142,7 @@ SCENARIO_CASES = [
         "initial_state.x_m",
         "less than or equal to 1000000",
     ),
-    ("initial state: far from the path", _set(["initial_state", "y_m"], 5000.0), "", "from the path"),
+    ("initial state: far from the path", _set(["initial_state", "y_m"], 5000.0), "initial_state", "from the path"),
     (
         "initial state: absurd yaw",
         _set(["initial_state", "yaw_deg"], 1e6),
