@@ -69,7 +69,7 @@ def scenarios(draw):
         "linearization": draw(st.sampled_from(["trajectory", "paper"])),
     }
     if draw(st.booleans()):
-        c["max_steer_rate_deg_s"] = draw(st.floats(10, 600))
+        c["max_steer_rate_deg_s"] = draw(st.floats(10, 180))  # the plant's (F1TENTH) 183 deg/s at most
     init = {
         "x_m": draw(st.floats(-spread, spread)),
         "y_m": draw(st.floats(-spread, spread)),
@@ -98,6 +98,12 @@ def scenarios(draw):
         "controller": c,
         "plant": {"lr_m": vehicle["lr_m"] * draw(st.floats(0.8, 1.2))},
     }
+    # the plant's steering: the vehicle's (F1TENTH: 183 deg/s, 0.02 s dead time), ideal, or another
+    steering = draw(
+        st.sampled_from([None, "ideal", {"time_constant_s": 0.05}, {"dead_time_s": 0.03, "max_rate_deg_s": 200.0}])
+    )
+    if steering is not None:
+        data["plant"]["steering_actuator"] = steering
     if draw(st.booleans()):
         data["road"] = {"lane_width_m": draw(st.floats(0.3, 3))}
     if draw(st.booleans()):

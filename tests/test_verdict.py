@@ -45,8 +45,8 @@ obstacles:
 controller: {horizon: 10, Q: [1, 1, 1], R: [1]}
 """
 
-# the 1:10 car at 100 m/s, heading 60 deg off a straight path with 10 deg of steering: it passes
-# the path's end (the goal region) after leaving the 1 m lane
+# the 1:10 car at 100 m/s, heading 60 deg off a straight path with 10 deg of ideal steering: it
+# passes the path's end (the goal region) after leaving the 1 m lane
 FAST = """\
 id: fast
 dt_s: 0.01
@@ -56,6 +56,7 @@ path: {type: straight, start: [0.0, 0.0], end: [8.0, 0.0]}
 road: {lane_width_m: 1.0}
 initial_state: {x_m: 0.0, y_m: 0.0, yaw_deg: 60.0}
 controller: {horizon: 10, Q: [1, 1, 1], R: [1], max_steer_deg: 10.0}
+plant: {steering_actuator: ideal}
 """
 
 # OSQP gets one iteration per solve (the relax rung two): every solve fails and the ladder
