@@ -24,6 +24,7 @@ from ..paths.speed_profile import SpeedProfile
 from ..paths.tracks import Track, load_track_csv, track_from_text
 from ..sim.actuator import SteeringActuator
 from ..sim.closed_loop import Disturbance, ObservedPlant, Plant, simulate
+from ..sim.verdict import VerdictCriteria
 from ..ocp.avoidance import AvoidanceConfig
 from ..scene.footprint import Footprint
 from ..scene.road import Lane, Road
@@ -374,6 +375,12 @@ def build_actuator(spec) -> SteeringActuator | None:
     return SteeringActuator(spec.time_constant_s, spec.dead_time_s, math.radians(spec.max_rate_deg_s))
 
 
+def criteria(spec: ScenarioSpec) -> VerdictCriteria:
+    """How runs of ``spec`` are judged (its ``verdict`` block)."""
+    v = spec.verdict
+    return VerdictCriteria(v.goal, v.max_final_lateral_error_m, v.max_final_speed_mps, v.max_lane_excess_m)
+
+
 def _noise(spec: NoiseSpec | None) -> Disturbance | None:
     if spec is None:
         return None
@@ -571,6 +578,7 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
             "max_steer_rad": float(pb.u_max[0]),
             "description": spec.description,
             "backend": getattr(exp.mpc, "backend_name", ""),
+            "criteria": criteria(spec).as_dict(),
         },
         obstacles=exp.obstacles,
         footprint=exp.footprint,

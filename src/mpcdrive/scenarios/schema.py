@@ -22,7 +22,7 @@ from ..ocp.avoidance import AvoidanceConfig
 from ..sim.closed_loop import solve_interval
 from .fields import Coord, Finite, Int, Length, NonNeg, Point, Positive, Speed
 from .fields import Strict as _Strict
-from .steering import ActuatorSpec, resolve_steering
+from .steering import ActuatorSpec, VerdictSpec, resolve_steering_and_verdict
 from ..solvers.osqp_backend import OsqpSettings
 
 #: the core's defaults, which the scenario schema repeats
@@ -558,8 +558,8 @@ class NoiseSpec(_Strict):
 
 
 class ScenarioSpec(_Strict):
-    """A complete, self-contained closed-loop experiment. The plant's steering and the
-    controller's steering-rate limit are filled in when it is validated
+    """A complete, self-contained closed-loop experiment. The plant's steering, the controller's
+    steering-rate limit and the verdict's final-error tolerance are filled in when it is validated
     (:mod:`mpcdrive.scenarios.steering`)."""
 
     id: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
@@ -579,6 +579,7 @@ class ScenarioSpec(_Strict):
     obstacles: list[ObstacleSpec] = Field(default_factory=list)
     avoidance: AvoidanceSpec | None = None
     laps: Positive | None = None
+    verdict: VerdictSpec = VerdictSpec()
 
     @property
     def control_period_s(self) -> float:
@@ -611,8 +612,8 @@ class ScenarioSpec(_Strict):
         return self.vehicle.model if self.plant.model == "same" else self.plant.model
 
     @model_validator(mode="after")
-    def _resolve_steering(self):
-        problem = resolve_steering(self, commonroad=self.plant_model in COMMONROAD_PLANTS)
+    def _resolve_steering_and_verdict(self):
+        problem = resolve_steering_and_verdict(self, commonroad=self.plant_model in COMMONROAD_PLANTS)
         if problem is not None:
             _raise_at(("controller", "max_steer_rate_deg_s"), self.controller.max_steer_rate_deg_s, problem)
         return self

@@ -1,20 +1,24 @@
-"""The scenario section of the plant's steering (``plant.steering_actuator``), and how a
-validated scenario fills it in.
+"""The scenario sections of the plant's steering (``plant.steering_actuator``) and of the verdict
+(``verdict``), and how a validated scenario fills them in.
 
 Resolved when a scenario is validated (the resolved ``scenario.yaml`` shows every value): the
 plant's ``steering_actuator`` (values left out: the vehicle's steering system, its preset's, the
 F1TENTH steering without one; ``ideal``: instant, at any rate, the paper's), the controller's
 ``max_steer_rate_deg_s`` (left out: the plant's rate limit, none for the projected gradient
 solver, which handles input bounds only; it may be lower, never higher: the controller plans within
-what the car can do). A value filled in this way is not marked as given (``model_fields_set``), so a scenario
+what the car can do) and ``verdict.max_final_lateral_error_m`` (left out: half the vehicle's
+width). A value filled in this way is not marked as given (``model_fields_set``), so a scenario
 made from a resolved one for another vehicle gets that vehicle's."""
 
 from __future__ import annotations
 
 import math
+from typing import Literal
+
 from pydantic import BaseModel
 
 from ..models.presets import steering_of
+from ..sim.verdict import GOALS, LANE_TOLERANCE_M, STANDSTILL_SPEED_MPS
 from .fields import NonNeg, Positive, Strict
 
 #: ``plant.steering_actuator: ideal``: the wheels follow every command at once, at any rate (the
@@ -33,8 +37,23 @@ class ActuatorSpec(Strict):
     max_rate_deg_s: Positive | None = None
 
 
-def resolve_steering(spec, *, commonroad: bool) -> str | None:
-    """Fill in the steering values ``spec`` (a :class:`ScenarioSpec` being
+class VerdictSpec(Strict):
+    """How the run is judged (:class:`~mpcdrive.sim.VerdictCriteria`): ``goal`` ``reach`` (the
+    end of an open path, the laps of a closed one) or ``standstill`` (at most
+    ``max_final_speed_mps`` at the end, e.g. stopped before an obstacle that blocks the road);
+    ``max_final_lateral_error_m``: how far from the path the car may end [m] (default: half the
+    vehicle's width, the path still under the body); ``max_lane_excess_m``: how far outside the
+    road the body may get and still count as inside [m] (default 1 mm, the measurement's
+    accuracy)."""
+
+    goal: Literal[GOALS] = "reach"  # type: ignore[valid-type]
+    max_final_lateral_error_m: NonNeg | None = None
+    max_final_speed_mps: NonNeg = STANDSTILL_SPEED_MPS
+    max_lane_excess_m: NonNeg = LANE_TOLERANCE_M
+
+
+def resolve_steering_and_verdict(spec, *, commonroad: bool) -> str | None:
+    """Fill in the steering and verdict values ``spec`` (a :class:`ScenarioSpec` being
     validated; ``commonroad``: its plant is a CommonRoad vehicle, which steers itself) leaves out;
     returns why its ``controller.max_steer_rate_deg_s`` is faster than the plant can steer, or None."""
     pl, c = spec.plant, spec.controller
@@ -48,10 +67,12 @@ def resolve_steering(spec, *, commonroad: bool) -> str | None:
             _set(spec, "plant", _constructed(pl, steering_actuator=act))
         plant_rate_deg = math.inf if act == IDEAL_STEERING else act.max_rate_deg_s
         where = "plant.steering_actuator (ideal)" if act == IDEAL_STEERING else "plant.steering_actuator.max_rate_deg_s"
+    if spec.verdict.max_final_lateral_error_m is None:
+        _set(spec, "verdict", _constructed(spec.verdict, max_final_lateral_error_m=0.5 * spec.vehicle.width_m))
     rate = c.max_steer_rate_deg_s
     if "max_steer_rate_deg_s" not in c.model_fields_set and rate is None:
         # the projected gradient solver handles input bounds only: it plans without the rate limit
-        # (the plant's actuator still limits the wheels)
+        # (the plant's actuator still limits the wheels; the run's verdict says so)
         pg = c.solver == "projected_gradient"
         _set(
             spec,
