@@ -10,7 +10,7 @@ import pytest
 import yaml
 from test_verdict import COLLIDE
 
-from mpcdrive.scenarios import build_experiment, run_experiment, validate_scenario_data
+from mpcdrive.scenarios import build_experiment, load_scenario, run_experiment, validate_scenario_data
 from mpcdrive.sim import compute_metrics, run_verdict
 from mpcdrive.sweep import SuccessCriteria, plan_sweep, run_sweep
 
@@ -144,3 +144,21 @@ def test_an_external_checker_is_a_part_of_the_verdict():
     v = run_verdict({"goal_region_reached": True, "commonroad": cr})
     assert [n for n, _ in v.parts][-1] == "commonroad" and v.failed and not v.unsafe
     assert v.reasons == ["CommonRoad checker: collision-free, road-compliant, not KS-feasible, goal reached"]
+
+
+@pytest.mark.parametrize("drive_through", [False, True])
+def test_obstacle_blocked_passes_when_it_stops_before_the_barrier_and_fails_when_it_hits_it(drive_through):
+    spec = load_scenario("obstacle-blocked")
+    assert spec.verdict.goal == "standstill"
+    if drive_through:  # an obstacle cost of weight 0: the barrier is not avoided
+        data = spec.model_dump(mode="json", exclude_unset=True)
+        data["avoidance"] = {"formulation": "potential", "weight": 0.0}
+        spec = validate_scenario_data(data, "through")
+    m = compute_metrics(run_experiment(build_experiment(spec)))
+    if drive_through:
+        assert m.collisions >= 1 and m.verdict.failed and m.verdict.unsafe
+        assert m.goal_reached is False
+    else:
+        assert m.verdict.passed and m.goal_reached is True and m.termination == "completed"
+        assert m.final_speed_mps <= spec.verdict.max_final_speed_mps and m.min_obstacle_clearance_m > 0.1
+        assert "goal reached (a standstill)" in m.verdict.text()
