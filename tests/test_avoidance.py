@@ -160,7 +160,8 @@ def test_blocked_lane_stops_before_the_barrier():
     assert m["collisions"] == 0
     assert 0.1 <= m["min_obstacle_clearance_m"] < 0.6  # stopped close, with a margin
     assert r.v_mps[-1] < 0.05 and r.x[-1, 0] < 5.0 - 0.15 - 0.25
-    assert m["goal_reached"] is False
+    # its goal is to stop (verdict.goal: standstill), safely: that is what it did
+    assert m["goal_reached"] is True and m["verdict"]["passed"]
 
 
 @pytest.mark.slow

@@ -114,7 +114,10 @@ def test_bad_track_file_content_is_reported_at_build(tmp_path):
 @pytest.mark.parametrize(
     "change, words",
     [
-        (lambda d: d["controller"].update(delay_compensation=True), "steering_actuator"),
+        (
+            lambda d: (d["controller"].update(delay_compensation=True), d.update(plant={"steering_actuator": "ideal"})),
+            "steering_actuator.dead_time_s",
+        ),
         (lambda d: d.update(plant={"model": "kinematic4", "param_scale": {"mass": 1.2}}), "dynamic plant"),
         (
             lambda d: d.update(

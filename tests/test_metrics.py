@@ -49,7 +49,17 @@ EXPECTED_KEYS = [
     "goal_reached",
     "termination",
     "controller_backend",
+    # added with the verdict: the steering's limits and saturation, the criteria, the verdict
+    "final_speed_mps",
+    "steer_limit_rad",
+    "steer_rate_limit_rad_s",
+    "steer_saturated_fraction",
+    "steer_rate_saturated_fraction",
+    "steering_actuator",
+    "criteria",
 ]
+#: the verdict comes last, after the CommonRoad block of a CommonRoad run
+LAST_KEY = "verdict"
 EVENT_KEYS = ["obstacle", "name", "step", "t_s", "steps", "depth_m"]
 FALLBACK_KEYS = ["relax", "shifted_plan", "brake", "hold_last"]
 
@@ -90,8 +100,8 @@ def test_as_dict_is_the_old_metrics_dict(source, tmp_path_factory):
     result, m = run(source, tmp_path_factory)
     assert isinstance(m, Metrics)
     d = m.as_dict()
-    assert list(d) == EXPECTED_KEYS
-    assert [f.name for f in dataclasses.fields(Metrics)] == [*EXPECTED_KEYS, "commonroad"]
+    assert list(d) == [*EXPECTED_KEYS, LAST_KEY]
+    assert [f.name for f in dataclasses.fields(Metrics)] == [*EXPECTED_KEYS, "commonroad", LAST_KEY]
     for key, value in d.items():
         assert _plain_json(value), f"{key}: {value!r} is not plain JSON"
     # every value round-trips through JSON (the runs have no NaN: each step has a lateral error)
@@ -122,7 +132,8 @@ def test_collision_events_are_typed(tmp_path_factory):
 def test_metrics_is_a_read_only_mapping_over_the_json_view(tmp_path_factory, tmp_path):
     _, m = run("collide", tmp_path_factory)
     d = m.as_dict()
-    assert dict(m) == d and {**m} == d and m == d and len(m) == len(EXPECTED_KEYS) and list(m) == EXPECTED_KEYS
+    keys = [*EXPECTED_KEYS, LAST_KEY]
+    assert dict(m) == d and {**m} == d and m == d and len(m) == len(keys) and list(m) == keys
     assert m["collisions"] == m.collisions and m.get("max_lane_excess_m") == m.max_lane_excess_m
     assert "commonroad" not in m and m.get("commonroad") is None
     with pytest.raises(KeyError):
@@ -172,7 +183,7 @@ def test_commonroad_block_is_typed_and_written_last(tmp_path_factory):
     judged = apply_goal_region(dataclasses.replace(m, commonroad=cr), cr.goal_reached)
     assert isinstance(judged, Metrics) and judged.commonroad == cr
     d = judged.as_dict()
-    assert list(d) == [*EXPECTED_KEYS, "commonroad"] and len(judged) == len(d)
+    assert list(d) == [*EXPECTED_KEYS, "commonroad", LAST_KEY] and len(judged) == len(d)
     assert d["commonroad"] == {**cr.as_dict(), "route_lanelets": [3, 4]} and _plain_json(d["commonroad"])
     # the planning problem's goal is reached, but the run collided: not the goal
     assert judged.goal_region_reached is True and judged.goal_reached is False

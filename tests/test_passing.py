@@ -34,7 +34,7 @@ def _spec(obstacles, backend="fast", neighbours=True) -> dict:
             "R": [10.0, 0.1],
             "Rc": [100.0, 1.0],
             "max_steer_deg": 30.0,
-            "max_steer_rate_deg_s": 23.0,
+            "max_steer_rate_deg_s": 22.9,  # CommonRoad: 0.4 rad/s = 22.92 deg/s at most
             "accel_limits_mps2": [-8.0, 3.0],
             "speed_limits_mps": [0.0, 12.0],
             "horizon_step_m": 0.5,

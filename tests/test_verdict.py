@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from mpcdrive.scenarios import build_experiment, load_scenario, run_experiment
-from mpcdrive.sim import LANE_TOLERANCE_M, compute_metrics, goal_met, run_verdict
+from mpcdrive.sim import LANE_TOLERANCE_M, compute_metrics, run_verdict
 from mpcdrive.types import ScenarioWarning
 
 # a car at 1 m/s on a straight path through a rock (index 1; index 0 is off the road); the
@@ -45,8 +45,8 @@ obstacles:
 controller: {horizon: 10, Q: [1, 1, 1], R: [1]}
 """
 
-# the 1:10 car at 100 m/s, heading 60 deg off a straight path with 10 deg of steering: it passes
-# the path's end (the goal region) after leaving the 1 m lane
+# the 1:10 car at 100 m/s, heading 60 deg off a straight path with 10 deg of ideal steering: it
+# passes the path's end (the goal region) after leaving the 1 m lane
 FAST = """\
 id: fast
 dt_s: 0.01
@@ -56,6 +56,7 @@ path: {type: straight, start: [0.0, 0.0], end: [8.0, 0.0]}
 road: {lane_width_m: 1.0}
 initial_state: {x_m: 0.0, y_m: 0.0, yaw_deg: 60.0}
 controller: {horizon: 10, Q: [1, 1, 1], R: [1], max_steer_deg: 10.0}
+plant: {steering_actuator: ideal}
 """
 
 # OSQP gets one iteration per solve (the relax rung two): every solve fails and the ladder
@@ -159,13 +160,26 @@ def test_fallback_phrases(counts, failures, words):
     assert words in run_verdict(m).text()
 
 
-def test_goal_definition_needs_region_lane_and_no_collision():
-    assert goal_met(True, 0.0, 0) is True
-    assert goal_met(True, LANE_TOLERANCE_M, 0) is True
-    assert goal_met(True, 2 * LANE_TOLERANCE_M, 0) is False
-    assert goal_met(True, 0.0, 1) is False
-    assert goal_met(False, 0.0, 0) is False
-    assert goal_met(None, 5.0, 3) is None  # no goal to reach
+def _goal(region, excess=0.0, collisions=0, final=0.0):
+    m = {
+        "goal_region_reached": region,
+        "max_lane_excess_m": excess,
+        "collisions": collisions,
+        "final_lateral_error_m": final,
+        "criteria": {"max_final_lateral_error_m": 0.1},
+    }
+    return run_verdict(m).part("goal").ok
+
+
+def test_goal_definition_needs_region_lane_no_collision_and_the_end_near_the_path():
+    assert _goal(True) is True
+    assert _goal(True, excess=LANE_TOLERANCE_M) is True
+    assert _goal(True, excess=2 * LANE_TOLERANCE_M) is False
+    assert _goal(True, collisions=1) is False
+    assert _goal(True, final=0.1) is True and _goal(True, final=0.1001) is False
+    assert _goal(False) is False
+    # no goal region: judged on where the run ends
+    assert _goal(None, final=0.05) is True and _goal(None, final=0.5) is False
 
 
 def test_commonroad_checker_verdicts_make_a_run_unsafe():

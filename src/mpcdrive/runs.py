@@ -19,7 +19,6 @@ def run_into(spec, out_dir: Path, progress=None, source: str | None = None, extr
     ``progress`` is a context manager factory ``progress(label, steps)`` yielding a step callback
     (or None). Returns (result, metrics, figures, footprint), ``metrics`` a
     :class:`~mpcdrive.sim.Metrics`; BuildError when the scenario does not build."""
-    import dataclasses
     from contextlib import nullcontext
 
     from .io import write_json, write_trajectory_csv
@@ -49,12 +48,7 @@ def run_into(spec, out_dir: Path, progress=None, source: str | None = None, extr
         if extra:
             raise ValueError(f"extra_outputs returned unknown entries {sorted(extra)} (known: commonroad, figures)")
         if cr is not None:  # the goal is the planning problem's, the checker's verdicts count too
-            metrics = apply_goal_region(
-                dataclasses.replace(metrics, commonroad=cr),
-                cr.goal_reached,
-                collision_free=cr.collision_free,
-                road_compliant=cr.road_compliant,
-            )
+            metrics = apply_goal_region(metrics, cr.goal_reached, cr)
         write_json(out_dir / "metrics.json", metrics.as_dict())
     figures = list(write_run_figures(result, out_dir)) + extra_figures
     write_run_html(out_dir, result, metrics, figures, exp.footprint, run_id=spec.id, description=spec.description)

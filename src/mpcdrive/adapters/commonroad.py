@@ -214,6 +214,11 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
                 else None,
             },
             "initial_state": {"x_m": float(p0[0]), "y_m": float(p0[1]), "yaw_deg": math.degrees(yaw0), "v_mps": v0},
+            # the project's plant steers instantly here: the commands keep within the vehicle's
+            # steering rate and CommonRoad's checker judges the drive (KS feasibility); the
+            # vehicle's own servo is --plant ks|st|mb (with a 0.4 rad/s servo on this kinematic
+            # plant the evasive lane change of ZAM_Tutorial_Urban-3_2 overshoots off the road)
+            "plant": {"steering_actuator": "ideal"},
             "obstacles": obstacles,
             "avoidance": {
                 "formulation": "hard",

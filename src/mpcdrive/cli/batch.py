@@ -35,10 +35,17 @@ def sweep(
     workers: int | None = typer.Option(None, "--workers", min=1, help="local processes (default: all cores)"),
     backend: str = typer.Option("local", "--backend", help="local (process pool) or ray"),
     address: str | None = typer.Option(None, "--address", help="Ray cluster address (default: a new local Ray)"),
-    max_final_error: float = typer.Option(
-        0.1, "--max-final-error", help="largest final |lateral error| of a successful run [m]"
+    max_final_error: float | None = typer.Option(
+        None,
+        "--max-final-error",
+        help="override of the verdict's final |lateral error| allowed [m] (default: the scenario's "
+        "verdict.max_final_lateral_error_m, half the car's width)",
     ),
-    max_lane_excess: float = typer.Option(0.0, "--max-lane-excess", help="largest lane excess of a successful run [m]"),
+    max_lane_excess: float | None = typer.Option(
+        None,
+        "--max-lane-excess",
+        help="override of the verdict's lane excess allowed [m] (default: the scenario's verdict.max_lane_excess_m, 0.001)",
+    ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
 ) -> None:
     """Monte Carlo sweep: run SCENARIO many times with varied values; write runs.csv, summary.json/md, histograms."""

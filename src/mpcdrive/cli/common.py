@@ -173,13 +173,11 @@ def _default_out(stem: str) -> Path:
 
 
 def _summary_line(sid: str, m: Metrics) -> str:
-    """The run's safety verdict in words (``UNSAFE:`` first when it collided, left the road or
-    diverged), then its tracking figures."""
-    from ..sim import run_verdict
-
-    v = run_verdict(m)
+    """The run's verdict (``m.verdict``) in words (``UNSAFE:`` first when it collided, left the
+    road or diverged, ``FAILED:`` when it missed its goal or an external check), then its
+    tracking figures."""
     return (
-        f"{'UNSAFE: ' if v.unsafe else ''}{sid}: {'; '.join(v.findings)} | {m.steps} steps, rms |e_y| "
+        f"{m.verdict.line(sid)} | {m.steps} steps, rms |e_y| "
         f"{m.rms_lateral_error_m:.4g} m, final |e_y| {m.final_lateral_error_m:.3g} m, max |steer| "
         f"{m.max_abs_steer_rad:.3f} rad, step p50 {m.solve_time_us.p50:.0f} us"
     )

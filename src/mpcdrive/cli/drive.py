@@ -98,10 +98,7 @@ def run(
         _, metrics, _, _ = _run_into(spec, tmp, not quiet, source=scenario, extra_outputs=extra)
     typer.echo(_summary_line(spec.id, metrics))
     typer.echo(f"wrote {out_dir}")
-    if check:
-        from ..sim import run_verdict
-
-        problems = run_verdict(metrics).problems()
-        if problems:
-            typer.echo(f"mpcdrive: --check: {spec.id} failed: {', '.join(problems)}", err=True)
-            raise typer.Exit(3)
+    if check and not metrics.verdict.passed:
+        v = metrics.verdict
+        typer.echo(f"mpcdrive: --check: {spec.id} failed ({', '.join(v.problems())}): {'; '.join(v.reasons)}", err=True)
+        raise typer.Exit(3)

@@ -11,6 +11,11 @@
 
 Every preset uses the CommonRoad lateral magic-formula shape factors (C = p_cy1 = 1.3507,
 E = p_ey1 = -0.0074722) for the Pacejka tire, with B = C_S / C.
+
+Each preset also carries its steering system (:class:`SteeringSystem`: the rate at which the
+wheels can turn, the actuator's lag and dead time), each value with its source;
+:data:`DEFAULT_STEERING` is the steering of a vehicle that names no preset (the paper's 1:10 car,
+an F1TENTH-class car: the F1TENTH steering).
 """
 
 from __future__ import annotations
@@ -29,24 +34,68 @@ _CR_CS = 21.92 / 1.0489
 
 
 @dataclass(frozen=True)
+class SteeringSystem:
+    """How a vehicle's wheels follow a steering command: after ``dead_time_s`` [s] the wheels turn
+    towards the command at up to ``max_rate_rad_s`` [rad/s], through a first-order lag of
+    ``time_constant_s`` [s] (0: none, a servo that turns at its rate limit until it is there);
+    ``source``: where the numbers come from. The plant's steering actuator
+    (:class:`~mpcdrive.sim.SteeringActuator`) and, by default, the controller's steering-rate
+    limit are these numbers."""
+
+    max_rate_rad_s: float
+    time_constant_s: float
+    dead_time_s: float
+    source: str
+
+
+#: F1TENTH gym (f1tenth/f1tenth_gym, gym/f110_gym/envs): the steering angle is a state driven by
+#: the steering velocity, clipped to sv_max = 3.2 rad/s (vehicle parameters); a commanded angle
+#: becomes that velocity by bang-bang control towards it (dynamic_models.pid: +-sv_max until
+#: there), so no lag; RaceCar keeps each command in a steering buffer of 2 physics steps of
+#: 0.01 s (base_classes.py, steer_buffer_size = 2, time_step = 0.01) before it acts: 0.02 s dead time
+F1TENTH_STEERING = SteeringSystem(
+    max_rate_rad_s=3.2,
+    time_constant_s=0.0,
+    dead_time_s=0.02,
+    source="F1TENTH gym: sv_max 3.2 rad/s, bang-bang servo (no lag), steering buffer of 2 x 0.01 s",
+)
+#: CommonRoad vehicle models (vehicleModels_commonRoad.pdf, parameters_vehicle1-3): the steering
+#: angle is a state whose input is the steering velocity, |v_delta| <= 0.4 rad/s for all three
+#: vehicles; no actuator lag and no dead time in the model (the drivability checker judges the
+#: drive on that model)
+COMMONROAD_STEERING = SteeringSystem(
+    max_rate_rad_s=0.4,
+    time_constant_s=0.0,
+    dead_time_s=0.0,
+    source="CommonRoad vehicle models: steering velocity within +-0.4 rad/s, no actuator lag or dead time",
+)
+
+
+@dataclass(frozen=True)
 class VehiclePreset:
     """A named vehicle: dynamic parameters plus actuator limits and body size (SI units).
 
-    max_steer_rad [rad], max_steer_rate_rad_s [rad/s], max_accel_mps2 [m/s^2] (absolute),
-    v_switch_mps [m/s]: speed above which the forward acceleration limit falls as
-    ``max_accel v_switch / v``; length_m, width_m [m]; source: where the numbers come from.
+    max_steer_rad [rad]; steering : the steering system (rate limit, lag, dead time, with their
+    source); max_accel_mps2 [m/s^2] (absolute), v_switch_mps [m/s]: speed above which the forward
+    acceleration limit falls as ``max_accel v_switch / v``; length_m, width_m [m]; source: where
+    the numbers come from.
     """
 
     name: str
     description: str
     params: DynamicParams
     max_steer_rad: float
-    max_steer_rate_rad_s: float
+    steering: SteeringSystem
     max_accel_mps2: float
     v_switch_mps: float
     length_m: float
     width_m: float
     source: str
+
+    @property
+    def max_steer_rate_rad_s(self) -> float:
+        """The steering-rate limit [rad/s] (``steering.max_rate_rad_s``)."""
+        return self.steering.max_rate_rad_s
 
     def accel_limit_mps2(self, v_max_mps: float) -> float:
         """The largest forward acceleration [m/s^2] the vehicle reaches at every speed up to
@@ -75,7 +124,7 @@ def _commonroad(num, name, description, m_slug, a_ft, b_ft, iz_slugft2, hs_ft, s
             h_cg_m=hs_ft * _FT,
         ),
         max_steer_rad=steer,
-        max_steer_rate_rad_s=0.4,
+        steering=COMMONROAD_STEERING,
         max_accel_mps2=11.5,
         v_switch_mps=v_switch,
         length_m=length,
@@ -90,7 +139,7 @@ PRESETS: dict[str, VehiclePreset] = {
         description="1:10 F1TENTH race car (F1TENTH gym defaults)",
         params=DynamicParams(),
         max_steer_rad=0.4189,
-        max_steer_rate_rad_s=3.2,
+        steering=F1TENTH_STEERING,
         max_accel_mps2=9.51,
         v_switch_mps=7.319,
         length_m=0.58,
@@ -140,6 +189,16 @@ PRESETS: dict[str, VehiclePreset] = {
         1.844,
     ),
 }
+
+
+#: the steering of a vehicle that names no preset: the paper's car is a 1:10 F1TENTH-class car
+#: (lf 0.17 m, lr 0.16 m; the vehicle defaults are the F1TENTH car's), so the F1TENTH steering
+DEFAULT_STEERING = F1TENTH_STEERING
+
+
+def steering_of(preset: str | None) -> SteeringSystem:
+    """The steering system of the vehicle preset ``preset`` (:data:`DEFAULT_STEERING` for None)."""
+    return DEFAULT_STEERING if preset is None else get_preset(preset).steering
 
 
 def get_preset(name: str) -> VehiclePreset:

@@ -55,6 +55,7 @@ from mpcdrive.report.markdown import (
     _num,
     metrics_summary,
     paper_comparison,
+    run_verdict_text,
 )
 from mpcdrive.scene.geometry import road_edges
 from mpcdrive.scene.footprint import Footprint
@@ -396,10 +397,23 @@ def _flatten(metrics: Mapping, prefix: str = "") -> list[tuple[str, object]]:
     return rows
 
 
+def _verdict_paragraph(metrics: Mapping) -> str:
+    """The run's verdict as a sentence (``UNSAFE: collided with ...``), marked by its headline."""
+    if not metrics:
+        return ""
+    headline, text = run_verdict_text(metrics)
+    body = text[len(headline) + 2 :] if text.startswith(headline + ": ") else text
+    return (
+        f'<p class="verdict {_e(headline.lower())}">Verdict: <strong>{_e(headline)}</strong>'
+        f"{': ' if body else ''}{_e(body)}</p>"
+    )
+
+
 def _metrics_table(metrics: Mapping) -> str:
     if not metrics:
         return ""
-    rows = "".join(f"<tr><th><code>{_e(k)}</code></th><td>{_value_text(k, v)}</td></tr>" for k, v in _flatten(metrics))
+    shown = {k: v for k, v in metrics.items() if k != "verdict"}  # the verdict is the sentence above
+    rows = "".join(f"<tr><th><code>{_e(k)}</code></th><td>{_value_text(k, v)}</td></tr>" for k, v in _flatten(shown))
     return f'<table class="metrics"><tbody>{rows}</tbody></table>'
 
 
@@ -455,6 +469,8 @@ def render_html_report(
     ]
     entries = [ReportEntry(r.id, r.description, r.metrics, []) for r in runs]
     parts = [f"<h1>{_e(title)}</h1>"]
+    if len(runs) == 1:  # one run: its verdict before anything else
+        parts.append(_verdict_paragraph(runs[0].metrics))
     if intro.strip():
         parts.append(f'<p class="intro">{_inline_markup(intro.strip())}</p>')
     if summary is None:
@@ -471,6 +487,8 @@ def render_html_report(
     sections, extras = [], []
     for r in runs:
         body = [f'<h2 id="run-{_e(r.id)}"><code>{_e(r.id)}</code></h2>']
+        if len(runs) > 1:
+            body.append(_verdict_paragraph(r.metrics))
         if r.description.strip():
             body.append(f"<p>{_e(r.description.strip())}</p>")
         body.append(_metrics_table(r.metrics))

@@ -29,6 +29,7 @@ __all__ = [
     "ReportEntry",
     "paper_comparison",
     "render_reproduce_report",
+    "run_verdict_text",
     "verdict",
     "write_reproduce_report",
 ]
@@ -126,6 +127,18 @@ def _as_entry(entry) -> ReportEntry:
     )
 
 
+def run_verdict_text(metrics: Mapping) -> tuple[str, str]:
+    """(headline, sentence) of a run's verdict, as its metrics hold it (``metrics["verdict"]``;
+    judged from the metrics when they have none, :func:`~mpcdrive.sim.run_verdict`): ``UNSAFE``,
+    ``FAILED`` or ``passed``, and the verdict's text (``UNSAFE: collided with ...``)."""
+    v = metrics.get("verdict")
+    if not isinstance(v, Mapping):
+        from mpcdrive.sim.verdict import run_verdict
+
+        v = run_verdict(metrics).as_dict()
+    return str(v["headline"]), str(v["text"])
+
+
 def _lookup(metrics: Mapping, key: str):
     """``metrics[key]`` with dotted keys descending into nested dicts; None when absent."""
     value = metrics
@@ -217,6 +230,7 @@ def metrics_summary(entries: Sequence[ReportEntry]) -> tuple[list[str], list[lis
         ("solve p50 [µs]", lambda m: _fmt_us(_lookup(m, "solve_time_us.p50"))),
         ("solve p99 [µs]", lambda m: _fmt_us(_lookup(m, "solve_time_us.p99"))),
     ]
+    columns.append(("run verdict", lambda m: run_verdict_text(m)[0]))
     header = ["experiment"] + [c[0] for c in columns]
     rows = [[e.id] + [f(e.metrics) for _, f in columns] for e in entries]
     return header, rows
@@ -353,6 +367,8 @@ def render_reproduce_report(
         lines += _paper_table(items, paper_values)
     for e in items:
         lines += ["", f"## `{e.id}`", ""]
+        if e.metrics:
+            lines += [f"**Verdict: {_verdict_sentence(e.metrics)}**", ""]
         if e.description.strip():
             lines += [e.description.strip(), ""]
         for fig in e.figures:
@@ -360,6 +376,12 @@ def render_reproduce_report(
         if lines[-1] == "":
             lines.pop()
     return "\n".join(lines) + "\n"
+
+
+def _verdict_sentence(metrics: Mapping) -> str:
+    """``passed: <findings>`` or the verdict's text (``UNSAFE: ...``, ``FAILED: ...``)."""
+    headline, text = run_verdict_text(metrics)
+    return text if headline != "passed" else f"passed: {text}"
 
 
 def write_reproduce_report(

@@ -24,6 +24,7 @@ from ..paths.speed_profile import SpeedProfile
 from ..paths.tracks import Track, load_track_csv, track_from_text
 from ..sim.actuator import SteeringActuator
 from ..sim.closed_loop import Disturbance, ObservedPlant, Plant, simulate
+from ..sim.verdict import VerdictCriteria
 from ..ocp.avoidance import AvoidanceConfig
 from ..scene.footprint import Footprint
 from ..scene.road import Lane, Road
@@ -32,6 +33,7 @@ from ..solvers.osqp_backend import OsqpSettings
 from ..solvers.projected_gradient import ProjectedGradientSettings
 from ..types import ScenarioWarning, SimResult
 from .schema import COMMONROAD_PLANTS, AvoidanceSpec, NoiseSpec, ObstacleSpec, ScenarioSpec
+from .steering import IDEAL_STEERING
 
 
 @dataclass(frozen=True)
@@ -365,6 +367,20 @@ def commonroad_plant(model: str, vehicle: str) -> ObservedPlant:
     return crv.CommonRoadPlant(crv.PLANT_MODELS[model], vehicle)
 
 
+def build_actuator(spec) -> SteeringActuator | None:
+    """The plant's steering actuator of a resolved ``plant.steering_actuator`` (None: ``ideal``, or
+    a CommonRoad plant, which steers itself)."""
+    if spec is None or spec == IDEAL_STEERING:
+        return None
+    return SteeringActuator(spec.time_constant_s, spec.dead_time_s, math.radians(spec.max_rate_deg_s))
+
+
+def criteria(spec: ScenarioSpec) -> VerdictCriteria:
+    """How runs of ``spec`` are judged (its ``verdict`` block)."""
+    v = spec.verdict
+    return VerdictCriteria(v.goal, v.max_final_lateral_error_m, v.max_final_speed_mps, v.max_lane_excess_m)
+
+
 def _noise(spec: NoiseSpec | None) -> Disturbance | None:
     if spec is None:
         return None
@@ -487,9 +503,7 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         plant_model = plant.model  # observed as kinematic4 (x, y, yaw, v at the centre of gravity)
     else:
         plant_model = model if same else build_model(spec.plant_model, plant_v, pl.param_scale)
-    actuator = None
-    if pl.steering_actuator is not None:
-        actuator = SteeringActuator(pl.steering_actuator.time_constant_s, pl.steering_actuator.dead_time_s)
+    actuator = build_actuator(pl.steering_actuator)
     controller: Controller = mpc
     if road is not None and road.lanes:
         # neighbour lanes: a decision layer opens them to pass a blocked stretch
@@ -564,6 +578,7 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
             "max_steer_rad": float(pb.u_max[0]),
             "description": spec.description,
             "backend": getattr(exp.mpc, "backend_name", ""),
+            "criteria": criteria(spec).as_dict(),
         },
         obstacles=exp.obstacles,
         footprint=exp.footprint,

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal, NoReturn
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from ..models.presets import PRESETS
@@ -20,29 +20,17 @@ from ..control.lanes import LaneConfig
 from ..control.mpc import MpcConfig
 from ..ocp.avoidance import AvoidanceConfig
 from ..sim.closed_loop import solve_interval
+from .fields import Coord, Finite, Int, Length, NonNeg, Point, Positive, Speed
+from .fields import Strict as _Strict
+from .steering import ActuatorSpec, VerdictSpec, resolve_steering_and_verdict
 from ..solvers.osqp_backend import OsqpSettings
 
 #: the core's defaults, which the scenario schema repeats
 _AV = AvoidanceConfig()
 
-Finite = Annotated[float, Field(strict=True, allow_inf_nan=False)]
-Positive = Annotated[float, Field(strict=True, gt=0, allow_inf_nan=False)]
-NonNeg = Annotated[float, Field(strict=True, ge=0, allow_inf_nan=False)]
-#: a coordinate [m]; beyond a thousand kilometres float64 loses the millimetres
-Coord = Annotated[float, Field(strict=True, ge=-1e6, le=1e6, allow_inf_nan=False)]
-#: a vehicle dimension [m]
-Length = Annotated[float, Field(strict=True, gt=0, le=100, allow_inf_nan=False)]
-#: a speed [m/s] (360 km/h at most)
-Speed = Annotated[float, Field(strict=True, ge=-100, le=100, allow_inf_nan=False)]
-Int = Annotated[int, Field(strict=True)]
-Point = tuple[Coord, Coord]
 #: largest distance [m] between the initial position and the path
 MAX_INITIAL_DISTANCE_M = 1000.0
 FallbackName = Literal["relax", "shifted_plan", "brake", "hold_last"]
-
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
 
 class StraightSpec(_Strict):
@@ -499,13 +487,6 @@ class ParamScaleSpec(_Strict):
     friction: Positive = 1.0
 
 
-class ActuatorSpec(_Strict):
-    """Steering actuator of the plant: dead time, then a first-order lag (both in seconds)."""
-
-    time_constant_s: NonNeg = 0.0
-    dead_time_s: NonNeg = 0.0
-
-
 class PlantSpec(_Strict):
     """The simulated vehicle: ``same`` model as the controller or another one (model mismatch),
     parameters scaled by ``param_scale``, integrated with ``integrator`` in ``substeps`` per control
@@ -523,7 +504,9 @@ class PlantSpec(_Strict):
     integrator: Literal["rk4", "euler"] = "rk4"
     substeps: int = Field(1, ge=1, le=100)
     param_scale: ParamScaleSpec | None = None
-    steering_actuator: ActuatorSpec | None = None
+    # None: the vehicle's steering (resolved when the scenario is validated; stays None for a
+    # CommonRoad plant, whose vehicle steers itself); ``ideal``: instant, at any rate (the paper's)
+    steering_actuator: ActuatorSpec | Literal["ideal"] | None = None
     lf_m: Length | None = None
     lr_m: Length | None = None
     speed_mps: Annotated[Speed, Field(gt=0)] | None = None
@@ -575,7 +558,9 @@ class NoiseSpec(_Strict):
 
 
 class ScenarioSpec(_Strict):
-    """A complete, self-contained closed-loop experiment."""
+    """A complete, self-contained closed-loop experiment. The plant's steering, the controller's
+    steering-rate limit and the verdict's final-error tolerance are filled in when it is validated
+    (:mod:`mpcdrive.scenarios.steering`)."""
 
     id: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
     description: str = ""
@@ -594,6 +579,7 @@ class ScenarioSpec(_Strict):
     obstacles: list[ObstacleSpec] = Field(default_factory=list)
     avoidance: AvoidanceSpec | None = None
     laps: Positive | None = None
+    verdict: VerdictSpec = VerdictSpec()
 
     @property
     def control_period_s(self) -> float:
@@ -624,6 +610,13 @@ class ScenarioSpec(_Strict):
     def plant_model(self) -> str:
         """The plant's model name (``same`` resolved)."""
         return self.vehicle.model if self.plant.model == "same" else self.plant.model
+
+    @model_validator(mode="after")
+    def _resolve_steering_and_verdict(self):
+        problem = resolve_steering_and_verdict(self, commonroad=self.plant_model in COMMONROAD_PLANTS)
+        if problem is not None:
+            _raise_at(("controller", "max_steer_rate_deg_s"), self.controller.max_steer_rate_deg_s, problem)
+        return self
 
     @model_validator(mode="after")
     def _sizes(self):
@@ -659,11 +652,12 @@ class ScenarioSpec(_Strict):
             )
         if self.plant.param_scale is not None and not self.plant_model.startswith("dynamic"):
             _raise_at(("plant", "param_scale"), None, "needs a dynamic plant model")
-        if c.delay_compensation and self.plant.steering_actuator is None:
+        act = self.plant.steering_actuator
+        if c.delay_compensation and not (isinstance(act, ActuatorSpec) and act.dead_time_s):
             _raise_at(
                 ("controller", "delay_compensation"),
                 True,
-                "needs plant.steering_actuator (the delay to compensate)",
+                "needs a steering dead time to compensate (plant.steering_actuator.dead_time_s > 0)",
             )
         for name, spec in (("disturbance", self.disturbance), ("measurement_noise", self.measurement_noise)):
             if spec is not None:

@@ -1,4 +1,4 @@
-"""Closed-loop simulation: plant, disturbances, measurement noise, full log, metrics."""
+"""Closed-loop simulation: plant, disturbances, measurement noise, full log, metrics, verdict."""
 
 from .actuator import ActuatorState, SteeringActuator
 from .closed_loop import Disturbance, Plant, simulate
@@ -11,10 +11,9 @@ from .metrics import (
     SolveTimes,
     apply_goal_region,
     compute_metrics,
-    goal_met,
     lane_excess_per_step,
 )
-from .verdict import RunVerdict, run_verdict
+from .verdict import RunVerdict, VerdictCriteria, VerdictPart, run_verdict
 
 __all__ = [
     "ActuatorState",
@@ -28,9 +27,10 @@ __all__ = [
     "Plant",
     "RunVerdict",
     "SolveTimes",
+    "VerdictCriteria",
+    "VerdictPart",
     "apply_goal_region",
     "compute_metrics",
-    "goal_met",
     "lane_excess_per_step",
     "run_verdict",
     "simulate",

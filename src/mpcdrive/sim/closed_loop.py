@@ -226,6 +226,25 @@ def _horizon_step_s(controller) -> float | None:
     return float(dt) if isinstance(dt, numbers.Real) and not isinstance(dt, bool) else None
 
 
+def steering_meta(controller, plant) -> dict:
+    """What the run's steering could do, for the metrics: ``steer_limits_rad`` (the controller's
+    steering bounds ``(lo, hi)`` [rad]) and ``steer_rate_limit_rad_s`` (its steering-rate limit
+    [rad/s], None for none) from its problem (or the problem of the controller it wraps; neither
+    key without one), and ``steering_actuator``, the plant's (a :class:`SteeringActuator`; ideal
+    without one; not recorded for an observed plant, which steers itself)."""
+    meta: dict = {}
+    pb = _inner_attr(controller, "problem")
+    lo, hi = getattr(pb, "u_min", None), getattr(pb, "u_max", None)
+    if lo is not None and hi is not None:
+        meta["steer_limits_rad"] = (float(lo[0]), float(hi[0]))
+        du = getattr(pb, "du_max_per_s", None)
+        rate = math.inf if du is None else float(np.asarray(du, float).reshape(-1)[0])
+        meta["steer_rate_limit_rad_s"] = None if rate == math.inf else rate
+    if isinstance(plant, Plant):
+        meta["steering_actuator"] = plant.actuator if plant.actuator is not None else SteeringActuator()
+    return meta
+
+
 def _plan_slope(controller, out, nu: int) -> np.ndarray | None:
     """(nu,) change of the input over one controller period along the plan of ``out``: from the
     applied command to the plan's second input (clipped to the controller's input bounds when it
@@ -322,8 +341,11 @@ def simulate(
 
     Invalid arguments raise ValueError naming the argument. A plant state that stops being finite
     ends the run early (``meta["termination"] = "diverged"``, the last finite state as
-    ``x_final``); otherwise ``termination`` is ``goal_reached``, the reason an episodic plant
-    gave or ``completed``.
+    ``x_final``); otherwise ``termination`` says how the run ended: ``path_end_reached`` (an
+    open path's end), ``laps_completed``, ``aborted_off_path``, the reason an episodic plant
+    gave, or ``completed`` (it ran its ``steps``) -- how it ended, not whether the goal was met
+    (the metrics' verdict judges that). ``meta`` also records what the steering could do
+    (:func:`steering_meta`) and the footprint's width (``footprint_width_m``).
     """
     _check_run_args(dt_s, steps, seed, road)
     m = solve_interval(dt_s, control_period_s)
@@ -455,16 +477,17 @@ def simulate(
             break
         if goal_reached is not None and s >= (path.length_m if s_goal is None else s_goal):
             goal_reached = True
-            termination = "goal_reached"
+            termination = "path_end_reached" if s_goal is None else "laps_completed"
             k_end = k + 1
             break
         if abort_lateral_error_m is not None and abs(ey) > abort_lateral_error_m:
             aborted = True
+            termination = "aborted_off_path"
             goal_reached = False
             k_end = k + 1
             break
     sl = slice(0, k_end)
-    meta = dict(meta or {})
+    meta = {**steering_meta(controller, plant), "footprint_width_m": footprint.width_m, **(meta or {})}
     if m > 1:
         meta.update(control_period_s=float(control_period_s), between_solves=between_solves)
     if observed:

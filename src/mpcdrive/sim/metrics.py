@@ -7,13 +7,17 @@ key of ``metrics.json``, and at the same time a read-only mapping whose items ar
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from ..scene.footprint import Footprint
 from ..types import FALLBACK_KINDS, STATUS_HELD, STATUS_INACCURATE, STATUS_OK, SimResult
+from .actuator import SteeringActuator
+from .verdict import LANE_TOLERANCE_M, SATURATION_TOLERANCE, RunVerdict, VerdictCriteria, goal_condition, run_verdict
 
 __all__ = [
     "LANE_TOLERANCE_M",
@@ -23,7 +27,6 @@ __all__ = [
     "SolveTimes",
     "apply_goal_region",
     "compute_metrics",
-    "goal_met",
     "lane_excess_per_step",
 ]
 
@@ -105,8 +108,14 @@ class CommonRoadCheck:
 def _plain(value: Any) -> Any:
     """A field's value as it appears in ``metrics.json`` (nested records as dicts, a fresh copy
     of a dict)."""
-    if isinstance(value, (CollisionEvent, SolveTimes, CommonRoadCheck)):
+    if isinstance(value, (CollisionEvent, SolveTimes, CommonRoadCheck, VerdictCriteria, RunVerdict)):
         return value.as_dict()
+    if isinstance(value, SteeringActuator):
+        return {
+            "time_constant_s": value.time_constant_s,
+            "dead_time_s": value.dead_time_s,
+            "max_rate_rad_s": None if value.max_rate_rad_s == math.inf else value.max_rate_rad_s,
+        }
     if isinstance(value, tuple):
         return [_plain(v) for v in value]
     if isinstance(value, dict):
@@ -152,14 +161,37 @@ class Metrics(Mapping[str, Any]):
 
     Outcome:
 
-    goal_region_reached : the raw test (the run reached the end of an open path or its laps;
-    ``SimResult.goal_reached``; None: the run has no goal); goal_reached : the definition of
-    :func:`goal_met` -- region reached, inside the lane and without collision (None: no goal;
-    for CommonRoad the planning problem's goal and the checker's verdicts,
-    :func:`apply_goal_region`); termination : why the run ended (``completed``,
-    ``goal_reached`` or ``diverged``); controller_backend : the MPC implementation that ran
-    (``fast``: the condensed solver, ``osqp``, or ``pg``: projected gradient; from
-    ``meta["backend"]``; None if not recorded).
+    goal_region_reached : the raw test of the goal (``criteria.goal``): for ``reach`` the end
+    of an open path or the laps were reached (``SimResult.goal_reached``; None: the run has no
+    goal region), for ``standstill`` the car was standing at the end; goal_reached : the
+    verdict's goal part where there is a goal region -- reached, inside the road, without
+    collision and ending within ``criteria.max_final_lateral_error_m`` of the path (None: no
+    goal region; for CommonRoad the planning problem's goal and the checker's verdicts,
+    :func:`apply_goal_region`); not an argument; termination : how the run ended
+    (``completed``: it ran its steps, ``path_end_reached``, ``laps_completed``,
+    ``aborted_off_path``, ``diverged``, or an episodic plant's reason); controller_backend : the
+    MPC implementation that ran (``fast``: the condensed solver, ``osqp``, or ``pg``: projected
+    gradient; from ``meta["backend"]``; None if not recorded).
+
+    Steering limits and saturation (against the limits the controller had, ``meta["steer_limits_rad"]``
+    and ``meta["steer_rate_limit_rad_s"]``; over the solves, a rate being the change of the
+    command from one solve to the next over the control period; a command within
+    :data:`~mpcdrive.sim.verdict.SATURATION_TOLERANCE` of a limit is at it):
+
+    final_speed_mps : |speed| at the last logged step [m/s]; steer_limit_rad : the steering
+    angle limit [rad] (None: not recorded); steer_rate_limit_rad_s : the steering-rate limit
+    [rad/s] (None: none); steer_saturated_fraction, steer_rate_saturated_fraction : the fraction
+    of solves whose command sat at the angle / rate limit (None: no such limit);
+    steering_actuator : the plant's steering (:class:`~mpcdrive.sim.SteeringActuator` as
+    ``{time_constant_s, dead_time_s, max_rate_rad_s}``, ``max_rate_rad_s`` None for no limit;
+    all 0 / None: ideal, the paper's; None: a plant that steers itself, not recorded).
+
+    Verdict:
+
+    criteria : the :class:`~mpcdrive.sim.VerdictCriteria` the run was judged by (goal, final
+    lateral error and standstill speed allowed, lane tolerance); verdict : the run's
+    :class:`~mpcdrive.sim.RunVerdict` (:func:`~mpcdrive.sim.run_verdict` of these metrics;
+    not an argument), ``metrics.json["verdict"]``.
 
     External checkers:
 
@@ -196,15 +228,27 @@ class Metrics(Mapping[str, Any]):
     fallback_counts: dict[str, int]
     solve_time_us: SolveTimes
     goal_region_reached: bool | None
-    goal_reached: bool | None
+    goal_reached: bool | None = field(init=False)
     termination: str
     controller_backend: str | None
+    final_speed_mps: float
+    steer_limit_rad: float | None
+    steer_rate_limit_rad_s: float | None
+    steer_saturated_fraction: float | None
+    steer_rate_saturated_fraction: float | None
+    steering_actuator: SteeringActuator | None
+    criteria: VerdictCriteria = VerdictCriteria(max_final_lateral_error_m=0.5 * Footprint().width_m)
     commonroad: CommonRoadCheck | None = None
+    verdict: RunVerdict = field(init=False)
 
     def __post_init__(self) -> None:
         events = tuple(self.collision_events)
         object.__setattr__(self, "collision_events", events)
         object.__setattr__(self, "first_collision", events[0] if events else None)
+        object.__setattr__(self, "goal_reached", None)  # run_verdict does not read it
+        v = run_verdict(self)
+        object.__setattr__(self, "goal_reached", None if self.goal_region_reached is None else v.goal_reached)
+        object.__setattr__(self, "verdict", v)
 
     def as_dict(self) -> dict[str, Any]:
         """The run's ``metrics.json`` as a dict of plain JSON types (numbers, bools, strings,
@@ -224,7 +268,7 @@ class Metrics(Mapping[str, Any]):
         return len(_KEYS) - (self.commonroad is None)
 
 
-#: the keys of ``metrics.json`` in order (``commonroad`` last, only for CommonRoad runs)
+#: the keys of ``metrics.json`` in order (``commonroad`` only for CommonRoad runs, ``verdict`` last)
 _KEYS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(Metrics))
 _FIELD_NAMES = frozenset(_KEYS)
 
@@ -242,38 +286,15 @@ def _lane_excess(result: SimResult) -> float:
     return 0.0 if e is None or e.size == 0 else float(np.max(e))
 
 
-#: lane excess [m] up to which a run still counts as inside the lane (the goal definition, the
-#: run verdict): the excess is measured on the projection onto the path's polyline table, whose
-#: chord error kappa ds^2 / 8 stays below a millimetre for the tables' spacing (<= 0.1 m) on
-#: curves down to 1.25 m radius; anything beyond is a real excursion
-LANE_TOLERANCE_M = 1e-3
-
-
-def goal_met(region_reached: bool | None, max_lane_excess_m: float, collisions: int) -> bool | None:
-    """The one definition of ``goal_reached``: the goal region was reached (``region_reached``)
-    AND the body stayed inside the lane (largest excess <= :data:`LANE_TOLERANCE_M`) AND there
-    was no collision. None when the run has no goal (``region_reached`` None: a closed path
-    without ``laps``, or a run that does not stop at the path's end)."""
-    if region_reached is None:
-        return None
-    return bool(region_reached) and max_lane_excess_m <= LANE_TOLERANCE_M and int(collisions) == 0
-
-
-def apply_goal_region(
-    metrics: Metrics, region_reached: bool, *, collision_free: bool = True, road_compliant: bool = True
-) -> Metrics:
-    """``metrics`` with the goal judged on another goal region (a CommonRoad planning problem's):
-    ``goal_region_reached`` becomes ``region_reached`` and ``goal_reached`` follows
-    :func:`goal_met`, also requiring an external checker's ``collision_free`` and
-    ``road_compliant`` verdicts (the drivability checker's for CommonRoad). The checker's road
-    is the authority on "inside the road" there: mpcdrive's own lane (one width along the route's
-    centre line) is a proxy that a lane change or a wider lanelet exceeds."""
-    met = goal_met(region_reached, 0.0, metrics.collisions)  # the lane proxy gives way to the checker's road
-    return dataclasses.replace(
-        metrics,
-        goal_region_reached=bool(region_reached),
-        goal_reached=bool(met and collision_free and road_compliant),
-    )
+def apply_goal_region(metrics: Metrics, region_reached: bool, commonroad: CommonRoadCheck | None = None) -> Metrics:
+    """``metrics`` judged on another goal region (a CommonRoad planning problem's):
+    ``goal_region_reached`` becomes ``region_reached`` and, with ``commonroad``, the metrics hold
+    that checker's block; the goal and the verdict follow (:func:`~mpcdrive.sim.run_verdict`),
+    with the checker's collision and road verdicts as the authority: mpcdrive's own lane there
+    (one width along the route's centre line) is a proxy that a lane change or a wider lanelet
+    exceeds."""
+    cr = metrics.commonroad if commonroad is None else commonroad
+    return dataclasses.replace(metrics, goal_region_reached=bool(region_reached), commonroad=cr)
 
 
 def _rms(a) -> float:
@@ -281,10 +302,13 @@ def _rms(a) -> float:
     return float(np.sqrt(np.mean(a * a))) if a.size else float("nan")
 
 
-def compute_metrics(result: SimResult) -> Metrics:
+def compute_metrics(result: SimResult, criteria: VerdictCriteria | None = None) -> Metrics:
     """The metrics of one run (:class:`Metrics`, whose :meth:`~Metrics.as_dict` is the run's
     ``metrics.json``), from ``result`` alone: its log and ``result.meta`` (collisions and their
-    events, obstacle clearance, termination, backend, initial steering angle)."""
+    events, obstacle clearance, termination, backend, initial steering angle, the steering limits
+    and actuator, the car's width), judged by ``criteria`` (default: ``meta["criteria"]``, a
+    scenario's, else :class:`~mpcdrive.sim.VerdictCriteria`'s defaults; a final-error tolerance
+    of None is half the car's width)."""
     K = result.steps
     ey = result.e_y_m
     half = ey[K // 2 :]
@@ -299,6 +323,10 @@ def compute_metrics(result: SimResult) -> Metrics:
     events = tuple(CollisionEvent(**e) for e in result.meta.get("collision_events", ()))
     lane_excess = _lane_excess(result)
     clearance = result.meta.get("min_obstacle_clearance_m")
+    if criteria is None:
+        criteria = VerdictCriteria.from_mapping(result.meta.get("criteria"))
+    criteria = criteria.resolved(result.meta.get("footprint_width_m", Footprint().width_m))
+    final_speed = float(abs(result.v_mps[-1])) if K else math.nan
     return Metrics(
         steps=int(K),
         duration_s=float(K * result.dt_s),
@@ -324,11 +352,58 @@ def compute_metrics(result: SimResult) -> Metrics:
             p99=float(np.percentile(st, 99)),
             max=float(np.max(st)),
         ),
-        goal_region_reached=result.goal_reached,
-        goal_reached=goal_met(result.goal_reached, lane_excess, collisions),
+        goal_region_reached=goal_condition(criteria, result.goal_reached, final_speed),
         termination=result.meta.get("termination", "completed"),
         controller_backend=result.meta.get("backend") or None,
+        final_speed_mps=final_speed,
+        **dataclasses.asdict(_saturation(result, steer0, solved)),
+        steering_actuator=result.meta.get("steering_actuator"),
+        criteria=criteria,
     )
+
+
+@dataclass
+class _Saturation:
+    steer_limit_rad: float | None = None
+    steer_rate_limit_rad_s: float | None = None
+    steer_saturated_fraction: float | None = None
+    steer_rate_saturated_fraction: float | None = None
+
+
+def _saturation(result: SimResult, steer0: np.ndarray, solved: np.ndarray) -> _Saturation:
+    """The steering limits the controller had (``meta["steer_limits_rad"]``, ``(lo, hi)`` [rad],
+    and ``meta["steer_rate_limit_rad_s"]``) and the fraction of solves whose command sat at each
+    (within :data:`SATURATION_TOLERANCE` of it): a rate is the command's change since the
+    previous solve over the control period."""
+    limits = result.meta.get("steer_limits_rad")
+    rate_limit = result.meta.get("steer_rate_limit_rad_s")
+    out = _Saturation(steer_rate_limit_rad_s=None if rate_limit is None else float(rate_limit))
+    u = steer0[1:][solved]
+    n = int(u.size)
+    if limits is not None:
+        lo, hi = (float(b) for b in limits)
+        out.steer_limit_rad = max(abs(lo), abs(hi))
+        if n:
+            at = (u >= hi - SATURATION_TOLERANCE * abs(hi)) | (u <= lo + SATURATION_TOLERANCE * abs(lo))
+            out.steer_saturated_fraction = float(np.count_nonzero(at)) / n
+    if rate_limit is not None and n:
+        period = float(result.meta.get("control_period_s", result.dt_s))
+        rate = np.abs(u - np.r_[steer0[0], u[:-1]]) / period
+        out.steer_rate_saturated_fraction = float(np.count_nonzero(rate >= (1 - SATURATION_TOLERANCE) * rate_limit)) / n
+    return out
+    if limits is not None:
+        lo, hi = (float(b) for b in limits)
+        out["steer_limit_rad"] = max(abs(lo), abs(hi))
+        at = (u >= hi - SATURATION_TOLERANCE * abs(hi)) | (u <= lo + SATURATION_TOLERANCE * abs(lo))
+        out["steer_saturated_fraction"] = float(np.count_nonzero(at)) / n
+    if rate_limit is not None:
+        period = float(result.meta.get("control_period_s", result.dt_s))
+        prev = np.r_[steer0[0], u[:-1]]
+        rate = np.abs(u - prev) / period
+        out["steer_rate_saturated_fraction"] = (
+            float(np.count_nonzero(rate >= (1 - SATURATION_TOLERANCE) * rate_limit)) / n
+        )
+    return out
 
 
 def _fallback_counts(fallback) -> dict[str, int]:

@@ -1,34 +1,185 @@
-"""A run's safety outcome in words: collisions (which obstacle, when), clearance, lane excess,
-goal, failed solves and how they were handled, and an external checker's verdicts (CommonRoad's
-drivability checker). Pure functions of a run's metrics as a mapping in the shape of
-``metrics.json``: a :class:`~mpcdrive.sim.Metrics` (:func:`~mpcdrive.sim.compute_metrics`) or a
-``metrics.json`` read back (missing keys count as fine)."""
+"""The verdict of a run: one judgement, computed once from the run's metrics and shown everywhere
+(the summary line, ``metrics.json["verdict"]``, ``report.html``, ``mpcdrive sweep``, ``mpcdrive
+run --check``).
+
+Its parts, each ``ok`` or failed with a reason (or ``ok`` None where there is nothing to judge):
+
+* ``divergence``: the simulated state stayed finite;
+* ``collision``: the body never overlapped an obstacle (nor did an external checker find a
+  collision);
+* ``road``: the body stayed inside the road, up to :attr:`VerdictCriteria.max_lane_excess_m`
+  (an external checker's road verdict, CommonRoad's, is the authority where there is one);
+* ``goal``: what the run had to do (:attr:`VerdictCriteria.goal`: reach the end of its open path
+  or its laps, or come to a standstill), done safely (inside the road, without a collision) and
+  ending within :attr:`VerdictCriteria.max_final_lateral_error_m` of the path; a run with no goal
+  region (a closed path without laps, a run that does not stop at the path's end) is judged on
+  that final error alone; for CommonRoad the planning problem's goal region;
+* one part per external checker whose block the metrics hold (:data:`EXTERNAL_PARTS`: CommonRoad's
+  drivability and solution checkers, ``metrics["commonroad"]``).
+
+A run passes when no part failed; it is *unsafe* when it diverged, collided or left the road.
+Steering saturation (how often the steering sat at its angle or rate limit) and failed solves are
+notes, informational: a controller that uses its full authority or recovers from a failed solve
+by its fallback ladder has done nothing unsafe; the parts judge the outcome.
+
+Pure functions of a run's metrics as a mapping in the shape of ``metrics.json``: a
+:class:`~mpcdrive.sim.Metrics` (:func:`~mpcdrive.sim.compute_metrics`) or a ``metrics.json``
+read back (missing keys count as fine, missing criteria as the defaults)."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from .metrics import LANE_TOLERANCE_M
+__all__ = [
+    "EXTERNAL_PARTS",
+    "GOALS",
+    "LANE_TOLERANCE_M",
+    "SATURATION_TOLERANCE",
+    "STANDSTILL_SPEED_MPS",
+    "RunVerdict",
+    "VerdictCriteria",
+    "VerdictPart",
+    "goal_condition",
+    "run_verdict",
+]
+
+#: lane excess [m] up to which a run still counts as inside the lane (the goal definition, the
+#: run verdict): the excess is measured on the projection onto the path's polyline table, whose
+#: chord error kappa ds^2 / 8 stays below a millimetre for the tables' spacing (<= 0.1 m) on
+#: curves down to 1.25 m radius; anything beyond is a real excursion
+LANE_TOLERANCE_M = 1e-3
+#: speed [m/s] up to which a car counts as standing (goal ``standstill``): it covers less than a
+#: centimetre a second
+STANDSTILL_SPEED_MPS = 0.01
+#: a command within this fraction of a limit counts as at the limit (steering saturation): the
+#: commands are clipped to the limits, and a solver meets an active limit to its tolerance
+#: (OSQP's 1e-5 rad on steering steps of at least r dt ~ 0.01 rad is 1e-3 of it)
+SATURATION_TOLERANCE = 1e-3
+#: what a run may have to do: ``reach`` the end of its open path (or its laps on a closed one),
+#: or come to a ``standstill`` (e.g. before an obstacle that blocks the road)
+GOALS = ("reach", "standstill")
+
+
+@dataclass(frozen=True)
+class VerdictCriteria:
+    """How a run is judged (``metrics.json["criteria"]``; a scenario's ``verdict`` block).
+
+    goal : ``reach`` (the end of an open path, the laps of a closed one) or ``standstill`` (at
+    most ``max_final_speed_mps`` at the end); max_final_lateral_error_m : the largest |lateral
+    error| at the end [m] (None: half the car's width, the path still under the body; resolved
+    by :meth:`resolved`); max_final_speed_mps : standstill speed [m/s]; max_lane_excess_m : the
+    largest excess outside the road [m] that still counts as inside (the measurement's accuracy,
+    :data:`LANE_TOLERANCE_M`)."""
+
+    goal: str = "reach"
+    max_final_lateral_error_m: float | None = None
+    max_final_speed_mps: float = STANDSTILL_SPEED_MPS
+    max_lane_excess_m: float = LANE_TOLERANCE_M
+
+    def __post_init__(self):
+        if self.goal not in GOALS:
+            raise ValueError(f"goal must be one of {', '.join(GOALS)}, got {self.goal!r}")
+        for name in ("max_final_lateral_error_m", "max_final_speed_mps", "max_lane_excess_m"):
+            v = getattr(self, name)
+            if v is None and name == "max_final_lateral_error_m":
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0 [SI units], got {v!r}")
+
+    def resolved(self, car_width_m: float) -> VerdictCriteria:
+        """These criteria with the final-error tolerance of a car ``car_width_m`` [m] wide filled in."""
+        if self.max_final_lateral_error_m is not None:
+            return self
+        return VerdictCriteria(self.goal, 0.5 * float(car_width_m), self.max_final_speed_mps, self.max_lane_excess_m)
+
+    def as_dict(self) -> dict[str, Any]:
+        """The JSON object of ``metrics.json["criteria"]``."""
+        return {
+            "goal": self.goal,
+            "max_final_lateral_error_m": self.max_final_lateral_error_m,
+            "max_final_speed_mps": self.max_final_speed_mps,
+            "max_lane_excess_m": self.max_lane_excess_m,
+        }
+
+    @classmethod
+    def from_mapping(cls, d: Mapping[str, Any] | None) -> VerdictCriteria:
+        """Criteria from their JSON object (missing keys: the defaults)."""
+        d = d or {}
+        return cls(
+            **{
+                k: d[k]
+                for k in ("goal", "max_final_lateral_error_m", "max_final_speed_mps", "max_lane_excess_m")
+                if k in d
+            }
+        )
+
+
+def goal_condition(criteria: VerdictCriteria, path_goal_reached: bool | None, final_speed_mps: float) -> bool | None:
+    """Whether the run did what its goal asks, safety aside (``goal_region_reached``): for
+    ``reach`` the closed loop's own test (``SimResult.goal_reached``: the end of an open path or
+    the laps; None without a goal region), for ``standstill`` the speed at the end."""
+    if criteria.goal == "standstill":
+        return bool(math.isfinite(final_speed_mps) and abs(final_speed_mps) <= criteria.max_final_speed_mps)
+    return path_goal_reached
+
+
+@dataclass(frozen=True)
+class VerdictPart:
+    """One part of a verdict: ``ok`` (None: nothing to judge), ``finding`` (the part in words, as
+    the summary says it; None where there is nothing to say) and ``reason`` (why it failed; None
+    unless ``ok`` is False)."""
+
+    ok: bool | None
+    finding: str | None
+    reason: str | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"ok": self.ok, "reason": self.reason, "finding": self.finding}
+
+
+def _part(ok: bool | None, finding: str | None) -> VerdictPart:
+    return VerdictPart(ok, finding, finding if ok is False else None)
 
 
 @dataclass(frozen=True)
 class RunVerdict:
-    """What happened in a run, judged from its metrics.
+    """The verdict of a run (:func:`run_verdict`; ``metrics.json["verdict"]`` is :meth:`as_dict`).
 
-    collided : the body overlapped an obstacle (or an external checker found a collision);
-    off_road : the body left the lane by more than ``LANE_TOLERANCE_M`` or, when an external
-    checker judged the road (CommonRoad), that checker found it off the road; diverged : the simulated state stopped being finite;
-    goal_reached : the metrics' ``goal_reached`` (None: the run has no goal);
-    findings : the outcome as phrases (divergence, collisions, lane, goal, failed solves, the
-    external checker)."""
+    parts : name -> :class:`VerdictPart`, in order (``divergence``, ``collision``, ``road``,
+    ``goal``, then the external checkers'); notes : name -> phrase, informational (``steering``:
+    saturation, ``solver``: failed solves and how they were handled)."""
 
-    collided: bool
-    off_road: bool
-    diverged: bool
-    goal_reached: bool | None
-    findings: tuple[str, ...]
+    parts: tuple[tuple[str, VerdictPart], ...]
+    notes: tuple[tuple[str, str], ...] = ()
+
+    def part(self, name: str) -> VerdictPart | None:
+        """The part called ``name`` (None if the verdict has none)."""
+        return dict(self.parts).get(name)
+
+    def _failed(self, name: str) -> bool:
+        p = self.part(name)
+        return p is not None and p.ok is False
+
+    @property
+    def collided(self) -> bool:
+        return self._failed("collision")
+
+    @property
+    def off_road(self) -> bool:
+        return self._failed("road")
+
+    @property
+    def diverged(self) -> bool:
+        return self._failed("divergence")
+
+    @property
+    def goal_reached(self) -> bool | None:
+        """The goal part's ``ok``."""
+        p = self.part("goal")
+        return None if p is None else p.ok
 
     @property
     def unsafe(self) -> bool:
@@ -36,26 +187,74 @@ class RunVerdict:
         return self.collided or self.off_road or self.diverged
 
     @property
+    def passed(self) -> bool:
+        """No part failed (``mpcdrive run --check`` exits 3 otherwise)."""
+        return not any(p.ok is False for _, p in self.parts)
+
+    @property
     def failed(self) -> bool:
-        """Unsafe or missed its goal (``mpcdrive run --check`` exits 3)."""
-        return self.unsafe or self.goal_reached is False
+        return not self.passed
+
+    @property
+    def reasons(self) -> list[str]:
+        """Why the run failed: the reason of each failed part, in order (empty: passed)."""
+        return [p.reason for _, p in self.parts if p.ok is False and p.reason]
 
     def problems(self) -> list[str]:
-        """Short names of what failed (``collision``, ``left the road``, ``diverged``,
-        ``goal not reached``)."""
-        names = [
-            ("collision", self.collided),
-            ("left the road", self.off_road),
-            ("diverged", self.diverged),
-            ("goal not reached", self.goal_reached is False),
-        ]
-        return [n for n, bad in names if bad]
+        """Short names of the failed parts (``diverged``, ``collision``, ``left the road``, ``goal
+        not reached``, an external checker's name)."""
+        short = {
+            "divergence": "diverged",
+            "collision": "collision",
+            "road": "left the road",
+            "goal": "goal not reached",
+        }
+        return [short.get(n, n) for n, p in self.parts if p.ok is False]
+
+    @property
+    def headline(self) -> str:
+        """``UNSAFE`` (diverged, collided or left the road), ``FAILED`` (another part failed) or
+        ``passed``."""
+        return "UNSAFE" if self.unsafe else "FAILED" if self.failed else "passed"
+
+    @property
+    def findings(self) -> tuple[str, ...]:
+        """The verdict as phrases: the parts' findings, then the notes (the external checkers
+        last)."""
+        core = [p.finding for n, p in self.parts if n in _CORE and p.finding]
+        external = [p.finding for n, p in self.parts if n not in _CORE and p.finding]
+        return (*core, *(text for _, text in self.notes), *external)
+
+    def prefix(self) -> str:
+        """``UNSAFE: `` or ``FAILED: `` before a line about a run that did not pass, else ''."""
+        return "" if self.passed else self.headline + ": "
 
     def text(self) -> str:
-        """One line: ``UNSAFE: `` first when unsafe, then the findings."""
-        return ("UNSAFE: " if self.unsafe else "") + "; ".join(self.findings)
+        """One line: ``UNSAFE: `` or ``FAILED: `` first when the run did not pass, then the findings."""
+        return self.prefix() + "; ".join(self.findings)
+
+    def line(self, run_id: str) -> str:
+        """The verdict of run ``run_id`` as the summary line begins: ``UNSAFE: <id>: <findings>``."""
+        return f"{self.prefix()}{run_id}: {'; '.join(self.findings)}"
+
+    def as_dict(self) -> dict[str, Any]:
+        """``metrics.json["verdict"]``: ``passed``, ``unsafe``, ``headline``, ``text``,
+        ``reasons``, ``parts`` (name -> ``{ok, reason, finding}``) and ``notes`` (name -> phrase)."""
+        return {
+            "passed": self.passed,
+            "unsafe": self.unsafe,
+            "headline": self.headline,
+            "text": self.text(),
+            "reasons": self.reasons,
+            "parts": {n: p.as_dict() for n, p in self.parts},
+            "notes": dict(self.notes),
+        }
 
 
+_CORE = ("divergence", "collision", "road", "goal")
+
+
+# -- the phrases -------------------------------------------------------------------------------------
 def _obstacle(event: Mapping[str, Any]) -> str:
     name = event.get("name")
     return f"obstacle {event['obstacle']}" + (f" ({name})" if name else "")
@@ -82,31 +281,18 @@ def collision_phrase(m: Mapping[str, Any]) -> str | None:
     return text
 
 
-def lane_phrase(m: Mapping[str, Any]) -> str:
+def lane_phrase(m: Mapping[str, Any], tolerance_m: float = LANE_TOLERANCE_M) -> str:
     """``left the lane by 0.82 m``, ``inside the lane (max excess 0 m)`` or ``no lane given``; for
     a run an external checker judged on the road (CommonRoad) the lane is the route lane, a proxy
     the checker's verdict overrides."""
     if m.get("road_given") is False:
         return "no lane given"
     e = float(m.get("max_lane_excess_m") or 0.0)
-    if e > LANE_TOLERANCE_M:
+    if e > tolerance_m:
         if "road_compliant" in (m.get("commonroad") or {}):
             return f"left the route lane by {e:.3g} m (the CommonRoad checker judges the road)"
         return f"left the lane by {e:.3g} m"
     return "inside the lane" + (f" (max excess {e:.2g} m)" if e > 0 else "")
-
-
-def goal_phrase(m: Mapping[str, Any]) -> str | None:
-    """``goal reached``, ``goal not reached`` (saying when the region was reached but not
-    safely), or None for a run without a goal."""
-    g = m.get("goal_reached")
-    if g is None:
-        return None
-    if g:
-        return "goal reached"
-    if m.get("goal_region_reached"):
-        return "goal not reached (the goal region was reached, but not safely)"
-    return "goal not reached"
 
 
 def solver_phrase(m: Mapping[str, Any]) -> str:
@@ -124,6 +310,35 @@ def solver_phrase(m: Mapping[str, Any]) -> str:
         return f"{head}, {'all ' if n > 1 else ''}recovered by {counts[0][0]}"
     parts = [f"{v} recovered by {k}" if i == 0 else f"{v} by {k}" for i, (k, v) in enumerate(counts)]
     return f"{head}: {', '.join(parts)}"
+
+
+def _percent(fraction: float) -> str:
+    p = 100.0 * fraction
+    return f"{p:.0f} %" if p >= 10 or p == 0 else f"{p:.2g} %"
+
+
+def steering_phrase(m: Mapping[str, Any]) -> str | None:
+    """How often the steering sat at its limits: ``steering at its angle limit 12 % and at its rate
+    limit 38 % of the time``; without a rate limit it says so (``ideal steering (the paper's: no
+    rate limit, no lag; up to 84.9 rad/s)``); None when the run recorded no limits."""
+    angle = m.get("steer_saturated_fraction")
+    rate = m.get("steer_rate_saturated_fraction")
+    if angle is None:
+        return None
+    if m.get("steer_rate_limit_rad_s") is not None and rate is not None:
+        return f"steering at its angle limit {_percent(angle)} and at its rate limit {_percent(rate)} of the time"
+    peak = m.get("max_abs_steer_rate_rad_s")
+    up_to = f"; up to {peak:.3g} rad/s" if isinstance(peak, (int, float)) else ""
+    act = m.get("steering_actuator")
+    if isinstance(act, Mapping) and _is_ideal(act):
+        head = f"ideal steering (the paper's: no rate limit, no lag{up_to})"
+    else:
+        head = f"no steering-rate limit in the controller ({up_to[2:] or 'none'})"
+    return f"{head}, at its angle limit {_percent(angle)} of the time"
+
+
+def _is_ideal(act: Mapping[str, Any]) -> bool:
+    return not act.get("time_constant_s") and not act.get("dead_time_s") and act.get("max_rate_rad_s") is None
 
 
 def checker_phrase(cr: Mapping[str, Any]) -> str:
@@ -145,24 +360,93 @@ def checker_phrase(cr: Mapping[str, Any]) -> str:
             if goal
             else "goal not reached"
         )
+    if cr.get("solution_valid") is False:
+        words.append("solution rejected by CommonRoad's solution checker")
     return "CommonRoad checker: " + ", ".join(words)
 
 
-def run_verdict(m: Mapping[str, Any]) -> RunVerdict:
-    """The verdict of a run with metrics ``m`` (missing keys count as fine)."""
+def _commonroad_part(cr: Mapping[str, Any]) -> VerdictPart:
+    ok = cr.get("passed")
+    return _part(None if ok is None else bool(ok), checker_phrase(cr))
+
+
+#: the parts of external checkers: metrics key -> the part judged from that block of the metrics
+#: (present only when the metrics hold the block). CommonRoad's drivability and solution checkers
+#: up to the goal are ``commonroad``; another checker (e.g. a verdict on the whole drive) adds its
+#: key and function here
+EXTERNAL_PARTS: dict[str, Callable[[Mapping[str, Any]], VerdictPart]] = {"commonroad": _commonroad_part}
+
+
+# -- the verdict ---------------------------------------------------------------------------------------
+def _goal_part(m: Mapping[str, Any], crit: VerdictCriteria, collided: bool, off_road: bool) -> VerdictPart:
+    region = m.get("goal_region_reached")
     cr = m.get("commonroad") or {}
+    fe = m.get("final_lateral_error_m")
+    tol = crit.max_final_lateral_error_m
+    off_path = None  # why the end is too far from the path, or None
+    if not cr and tol is not None and isinstance(fe, (int, float)):
+        if not math.isfinite(fe):
+            off_path = "the final lateral error is not finite"
+        elif abs(fe) > tol:
+            off_path = f"ended {abs(fe):.3g} m from the path (the goal allows {tol:.3g} m)"
+    what = "a standstill" if crit.goal == "standstill" else "the goal region"
+    if region is None:  # no goal region: the run is judged on where it ends
+        if off_path is not None:
+            return _part(False, f"no goal region, but {off_path}")
+        return _part(True, None)
+    if not region:
+        if crit.goal == "standstill":
+            v = m.get("final_speed_mps")
+            moving = f"still moving at {v:.3g} m/s at the end" if isinstance(v, (int, float)) else "not stopped"
+            return _part(False, f"goal not reached ({moving}; the goal is a standstill)")
+        return _part(False, "goal not reached")
+    if collided or off_road:
+        return _part(False, f"goal not reached ({what} was reached, but not safely)")
+    if off_path is not None:
+        return _part(False, f"goal not reached ({what} was reached, but {off_path})")
+    return _part(True, "goal reached" + (" (a standstill)" if crit.goal == "standstill" else ""))
+
+
+def run_verdict(m: Mapping[str, Any]) -> RunVerdict:
+    """The verdict of a run with metrics ``m`` (missing keys count as fine; criteria from
+    ``m["criteria"]``, else the defaults)."""
+    crit = VerdictCriteria.from_mapping(m.get("criteria"))
+    cr = m.get("commonroad") or {}
+    diverged = m.get("termination") == "diverged"
+    parts: list[tuple[str, VerdictPart]] = [
+        (
+            "divergence",
+            _part(False, f"the simulated state diverged (not finite) after {m.get('steps')} steps")
+            if diverged
+            else _part(True, None),
+        )
+    ]
     collided = bool(m.get("collisions")) or bool(m.get("collision_events")) or cr.get("collision_free") is False
+    phrase = collision_phrase(m)
+    if cr.get("collision_free") is False and not (m.get("collisions") or m.get("collision_events")):
+        phrase = "the CommonRoad checker found a collision" + (f" ({phrase})" if phrase else "")
+    # without obstacles (no phrase) there is nothing to judge
+    parts.append(("collision", _part(False if collided else None if phrase is None else True, phrase)))
+    lane = lane_phrase(m, crit.max_lane_excess_m)
     if "road_compliant" in cr:  # an external checker's road (CommonRoad's lanelets) is the authority
         off_road = cr["road_compliant"] is False
+        if off_road and not lane.startswith("left"):
+            lane = "the CommonRoad checker found the car off the road"
+        parts.append(("road", VerdictPart(not off_road, lane, lane if off_road else None)))
+    elif m.get("road_given") is False:
+        off_road = False
+        parts.append(("road", VerdictPart(None, lane)))
     else:
-        off_road = float(m.get("max_lane_excess_m") or 0.0) > LANE_TOLERANCE_M
-    diverged = m.get("termination") == "diverged"
-    findings = []
-    if diverged:
-        findings.append(f"the simulated state diverged (not finite) after {m.get('steps')} steps")
-    for phrase in (collision_phrase(m), lane_phrase(m), goal_phrase(m), solver_phrase(m)):
-        if phrase is not None:
-            findings.append(phrase)
-    if cr:
-        findings.append(checker_phrase(cr))
-    return RunVerdict(collided, off_road, diverged, m.get("goal_reached"), tuple(findings))
+        off_road = float(m.get("max_lane_excess_m") or 0.0) > crit.max_lane_excess_m
+        parts.append(("road", _part(not off_road, lane)))
+    parts.append(("goal", _goal_part(m, crit, collided, off_road)))
+    for key, judge in EXTERNAL_PARTS.items():
+        block = m.get(key)
+        if block:
+            parts.append((key, judge(block)))
+    notes = []
+    steering = steering_phrase(m)
+    if steering is not None:
+        notes.append(("steering", steering))
+    notes.append(("solver", solver_phrase(m)))
+    return RunVerdict(tuple(parts), tuple(notes))

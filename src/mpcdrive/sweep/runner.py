@@ -74,44 +74,49 @@ TIMING_COLUMNS: tuple[str, ...] = ("solve_time_p50_us", "solve_time_p99_us", "so
 
 @dataclass(frozen=True)
 class SuccessCriteria:
-    """When a run counts as a success: it ran to the end (no error, no divergence), had no
-    collision, its footprint left the lane by at most ``max_lane_excess_m`` [m], it reached the
-    goal of an open path, and its final |lateral error| is at most ``max_final_lateral_error_m`` [m]."""
+    """A run succeeds when its verdict passes (``Metrics.verdict``, :func:`~mpcdrive.sim.run_verdict`:
+    no divergence, no collision, inside the road, its goal reached safely and ending close to the
+    path); these override the verdict's tolerances of every run (None: the scenario's own, its
+    ``verdict`` block): ``max_final_lateral_error_m`` [m] (``verdict.max_final_lateral_error_m``)
+    and ``max_lane_excess_m`` [m] (``verdict.max_lane_excess_m``)."""
 
-    max_final_lateral_error_m: float = 0.1
-    max_lane_excess_m: float = 0.0
+    max_final_lateral_error_m: float | None = None
+    max_lane_excess_m: float | None = None
 
     def __post_init__(self):
         for name in ("max_final_lateral_error_m", "max_lane_excess_m"):
             v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+            if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise SweepError(f"{name} must be a finite number >= 0, got {v!r}")
 
+    def apply(self, data: dict) -> dict:
+        """Scenario ``data`` (a dict, changed in place and returned) with these overrides in its
+        ``verdict`` block."""
+        verdict = data.setdefault("verdict", {})
+        for name in ("max_final_lateral_error_m", "max_lane_excess_m"):
+            v = getattr(self, name)
+            if v is not None:
+                verdict[name] = v
+        return data
+
+    @staticmethod
     def judge(
-        self, m: Metrics, *, max_lane_excess_t_s: float | None = None, lane_excess_at_start_m: float | None = None
+        m: Metrics, *, max_lane_excess_t_s: float | None = None, lane_excess_at_start_m: float | None = None
     ) -> list[str]:
-        """Reasons the run with metrics ``m`` failed (empty: success). ``max_lane_excess_t_s``
-        (when the lane excess was largest [s]) and ``lane_excess_at_start_m`` (the excess at the
-        first step [m]) add to the lane finding."""
+        """Reasons the run with metrics ``m`` failed (empty: success): its verdict's reasons,
+        verbatim; ``max_lane_excess_t_s`` (when the lane excess was largest [s]) and
+        ``lane_excess_at_start_m`` (the excess at the first step [m]) add to the road's."""
         why = []
-        if m.termination == "diverged":
-            why.append("plant state diverged (not finite)")
-        if m.collisions:
-            why.append(f"{m.collisions} collision(s)")
-        if m.max_lane_excess_m > self.max_lane_excess_m:
-            msg = f"left the lane by {m.max_lane_excess_m:.3g} m"
-            if max_lane_excess_t_s is not None:
-                msg += f" at t = {max_lane_excess_t_s:.2f} s"
-            if lane_excess_at_start_m:
-                msg += f" (already {lane_excess_at_start_m:.3g} m outside at the start)"
+        for name, part in m.verdict.parts:
+            if part.ok is not False or not part.reason:
+                continue
+            msg = part.reason
+            if name == "road" and msg.startswith("left the"):
+                if max_lane_excess_t_s is not None:
+                    msg += f" at t = {max_lane_excess_t_s:.2f} s"
+                if lane_excess_at_start_m:
+                    msg += f" (already {lane_excess_at_start_m:.3g} m outside at the start)"
             why.append(msg)
-        if m.goal_reached is False:
-            why.append("goal not reached")
-        fe = m.final_lateral_error_m
-        if not (isinstance(fe, float) and math.isfinite(fe)):
-            why.append("final lateral error not finite")
-        elif fe > self.max_final_lateral_error_m:
-            why.append(f"final |lateral error| {fe:.3g} m > {self.max_final_lateral_error_m:g} m")
         return why
 
 
@@ -177,7 +182,7 @@ def plan_sweep(
     data = spec.model_dump(mode="json")
     _materialize_plant(data)
     settings = tuple(parse_set(s, data) for s in set_)
-    base_data = apply(data, settings, {})
+    base_data = criteria.apply(apply(data, settings, {}))
     try:
         base = validate_scenario_data(base_data, f"{source} with --set")
     except ScenarioError as e:
@@ -273,7 +278,7 @@ def run_task(task: RunTask) -> dict:
         solve_time_max_us=st.max,
     )
     why = task.criteria.judge(m, **lane)
-    row.update(success=not why, failure_reason="; ".join(why), wall_s=time.perf_counter() - t0)
+    row.update(success=m.verdict.passed, failure_reason="; ".join(why), wall_s=time.perf_counter() - t0)
     return row
 
 

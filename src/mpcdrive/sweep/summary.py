@@ -49,12 +49,16 @@ def _category(reason: str) -> list[str]:
             out.append("invalid scenario")
         elif part.startswith("error:"):
             out.append("error: " + part.split(":")[1].strip())
-        elif "collision" in part:
+        elif "collision" in part or part.startswith("collided"):
             out.append("collision")
-        elif part.startswith("left the lane"):
+        elif part.startswith("left the"):
             out.append("left the lane, already outside at the start" if "already" in part else "left the lane")
-        elif part.startswith("final |lateral error|"):
+        elif "from the path (the goal allows" in part:
             out.append("final lateral error too large")
+        elif part.startswith("goal not reached"):
+            out.append("goal not reached")
+        elif "diverged" in part:
+            out.append("diverged")
         elif part:
             out.append(part)
     return out
@@ -79,10 +83,7 @@ def summarize(plan: SweepPlan, rows: list[dict], backend: str = "local") -> dict
         "backend": backend,
         "vary": [str(v) for v in plan.variations],
         "set": [str(s) for s in plan.settings],
-        "criteria": {
-            "max_final_lateral_error_m": plan.criteria.max_final_lateral_error_m,
-            "max_lane_excess_m": plan.criteria.max_lane_excess_m,
-        },
+        "criteria": plan.base.verdict.model_dump(mode="json"),  # the runs' verdict criteria, overrides applied
         "successes": len(ok),
         "failures": len(failed),
         "success_rate": len(ok) / n if n else None,
@@ -156,9 +157,9 @@ def summary_markdown(s: dict) -> str:
     c = s["criteria"]
     L += [
         "",
-        f"A run succeeds when it runs to the end without error or divergence, has no collision, leaves "
-        f"the lane by at most {c['max_lane_excess_m']:g} m, reaches the goal of an open path and ends within "
-        f"{c['max_final_lateral_error_m']:g} m of the path.",
+        f"A run succeeds when its verdict passes: it runs without error or divergence, has no collision, "
+        f"leaves the road by at most {c['max_lane_excess_m']:g} m, reaches its goal ({c['goal']}) safely and "
+        f"ends within {c['max_final_lateral_error_m']:g} m of the path.",
         "",
     ]
     rate = "-" if s["success_rate"] is None else f"{100 * s['success_rate']:.1f} %"
