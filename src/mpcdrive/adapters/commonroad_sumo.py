@@ -146,10 +146,33 @@ def _obstacle_name(o) -> str:
     return f"{o.obstacle_type.value}-{o.obstacle_id}"
 
 
+def exact_states(scenario):
+    """A copy of ``scenario`` whose obstacle states are exact: a position given as a shape (an
+    uncertain position) becomes its centre, an interval its middle, as the import reads them
+    (commonroad-sumo's route matching takes every position for a point)."""
+    import copy
+
+    from .commonroad_route import point, scalar
+
+    sc = copy.deepcopy(scenario)
+    for o in sc.dynamic_obstacles:
+        states = [o.initial_state]
+        if o.prediction is not None and getattr(o.prediction, "trajectory", None) is not None:
+            states += list(o.prediction.trajectory.state_list)
+        for st in states:
+            st.position = point(st.position)
+            for name in ("orientation", "velocity"):
+                v = getattr(st, name, None)
+                if v is not None:
+                    setattr(st, name, scalar(v))
+    return sc
+
+
 def build_sumo_files(scenario, folder: Path, settings: SumoSettings = SumoSettings()) -> SumoFiles:
     """Convert ``scenario``'s lanelet network and recorded vehicles into a SUMO project in
     ``folder`` (see the module: map matching, routes corrected to the recorded starts and
-    bodies); ValueError naming what failed."""
+    bodies; uncertain states read exactly, :func:`exact_states`); ValueError naming what
+    failed."""
     sumo_home()
     _libsumo()
     from commonroad.geometry.shape import Rectangle
@@ -161,6 +184,7 @@ def build_sumo_files(scenario, folder: Path, settings: SumoSettings = SumoSettin
     from commonroad_sumo.sumolib.sumo_project import SumoFileType
 
     folder = Path(folder)
+    scenario = exact_states(scenario)
     try:
         with contextlib.redirect_stdout(io.StringIO()):
             project = CR2SumoMapConverter(scenario).create_sumo_files(output_folder=folder)

@@ -115,7 +115,7 @@ def prepare(imp, exp):
         if exp.mpc is not None and getattr(exp.mpc, "avoidance", None) is not None:
             exp.mpc.set_obstacles(obstacles)  # no recorded future of a SUMO vehicle reaches the controller
     controller = exp.controller
-    if imp.prediction == "lane":
+    if imp.prediction == "lane" and getattr(exp.mpc, "avoidance", None) is not None:  # else nothing to predict
         from ..prediction import LanePredictor, PredictingController
 
         controller = PredictingController(
