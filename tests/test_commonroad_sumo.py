@@ -351,3 +351,16 @@ def test_the_batch_table_names_traffic_and_prediction(tmp_path):
     row = json.loads((out / "summary.json").read_text())["ZAM_Tutorial-1_1_T-1.xml"]
     assert (row["traffic"], row["prediction"], row["sumo"]) == ("recorded", "lane", None)
     assert "| `ZAM_Tutorial-1_1_T-1.xml` | recorded / lane |" in (out / "summary.md").read_text()
+
+
+def test_a_car_moved_across_a_gap_of_the_converted_net_is_reported():
+    """Where a converted junction lane does not join the lane it leads to, SUMO moves a car
+    across the gap in one step (DEU_Backnang: 19 m at 11.8 m/s): sumo.json lists it."""
+    from types import SimpleNamespace
+
+    from mpcdrive.adapters.commonroad_traffic import position_jumps
+
+    log = cs.TrafficLog(0.1)
+    for k, x in enumerate([0.0, 1.2, 2.4, 21.4, 22.6]):
+        log.record(k, {7: cs.VehicleState(x, 0.0, 0.0, 12.0), 8: cs.VehicleState(0.0, 1.2 * k, 1.57, 12.0)})
+    assert position_jumps(SimpleNamespace(dt_s=0.1, log=log)) == [{"vehicle": 7, "step": 3, "jump_m": 19.0}]

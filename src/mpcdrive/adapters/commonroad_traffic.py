@@ -234,9 +234,28 @@ def sumo_baseline(imp, plant, steps: int) -> dict:
     }
 
 
+def position_jumps(plant, slack_m: float = 1.0) -> list[dict]:
+    """The steps at which a SUMO vehicle moved farther than its speed allows (more than
+    ``max(v_before, v_after) dt + slack_m``): where the converted net's junction lanes do not
+    join the lanes they lead to, SUMO moves a car across the gap in one step. ``vehicle`` (its
+    CommonRoad id), ``step`` and ``jump_m``."""
+    out = []
+    dt = plant.dt_s
+    for vid, states in sorted(plant.log.states.items()):
+        ks = sorted(states)
+        for a, b in zip(ks, ks[1:]):
+            if b != a + 1:
+                continue
+            sa, sb = states[a], states[b]
+            d = math.hypot(sb.x_m - sa.x_m, sb.y_m - sa.y_m)
+            if d > max(sa.v_mps, sb.v_mps) * dt + slack_m:
+                out.append({"vehicle": vid, "step": b, "jump_m": round(d, 2)})
+    return out
+
+
 def sumo_report(imp, plant, result, whole=None) -> dict:
     """``sumo.json``: the co-simulation's facts (vehicles SUMO drove, those kept as recorded,
-    the ego's SUMO route), SUMO's time per step [ms] (wall time), the drivability checker's
+    the ego's SUMO route, :func:`position_jumps`), SUMO's time per step [ms] (wall time), the drivability checker's
     verdicts over the whole drive against the vehicles as SUMO drove them (``whole``, a
     :class:`~.commonroad.CheckReport`), and the ego's progress and comfort beside the
     SUMO-driver baseline's (:func:`sumo_baseline`)."""
@@ -254,6 +273,7 @@ def sumo_report(imp, plant, result, whole=None) -> dict:
         "seed": plant.settings.seed,
         "ego_route_edges": list(plant.session.ego_route),
         "sumo_step_ms": plant.sumo_step_ms(),
+        "position_jumps": position_jumps(plant),
         "whole_drive": None
         if whole is None
         else {
