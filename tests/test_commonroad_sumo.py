@@ -188,34 +188,48 @@ def test_drivers_see_the_ego_as_it_is_not_one_step_late(us101):
     assert first["before"] == first["after"] + 1
 
 
-def test_at_a_junction_the_ego_stays_on_the_lanes_of_its_route(tmp_path):
-    """USA_Peach's left turn crosses two junctions: placed anywhere, the ego lands on a lane of
-    a third junction it does not drive through; kept to its route, never."""
-    import sumolib
+def _route_junction_lanes(ls, route: list[str]) -> set[str]:
+    """The junction lanes that lead from each edge of ``route`` to the next (SUMO's links, their
+    internal lanes followed to the next edge)."""
+    out = set()
+    for a, b in zip(route, route[1:]):
+        for i in range(ls.edge.getLaneNumber(a)):
+            for link in ls.lane.getLinks(f"{a}_{i}"):
+                to, via = link[0], link[4]
+                if ls.lane.getEdgeID(to) != b:
+                    continue
+                while via and via.startswith(":"):
+                    out.add(via)
+                    nxt = [lk[4] or lk[0] for lk in ls.lane.getLinks(via)]
+                    via = nxt[0] if nxt else ""
+    return out
 
-    imp = load_commonroad(DIR / "USA_Peach-4_8_T-1.xml")
+
+def test_at_a_junction_the_ego_stays_on_the_lanes_of_its_route(tmp_path):
+    """DEU_Backnang's route crosses a junction: placed anywhere (commonroad-sumo's moveToXY),
+    the ego lands on the junction's nearest lane, of another connection, where a car behind it
+    on its route does not see it; kept to its route, it is on its route's connection."""
+    imp = load_commonroad(DIR / "DEU_Backnang-9_1_T-1.xml")
     files = cs.build_sumo_files(imp.scenario, tmp_path)
     route = cs.route_edges(files.net, imp.centerline)
-    net = sumolib.net.readNet(str(files.net))
-    junctions = {net.getEdge(e).getToNode().getID() for e in route[:-1]}
     c = np.asarray(imp.centerline, float)
     yaw = np.arctan2(np.gradient(c[:, 1]), np.gradient(c[:, 0]))
-    off = {}
+    junction = {}
     for name, edges in (("route", route), ("anywhere", [])):
         s = cs.SumoSession(files, imp.spec.dt_s)
         s.start((c[2, 0], c[2, 1], yaw[2]), 5.0, EGO_SHAPE, edges)
-        roads = []
+        lanes = []
         try:
+            allowed = _route_junction_lanes(s._ls, s.ego_route if edges else route)
             for i in range(3, len(c), 2):
                 s.push_ego((c[i, 0], c[i, 1], yaw[i]), 5.0)
                 s.step()
-                roads.append(s._ls.vehicle.getRoadID(cs.EGO_ID))
+                lanes.append(s.ego_lane())
         finally:
             s.close()
-        off[name] = {r for r in roads if r.startswith(":") and r[1:].rsplit("_", 1)[0] not in junctions}
-        off[name] |= {r for r in roads if not r.startswith(":") and r not in route}
-    assert off["route"] == set()
-    assert off["anywhere"]  # the pitfall this works around
+        junction[name] = {ln for ln in lanes if ln.startswith(":")}
+    assert junction["route"] and junction["route"] <= allowed
+    assert junction["anywhere"] - allowed  # the pitfall this works around
 
 
 def test_static_obstacles_and_unrouted_vehicles_stay_commonroad_obstacles():
@@ -364,3 +378,38 @@ def test_a_car_moved_across_a_gap_of_the_converted_net_is_reported():
     for k, x in enumerate([0.0, 1.2, 2.4, 21.4, 22.6]):
         log.record(k, {7: cs.VehicleState(x, 0.0, 0.0, 12.0), 8: cs.VehicleState(0.0, 1.2 * k, 1.57, 12.0)})
     assert position_jumps(SimpleNamespace(dt_s=0.1, log=log)) == [{"vehicle": 7, "step": 3, "jump_m": 19.0}]
+
+
+@pytest.mark.parametrize("name", ["FRA_Anglet-1_1_T-1.xml", "DEU_Backnang-9_1_T-1.xml"])
+def test_the_ego_route_runs_the_ego_way_so_the_cars_behind_see_it(name, tmp_path):
+    """Matched by distance to an edge's middle line alone (commonroad-sumo's map matcher), the
+    ego's route began on the lane of the opposite direction: SUMO held the ego at that lane's
+    start and a motorcycle behind it (FRA_Anglet), a car behind it (DEU_Backnang) drove into
+    it. The route matched lane by lane and direction: the ego moves along its lane, and the car
+    behind has it as its leader."""
+    imp = load_commonroad(DIR / name)
+    files = cs.build_sumo_files(imp.scenario, tmp_path)
+    route = cs.route_edges(files.net, imp.centerline)
+    x = _x0(imp)
+    s = cs.SumoSession(files, imp.spec.dt_s)
+    s.start(tuple(x[:3]), x[3], EGO_SHAPE, route)
+    try:
+        V = s._ls.vehicle
+        track = [(V.getRoadID(cs.EGO_ID), V.getLanePosition(cs.EGO_ID))]
+        pose, v = x[:3].copy(), float(x[3])
+        leaders = set()
+        for _ in range(10):
+            pose[:2] += v * imp.spec.dt_s * np.array([math.cos(pose[2]), math.sin(pose[2])])
+            s.push_ego(tuple(pose), v)
+            s.step()
+            track.append((V.getRoadID(cs.EGO_ID), V.getLanePosition(cs.EGO_ID)))
+            for vid in V.getIDList():
+                lead = V.getLeader(vid, 100.0) if vid != cs.EGO_ID else None
+                if lead and lead[0] == cs.EGO_ID:
+                    leaders.add(vid)
+        assert all(road in route or road.startswith(":") for road, _ in track)  # its route and its junctions
+        moves = [b - a for (ra, a), (rb, b) in zip(track, track[1:]) if ra == rb]
+        assert moves and min(moves) > 0.5 * v * imp.spec.dt_s  # along its lane, not held at a lane's start
+        assert leaders  # some car drives behind the ego, seeing it
+    finally:
+        s.close()

@@ -260,18 +260,76 @@ def _edge_lengths(net: Path) -> dict[str, float]:
     return out
 
 
-def route_edges(net: Path, points: np.ndarray, radius_m: float = MAP_MATCHING_M) -> list[str]:
-    """The SUMO edges along a line of ``points`` (M, 2) [m] (e.g. the ego's reference path),
-    connected (commonroad-sumo's map matcher; an edge's distance is to its middle line, up to
-    ``radius_m`` [m] from a lane of a wide road); empty when the line lies on no edge."""
+def route_edges(net: Path, points: np.ndarray, radius_m: float = MAP_MATCHING_M, step_m: float = 2.0) -> list[str]:
+    """The SUMO edges along a line of ``points`` (M, 2) [m] in driving order (the ego's
+    reference path), connected; empty when the line lies on no edge.
+
+    Every ``step_m`` [m] along the line the nearest lane within ``radius_m`` [m] that runs the
+    line's way (within 45 deg) gives the edge; consecutive edges that do not connect are joined
+    by the net's shortest path. (commonroad-sumo's map matcher measures to an edge's middle line
+    and ignores direction: on FRA_Anglet it starts the ego's route on the lane of the opposite
+    direction, where SUMO's drivers behind it do not see it.)"""
     import sumolib
-    from commonroad_sumo.cr2sumo.traffic_generator.sumo_map_matcher import SumoMapMatcher
+    from sumolib.geomhelper import polygonOffsetAndDistanceToPoint, rotationAtShapeOffset
 
     sn = sumolib.net.readNet(str(net), withInternal=False)
     pts = np.asarray(points, float)
-    step = max(1, len(pts) // 200)
-    trace = [tuple(map(float, p)) for p in pts[::step]] + [tuple(map(float, pts[-1]))]
-    return [e.getID() for e in SumoMapMatcher(sn, radius_m).map_trace(trace)]
+    seg = np.hypot(*np.diff(pts, axis=0).T)
+    s = np.r_[0.0, np.cumsum(seg)]
+    if s[-1] <= 0:
+        return []
+    at = np.arange(0.0, s[-1], step_m)
+    xs, ys = np.interp(at, s, pts[:, 0]), np.interp(at, s, pts[:, 1])
+    ahead = np.minimum(at + 1.0, s[-1])
+    hs = np.arctan2(np.interp(ahead, s, pts[:, 1]) - ys, np.interp(ahead, s, pts[:, 0]) - xs)
+    seq: list = []
+    for x, y, h in zip(xs, ys, hs):
+        best = None
+        for edge, _ in sn.getNeighboringEdges(float(x), float(y), r=radius_m, includeJunctions=False):
+            for lane in edge.getLanes():
+                shape = lane.getShape()
+                off, d = polygonOffsetAndDistanceToPoint((float(x), float(y)), shape)
+                if d < 0:
+                    continue
+                rot = rotationAtShapeOffset(shape, off)
+                if rot is None or abs((rot - h + math.pi) % (2.0 * math.pi) - math.pi) > math.radians(45.0):
+                    continue
+                if best is None or d < best[0]:
+                    best = (d, edge)
+        if best is not None and (not seq or seq[-1] is not best[1]):
+            if best[1] in seq:  # back on an edge already passed: matching noise
+                continue
+            seq.append(best[1])
+    route: list = []
+    for e in seq:
+        if route and e not in route[-1].getOutgoing():
+            path, _ = sn.getShortestPath(route[-1], e)
+            if path is None:
+                continue  # not reachable from the route so far: a stray match
+            route += list(path[1:-1])
+        route.append(e)
+    if route:  # a start inside a junction: the route begins on the edge leading into it
+        start = (float(xs[min(1, len(xs) - 1)]), float(ys[min(1, len(ys) - 1)]))
+
+        def dist(edge) -> float:
+            return min(polygonOffsetAndDistanceToPoint(start, ln.getShape())[1] % 1e9 for ln in edge.getLanes())
+
+        into = [e for e in route[0].getIncoming() if e.getFunction() != "internal"]
+        if into and dist(route[0]) > 2.0:
+            before = min(into, key=dist)
+            if dist(before) < dist(route[0]):
+                route.insert(0, before)
+        # the path may end in a junction or short of an edge SUMO needs: the route goes on one
+        # edge, the one leaving the last one the path's way (SUMO holds a car at its route's end)
+        out = [e for e in route[-1].getOutgoing() if e.getFunction() != "internal" and e not in route]
+        if out:
+
+            def turn(edge) -> float:
+                rot = rotationAtShapeOffset(edge.getLanes()[0].getShape(), 0.0)
+                return math.inf if rot is None else abs((rot - float(hs[-1]) + math.pi) % (2.0 * math.pi) - math.pi)
+
+            route.append(min(out, key=turn))
+    return [e.getID() for e in route]
 
 
 @dataclass
