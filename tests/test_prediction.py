@@ -183,3 +183,30 @@ def test_bad_settings_are_refused():
         PredictingController(
             object.__new__(type("C", (), {"nx": 1, "nu": 1, "N": 1})), LanePredictor(None), period_s=0.1
         )
+
+
+def test_matching_through_the_grid_is_matching_against_every_segment():
+    """The oracle: the nearest qualifying segment of all, by brute force."""
+    rng = np.random.default_rng(3)
+    lm = _map()
+    for _ in range(300):
+        x, y, yaw = rng.uniform(-10, 130), rng.uniform(-10, 40), rng.uniform(-math.pi, math.pi)
+        got = lm.match(x, y, yaw)
+        best = None
+        for lane in lm.lanes.values():
+            c = lane.centre
+            for j in range(len(c) - 1):
+                d = c[j + 1] - c[j]
+                L = math.hypot(*d)
+                u = d / L
+                t = min(max((x - c[j, 0]) * u[0] + (y - c[j, 1]) * u[1], 0.0), L)
+                dist = math.hypot(x - c[j, 0] - t * u[0], y - c[j, 1] - t * u[1])
+                dpsi = (yaw - math.atan2(d[1], d[0]) + math.pi) % (2 * math.pi) - math.pi
+                if dist <= lane.half_width_m + 1.0 and abs(dpsi) <= math.radians(45.0):
+                    score = dist + 2.0 * abs(dpsi)
+                    if best is None or score < best[0]:
+                        best = (score, lane.id, lane.s_m[j] + t)
+        if best is None:
+            assert got is None
+        else:
+            assert got is not None and got.lane == best[1] and got.s_m == pytest.approx(best[2])

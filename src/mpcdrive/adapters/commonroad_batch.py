@@ -166,6 +166,7 @@ def _sumo_row(out_dir: Path) -> dict | None:
         "vehicles_simulated": d["vehicles_simulated"],
         "vehicles_recorded": len(d["vehicles_recorded"]),
         "step_ms": {"p50": d["sumo_step_ms"]["p50"], "p99": d["sumo_step_ms"]["p99"]},
+        "cosim_step_ms": {k: (d.get("cosim_step_ms") or {}).get(k) for k in ("p50", "p99")},
         "whole_drive": d["whole_drive"],
         "position_jumps": len(d.get("position_jumps", [])),
         "ego": {k: d["ego"].get(k) for k in keys},

@@ -305,7 +305,9 @@ def route_edges(net: Path, points: np.ndarray, radius_m: float = MAP_MATCHING_M,
         if route and e not in route[-1].getOutgoing():
             path, _ = sn.getShortestPath(route[-1], e)
             if path is None:
-                continue  # not reachable from the route so far: a stray match
+                # the net does not connect the path's edges (DEU_Salzwedel's left turn): no route
+                # SUMO could hold the ego to; it is placed anywhere
+                return []
             route += list(path[1:-1])
         route.append(e)
     if route:  # a start inside a junction: the route begins on the edge leading into it
@@ -357,6 +359,8 @@ class SumoSession:
         self.files, self.dt_s, self.settings = files, float(dt_s), settings
         self.ego_route: list[str] = []
         self.step_times_s: list[float] = []
+        #: steps at which the ego was too far from its route to be kept on it (placed anywhere)
+        self.off_route_steps = 0
         self._ls = None
         self._ego_length = 0.0
 
@@ -423,7 +427,11 @@ class SumoSession:
         x, y, yaw = (float(c) for c in pose)
         fx, fy = _front(x, y, yaw, self._ego_length)
         angle = 90.0 - math.degrees(yaw)  # SUMO: degrees clockwise from north
-        V.moveToXY(EGO_ID, "", -1, fx, fy, angle, keepRoute=KEEP_ROUTE if self.ego_route else ANYWHERE)
+        try:
+            V.moveToXY(EGO_ID, "", -1, fx, fy, angle, keepRoute=KEEP_ROUTE if self.ego_route else ANYWHERE)
+        except self._ls.TraCIException:  # farther than 100 m from its route: placed anywhere
+            V.moveToXY(EGO_ID, "", -1, fx, fy, angle, keepRoute=ANYWHERE)
+            self.off_route_steps += 1
         V.setSpeedMode(EGO_ID, SPEED_MODE_NO_CHECKS)
         V.setSpeed(EGO_ID, max(float(v_mps), 0.0))
 
@@ -516,6 +524,9 @@ class SumoTrafficPlant:
         self.session = SumoSession(files, dt_s, settings)
         self.route = route_edges(files.net, centerline, settings.map_matching_m)
         self.log = TrafficLog(self.dt_s)
+        #: wall time [s] of each step's exchange with SUMO: the ego pushed, SUMO's step, the
+        #: vehicles read
+        self.cosim_times_s: list[float] = []
         self._k = 0
         self._now: dict[int, VehicleState] = {}
         self._seen: dict[int, tuple[float, float]] = {}  # id -> (first, last) time present [s]
@@ -539,10 +550,12 @@ class SumoTrafficPlant:
         if not np.all(np.isfinite(xp1)):
             return xp1
         x1 = self.observe(xp1)
+        t0 = time.perf_counter()
         self.session.push_ego((x1[0], x1[1], x1[2]), float(self.model.speed(x1)))
         self.session.step()
         self._k += 1
         self._read(self._k)
+        self.cosim_times_s.append(time.perf_counter() - t0)
         return xp1
 
     def close(self) -> None:
@@ -583,16 +596,27 @@ class SumoTrafficPlant:
         return tuple(out)
 
     def sumo_step_ms(self) -> dict:
-        """``{p50, p99, max, steps}`` of SUMO's step times [ms] over the drive (wall time)."""
-        st = np.asarray(self.session.step_times_s, float) * 1e3
-        if not st.size:
-            return {"p50": None, "p99": None, "max": None, "steps": 0}
-        return {
-            "p50": float(np.percentile(st, 50)),
-            "p99": float(np.percentile(st, 99)),
-            "max": float(st.max()),
-            "steps": int(st.size),
-        }
+        """``{p50, p99, max, steps}`` of SUMO's step times [ms] over the drive (wall time; the
+        first step inserts the ego)."""
+        return _ms(self.session.step_times_s)
+
+    def cosim_step_ms(self) -> dict:
+        """``{p50, p99, max, steps}`` [ms] of what SUMO adds to each loop step (wall time): the
+        ego pushed, SUMO's step, the vehicles read."""
+        return _ms(self.cosim_times_s)
+
+
+def _ms(times_s) -> dict:
+    """``{p50, p99, max, steps}`` [ms] of wall times [s]."""
+    st = np.asarray(times_s, float) * 1e3
+    if not st.size:
+        return {"p50": None, "p99": None, "max": None, "steps": 0}
+    return {
+        "p50": float(np.percentile(st, 50)),
+        "p99": float(np.percentile(st, 99)),
+        "max": float(st.max()),
+        "steps": int(st.size),
+    }
 
 
 def tempdir() -> tempfile.TemporaryDirectory:

@@ -272,7 +272,9 @@ def sumo_report(imp, plant, result, whole=None) -> dict:
         "map_matching_m": plant.settings.map_matching_m,
         "seed": plant.settings.seed,
         "ego_route_edges": list(plant.session.ego_route),
+        "ego_off_route_steps": plant.session.off_route_steps,
         "sumo_step_ms": plant.sumo_step_ms(),
+        "cosim_step_ms": plant.cosim_step_ms(),
         "position_jumps": position_jumps(plant),
         "whole_drive": None
         if whole is None

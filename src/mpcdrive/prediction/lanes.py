@@ -16,6 +16,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+#: the matching grid's cell [m], and how far beyond a cell its segments reach [m] (more than
+#: any half width plus reach a match accepts: a wider lane is matched against every segment)
+CELL_M = 25.0
+GRID_PAD_M = 6.0
+
 
 @dataclass(frozen=True, eq=False)
 class Lane:
@@ -94,6 +99,17 @@ class LaneMap:
         self._dir = d / self._len[:, None]
         self._heading = np.arctan2(d[:, 1], d[:, 0])
         self._lines: dict[tuple[int, float], tuple[np.ndarray, np.ndarray, np.ndarray, tuple[int, ...]]] = {}
+        # a grid of CELL_M cells, each with the segments passing within GRID_PAD_M of it
+        lo = np.minimum(self._a, self._b) - GRID_PAD_M
+        hi = np.maximum(self._a, self._b) + GRID_PAD_M
+        i0, i1 = np.floor(lo / CELL_M).astype(int), np.floor(hi / CELL_M).astype(int)
+        cells: dict[tuple[int, int], list[int]] = {}
+        for k in range(len(self._a)):
+            for cx in range(i0[k, 0], i1[k, 0] + 1):
+                for cy in range(i0[k, 1], i1[k, 1] + 1):
+                    cells.setdefault((cx, cy), []).append(k)
+        self._cells = {c: np.array(v, np.int64) for c, v in cells.items()}
+        self._hw_max = float(self._hw.max())
 
     def match(
         self,
@@ -109,18 +125,26 @@ class LaneMap:
         ``max_heading_rad`` of the car's, the nearest (distance plus 2 m per radian of heading
         offset); None when no lane qualifies."""
         p = np.array([x_m, y_m], float)
-        rel = p - self._a
-        t = np.clip(np.einsum("ij,ij->i", rel, self._dir), 0.0, self._len)
-        foot = self._a + t[:, None] * self._dir
+        if self._hw_max + reach_m <= GRID_PAD_M:
+            ix = self._cells.get((int(math.floor(x_m / CELL_M)), int(math.floor(y_m / CELL_M))))
+            if ix is None:
+                return None
+        else:  # lanes wider than the grid's padding: every segment
+            ix = np.arange(len(self._a))
+        a, d, seg_len = self._a[ix], self._dir[ix], self._len[ix]
+        rel = p - a
+        t = np.clip(np.einsum("ij,ij->i", rel, d), 0.0, seg_len)
+        foot = a + t[:, None] * d
         dist = np.hypot(*(p - foot).T)
-        dpsi = (yaw_rad - self._heading + math.pi) % (2.0 * math.pi) - math.pi
-        ok = (dist <= self._hw + reach_m) & (np.abs(dpsi) <= max_heading_rad)
+        dpsi = (yaw_rad - self._heading[ix] + math.pi) % (2.0 * math.pi) - math.pi
+        ok = (dist <= self._hw[ix] + reach_m) & (np.abs(dpsi) <= max_heading_rad)
         if not ok.any():
             return None
         score = np.where(ok, dist + 2.0 * np.abs(dpsi), np.inf)
         i = int(np.argmin(score))
-        cross = self._dir[i, 0] * rel[i, 1] - self._dir[i, 1] * rel[i, 0]
-        return LaneMatch(int(self._owner[i]), float(self._s0[i] + t[i]), float(cross), float(dpsi[i]))
+        cross = d[i, 0] * rel[i, 1] - d[i, 1] * rel[i, 0]
+        k = int(ix[i])
+        return LaneMatch(int(self._owner[k]), float(self._s0[k] + t[i]), float(cross), float(dpsi[i]))
 
     def chain(self, lane_id: int, length_m: float) -> list[int]:
         """Lane ids from ``lane_id`` on, over successors (the one turning least at a fork; ids
