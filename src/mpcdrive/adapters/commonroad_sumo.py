@@ -18,7 +18,7 @@ libsumo, commonroad-sumo's map and route conversion); imported lazily.
 * **Co-simulation** (:class:`SumoSession`). SUMO's clock runs one step ahead of the loop's (the
   first step inserts the ego: SUMO time ``t + dt`` is the loop's ``t``). The ego is a SUMO
   vehicle with id :data:`EGO_ID` (no CommonRoad id, no generated id), on its own route (the
-  reference path matched to the net), placed at its pose with ``moveToXY`` staying on that
+  reference path matched to the net lane by lane and direction, :func:`route_edges`), placed at its pose with ``moveToXY`` staying on that
   route (``keepRoute=1``: at a junction on the lane of its route, not the nearest junction lane,
   where a car behind would stop seeing it as its leader), its speed set with every check off
   (speed mode 0: SUMO's limits would have its drivers react to an ego that accelerates and
