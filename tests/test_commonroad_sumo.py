@@ -327,6 +327,7 @@ def test_traffic_flags_are_for_commonroad_files(tmp_path):
     assert r.returncode == 2 and "are for CommonRoad files" in r.stderr
 
 
+@pytest.mark.slow
 def test_a_drive_among_sumo_traffic_is_judged_against_the_vehicles_as_sumo_drove_them(tmp_path):
     """``mpcdrive run FILE --traffic sumo``: the checks, the scene figure and the replay take the
     SUMO vehicles' actual trajectories; sumo.json has the co-simulation's figures."""
@@ -355,6 +356,7 @@ def test_a_drive_among_sumo_traffic_is_judged_against_the_vehicles_as_sumo_drove
     assert (out / "commonroad_scene.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_the_batch_table_names_traffic_and_prediction(tmp_path):
     import json
 
