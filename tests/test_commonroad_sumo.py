@@ -415,3 +415,36 @@ def test_the_ego_route_runs_the_ego_way_so_the_cars_behind_see_it(name, tmp_path
         assert leaders  # some car drives behind the ego, seeing it
     finally:
         s.close()
+
+
+def test_the_scenario_judged_and_drawn_holds_the_vehicles_as_sumo_drove_them(us101):
+    """The checks and the scene figure take a copy of the scenario in which each SUMO vehicle
+    follows the states SUMO gave it; the vehicles SUMO could not route stay as recorded."""
+    from mpcdrive.adapters.commonroad_traffic import driven_scenario
+
+    imp, files = us101
+    plant = _plant(imp, files)
+    try:
+        xp = plant.initial_state(_x0(imp))
+        for _ in range(15):
+            xp = plant.step(xp, np.array([0.0, -3.0]), imp.spec.dt_s)
+    finally:
+        plant.close()
+    sc = driven_scenario(imp, plant)
+    for vid, states in plant.log.states.items():
+        o = sc.obstacle_by_id(vid)
+        for k, s in states.items():
+            st = o.state_at_time(k)
+            assert tuple(st.position) == pytest.approx((s.x_m, s.y_m))
+            assert st.orientation == pytest.approx(s.yaw_rad) and st.velocity == pytest.approx(s.v_mps)
+        recorded = imp.scenario.obstacle_by_id(vid).prediction.trajectory.state_at_time_step(15)
+        if recorded is not None and 15 in states:  # SUMO drove it elsewhere than the recording
+            assert tuple(recorded.position) != pytest.approx((states[15].x_m, states[15].y_m), abs=1e-3)
+    assert files.unrouted
+    for vid in files.unrouted:
+        got, rec = sc.obstacle_by_id(vid), imp.scenario.obstacle_by_id(vid)
+        for k in (0, 10):
+            a, b = got.occupancy_at_time(k), rec.occupancy_at_time(k)
+            assert (a is None) == (b is None)
+            if a is not None:
+                np.testing.assert_allclose(a.shape.center, b.shape.center)
