@@ -98,7 +98,7 @@ class LaneMap:
         self._len = np.hypot(d[:, 0], d[:, 1])
         self._dir = d / self._len[:, None]
         self._heading = np.arctan2(d[:, 1], d[:, 0])
-        self._lines: dict[tuple[int, float], tuple[np.ndarray, np.ndarray, np.ndarray, tuple[int, ...]]] = {}
+        self._lines: dict[tuple[int, float], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
         # a grid of CELL_M cells, each with the segments passing within GRID_PAD_M of it
         lo = np.minimum(self._a, self._b) - GRID_PAD_M
         hi = np.maximum(self._a, self._b) + GRID_PAD_M
@@ -162,18 +162,19 @@ class LaneMap:
         return out
 
     def follow(self, lane_id: int, s_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Positions (K, 2) [m] and headings (K,) [rad] at the arc lengths ``s_m`` (K,) [m] from
+        """Positions (K, 2) [m] and headings (K,) [rad, continuous] at the arc lengths ``s_m`` (K,) [m] from
         the start of lane ``lane_id``, along it and its successors (:meth:`chain`); past the last
         lane the line goes on straight along its last direction."""
         s_m = np.asarray(s_m, float)
-        P, cum, u, _ = self._line(lane_id, float(s_m.max(initial=0.0)))
+        P, cum, u, heading = self._line(lane_id, float(s_m.max(initial=0.0)))
         i = np.clip(np.searchsorted(cum, s_m, side="right") - 1, 0, len(u) - 1)
         xy = P[i] + (s_m - cum[i])[:, None] * u[i]
-        return xy, np.arctan2(u[i, 1], u[i, 0])
+        return xy, heading[i]
 
     def _line(self, lane_id: int, length_m: float):
         """The joined centre line from lane ``lane_id`` over at least ``length_m`` [m] (kept per
-        lane and 100 m of length): points, their arc lengths, unit segment directions, ids."""
+        lane and 100 m of length): points, their arc lengths, unit segment directions, segment
+        headings [rad] (unwrapped: continuous along the line)."""
         key = (lane_id, 100.0 * math.ceil(max(length_m, 1.0) / 100.0))
         hit = self._lines.get(key)
         if hit is None:
@@ -187,7 +188,8 @@ class LaneMap:
             P = P[np.r_[True, np.hypot(*np.diff(P, axis=0).T) > 1e-9]]
             seg = np.diff(P, axis=0)
             seg_len = np.hypot(seg[:, 0], seg[:, 1])
-            line = (P, np.r_[0.0, np.cumsum(seg_len)], seg / seg_len[:, None], tuple(ids))
+            u = seg / seg_len[:, None]
+            line = (P, np.r_[0.0, np.cumsum(seg_len)], u, np.unwrap(np.arctan2(u[:, 1], u[:, 0])))
             self._lines[key] = line
             return line
         return hit

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Polygon, Static, TrajectoryMotion
+from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Polygon, TrajectoryMotion
 from .lanes import LaneMap
 
 #: a band's start lies this long after the previous band's end [s]: at a horizon step exactly on
@@ -55,25 +55,18 @@ def observe(ob: Obstacle, t_s: float, period_s: float) -> Observation | None:
     recording's first step at its start), as speed along its heading."""
     if not bool(ob.present(t_s)):
         return None
-    x, y, yaw = ob.pose_at(t_s)
     m = ob.motion
-    if isinstance(m, Static):
-        vx = vy = 0.0
-    elif isinstance(m, ConstantVelocity):
-        vx, vy = m.vx_mps, m.vy_mps
-    else:
-        t0 = t_s - period_s
+    if isinstance(m, TrajectoryMotion):
+        t0, t1 = t_s - period_s, t_s
         first = float(m.t_s[0])
         if len(m.t_s) >= 2 and t0 < first - 1e-9:
-            t0, t_s1 = first, float(m.t_s[1])
-        else:
-            t_s1 = t_s
-        if t_s1 - t0 <= 0:
-            vx = vy = 0.0
-        else:
-            xa, ya, _ = ob.pose_at(t0)
-            xb, yb, _ = ob.pose_at(t_s1)
-            vx, vy = (xb - xa) / (t_s1 - t0), (yb - ya) / (t_s1 - t0)
+            t0, t1 = first, float(m.t_s[1])
+        P = ob.poses_at(np.array([t_s, t0, t1]))  # one interpolation for the three times
+        x, y, yaw = (float(c) for c in P[0])
+        vx, vy = ((P[2, 0] - P[1, 0]) / (t1 - t0), (P[2, 1] - P[1, 1]) / (t1 - t0)) if t1 > t0 else (0.0, 0.0)
+    else:
+        x, y, yaw = ob.pose_at(t_s)
+        vx, vy = (m.vx_mps, m.vy_mps) if isinstance(m, ConstantVelocity) else (0.0, 0.0)
     v = vx * math.cos(yaw) + vy * math.sin(yaw)
     return Observation(float(t_s), (x, y, yaw), float(v), ob.shape, ob.name, ob.t_start_s, ob.t_end_s)
 
@@ -159,6 +152,7 @@ class LanePredictor:
         self.config = config
         n = int(round(config.horizon_s / config.dt_s))
         self.taus_s = np.linspace(0.0, n * config.dt_s, n + 1)
+        self._decay = np.exp(-self.taus_s / config.tau_lateral_s)  # of the offset from the lane centre
         self._shapes: dict[tuple, Circle | Polygon] = {}  # inflated bodies, by body and growth
 
     def _inflated(self, shape: Circle | Polygon, tau_s: float, v_mps: float) -> Circle | Polygon:
@@ -193,11 +187,11 @@ class LanePredictor:
             d = np.array([math.cos(yaw), math.sin(yaw)])
             return np.array([x, y]) + (v * taus)[:, None] * d, np.full(len(taus), yaw)
         xy_c, h = lanes.follow(m.lane, m.s_m + v * taus)
-        decay = np.exp(-taus / cfg.tau_lateral_s)
+        decay = self._decay
         normal = np.column_stack([-np.sin(h), np.cos(h)])
         P = xy_c + (m.e_y_m * decay)[:, None] * normal
         P += (np.array([x, y]) - P[0]) * decay[:, None]  # starts exactly at the car
-        yaws = np.unwrap(h + m.e_psi_rad * decay)
+        yaws = h + m.e_psi_rad * decay  # continuous: the lane's headings are
         return P, yaws + (yaw - yaws[0])
 
     def predict(self, obs: Observation) -> tuple[Obstacle, ...]:
