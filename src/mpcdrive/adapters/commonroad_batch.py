@@ -246,18 +246,18 @@ def summary_markdown(rows: dict, header: str = "") -> str:
         "Traffic: recorded (replayed) or sumo (SUMO drives the vehicles, reacting to the ego); prediction: "
         "known (the recorded futures) or lane (constant speed along the lane, growing uncertainty).",
         "",
-        "| file | traffic / prediction | verdict | collision-free | road-compliant | feasible | goal reached | "
-        "min clearance [m] | solver failures | step p50 / p99 [us] | wall [s] |",
+        "| file | verdict | collision-free | road-compliant | feasible | goal reached | "
+        "min clearance [m] | solver failures | step p50 / p99 [us] | wall [s] | traffic / prediction |",
         "|" + "---|" * 11,
     ]
     for name, r in rows.items():
         st = r["solve_time_us"]
         lines.append(
-            f"| `{name}` | {r.get('traffic') or '-'} / {r.get('prediction') or '-'} | "
-            f"{'error' if r.get('error') else verdict(r).split(' (')[0]} | {_cell(r['collision_free'])} | "
+            f"| `{name}` | {'error' if r.get('error') else verdict(r).split(' (')[0]} | {_cell(r['collision_free'])} | "
             f"{_cell(r['road_compliant'])} | {_cell(r['ks_feasible'])} | {_cell(r['goal_reached'])} | "
             f"{_clearance_cell(r)} | {_cell(r['solver_failures'])} | "
-            f"{_cell(st['p50'], '{:.0f}')} / {_cell(st['p99'], '{:.0f}')} | {_cell(r['wall_s'], '{:.1f}')} |"
+            f"{_cell(st['p50'], '{:.0f}')} / {_cell(st['p99'], '{:.0f}')} | {_cell(r['wall_s'], '{:.1f}')} | "
+            f"{r.get('traffic') or '-'} / {r.get('prediction') or '-'} |"
         )
     rejected = [
         (k, r.get("solution_check"))
