@@ -10,7 +10,7 @@ class BuildError(ValueError):
     """The scenario could not be built into an experiment (bad input)."""
 
 
-def run_into(spec, out_dir: Path, progress=None, source: str | None = None, extra_outputs=None):
+def run_into(spec, out_dir: Path, progress=None, source: str | None = None, extra_outputs=None, prepare=None):
     """Run ``spec`` and write its files into ``out_dir``: ``trajectory.csv``, ``metrics.json``,
     ``scenario.yaml``, the figures and the interactive ``report.html`` (``extra_outputs(result,
     out_dir)`` writes more and returns a dict: under ``commonroad`` a
@@ -18,7 +18,9 @@ def run_into(spec, out_dir: Path, progress=None, source: str | None = None, extr
     the goal, and under ``figures`` the names of figures it wrote; other entries are an error).
     ``progress`` is a context manager factory ``progress(label, steps)`` yielding a step callback
     (or None). Returns (result, metrics, figures, footprint), ``metrics`` a
-    :class:`~mpcdrive.sim.Metrics`; BuildError when the scenario does not build."""
+    :class:`~mpcdrive.sim.Metrics`; BuildError when the scenario does not build. ``prepare(exp)``
+    (optional) returns the built experiment to run instead (e.g. another simulator's traffic);
+    a plant with a ``close()`` is closed once the run is over."""
     from contextlib import nullcontext
 
     from .io import write_json, write_trajectory_csv
@@ -31,10 +33,17 @@ def run_into(spec, out_dir: Path, progress=None, source: str | None = None, extr
     out_dir = Path(out_dir).resolve()  # figure paths relative to the working directory would not embed
     try:
         exp = build_experiment(spec)
+        if prepare is not None:
+            exp = prepare(exp)
     except ValueError as e:
         raise BuildError(f"{source or spec.id}: {e}") from None
-    with progress(spec.id, exp.steps) if progress is not None else nullcontext() as cb:
-        result = run_experiment(exp, progress=cb)
+    try:
+        with progress(spec.id, exp.steps) if progress is not None else nullcontext() as cb:
+            result = run_experiment(exp, progress=cb)
+    finally:
+        close = getattr(exp.plant, "close", None)
+        if callable(close):
+            close()
     metrics = compute_metrics(result)
     out_dir.mkdir(parents=True, exist_ok=True)
     write_trajectory_csv(result, out_dir / "trajectory.csv")

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -72,15 +72,40 @@ class CommonRoadImport:
     plan: DrivePlan | None = None
     problems: object = None  # commonroad PlanningProblemSet
     vehicle_type: str = "FORD_ESCORT"  # CommonRoad VehicleType name of the solution and the checks
+    #: the traffic (recorded | sumo) and what the controller knows of it (known | lane):
+    #: :func:`~.commonroad_traffic.with_traffic`; ``sumo`` its SUMO settings
+    traffic: str = "recorded"
+    prediction: str = "known"
+    sumo: object = None
+    runtime: dict = field(default_factory=dict, compare=False)  # one run's SUMO plant and files
+
+    def prepare_experiment(self, exp):
+        """The built experiment with this import's traffic and prediction
+        (:func:`~.commonroad_traffic.prepare`)."""
+        from .commonroad_traffic import prepare
+
+        return prepare(self, exp)
 
     def write_outputs(self, result, out_dir: Path) -> dict:
         """Write ``solution.xml`` (up to the goal, else the whole drive) and ``commonroad_scene.png``
         (commonroad-io's renderer), hand the lanelet polygons to the replay (``result.meta``), and
         return the ``commonroad`` metrics (:class:`~mpcdrive.sim.CommonRoadCheck`): route, plan,
         goal step, the drivability checker's verdicts and whether CommonRoad's solution checker
-        accepts the solution."""
+        accepts the solution. Among SUMO traffic the checks and the figure take the vehicles as
+        SUMO drove them, and ``sumo.json`` is written (:func:`~.commonroad_traffic.sumo_report`)."""
         from .commonroad_figures import lanelet_polygons, write_scene_figure
 
+        plant = self.runtime.get("plant")
+        if plant is not None:
+            from dataclasses import replace
+
+            from ..io import write_json
+            from .commonroad_traffic import driven_scenario, sumo_report
+
+            plant.close()
+            self = replace(self, scenario=driven_scenario(self, plant), runtime={})
+            whole = check_drive(self, result, whole_drive=True)
+            write_json(Path(out_dir) / "sumo.json", sumo_report(self, plant, result, whole))
         report = check_drive(self, result)
         path = write_solution(self, result, Path(out_dir), report.goal_step)
         # CommonRoad's own solution checker has the last word (its road boundary is a triangulation
@@ -384,10 +409,11 @@ class CheckReport:
         )
 
 
-def check_drive(imp: CommonRoadImport, result) -> CheckReport:
-    """Check the driven trajectory (up to the goal, else all of it) with the drivability checker:
-    collisions with the scenario's obstacles, road boundary, and feasibility of the solution's
-    trajectory under its model (KS; ST for a drive on the ST plant) with the run's vehicle."""
+def check_drive(imp: CommonRoadImport, result, whole_drive: bool = False) -> CheckReport:
+    """Check the driven trajectory (up to the goal, else all of it; all of it with
+    ``whole_drive``) with the drivability checker: collisions with the scenario's obstacles,
+    road boundary, and feasibility of the solution's trajectory under its model (KS; ST for a
+    drive on the ST plant) with the run's vehicle."""
     from commonroad.geometry.shape import Rectangle
     from commonroad.prediction.prediction import TrajectoryPrediction
     from commonroad.scenario.state import CustomState
@@ -401,7 +427,7 @@ def check_drive(imp: CommonRoadImport, result) -> CheckReport:
     from commonroad_dc.feasibility.vehicle_dynamics import VehicleDynamics, VehicleType
 
     g = goal_step(imp, result)
-    last = g if g is not None else len(result.t_s) - 1
+    last = g if g is not None and not whole_drive else len(result.t_s) - 1
     v = imp.spec.vehicle
     centre_states = [
         CustomState(

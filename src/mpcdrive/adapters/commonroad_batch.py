@@ -60,6 +60,15 @@ def collect_files(args) -> list[Path]:
     return files
 
 
+def configure_import(imp, vehicle=None, plant=None, traffic=None, prediction=None):
+    """``imp`` with the vehicle and plant (:func:`~.commonroad.with_vehicle`), then the traffic
+    and prediction (:func:`~.commonroad_traffic.with_traffic`)."""
+    from .commonroad import with_vehicle
+    from .commonroad_traffic import with_traffic
+
+    return with_traffic(with_vehicle(imp, vehicle, plant), traffic, prediction)
+
+
 @dataclass(frozen=True)
 class BatchTask:
     """One file to drive into ``out_dir`` (``configure(imp) -> imp`` adapts the import, e.g. the
@@ -86,6 +95,9 @@ def _empty_row() -> dict:
         "solution_valid": None,
         "solution_check": None,
         "plan": None,
+        "traffic": None,
+        "prediction": None,
+        "sumo": None,
     }
 
 
@@ -102,7 +114,14 @@ def drive_file(task: BatchTask) -> dict:
         imp = load_commonroad(task.file)
         if task.configure is not None:
             imp = task.configure(imp)
-        res, m, _, _ = run_into(imp.spec, Path(task.out_dir), source=task.file, extra_outputs=imp.write_outputs)
+        row.update(traffic=imp.traffic, prediction=imp.prediction)
+        res, m, _, _ = run_into(
+            imp.spec,
+            Path(task.out_dir),
+            source=task.file,
+            extra_outputs=imp.write_outputs,
+            prepare=imp.prepare_experiment,
+        )
         cr = m.commonroad
         if cr is None:
             raise RuntimeError("the run has no CommonRoad checks")
@@ -122,6 +141,7 @@ def drive_file(task: BatchTask) -> dict:
             solution_check=cr.solution_check,
             vehicle_model=cr.vehicle_model,
             plan=cr.plan,
+            sumo=_sumo_row(Path(task.out_dir)),
         )
     except Exception as e:  # a file's failure is its row; the batch goes on
         import shutil
@@ -130,6 +150,28 @@ def drive_file(task: BatchTask) -> dict:
         shutil.rmtree(task.out_dir, ignore_errors=True)  # no half-written run folder
     row["wall_s"] = time.perf_counter() - t0
     return row
+
+
+def _sumo_row(out_dir: Path) -> dict | None:
+    """A SUMO drive's figures for the row (from its ``sumo.json``): vehicles, SUMO's step time
+    [ms], the whole drive's checks, progress [m] and comfort of the ego and of the SUMO driver."""
+    import json
+
+    f = out_dir / "sumo.json"
+    if not f.is_file():
+        return None
+    d = json.loads(f.read_text())
+    keys = ("progress_m", "rms_accel_mps2", "rms_jerk_mps3", "goal_reached")
+    return {
+        "vehicles_simulated": d["vehicles_simulated"],
+        "vehicles_recorded": len(d["vehicles_recorded"]),
+        "step_ms": {"p50": d["sumo_step_ms"]["p50"], "p99": d["sumo_step_ms"]["p99"]},
+        "cosim_step_ms": {k: (d.get("cosim_step_ms") or {}).get(k) for k in ("p50", "p99")},
+        "whole_drive": d["whole_drive"],
+        "position_jumps": len(d.get("position_jumps", [])),
+        "ego": {k: d["ego"].get(k) for k in keys},
+        "sumo_driver": {k: d["sumo_driver"].get(k) for k in keys},
+    }
 
 
 def _min_clearance(result, n: int | None) -> float | None:
@@ -201,9 +243,12 @@ def summary_markdown(rows: dict, header: str = "") -> str:
         "Min clearance: footprint to obstacle over the checked drive (whole run in brackets when smaller). "
         "Step: the controller's whole step (lane decision, obstacle terms, QP), wall time.",
         "",
-        "| file | verdict | collision-free | road-compliant | feasible | goal reached | min clearance [m] | "
-        "solver failures | step p50 / p99 [us] | wall [s] |",
-        "|" + "---|" * 10,
+        "Traffic: recorded (replayed) or sumo (SUMO drives the vehicles, reacting to the ego); prediction: "
+        "known (the recorded futures) or lane (constant speed along the lane, growing uncertainty).",
+        "",
+        "| file | verdict | collision-free | road-compliant | feasible | goal reached | "
+        "min clearance [m] | solver failures | step p50 / p99 [us] | wall [s] | traffic / prediction |",
+        "|" + "---|" * 11,
     ]
     for name, r in rows.items():
         st = r["solve_time_us"]
@@ -211,7 +256,8 @@ def summary_markdown(rows: dict, header: str = "") -> str:
             f"| `{name}` | {'error' if r.get('error') else verdict(r).split(' (')[0]} | {_cell(r['collision_free'])} | "
             f"{_cell(r['road_compliant'])} | {_cell(r['ks_feasible'])} | {_cell(r['goal_reached'])} | "
             f"{_clearance_cell(r)} | {_cell(r['solver_failures'])} | "
-            f"{_cell(st['p50'], '{:.0f}')} / {_cell(st['p99'], '{:.0f}')} | {_cell(r['wall_s'], '{:.1f}')} |"
+            f"{_cell(st['p50'], '{:.0f}')} / {_cell(st['p99'], '{:.0f}')} | {_cell(r['wall_s'], '{:.1f}')} | "
+            f"{r.get('traffic') or '-'} / {r.get('prediction') or '-'} |"
         )
     rejected = [
         (k, r.get("solution_check"))
@@ -220,6 +266,29 @@ def summary_markdown(rows: dict, header: str = "") -> str:
     ]
     if rejected:
         lines += ["", "## Solutions CommonRoad's solution checker rejects", ""] + [f"- `{k}`: {e}" for k, e in rejected]
+    sumo = [(k, r["sumo"]) for k, r in rows.items() if r.get("sumo")]
+    if sumo:
+        lines += [
+            "",
+            "## Among SUMO traffic",
+            "",
+            "Whole drive: the drivability checker over the whole drive against the vehicles as SUMO drove them. "
+            "Progress along the reference path [m] and RMS acceleration [m/s^2] of the ego, and of a SUMO driver "
+            "put in its place on its route (same start, same traffic). SUMO step: wall time [ms].",
+            "",
+            "| file | vehicles (SUMO / recorded) | whole drive collision-free / on road | ego progress / RMS accel | "
+            "SUMO driver progress / RMS accel | SUMO step p50 / p99 [ms] |",
+            "|" + "---|" * 6,
+        ]
+        for k, d in sumo:
+            w = d.get("whole_drive") or {}
+            e, b = d["ego"], d["sumo_driver"]
+            lines.append(
+                f"| `{k}` | {d['vehicles_simulated']} / {d['vehicles_recorded']} | {_cell(w.get('collision_free'))} / "
+                f"{_cell(w.get('road_compliant'))} | {_cell(e['progress_m'], '{:.1f}')} / "
+                f"{_cell(e['rms_accel_mps2'])} | {_cell(b['progress_m'], '{:.1f}')} / {_cell(b['rms_accel_mps2'])} | "
+                f"{_cell(d['step_ms']['p50'])} / {_cell(d['step_ms']['p99'])} |"
+            )
     errors = [(k, r["error"]) for k, r in rows.items() if r.get("error")]
     if errors:
         lines += ["", "## Errors", ""] + [f"- `{k}`: {e}" for k, e in errors]

@@ -10,7 +10,17 @@ from pathlib import Path
 
 import typer
 
-from .common import BadInput, _check_vehicle_flags, _default_out, _load, _output_dir, _shown, _stderr_console, app
+from .common import (
+    BadInput,
+    _check_traffic_flags,
+    _check_vehicle_flags,
+    _default_out,
+    _load,
+    _output_dir,
+    _shown,
+    _stderr_console,
+    app,
+)
 
 
 @app.command()
@@ -137,6 +147,12 @@ def commonroad_cmd(
     ),
     workers: int | None = typer.Option(None, "--workers", min=1, help="local processes (default: all cores)"),
     backend: str = typer.Option("local", "--backend", help="local (process pool) or ray"),
+    traffic: str | None = typer.Option(
+        None, "--traffic", help="recorded (default) or sumo (SUMO drives the vehicles; extra sumo)"
+    ),
+    prediction: str | None = typer.Option(
+        None, "--prediction", help="known (recorded futures; default with recorded traffic) or lane (default with sumo)"
+    ),
 ) -> None:
     """Drive every CommonRoad file and judge it with CommonRoad's drivability checker; write
     OUT/summary.json, OUT/summary.md and OUT/<file stem>/ per file (as mpcdrive run writes it)."""
@@ -157,17 +173,18 @@ def commonroad_cmd(
         if workers is not None:
             raise BadInput("--workers is only for --backend local (Ray uses the cluster's CPUs)")
     _check_vehicle_flags(vehicle, plant)
+    _check_traffic_flags(traffic, prediction)
     try:
         paths = collect_files(files)
     except ValueError as e:
         raise BadInput(str(e)) from None
     configure = None
-    if vehicle is not None or plant is not None:
+    if any(f is not None for f in (vehicle, plant, traffic, prediction)):
         from functools import partial
 
-        from ..adapters.commonroad import with_vehicle
+        from ..adapters.commonroad_batch import configure_import
 
-        configure = partial(with_vehicle, vehicle=vehicle, plant=plant)
+        configure = partial(configure_import, vehicle=vehicle, plant=plant, traffic=traffic, prediction=prediction)
     out_dir = out or _default_out("commonroad")
     t0 = time.perf_counter()
 

@@ -126,7 +126,23 @@ def _check_vehicle_flags(vehicle: str | None, plant: str | None) -> None:
         raise BadInput("--vehicle/--plant need commonroad-vehicle-models (pip install 'mpcdrive[commonroad]')")
 
 
-def _run_into(spec, out_dir: Path, show_progress: bool, source: str | None = None, extra_outputs=None):
+def _check_traffic_flags(traffic: str | None, prediction: str | None) -> None:
+    """``--traffic`` / ``--prediction`` of a CommonRoad run: known names, a combination that
+    exists, and the sumo extra where it is needed."""
+    from ..adapters.commonroad_traffic import check_modes
+
+    try:
+        traffic, _ = check_modes(traffic, prediction)
+    except ValueError as e:
+        raise BadInput(str(e)) from None
+    if traffic == "sumo":
+        from ..adapters.commonroad_sumo import INSTALL_HINT, available
+
+        if not available():
+            raise BadInput(f"--traffic sumo needs the sumo extra ({INSTALL_HINT})")
+
+
+def _run_into(spec, out_dir: Path, show_progress: bool, source: str | None = None, extra_outputs=None, prepare=None):
     """:func:`mpcdrive.runs.run_into` with a progress bar on stderr; a scenario that does not
     build is bad input."""
     from ..runs import BuildError, run_into
@@ -138,6 +154,7 @@ def _run_into(spec, out_dir: Path, show_progress: bool, source: str | None = Non
             lambda label, n: _progress(show_progress, label, n),
             source=source,
             extra_outputs=extra_outputs,
+            prepare=prepare,
         )
     except BuildError as e:
         raise BadInput(str(e)) from None
