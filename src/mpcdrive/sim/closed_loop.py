@@ -294,8 +294,8 @@ def simulate(
     ``disturbance`` after every step. On an open path the run ends when the vehicle passes the
     path's end (``stop_at_path_end``), and ``goal_reached`` says whether it did.
     ``progress(k, steps)`` is called every step when given. With a ``road`` the body's excess
-    outside it is measured at each step by the road's own rule (``SimResult.lane_excess_m``,
-    :meth:`Road.body_excess_m`, 0 inside). With ``obstacles`` the clearance
+    outside it is measured at each step, exactly (``SimResult.lane_excess_m``,
+    :meth:`Road.measure_excess_m`, 0 inside). With ``obstacles`` the clearance
     between the vehicle ``footprint`` and every obstacle is measured at each step
     (``SimResult.clearance_m``; negative = overlap), the obstacles' poses are logged in
     ``meta["obstacles"]``, the number of contacts in ``meta["collisions"]`` and each contact
@@ -483,8 +483,7 @@ def simulate(
         meta["collisions"] = max(int(meta.get("collisions", 0)), 1)
     lane_excess = profile = None
     if road is not None:
-        s_k = S[sl]
-        lane_excess = road.body_excess_m(s_k, EY[sl], np.asarray(path.curvature(s_k), float), EPSI[sl], footprint)
+        lane_excess = road.measure_excess_m(path, Xs[sl], S[sl], footprint)
         profile = road.profile(path.length_m)
     v = model.speed(Xs[sl])
     steer = Us[sl, 0]

@@ -231,7 +231,7 @@ _FIELD_NAMES = frozenset(_KEYS)
 
 def lane_excess_per_step(result: SimResult) -> np.ndarray | None:
     """(K,) distance [m] by which the body was outside the road at each step (0 inside), measured
-    in the run by the road's rule (:meth:`~mpcdrive.scene.road.Road.body_excess_m`); None
+    in the run by the road's measure (:meth:`~mpcdrive.scene.road.Road.measure_excess_m`); None
     without a road."""
     return result.lane_excess_m
 
