@@ -16,10 +16,10 @@ from ..models.discretize import Method, discrete_step
 from ..paths.base import ReferencePath
 from ..scene.footprint import Footprint
 from ..scene.road import Road
-from ..scene.geometry import shape_distance
-from ..scene.obstacles import Circle, Obstacle, TrajectoryMotion
+from ..scene.obstacles import Obstacle
 from ..types import STATUS_HELD, SimResult
 from .actuator import ActuatorState, SteeringActuator
+from .contact import clearances, collision_events, contact_count, recorded_traffic
 
 
 @dataclass(frozen=True)
@@ -295,11 +295,15 @@ def simulate(
     path's end (``stop_at_path_end``), and ``goal_reached`` says whether it did.
     ``progress(k, steps)`` is called every step when given. With a ``road`` the body's excess
     outside it is measured at each step, exactly (``SimResult.lane_excess_m``,
-    :meth:`Road.measure_excess_m`, 0 inside). With ``obstacles`` the clearance
-    between the vehicle ``footprint`` and every obstacle is measured at each step
-    (``SimResult.clearance_m``; negative = overlap), the obstacles' poses are logged in
-    ``meta["obstacles"]``, the number of contacts in ``meta["collisions"]`` and each contact
-    (which obstacle, when, how deep) in ``meta["collision_events"]`` (:func:`collision_events`).
+    :meth:`Road.measure_excess_m`, 0 inside). With ``obstacles`` the signed
+    distance between the vehicle ``footprint`` and every obstacle is measured at each step and,
+    where they may meet in between, on the swept motion between the steps
+    (:mod:`mpcdrive.sim.contact`): ``SimResult.clearance_m`` at the logged steps (negative =
+    overlap), the obstacles' poses in ``meta["obstacles"]``, the number of contacts in
+    ``meta["collisions"]``, each contact (which obstacle, when it began, how deep; also one
+    between two logged steps) in ``meta["collision_events"]``
+    (:func:`~mpcdrive.sim.contact.collision_events`) and the smallest distance, contacts between
+    the steps included, in ``meta["min_obstacle_clearance_m"]``.
     On a closed path, ``laps`` ends the
     run once the vehicle has driven that many laps from its start (``goal_reached`` says whether
     it did within ``steps``). ``abort_lateral_error_m`` ends the run early when the lateral error
@@ -472,13 +476,14 @@ def simulate(
         #: (K, n) the plant's own state at each logged step (e.g. for a CommonRoad ST solution)
         meta["plant_states"] = np.array(plant_log[:k_end], float)
     clearance = None
-    judged = (*obstacles, *_recorded_traffic(traffic_log[:k_end], T[sl]))
+    judged = (*obstacles, *recorded_traffic(traffic_log[:k_end], T[sl]))
     if judged:
-        per_obstacle, meta["obstacles"] = _clearances(Xs[sl], T[sl], judged, footprint)
-        clearance = per_obstacle.min(axis=0)
-        meta["min_obstacle_clearance_m"] = float(clearance.min())
-        meta["collisions"] = contact_count(clearance)
-        meta["collision_events"] = collision_events(per_obstacle, T[sl], judged)
+        at_steps, swept, began, meta["obstacles"] = clearances(Xs[sl], T[sl], judged, footprint)
+        clearance = at_steps.min(axis=0)  # at the logged steps
+        nearest = swept.min(axis=0)  # with the contacts between them
+        meta["min_obstacle_clearance_m"] = float(nearest.min())
+        meta["collisions"] = contact_count(nearest)
+        meta["collision_events"] = collision_events(swept, T[sl], judged, began)
     if termination == ENDED_COLLISION:
         meta["collisions"] = max(int(meta.get("collisions", 0)), 1)
     lane_excess = profile = None
@@ -528,94 +533,3 @@ def _traffic(plant: TrafficPlant, t_s: float, log: list) -> tuple[Obstacle, ...]
         raise ValueError(f"the plant's traffic changed from {len(log[0])} to {len(seen)} obstacles (index = identity)")
     log.append(seen)
     return seen
-
-
-def _recorded_traffic(log: list, T: np.ndarray) -> tuple[Obstacle, ...]:
-    """The traffic as it moved: per obstacle its shape through the poses the plant reported at
-    each logged step (``T`` (K,) [s]; interpolated between), with its lifetime."""
-    if not log or not log[0]:
-        return ()
-    out = []
-    for i, last in enumerate(log[-1]):
-        P = np.array([seen[i].pose_at(t) for seen, t in zip(log, T)], float)
-        P[:, 2] = np.unwrap(P[:, 2])
-        d = P - P[0]
-        motion = TrajectoryMotion(T, d[:, 0], d[:, 1], d[:, 2])
-        out.append(Obstacle(last.shape, tuple(P[0]), motion, last.name, last.t_start_s, last.t_end_s))
-    return tuple(out)
-
-
-def contact_count(clearance_m: np.ndarray) -> int:
-    """How many contacts a run had: stretches of steps with the smallest footprint-to-obstacle
-    distance ``clearance_m`` (K,) [m] below 0 (one contact lasting many steps counts once)."""
-    hit = np.asarray(clearance_m) < 0.0
-    return int(np.count_nonzero(hit[1:] & ~hit[:-1]) + (1 if hit.size and hit[0] else 0))
-
-
-def collision_events(clearance_m: np.ndarray, t_s: np.ndarray, obstacles) -> list[dict]:
-    """One event per contact of the footprint with an obstacle, in time order: ``obstacle``
-    (index in the scenario's list), ``name``, ``step`` and ``t_s`` [s] of the first overlapping
-    step, ``steps`` in contact and ``depth_m`` (deepest penetration [m], > 0).
-
-    ``clearance_m`` : (n_obstacles, K) footprint-to-obstacle signed distances [m] (negative =
-    overlap). A contact starts at a step with overlap after one without (or at step 0)."""
-    events = []
-    for i, d in enumerate(clearance_m):
-        hit = d < 0.0
-        starts = np.flatnonzero(hit & ~np.r_[False, hit[:-1]])
-        ends = np.flatnonzero(hit & ~np.r_[hit[1:], False]) + 1
-        for a, b in zip(starts, ends):
-            events.append(
-                {
-                    "obstacle": i,
-                    "name": obstacles[i].name,
-                    "step": int(a),
-                    "t_s": float(t_s[a]),
-                    "steps": int(b - a),
-                    "depth_m": float(-d[a:b].min()),
-                }
-            )
-    return sorted(events, key=lambda e: (e["step"], e["obstacle"]))
-
-
-def _clearances(X: np.ndarray, T: np.ndarray, obstacles, footprint: Footprint):
-    """(n_obstacles, K) footprint-to-obstacle signed distance per obstacle and step [m], and the
-    obstacles' logged shapes and poses (for reports).
-
-    The distance is exact where it can matter: the step's nearest obstacle and every contact.
-    For the others it is a lower bound (centre distance less both bounding radii), >= 0 and
-    >= the step's smallest distance; inf outside an obstacle's lifetime."""
-    K = len(T)
-    hl, hw = 0.5 * footprint.length_m, 0.5 * footprint.width_m
-    body_r = math.hypot(abs(footprint.center_offset_m) + hl, hw)  # about the reference point
-    clear = np.full((len(obstacles), K), np.inf)
-    for i, ob in enumerate(obstacles):
-        P = ob.poses_at(T)
-        bound = np.hypot(P[:, 0] - X[:, 0], P[:, 1] - X[:, 1]) - body_r - ob.shape.bounding_radius_m
-        # an obstacle outside its lifetime is not there to hit
-        clear[i] = np.where(np.broadcast_to(ob.present(T), (K,)), bound, np.inf)
-    for k in range(K):
-        body = None
-        best = math.inf
-        for i in np.argsort(clear[:, k], kind="stable"):
-            b = clear[i, k]
-            if b == math.inf or (b > best + 1e-9 and b > 1e-9):
-                break  # this one and the rest are farther and not in contact (1 nm of rounding)
-            if body is None:
-                body = footprint.polygon(*X[k, :3])
-            clear[i, k] = shape_distance(body, obstacles[i].at(T[k]))
-            best = min(best, clear[i, k])
-    logs = []
-    for ob in obstacles:
-        poses = np.array([ob.pose_at(t) for t in T])
-        entry = {"name": ob.name, "moving": ob.moving}
-        if isinstance(ob.shape, Circle):
-            centers = poses[:, :2].round(4)
-            entry.update(
-                type="circle", radius_m=ob.shape.radius_m, center=centers.tolist() if ob.moving else centers[0].tolist()
-            )
-        else:
-            world = np.array([ob.at(t).points for t in (T if ob.moving else T[:1])]).round(4)
-            entry.update(type="polygon", points=world.tolist() if ob.moving else world[0].tolist())
-        logs.append(entry)
-    return clear, logs
