@@ -58,7 +58,7 @@ def time_closed_loop(controller, prob: BenchProblem, steps: int) -> dict:
     road = prob.problem.road
     excess = None
     if road is not None:  # the road's own measure, as a run's metrics measure it
-        excess = float(np.max(road.measure_excess_m(prob.path, X, s_m, prob.footprint)))
+        excess = float(np.max(road.whole().measure_excess_m(prob.path, X, s_m, prob.footprint)))
     return {
         "p50_us": float(np.percentile(t, 50)),
         "p99_us": float(np.percentile(t, 99)),

@@ -27,6 +27,7 @@ from ..sim.closed_loop import Disturbance, ObservedPlant, Plant, simulate
 from ..ocp.avoidance import AvoidanceConfig
 from ..scene.footprint import Footprint
 from ..scene.road import Lane, Road
+from ..scene.world import Scene
 from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Polygon, Static, TrajectoryMotion, rectangle
 from ..solvers.osqp_backend import OsqpSettings
 from ..solvers.projected_gradient import ProjectedGradientSettings
@@ -418,7 +419,6 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         du_max_per_s=np.array(du),
         x_min=x_min,
         x_max=x_max,
-        road=road,
         lane_slack_weight=c.lane_slack_weight,
         lane_slack_weight_l1=c.lane_slack_weight_l1,
         friction_accel_mps2=c.friction_accel_mps2,
@@ -467,9 +467,8 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         problem,
         config,
         c.solver if reference else "condensed",
-        obstacles=obstacles,
+        scene=Scene(road, obstacles, footprint),  # the world, given once: the run is judged on it
         avoidance=avoidance,
-        footprint=footprint,
         osqp_settings=osqp_settings,
         pg_settings=pg_settings,
         assembly="python" if reference else "auto",
@@ -544,8 +543,9 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
     """Closed-loop run of a built experiment."""
     spec = exp.spec
     pb = (exp.mpc or exp.controller).problem
-    # the run is measured against every lane the car may use (a pass through a neighbour is inside)
-    road = exp.road if exp.road is None or not exp.road.lanes else exp.road.band(range(len(exp.road.lanes)))
+    # the run is judged against the controller's scene: the whole road (a pass through a
+    # neighbour lane is inside), the obstacles, the body
+    road = None if exp.road is None else exp.road.whole()
     return simulate(
         exp.controller,
         exp.plant,
@@ -557,7 +557,6 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
         measurement_noise=exp.measurement_noise,
         seed=spec.seed,
         stop_at_path_end=spec.stop_at_path_end,
-        road=road,
         progress=progress,
         meta={
             "id": spec.id,
@@ -565,8 +564,6 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
             "description": spec.description,
             "backend": getattr(exp.mpc, "backend_name", ""),
         },
-        obstacles=exp.obstacles,
-        footprint=exp.footprint,
         laps=spec.laps,
         # on a track, a car more than 1 m beyond the road edge has left it for good
         abort_lateral_error_m=None if exp.track is None or road is None else road.max_offset_m + 1.0,

@@ -528,6 +528,16 @@ class Road:
             self.s_m, left, np.minimum(right, left - 1e-6), self.margin_m, self.lanes, self.route_lane, self.period_m
         )
 
+    def whole(self) -> Road:
+        """The whole road: its edges widened to the outer edges of every lane (the road itself
+        without lanes), its lanes and margin kept. Where the body counts as inside when a drive
+        is judged, whichever lanes a decision layer lets the controller use at the time."""
+        if not self.lanes:
+            return self
+        left = np.maximum(self.left_m, np.max([ln.left_m for ln in self.lanes], axis=0))
+        right = np.minimum(self.right_m, np.min([ln.right_m for ln in self.lanes], axis=0))
+        return Road(self.s_m, left, right, self.margin_m, self.lanes, self.route_lane, self.period_m)
+
     def profile(self, length_m: float, ds_m: float = 0.5) -> np.ndarray:
         """(M, 3) rows ``[s_m, left_m, right_m]`` over arc lengths 0..``length_m`` [m] (every
         ``ds_m`` and at the knots): the edges along the path, for figures and result files."""

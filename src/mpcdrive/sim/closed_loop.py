@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 from collections.abc import Callable
@@ -15,8 +16,9 @@ from ..models.base import VehicleModel
 from ..models.discretize import Method, discrete_step
 from ..paths.base import ReferencePath
 from ..scene.footprint import Footprint
-from ..scene.road import Road
 from ..scene.obstacles import Obstacle
+from ..scene.road import Road
+from ..scene.world import Scene
 from ..types import STATUS_HELD, SimResult
 from .actuator import ActuatorState, SteeringActuator
 from .contact import clearances, collision_events, contact_count, recorded_traffic
@@ -168,15 +170,52 @@ def _finite_array(v, name: str) -> np.ndarray:
     return a
 
 
-def _check_run_args(dt_s, steps, seed, road) -> None:
+def _check_run_args(dt_s, steps, seed) -> None:
     if isinstance(dt_s, bool) or not isinstance(dt_s, numbers.Real) or not (math.isfinite(dt_s) and dt_s > 0):
         raise ValueError(f"dt_s must be a positive finite number, got {dt_s!r}")
     if isinstance(steps, bool) or not isinstance(steps, numbers.Integral) or steps < 1:
         raise ValueError(f"steps must be an integer >= 1, got {steps!r}")
     if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
         raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+
+
+def judged_scene(
+    controller,
+    scene: Scene | None = None,
+    road: Road | None = None,
+    obstacles: tuple[Obstacle, ...] | None = None,
+    footprint: Footprint | None = None,
+) -> Scene:
+    """The scene a drive of ``controller`` is judged against: the controller's own
+    (``controller.scene``, or that of the controller it wraps), or the one given, which must then
+    be the same world (a ValueError naming what differs). The older arguments ``road``,
+    ``obstacles``, ``footprint`` name parts of it (the rest is the controller's); a controller
+    without a scene (a baseline) is judged against what is given (nothing: an empty scene)."""
+    own = _inner_attr(controller, "scene")
+    if own is not None and not isinstance(own, Scene):
+        raise ValueError(f"the controller's scene must be a mpcdrive.scene.Scene, got {type(own).__name__}")
+    parts = {"road": road, "obstacles": obstacles, "footprint": footprint}
+    named = {k: v for k, v in parts.items() if v is not None}
+    if scene is not None and not isinstance(scene, Scene):
+        raise ValueError(f"scene must be a mpcdrive.scene.Scene or None, got {type(scene).__name__}")
+    if scene is not None and named:
+        raise ValueError(f"give the scene or its parts ({', '.join(named)}), not both")
     if road is not None and not isinstance(road, Road):
-        raise ValueError(f"road must be a mpcdrive.scene.road.Road or None, got {type(road).__name__}")
+        raise ValueError(f"road must be a mpcdrive.scene.Road or None, got {type(road).__name__}")
+    if named:
+        base = own if own is not None else Scene()
+        scene = dataclasses.replace(base, **{k: tuple(v) if k == "obstacles" else v for k, v in named.items()})
+    if scene is None:
+        return own if own is not None else Scene()
+    if own is not None:
+        diff = own.differences(scene)
+        if diff:
+            raise ValueError(
+                "the scene given to simulate is not the controller's (controller.scene): "
+                + "; ".join(diff)
+                + " (controller's vs given); build the controller with the scene and leave it out here"
+            )
+    return scene
 
 
 #: ways to drive the plant between two solves of a controller slower than the plant
@@ -256,11 +295,12 @@ def simulate(
     measurement_noise: Disturbance | None = None,
     seed: int = 0,
     stop_at_path_end: bool = True,
+    scene: Scene | None = None,
     road: Road | None = None,
     progress: Callable[[int, int], None] | None = None,
     meta: dict | None = None,
-    obstacles: tuple[Obstacle, ...] = (),
-    footprint: Footprint = Footprint(),
+    obstacles: tuple[Obstacle, ...] | None = None,
+    footprint: Footprint | None = None,
     laps: float | None = None,
     abort_lateral_error_m: float | None = None,
     control_period_s: float | None = None,
@@ -293,11 +333,18 @@ def simulate(
     The controller sees the plant state plus ``measurement_noise``; the plant state receives
     ``disturbance`` after every step. On an open path the run ends when the vehicle passes the
     path's end (``stop_at_path_end``), and ``goal_reached`` says whether it did.
-    ``progress(k, steps)`` is called every step when given. With a ``road`` the body's excess
-    outside it is measured at each step, exactly (``SimResult.lane_excess_m``,
-    :meth:`Road.measure_excess_m`, 0 inside). With ``obstacles`` the signed
-    distance between the vehicle ``footprint`` and every obstacle is measured at each step and,
-    where they may meet in between, on the swept motion between the steps
+    ``progress(k, steps)`` is called every step when given.
+
+    The drive is judged against the world it happens in, the scene (:func:`judged_scene`): the
+    controller's own (``controller.scene``; an ``LtvMpc`` built with ``scene=``, or with the road
+    in its problem and ``obstacles=`` / ``footprint=``; wrappers are looked through), so it cannot
+    be forgotten. A ``scene`` given here must be that same world (a ValueError names what
+    differs); ``road`` / ``obstacles`` / ``footprint`` name parts of it, the older way. Only a
+    controller without a scene (a baseline) takes its scene from here. With a road the body's
+    excess outside the whole road (every lane: :meth:`Scene.judged_road`) is measured at each
+    step, exactly (``SimResult.lane_excess_m``, :meth:`Road.measure_excess_m`, 0 inside). With
+    obstacles the signed distance between the body and every obstacle is measured at each step
+    and, where they may meet in between, on the swept motion between the steps
     (:mod:`mpcdrive.sim.contact`): ``SimResult.clearance_m`` at the logged steps (negative =
     overlap), the obstacles' poses in ``meta["obstacles"]``, the number of contacts in
     ``meta["collisions"]``, each contact (which obstacle, when it began, how deep; also one
@@ -316,10 +363,10 @@ def simulate(
     state ``disturbance`` needs a :class:`Plant`.
 
     A :class:`TrafficPlant` (another simulator's vehicles) is asked for its ``traffic`` at every
-    step; at each solve the controller gets ``obstacles`` followed by the traffic
+    step; at each solve the controller gets the scene's obstacles followed by the traffic
     (``controller.set_obstacles``, when it has the method and there is traffic), and the
-    traffic's poses at each step, as the plant reported them, join ``obstacles`` in the clearance
-    and collision accounting (indices after those of ``obstacles``). An :class:`EpisodicPlant`
+    traffic's poses at each step, as the plant reported them, join the scene's obstacles in the
+    clearance and collision accounting (indices after theirs). An :class:`EpisodicPlant`
     ends the run after the step at which ``ended`` gives a reason: ``meta["termination"]`` is
     that reason, and a plant-found contact (:data:`ENDED_COLLISION`) counts as a collision
     (``meta["collisions"]`` at least 1) even when no logged state overlaps.
@@ -329,7 +376,9 @@ def simulate(
     ``x_final``); otherwise ``termination`` is ``goal_reached``, the reason an episodic plant
     gave or ``completed``.
     """
-    _check_run_args(dt_s, steps, seed, road)
+    _check_run_args(dt_s, steps, seed)
+    world = judged_scene(controller, scene, road, obstacles, footprint)
+    obstacles, footprint = world.obstacles, world.footprint
     m = solve_interval(dt_s, control_period_s)
     if between_solves not in BETWEEN_SOLVES:
         raise ValueError(f"between_solves must be 'hold' or 'plan', got {between_solves!r}")
@@ -487,6 +536,7 @@ def simulate(
     if termination == ENDED_COLLISION:
         meta["collisions"] = max(int(meta.get("collisions", 0)), 1)
     lane_excess = profile = None
+    road = world.judged_road()
     if road is not None:
         lane_excess = road.measure_excess_m(path, Xs[sl], S[sl], footprint)
         profile = road.profile(path.length_m)
