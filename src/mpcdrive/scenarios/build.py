@@ -124,6 +124,41 @@ def warn_if_path_too_curved(spec: ScenarioSpec, path: ReferencePath, source: str
     return float(kappa[i])
 
 
+def path_doubles_back(spec: ScenarioSpec, path: ReferencePath, road: Road | None) -> tuple[str, str] | None:
+    """(field, problem) when the path doubles back (:meth:`ReferencePath.doubling_back`) onto
+    the band a run is judged in -- the whole road (every lane), at least the body's half width
+    either side -- else None. Where: the waypoint nearest the turn (``path.points``), else the
+    position (``path.file`` for a track, ``path``)."""
+    half_body = 0.5 * spec.vehicle.width_m
+    whole = None if road is None else road.whole()
+    if whole is None:
+        band = half_body
+    else:
+
+        def band(s):
+            left, right = whole.edges(s)
+            return np.maximum(np.maximum(np.abs(left), np.abs(right)), half_body)
+
+    back = path.doubling_back(band)
+    if back is None:
+        return None
+    turn = np.asarray(path.position(0.5 * (back.s_m + back.s_back_m)), float)
+    if spec.path.type == "waypoints":
+        pts = np.asarray(spec.path.points, float)
+        i = int(np.argmin(np.hypot(*(pts - turn).T)))
+        field, where = "path.points", f"at point {i} ({pts[i, 0]:.4g}, {pts[i, 1]:.4g}) m"
+    else:
+        field = "path.file" if spec.path.type == "csv" else "path"
+        where = f"at ({turn[0]:.4g}, {turn[1]:.4g}) m"
+    return (
+        field,
+        f"the path doubles back {where}: at s = {back.s_back_m:.4g} m it comes back to {back.distance_m:.3f} m "
+        f"from itself at s = {back.s_m:.4g} m, inside the {back.band_m:.3g} m band of road around it, so a "
+        "position there has two arc lengths and lateral offsets (lane excess and tracking errors would be "
+        "measured from the wrong stretch): split the drive in two or widen the turn",
+    )
+
+
 def build_obstacle(spec: ObstacleSpec) -> Obstacle:
     """Core obstacle from its scenario entry."""
     if spec.shape == "circle":
@@ -451,6 +486,9 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         time_limit_s=c.osqp_time_limit_s,
     )
     footprint = Footprint(v.length_m, v.width_m, n_discs=v.footprint_discs)
+    doubled = path_doubles_back(spec, path, road)
+    if doubled is not None:
+        raise ValueError(": ".join(doubled))
     obstacles = tuple(build_obstacle(o) for o in spec.obstacles)
     av = spec.avoidance or AvoidanceSpec()
     avoidance = AvoidanceConfig(**{f.name: getattr(av, f.name) for f in dataclasses.fields(AvoidanceConfig)})
