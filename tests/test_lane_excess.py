@@ -151,23 +151,27 @@ def test_a_spline_path_is_measured_against_its_own_table():
 
 
 class Steady:
-    """Holds the steering at ``steer_rad``: a kinematic bicycle then drives a circle."""
+    """Holds the steering at ``steer_rad``: a kinematic bicycle then drives a circle. Its
+    outputs' path coordinates are the state's on ``path``."""
 
     nx, nu, N = 3, 1, 0
 
-    def __init__(self, steer_rad: float):
-        self.steer = steer_rad
+    def __init__(self, steer_rad: float, path):
+        self.steer, self.path = steer_rad, path
 
     def initial_warm(self, x0):
         from mpcdrive.types import WarmStart
 
-        return WarmStart(s_m=0.0, u_prev=np.zeros(1))
+        return WarmStart(s_m=float(self.path.project(np.asarray(x0[:2], float))[0]), u_prev=np.zeros(1))
 
     def step(self, x, warm):
-        from mpcdrive.types import STATUS_OK, ControlOutput
+        from mpcdrive.types import STATUS_OK, ControlOutput, WarmStart
 
+        f = self.path.frenet(x[:3], warm.s_m)
         X = np.asarray(x, float)[None, :]
-        return ControlOutput(np.array([self.steer]), STATUS_OK, "", 0.0, 0.0, 0.0, 0.0, X, X, warm)
+        return ControlOutput(
+            np.array([self.steer]), STATUS_OK, "", 0.0, f.s_m, f.e_y_m, f.e_psi_rad, X, X, WarmStart(f.s_m, np.zeros(1))
+        )
 
 
 def test_a_drive_on_the_readme_circle_reports_its_exact_excess():
@@ -184,9 +188,8 @@ def test_a_drive_on_the_readme_circle_reports_its_exact_excess():
     steer = math.atan(math.tan(beta) * (lf + lr) / lr)
     model = KinematicBicycle3(1.0, KinematicParams(lf, lr))
     x0 = [rho * math.cos(beta), rho * math.sin(beta), math.pi / 2]  # its velocity (yaw + beta) tangent
-    r = simulate(
-        Steady(steer), Plant(model), CirclePath(radius_m=1.5), x0, 0.01, 300, road=Road.constant(1.0), footprint=CAR
-    )
+    path = CirclePath(radius_m=1.5)
+    r = simulate(Steady(steer, path), Plant(model), path, x0, 0.01, 300, road=Road.constant(1.0), footprint=CAR)
     assert np.allclose(np.hypot(r.x[:, 0], r.x[:, 1]), rho, atol=1e-3)  # the circle about the centre
     exact = 0.0
     for p in r.x:
