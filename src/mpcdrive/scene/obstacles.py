@@ -200,6 +200,18 @@ class Obstacle:
             out[k] = v[j0[k] : j1[k] + 1].max()
         return out
 
+    def moves_linearly(self, t_s: np.ndarray) -> np.ndarray:
+        """(K - 1,) True where the obstacle's pose is linear in time over the interval between
+        two of the times ``t_s`` (K,) [s] (increasing): always for a static or constant-velocity
+        one; for a recorded trajectory where no sample lies strictly inside the interval."""
+        t = np.asarray(t_s, float)
+        if not isinstance(self.motion, TrajectoryMotion):
+            return np.ones(max(len(t) - 1, 0), dtype=bool)
+        inside = np.searchsorted(self.motion.t_s, t[1:], side="left") - np.searchsorted(
+            self.motion.t_s, t[:-1], side="right"
+        )
+        return inside <= 0
+
     def outlines_at(self, t_s: np.ndarray) -> np.ndarray:
         """(K, M, 2) world vertices [m] of a polygon obstacle at the times ``t_s`` (K,) [s], as
         :meth:`at` places them."""

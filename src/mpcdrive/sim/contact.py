@@ -140,10 +140,16 @@ def _sweep(X, T, obstacles, footprint: Footprint, clear: np.ndarray, contact_t: 
     deepest overlap of the interval after a step, where below the step's own distance) and
     ``contact_t`` (when the first began, where the step itself had none)."""
     dt = np.diff(T)
-    dyaw = np.abs((np.diff(X[:, 2]) + math.pi) % (2.0 * math.pi) - math.pi)
-    ego_move = np.hypot(np.diff(X[:, 0]), np.diff(X[:, 1])) + dyaw * _body_reach_m(footprint)
+    turn = np.abs((np.diff(X[:, 2]) + math.pi) % (2.0 * math.pi) - math.pi) * _body_reach_m(footprint)
+    ego_move = np.hypot(np.diff(X[:, 0]), np.diff(X[:, 1])) + turn
     for i, ob in enumerate(obstacles):
-        move = ego_move + ob.point_speeds_mps(T) * dt  # relative point motion over each interval [m]
+        # the points' relative motion over each interval [m]: where the obstacle moves linearly
+        # in time, as the body does, their relative translation is linear too (cars side by side
+        # at one speed hardly move relative to each other); else both motions added up
+        P = ob.poses_at(T)
+        relative = np.hypot(np.diff(X[:, 0]) - np.diff(P[:, 0]), np.diff(X[:, 1]) - np.diff(P[:, 1]))
+        relative += turn + np.abs(np.diff(P[:, 2])) * ob.shape.bounding_radius_m
+        move = np.where(ob.moves_linearly(T), relative, ego_move + ob.point_speeds_mps(T) * dt)
         present = np.broadcast_to(ob.present(T), T.shape)
         near = present[:-1] & present[1:] & (clear[i, :-1] + clear[i, 1:] < move)
         if ob.has_lifetime:  # it appears or vanishes between two steps
