@@ -11,6 +11,7 @@ import pytest
 from test_verdict import COLLIDE  # a car at 1 m/s on a straight path through a rock: one collision
 
 from mpcdrive.io import write_json
+from mpcdrive.sim.contact import SWEEP_DEPTH_M
 from mpcdrive.scenarios import build_experiment, load_scenario, run_experiment
 from mpcdrive.sim import (
     CollisionEvent,
@@ -123,7 +124,9 @@ def test_collision_events_are_typed(tmp_path_factory):
     assert m.collisions == 1 and len(m.collision_events) == 1
     ev = m.collision_events[0]
     assert isinstance(ev, CollisionEvent) and m.first_collision == ev
-    assert (ev.obstacle, ev.name, ev.step) == (1, "rock", 20) and ev.depth_m > 0.0
+    # the front touches the rock at x = 0.97 m, between the steps at 0.95 s (19) and 1.00 s
+    assert (ev.obstacle, ev.name, ev.step) == (1, "rock", 19) and ev.depth_m > 0.0
+    assert 0.97 <= ev.t_s <= 0.97 + 2 * SWEEP_DEPTH_M / 1.0  # to the sweep's resolution at 1 m/s
     assert list(m["collision_events"][0]) == EVENT_KEYS and m["first_collision"] == ev.as_dict()
     assert isinstance(m.solve_time_us, SolveTimes) and m["solve_time_us"]["p50"] == m.solve_time_us.p50
     assert m.goal_reached is False  # the 2 s drive does not get to the path's end

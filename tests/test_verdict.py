@@ -16,7 +16,7 @@ from mpcdrive.types import ScenarioWarning
 
 # a car at 1 m/s on a straight path through a rock (index 1; index 0 is off the road); the
 # potential cost with weight 0 does not avoid it, so the body first overlaps the rock at
-# x = 1.52 - 0.3 - 0.25 (its front) = 0.97 m, the step at t = 1.00 s
+# x = 1.52 - 0.3 - 0.25 (its front) = 0.97 m, at t = 0.97 s (between the logged steps)
 COLLIDE = """\
 id: collide
 dt_s: 0.05
@@ -89,11 +89,12 @@ def test_summary_names_the_obstacle_and_time_of_a_collision_and_check_exits_3(tm
     r = cli("run", str(p), "--out", str(tmp_path / "plain"), "-q")
     assert r.returncode == 0, r.stderr  # without --check a collision is reported, not an error
     line = r.stdout.splitlines()[0]
-    assert line.startswith("UNSAFE: collide: collided with obstacle 1 (rock) at t = 1.00 s"), line
+    # the front touches the rock at x = 0.97 m, between two logged steps (0.95 s, 1.00 s)
+    assert line.startswith("UNSAFE: collide: collided with obstacle 1 (rock) at t = 0.97 s"), line
     assert "goal not reached (the goal region was reached, but not safely)" in line
     m = json.loads((tmp_path / "plain" / "metrics.json").read_text())
     assert m["collisions"] == 1 and m["first_collision"]["obstacle"] == 1
-    assert m["first_collision"]["t_s"] == pytest.approx(1.0) and m["first_collision"]["name"] == "rock"
+    assert m["first_collision"]["t_s"] == pytest.approx(0.97, abs=2e-3) and m["first_collision"]["name"] == "rock"
     assert [e["obstacle"] for e in m["collision_events"]] == [1]
     assert m["goal_region_reached"] is True and m["goal_reached"] is False
     # --check: exit code 3, outputs still written, the reason on stderr

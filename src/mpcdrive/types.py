@@ -151,8 +151,9 @@ class SimResult:
     road_profile : (M, 3) rows ``[s_m, left_m, right_m]``: the road edges' lateral offsets [m]
     from the path along it (``Road.profile``), or None without a road;
     lane_excess_m : (K,) how far [m] the body was outside the road at each step (0 inside; the
-    road's own rule), or None without a road; state_names/input_names: labels;
-    clearance_m : (K,) smallest footprint-to-obstacle distance per step [m] (None without obstacles).
+    road's own measure, ``Road.measure_excess_m``), or None without a road; state_names/input_names: labels;
+    clearance_m : (K,) smallest footprint-to-obstacle distance at each logged step [m] (None
+    without obstacles; a contact between two steps is in ``meta["collision_events"]``).
     """
 
     t_s: np.ndarray

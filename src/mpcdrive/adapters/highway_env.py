@@ -51,6 +51,7 @@ from ..ocp.problem import MpcProblem
 from ..paths.straight import StraightPath
 from ..scene.footprint import Footprint
 from ..scene.road import Lane, Road
+from ..scene.world import Scene
 from ..sim.closed_loop import simulate
 from ..types import ControlOutput, SimResult, WarmStart
 from .highway_plant import (
@@ -366,6 +367,12 @@ class HighwayEnvMpcDriver:
         return self.road if self.road is not None else self.lane_road
 
     @property
+    def scene(self) -> Scene:
+        """The world a drive is judged in (:func:`~mpcdrive.sim.simulate` reads it): the
+        :attr:`safety_road` and the ego's body; the other vehicles are the plant's traffic."""
+        return Scene(self.safety_road, (), self.footprint)
+
+    @property
     def decision(self) -> LaneDecision | None:
         """The lane decision layer's last decision (None without ``settings.lanes``)."""
         return getattr(self.controller, "decision", None) if self.road is not None else None
@@ -417,7 +424,8 @@ class HighwayDrive:
 
 def drive_env(env, driver: HighwayEnvMpcDriver, steps: int) -> HighwayDrive:
     """Run up to ``steps`` policy steps (fewer if the episode ends) of ``driver`` on its plant
-    (``env``) through :func:`~mpcdrive.sim.simulate`, judged on ``driver.safety_road``. One run
+    (``env``) through :func:`~mpcdrive.sim.simulate`, judged on ``driver.scene`` (its
+    ``safety_road``). One run
     per driver: the loop's clock and the warm start begin at 0 (after ``env.reset``, build a new
     driver)."""
     if isinstance(steps, bool) or int(steps) != steps or steps < 1:
@@ -433,8 +441,6 @@ def drive_env(env, driver: HighwayEnvMpcDriver, steps: int) -> HighwayDrive:
         plant.state(),
         driver.dt_s,
         int(steps),
-        road=driver.safety_road,
-        footprint=driver.footprint,
         stop_at_path_end=False,
         meta={
             "id": "highway-env-racetrack" if driver.road is None else "highway-env-highway",

@@ -13,6 +13,7 @@ import numpy as np
 from ..control.base import TrackingWarmStart
 from ..models.base import VehicleModel
 from ..paths.base import ReferencePath
+from ..scene.world import Scene
 from ..sim.closed_loop import simulate
 from ..sim.metrics import compute_metrics
 from ..types import STATUS_OK, ControlOutput, SimResult, WarmStart
@@ -128,14 +129,16 @@ def highway_episode(
     u = env.unwrapped
     if steps is None:
         steps = int(round(float(u.config["duration"]) * float(u.config["policy_frequency"])))
+    scene: Scene | None = None  # the MPC driver's own (driver.scene)
     if policy == "mpc":
         driver = HighwayEnvMpcDriver(env, settings)
-        controller, plant, path, road = driver, driver.plant, driver.path, driver.safety_road
+        controller, plant, path = driver, driver.plant, driver.path
     elif policy == "idm":
         _idm_ego(env, settings.v_ref_mps)
         plant = HighwayEnvPlant(env, prediction="constant_velocity")  # the traffic only for the accounting
         road, path, _ = straight_road(u.road.network, plant.lane_index)
         controller = EnvDriven(plant.model, path, plant.dt_s)
+        scene = Scene(road, (), plant.footprint)
     else:
         raise ValueError(f"policy must be 'mpc' or 'idm', got {policy!r}")
     plant.observer = overtakes = _Overtakes()
@@ -148,8 +151,7 @@ def highway_episode(
         plant.state(),
         plant.dt_s,
         int(steps),
-        road=road,
-        footprint=plant.footprint,
+        scene=scene,
         stop_at_path_end=False,
         meta={"id": f"highway-v0-{policy}-{int(seed)}"},
     )

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..control.mpc import LtvMpc
 from ..sim.closed_loop import Plant
-from ..scene.geometry import shape_distance
+from ..sim.contact import clearances
 from .problems import PROBLEMS, BenchProblem
 
 WARMUP_STEPS = 10
@@ -28,40 +28,37 @@ def time_closed_loop(controller, prob: BenchProblem, steps: int) -> dict:
     says: ``solver_failures`` (steps whose solve did not succeed), ``min_obstacle_clearance_m``
     (least signed distance between the footprint and any obstacle over the drive, negative when
     they overlapped; None without obstacles), ``collision_steps`` (steps with the footprint
-    touching or overlapping an obstacle) and ``max_lane_excess_m`` (how far a footprint corner
-    got outside the lane or road, 0 inside; None without a lane)."""
+    touching or overlapping an obstacle, at the step or before the next) and
+    ``max_lane_excess_m`` (how far the body got outside the lane or road, 0 inside; None without
+    a lane), measured as a run's metrics measure them (:func:`~mpcdrive.sim.contact.clearances`,
+    :meth:`~mpcdrive.scene.road.Road.measure_excess_m`)."""
     plant = Plant(prob.model)
     x = prob.x0.copy()
     warm = controller.initial_warm(x)
     times = np.empty(steps)
     ey = np.empty(steps)
-    epsi = np.empty(steps)
-    yaw = np.empty(steps)
     s_m = np.empty(steps)
+    X = np.empty((steps, 3))
     failures = 0
     qps = 0
-    collisions = 0
-    min_clear = None
     for k in range(steps):
         t0 = time.perf_counter()
         out = controller.step(x, warm)
         times[k] = time.perf_counter() - t0
         warm = out.warm
-        ey[k], epsi[k], yaw[k], s_m[k] = out.e_y_m, out.e_psi_rad, x[2], out.s_m
+        ey[k], s_m[k], X[k] = out.e_y_m, out.s_m, x[:3]
         failures += out.status not in ("ok", "inaccurate")
         qps += out.sqp_iterations
-        if prob.obstacles:
-            body = prob.footprint.polygon(*x[:3])
-            d = min(shape_distance(body, ob.at(k * prob.dt_s)) for ob in prob.obstacles)
-            collisions += d <= 0.0
-            min_clear = d if min_clear is None else min(min_clear, d)
         x = plant.step(x, out.u, prob.dt_s)
     t = times[min(WARMUP_STEPS, steps - 1) :] * 1e6
+    collisions, min_clear = 0, None
+    if prob.obstacles:  # as a run's metrics judge them: at the steps and between them
+        clear = clearances(X, prob.dt_s * np.arange(steps), prob.obstacles, prob.footprint)[1].min(axis=0)
+        collisions, min_clear = int(np.count_nonzero(clear <= 0.0)), float(clear.min())
     road = prob.problem.road
     excess = None
-    if road is not None:  # the road's own rule, as a run's metrics measure it
-        kappa = np.asarray(prob.path.curvature(s_m), float)
-        excess = float(np.max(road.body_excess_m(s_m, ey, kappa, epsi, prob.footprint)))
+    if road is not None:  # the road's own measure, as a run's metrics measure it
+        excess = float(np.max(road.whole().measure_excess_m(prob.path, X, s_m, prob.footprint)))
     return {
         "p50_us": float(np.percentile(t, 50)),
         "p99_us": float(np.percentile(t, 99)),

@@ -3,14 +3,18 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Protocol, TypeVar
 
 import numpy as np
 
 from ..models.base import VehicleModel
+from ..ocp.problem import MpcProblem
 from ..paths.base import ReferencePath
+from ..scene.footprint import Footprint
 from ..scene.obstacles import Obstacle
 from ..scene.road import Road
+from ..scene.world import Scene
 from ..types import ControlOutput, WarmStart
 
 A = TypeVar("A")
@@ -71,6 +75,30 @@ class TrackingWarmStart:
         if not math.isfinite(warm.s_m):
             raise ValueError(f"warm.s_m must be finite, got {warm.s_m!r}")
         return u_prev
+
+
+def resolve_scene(
+    problem: MpcProblem, scene: Scene | None, obstacles, footprint: Footprint | None
+) -> tuple[MpcProblem, Scene]:
+    """``(problem, scene)`` of an MPC built with ``scene`` (the road, obstacles and body, given
+    once) or, the older way, with the road in ``problem.road`` and ``obstacles`` / ``footprint``
+    as arguments (their scene is made of them). With a scene, ``problem.road`` becomes the
+    scene's road; a ValueError when a part is given twice and differs."""
+    if scene is None:
+        fp = Footprint() if footprint is None else footprint
+        return problem, Scene(problem.road, tuple(obstacles), fp)
+    if not isinstance(scene, Scene):
+        raise ValueError(f"scene must be a mpcdrive.scene.Scene, got {type(scene).__name__}")
+    if tuple(obstacles):
+        raise ValueError("obstacles given both in the scene and as obstacles=: give them once, in the scene")
+    if footprint is not None and scene.differences(Scene(scene.road, scene.obstacles, footprint)):
+        raise ValueError("footprint given both in the scene and as footprint=, and they differ: give it once")
+    if problem.road is not None and problem.road is not scene.road:
+        if scene.differences(Scene(problem.road, scene.obstacles, scene.footprint)):
+            raise ValueError("MpcProblem.road is not the scene's road: give the road once, in the scene")
+    elif problem.road is None and scene.road is not None:
+        problem = replace(problem, road=scene.road)
+    return problem, scene
 
 
 def checked_road(current: Road | None, road: Road) -> Road:

@@ -77,10 +77,11 @@ from ..paths.compiled import path_arrays
 from ..paths.profile_compiled import profile_array
 from ..scene.footprint import Footprint
 from ..scene.road import Road
+from ..scene.world import Scene
 from ..solvers.dense_qp import STATUS_WORDS
 from ..solvers.osqp_backend import OsqpSettings
 from ..types import ControlOutput, WarmStart
-from .base import checked_obstacles, checked_road, checked_speed_cap
+from .base import checked_obstacles, checked_road, checked_speed_cap, resolve_scene
 
 from ..ocp.assembly import MODE_ITERATE, MODE_NO_PLAN, MODE_SHIFTED_PLAN, StepAssembly
 from ..ocp.avoidance_compiled import SIDE_NONE
@@ -163,15 +164,18 @@ class CompiledLtvMpc(LtvMpc):
         config: MpcConfig = MpcConfig(),
         solver: Literal["condensed", "osqp"] = "condensed",
         *,
+        scene: Scene | None = None,
         obstacles=(),
         avoidance: AvoidanceConfig | None = None,
-        footprint: Footprint = Footprint(),
+        footprint: Footprint | None = None,
         condensed_settings: CondensedSettings | None = None,
         osqp_settings: OsqpSettings = OsqpSettings(),
         pg_settings=None,
         assembly: str = "compiled",
         step_spec: StepSpec | None = None,
     ):
+        problem, self.scene = resolve_scene(problem, scene, obstacles, footprint)
+        obstacles, footprint = self.scene.obstacles, self.scene.footprint
         if solver not in SOLVERS:
             raise ValueError(f"the compiled step's solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
         settings = condensed_settings if condensed_settings is not None else CondensedSettings()

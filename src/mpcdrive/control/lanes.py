@@ -60,6 +60,7 @@ from ..ocp.avoidance_compiled import SHAPE_CIRCLE, ObstacleTable, pose_at, table
 from ..paths.compiled import PathArrays, path_arrays, path_eval, path_project
 from ..scene.obstacles import Circle, Obstacle
 from ..scene.road import Road
+from ..scene.world import Scene
 
 __all__ = ["LaneConfig", "LaneDecision", "LateralRamp", "decide_lane", "lane_line", "lane_of"]
 
@@ -585,7 +586,8 @@ class LaneChoosingMpc:
     MPC's (attributes, warm start). ``return_by_s``: as for :func:`decide_lane`.
 
     ``road`` is the full road with its lanes (``road.lanes``, ``route_lane``), on the knots of the
-    MPC's road. ``decision`` is the last :class:`LaneDecision`."""
+    MPC's road. ``decision`` is the last :class:`LaneDecision`. ``scene`` is the MPC's scene
+    with this full road: the world a drive is judged in, whichever band the MPC keeps to."""
 
     def __init__(self, mpc, road: Road, config: LaneConfig | None = None, return_by_s: float | None = None):
         if not road.lanes:
@@ -594,6 +596,11 @@ class LaneChoosingMpc:
             raise ValueError("LaneChoosingMpc needs an MPC built with a road (MpcProblem(road=...))")
         self.mpc = mpc
         self.road = road
+        own = getattr(mpc, "scene", None)
+        #: the world: the MPC's obstacles and body on the full road
+        self.scene = (
+            Scene(road, tuple(mpc.obstacles), mpc.footprint) if own is None else dataclasses.replace(own, road=road)
+        )
         fp = mpc.footprint
         self.config = config or LaneConfig(ego_length_m=fp.length_m, ego_width_m=fp.width_m)
         self.return_by_s = return_by_s

@@ -29,6 +29,7 @@ from ..paths.base import ReferencePath
 from ..scene.footprint import Footprint
 from ..scene.obstacles import Obstacle
 from ..scene.road import Road, lin_arc_lengths, reach_first_step
+from ..scene.world import Scene
 from ..paths.reference import HorizonMode, horizon_arc_lengths, horizon_states
 from ..paths.speed_profile import SpeedReference
 from ..solvers.osqp_backend import OsqpBackend, OsqpSettings
@@ -36,7 +37,7 @@ from ..solvers.projected_gradient import ProjectedGradientBackend, ProjectedGrad
 from ..types import ControlOutput, SolveResult, WarmStart
 from ..units import TWO_PI, wrap_angle
 from .fallback import FallbackConfig, FallbackLadder
-from .base import TrackingWarmStart, checked_obstacles, checked_road, checked_speed_cap
+from .base import TrackingWarmStart, checked_obstacles, checked_road, checked_speed_cap, resolve_scene
 
 if TYPE_CHECKING:
     from ..ocp.qp import LtvQp
@@ -251,9 +252,8 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
     """Tracking LTV-MPC of ``model`` along ``path`` solving ``problem``: the one public
     controller.
 
-    ``LtvMpc(model, path, problem, config, solver=..., obstacles=..., avoidance=...,
-    footprint=...)`` returns the controller that covers the problem, an instance of one of two
-    subclasses that differ only in who assembles each step's stage QP (``assembly``):
+    ``LtvMpc(model, path, problem, config, solver=..., scene=..., avoidance=...)`` returns the
+    controller that covers the problem, an instance of one of two subclasses that differ only in who assembles each step's stage QP (``assembly``):
 
     - :class:`~mpcdrive.control.fast.CompiledLtvMpc` (``compiled``, the default wherever it
       covers the problem): the whole step in numba-compiled code;
@@ -274,8 +274,13 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
     ``assembly`` who builds the QP. Both keep the body inside ``problem.road`` by the rule of
     :mod:`mpcdrive.scene.road`.
 
-    obstacles / avoidance : the obstacles and how they enter the problem (see ``ocp.avoidance``);
-    footprint : the vehicle body, kept inside ``problem.road`` (with the road's margin).
+    scene : the world, given once (:class:`~mpcdrive.scene.Scene`: the road, the obstacles, the
+    body), kept as :attr:`scene`, which :func:`~mpcdrive.sim.simulate` judges a drive against;
+    its road becomes ``problem.road``. The older way names the parts: the road in
+    ``problem.road``, ``obstacles=`` and ``footprint=`` (the scene is made of them; naming a part
+    both ways is a ValueError unless it is the same). avoidance : how the obstacles enter the
+    problem (see ``ocp.avoidance``). ``set_road`` and ``set_obstacles`` change what the problem
+    keeps to from the next step on (a lane band, fresh predictions), never :attr:`scene`.
     """
 
     name = "ltv-mpc"
@@ -284,6 +289,8 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
     assembly = "python"
     avoidance: Avoidance | None
     _road: Road | None
+    #: the world the controller was built for (road, obstacles, body): what a run is judged against
+    scene: Scene
 
     def __new__(
         cls,
@@ -293,9 +300,10 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
         config: MpcConfig = MpcConfig(),
         solver: Solver = "condensed",
         *,
+        scene: Scene | None = None,
         obstacles=(),
         avoidance: AvoidanceConfig | None = None,
-        footprint: Footprint = Footprint(),
+        footprint: Footprint | None = None,
         condensed_settings: CondensedSettings | None = None,
         osqp_settings: OsqpSettings = OsqpSettings(),
         pg_settings: ProjectedGradientSettings = ProjectedGradientSettings(),
@@ -320,8 +328,9 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
             return super().__new__(CompiledLtvMpc)
         from .fast_setup import fast_unsupported_reason
 
+        problem, scene = resolve_scene(problem, scene, obstacles, footprint)
         reason = fast_unsupported_reason(
-            model, path, problem, config, obstacles=obstacles, avoidance=avoidance, solver="osqp"
+            model, path, problem, config, obstacles=scene.obstacles, avoidance=avoidance, solver="osqp"
         )
         if reason is None:
             return super().__new__(CompiledLtvMpc)
@@ -377,14 +386,17 @@ class PythonLtvMpc(LtvMpc):
         config: MpcConfig = MpcConfig(),
         solver: Solver = "condensed",
         *,
+        scene: Scene | None = None,
         obstacles=(),
         avoidance: AvoidanceConfig | None = None,
-        footprint: Footprint = Footprint(),
+        footprint: Footprint | None = None,
         condensed_settings: CondensedSettings | None = None,
         osqp_settings: OsqpSettings = OsqpSettings(),
         pg_settings: ProjectedGradientSettings = ProjectedGradientSettings(),
         assembly: Assembly = "auto",
     ):
+        problem, self.scene = resolve_scene(problem, scene, obstacles, footprint)
+        obstacles, footprint = self.scene.obstacles, self.scene.footprint
         if solver not in SOLVERS:
             raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
         if (problem.nx, problem.nu) != (model.nx, model.nu):

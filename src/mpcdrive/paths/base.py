@@ -8,6 +8,7 @@ Lateral error ``e_y`` [m] is positive to the left of the path direction.
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
@@ -23,6 +24,27 @@ class Projection:
     s_m: float
     e_y_m: float
     e_psi_rad: float
+
+
+#: a path doubles back where it comes within the band's width of itself after a stretch more than
+#: this many times that distance long (:meth:`ReferencePath.doubling_back`): a turn of more than
+#: ~150 deg (legs of equal length: sin(15 deg) ~ 1 / 4), a U-turn onto its own band
+DOUBLING_BACK_RATIO = 4.0
+#: ... within this many band widths of path (farther returns are followed along the path)
+DOUBLING_BACK_REACH = 8.0
+
+
+@dataclass(frozen=True)
+class DoublingBack:
+    """Where a path doubles back (:meth:`ReferencePath.doubling_back`): at arc length ``s_back_m``
+    [m], point ``xy`` (2,) [m], it is ``distance_m`` [m] from itself at ``s_m`` [m], closer than
+    the band around both (``band_m`` [m], the two half widths)."""
+
+    s_m: float
+    s_back_m: float
+    distance_m: float
+    band_m: float
+    xy: tuple[float, float]
 
 
 class ReferencePath(ABC):
@@ -121,6 +143,52 @@ class ReferencePath(ABC):
         s, e_y = self.project(pose[:2], s_guess, window_m)
         e_psi = wrap_angle(pose[2] - float(self.heading(s)))
         return Projection(float(s), float(e_y), float(e_psi))
+
+    def doubling_back(self, half_width_m, ds_m: float | None = None) -> DoublingBack | None:
+        """Where the path doubles back, or None: the first place where it turns back onto the
+        band of ``half_width_m`` [m] either side of itself (a float, or a function of arc length
+        giving one per point). Two points at arc lengths ``s1 < s2``, ``d = |p(s1) - p(s2)|``
+        apart, with ``d < w(s1) + w(s2)`` (their bands overlap) and
+        ``DOUBLING_BACK_RATIO d < s2 - s1 <= DOUBLING_BACK_REACH (w(s1) + w(s2))`` (the path got
+        there by turning back within a few band widths, on a closed path ``s2 - s1`` the shorter
+        way round): a position in the overlap has two arc lengths close enough for a projection
+        searching near the car to take either, so its lateral offset, and every measure taken
+        from it, can be wrong by the width of the turn. A reversal onto itself, a U-turn whose
+        legs run inside the band, a turn sharper than ~150 deg all do; a curve of any radius, a
+        90 deg corner, a hairpin whose legs keep their bands apart, a closed track's joint, a
+        crossing or a return far along the path (a loop around a block back on the opposite
+        lane: projections follow the car along the path there) do not. Points are compared
+        every ``ds_m`` [m] (default: a quarter of the narrowest half width, at least 1/200000 of
+        the length)."""
+        from scipy.spatial import cKDTree  # here: only scenario checks ask
+
+        L = float(self.length_m)
+        w_of = half_width_m if callable(half_width_m) else (lambda s: np.full(np.shape(s), float(half_width_m)))
+        if ds_m is None:
+            probe = np.linspace(0.0, L, 201)
+            ds_m = max(float(np.min(w_of(probe))) / 4.0, L / 200000.0)
+        n = max(3, int(math.ceil(L / ds_m)) + 1)
+        s = np.linspace(0.0, L, n, endpoint=not self.closed)
+        p = np.asarray(self.position(s), float)
+        w = np.asarray(w_of(s), float)
+        pairs = cKDTree(p).query_pairs(2.0 * float(np.max(w)), output_type="ndarray")
+        if len(pairs) == 0:
+            return None
+        i, j = pairs.min(axis=1), pairs.max(axis=1)
+        gap = np.hypot(*(p[i] - p[j]).T)
+        along = s[j] - s[i]
+        if self.closed:
+            along = np.minimum(along, L - along)
+        band = w[i] + w[j]
+        bad = (gap < band) & (DOUBLING_BACK_RATIO * gap < along) & (along <= DOUBLING_BACK_REACH * band)
+        if not np.any(bad):
+            return None
+        k = np.flatnonzero(bad)
+        first = k[np.lexsort((s[i[k]], s[j[k]]))[0]]  # the earliest place it comes back
+        a, b = int(i[first]), int(j[first])
+        return DoublingBack(
+            float(s[a]), float(s[b]), float(gap[first]), float(band[first]), (float(p[b, 0]), float(p[b, 1]))
+        )
 
     def polyline(self, ds_m: float | None = None) -> np.ndarray:
         """(M, 2) points along one traversal of the path, for plots [m]."""

@@ -28,6 +28,7 @@ from ..sim.verdict import VerdictCriteria
 from ..ocp.avoidance import AvoidanceConfig
 from ..scene.footprint import Footprint
 from ..scene.road import Lane, Road
+from ..scene.world import Scene
 from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Polygon, Static, TrajectoryMotion, rectangle
 from ..solvers.osqp_backend import OsqpSettings
 from ..solvers.projected_gradient import ProjectedGradientSettings
@@ -123,6 +124,41 @@ def warn_if_path_too_curved(spec: ScenarioSpec, path: ReferencePath, source: str
         stacklevel=2,
     )
     return float(kappa[i])
+
+
+def path_doubles_back(spec: ScenarioSpec, path: ReferencePath, road: Road | None) -> tuple[str, str] | None:
+    """(field, problem) when the path doubles back (:meth:`ReferencePath.doubling_back`) onto
+    the band a run is judged in -- the whole road (every lane), at least the body's half width
+    either side -- else None. Where: the waypoint nearest the turn (``path.points``), else the
+    position (``path.file`` for a track, ``path``)."""
+    half_body = 0.5 * spec.vehicle.width_m
+    whole = None if road is None else road.whole()
+    if whole is None:
+        band = half_body
+    else:
+
+        def band(s):
+            left, right = whole.edges(s)
+            return np.maximum(np.maximum(np.abs(left), np.abs(right)), half_body)
+
+    back = path.doubling_back(band)
+    if back is None:
+        return None
+    turn = np.asarray(path.position(0.5 * (back.s_m + back.s_back_m)), float)
+    if spec.path.type == "waypoints":
+        pts = np.asarray(spec.path.points, float)
+        i = int(np.argmin(np.hypot(*(pts - turn).T)))
+        field, where = "path.points", f"at point {i} ({pts[i, 0]:.4g}, {pts[i, 1]:.4g}) m"
+    else:
+        field = "path.file" if spec.path.type == "csv" else "path"
+        where = f"at ({turn[0]:.4g}, {turn[1]:.4g}) m"
+    return (
+        field,
+        f"the path doubles back {where}: at s = {back.s_back_m:.4g} m it comes back to {back.distance_m:.3f} m "
+        f"from itself at s = {back.s_m:.4g} m, inside the {back.band_m:.3g} m band of road around it, so a "
+        "position there has two arc lengths and lateral offsets (lane excess and tracking errors would be "
+        "measured from the wrong stretch): split the drive in two or widen the turn",
+    )
 
 
 def build_obstacle(spec: ObstacleSpec) -> Obstacle:
@@ -434,7 +470,6 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         du_max_per_s=np.array(du),
         x_min=x_min,
         x_max=x_max,
-        road=road,
         lane_slack_weight=c.lane_slack_weight,
         lane_slack_weight_l1=c.lane_slack_weight_l1,
         friction_accel_mps2=c.friction_accel_mps2,
@@ -467,6 +502,9 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         time_limit_s=c.osqp_time_limit_s,
     )
     footprint = Footprint(v.length_m, v.width_m, n_discs=v.footprint_discs)
+    doubled = path_doubles_back(spec, path, road)
+    if doubled is not None:
+        raise ValueError(": ".join(doubled))
     obstacles = tuple(build_obstacle(o) for o in spec.obstacles)
     av = spec.avoidance or AvoidanceSpec()
     avoidance = AvoidanceConfig(**{f.name: getattr(av, f.name) for f in dataclasses.fields(AvoidanceConfig)})
@@ -483,9 +521,8 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         problem,
         config,
         c.solver if reference else "condensed",
-        obstacles=obstacles,
+        scene=Scene(road, obstacles, footprint),  # the world, given once: the run is judged on it
         avoidance=avoidance,
-        footprint=footprint,
         osqp_settings=osqp_settings,
         pg_settings=pg_settings,
         assembly="python" if reference else "auto",
@@ -558,8 +595,9 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
     """Closed-loop run of a built experiment."""
     spec = exp.spec
     pb = (exp.mpc or exp.controller).problem
-    # the run is measured against every lane the car may use (a pass through a neighbour is inside)
-    road = exp.road if exp.road is None or not exp.road.lanes else exp.road.band(range(len(exp.road.lanes)))
+    # the run is judged against the controller's scene: the whole road (a pass through a
+    # neighbour lane is inside), the obstacles, the body
+    road = None if exp.road is None else exp.road.whole()
     return simulate(
         exp.controller,
         exp.plant,
@@ -571,7 +609,6 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
         measurement_noise=exp.measurement_noise,
         seed=spec.seed,
         stop_at_path_end=spec.stop_at_path_end,
-        road=road,
         progress=progress,
         meta={
             "id": spec.id,
@@ -580,8 +617,6 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
             "backend": getattr(exp.mpc, "backend_name", ""),
             "criteria": criteria(spec).as_dict(),
         },
-        obstacles=exp.obstacles,
-        footprint=exp.footprint,
         laps=spec.laps,
         # on a track, a car more than 1 m beyond the road edge has left it for good
         abort_lateral_error_m=None if exp.track is None or road is None else road.max_offset_m + 1.0,

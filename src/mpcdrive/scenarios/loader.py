@@ -120,16 +120,24 @@ def reject_initial_overlap(spec: ScenarioSpec, source: str) -> ScenarioSpec:
 def warn_suspicious(spec: ScenarioSpec, source: str) -> ScenarioSpec:
     """Warn (:class:`~mpcdrive.types.ScenarioWarning`, one ``source: field: problem`` message
     each) about every legal but suspicious value of ``spec`` (see
-    :func:`~mpcdrive.scenarios.build.scenario_warnings`); returns ``spec``."""
+    :func:`~mpcdrive.scenarios.build.scenario_warnings`); returns ``spec``. The checks that need
+    the built path run here too: a path that doubles back is a :class:`ScenarioError`
+    (:func:`~mpcdrive.scenarios.build.path_doubles_back`), one that turns tighter than the car
+    can a warning."""
     from ..types import ScenarioWarning
-    from .build import build_path, load_track, scenario_warnings, warn_if_path_too_curved
+    from .build import build_path, build_road, load_track, path_doubles_back, scenario_warnings, warn_if_path_too_curved
 
     for field, problem in scenario_warnings(spec):
         warnings.warn(str(ScenarioError(source, field, problem)), ScenarioWarning, stacklevel=2)
     try:
-        path = load_track(spec.path).path if spec.path.type == "csv" else build_path(spec.path)
+        track = load_track(spec.path) if spec.path.type == "csv" else None
+        path = track.path if track is not None else build_path(spec.path)
+        road = build_road(spec.road, path, track)
     except (ValueError, OSError):
         return spec  # build_experiment reports it
+    doubled = path_doubles_back(spec, path, road)
+    if doubled is not None:
+        raise ScenarioError(source, *doubled)
     warn_if_path_too_curved(spec, path, source)
     return spec
 

@@ -1,4 +1,5 @@
-"""The scene: obstacle shapes and their motion, the vehicle footprint, clearance geometry."""
+"""The scene: the world a drive happens in (:class:`Scene`: the road, the obstacles, the vehicle's
+body), obstacle shapes and their motion, clearance geometry."""
 
 from .footprint import Footprint
 from .geometry import shape_distance
@@ -13,8 +14,13 @@ from .obstacles import (
     WorldPolygon,
     rectangle,
 )
+from .road import Lane, Road
+from .world import Scene
 
 __all__ = [
+    "Scene",
+    "Road",
+    "Lane",
     "Footprint",
     "Circle",
     "Polygon",

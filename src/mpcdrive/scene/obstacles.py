@@ -174,6 +174,44 @@ class Obstacle:
         out[:, 0], out[:, 1], out[:, 2] = self.pose_at(t)  # type: ignore[arg-type]
         return out
 
+    def point_speeds_mps(self, t_s: np.ndarray) -> np.ndarray:
+        """(K - 1,) the fastest any point of the obstacle moves [m/s] during each interval of the
+        times ``t_s`` (K,) [s] (increasing): its reference point's speed plus its yaw rate times
+        the shape's bounding radius, the largest over the motion's pieces in the interval (a
+        recorded trajectory is linear between its samples and still before and after them)."""
+        t = np.asarray(t_s, float)
+        K = len(t)
+        if K < 2 or isinstance(self.motion, Static):
+            return np.zeros(max(K - 1, 0))
+        r = self.shape.bounding_radius_m
+        if isinstance(self.motion, ConstantVelocity):
+            return np.full(K - 1, math.hypot(self.motion.vx_mps, self.motion.vy_mps))
+        m = self.motion
+        dt = np.diff(m.t_s)
+        if dt.size == 0:
+            return np.zeros(K - 1)
+        # each piece's speed, padded with the still motion before the first and after the last sample
+        v = np.r_[0.0, (np.hypot(np.diff(m.dx_m), np.diff(m.dy_m)) + r * np.abs(np.diff(m.dyaw_rad))) / dt, 0.0]
+        # the pieces (indices into v) holding each interval's start and end
+        j0 = np.searchsorted(m.t_s, t[:-1], side="right")
+        j1 = np.searchsorted(m.t_s, t[1:], side="left")
+        out = np.maximum(v[j0], v[j1])
+        for k in np.flatnonzero(j1 - j0 > 1):  # an interval over several pieces
+            out[k] = v[j0[k] : j1[k] + 1].max()
+        return out
+
+    def moves_linearly(self, t_s: np.ndarray) -> np.ndarray:
+        """(K - 1,) True where the obstacle's pose is linear in time over the interval between
+        two of the times ``t_s`` (K,) [s] (increasing): always for a static or constant-velocity
+        one; for a recorded trajectory where no sample lies strictly inside the interval."""
+        t = np.asarray(t_s, float)
+        if not isinstance(self.motion, TrajectoryMotion):
+            return np.ones(max(len(t) - 1, 0), dtype=bool)
+        inside = np.searchsorted(self.motion.t_s, t[1:], side="left") - np.searchsorted(
+            self.motion.t_s, t[:-1], side="right"
+        )
+        return inside <= 0
+
     def outlines_at(self, t_s: np.ndarray) -> np.ndarray:
         """(K, M, 2) world vertices [m] of a polygon obstacle at the times ``t_s`` (K,) [s], as
         :meth:`at` places them."""

@@ -17,8 +17,10 @@ point's lateral offset, per horizon step, evaluated at the linearization traject
 held at its linearization value, as the obstacle rows are linearized). Where the road is
 narrower than the body needs, both bounds are the middle of what there is: the rows are soft
 (``MpcProblem.lane_slack_weight``), so the car is pulled to the middle and the excess is paid
-for, never an infeasible QP. The same function measures how far a driven body got outside
-(:meth:`Road.body_excess_m`), so the controller and the verdict use one rule.
+for, never an infeasible QP. A drive is judged by the same rule without its linearization
+(:meth:`Road.measure_excess_m`): every point of the body's outline, in the world frame, against
+the edges at its own arc length, exact to a tenth of a millimetre; :meth:`Road.body_excess_m`
+is the rows' form of it (the controller's quick checks).
 
 The functions are numba-compiled and called both from numpy code (the OSQP controller) and from
 the compiled control step.
@@ -28,6 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from numba import njit
@@ -37,6 +40,25 @@ from .footprint import Footprint
 
 #: points sampled along each long side of the body (rear corner, ..., front corner)
 BODY_SAMPLES = 5
+#: the largest sampling error [m] of :meth:`Road.measure_excess_m` (between the outline points)
+EXCESS_SAMPLING_TOL_M = 1e-4
+#: the most points per side of the body outline :meth:`Road.measure_excess_m` takes (2^j + 1)
+EXCESS_MAX_POINTS = 513
+
+
+class ProjectingPath(Protocol):
+    """What :meth:`Road.measure_excess_m` needs of a reference path (``mpcdrive.paths``)."""
+
+    def project_many(self, xy, s_guess, window_m) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def curvature(self, s) -> np.ndarray: ...
+
+
+def _placed(points: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """(K, M, 2) world positions [m] of body-frame points ``points`` (M, 2) at poses (K, >= 3)."""
+    c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
+    px, py = points[None, :, 0], points[None, :, 1]
+    return np.stack([poses[:, :1] + c * px - s * py, poses[:, 1:2] + s * px + c * py], axis=-1)
 
 
 @subroutine
@@ -333,11 +355,139 @@ class Road:
         return self._bounds(s_m, kappa, yaw_rel_rad, footprint, self.margin_m)
 
     def body_excess_m(self, s_m, e_y_m, kappa, yaw_rel_rad, footprint: Footprint) -> np.ndarray:
-        """How far [m] the body is outside the road (0 inside): the rule of :meth:`bounds` with no
-        margin, for the reference point at lateral offset(s) ``e_y_m``."""
+        """How far [m] the body is outside the road (0 inside) by the rule of :meth:`bounds` with
+        no margin, for the reference point at lateral offset(s) ``e_y_m``: the controller rows'
+        form (sampled points, the curvature's ``kappa d^2 / 2``), which over-reports on tight
+        curves by millimetres. A drive is judged by :meth:`measure_excess_m`, exact."""
         lo, hi = self._bounds(s_m, kappa, yaw_rel_rad, footprint, 0.0)
         e = np.asarray(e_y_m, float)
         return np.maximum(np.maximum(e - hi, lo - e), 0.0)
+
+    def measure_excess_m(self, path: ProjectingPath, poses, s_m, footprint: Footprint) -> np.ndarray:
+        """(K,) how far [m] the body was outside the road at each of the poses ``poses`` (K, >= 3)
+        ``[x m, y m, yaw rad, ...]`` of its reference point, whose arc lengths on ``path`` are
+        ``s_m`` (K,) [m] (0 inside; no margin): the measure a drive is judged by.
+
+        Exact in the world frame, unlike :meth:`body_excess_m` (the controller rows' linearized
+        rule): points along the body's outline are each projected onto ``path`` (its
+        ``project_many``, searched near ``s_m``) and compared with the edges at their own arc
+        length. Between two outline points the excess is a smooth function whose curvature is
+        bounded by the path's local curvature ``kappa`` (|d2e/dtau2| <= kappa / (1 - kappa e)
+        along a straight side, the edges' slope adding its share), so the points are spaced for
+        a sampling error of at most :data:`EXCESS_SAMPLING_TOL_M`; where a side crosses a knot at
+        which an edge bends, the point on the knot is measured too. So the measure is exact to
+        that tolerance on the path as it is represented (a waypoint path's own table)."""
+        X = np.asarray(poses, float)
+        S = np.asarray(s_m, float).reshape(-1)
+        K = len(S)
+        if X.ndim != 2 or X.shape[0] != K or X.shape[1] < 3:
+            raise ValueError(f"poses must be (K, 3) with one row per arc length ({K}), got shape {X.shape}")
+        out = np.zeros(K)
+        if K == 0:
+            return out
+        corners = footprint.corners()  # (4, 2) counter-clockwise, body frame
+        reach = float(np.max(np.hypot(corners[:, 0], corners[:, 1])))  # of a body point from (x, y)
+        counts = self._outline_counts(path, S, reach, footprint)
+        window = np.full(1, 2.0 * reach + 1.0)
+        knots = self._bend_knots(S, reach)
+        for n in np.unique(counts):
+            ks = np.flatnonzero(counts == n)
+            # n points along each side, corner to corner: (4 sides, n) in the body frame
+            tau = np.linspace(0.0, 1.0, int(n))
+            a, b = corners, np.roll(corners, -1, axis=0)
+            body = a[:, None, :] + tau[None, :, None] * (b - a)[:, None, :]  # (4, n, 2)
+            P = _placed(body.reshape(-1, 2), X[ks])  # (k, 4n, 2)
+            s_pts, e_pts = path.project_many(
+                P.reshape(-1, 2), np.repeat(S[ks], P.shape[1]), np.broadcast_to(window, (P.shape[0] * P.shape[1],))
+            )
+            s_pts, e_pts = s_pts.reshape(len(ks), 4, int(n)), e_pts.reshape(len(ks), 4, int(n))
+            out[ks] = self._points_excess(s_pts, e_pts).reshape(len(ks), -1).max(axis=1)
+            if knots.size:  # the points of the sides on the knots where an edge bends
+                out[ks] = np.maximum(out[ks], self._knot_excess(path, knots, s_pts, body, X[ks], S[ks], window))
+        return out
+
+    def _points_excess(self, s_pts: np.ndarray, e_pts: np.ndarray) -> np.ndarray:
+        """Excess [m] of points at arc lengths ``s_pts`` and lateral offsets ``e_pts`` (0 inside)."""
+        left, right = self.edges(s_pts)
+        return np.maximum(np.maximum(e_pts - left, right - e_pts), 0.0)
+
+    def _outline_counts(self, path: ProjectingPath, S: np.ndarray, reach: float, footprint: Footprint) -> np.ndarray:
+        """(K,) points per side of the body outline at each step: the fewest (2^j + 1, 5 to
+        :data:`EXCESS_MAX_POINTS`) for which the curvature bound M of the excess along a side
+        (the path's largest |kappa| within ``reach`` [m] of the step's arc length) keeps the
+        sampling error M h^2 / 8 within :data:`EXCESS_SAMPLING_TOL_M`, h the spacing."""
+        offsets = np.linspace(-reach, reach, max(9, int(math.ceil(2.0 * reach / 0.02)) + 1))
+        kappa = np.abs(np.asarray(path.curvature(S[:, None] + offsets[None, :]), float)).max(axis=1)
+        lateral = reach + float(self.max_offset_m)  # how far from the path a body point can count
+        stretch = np.maximum(1.0 - kappa * lateral, 0.1)  # 1 - kappa e, kept away from the centre
+        slopes = np.abs(np.diff(np.r_[self.left_m, self.right_m].reshape(2, -1), axis=1))
+        ds = np.diff(self.s_m)
+        slope = float(np.max(slopes / ds)) if ds.size else 0.0
+        M = kappa / stretch * (1.0 + slope / stretch)
+        side = max(footprint.length_m, footprint.width_m)
+        h = np.sqrt(8.0 * EXCESS_SAMPLING_TOL_M / np.maximum(M, 1e-12))
+        need = np.ceil(side / h) + 1.0
+        j = np.ceil(np.log2(np.maximum(need - 1.0, 4.0)))
+        return np.minimum(2.0**j + 1.0, EXCESS_MAX_POINTS).astype(int)
+
+    def _bend_knots(self, S: np.ndarray, reach: float) -> np.ndarray:
+        """Arc lengths [m] of the knots at which an edge bends (its slope changes), within
+        ``reach`` (plus a metre) of the arc lengths ``S``, laps repeated on a periodic road."""
+        s, left, right = self.s_m, self.left_m, self.right_m
+        if s.size < 2 and self.period_m <= 0:
+            return np.zeros(0)
+        if self.period_m > 0:  # one lap of knots, the joint to the next lap included
+            p = self.period_m
+            s_ext = np.r_[s[-1] - p, s, s[0] + p]
+            l_ext, r_ext = np.r_[left[-1], left, left[0]], np.r_[right[-1], right, right[0]]
+        else:
+            s_ext, l_ext, r_ext = s, left, right
+        sl_l, sl_r = np.diff(l_ext) / np.diff(s_ext), np.diff(r_ext) / np.diff(s_ext)
+        if self.period_m > 0:
+            bend = (np.abs(np.diff(sl_l)) > 0) | (np.abs(np.diff(sl_r)) > 0)
+            lap = s_ext[1:-1][bend]
+        else:  # beyond the ends the edges are held: the end knots bend unless the slope is 0
+            sl_l, sl_r = np.r_[0.0, sl_l, 0.0], np.r_[0.0, sl_r, 0.0]
+            bend = (np.abs(np.diff(sl_l)) > 0) | (np.abs(np.diff(sl_r)) > 0)
+            lap = s[bend]
+        if lap.size == 0:
+            return lap
+        lo, hi = float(S.min()) - reach - 1.0, float(S.max()) + reach + 1.0
+        if self.period_m > 0:
+            m = np.arange(math.floor((lo - lap.max()) / self.period_m), math.ceil((hi - lap.min()) / self.period_m) + 1)
+            lap = (lap[None, :] + self.period_m * m[:, None]).ravel()
+        lap = np.sort(lap)
+        return lap[(lap >= lo) & (lap <= hi)]
+
+    def _knot_excess(self, path, knots, s_pts, body, X, S, window) -> np.ndarray:
+        """(k,) the largest excess [m] at the points of the body's sides that lie on a bend knot:
+        between two outline points (arc lengths ``s_pts`` (k, 4, n), body-frame points ``body``
+        (4, n, 2)) that a knot lies between, the point at the knot's arc length (interpolated in
+        arc length along the side), projected and measured like the others."""
+        s0, s1 = s_pts[..., :-1], s_pts[..., 1:]
+        lo, hi = np.minimum(s0, s1), np.maximum(s0, s1)
+        first = np.searchsorted(knots, lo, side="right")
+        count = np.searchsorted(knots, hi, side="left") - first  # knots strictly between
+        out = np.zeros(len(X))
+        if not np.any(count > 0):
+            return out
+        step, side, q = np.nonzero(count > 0)
+        c = count[step, side, q]
+        step, side, q = np.repeat(step, c), np.repeat(side, c), np.repeat(q, c)
+        start = np.repeat(first[count > 0], c)
+        kth = np.arange(len(step)) - np.repeat(np.cumsum(c) - c, c)
+        sk = knots[start + kth]
+        a, b = s0[step, side, q], s1[step, side, q]
+        w = (sk - a) / (b - a)
+        pts = body[side, q] + w[:, None] * (body[side, q + 1] - body[side, q])  # (m, 2) body frame
+        xs = X[step]
+        cos, sin = np.cos(xs[:, 2]), np.sin(xs[:, 2])
+        world = np.column_stack(
+            [xs[:, 0] + cos * pts[:, 0] - sin * pts[:, 1], xs[:, 1] + sin * pts[:, 0] + cos * pts[:, 1]]
+        )
+        s_k, e_k = path.project_many(world, S[step], np.broadcast_to(window, (len(step),)))
+        np.maximum.at(out, step, self._points_excess(s_k, e_k))
+        return out
 
     def _bounds(self, s_m, kappa, yaw_rel_rad, footprint: Footprint, margin_m: float):
         b = np.broadcast_arrays(np.asarray(s_m, float), np.asarray(kappa, float), np.asarray(yaw_rel_rad, float))
@@ -377,6 +527,16 @@ class Road:
         return Road(
             self.s_m, left, np.minimum(right, left - 1e-6), self.margin_m, self.lanes, self.route_lane, self.period_m
         )
+
+    def whole(self) -> Road:
+        """The whole road: its edges widened to the outer edges of every lane (the road itself
+        without lanes), its lanes and margin kept. Where the body counts as inside when a drive
+        is judged, whichever lanes a decision layer lets the controller use at the time."""
+        if not self.lanes:
+            return self
+        left = np.maximum(self.left_m, np.max([ln.left_m for ln in self.lanes], axis=0))
+        right = np.minimum(self.right_m, np.min([ln.right_m for ln in self.lanes], axis=0))
+        return Road(self.s_m, left, right, self.margin_m, self.lanes, self.route_lane, self.period_m)
 
     def profile(self, length_m: float, ds_m: float = 0.5) -> np.ndarray:
         """(M, 3) rows ``[s_m, left_m, right_m]`` over arc lengths 0..``length_m`` [m] (every

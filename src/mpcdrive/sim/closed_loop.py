@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 from collections.abc import Callable
@@ -15,11 +16,12 @@ from ..models.base import VehicleModel
 from ..models.discretize import Method, discrete_step
 from ..paths.base import ReferencePath
 from ..scene.footprint import Footprint
+from ..scene.obstacles import Obstacle
 from ..scene.road import Road
-from ..scene.geometry import shape_distance
-from ..scene.obstacles import Circle, Obstacle, TrajectoryMotion
+from ..scene.world import Scene
 from ..types import STATUS_HELD, SimResult
 from .actuator import ActuatorState, SteeringActuator
+from .contact import clearances, collision_events, contact_count, recorded_traffic
 
 
 @dataclass(frozen=True)
@@ -168,15 +170,52 @@ def _finite_array(v, name: str) -> np.ndarray:
     return a
 
 
-def _check_run_args(dt_s, steps, seed, road) -> None:
+def _check_run_args(dt_s, steps, seed) -> None:
     if isinstance(dt_s, bool) or not isinstance(dt_s, numbers.Real) or not (math.isfinite(dt_s) and dt_s > 0):
         raise ValueError(f"dt_s must be a positive finite number, got {dt_s!r}")
     if isinstance(steps, bool) or not isinstance(steps, numbers.Integral) or steps < 1:
         raise ValueError(f"steps must be an integer >= 1, got {steps!r}")
     if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
         raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+
+
+def judged_scene(
+    controller,
+    scene: Scene | None = None,
+    road: Road | None = None,
+    obstacles: tuple[Obstacle, ...] | None = None,
+    footprint: Footprint | None = None,
+) -> Scene:
+    """The scene a drive of ``controller`` is judged against: the controller's own
+    (``controller.scene``, or that of the controller it wraps), or the one given, which must then
+    be the same world (a ValueError naming what differs). The older arguments ``road``,
+    ``obstacles``, ``footprint`` name parts of it (the rest is the controller's); a controller
+    without a scene (a baseline) is judged against what is given (nothing: an empty scene)."""
+    own = _inner_attr(controller, "scene")
+    if own is not None and not isinstance(own, Scene):
+        raise ValueError(f"the controller's scene must be a mpcdrive.scene.Scene, got {type(own).__name__}")
+    parts = {"road": road, "obstacles": obstacles, "footprint": footprint}
+    named = {k: v for k, v in parts.items() if v is not None}
+    if scene is not None and not isinstance(scene, Scene):
+        raise ValueError(f"scene must be a mpcdrive.scene.Scene or None, got {type(scene).__name__}")
+    if scene is not None and named:
+        raise ValueError(f"give the scene or its parts ({', '.join(named)}), not both")
     if road is not None and not isinstance(road, Road):
-        raise ValueError(f"road must be a mpcdrive.scene.road.Road or None, got {type(road).__name__}")
+        raise ValueError(f"road must be a mpcdrive.scene.Road or None, got {type(road).__name__}")
+    if named:
+        base = own if own is not None else Scene()
+        scene = dataclasses.replace(base, **{k: tuple(v) if k == "obstacles" else v for k, v in named.items()})
+    if scene is None:
+        return own if own is not None else Scene()
+    if own is not None:
+        diff = own.differences(scene)
+        if diff:
+            raise ValueError(
+                "the scene given to simulate is not the controller's (controller.scene): "
+                + "; ".join(diff)
+                + " (controller's vs given); build the controller with the scene and leave it out here"
+            )
+    return scene
 
 
 #: ways to drive the plant between two solves of a controller slower than the plant
@@ -275,11 +314,12 @@ def simulate(
     measurement_noise: Disturbance | None = None,
     seed: int = 0,
     stop_at_path_end: bool = True,
+    scene: Scene | None = None,
     road: Road | None = None,
     progress: Callable[[int, int], None] | None = None,
     meta: dict | None = None,
-    obstacles: tuple[Obstacle, ...] = (),
-    footprint: Footprint = Footprint(),
+    obstacles: tuple[Obstacle, ...] | None = None,
+    footprint: Footprint | None = None,
     laps: float | None = None,
     abort_lateral_error_m: float | None = None,
     control_period_s: float | None = None,
@@ -312,13 +352,24 @@ def simulate(
     The controller sees the plant state plus ``measurement_noise``; the plant state receives
     ``disturbance`` after every step. On an open path the run ends when the vehicle passes the
     path's end (``stop_at_path_end``), and ``goal_reached`` says whether it did.
-    ``progress(k, steps)`` is called every step when given. With a ``road`` the body's excess
-    outside it is measured at each step by the road's own rule (``SimResult.lane_excess_m``,
-    :meth:`Road.body_excess_m`, 0 inside). With ``obstacles`` the clearance
-    between the vehicle ``footprint`` and every obstacle is measured at each step
-    (``SimResult.clearance_m``; negative = overlap), the obstacles' poses are logged in
-    ``meta["obstacles"]``, the number of contacts in ``meta["collisions"]`` and each contact
-    (which obstacle, when, how deep) in ``meta["collision_events"]`` (:func:`collision_events`).
+    ``progress(k, steps)`` is called every step when given.
+
+    The drive is judged against the world it happens in, the scene (:func:`judged_scene`): the
+    controller's own (``controller.scene``; an ``LtvMpc`` built with ``scene=``, or with the road
+    in its problem and ``obstacles=`` / ``footprint=``; wrappers are looked through), so it cannot
+    be forgotten. A ``scene`` given here must be that same world (a ValueError names what
+    differs); ``road`` / ``obstacles`` / ``footprint`` name parts of it, the older way. Only a
+    controller without a scene (a baseline) takes its scene from here. With a road the body's
+    excess outside the whole road (every lane: :meth:`Scene.judged_road`) is measured at each
+    step, exactly (``SimResult.lane_excess_m``, :meth:`Road.measure_excess_m`, 0 inside). With
+    obstacles the signed distance between the body and every obstacle is measured at each step
+    and, where they may meet in between, on the swept motion between the steps
+    (:mod:`mpcdrive.sim.contact`): ``SimResult.clearance_m`` at the logged steps (negative =
+    overlap), the obstacles' poses in ``meta["obstacles"]``, the number of contacts in
+    ``meta["collisions"]``, each contact (which obstacle, when it began, how deep; also one
+    between two logged steps) in ``meta["collision_events"]``
+    (:func:`~mpcdrive.sim.contact.collision_events`) and the smallest distance, contacts between
+    the steps included, in ``meta["min_obstacle_clearance_m"]``.
     On a closed path, ``laps`` ends the
     run once the vehicle has driven that many laps from its start (``goal_reached`` says whether
     it did within ``steps``). ``abort_lateral_error_m`` ends the run early when the lateral error
@@ -331,10 +382,10 @@ def simulate(
     state ``disturbance`` needs a :class:`Plant`.
 
     A :class:`TrafficPlant` (another simulator's vehicles) is asked for its ``traffic`` at every
-    step; at each solve the controller gets ``obstacles`` followed by the traffic
+    step; at each solve the controller gets the scene's obstacles followed by the traffic
     (``controller.set_obstacles``, when it has the method and there is traffic), and the
-    traffic's poses at each step, as the plant reported them, join ``obstacles`` in the clearance
-    and collision accounting (indices after those of ``obstacles``). An :class:`EpisodicPlant`
+    traffic's poses at each step, as the plant reported them, join the scene's obstacles in the
+    clearance and collision accounting (indices after theirs). An :class:`EpisodicPlant`
     ends the run after the step at which ``ended`` gives a reason: ``meta["termination"]`` is
     that reason, and a plant-found contact (:data:`ENDED_COLLISION`) counts as a collision
     (``meta["collisions"]`` at least 1) even when no logged state overlaps.
@@ -347,7 +398,9 @@ def simulate(
     (the metrics' verdict judges that). ``meta`` also records what the steering could do
     (:func:`steering_meta`) and the footprint's width (``footprint_width_m``).
     """
-    _check_run_args(dt_s, steps, seed, road)
+    _check_run_args(dt_s, steps, seed)
+    world = judged_scene(controller, scene, road, obstacles, footprint)
+    obstacles, footprint = world.obstacles, world.footprint
     m = solve_interval(dt_s, control_period_s)
     if between_solves not in BETWEEN_SOLVES:
         raise ValueError(f"between_solves must be 'hold' or 'plan', got {between_solves!r}")
@@ -495,19 +548,20 @@ def simulate(
         #: (K, n) the plant's own state at each logged step (e.g. for a CommonRoad ST solution)
         meta["plant_states"] = np.array(plant_log[:k_end], float)
     clearance = None
-    judged = (*obstacles, *_recorded_traffic(traffic_log[:k_end], T[sl]))
+    judged = (*obstacles, *recorded_traffic(traffic_log[:k_end], T[sl]))
     if judged:
-        per_obstacle, meta["obstacles"] = _clearances(Xs[sl], T[sl], judged, footprint)
-        clearance = per_obstacle.min(axis=0)
-        meta["min_obstacle_clearance_m"] = float(clearance.min())
-        meta["collisions"] = contact_count(clearance)
-        meta["collision_events"] = collision_events(per_obstacle, T[sl], judged)
+        at_steps, swept, began, meta["obstacles"] = clearances(Xs[sl], T[sl], judged, footprint)
+        clearance = at_steps.min(axis=0)  # at the logged steps
+        nearest = swept.min(axis=0)  # with the contacts between them
+        meta["min_obstacle_clearance_m"] = float(nearest.min())
+        meta["collisions"] = contact_count(nearest)
+        meta["collision_events"] = collision_events(swept, T[sl], judged, began)
     if termination == ENDED_COLLISION:
         meta["collisions"] = max(int(meta.get("collisions", 0)), 1)
     lane_excess = profile = None
+    road = world.judged_road()
     if road is not None:
-        s_k = S[sl]
-        lane_excess = road.body_excess_m(s_k, EY[sl], np.asarray(path.curvature(s_k), float), EPSI[sl], footprint)
+        lane_excess = road.measure_excess_m(path, Xs[sl], S[sl], footprint)
         profile = road.profile(path.length_m)
     v = model.speed(Xs[sl])
     steer = Us[sl, 0]
@@ -552,94 +606,3 @@ def _traffic(plant: TrafficPlant, t_s: float, log: list) -> tuple[Obstacle, ...]
         raise ValueError(f"the plant's traffic changed from {len(log[0])} to {len(seen)} obstacles (index = identity)")
     log.append(seen)
     return seen
-
-
-def _recorded_traffic(log: list, T: np.ndarray) -> tuple[Obstacle, ...]:
-    """The traffic as it moved: per obstacle its shape through the poses the plant reported at
-    each logged step (``T`` (K,) [s]; interpolated between), with its lifetime."""
-    if not log or not log[0]:
-        return ()
-    out = []
-    for i, last in enumerate(log[-1]):
-        P = np.array([seen[i].pose_at(t) for seen, t in zip(log, T)], float)
-        P[:, 2] = np.unwrap(P[:, 2])
-        d = P - P[0]
-        motion = TrajectoryMotion(T, d[:, 0], d[:, 1], d[:, 2])
-        out.append(Obstacle(last.shape, tuple(P[0]), motion, last.name, last.t_start_s, last.t_end_s))
-    return tuple(out)
-
-
-def contact_count(clearance_m: np.ndarray) -> int:
-    """How many contacts a run had: stretches of steps with the smallest footprint-to-obstacle
-    distance ``clearance_m`` (K,) [m] below 0 (one contact lasting many steps counts once)."""
-    hit = np.asarray(clearance_m) < 0.0
-    return int(np.count_nonzero(hit[1:] & ~hit[:-1]) + (1 if hit.size and hit[0] else 0))
-
-
-def collision_events(clearance_m: np.ndarray, t_s: np.ndarray, obstacles) -> list[dict]:
-    """One event per contact of the footprint with an obstacle, in time order: ``obstacle``
-    (index in the scenario's list), ``name``, ``step`` and ``t_s`` [s] of the first overlapping
-    step, ``steps`` in contact and ``depth_m`` (deepest penetration [m], > 0).
-
-    ``clearance_m`` : (n_obstacles, K) footprint-to-obstacle signed distances [m] (negative =
-    overlap). A contact starts at a step with overlap after one without (or at step 0)."""
-    events = []
-    for i, d in enumerate(clearance_m):
-        hit = d < 0.0
-        starts = np.flatnonzero(hit & ~np.r_[False, hit[:-1]])
-        ends = np.flatnonzero(hit & ~np.r_[hit[1:], False]) + 1
-        for a, b in zip(starts, ends):
-            events.append(
-                {
-                    "obstacle": i,
-                    "name": obstacles[i].name,
-                    "step": int(a),
-                    "t_s": float(t_s[a]),
-                    "steps": int(b - a),
-                    "depth_m": float(-d[a:b].min()),
-                }
-            )
-    return sorted(events, key=lambda e: (e["step"], e["obstacle"]))
-
-
-def _clearances(X: np.ndarray, T: np.ndarray, obstacles, footprint: Footprint):
-    """(n_obstacles, K) footprint-to-obstacle signed distance per obstacle and step [m], and the
-    obstacles' logged shapes and poses (for reports).
-
-    The distance is exact where it can matter: the step's nearest obstacle and every contact.
-    For the others it is a lower bound (centre distance less both bounding radii), >= 0 and
-    >= the step's smallest distance; inf outside an obstacle's lifetime."""
-    K = len(T)
-    hl, hw = 0.5 * footprint.length_m, 0.5 * footprint.width_m
-    body_r = math.hypot(abs(footprint.center_offset_m) + hl, hw)  # about the reference point
-    clear = np.full((len(obstacles), K), np.inf)
-    for i, ob in enumerate(obstacles):
-        P = ob.poses_at(T)
-        bound = np.hypot(P[:, 0] - X[:, 0], P[:, 1] - X[:, 1]) - body_r - ob.shape.bounding_radius_m
-        # an obstacle outside its lifetime is not there to hit
-        clear[i] = np.where(np.broadcast_to(ob.present(T), (K,)), bound, np.inf)
-    for k in range(K):
-        body = None
-        best = math.inf
-        for i in np.argsort(clear[:, k], kind="stable"):
-            b = clear[i, k]
-            if b == math.inf or (b > best + 1e-9 and b > 1e-9):
-                break  # this one and the rest are farther and not in contact (1 nm of rounding)
-            if body is None:
-                body = footprint.polygon(*X[k, :3])
-            clear[i, k] = shape_distance(body, obstacles[i].at(T[k]))
-            best = min(best, clear[i, k])
-    logs = []
-    for ob in obstacles:
-        poses = np.array([ob.pose_at(t) for t in T])
-        entry = {"name": ob.name, "moving": ob.moving}
-        if isinstance(ob.shape, Circle):
-            centers = poses[:, :2].round(4)
-            entry.update(
-                type="circle", radius_m=ob.shape.radius_m, center=centers.tolist() if ob.moving else centers[0].tolist()
-            )
-        else:
-            world = np.array([ob.at(t).points for t in (T if ob.moving else T[:1])]).round(4)
-            entry.update(type="polygon", points=world.tolist() if ob.moving else world[0].tolist())
-        logs.append(entry)
-    return clear, logs

@@ -37,8 +37,10 @@ class CollisionEvent:
     ``SimResult.meta["collision_events"]``).
 
     obstacle : index of the obstacle in the scenario's list (traffic follows the obstacles);
-    name : its name (``""`` when it has none); step, t_s : the first overlapping step and its
-    time [s]; steps : steps in contact; depth_m : the deepest penetration [m] (> 0)."""
+    name : its name (``""`` when it has none); step : the first overlapping logged step, or the
+    one before the contact when it began between two steps (the motion between them is
+    checked, :mod:`mpcdrive.sim.contact`); t_s : when it began [s]; steps : logged steps in
+    contact (their intervals included); depth_m : the deepest penetration [m] (> 0)."""
 
     obstacle: int
     name: str
@@ -275,7 +277,7 @@ _FIELD_NAMES = frozenset(_KEYS)
 
 def lane_excess_per_step(result: SimResult) -> np.ndarray | None:
     """(K,) distance [m] by which the body was outside the road at each step (0 inside), measured
-    in the run by the road's rule (:meth:`~mpcdrive.scene.road.Road.body_excess_m`); None
+    in the run by the road's measure (:meth:`~mpcdrive.scene.road.Road.measure_excess_m`); None
     without a road."""
     return result.lane_excess_m
 
