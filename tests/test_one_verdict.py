@@ -107,7 +107,7 @@ def test_report_html_opens_with_the_verdict_sentence(tmp_path):
     assert r.returncode == 0, r.stderr
     html = (out / "report.html").read_text()
     m = json.loads((out / "metrics.json").read_text())
-    sentence = "Verdict: <strong>UNSAFE</strong>: collided with obstacle 1 (rock) at t = 1.00 s"
+    sentence = "Verdict: <strong>UNSAFE</strong>: collided with obstacle 1 (rock) at t = 0.97 s"
     assert sentence in html
     body = html[html.index("<body") :]
     assert body.index(sentence) < body.index('id="replay"') and body.index(sentence) < body.index('class="metrics"')
