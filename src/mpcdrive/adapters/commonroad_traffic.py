@@ -114,6 +114,15 @@ def prepare(imp, exp):
         imp.runtime["plant"] = plant
         if exp.mpc is not None and getattr(exp.mpc, "avoidance", None) is not None:
             exp.mpc.set_obstacles(obstacles)  # no recorded future of a SUMO vehicle reaches the controller
+        # the world the drive is judged in: the obstacles SUMO does not drive, and its traffic
+        # (the plant's, added by the closed loop) in place of the recordings
+        c = exp.controller
+        for _ in range(8):  # the controller and those it wraps
+            if c is None:
+                break
+            if "scene" in vars(c):
+                c.scene = dataclasses.replace(c.scene, obstacles=obstacles)
+            c = vars(c).get("inner") or vars(c).get("mpc")
     controller = exp.controller
     if imp.prediction == "lane" and getattr(exp.mpc, "avoidance", None) is not None:  # else nothing to predict
         from ..prediction import LanePredictor, PredictingController
