@@ -156,7 +156,7 @@ def _obstacle_entry(o, dt: float) -> dict:
     entry.update(position=(float(p[0]), float(p[1])), yaw_deg=math.degrees(yaw))
     pred = getattr(o, "prediction", None)
     if pred is not None and getattr(pred, "trajectory", None) is not None:
-        states = [st] + list(pred.trajectory.state_list)
+        states = _distinct_steps([st] + list(pred.trajectory.state_list))
         yaws = list(np.unwrap([scalar(getattr(s, "orientation", None)) or yaw for s in states]))
         t = [scalar(s.time_step) * dt for s in states]
         pts = [tuple(map(float, point(s.position))) for s in states]
@@ -168,6 +168,23 @@ def _obstacle_entry(o, dt: float) -> dict:
             yaws.append(yaws[-1])
         entry["trajectory"] = {"t_s": t, "points": pts, "yaw_deg": [math.degrees(y) for y in yaws]}
     return entry
+
+
+def _distinct_steps(states: list) -> list:
+    """``states`` with one state per time step: of states sharing a time step the later one.
+
+    A CommonRoad trajectory should begin one step after the obstacle's initial state, but some
+    published files (e.g. scenarios written by the interactive-scenario simulation) begin it *at*
+    the initial time step, repeating the initial state; a repeated step has no time between its
+    two states, so it is read once (the recording's own state, the later one), not refused. A
+    time step that goes backwards is left in: the schema refuses it."""
+    out: list = []
+    for s in states:
+        if out and scalar(s.time_step) == scalar(out[-1].time_step):
+            out[-1] = s
+        else:
+            out.append(s)
+    return out
 
 
 def _read_file(reader, file: Path):
