@@ -37,3 +37,95 @@ def test_a_trajectory_repeating_its_initial_time_step_reads_once():
         assert len(traj.points) == len(recorded) + 1
         assert traj.points[0] == pytest.approx(tuple(recorded[0].position))
         assert traj.points[-2] == pytest.approx(tuple(recorded[-1].position))
+
+
+def test_a_route_ending_where_its_lanelet_ends_keeps_the_lanes_width():
+    """DEU_Gar-1_1_T-1's route ends where its lanelet 47240 ends, on the lanelet's slanted closing
+    edge: measured there the road was 0.05 m to its left, and the file was refused as narrower
+    than the car. The edges are measured on into the successor: the road is the lane's width
+    (2.2 m at the narrowest, the lane's end) up to the route's end."""
+    imp = load_commonroad(DIR / "DEU_Gar-1_1_T-1.xml")
+    assert imp.route == (47240,)
+    w = np.array(imp.spec.road.widths)
+    assert w[:, 1:].sum(axis=1).min() > 2.1
+    assert w[-1, 1] == pytest.approx(w[-2, 1], abs=0.06) and w[-1, 2] == pytest.approx(w[-2, 2], abs=0.06)
+
+
+def _make_cases():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("make_cases", DIR.parent / "commonroad_cases" / "make_cases.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _tapering_file(tmp_path, with_neighbour: bool = True) -> Path:
+    """A straight road along +x: lane 1 (the start lane, y = 0) 3.5 m wide up to x = 60, then
+    tapering to 0.2 m at its end x = 100 (its left side stays, its right side comes in; no
+    successor), and, ``with_neighbour``, lane 2 to its left going the same way (y = 3.5, to
+    x = 200). The goal is a time only: the car drives its lane forward, into the taper."""
+    from commonroad.common.file_writer import CommonRoadFileWriter, OverwriteExistingFile
+    from commonroad.common.util import Interval
+    from commonroad.planning.goal import GoalRegion
+    from commonroad.planning.planning_problem import PlanningProblem, PlanningProblemSet
+    from commonroad.scenario.lanelet import Lanelet, LaneletType
+    from commonroad.scenario.scenario import Location, Tag
+    from commonroad.scenario.state import CustomState
+
+    mc = _make_cases()
+    x = np.linspace(0.0, 100.0, 101)
+    right = np.where(x <= 60.0, -1.75, -1.75 + (3.5 - 0.2) * (x - 60.0) / 40.0)
+    left = np.full_like(x, 1.75)
+    lane1 = Lanelet(
+        np.column_stack([x, left]),
+        np.column_stack([x, 0.5 * (left + right)]),
+        np.column_stack([x, right]),
+        1,
+        adjacent_left=2 if with_neighbour else None,
+        adjacent_left_same_direction=True if with_neighbour else None,
+        lanelet_type={LaneletType.HIGHWAY},
+    )
+    lanelets = [lane1]
+    if with_neighbour:
+        x2 = np.linspace(0.0, 200.0, 201)
+        lanelets.append(
+            Lanelet(
+                np.column_stack([x2, np.full_like(x2, 5.25)]),
+                np.column_stack([x2, np.full_like(x2, 3.5)]),
+                np.column_stack([x2, np.full_like(x2, 1.75)]),
+                2,
+                adjacent_right=1,
+                adjacent_right_same_direction=True,
+                lanelet_type={LaneletType.HIGHWAY},
+            )
+        )
+    sc = mc._scenario(9, lanelets)
+    goal = GoalRegion([CustomState(time_step=Interval(30, 60))])
+    pps = PlanningProblemSet([PlanningProblem(1000, mc._initial(10.0, 0.0, 0.0, 8.0), goal)])
+    path = tmp_path / "ZAM_Taper-1_1_T-1.xml"
+    writer = CommonRoadFileWriter(sc, pps, tags={Tag.HIGHWAY, Tag.LANE_CHANGE}, location=Location())
+    writer.write_to_file(str(path), OverwriteExistingFile.ALWAYS)
+    return path
+
+
+def test_a_route_lane_that_tapers_away_takes_in_the_lane_beside_it(tmp_path):
+    """The start lane tapers to 0.2 m (a merge lane): it was refused as "not wider than the car".
+    Where it is narrower than any car the road takes in the lane beside it going its way, so the
+    car can leave the lane it is in; before the taper the road is the lane and the lane beside
+    it its neighbour."""
+    from mpcdrive.adapters.commonroad import TAPER_WIDTH_M
+
+    imp = load_commonroad(_tapering_file(tmp_path))
+    assert imp.route == (1,)
+    w = np.array(imp.spec.road.widths)
+    n = np.array(imp.spec.road.neighbours)
+    x = imp.centerline[:, 0]
+    before, tip = x < 55.0, x > 95.0
+    assert np.allclose(w[before, 1:].sum(axis=1), 3.5, atol=0.1)
+    assert np.allclose(n[before, 1], 3.5, atol=0.1)  # lane 2 beside it
+    assert np.all(w[tip, 1:].sum(axis=1) > 3.5)  # the route lane and lane 2 together
+    assert np.allclose(n[w[:, 1:].sum(axis=1) < TAPER_WIDTH_M - 0.1, 1], 0.0)
+    # the lane's own width where the road takes lane 2 in: narrower than TAPER_WIDTH_M
+    own = 1.75 - np.interp(x, [0, 60, 100], [-1.75, -1.75, 1.45])
+    assert np.all(w[own < TAPER_WIDTH_M - 0.1, 1] > 3.0)

@@ -12,8 +12,9 @@ Import:
   lanelet network (or along the lane for a goal without a position), its smoothed centre line up
   to the route's end, and a curvature-limited speed profile braking to 0 there whose top speed
   puts the car in the goal region inside the goal's time window.
-* **Road.** The lane bound is the narrowest route lanelet width (the controller keeps the body
-  inside it).
+* **Road.** The route's lanelets edge by edge along the centre line (the controller keeps the
+  body inside them), the same-direction lanes beside them as neighbour lanes; where the route
+  lane tapers narrower than any car, the lanes beside it join the road there (:func:`_road`).
 * **Obstacles.** Static and dynamic obstacles with rectangle / circle / polygon shapes; a dynamic
   obstacle's recorded trajectory is its known prediction (:class:`TrajectoryMotion`).
 * **Vehicle.** ``kinematic4`` (speed state) with the CommonRoad Ford Escort preset's wheelbase,
@@ -38,7 +39,7 @@ from ..models.presets import PRESETS
 from ..scenarios.schema import ScenarioSpec
 from ..sim.metrics import CommonRoadCheck
 from .commonroad_goal import DrivePlan, accel_limit, friction_accel, plan_drive
-from .commonroad_route import drivable_lanelets, point, route_edges, scalar
+from .commonroad_route import drivable_lanelets, point, route_edges, route_ends, scalar
 
 PRESET = "commonroad_ford_escort"
 #: the lanes beside the route that go its way are the road's neighbour lanes: a lane decision
@@ -46,6 +47,9 @@ PRESET = "commonroad_ford_escort"
 NEIGHBOUR_LANES = True
 #: distance [m] the body keeps from the road's edges
 ROAD_MARGIN_M = 0.1
+#: a route lane narrower than this [m] (the widest CommonRoad vehicle and the road margin on both
+#: sides) takes in the same-direction lanes beside it (:func:`_road`)
+TAPER_WIDTH_M = max(p.width_m for n, p in PRESETS.items() if n.startswith("commonroad_")) + 2 * ROAD_MARGIN_M
 _EXTRAPOLATE_S = 10.0  # recorded obstacle trajectories are extended this long at their last velocity
 
 
@@ -170,6 +174,26 @@ def _obstacle_entry(o, dt: float) -> dict:
     return entry
 
 
+def _road(net, route, line: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(s, left, right, neighbours) of the road along the centre line ``line``: the route's
+    lanelets edge by edge (a lane that narrows is followed as it narrows; measured on into the
+    lanelets past the route's ends, :func:`~.commonroad_route.route_ends`), and how far the
+    same-direction lanes beside them reach beyond its edges (the neighbour rows).
+
+    A lane narrower than :data:`TAPER_WIDTH_M` is one to leave (a merge lane tapering to
+    nothing, a lane that ends): there the road is the route lane together with the lanes beside
+    it going its way, which the car may use to get out of it, and has no neighbours beyond. Only
+    where that too is no wider than the car is the road refused (the scenario's check)."""
+    ends = route_ends(net, route)
+    s, left, right = route_edges(net, drivable_lanelets(net, route, neighbours=False) | ends, line)
+    _, band_l, band_r = route_edges(net, drivable_lanelets(net, [*route, *ends], neighbours=True), line)
+    taper = left + right < TAPER_WIDTH_M
+    left = np.where(taper, np.maximum(left, band_l), left)
+    right = np.where(taper, np.maximum(right, band_r), right)
+    neighbours = np.column_stack([s, np.maximum(band_l - left, 0.0), np.maximum(band_r - right, 0.0)])
+    return s, left, right, neighbours
+
+
 def _distinct_steps(states: list) -> list:
     """``states`` with one state per time step: of states sharing a time step the later one.
 
@@ -220,11 +244,7 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
     yaw0 = scalar(init.orientation)
     v0 = max(0.0, scalar(getattr(init, "velocity", None)) or 0.0)
     plan = plan_drive(net, pp, p0, yaw0, v0, dt)
-    # the road: the route's lanelets and their same-direction neighbours, edge by edge along the
-    # reference (a lane that narrows is followed as it narrows)
-    s_k, left_k, right_k = route_edges(net, drivable_lanelets(net, plan.route, neighbours=False), plan.centerline)
-    _, band_l, band_r = route_edges(net, drivable_lanelets(net, plan.route, neighbours=True), plan.centerline)
-    neighbours = np.column_stack([s_k, np.maximum(band_l - left_k, 0.0), np.maximum(band_r - right_k, 0.0)])
+    s_k, left_k, right_k, neighbours = _road(net, plan.route, plan.centerline)
     pre = PRESETS[PRESET]
     v_max = max(plan.v_cruise_mps, v0) + 2.0
     a_lim = accel_limit(v_max)
