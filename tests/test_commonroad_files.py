@@ -129,3 +129,91 @@ def test_a_route_lane_that_tapers_away_takes_in_the_lane_beside_it(tmp_path):
     # the lane's own width where the road takes lane 2 in: narrower than TAPER_WIDTH_M
     own = 1.75 - np.interp(x, [0, 60, 100], [-1.75, -1.75, 1.45])
     assert np.all(w[own < TAPER_WIDTH_M - 0.1, 1] > 3.0)
+
+
+def _bottleneck_file(tmp_path, narrowest_m: float) -> Path:
+    """One lane along +x, 3.5 m wide, narrowing to ``narrowest_m`` between x = 70 and 80 (from
+    60, back to 3.5 m by 90), no lane beside it; the goal lies past the narrows at x = 120."""
+    from commonroad.common.file_writer import CommonRoadFileWriter, OverwriteExistingFile
+    from commonroad.scenario.lanelet import Lanelet, LaneletType
+    from commonroad.scenario.scenario import Location, Tag
+
+    mc = _make_cases()
+    x = np.linspace(0.0, 150.0, 151)
+    half = 0.5 * np.interp(x, [0, 60, 70, 80, 90, 150], [3.5, 3.5, narrowest_m, narrowest_m, 3.5, 3.5])
+    lane = Lanelet(
+        np.column_stack([x, half]),
+        np.column_stack([x, np.zeros_like(x)]),
+        np.column_stack([x, -half]),
+        7,
+        lanelet_type={LaneletType.URBAN},
+    )
+    sc = mc._scenario(8, [lane])
+    pps = mc._problem(1000, mc._initial(10.0, 0.0, 0.0, 8.0), (120.0, 0.0), 0.0, 10.0, 3.0, 150)
+    path = tmp_path / "ZAM_Narrows-1_1_T-1.xml"
+    writer = CommonRoadFileWriter(sc, pps, tags={Tag.URBAN}, location=Location())
+    writer.write_to_file(str(path), OverwriteExistingFile.ALWAYS)
+    return path
+
+
+def _cli(monkeypatch, capsys, *args) -> tuple[int, str]:
+    """(exit code, stderr) of ``mpcdrive ARGS`` run in this process."""
+    import sys
+
+    from mpcdrive.cli import main
+
+    monkeypatch.setattr(sys, "argv", ["mpcdrive", *map(str, args)])
+    with pytest.raises(SystemExit) as ex:
+        main()
+    return int(ex.value.code), capsys.readouterr().err
+
+
+def test_a_road_narrower_than_the_car_is_refused_in_one_line_naming_the_lanelet(tmp_path, monkeypatch, capsys):
+    """A lane that narrows to 1.2 m with no lane beside it, and the goal past it: the car cannot
+    get through. ``mpcdrive run`` exits 2 with one line: the file, the lanelet, the reason."""
+    f = _bottleneck_file(tmp_path, 1.2)
+    with pytest.raises(ValueError) as e:
+        load_commonroad(f)
+    msg = str(e.value)
+    assert "\n" not in msg and "validation error" not in msg
+    assert msg.startswith("lanelet 7, ") and "not wider than the car" in msg
+    code, err = _cli(monkeypatch, capsys, "run", f, "--out", tmp_path / "out", "-q")
+    assert code == 2 and err.count("\n") == 1
+    assert err.startswith(f"mpcdrive: {f}: lanelet 7, ") and "not wider than the car" in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_car_too_wide_for_the_narrows_is_refused_in_one_line(tmp_path, monkeypatch, capsys):
+    """Narrows of 1.75 m let the Ford Escort (1.674 m wide) through but not the VW Vanagon
+    (1.844 m): --vehicle vw_vanagon is refused in one line naming the lanelet."""
+    from mpcdrive.adapters.commonroad import with_vehicle
+
+    f = _bottleneck_file(tmp_path, 1.75)
+    imp = load_commonroad(f)  # the Ford Escort fits
+    with pytest.raises(ValueError) as e:
+        with_vehicle(imp, "vw_vanagon")
+    assert "\n" not in str(e.value) and str(e.value).startswith("lanelet 7, ")
+    code, err = _cli(monkeypatch, capsys, "run", f, "--vehicle", "vw_vanagon", "--out", tmp_path / "out", "-q")
+    assert code == 2 and err.count("\n") == 1 and err.startswith(f"mpcdrive: {f}: lanelet 7, ")
+    assert "vehicle.width_m 1.844" in err
+
+
+def test_a_refused_obstacle_is_one_line_naming_it(tmp_path, monkeypatch, capsys):
+    """An obstacle the schema refuses (here DEU_Cologne-63_5_I-1's repeated time steps, read as
+    they were before they were read once) is one line naming the obstacle's CommonRoad id and
+    the reason, and how many more were refused: not pydantic's dump of all 34 errors."""
+    import mpcdrive.adapters.commonroad as cr
+
+    monkeypatch.setattr(cr, "_distinct_steps", lambda states: states)
+    f = DIR / "DEU_Cologne-63_5_I-1.xml.gz"
+    first = cr._read_file  # the first obstacle's id, as the file gives it
+    from commonroad.common.file_reader import CommonRoadFileReader
+
+    oid = first(CommonRoadFileReader, f)[0].obstacles[0].obstacle_id
+    with pytest.raises(ValueError) as e:
+        cr.load_commonroad(f)
+    msg = str(e.value)
+    assert "\n" not in msg and "errors.pydantic.dev" not in msg
+    assert msg.startswith(f"obstacle {oid} (obstacles.0.trajectory): t_s must be strictly increasing (and 33 more")
+    code, err = _cli(monkeypatch, capsys, "run", f, "--out", tmp_path / "out", "-q")
+    assert code == 2 and err == f"mpcdrive: {f}: {msg}\n"

@@ -249,7 +249,7 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
     v_max = max(plan.v_cruise_mps, v0) + 2.0
     a_lim = accel_limit(v_max)
     obstacles = [_obstacle_entry(o, dt) for o in scenario.obstacles]
-    spec = ScenarioSpec.model_validate(
+    spec = _validated(
         {
             # named after the file the user passed (a file's internal benchmark id can be another's)
             "id": re.sub(r"[^A-Za-z0-9_.-]", "_", file.name.removesuffix(".gz").removesuffix(".xml")) or "commonroad",
@@ -305,9 +305,53 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
                 "brake_decel_mps2": plan.accel_mps2,
                 "friction_accel_mps2": friction_accel(pre.accel_limit_mps2(0.0)),
             },
-        }
+        },
+        scenario,
+        pp,
+        plan.route,
+        plan.centerline,
     )
     return CommonRoadImport(file, scenario, pp, spec, tuple(plan.route), plan.centerline, plan, pps)
+
+
+def _validated(data: dict, scenario, pp, route, centerline: np.ndarray, build=None) -> ScenarioSpec:
+    """``data`` as a :class:`ScenarioSpec` (or ``build()``'s spec, made from ``data``), or a
+    ValueError of one line: the file's element that the first refusal is about, the schema's
+    reason, and how many refusals more (never pydantic's dump of every error)."""
+    from pydantic import ValidationError
+
+    try:
+        return build() if build is not None else ScenarioSpec.model_validate(data)
+    except ValidationError as e:
+        errors = e.errors()
+        where = [_element(err["loc"], scenario, pp, route, centerline, data) for err in errors]
+        msg = str(errors[0]["msg"]).removeprefix("Value error, ")
+        line = f"{where[0]} ({'.'.join(map(str, errors[0]['loc'])) or 'scenario'}): {msg}"
+        if len(errors) > 1:
+            others = list(dict.fromkeys(w for w in where[1:] if w != where[0]))
+            named = f": {', '.join(others[:3])}{', ...' if len(others) > 3 else ''}" if others else ""
+            line += f" (and {len(errors) - 1} more{named})"
+        raise ValueError(" ".join(line.split())) from None
+
+
+def _element(loc, scenario, pp, route, centerline: np.ndarray, data) -> str:
+    """The element of the CommonRoad file a schema field ``loc`` comes from: an obstacle (by its
+    CommonRoad id), the route lanelet where the road is narrowest, or the planning problem."""
+    loc = tuple(loc)
+    if loc[:1] == ("obstacles",) and len(loc) > 1 and isinstance(loc[1], int) and loc[1] < len(scenario.obstacles):
+        return f"obstacle {scenario.obstacles[loc[1]].obstacle_id}"
+    if loc[:1] == ("road",):
+        widths = (data.get("road") or {}).get("widths")
+        if widths:
+            s, wl, wr = (np.asarray(c, float) for c in zip(*widths))
+            k = int(np.argmin(wl + wr))
+            arc = np.r_[0.0, np.cumsum(np.hypot(*np.diff(centerline, axis=0).T))]
+            p = centerline[int(np.argmin(np.abs(arc - s[k])))]
+            holding = {int(i) for ids in scenario.lanelet_network.find_lanelet_by_position([p]) for i in ids}
+            on = [int(i) for i in route if int(i) in holding] or [int(i) for i in route]
+            return f"lanelet {on[0]}, {s[k]:.1f} m along the path"
+        return f"the road along lanelets {list(map(int, route))}"
+    return f"planning problem {pp.planning_problem_id}"
 
 
 def goal_step(imp: CommonRoadImport, result) -> int | None:
@@ -519,5 +563,12 @@ def with_vehicle(imp: CommonRoadImport, vehicle: str | None = None, plant: str |
     from .commonroad_vehicles import apply_vehicle, solution_vehicle_type
 
     vehicle = vehicle or "ford_escort"
-    spec = apply_vehicle(imp.spec, vehicle, plant)
+    spec = _validated(
+        imp.spec.model_dump(mode="python", exclude_unset=True),
+        imp.scenario,
+        imp.planning_problem,
+        imp.route,
+        imp.centerline,
+        build=lambda: apply_vehicle(imp.spec, vehicle, plant),
+    )
     return replace(imp, spec=spec, vehicle_type=solution_vehicle_type(vehicle).name)
