@@ -17,7 +17,7 @@ def _published_checksums() -> dict[str, str]:
 
 def test_every_listed_file_is_present_and_listed_files_only():
     listed = _published_checksums()
-    assert len(listed) == 14
+    assert len(listed) == 32
     stored = {p.name.removesuffix(".gz") for p in DIR.iterdir() if p.name.endswith((".xml", ".xml.gz"))}
     assert stored == set(listed)
 

@@ -12,8 +12,9 @@ Import:
   lanelet network (or along the lane for a goal without a position), its smoothed centre line up
   to the route's end, and a curvature-limited speed profile braking to 0 there whose top speed
   puts the car in the goal region inside the goal's time window.
-* **Road.** The lane bound is the narrowest route lanelet width (the controller keeps the body
-  inside it).
+* **Road.** The route's lanelets edge by edge along the centre line (the controller keeps the
+  body inside them), the same-direction lanes beside them as neighbour lanes; where the route
+  lane tapers narrower than any car, the lanes beside it join the road there (:func:`_road`).
 * **Obstacles.** Static and dynamic obstacles with rectangle / circle / polygon shapes; a dynamic
   obstacle's recorded trajectory is its known prediction (:class:`TrajectoryMotion`).
 * **Vehicle.** ``kinematic4`` (speed state) with the CommonRoad Ford Escort preset's wheelbase,
@@ -38,7 +39,7 @@ from ..models.presets import PRESETS
 from ..scenarios.schema import ScenarioSpec
 from ..sim.metrics import CommonRoadCheck
 from .commonroad_goal import DrivePlan, accel_limit, friction_accel, plan_drive
-from .commonroad_route import drivable_lanelets, point, route_edges, scalar
+from .commonroad_route import drivable_lanelets, point, route_edges, route_ends, scalar
 
 PRESET = "commonroad_ford_escort"
 #: the lanes beside the route that go its way are the road's neighbour lanes: a lane decision
@@ -46,6 +47,9 @@ PRESET = "commonroad_ford_escort"
 NEIGHBOUR_LANES = True
 #: distance [m] the body keeps from the road's edges
 ROAD_MARGIN_M = 0.1
+#: a route lane narrower than this [m] (the widest CommonRoad vehicle and the road margin on both
+#: sides) takes in the same-direction lanes beside it (:func:`_road`)
+TAPER_WIDTH_M = max(p.width_m for n, p in PRESETS.items() if n.startswith("commonroad_")) + 2 * ROAD_MARGIN_M
 _EXTRAPOLATE_S = 10.0  # recorded obstacle trajectories are extended this long at their last velocity
 
 
@@ -156,7 +160,7 @@ def _obstacle_entry(o, dt: float) -> dict:
     entry.update(position=(float(p[0]), float(p[1])), yaw_deg=math.degrees(yaw))
     pred = getattr(o, "prediction", None)
     if pred is not None and getattr(pred, "trajectory", None) is not None:
-        states = [st] + list(pred.trajectory.state_list)
+        states = _distinct_steps([st] + list(pred.trajectory.state_list))
         yaws = list(np.unwrap([scalar(getattr(s, "orientation", None)) or yaw for s in states]))
         t = [scalar(s.time_step) * dt for s in states]
         pts = [tuple(map(float, point(s.position))) for s in states]
@@ -168,6 +172,43 @@ def _obstacle_entry(o, dt: float) -> dict:
             yaws.append(yaws[-1])
         entry["trajectory"] = {"t_s": t, "points": pts, "yaw_deg": [math.degrees(y) for y in yaws]}
     return entry
+
+
+def _road(net, route, line: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(s, left, right, neighbours) of the road along the centre line ``line``: the route's
+    lanelets edge by edge (a lane that narrows is followed as it narrows; measured on into the
+    lanelets past the route's ends, :func:`~.commonroad_route.route_ends`), and how far the
+    same-direction lanes beside them reach beyond its edges (the neighbour rows).
+
+    A lane narrower than :data:`TAPER_WIDTH_M` is one to leave (a merge lane tapering to
+    nothing, a lane that ends): there the road is the route lane together with the lanes beside
+    it going its way, which the car may use to get out of it, and has no neighbours beyond. Only
+    where that too is no wider than the car is the road refused (the scenario's check)."""
+    ends = route_ends(net, route)
+    s, left, right = route_edges(net, drivable_lanelets(net, route, neighbours=False) | ends, line)
+    _, band_l, band_r = route_edges(net, drivable_lanelets(net, [*route, *ends], neighbours=True), line)
+    taper = left + right < TAPER_WIDTH_M
+    left = np.where(taper, np.maximum(left, band_l), left)
+    right = np.where(taper, np.maximum(right, band_r), right)
+    neighbours = np.column_stack([s, np.maximum(band_l - left, 0.0), np.maximum(band_r - right, 0.0)])
+    return s, left, right, neighbours
+
+
+def _distinct_steps(states: list) -> list:
+    """``states`` with one state per time step: of states sharing a time step the later one.
+
+    A CommonRoad trajectory should begin one step after the obstacle's initial state, but some
+    published files (e.g. scenarios written by the interactive-scenario simulation) begin it *at*
+    the initial time step, repeating the initial state; a repeated step has no time between its
+    two states, so it is read once (the recording's own state, the later one), not refused. A
+    time step that goes backwards is left in: the schema refuses it."""
+    out: list = []
+    for s in states:
+        if out and scalar(s.time_step) == scalar(out[-1].time_step):
+            out[-1] = s
+        else:
+            out.append(s)
+    return out
 
 
 def _read_file(reader, file: Path):
@@ -203,16 +244,12 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
     yaw0 = scalar(init.orientation)
     v0 = max(0.0, scalar(getattr(init, "velocity", None)) or 0.0)
     plan = plan_drive(net, pp, p0, yaw0, v0, dt)
-    # the road: the route's lanelets and their same-direction neighbours, edge by edge along the
-    # reference (a lane that narrows is followed as it narrows)
-    s_k, left_k, right_k = route_edges(net, drivable_lanelets(net, plan.route, neighbours=False), plan.centerline)
-    _, band_l, band_r = route_edges(net, drivable_lanelets(net, plan.route, neighbours=True), plan.centerline)
-    neighbours = np.column_stack([s_k, np.maximum(band_l - left_k, 0.0), np.maximum(band_r - right_k, 0.0)])
+    s_k, left_k, right_k, neighbours = _road(net, plan.route, plan.centerline)
     pre = PRESETS[PRESET]
     v_max = max(plan.v_cruise_mps, v0) + 2.0
     a_lim = accel_limit(v_max)
     obstacles = [_obstacle_entry(o, dt) for o in scenario.obstacles]
-    spec = ScenarioSpec.model_validate(
+    spec = _validated(
         {
             # named after the file the user passed (a file's internal benchmark id can be another's)
             "id": re.sub(r"[^A-Za-z0-9_.-]", "_", file.name.removesuffix(".gz").removesuffix(".xml")) or "commonroad",
@@ -268,9 +305,53 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
                 "brake_decel_mps2": plan.accel_mps2,
                 "friction_accel_mps2": friction_accel(pre.accel_limit_mps2(0.0)),
             },
-        }
+        },
+        scenario,
+        pp,
+        plan.route,
+        plan.centerline,
     )
     return CommonRoadImport(file, scenario, pp, spec, tuple(plan.route), plan.centerline, plan, pps)
+
+
+def _validated(data: dict, scenario, pp, route, centerline: np.ndarray, build=None) -> ScenarioSpec:
+    """``data`` as a :class:`ScenarioSpec` (or ``build()``'s spec, made from ``data``), or a
+    ValueError of one line: the file's element that the first refusal is about, the schema's
+    reason, and how many refusals more (never pydantic's dump of every error)."""
+    from pydantic import ValidationError
+
+    try:
+        return build() if build is not None else ScenarioSpec.model_validate(data)
+    except ValidationError as e:
+        errors = e.errors()
+        where = [_element(err["loc"], scenario, pp, route, centerline, data) for err in errors]
+        msg = str(errors[0]["msg"]).removeprefix("Value error, ")
+        line = f"{where[0]} ({'.'.join(map(str, errors[0]['loc'])) or 'scenario'}): {msg}"
+        if len(errors) > 1:
+            others = list(dict.fromkeys(w for w in where[1:] if w != where[0]))
+            named = f": {', '.join(others[:3])}{', ...' if len(others) > 3 else ''}" if others else ""
+            line += f" (and {len(errors) - 1} more{named})"
+        raise ValueError(" ".join(line.split())) from None
+
+
+def _element(loc, scenario, pp, route, centerline: np.ndarray, data) -> str:
+    """The element of the CommonRoad file a schema field ``loc`` comes from: an obstacle (by its
+    CommonRoad id), the route lanelet where the road is narrowest, or the planning problem."""
+    loc = tuple(loc)
+    if loc[:1] == ("obstacles",) and len(loc) > 1 and isinstance(loc[1], int) and loc[1] < len(scenario.obstacles):
+        return f"obstacle {scenario.obstacles[loc[1]].obstacle_id}"
+    if loc[:1] == ("road",):
+        widths = (data.get("road") or {}).get("widths")
+        if widths:
+            s, wl, wr = (np.asarray(c, float) for c in zip(*widths))
+            k = int(np.argmin(wl + wr))
+            arc = np.r_[0.0, np.cumsum(np.hypot(*np.diff(centerline, axis=0).T))]
+            p = centerline[int(np.argmin(np.abs(arc - s[k])))]
+            holding = {int(i) for ids in scenario.lanelet_network.find_lanelet_by_position([p]) for i in ids}
+            on = [int(i) for i in route if int(i) in holding] or [int(i) for i in route]
+            return f"lanelet {on[0]}, {s[k]:.1f} m along the path"
+        return f"the road along lanelets {list(map(int, route))}"
+    return f"planning problem {pp.planning_problem_id}"
 
 
 def goal_step(imp: CommonRoadImport, result) -> int | None:
@@ -482,5 +563,12 @@ def with_vehicle(imp: CommonRoadImport, vehicle: str | None = None, plant: str |
     from .commonroad_vehicles import apply_vehicle, solution_vehicle_type
 
     vehicle = vehicle or "ford_escort"
-    spec = apply_vehicle(imp.spec, vehicle, plant)
+    spec = _validated(
+        imp.spec.model_dump(mode="python", exclude_unset=True),
+        imp.scenario,
+        imp.planning_problem,
+        imp.route,
+        imp.centerline,
+        build=lambda: apply_vehicle(imp.spec, vehicle, plant),
+    )
     return replace(imp, spec=spec, vehicle_type=solution_vehicle_type(vehicle).name)

@@ -356,6 +356,16 @@ def drivable_lanelets(net, route, neighbours: bool = True) -> set[int]:
     return ids
 
 
+def route_ends(net, route) -> set[int]:
+    """The lanelets the road goes on into past the route's ends: the first lanelet's
+    predecessors and the last one's successors. Measured with them, the road's edges at the ends
+    of the centre line are the lane's sides; without them a route ending where its lanelet ends
+    (DEU_Gar-1_1_T-1) measures, at its last point, the lanelet's slanted closing edge as a side
+    a few centimetres away."""
+    first, last = net.find_lanelet_by_id(int(route[0])), net.find_lanelet_by_id(int(route[-1]))
+    return {int(i) for i in (*first.predecessor, *last.successor)}
+
+
 def route_edges(net, lanelet_ids, line: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(s, left, right) (M,) [m] along the polyline ``line`` (M, 2): the arc length of each point
     and the distances from it, along the line's left / right normal, to the edge of the union of
