@@ -174,7 +174,9 @@ def _steps(t_s: float) -> int:
     return int(round(t_s / DT))
 
 
-def _problem(init: InitialState, center, yaw: float, length: float, width: float, window_s, velocity=None, heading=None):
+def _problem(
+    init: InitialState, center, yaw: float, length: float, width: float, window_s, velocity=None, heading=None
+):
     """The planning problem: ``init``, and a goal rectangle (``length`` along ``yaw``) inside the
     time window ``window_s`` [s] (and a velocity / orientation range when given)."""
     kw = {}
@@ -540,7 +542,12 @@ def _roundabout(w: float, radius: float, r_conn: float, arm_m: float, goal_arm: 
             pred.append(ids[k][1])
         built.append(
             _lanelet(
-                ring_ids[i], _arc((0.0, 0.0), radius, a0, a1), w, predecessor=pred, successor=succ, lanelet_type={LaneletType.URBAN}
+                ring_ids[i],
+                _arc((0.0, 0.0), radius, a0, a1),
+                w,
+                predecessor=pred,
+                successor=succ,
+                lanelet_type={LaneletType.URBAN},
             )
         )
     return built, alpha, ids, y_t
