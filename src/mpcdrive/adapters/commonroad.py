@@ -38,7 +38,7 @@ import numpy as np
 from ..models.presets import PRESETS
 from ..scenarios.schema import ScenarioSpec
 from ..sim.metrics import CommonRoadCheck
-from .commonroad_goal import DrivePlan, accel_limit, friction_accel, plan_drive
+from .commonroad_goal import DrivePlan, accel_limit, friction_accel, goal_spec, plan_drive
 from .commonroad_route import drivable_lanelets, point, route_edges, route_ends, scalar
 
 PRESET = "commonroad_ford_escort"
@@ -276,6 +276,10 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
                 else None,
             },
             "initial_state": {"x_m": float(p0[0]), "y_m": float(p0[1]), "yaw_deg": math.degrees(yaw0), "v_mps": v0},
+            # the maneuver planner's goal, and its pass through the oncoming lane when no lane
+            # going the car's way serves
+            "goal": goal_spec(pp, plan.centerline, plan),
+            "planner": {"oncoming": True},
             # the project's plant steers instantly here: the commands keep within the vehicle's
             # steering rate and CommonRoad's checker judges the drive (KS feasibility); the
             # vehicle's own servo is --plant ks|st|mb (with a 0.4 rad/s servo on this kinematic

@@ -333,3 +333,58 @@ def _finish(
         start_arc(path, pb.p0),
         caps,
     )
+
+
+def _vertices(shape) -> np.ndarray:
+    """(M, 2) points [m] outlining a CommonRoad shape (a circle by its four extreme points)."""
+    verts = getattr(shape, "vertices", None)
+    if verts is not None:
+        return np.asarray(verts, float)
+    c, r = cr.point(shape.center), float(getattr(shape, "radius", 0.0))
+    return c + r * np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
+
+
+def frenet_interval(line: np.ndarray, points: np.ndarray) -> tuple[tuple[float, float], tuple[float, float]]:
+    """((s_lo, s_hi), (e_lo, e_hi)) [m]: the arc lengths along the polyline ``line`` (M, 2) of the
+    nearest points to ``points`` (P, 2), and their lateral offsets (positive left)."""
+    p = np.asarray(line, float)
+    seg = np.diff(p, axis=0)
+    L = np.hypot(seg[:, 0], seg[:, 1])
+    s0 = np.r_[0.0, np.cumsum(L)][:-1]
+    S, E = [], []
+    for q in np.asarray(points, float):
+        t = np.clip(np.einsum("ij,ij->i", q - p[:-1], seg) / np.maximum(L * L, 1e-12), 0.0, 1.0)
+        near = p[:-1] + t[:, None] * seg
+        d = np.hypot(*(q - near).T)
+        i = int(np.argmin(d))
+        cross = seg[i, 0] * (q[1] - p[i, 1]) - seg[i, 1] * (q[0] - p[i, 0])
+        S.append(s0[i] + t[i] * L[i])
+        E.append(math.copysign(d[i], cross))
+    return (float(min(S)), float(max(S))), (float(min(E)), float(max(E)))
+
+
+def goal_spec(pp, line: np.ndarray, plan: DrivePlan) -> dict | None:
+    """The scenario's ``goal`` entry (the maneuver planner's goal) of planning problem ``pp`` along
+    the route's centre line ``line``: the route's stretch in the goal region and the region's
+    lateral extent, the time window, the speed and orientation ranges of its first state with a
+    position; None for a goal without a position (the time-only goals: the reference drives them)."""
+    for st in pp.goal.state_list:
+        shapes = cr.goal_shapes(st)
+        if not shapes:
+            continue
+        arc, offset = frenet_interval(line, np.vstack([_vertices(sh) for sh in shapes]))
+        if plan.goal_arc_m is not None:
+            arc = (min(arc[0], plan.goal_arc_m[0]), max(arc[1], plan.goal_arc_m[1]))
+        out: dict = {"arc_m": list(arc), "offset_m": list(offset)}
+        if plan.goal_window_s is not None:
+            lo, hi = plan.goal_window_s
+            out["time_s"] = [lo, hi if math.isfinite(hi) else None]
+        v = cr.bounds(getattr(st, "velocity", None))
+        if v is not None:
+            out["speed_mps"] = [max(v[0], 0.0), v[1]]
+        yaw = cr.bounds(getattr(st, "orientation", None))
+        if yaw is not None and yaw[1] - yaw[0] < 2.0 * math.pi - 1e-6:
+            out["yaw_deg"] = [math.degrees(yaw[0]), math.degrees(yaw[1])]
+        return out
+    return None
+

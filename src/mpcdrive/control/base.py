@@ -128,6 +128,23 @@ def checked_speed_cap(v_mps, decel_mps2, default_decel_mps2: float) -> tuple[flo
     return float(v_mps), float(decel)
 
 
+def checked_plan(s_m, v_mps, N: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(s (N+1,) [m], v (N+1,) [m/s])`` of a ``set_longitudinal_plan`` call (None: none), copies;
+    a ValueError for arrays of another length, not finite, arc lengths that go back or speeds
+    below zero."""
+    if s_m is None and v_mps is None:
+        return None
+    s = np.array(s_m, float).reshape(-1)
+    v = np.array(v_mps, float).reshape(-1)
+    if s.shape != (N + 1,) or v.shape != (N + 1,):
+        raise ValueError(f"a longitudinal plan needs N + 1 = {N + 1} arc lengths and speeds, got {s.size} and {v.size}")
+    if not (np.all(np.isfinite(s)) and np.all(np.isfinite(v))):
+        raise ValueError("a longitudinal plan's arc lengths and speeds must be finite")
+    if np.any(np.diff(s) < -1e-9) or np.any(v < -1e-9):
+        raise ValueError("a longitudinal plan must not drive backwards (arc lengths non-decreasing, speeds >= 0)")
+    return s, np.maximum(v, 0.0)
+
+
 def checked_obstacles(avoidance: A | None, obstacles) -> tuple[A, tuple[Obstacle, ...]]:
     """``(avoidance, obstacles)`` of a ``set_obstacles`` call, the obstacles as a tuple of
     :class:`Obstacle`; a ValueError for a controller built without obstacles (``avoidance`` None:

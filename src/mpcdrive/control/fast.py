@@ -81,7 +81,7 @@ from ..scene.world import Scene
 from ..solvers.dense_qp import STATUS_WORDS
 from ..solvers.osqp_backend import OsqpSettings
 from ..types import ControlOutput, WarmStart
-from .base import checked_obstacles, checked_road, checked_speed_cap, resolve_scene
+from .base import checked_obstacles, checked_plan, checked_road, checked_speed_cap, resolve_scene
 
 from ..ocp.assembly import MODE_ITERATE, MODE_NO_PLAN, MODE_SHIFTED_PLAN, StepAssembly
 from ..ocp.avoidance_compiled import SIDE_NONE
@@ -199,6 +199,8 @@ class CompiledLtvMpc(LtvMpc):
         self._lateral = None
         #: (cap [m/s], braking to it [m/s^2]) of set_speed_cap, or None
         self._speed_cap: tuple[float, float] | None = None
+        #: (s (N+1,) [m], v (N+1,) [m/s]) of set_longitudinal_plan, or None
+        self._plan: tuple[np.ndarray, np.ndarray] | None = None
         self._follow_decel = (av or AvoidanceConfig()).follow_decel_mps2
         lane = road is not None
         #: the obstacle terms as LtvMpc keeps them (``avoidance.config``, ``.obstacles``,
@@ -416,6 +418,23 @@ class CompiledLtvMpc(LtvMpc):
         if self._relaxed is not None:
             self._relaxed.set_speed_cap(v_mps, decel_mps2)
 
+    def set_obstacle_relations(self, relations) -> None:
+        """As :meth:`LtvMpc.set_obstacle_relations <mpcdrive.control.mpc.PythonLtvMpc.set_obstacle_relations>`."""
+        if self.avoidance is None:
+            if relations:
+                raise ValueError("this controller was built without obstacles: it has no obstacle rows")
+            return
+        self.avoidance.set_relations(relations)
+        if self._relaxed is not None:
+            self._relaxed.set_obstacle_relations(relations)
+
+    def set_longitudinal_plan(self, s_m, v_mps) -> None:
+        """As :meth:`LtvMpc.set_longitudinal_plan <mpcdrive.control.mpc.PythonLtvMpc.set_longitudinal_plan>`
+        (the step then runs in two stages, the plan's references placed between them)."""
+        self._plan = checked_plan(s_m, v_mps, self.N)
+        if self._relaxed is not None:
+            self._relaxed.set_longitudinal_plan(s_m, v_mps)
+
     def set_obstacles(self, obstacles) -> None:
         """Replace the obstacles, as :meth:`LtvMpc.set_obstacles <mpcdrive.control.mpc.PythonLtvMpc.set_obstacles>`
         does (fresh predictions of moving ones each step; index j keeps naming the same
@@ -476,7 +495,14 @@ class CompiledLtvMpc(LtvMpc):
         ``last=STAGE_COST``: only the stage QP, into the buffers (for :meth:`prepare`)."""
         sides = self._load_sides(warm_sides)
         step = self._step_struct
-        if last == STAGE_SOLVE and self._rows is None and self._lateral is None and self._speed_cap is None:
+        plan = self._plan
+        if (
+            last == STAGE_SOLVE
+            and self._rows is None
+            and self._lateral is None
+            and self._speed_cap is None
+            and plan is None
+        ):
             code = self._step_fn(step, x, s_guess, t_s, u_prev, X, U, mode, STAGE_ALL, out)
             if self._detour:
                 return code, tuple((j, int(v)) for j, v in enumerate(sides) if v != SIDE_NONE)
@@ -486,6 +512,9 @@ class CompiledLtvMpc(LtvMpc):
             return code, warm_sides
         a, qp = self._asm, self._qp
         a.e_ref[...] = 0.0
+        if plan is not None:  # the plan's references, from the car's arc length
+            a.s_arr[:] = plan[0] - plan[0][0] + a.s_arr[0]
+            a.v_arr[:] = plan[1]
         new_sides = warm_sides
         s_max = None
         if self._rows is not None:
@@ -499,11 +528,14 @@ class CompiledLtvMpc(LtvMpc):
                 a.e_ref[...] = terms.e_ref
             s_max = terms.s_max
             new_sides = tuple(sorted(memory.sides.items()))
-        if s_max is not None or self._speed_cap is not None:
+        if s_max is not None or self._speed_cap is not None or plan is not None:
             # car following: the references approach the stop line behind the obstacle blocking
-            # the lane ahead and move on with its prediction; and a speed cap (as LtvMpc.prepare)
+            # the lane ahead and move on with its prediction; and a speed cap (as LtvMpc.prepare);
+            # a plan's references are placed in any case
             cap, decel = self._speed_cap or (math.inf, self._follow_decel)
             follow = follow_references(a.s_arr, a.v_arr, s_max, float(self.model.speed(x)), self.dt_s, decel, cap)
+            if follow is None and plan is not None:
+                follow = (a.s_arr, a.v_arr)
             if follow is not None:
                 a.follow_s[:] = follow[0]
                 a.follow_v[:] = follow[1]

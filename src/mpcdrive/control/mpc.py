@@ -37,7 +37,14 @@ from ..solvers.projected_gradient import ProjectedGradientBackend, ProjectedGrad
 from ..types import ControlOutput, SolveResult, WarmStart
 from ..units import TWO_PI, wrap_angle
 from .fallback import FallbackConfig, FallbackLadder
-from .base import TrackingWarmStart, checked_obstacles, checked_road, checked_speed_cap, resolve_scene
+from .base import (
+    TrackingWarmStart,
+    checked_obstacles,
+    checked_plan,
+    checked_road,
+    checked_speed_cap,
+    resolve_scene,
+)
 
 if TYPE_CHECKING:
     from ..ocp.qp import LtvQp
@@ -461,6 +468,8 @@ class PythonLtvMpc(LtvMpc):
         self._lateral = None
         #: (cap [m/s], braking to it [m/s^2]) of set_speed_cap, or None
         self._speed_cap: tuple[float, float] | None = None
+        #: (s (N+1,) [m], v (N+1,) [m/s]) of set_longitudinal_plan, or None
+        self._plan: tuple[np.ndarray, np.ndarray] | None = None
         self._follow_decel = (
             self.avoidance.config.follow_decel_mps2 if self.avoidance else AvoidanceConfig().follow_decel_mps2
         )
@@ -490,6 +499,23 @@ class PythonLtvMpc(LtvMpc):
         decision layer turning out past an obstacle slowly); None: the free references."""
         self._speed_cap = checked_speed_cap(v_mps, decel_mps2, self._follow_decel)
 
+    def set_obstacle_relations(self, relations) -> None:
+        """Keep the planned maneuver's relation to each obstacle it names (obstacle index -> (N,)
+        ``REL_*`` codes of steps 1..N, :meth:`~mpcdrive.ocp.avoidance.Avoidance.set_relations`)
+        from the next step on; None: the controller's own decisions."""
+        if self.avoidance is None:
+            if relations:
+                raise ValueError("this controller was built without obstacles: it has no obstacle rows")
+            return
+        self.avoidance.set_relations(relations)
+
+    def set_longitudinal_plan(self, s_m, v_mps) -> None:
+        """Track a planned longitudinal motion at the next step: the horizon references at arc
+        lengths ``s_m`` (N+1,) [m] (from the car's own at step 0) driven at ``v_mps`` (N+1,)
+        [m/s], e.g. a maneuver planner's, instead of the speed profile's; an obstacle's stop line
+        still holds them back (car following). ``None, None``: the speed profile again."""
+        self._plan = checked_plan(s_m, v_mps, self.N)
+
     def set_obstacles(self, obstacles) -> None:
         """Replace the obstacles, e.g. with fresh predictions of moving ones each step; the QP is
         not rebuilt (``AvoidanceConfig.max_obstacles``, nearest first, fixes its rows, so any
@@ -517,9 +543,13 @@ class PythonLtvMpc(LtvMpc):
             s0, e_y = self.path.project(x[:2], s_m, cfg.projection_window_m)
         e_psi = wrap_angle(x[2] - float(self.path.heading(s0)))
 
-        # references over the horizon
-        s_arr, v_arr = self._horizon(s0)
-        refs = self._references(s_arr, v_arr, x[2], cfg.speed_profile is not None)
+        # references over the horizon: a plan's (from the car's arc length), else the profile's
+        if self._plan is not None:
+            s_arr = self._plan[0] - self._plan[0][0] + s0
+            v_arr = self._plan[1]
+        else:
+            s_arr, v_arr = self._horizon(s0)
+        refs = self._references(s_arr, v_arr, x[2], cfg.speed_profile is not None or self._plan is not None)
         st = self._stage
         xref, uref = st.xref, st.uref
         # linearization points

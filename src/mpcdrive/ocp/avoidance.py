@@ -38,6 +38,11 @@ from .avoidance_cost import obstacle_cost, position_cost, sigma_inv
 from .frenet import FrenetBox, FrenetBoxes, frenet_box, frenet_boxes
 
 __all__ = [
+    "REL_AHEAD",
+    "REL_BEHIND",
+    "REL_CLEAR",
+    "REL_LEFT",
+    "REL_RIGHT",
     "SIDE_BLOCKED",
     "SIDE_LEFT",
     "SIDE_RIGHT",
@@ -54,7 +59,13 @@ __all__ = [
 ]
 
 Formulation = Literal["hard", "corridor", "potential", "gaussian"]
+#: a maneuver planner's relation to an obstacle at a step (:meth:`Avoidance.set_relations`): the
+#: car is clear of it, behind it, ahead of it, beside it on its left / right
+REL_CLEAR, REL_BEHIND, REL_AHEAD, REL_LEFT, REL_RIGHT = 0, 1, 2, 3, 4
 SIDE_LEFT, SIDE_RIGHT, SIDE_BLOCKED = _ac.SIDE_LEFT, _ac.SIDE_RIGHT, _ac.SIDE_BLOCKED
+#: the rows of each relation: the passing side (a lateral row on SIDE_LEFT / SIDE_RIGHT) and the mode
+_REL_SIDE = np.array([_ac.SIDE_NONE, SIDE_BLOCKED, _ac.SIDE_NONE, SIDE_LEFT, SIDE_RIGHT], np.int64)
+_REL_MODE = np.array([_ac.MODE_AVOID, _ac.MODE_STOP, _ac.MODE_AHEAD, _ac.MODE_AVOID, _ac.MODE_AVOID], np.int64)
 #: an obstacle coming towards the car along its path, or crossing its road, faster than this
 #: [m/s], on the car's road where they meet, is yielded to (a stop row before it), not passed beside
 ONCOMING_MPS = 1.0
@@ -182,9 +193,11 @@ class Avoidance:
         self.footprint = footprint
         self.N, self.dt_s = N, dt_s
         self.road = road
-        #: extra distance [m] the stop row of a blocked obstacle keeps before it (a decision
-        #: layer waiting to change lanes keeps room to turn out: control.lanes)
+        #: extra distance [m] the stop row of a blocked obstacle keeps before it
         self.stop_gap_m = 0.0
+        #: a maneuver planner's relations to the obstacles (:meth:`set_relations`): obstacle index
+        #: -> (N,) REL_* codes of steps 1..N; the obstacles it names get their rows from it
+        self.relations: dict[int, np.ndarray] = {}
         self.M = config.rows_per_step(footprint)
         self.offsets = footprint.disc_offsets_m
         self._max_offset = float(np.max(self.offsets))
@@ -292,6 +305,45 @@ class Avoidance:
         obstacle_side = self.r_disc if self.config.formulation == "hard" else self.half_width
         margin = self.road.margin_m if self.road is not None else 0.0
         return self.half_width + margin + self.config.margin_m + obstacle_side
+
+    def set_relations(self, relations: dict[int, np.ndarray] | None) -> None:
+        """Take a maneuver planner's relations to the obstacles from the next step on: obstacle
+        index -> (N,) codes of steps 1..N (``REL_*``: clear of it, behind it, ahead of it, beside
+        it on its left / right). The rows of a named obstacle then keep that relation at each step
+        (a stop row behind it, a keep-ahead row, a lateral row on that side, the nearest-point
+        half-plane), the planned maneuver's side of it; the others are decided as before. None
+        or an empty dict: no planner."""
+        out: dict[int, np.ndarray] = {}
+        for j, codes in (relations or {}).items():
+            c = np.asarray(codes, np.int64)
+            if c.shape != (self.N,):
+                raise ValueError(f"relations of obstacle {j}: {self.N} codes (steps 1..N) needed, got {c.shape}")
+            if np.any((c < REL_CLEAR) | (c > REL_RIGHT)):
+                raise ValueError(f"relations of obstacle {j}: codes must be REL_* ({REL_CLEAR}..{REL_RIGHT})")
+            out[int(j)] = c
+        self.relations = out
+
+    def _step_modes(self, rel, sides, following, ahead) -> tuple[np.ndarray, np.ndarray]:
+        """(side (n, N), mode (n, N)) of the obstacles ``rel`` at steps 1..N: from the planner's
+        relations where it names the obstacle, else the step's decisions for every step (a stop
+        row before an obstacle blocking the way ahead, a keep-ahead row for a car following)."""
+        n = len(rel)
+        side = np.empty((n, self.N), np.int64)
+        mode = np.empty((n, self.N), np.int64)
+        for i, j in enumerate(rel):
+            codes = self.relations.get(j)
+            if codes is not None:
+                side[i] = _REL_SIDE[codes]
+                mode[i] = _REL_MODE[codes]
+                continue
+            side[i] = sides[j]
+            if sides[j] == SIDE_BLOCKED and ahead[j]:
+                mode[i] = _ac.MODE_STOP
+            elif j in following:
+                mode[i] = _ac.MODE_AHEAD
+            else:
+                mode[i] = _ac.MODE_AVOID
+        return side, mode
 
     def _decide(self, rel: list[int], boxes, packed, x: np.ndarray, s_arr: np.ndarray, memory: AvoidanceMemory):
         """The decisions of one step (compiled: :func:`~mpcdrive.ocp.avoidance_compiled.decide`)
@@ -594,14 +646,7 @@ class Avoidance:
         a, b = self._a, self._b
         if packed is None:
             packed = self._packed(rel, boxes, centers, world)
-        n = len(rel)
-        side = np.array([sides[j] for j in rel], np.int64)
-        mode = np.zeros(n, np.int64)
-        for i, j in enumerate(rel):  # the stop and keep-ahead rows, as _hard_rows_numpy picks them
-            if sides[j] == SIDE_BLOCKED and ahead[j]:
-                mode[i] = _ac.MODE_STOP
-            elif j in following:
-                mode[i] = _ac.MODE_AHEAD
+        side, mode = self._step_modes(rel, sides, following, ahead)
         pres = self._presence(rel, present)
         shape, radius, centers_a, outlines_a, nverts, box = packed
         _ac.hard_rows(
@@ -648,7 +693,8 @@ class Avoidance:
         P = lin[None, :, :2] + off[..., None] * np.column_stack([c, s])[None]  # disc centres (nd, N, 2)
         s_disc = s_arr[None, 1:] + off
         # every considered obstacle at once: arrays (n_obs, nd, N[, 2]), obstacle i in row slot i
-        side = np.array([sides[j] for j in rel], float)[:, None, None]
+        side_k, mode_k = self._step_modes(rel, sides, following, ahead)
+        side = side_k.astype(float)[:, None, :]
         s_lo, s_hi, s_ref, e_lo, e_hi = (
             np.stack([getattr(boxes[j], f)[1:] for j in rel])[:, None, :]
             for f in ("s_lo", "s_hi", "s_ref", "e_lo", "e_hi")
@@ -670,28 +716,31 @@ class Avoidance:
         # beside the obstacle where the plan has the disc (its reference may run far ahead of a
         # slow car: rows from it had a car creeping out behind a parked one swerve at 45 deg)
         s_near = s_lin[None, :] + off
-        lateral = (side != SIDE_BLOCKED) & (s_lo - reach <= s_near) & (s_near <= s_hi + reach)
+        lateral = (np.abs(side) == 1) & (s_lo - reach <= s_near) & (s_near <= s_hi + reach)
         n = np.where(lateral[..., None], side[..., None] * nl, n)
         q = np.where(lateral[..., None], q_lat, q)
         active |= lateral
-        for i, j in enumerate(rel):
-            if sides[j] == SIDE_BLOCKED and ahead[j]:
-                # stop behind an obstacle now ahead: the disc's arc length at most its near end
-                # less the clearance (the nearest-point normal points forward once the
-                # linearization passes it)
-                tb, qs = self._stop_plane(np.tile(s_lo[i, 0] - self.stop_gap_m, nd), (s_lin + off).ravel(), r_need)
-                n[i] = -tb.reshape(nd, -1, 2)
-            elif j in following:
-                # keep ahead of a car following in the lane: the disc's arc length at least its far
-                # end plus the clearance, never beyond the disc's reference (the car keeps to its
-                # own plan: no speeding away, no swerving, no braking for it)
-                s_end = np.minimum(np.tile(s_hi[i, 0], nd), (s_disc - r_need).ravel())
-                tb, qs = self._stop_plane(s_end, (s_lin + off).ravel(), r_need, ahead=True)
-                n[i] = tb.reshape(nd, -1, 2)
-            else:
-                continue
-            q[i] = qs.reshape(nd, -1, 2)
-            active[i] = True
+        for i in range(len(rel)):
+            for md in (_ac.MODE_STOP, _ac.MODE_AHEAD):
+                steps = mode_k[i] == md
+                if not steps.any():
+                    continue
+                if md == _ac.MODE_STOP:
+                    # stop behind an obstacle now ahead: the disc's arc length at most its near end
+                    # less the clearance (the nearest-point normal points forward once the
+                    # linearization passes it)
+                    tb, qs = self._stop_plane(np.tile(s_lo[i, 0] - self.stop_gap_m, nd), (s_lin + off).ravel(), r_need)
+                    nb = -tb.reshape(nd, -1, 2)
+                else:
+                    # keep ahead of a car following in the lane: the disc's arc length at least its
+                    # far end plus the clearance, never beyond the disc's reference (the car keeps
+                    # to its own plan: no speeding away, no swerving, no braking for it)
+                    s_end = np.minimum(np.tile(s_hi[i, 0], nd), (s_disc - r_need).ravel())
+                    tb, qs = self._stop_plane(s_end, (s_lin + off).ravel(), r_need, ahead=True)
+                    nb = tb.reshape(nd, -1, 2)
+                n[i][:, steps] = nb[:, steps]
+                q[i][:, steps] = qs.reshape(nd, -1, 2)[:, steps]
+                active[i][:, steps] = True
         active &= np.stack([present[j] for j in rel])[:, None, :]  # no row at the steps the obstacle does not exist
         # n . (p + J (x - xbar)) >= n . q + r_need, J = d p / d (x, y, yaw)
         ay = off * (-n[..., 0] * s + n[..., 1] * c)

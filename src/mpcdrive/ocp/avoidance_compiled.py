@@ -351,8 +351,9 @@ def hard_rows(
     slots 0..n-1, disc d of slot i in row ``i * len(offsets) + d``) at steps 1..N, into a (N, M, 3)
     and b (N, M) (unused rows: 0 and -inf). Obstacle i: ``shape``, ``radius`` (n,), centres
     (n, N+1, 2), vertices (n, N+1, V, 2) (``nverts`` (n,) of them), Frenet boxes (n, 5, N+1),
-    passing ``side`` (n,) (SIDE_*), ``mode`` (n,) (MODE_*) and ``present`` (n, N); a stop row
-    keeps ``stop_gap`` [m] more before the obstacle."""
+    per step 1..N the passing ``side`` (n, N) (SIDE_*; a lateral row only for SIDE_LEFT /
+    SIDE_RIGHT), the ``mode`` (n, N) (MODE_*) and ``present`` (n, N); a stop row keeps
+    ``stop_gap`` [m] more before the obstacle."""
     N = a.shape[0]
     nd = offsets.shape[0]
     for k in range(N):
@@ -373,7 +374,8 @@ def hard_rows(
         s_lin = s_arr[0] + acc
         c, s = math.cos(th), math.sin(th)
         for i in range(n_obs):
-            sd = side[i]
+            sd = side[i, k]
+            md = mode[i, k]
             s_lo, s_hi, s_ref = box[i, BOX_S_LO, k + 1], box[i, BOX_S_HI, k + 1], box[i, BOX_S_REF, k + 1]
             # lateral from half a car length before a moving obstacle (a hedge on its prediction);
             # before a standing one from where the disc may reach its side by the next step
@@ -394,13 +396,13 @@ def hard_rows(
                 nx, ny = vx / nv * sg, vy / nv * sg
                 active = dist - r_disc <= influence
                 s_near = s_lin + off  # where the plan has the disc
-                if sd != 0 and s_lo - reach <= s_near and s_near <= s_hi + reach:
+                if (sd == SIDE_LEFT or sd == SIDE_RIGHT) and s_lo - reach <= s_near and s_near <= s_hi + reach:
                     nx, ny = sd * nlx, sd * nly
                     qx, qy = qlx, qly
                     active = True
-                if mode[i] != MODE_AVOID:
+                if md != MODE_AVOID:
                     s_at = s_lin + off
-                    if mode[i] == MODE_STOP:  # behind its near end at that step
+                    if md == MODE_STOP:  # behind its near end at that step
                         s_end = s_lo - stop_gap
                         s_bar = min(s_at, s_end - r_need)
                     else:  # ahead of its far end, as far as the disc's reference goes
@@ -409,7 +411,7 @@ def hard_rows(
                     bx, by, bh, _ = path_eval(kind, geo, tab_s, tab_xy, tab_h, tab_k, s_bar)
                     tx, ty = math.cos(bh), math.sin(bh)
                     qx, qy = bx + tx * (s_end - s_bar), by + ty * (s_end - s_bar)
-                    if mode[i] == MODE_STOP:
+                    if md == MODE_STOP:
                         nx, ny = -tx, -ty
                     else:
                         nx, ny = tx, ty

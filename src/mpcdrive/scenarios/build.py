@@ -14,11 +14,12 @@ from ..control.adapters import StateAdapter
 from ..control.base import Controller
 from ..control.delay import DelayCompensator
 from ..control.fallback import FallbackConfig
-from ..control.lanes import LaneChoosingMpc, LaneConfig
 from ..control.mpc import LtvMpc, MpcConfig
 from ..models.dynamic import DynamicBicycle, DynamicParams
 from ..models.kinematic import KinematicBicycle3, KinematicBicycle4, KinematicParams, slip_terms
 from ..ocp.problem import MpcProblem
+from ..planning import PlannerConfig, PlanningGoal
+from ..planning.driver import PlannedMpc
 from ..paths import CirclePath, ReferencePath, StraightPath, WaypointPath
 from ..paths.speed_profile import SpeedProfile
 from ..paths.tracks import Track, load_track_csv, track_from_text
@@ -302,6 +303,25 @@ def _start_outside_lane(spec: ScenarioSpec) -> str | None:
     return f"the car starts {abs(e_y):.3g} m {side} of the path, outside the lane ({width:.3g} m to its {side} edge)"
 
 
+def build_goal(spec) -> PlanningGoal | None:
+    """The :class:`~mpcdrive.planning.PlanningGoal` of a ``goal`` spec (None: none)."""
+    if spec is None:
+        return None
+
+    def interval(v, lo=-math.inf, hi=math.inf) -> tuple[float, float]:
+        if v is None:
+            return lo, hi
+        return (lo if v[0] is None else float(v[0])), (hi if v[1] is None else float(v[1]))
+
+    return PlanningGoal(
+        arc_m=interval(spec.arc_m),
+        offset_m=interval(spec.offset_m),
+        time_s=interval(spec.time_s),
+        speed_mps=interval(spec.speed_mps, 0.0),
+        yaw_rad=None if spec.yaw_deg is None else (math.radians(spec.yaw_deg[0]), math.radians(spec.yaw_deg[1])),
+    )
+
+
 def build_road(spec, path: ReferencePath, track: Track | None = None) -> Road | None:
     """The :class:`~mpcdrive.scene.road.Road` of a ``road`` spec along ``path``, else the road
     widths of a track (followed exactly, not by their narrowest), else None."""
@@ -543,12 +563,11 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
     actuator = build_actuator(pl.steering_actuator)
     controller: Controller = mpc
     if road is not None and road.lanes:
-        # neighbour lanes: a decision layer opens them to pass a blocked stretch
-        rs = spec.road
-        lanes = LaneConfig(
-            **{"ego_length_m": footprint.length_m, "ego_width_m": footprint.width_m, **((rs.lanes or {}) if rs else {})}
-        )
-        controller = LaneChoosingMpc(mpc, road, lanes, return_by_s=rs.return_by_s if rs else None)
+        # a road with lanes: the maneuver planner chooses the lane, the offset and the speed
+        settings = dict(spec.planner or {})
+        replan_s = float(settings.pop("replan_s", 0.0))
+        cfg = PlannerConfig(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in settings.items()})
+        controller = PlannedMpc(mpc, road, cfg, goal=build_goal(spec.goal), replan_s=replan_s)
     if c.delay_compensation:
         # predicts over its own period with the plant's integration step
         period_steps = int(round(spec.control_period_s / spec.dt_s))

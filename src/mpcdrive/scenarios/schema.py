@@ -18,6 +18,7 @@ from ..models.presets import PRESETS
 from ..control.fallback import DEFAULT_LADDER, check_ladder
 from ..control.lanes import LaneConfig
 from ..control.mpc import MpcConfig
+from ..planning.config import PlannerConfig
 from ..ocp.avoidance import AvoidanceConfig
 from ..sim.closed_loop import solve_interval
 from .fields import Coord, Finite, Int, Length, NonNeg, Point, Positive, Speed
@@ -557,6 +558,50 @@ class NoiseSpec(_Strict):
         return self
 
 
+Interval = tuple[Finite, Finite]
+#: an interval whose ends may be open (null: unbounded on that side)
+OpenInterval = tuple[Finite | None, Finite | None]
+
+
+class GoalSpec(_Strict):
+    """Where and when the car should be (the maneuver planner plans for it): its reference
+    point's arc length along the path in ``arc_m`` [m], its lateral offset from the path in
+    ``offset_m`` [m], at a time in ``time_s`` [s], a speed in ``speed_mps`` [m/s] and a heading in
+    ``yaw_deg`` [deg] (absolute, counter-clockwise from east). Each is ``[lo, hi]``; ``null`` for
+    an end (or the whole entry) leaves it open."""
+
+    arc_m: OpenInterval
+    offset_m: OpenInterval | None = None
+    time_s: OpenInterval | None = None
+    speed_mps: OpenInterval | None = None
+    yaw_deg: Interval | None = None
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        for name in ("arc_m", "offset_m", "time_s", "speed_mps", "yaw_deg"):
+            v = getattr(self, name)
+            if v is not None and v[0] is not None and v[1] is not None and v[0] > v[1]:
+                raise ValueError(f"goal {name}: [lo, hi] needs lo <= hi, got {list(v)}")
+        return self
+
+
+def _planner_settings(v: dict | None) -> dict | None:
+    """``planner`` settings by the names of :class:`~mpcdrive.planning.config.PlannerConfig`
+    (plus ``replan_s``), checked by the config itself."""
+    if v is None:
+        return v
+    known = set(PlannerConfig.__dataclass_fields__) | {"replan_s"}
+    unknown = sorted(set(v) - known)
+    if unknown:
+        raise ValueError(f"unknown planner setting(s) {unknown}; known: {sorted(known)}")
+    replan = v.get("replan_s", 0.0)
+    if not (isinstance(replan, (int, float)) and not isinstance(replan, bool) and 0.0 <= replan <= 0.5):
+        raise ValueError(f"replan_s must be between 0 and 0.5 s, got {replan!r}")
+    cfg = {k: (tuple(x) if isinstance(x, list) else x) for k, x in v.items() if k != "replan_s"}
+    PlannerConfig(**cfg)  # its own checks, with its own messages
+    return v
+
+
 class ScenarioSpec(_Strict):
     """A complete, self-contained closed-loop experiment. The plant's steering, the controller's
     steering-rate limit and the verdict's final-error tolerance are filled in when it is validated
@@ -580,6 +625,15 @@ class ScenarioSpec(_Strict):
     avoidance: AvoidanceSpec | None = None
     laps: Positive | None = None
     verdict: VerdictSpec = VerdictSpec()
+    #: the maneuver planner's settings (:class:`~mpcdrive.planning.config.PlannerConfig` names and
+    #: ``replan_s``); it drives a road with lanes (``road.neighbours``)
+    planner: dict[str, float | bool | list[float]] | None = None
+    goal: GoalSpec | None = None
+
+    @field_validator("planner")
+    @classmethod
+    def _planner(cls, v):
+        return _planner_settings(v)
 
     @property
     def control_period_s(self) -> float:

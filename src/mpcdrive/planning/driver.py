@@ -1,0 +1,197 @@
+"""The controller drives the planner's maneuver.
+
+:class:`PlannedMpc` wraps an MPC built with a road (:class:`~mpcdrive.control.mpc.LtvMpc`,
+either backend). Every replanning (every control step by default, at most ``replan_s`` apart)
+:class:`~.planner.ManeuverPlanner` chooses a maneuver; the MPC then gets
+
+* its **references**: the maneuver's arc lengths and speeds at the horizon's steps
+  (``set_longitudinal_plan``) and its lateral move as the lateral reference
+  (``set_lateral_reference``);
+* its **road**: the lanes the maneuver's body uses over the MPC's horizon and those the body
+  overlaps now (``set_road`` with :meth:`~mpcdrive.scene.road.Road.band`); the body-in-road rows
+  keep the car inside them;
+* its **obstacle rows**, the safety net, built by the MPC as before: the hard half-planes keep
+  the footprint clear of every obstacle whatever the references say.
+
+Between replannings the maneuver is followed from where the car is on it. The goal, once
+reached, is dropped: the car drives on along its lane.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+import numpy as np
+
+from ..ocp.avoidance_compiled import ObstacleTable, table_of
+from ..scene.road import Road
+from ..scene.world import Scene
+from ..units import wrap_angle
+from .config import PlannerConfig, VehicleLimits
+from .planner import Maneuver, ManeuverPlanner, PlanningGoal
+
+__all__ = ["PlannedMpc", "vehicle_limits"]
+
+
+def vehicle_limits(mpc) -> VehicleLimits:
+    """The :class:`VehicleLimits` of an MPC: its footprint, its model's wheelbase, its input,
+    rate and speed bounds and its friction circle."""
+    pb = mpc.problem
+    fp = mpc.footprint
+    names = list(mpc.model.input_names)
+    params = getattr(mpc.model, "params", None)
+    wheelbase = float(getattr(params, "wheelbase_m", 0.0) or 0.0)
+    if wheelbase <= 0.0:
+        raise ValueError("the maneuver planner needs a model with a wheelbase (kinematic or dynamic bicycle)")
+    if "accel" not in names:
+        raise ValueError("the maneuver planner needs a model with an acceleration input (kinematic4, dynamic)")
+    ia = names.index("accel")
+    speed_index = list(mpc.model.state_names).index("v") if "v" in mpc.model.state_names else 3
+    v_max = float(pb.x_max[speed_index]) if pb.x_max is not None else math.inf
+    if not math.isfinite(v_max):
+        v_max = 70.0  # no bound: the planner samples up to 250 km/h
+    rate = float(pb.du_max_per_s[0])
+    return VehicleLimits(
+        length_m=fp.length_m,
+        width_m=fp.width_m,
+        wheelbase_m=wheelbase,
+        max_steer_rad=float(pb.u_max[0]),
+        max_steer_rate_rad_s=rate if math.isfinite(rate) else 10.0,
+        max_accel_mps2=float(pb.u_max[ia]) if math.isfinite(pb.u_max[ia]) else 10.0,
+        max_decel_mps2=-float(pb.u_min[ia]) if math.isfinite(pb.u_min[ia]) else 10.0,
+        max_speed_mps=v_max,
+        friction_mps2=float(pb.friction_accel_mps2) if pb.friction_accel_mps2 else math.inf,
+        center_offset_m=fp.center_offset_m,
+        disc_offsets_m=tuple(float(o) for o in fp.disc_offsets_m),
+        disc_radius_m=fp.disc_radius_m,
+    )
+
+
+class PlannedMpc:
+    """An MPC driving the maneuvers of a :class:`ManeuverPlanner` on ``road`` (its lanes, on the
+    knots of the MPC's road). ``config``: the planner's settings; ``goal``: a
+    :class:`PlanningGoal`; ``replan_s``: the longest time [s] between two replannings (0: every
+    step). ``maneuver`` is the last maneuver, ``scene`` the MPC's scene with the full road (the
+    world a drive is judged in, whichever lanes the MPC keeps to); ``plans`` counts replannings
+    and ``plan_time_s`` sums their wall time."""
+
+    def __init__(
+        self,
+        mpc,
+        road: Road,
+        config: PlannerConfig | None = None,
+        goal: PlanningGoal | None = None,
+        replan_s: float = 0.0,
+    ):
+        if getattr(mpc, "road", None) is None:
+            raise ValueError("PlannedMpc needs an MPC built with a road (MpcProblem(road=...))")
+        if not (math.isfinite(replan_s) and 0.0 <= replan_s <= 0.5):
+            raise ValueError(f"replan_s must be between 0 and 0.5 s, got {replan_s!r}")
+        self.mpc = mpc
+        self.road = road
+        own = getattr(mpc, "scene", None)
+        #: the world: the MPC's obstacles and body on the full road
+        self.scene = (
+            Scene(road, tuple(mpc.obstacles), mpc.footprint) if own is None else dataclasses.replace(own, road=road)
+        )
+        cfg = config or PlannerConfig()
+        prof = getattr(mpc.config, "speed_profile", None)
+        wanted = prof.speed if prof is not None else float(mpc.v_ref_mps)
+        self.planner = ManeuverPlanner(
+            mpc.path,
+            road,
+            vehicle_limits(mpc),
+            cfg,
+            wanted_speed=wanted,
+            goal=goal,
+            band_steps=int(math.ceil(mpc.N * mpc.dt_s / cfg.dt_s)),
+        )
+        self.config = cfg
+        self.goal = goal
+        self.goal_reached_s: float | None = None
+        self.replan_s = float(replan_s)
+        self.maneuver: Maneuver | None = None
+        self._planned_at = -math.inf
+        self._band: tuple[int, ...] | None = None
+        self._table: ObstacleTable | None = None
+        self._lateral = None
+        names = list(mpc.model.input_names)
+        self._accel = names.index("accel")
+        self.plans = 0
+        self.plan_time_s = 0.0
+        #: one row per replanning: (t [s], kind, target, lane, offset [m], safe, ttc [s], pairs
+        #: checked, pairs sampled, wall time [s])
+        self.log: list[tuple] = []
+        self._t_mpc = mpc.dt_s * np.arange(mpc.N + 1)
+        road.bounds(0.0, 0.0, 0.0, mpc.footprint)  # load the road's kernel now: each band change uses it
+
+    def __getattr__(self, name):  # the MPC's attributes (problem, N, nx, path, obstacles ...)
+        if name == "mpc":
+            raise AttributeError(name)
+        return getattr(self.mpc, name)
+
+    def _lanes_now(self, s_m: float, e_y_m: float) -> set[int]:
+        """The lanes the body overlaps at (s, e_y) [m] (its half width around the offset)."""
+        hw = 0.5 * self.mpc.footprint.width_m
+        out = set()
+        for i, ln in enumerate(self.road.lanes):
+            lo = float(np.interp(s_m, self.road.s_m, ln.right_m))
+            hi = float(np.interp(s_m, self.road.s_m, ln.left_m))
+            if e_y_m - hw < hi and e_y_m + hw > lo:
+                out.add(i)
+        return out
+
+    def step(self, x, warm):
+        t0 = time.perf_counter()
+        mpc = self.mpc
+        x = np.asarray(x, float)
+        if np.all(np.isfinite(x[:4])):
+            t_s = float(warm.t_s)
+            s_m, e_y = mpc.path.project(x[:2], warm.s_m, mpc.config.projection_window_m)
+            s_m, e_y = float(s_m), float(e_y)
+            v = float(mpc.model.speed(x))
+            e_psi = wrap_angle(float(x[2]) - float(mpc.path.heading(s_m)))
+            if self.goal is not None and self.goal_reached_s is None:
+                if self.goal.reached(t_s, s_m, e_y, v, float(x[2])):
+                    self.goal_reached_s = t_s
+                    self.planner.set_goal(None)  # reached: drive on along the lane
+            due = self.maneuver is None or t_s - self._planned_at >= self.replan_s - 1e-9
+            if due:
+                self._table = table_of(mpc.obstacles, self._table)
+                a0 = float(warm.u_prev[self._accel]) if warm.u_prev is not None else 0.0
+                self.maneuver = self.planner.plan(t_s, s_m, e_y, v, math.tan(e_psi), a0, self._table)
+                self._planned_at = t_s
+                self.plans += 1
+                m = self.maneuver
+                self.plan_time_s += m.plan_time_s
+                self.log.append(
+                    (t_s, m.kind, m.target, m.lane, m.offset_m, m.safe, m.ttc_s, m.checked, m.candidates, m.plan_time_s)
+                )
+            m = self.maneuver
+            assert m is not None
+            # the maneuver from where the car is on it (between replannings, later on it)
+            tau = t_s - self._planned_at + self._t_mpc
+            s_ref = np.interp(tau, m.t_s, m.s_m)
+            v_ref = np.interp(tau, m.t_s, m.v_mps)
+            past = tau > m.t_s[-1]  # beyond the maneuver: on at its last speed
+            if np.any(past):
+                s_ref[past] = m.s_m[-1] + m.v_mps[-1] * (tau[past] - m.t_s[-1])
+            s_ref = np.maximum.accumulate(s_ref - s_ref[0] + s_m)
+            mpc.set_longitudinal_plan(s_ref, np.maximum(v_ref, 0.0))
+            if m.lateral is not self._lateral:
+                mpc.set_lateral_reference(m.lateral)
+                self._lateral = m.lateral
+            if getattr(mpc, "avoidance", None) is not None:
+                # the obstacle rows keep the maneuver's side of each obstacle it checked
+                idx = np.clip(np.rint(tau[1:] / self.config.dt_s).astype(np.int64), 0, len(m.t_s) - 1)
+                mpc.set_obstacle_relations({int(j): m.relations[r, idx] for r, j in enumerate(m.obstacle_index)})
+            band = tuple(sorted(set(m.lanes) | self._lanes_now(s_m, e_y))) if self.road.lanes else ()
+            if band and band != self._band:
+                mpc.set_road(self.road.band(band))
+                self._band = band
+        out = mpc.step(x, warm)
+        # the step's time is the whole step's: the planning too
+        return dataclasses.replace(out, solve_time_s=time.perf_counter() - t0)
+

@@ -1,0 +1,217 @@
+"""The planner's arrays, allocated once and handed to compiled code as one struct.
+
+:class:`PlannerWork` holds the road on a uniform arc-length grid (built once), the inputs of a
+replanning (the car's Frenet state, the obstacles' tracks, the goal; written in place each time),
+the candidates and the chosen maneuver (written by :func:`~.kernels.plan`). Index constants name
+the slots of the small scalar arrays.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from .._structs import define_struct, to_struct
+from ..ocp import avoidance as _av
+
+#: lane kinds (``lane_kind``)
+LANE_ROUTE, LANE_SAME, LANE_ONCOMING = 0, 1, 2
+#: longitudinal profile kinds (``lon_kind``)
+LON_REFERENCE, LON_SPEED, LON_STOP, LON_FOLLOW, LON_GOAL = 0, 1, 2, 3, 4
+LON_NAMES = ("reference", "speed", "stop", "follow", "goal")
+#: relations of the chosen maneuver to an obstacle at a step (``relation``): the codes the
+#: controller's obstacle rows take (:meth:`mpcdrive.ocp.avoidance.Avoidance.set_relations`)
+REL_CLEAR, REL_BEHIND, REL_AHEAD, REL_LEFT, REL_RIGHT = _av.REL_CLEAR, _av.REL_BEHIND, _av.REL_AHEAD, _av.REL_LEFT, _av.REL_RIGHT
+
+# slots of ``ego``
+E_S, E_D, E_SLOPE, E_CURV, E_V, E_A, E_T, E_LANE, E_PREV_LANE, E_PREV_OFF, E_PREV_KIND = range(11)
+# slots of ``goal``
+G_HAS, G_S_LO, G_S_HI, G_D_LO, G_D_HI, G_T_LO, G_T_HI, G_V_LO, G_V_HI, G_HAS_YAW, G_YAW_LO, G_YAW_HI = range(12)
+# slots of ``par`` (vehicle and settings)
+(
+    P_HL,
+    P_HW,
+    P_CO,
+    P_KAPPA_MAX,
+    P_KAPPA_RATE,
+    P_A_MAX,
+    P_D_MAX,
+    P_V_MAX,
+    P_FRICTION,
+    P_A_COMF,
+    P_D_COMF,
+    P_MARGIN,
+    P_ROAD_MARGIN,
+    P_TIME_GAP,
+    P_STANDSTILL,
+    P_STOP_V,
+    P_LAT_MIN,
+    P_SHIFT,
+    P_ONCOMING,
+    P_C_CHANGE,
+    P_C_OFFROUTE,
+    P_C_ONCOMING,
+    P_C_SWITCH,
+    P_C_GAP,
+    P_C_GOAL,
+    P_JERK_REF,
+    P_LAT_REF,
+    P_ROAD_START,
+    P_ROAD_END,
+    P_BAND_K,
+    P_CREEP,
+    P_R_DISC,
+) = range(32)
+N_PAR = 32
+# slots of ``result``
+(
+    R_I,
+    R_J,
+    R_COST,
+    R_TTC,
+    R_SAFE,
+    R_CHECKED,
+    R_SAFE_COUNT,
+    R_COMBOS,
+    R_LANE,
+    R_OFF,
+    R_KIND,
+    R_TARGET,
+    R_GOAL,
+    R_RATE,
+) = range(14)
+N_RESULT = 14
+
+MAX_LAT = 40
+MAX_LON = 48
+MAX_LANES = 8
+MAX_OBS = 64
+
+
+@dataclass(frozen=True, eq=False)
+class PlannerWork:
+    """Arrays of one planner (module docstring). Shapes: G grid points, L lanes, K + 1 samples
+    (t = 0, dt, ..., K dt after the replanning), O obstacle slots."""
+
+    # the road, on the grid s = g_s0 + g_ds * i
+    grid: np.ndarray  # (4,) s0 [m], ds [m], n points, 1 / ds [1/m]
+    g_kappa: np.ndarray  # (G,) path curvature [1/m]
+    g_heading: np.ndarray  # (G,) path heading [rad] (unwrapped)
+    g_vref: np.ndarray  # (G,) wanted speed along the path [m/s]
+    lane_left: np.ndarray  # (L, G) lane edges [m] (offsets from the path, positive left)
+    lane_right: np.ndarray  # (L, G)
+    lane_line: np.ndarray  # (L, G) the line driven in each lane [m]
+    lane_kind: np.ndarray  # (L,) LANE_*
+    same_left: np.ndarray  # (G,) edges of the lanes going the car's way
+    same_right: np.ndarray  # (G,)
+    all_left: np.ndarray  # (G,) edges of all lanes (the oncoming ones too)
+    all_right: np.ndarray  # (G,)
+    par: np.ndarray  # (N_PAR,) vehicle and settings
+    lat_lengths_s: np.ndarray  # (nT,) durations of lateral moves [s]
+    speed_s: np.ndarray  # (nV,) durations of speed changes [s]
+    dt: np.ndarray  # (1,) check grid [s]
+    discs: np.ndarray  # (nd,) centres [m] along the body of the controller's footprint discs
+    # one replanning's inputs
+    ego: np.ndarray  # (11,) E_*
+    goal: np.ndarray  # (12,) G_*
+    ob_s: np.ndarray  # (O, K+1) obstacle centre arc length [m] (NaN: absent)
+    ob_e: np.ndarray  # (O, K+1) lateral offset [m]
+    ob_hl: np.ndarray  # (O, K+1) half extent along the path [m]
+    ob_hw: np.ndarray  # (O, K+1) half extent across [m]
+    ob_n: np.ndarray  # (1,) int: obstacle rows in use
+    # candidates
+    lat_lane: np.ndarray  # (MAX_LAT,) int
+    lat_off: np.ndarray  # (MAX_LAT,) offset from the lane's line [m]
+    lat_len: np.ndarray  # (MAX_LAT,) length of the move [m]
+    lat_coef: np.ndarray  # (MAX_LAT, 6) quintic d(u), u = s - s0
+    lat_cost: np.ndarray  # (MAX_LAT,)
+    lat_n: np.ndarray  # (1,) int
+    lon_kind: np.ndarray  # (MAX_LON,) int LON_*
+    lon_target: np.ndarray  # (MAX_LON,) target speed [m/s] or stop point [m] or lane
+    lon_s: np.ndarray  # (MAX_LON, K+1) [m]
+    lon_v: np.ndarray  # (MAX_LON, K+1) [m/s]
+    lon_a: np.ndarray  # (MAX_LON, K+1) [m/s^2]
+    lon_ok: np.ndarray  # (MAX_LON,) int: within the vehicle's limits
+    lon_cost: np.ndarray  # (MAX_LON,)
+    lon_n: np.ndarray  # (1,) int
+    # the choice
+    order: np.ndarray  # (MAX_LAT * MAX_LON,) int work space
+    keys: np.ndarray  # (MAX_LAT * MAX_LON,) work space
+    result: np.ndarray  # (N_RESULT,)
+    plan_s: np.ndarray  # (K+1,) the chosen maneuver: arc length [m]
+    plan_v: np.ndarray  # (K+1,) speed along the path [m/s]
+    plan_a: np.ndarray  # (K+1,) acceleration [m/s^2]
+    plan_d: np.ndarray  # (K+1,) lateral offset [m]
+    plan_lanes: np.ndarray  # (L,) int: lanes the body overlaps over the maneuver's first second
+    relation: np.ndarray  # (O, K+1) int REL_*
+
+    def struct(self):
+        return to_struct(self, _build_planner_work)
+
+
+def new_work(K: int, grid_s: np.ndarray, n_lanes: int) -> dict:
+    """The allocations of a :class:`PlannerWork` for ``K`` steps, the grid ``grid_s`` (G,) and
+    ``n_lanes`` lanes, as keyword arrays (the road's and settings' values to be filled in)."""
+    G = len(grid_s)
+    L = n_lanes
+    ds = float(grid_s[1] - grid_s[0]) if G > 1 else 1.0
+    f = np.zeros
+    return dict(
+        grid=np.array([grid_s[0], ds, G, 1.0 / ds], float),
+        g_kappa=f(G),
+        g_heading=f(G),
+        g_vref=f(G),
+        lane_left=f((L, G)),
+        lane_right=f((L, G)),
+        lane_line=f((L, G)),
+        lane_kind=np.zeros(L, np.int64),
+        same_left=f(G),
+        same_right=f(G),
+        all_left=f(G),
+        all_right=f(G),
+        par=f(N_PAR),
+        lat_lengths_s=f(1),
+        speed_s=f(1),
+        dt=f(1),
+        discs=f(1),
+        ego=f(11),
+        goal=f(12),
+        ob_s=f((MAX_OBS, K + 1)),
+        ob_e=f((MAX_OBS, K + 1)),
+        ob_hl=f((MAX_OBS, K + 1)),
+        ob_hw=f((MAX_OBS, K + 1)),
+        ob_n=np.zeros(1, np.int64),
+        lat_lane=np.zeros(MAX_LAT, np.int64),
+        lat_off=f(MAX_LAT),
+        lat_len=f(MAX_LAT),
+        lat_coef=f((MAX_LAT, 6)),
+        lat_cost=f(MAX_LAT),
+        lat_n=np.zeros(1, np.int64),
+        lon_kind=np.zeros(MAX_LON, np.int64),
+        lon_target=f(MAX_LON),
+        lon_s=f((MAX_LON, K + 1)),
+        lon_v=f((MAX_LON, K + 1)),
+        lon_a=f((MAX_LON, K + 1)),
+        lon_ok=np.zeros(MAX_LON, np.int64),
+        lon_cost=f(MAX_LON),
+        lon_n=np.zeros(1, np.int64),
+        order=np.zeros(MAX_LAT * MAX_LON, np.int64),
+        keys=f(MAX_LAT * MAX_LON),
+        result=f(N_RESULT),
+        plan_s=f(K + 1),
+        plan_v=f(K + 1),
+        plan_a=f(K + 1),
+        plan_d=f(K + 1),
+        plan_lanes=np.zeros(L, np.int64),
+        relation=np.zeros((MAX_OBS, K + 1), np.int64),
+    )
+
+
+_PlannerWorkType, _PlannerWorkStruct = define_struct(PlannerWork, __name__)
+
+
+@njit(cache=True)
+def _build_planner_work(values):
+    return _PlannerWorkStruct(*values)
