@@ -39,12 +39,14 @@ from ..models.presets import PRESETS
 from ..scenarios.schema import ScenarioSpec
 from ..sim.metrics import CommonRoadCheck
 from .commonroad_goal import DrivePlan, accel_limit, friction_accel, goal_spec, plan_drive
-from .commonroad_route import drivable_lanelets, point, route_edges, route_ends, scalar
+from .commonroad_route import drivable_lanelets, lane_strips, point, route_edges, route_ends, scalar
 
 PRESET = "commonroad_ford_escort"
-#: the lanes beside the route that go its way are the road's neighbour lanes: a lane decision
-#: layer opens them to pass a blocked stretch (control.lanes)
+#: the lanes beside the route (each lane of the carriageway, the first oncoming lane) are the
+#: road's other lanes: the maneuver planner changes into them (mpcdrive.planning)
 NEIGHBOUR_LANES = True
+#: the most lanes beside the route lane given to the planner (the nearest)
+MAX_LANES_BESIDE = 10
 #: distance [m] the body keeps from the road's edges
 ROAD_MARGIN_M = 0.1
 #: a route lane narrower than this [m] (the widest CommonRoad vehicle and the road margin on both
@@ -194,6 +196,35 @@ def _road(net, route, line: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     return s, left, right, neighbours
 
 
+def _lane_rows(net, route, line: np.ndarray, left: np.ndarray, right: np.ndarray) -> list[dict]:
+    """The ``road.lane_rows`` of the lanes along the centre line ``line``
+    (:func:`~.commonroad_route.lane_strips`: each lane of the carriageway, and the first oncoming
+    lane, where the lanelets are): rows ``[s, left, right]`` of offsets [m] from it; where a lane
+    is absent (ended, not begun) it has no width, at the road's edge on its side (``left``,
+    ``right``: the route lane's widths [m])."""
+    s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(np.asarray(line, float), axis=0).T))]
+    lanes = []
+    strips = lane_strips(net, route, line)
+    # the planner takes at most MAX_LANES_BESIDE lanes: the nearest to the route
+    strips.sort(key=lambda st: float(np.nanmean(np.abs(0.5 * (st[0] + st[1])))))
+    for k, (lf, rt, oncoming) in enumerate(strips[:MAX_LANES_BESIDE]):
+        found = np.isfinite(lf)
+        if found.sum() < 2:
+            continue
+        mid = 0.5 * (lf[found] + rt[found])
+        edge = np.where(np.mean(mid) >= 0.0, left, -right)
+        lf = np.where(found, lf, edge)
+        rt = np.where(found, rt, edge)
+        lanes.append(
+            {
+                "name": f"{'oncoming' if oncoming else 'lane'}-{k + 1}",
+                "oncoming": bool(oncoming),
+                "rows": [[float(a), float(b), float(c)] for a, b, c in zip(s, lf, np.minimum(rt, lf))],
+            }
+        )
+    return lanes
+
+
 def _distinct_steps(states: list) -> list:
     """``states`` with one state per time step: of states sharing a time step the later one.
 
@@ -244,7 +275,7 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
     yaw0 = scalar(init.orientation)
     v0 = max(0.0, scalar(getattr(init, "velocity", None)) or 0.0)
     plan = plan_drive(net, pp, p0, yaw0, v0, dt)
-    s_k, left_k, right_k, neighbours = _road(net, plan.route, plan.centerline)
+    s_k, left_k, right_k, _ = _road(net, plan.route, plan.centerline)
     pre = PRESETS[PRESET]
     v_max = max(plan.v_cruise_mps, v0) + 2.0
     a_lim = accel_limit(v_max)
@@ -266,7 +297,7 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
             "path": {"type": "waypoints", "points": [tuple(map(float, p)) for p in plan.centerline], "ds_m": 0.2},
             "road": {
                 "widths": [[float(a), float(b), float(c)] for a, b, c in zip(s_k, left_k, right_k)],
-                "neighbours": neighbours.tolist() if NEIGHBOUR_LANES else None,
+                "lane_rows": _lane_rows(net, plan.route, plan.centerline, left_k, right_k) if NEIGHBOUR_LANES else None,
                 "margin_m": ROAD_MARGIN_M,
                 # a goal region on the route inside a time window: back in the route lane by its end
                 "return_by_s": plan.goal_window_s[1]

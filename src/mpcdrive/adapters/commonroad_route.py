@@ -397,3 +397,102 @@ def route_edges(net, lanelet_ids, line: np.ndarray) -> tuple[np.ndarray, np.ndar
     left = np.interp(s, s[ok], left[ok])
     right = np.interp(s, s[ok], right[ok])
     return s, left, right
+
+
+#: the step [m] of the search for lane edges along the normals (the route's own edges take
+#: EDGE_STEP_M)
+LANE_STEP_M = 0.1
+#: two lanelets' stretches along a normal that overlap by more than this [m] are one lane (a
+#: lanelet and its successor at their seam, two lanelets side by side in a junction)
+LANE_MERGE_M = 0.5
+#: a lane missed at this many points of the line in a row (a seam, a small gap between lanelets)
+#: goes on; the points are a metre apart
+LANE_GAP_POINTS = 5
+#: a strip of lane shorter than this many points (metres) is no lane: a junction's corner
+MIN_LANE_POINTS = 10
+
+
+def lane_candidates(net, route) -> dict[int, bool]:
+    """The lanelets that may make up the road's lanes: the route's, those it goes on into, every
+    lanelet beside them going the same way (repeatedly) and the first lanelet beside those going
+    the other way; lanelet id -> goes the other way."""
+    base = {int(i) for i in route} | route_ends(net, route)
+    same = drivable_lanelets(net, list(base), neighbours=True)
+    out = {i: False for i in same}
+    for lid in same:
+        ll = net.find_lanelet_by_id(lid)
+        for adj, is_same in ((ll.adj_left, ll.adj_left_same_direction), (ll.adj_right, ll.adj_right_same_direction)):
+            if adj is not None and not is_same and int(adj) not in out:
+                out[int(adj)] = True
+    return out
+
+
+def lane_strips(net, route, line: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, bool]]:
+    """The lanes along the polyline ``line`` (M, 2) as strips: per lane (left, right) (M,) offsets
+    [m] from the line (positive left; NaN where the lane is absent) and whether it goes the other
+    way. Along each normal, every candidate lanelet (:func:`lane_candidates`) gives the stretch
+    where the normal first runs inside it; stretches overlapping by more than ``LANE_MERGE_M``
+    are one lane; a lane at one point continues the lane at the point before that overlaps it
+    most (a lane that appears starts a strip, one that ends stops it)."""
+    import shapely
+
+    cands = lane_candidates(net, route)
+    p = np.asarray(line, float)
+    M = len(p)
+    t = np.gradient(p, axis=0)
+    t /= np.maximum(np.hypot(t[:, 0], t[:, 1]), 1e-12)[:, None]
+    nrm = np.column_stack([-t[:, 1], t[:, 0]])
+    d = np.arange(-EDGE_SEARCH_M, EDGE_SEARCH_M + LANE_STEP_M / 2, LANE_STEP_M)
+    q = p[:, None, :] + d[None, :, None] * nrm[:, None, :]
+    lo_box, hi_box = q.reshape(-1, 2).min(axis=0), q.reshape(-1, 2).max(axis=0)
+    per_point: list[list[tuple[float, float, bool]]] = [[] for _ in range(M)]
+    for lid, other in cands.items():
+        poly = net.find_lanelet_by_id(lid).polygon.shapely_object.buffer(0.02)  # closes seams
+        b = poly.bounds
+        if b[2] < lo_box[0] or b[0] > hi_box[0] or b[3] < lo_box[1] or b[1] > hi_box[1]:
+            continue
+        shapely.prepare(poly)
+        inside = shapely.contains_xy(poly, q[..., 0], q[..., 1])  # (M, D)
+        for i in np.flatnonzero(inside.any(axis=1)):
+            row = inside[i]
+            k0 = int(np.argmax(row))
+            k1 = k0 + int(np.argmin(row[k0:])) if not row[k0:].all() else len(d)
+            per_point[i].append((float(d[k0]), float(d[k1 - 1]), other))
+    strips: list[list] = []  # each: [left (M,), right (M,), oncoming, last index]
+    for i in range(M):
+        # merge one lane's stretches (a lanelet and its successor at their seam)
+        merged: list[list] = []
+        for r, l_, other in sorted(per_point[i]):
+            if merged and merged[-1][2] == other and min(l_, merged[-1][1]) - max(r, merged[-1][0]) > LANE_MERGE_M:
+                merged[-1][0] = min(merged[-1][0], r)
+                merged[-1][1] = max(merged[-1][1], l_)
+            else:
+                merged.append([r, l_, other])
+        used: set[int] = set()
+        for r, l_, other in merged:
+            best, best_ov = -1, 0.0
+            for k, st in enumerate(strips):
+                if k in used or st[2] != other or i - st[3] > LANE_GAP_POINTS:
+                    continue
+                j = st[3]  # the strip's last point (a short gap where no lanelet was met is bridged)
+                ov = min(l_, st[0][j]) - max(r, st[1][j])
+                if ov > best_ov:
+                    best, best_ov = k, ov
+            if best < 0:
+                strips.append([np.full(M, np.nan), np.full(M, np.nan), other, i])
+                best = len(strips) - 1
+            st = strips[best]
+            st[0][i], st[1][i], st[3] = l_, r, i
+            used.add(best)
+    out = []
+    for lf, rt, other, _ in strips:
+        found = np.flatnonzero(np.isfinite(lf))
+        if len(found) < MIN_LANE_POINTS:
+            continue  # a sliver (a junction's corner): no lane to drive in
+        # bridge the short gaps inside the strip
+        idx = np.arange(found[0], found[-1] + 1)
+        lf[idx] = np.interp(idx, found, lf[found])
+        rt[idx] = np.interp(idx, found, rt[found])
+        out.append((lf, rt, other))
+    return out
+

@@ -205,11 +205,19 @@ def _add_lateral(w, lane, off, L, cost):
     w.lat_n[0] = n + 1
 
 
+#: lanes whose line is farther than this [m] from the car are not sampled (two lanes over and a
+#: half: a maneuver of the horizon changes one or two lanes)
+LANE_REACH_M = 9.0
+
+
 @subroutine
 def _lane_open(w, lane, s0):
     """Whether ``lane`` is wide enough for the car here or just ahead (a lane that has ended or
-    not begun, narrower than the body and the road's margins, is no target)."""
+    not begun, narrower than the body and the road's margins, is no target) and within
+    ``LANE_REACH_M`` of it."""
     par = w.par
+    if abs(grid_row_at(w.grid, w.lane_line, lane, s0) - w.ego[E_D]) > LANE_REACH_M:
+        return False
     best = 0.0
     for q in range(3):
         s = s0 + q * par[P_LAT_MIN]
@@ -232,7 +240,7 @@ def lateral_candidates(w):
         kind = w.lane_kind[lane]
         if kind == LANE_ONCOMING and par[P_ONCOMING] == 0.0:
             continue
-        if not _lane_open(w, lane, s0):
+        if lane != now and not _lane_open(w, lane, s0):
             continue
         width_ahead = grid_row_at(w.grid, w.lane_left, lane, s0 + par[P_LAT_MIN]) - grid_row_at(
             w.grid, w.lane_right, lane, s0 + par[P_LAT_MIN]
@@ -330,9 +338,9 @@ def _speed_target(w, v1, T, c):
 
 
 @subroutine
-def _numeric(w, n, lane):
+def _numeric(w, n, lane, top):
     """The wanted-speed profile (``lane`` < 0) or the intelligent driver model behind ``lane``'s
-    leader, integrated on the grid with the profile jerk."""
+    leader (wanting the top speed with ``top``), integrated on the grid with the profile jerk."""
     par, grid, g_vref, ego = w.par, w.grid, w.g_vref, w.ego
     lon_s, lon_v, lon_a = w.lon_s, w.lon_v, w.lon_a
     ob_s, ob_e, ob_hl, ob_hw, n_obs = w.ob_s, w.ob_e, w.ob_hl, w.ob_hw, w.ob_n[0]
@@ -352,7 +360,7 @@ def _numeric(w, n, lane):
         lon_a[n, k] = a
         if k == K:
             break
-        v_want = min(grid_at(grid, g_vref, s + v * SPEED_TAU_S), v_max)
+        v_want = v_max if top else min(grid_at(grid, g_vref, s + v * SPEED_TAU_S), v_max)
         if lane < 0:
             a_des = (v_want - v) / SPEED_TAU_S
             a_des = min(max(a_des, -b_c), a_c)
@@ -430,7 +438,7 @@ def longitudinal_candidates(w, c):
     s0, v0 = w.ego[E_S], w.ego[E_V]
     v_want = min(grid_at(w.grid, w.g_vref, s0), par[P_V_MAX])
     n = _new_lon(w, LON_REFERENCE, v_want)
-    _numeric(w, n, -1)
+    _numeric(w, n, -1, False)
     # speed targets: hold, the wanted speed, the top speed, half the speed, a stop
     nV = w.speed_s.shape[0]
     targets = (v0, v_want, par[P_V_MAX], 0.5 * v0, par[P_CREEP], 0.0)
@@ -466,14 +474,18 @@ def longitudinal_candidates(w, c):
                             w.lon_v[n, kk] = 0.0
                             w.lon_a[n, kk] = 0.0
                         break
-    # the intelligent driver model behind each lane's leader
+    # the intelligent driver model behind each lane's leader, wanting the wanted speed or the
+    # top speed (keeping up with traffic faster than the car wants to drive, a car behind)
     for lane in range(w.lane_kind.shape[0]):
         if w.lane_kind[lane] == LANE_ONCOMING and par[P_ONCOMING] == 0.0:
             continue
-        n = _new_lon(w, LON_FOLLOW, lane)
-        if n < 0:
-            return
-        _numeric(w, n, lane)
+        if lane != int(w.ego[E_LANE]) and not _lane_open(w, lane, s0):
+            continue
+        for top in range(2):
+            n = _new_lon(w, LON_FOLLOW, lane)
+            if n < 0:
+                return
+            _numeric(w, n, lane, top == 1)
     # stops: before the first obstacles in the car's lane (a parked car, the conflict zone of a
     # crossing one), inside the road's end
     hl = par[P_HL] + par[P_CO]

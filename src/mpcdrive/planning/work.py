@@ -84,9 +84,9 @@ N_PAR = 32
 ) = range(14)
 N_RESULT = 14
 
-MAX_LAT = 40
-MAX_LON = 48
-MAX_LANES = 8
+MAX_LAT = 64
+MAX_LON = 64
+MAX_LANES = 12
 MAX_OBS = 64
 
 

@@ -334,11 +334,24 @@ def build_road(spec, path: ReferencePath, track: Track | None = None) -> Road | 
         else:
             s, wl, wr = (np.array(c, float) for c in zip(*spec.widths))
             road = Road.from_widths(s, wl, wr, spec.margin_m, period if s[-1] - s[0] < period else 0.0)
+        if spec.lane_rows:
+            return _with_lanes(road, spec.lane_rows)
         return road if spec.neighbours is None else _with_neighbours(road, spec.neighbours)
     if track is not None and track.has_widths:
         assert track.width_left_m is not None and track.width_right_m is not None
         return Road.from_widths(track.s_points_m, track.width_left_m, track.width_right_m, 0.0, period)
     return None
+
+
+def _with_lanes(road: Road, lanes) -> Road:
+    """``road`` (the route lane) with the lanes of ``road.lane_rows`` beside it, on its knots."""
+    s = road.s_m
+    out = [Lane("route", 0.5 * (road.left_m + road.right_m), road.left_m, road.right_m)]
+    for ln in lanes:
+        s_n, lf, rt = (np.array(c, float) for c in zip(*ln.rows))
+        left, right = np.interp(s, s_n, lf), np.interp(s, s_n, rt)
+        out.append(Lane(ln.name, 0.5 * (left + right), left, right, oncoming=ln.oncoming))
+    return Road(s, road.left_m, road.right_m, road.margin_m, tuple(out), 0, road.period_m)
 
 
 def _with_neighbours(road: Road, rows) -> Road:
@@ -562,8 +575,9 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
         plant_model = model if same else build_model(spec.plant_model, plant_v, pl.param_scale)
     actuator = build_actuator(pl.steering_actuator)
     controller: Controller = mpc
-    if road is not None and road.lanes:
-        # a road with lanes: the maneuver planner chooses the lane, the offset and the speed
+    if road is not None and (road.lanes or spec.planner is not None):
+        # a road with lanes (or a scenario asking for it): the maneuver planner chooses the lane,
+        # the offset and the speed
         settings = dict(spec.planner or {})
         replan_s = float(settings.pop("replan_s", 0.0))
         cfg = PlannerConfig(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in settings.items()})

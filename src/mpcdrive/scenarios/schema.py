@@ -284,6 +284,27 @@ class InitialState(_Strict):
     v_mps: Annotated[Speed, Field(ge=0)] | None = None
 
 
+class LaneRowsSpec(_Strict):
+    """One lane beside the route lane: its edges as rows ``[s_m, left_m, right_m]`` of lateral
+    offsets [m] from the path (positive left) at increasing arc lengths, linear in between (a
+    lane that has ended or not begun has no width there); ``oncoming``: it goes the other way."""
+
+    name: str = Field(min_length=1)
+    oncoming: bool = False
+    rows: list[tuple[Finite, Finite, Finite]]
+
+    @model_validator(mode="after")
+    def _rows(self):
+        if not self.rows:
+            raise ValueError(f"lane {self.name}: rows needs at least one row [s_m, left_m, right_m]")
+        s = [r[0] for r in self.rows]
+        if any(b <= a for a, b in zip(s, s[1:])):
+            raise ValueError(f"lane {self.name}: the arc lengths s_m must increase from row to row")
+        if any(r[1] < r[2] for r in self.rows):
+            raise ValueError(f"lane {self.name}: left_m must not be right of right_m")
+        return self
+
+
 class RoadSpec(_Strict):
     """The road around the reference path; the controller keeps the body ``margin_m`` inside it.
     One of: ``lane_width_m`` (a lane centred on the path), ``left_width_m`` and ``right_width_m``
@@ -303,6 +324,7 @@ class RoadSpec(_Strict):
     right_width_m: NonNeg | None = None
     widths: list[tuple[NonNeg, NonNeg, NonNeg]] | None = None
     neighbours: list[tuple[NonNeg, NonNeg, NonNeg]] | None = None
+    lane_rows: list[LaneRowsSpec] | None = None
     margin_m: NonNeg = 0.05
     return_by_s: NonNeg | None = None
     lanes: dict[str, float] | None = None

@@ -235,12 +235,14 @@ def reach_first_step(lo, hi, dlo, dhi, e1_m, dyaw1_rad):
 @dataclass(frozen=True, eq=False)
 class Lane:
     """One lane of a :class:`Road`, on the road's knots: its centre and edges as lateral offsets
-    [m] from the reference path (positive left). ``name`` identifies it (a lanelet id, "left")."""
+    [m] from the reference path (positive left). ``name`` identifies it (a lanelet id, "left");
+    ``oncoming``: it goes the other way (a car uses it only to pass)."""
 
     name: str
     center_m: np.ndarray
     left_m: np.ndarray
     right_m: np.ndarray
+    oncoming: bool = False
 
 
 @dataclass(frozen=True, eq=False, init=False)
