@@ -1,5 +1,5 @@
 """Controllers: the Controller protocol and the LTV-MPC (``LtvMpc``: its stage QP assembled by
-the compiled step, ``mpcdrive.control.fast``, loaded on demand as it imports numba, or in Python;
+the compiled step, ``mpcdrive.control.compiled_mpc``, loaded on demand as it imports numba, or in Python;
 solved by the condensed solver, OSQP or projected gradient), baselines and wrappers."""
 
 from .adapters import StateAdapter

@@ -255,7 +255,7 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
     ``LtvMpc(model, path, problem, config, solver=..., scene=..., avoidance=...)`` returns the
     controller that covers the problem, an instance of one of two subclasses that differ only in who assembles each step's stage QP (``assembly``):
 
-    - :class:`~mpcdrive.control.fast.CompiledLtvMpc` (``compiled``, the default wherever it
+    - :class:`~mpcdrive.control.compiled_mpc.CompiledLtvMpc` (``compiled``, the default wherever it
       covers the problem): the whole step in numba-compiled code;
     - :class:`PythonLtvMpc` (``python``): the same stage QP assembled in Python, for any model,
       path, speed reference and obstacle.
@@ -322,11 +322,11 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
             raise ValueError(f"assembly must be one of {', '.join(ASSEMBLIES)}, got {assembly!r}")
         if assembly == "python" or solver == "projected_gradient":
             return super().__new__(PythonLtvMpc)
-        from .fast import CompiledLtvMpc  # numba: loaded when a compiled controller may be built
+        from .compiled_mpc import CompiledLtvMpc  # numba: loaded when a compiled controller may be built
 
         if assembly == "compiled":
             return super().__new__(CompiledLtvMpc)
-        from .fast_setup import fast_unsupported_reason
+        from .compiled_setup import fast_unsupported_reason
 
         problem, scene = resolve_scene(problem, scene, obstacles, footprint)
         reason = fast_unsupported_reason(
@@ -368,7 +368,7 @@ def solver_in_reach(solver: str, problem: MpcProblem, settings: CondensedSetting
 
 class PythonLtvMpc(LtvMpc):
     """:class:`LtvMpc` with each step's stage QP assembled here in Python: for any model, path,
-    speed reference and obstacle (the compiled step, :class:`~mpcdrive.control.fast.CompiledLtvMpc`,
+    speed reference and obstacle (the compiled step, :class:`~mpcdrive.control.compiled_mpc.CompiledLtvMpc`,
     assembles the same QP for those it has a compiled form of), solved by the condensed solver
     (:mod:`mpcdrive.control.condensed`, which reads the stage QP as it is), OSQP or projected
     gradient descent (on the sparse QP of ``ocp.qp``, built here for those two only). Both are

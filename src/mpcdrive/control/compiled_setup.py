@@ -1,7 +1,7 @@
 """What the compiled LTV-MPC step covers.
 
 :func:`fast_unsupported_reason` (and :func:`obstacles_unsupported_reason` for the obstacles)
-says why :class:`~mpcdrive.control.fast.CompiledLtvMpc` cannot solve a problem exactly as
+says why :class:`~mpcdrive.control.compiled_mpc.CompiledLtvMpc` cannot solve a problem exactly as
 :class:`~mpcdrive.control.mpc.PythonLtvMpc` would, so that :class:`~mpcdrive.control.mpc.LtvMpc`
 can use the Python assembly instead (and
 :func:`~mpcdrive.solvers.condensed_setup.condensed_unsupported_reason`: why the condensed solver
