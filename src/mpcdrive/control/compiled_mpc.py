@@ -51,7 +51,7 @@ Compiled functions use numba's on-disk cache, so only the first process on a mac
 
 Problems the compiled step does not cover (see :func:`~mpcdrive.control.compiled_setup.fast_unsupported_reason`)
 are refused here with a ValueError naming the reason; :class:`~mpcdrive.control.mpc.LtvMpc` then
-builds the Python assembly (:class:`~mpcdrive.control.mpc.PythonLtvMpc`) and says so.
+builds the Python assembly (:class:`~mpcdrive.control.python_mpc.PythonLtvMpc`) and says so.
 """
 
 from __future__ import annotations
@@ -101,7 +101,8 @@ from .compiled_step import (
     control_step,
 )
 from .fallback import FALLBACK_HOLD, FALLBACK_RELAX, FallbackConfig, FallbackLadder, relaxed_problem
-from .mpc import FastPathUnavailable, LtvMpc, MpcConfig, StageQpSolve, StepData, solver_in_reach
+from .mpc_base import FastPathUnavailable, LtvMpc, StageQpSolve, StepData, solver_in_reach
+from .mpc_config import MpcConfig
 
 
 _announced: set = set()
@@ -130,7 +131,7 @@ class CompiledLtvMpc(LtvMpc):
     """:class:`~mpcdrive.control.mpc.LtvMpc` with every step compiled (see the module text).
 
     Same interface and results as the Python assembly
-    (:class:`~mpcdrive.control.mpc.PythonLtvMpc`); statuses ``ok``, ``infeasible``,
+    (:class:`~mpcdrive.control.python_mpc.PythonLtvMpc`); statuses ``ok``, ``infeasible``,
     ``max_iter``, ``failed``; after a failed solve the ladder of ``config.fallback`` (its
     ``relax`` rung on a second compiled controller built here for the relaxed problem), the rung
     named in ``ControlOutput.fallback``. Obstacles with a cost formulation (see
@@ -410,14 +411,14 @@ class CompiledLtvMpc(LtvMpc):
             self._relaxed.set_lateral_reference(offset)
 
     def set_speed_cap(self, v_mps: float | None, decel_mps2: float | None = None) -> None:
-        """As :meth:`LtvMpc.set_speed_cap <mpcdrive.control.mpc.PythonLtvMpc.set_speed_cap>` (the step
+        """As :meth:`LtvMpc.set_speed_cap <mpcdrive.control.python_mpc.PythonLtvMpc.set_speed_cap>` (the step
         then runs in two stages, the capped references placed between them)."""
         self._speed_cap = checked_speed_cap(v_mps, decel_mps2, self._follow_decel)
         if self._relaxed is not None:
             self._relaxed.set_speed_cap(v_mps, decel_mps2)
 
     def set_obstacles(self, obstacles) -> None:
-        """Replace the obstacles, as :meth:`LtvMpc.set_obstacles <mpcdrive.control.mpc.PythonLtvMpc.set_obstacles>`
+        """Replace the obstacles, as :meth:`LtvMpc.set_obstacles <mpcdrive.control.python_mpc.PythonLtvMpc.set_obstacles>`
         does (fresh predictions of moving ones each step; index j keeps naming the same
         obstacle; nothing is rebuilt). With a constraint formulation any number may be given;
         with a cost formulation the compiled obstacle table keeps the number given at
@@ -514,8 +515,8 @@ class CompiledLtvMpc(LtvMpc):
         return code, new_sides
 
     def prepare(self, x, warm: WarmStart, around=None, s_m: float | None = None) -> StepData:
-        """The stage QP of one step, as :meth:`LtvMpc.prepare <mpcdrive.control.mpc.PythonLtvMpc.prepare>`
-        gives it (:class:`~mpcdrive.control.mpc.StepData`) but assembled by the compiled step:
+        """The stage QP of one step, as :meth:`LtvMpc.prepare <mpcdrive.control.python_mpc.PythonLtvMpc.prepare>`
+        gives it (:class:`~mpcdrive.control.mpc_base.StepData`) but assembled by the compiled step:
         projection, references, linearization, road rows, obstacle rows or cost terms, per-stage
         input bounds. ``around=(X, U)`` re-linearizes at an SQP iterate. The stage QP is the one
         the compiled step solves, valid until the controller's next step; a step whose model or

@@ -156,7 +156,7 @@ class FallbackLadder:
     given: a callable ``(d, warm)``
     returning ``(u, WarmStart, X_pred)`` from the controller's own relaxed solve, or None when it
     fails. The rungs read ``x`` and ``s_m`` of the step data ``d`` (and, for the built-in
-    ``relax``, its stage QP and linearization: :class:`~mpcdrive.control.mpc.StepData`).
+    ``relax``, its stage QP and linearization: :class:`~mpcdrive.control.mpc_base.StepData`).
     """
 
     def __init__(
@@ -308,7 +308,7 @@ class FallbackLadder:
     # -- the ladder -----------------------------------------------------------------------------
     def run(self, d, warm: WarmStart) -> tuple[np.ndarray, str, WarmStart, np.ndarray]:
         """(command (nu,), rung name, next warm start, predicted states (N+1, nx)) for step data
-        ``d`` (:class:`~mpcdrive.control.mpc.StepData`, or anything with ``x`` and ``s_m`` when
+        ``d`` (:class:`~mpcdrive.control.mpc_base.StepData`, or anything with ``x`` and ``s_m`` when
         ``relax`` was given) after a failed solve."""
         rungs = {
             FALLBACK_RELAX: self._relax,
