@@ -58,7 +58,7 @@ from ..types import (  # noqa: F401  (the rung names are re-exported here, their
 
 if TYPE_CHECKING:
     from ..ocp.qp import LtvQp
-    from .condensed import CondensedBackend
+    from .condensed_backend import CondensedBackend
 
 #: rungs that always yield a command
 TERMINAL_FALLBACKS: tuple[str, ...] = (FALLBACK_BRAKE, FALLBACK_HOLD)
@@ -194,7 +194,7 @@ class FallbackLadder:
             backend = controller.backend
             if getattr(backend, "name", None) == "condensed":
                 # the controller's own solver, on the step's stage QP posed for the relaxed problem
-                from .condensed import CondensedBackend
+                from .condensed_backend import CondensedBackend
 
                 s = backend.settings
                 self.relax_backend = CondensedBackend(rpb, dataclasses.replace(s, max_iter=2 * s.max_iter))

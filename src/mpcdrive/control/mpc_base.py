@@ -44,7 +44,7 @@ from .mpc_config import MpcConfig
 if TYPE_CHECKING:
     from ..ocp.qp import LtvQp
     from ..solvers.condensed_setup import CondensedSettings
-    from .condensed import CondensedBackend
+    from .condensed_backend import CondensedBackend
 
 
 @dataclass(frozen=True)

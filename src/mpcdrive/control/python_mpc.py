@@ -53,7 +53,7 @@ class PythonLtvMpc(LtvMpc):
     """:class:`LtvMpc` with each step's stage QP assembled here in Python: for any model, path,
     speed reference and obstacle (the compiled step, :class:`~mpcdrive.control.compiled_mpc.CompiledLtvMpc`,
     assembles the same QP for those it has a compiled form of), solved by the condensed solver
-    (:mod:`mpcdrive.control.condensed`, which reads the stage QP as it is), OSQP or projected
+    (:mod:`mpcdrive.control.condensed_backend`, which reads the stage QP as it is), OSQP or projected
     gradient descent (on the sparse QP of ``ocp.qp``, built here for those two only). Both are
     built once here and only updated in place in :meth:`step`.
     """
@@ -115,7 +115,7 @@ class PythonLtvMpc(LtvMpc):
             settings = condensed_settings if condensed_settings is not None else CondensedSettings()
             solver = solver_in_reach(solver, problem, settings, bool(problem.obstacle_rows))  # type: ignore[assignment]
         if solver == "condensed":
-            from .condensed import CondensedBackend
+            from .condensed_backend import CondensedBackend
 
             self.backend = CondensedBackend(problem, settings)  # it reads the stage QP as it is
             self.backend_name = "fast"
