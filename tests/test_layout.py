@@ -94,12 +94,13 @@ def _cycle_between_children(ancestor: str) -> list[str] | None:
     return None
 
 
-@pytest.mark.parametrize("ancestor", ["mpcdrive.control"])
+@pytest.mark.parametrize("ancestor", ["mpcdrive", "mpcdrive.control"])
 def test_no_import_cycle_between_the_children_of(ancestor):
-    """The modules of ``control`` import each other one way only: ``mpc`` (``LtvMpc(...)``)
-    imports both implementations, ``python_mpc`` and ``compiled_mpc``, which import what they share
-    (``mpc_base``, ``mpc_config``) and never ``mpc``; the contracts of pyproject.toml say the same
-    for ``lint-imports``."""
+    """The package's parts import each other one way only (``scenarios`` no adapter: a CommonRoad
+    plant is handed to ``build_experiment``), and so do the modules of ``control``: ``mpc``
+    (``LtvMpc(...)``) imports both implementations, ``python_mpc`` and ``compiled_mpc``, which
+    import what they share (``mpc_base``, ``mpc_config``) and never ``mpc``. The contracts of
+    pyproject.toml say the same for ``lint-imports``."""
     cycle = _cycle_between_children(ancestor)
     assert cycle is None, f"import cycle in {ancestor}: " + " -> ".join(c.rpartition(".")[2] for c in cycle)
 
