@@ -559,9 +559,10 @@ def test_a_drive_on_the_st_plant_is_written_as_an_st_solution_commonroad_accepts
     from commonroad_dc.feasibility.solution_checker import valid_solution
 
     from mpcdrive.adapters.commonroad import solution_model, with_vehicle
+    from mpcdrive.adapters.commonroad_vehicles import commonroad_plant
 
     imp = with_vehicle(load_commonroad(DIR / "FRA_Anglet-1_1_T-1.xml"), "bmw_320i", "st")
-    res = run_experiment(build_experiment(imp.spec))
+    res = run_experiment(build_experiment(imp.spec, plant_factory=commonroad_plant))
     assert solution_model(imp, res) == "ST" and res.meta["plant_states"].shape == (len(res.t_s), 7)
     rep = check_drive(imp, res)
     assert rep.passed, rep.line()

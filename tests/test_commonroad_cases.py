@@ -17,6 +17,7 @@ if not available():
     )
 
 from mpcdrive.adapters.commonroad import check_drive, load_commonroad, with_vehicle  # noqa: E402
+from mpcdrive.adapters.commonroad_vehicles import commonroad_plant  # noqa: E402
 from mpcdrive.scenarios import build_experiment, run_experiment  # noqa: E402
 from mpcdrive.sim import compute_metrics  # noqa: E402
 
@@ -92,7 +93,7 @@ def drive(n: int, plant: str, obstacles: bool = True):
         imp = with_vehicle(load_commonroad(case(n)), "bmw_320i", plant)
         if not obstacles:  # the scenario's obstacles stay in the check
             imp = replace(imp, spec=imp.spec.model_copy(update={"obstacles": []}))
-        res = run_experiment(build_experiment(imp.spec))
+        res = run_experiment(build_experiment(imp.spec, plant_factory=commonroad_plant))
         _DRIVES[key] = (imp, res, check_drive(imp, res))
     return _DRIVES[key]
 

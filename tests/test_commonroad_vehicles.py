@@ -14,6 +14,7 @@ if not available():
 
 from mpcdrive.adapters.commonroad_vehicles import (  # noqa: E402
     apply_vehicle,
+    commonroad_plant,
     solution_vehicle_type,
     vehicle_parameters,
 )
@@ -399,7 +400,7 @@ from mpcdrive.sim import compute_metrics  # noqa: E402
 def test_scenario_runs_on_a_commonroad_plant_and_logs_the_centre_of_gravity(plant):
     data = {**ROAD, "duration_s": 6.0, "plant": {"model": f"commonroad_{plant}", "vehicle": "bmw_320i"}}
     spec = validate_scenario_data(data, "road.yaml")
-    exp = build_experiment(spec)
+    exp = build_experiment(spec, plant_factory=commonroad_plant)
     assert isinstance(exp.plant, CommonRoadPlant) and exp.plant.kind == plant
     res = run_experiment(exp)
     assert res.meta["termination"] == "completed" and len(res.t_s) == 60
@@ -425,6 +426,14 @@ def test_missing_extra_is_a_clear_error(monkeypatch):
     monkeypatch.setattr(crv, "available", lambda: False)
     spec = validate_scenario_data({**ROAD, "plant": {"model": "commonroad_st", "vehicle": "bmw_320i"}}, "f.yaml")
     with pytest.raises(ValueError, match=r"plant.model commonroad_st needs the commonroad extra"):
+        build_experiment(spec, plant_factory=crv.commonroad_plant)
+
+
+def test_a_commonroad_plant_without_its_factory_is_a_clear_error():
+    """The scenarios know no adapter: a CommonRoad plant is built by the factory handed to
+    build_experiment, and without one the error says how to hand it."""
+    spec = validate_scenario_data({**ROAD, "plant": {"model": "commonroad_st", "vehicle": "bmw_320i"}}, "f.yaml")
+    with pytest.raises(ValueError, match=r"plant.model commonroad_st .*plant_factory=commonroad_plant"):
         build_experiment(spec)
 
 
@@ -432,7 +441,8 @@ def test_simulate_refuses_a_state_disturbance_on_an_observed_plant():
     from mpcdrive.sim import Disturbance, simulate
 
     exp = build_experiment(
-        validate_scenario_data({**ROAD, "plant": {"model": "commonroad_ks", "vehicle": "bmw_320i"}}, "f.yaml")
+        validate_scenario_data({**ROAD, "plant": {"model": "commonroad_ks", "vehicle": "bmw_320i"}}, "f.yaml"),
+        plant_factory=commonroad_plant,
     )
     with pytest.raises(ValueError, match="state disturbance needs a Plant"):
         simulate(
@@ -456,7 +466,7 @@ def test_commonroad_file_on_a_commonroad_plant_stops_behind_the_parked_car(plant
     imp = cr.load_commonroad(Path(__file__).resolve().parent / "data" / "commonroad" / "ZAM_Tutorial_Urban-3_2.xml")
     road = imp.spec.road.model_copy(update={"neighbours": None})
     spec = apply_vehicle(imp.spec.model_copy(update={"duration_s": 8.0, "road": road}), "ford_escort", plant)
-    exp = build_experiment(spec)
+    exp = build_experiment(spec, plant_factory=commonroad_plant)
     res = run_experiment(exp)
     rep = cr.check_drive(replace(imp, spec=spec), res)
     assert rep.collision_free and rep.road_compliant, rep.line()
@@ -486,7 +496,7 @@ def test_us101_a_route_moving_over_a_lane_in_dense_traffic_stays_on_the_road(pla
         "bmw_320i",
         plant,
     )
-    res = run_experiment(build_experiment(imp.spec))
+    res = run_experiment(build_experiment(imp.spec, plant_factory=commonroad_plant))
     rep = cr.check_drive(imp, res)
     assert rep.collision_free and rep.road_compliant and rep.feasible, rep.line()
     assert np.min(res.clearance_m) > 0.3
@@ -514,7 +524,7 @@ def test_a_parked_car_too_close_to_swerve_round_at_speed_is_passed_slowly(plant)
         "bmw_320i",
         plant,
     )
-    res = run_experiment(build_experiment(imp.spec))
+    res = run_experiment(build_experiment(imp.spec, plant_factory=commonroad_plant))
     rep = cr.check_drive(imp, res)
     assert rep.collision_free and rep.road_compliant and rep.feasible and rep.goal_step is not None, rep.line()
     ob = imp.scenario.obstacles[0]
@@ -547,7 +557,7 @@ def test_st_plant_settles_onto_the_lane_without_a_limit_cycle():
     )
     init = imp.spec.initial_state.model_copy(update={"y_m": -1.0, "yaw_deg": 25.0})
     spec = imp.spec.model_copy(update={"obstacles": [], "initial_state": init, "duration_s": 8.0})
-    res = run_experiment(build_experiment(spec))
+    res = run_experiment(build_experiment(spec, plant_factory=commonroad_plant))
     late = res.t_s >= 4.0
     assert np.abs(res.e_y_m[late]).max() < 0.1
     assert res.v_mps.min() > 8.0 and res.v_mps.max() < 10.0

@@ -152,7 +152,7 @@ def test_ltv_mpc_is_one_controller_for_every_assembly_and_solver():
     import warnings
 
     from mpcdrive.control import FastPathUnavailable, LtvMpc
-    from mpcdrive.control.fast import CompiledLtvMpc
+    from mpcdrive.control.compiled_mpc import CompiledLtvMpc
     from mpcdrive.solvers.osqp_backend import OsqpSettings
 
     model = KinematicBicycle3(1.0)

@@ -10,8 +10,9 @@ import time
 import numpy as np
 import pytest
 
-from mpcdrive.control.fast import CompiledLtvMpc
-from mpcdrive.control.mpc import MpcConfig, MpcProblem, PythonLtvMpc
+from mpcdrive.control.compiled_mpc import CompiledLtvMpc
+from mpcdrive.control.mpc import MpcConfig, PythonLtvMpc
+from mpcdrive.ocp import MpcProblem
 from mpcdrive.models.kinematic import KinematicBicycle4
 from mpcdrive.ocp.avoidance import AvoidanceConfig
 from mpcdrive.paths import StraightPath

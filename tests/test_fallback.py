@@ -302,7 +302,7 @@ def test_the_condensed_solver_refuses_a_stage_qp_of_another_problem():
     reads past them."""
     from dataclasses import replace
 
-    from mpcdrive.control.condensed import CondensedBackend
+    from mpcdrive.control.condensed_backend import CondensedBackend
     from mpcdrive.ocp.stage_qp import new_stage_qp
 
     pb = speed_controller(["brake"])[2].problem

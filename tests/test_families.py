@@ -39,6 +39,7 @@ def drive(path: Path, out_dir: Path, monkeypatch) -> dict:
     from mpcdrive.adapters import commonroad_figures
     from mpcdrive.adapters.commonroad import load_commonroad, with_vehicle
     from mpcdrive.adapters.commonroad_traffic import with_traffic
+    from mpcdrive.adapters.commonroad_vehicles import commonroad_plant
     from mpcdrive.runs import run_into
     from mpcdrive.scenarios import reject_initial_overlap, warn_suspicious
 
@@ -52,7 +53,12 @@ def drive(path: Path, out_dir: Path, monkeypatch) -> dict:
         warnings.simplefilter("ignore")
         warn_suspicious(reject_initial_overlap(imp.spec, str(path)), str(path))
     _, metrics, _, _ = run_into(
-        imp.spec, out_dir, source=str(path), extra_outputs=imp.write_outputs, prepare=imp.prepare_experiment
+        imp.spec,
+        out_dir,
+        source=str(path),
+        extra_outputs=imp.write_outputs,
+        prepare=imp.prepare_experiment,
+        plant_factory=commonroad_plant,
     )
     v = metrics.verdict
     return {"passed": v.passed, "line": v.line(imp.spec.id), "problems": v.problems(), "reasons": list(v.reasons)}

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from mpcdrive.control import FastPathUnavailable, LtvMpc, MpcConfig, PythonLtvMpc
-from mpcdrive.control.fast import CompiledLtvMpc, CondensedSettings, fast_unsupported_reason
+from mpcdrive.control.compiled_mpc import CompiledLtvMpc, CondensedSettings, fast_unsupported_reason
 from mpcdrive.models import KinematicBicycle3, KinematicBicycle4, KinematicParams
 from mpcdrive.models.discretize import discrete_step, discrete_step_and_jacobians
 from mpcdrive.ocp import MpcProblem
@@ -567,31 +567,29 @@ def test_compiled_path_geometry_equals_the_path_objects(path):
 def test_a_second_process_loads_the_compiled_step_from_the_cache():
     """This process has compiled (or loaded) the step; a fresh one must find it in numba's
     on-disk cache (cache hits, no misses) instead of recompiling."""
-    from mpcdrive.control import fast
-
-    from mpcdrive.control import fast_step
+    from mpcdrive.control import compiled_mpc, compiled_step
 
     c = CompiledLtvMpc(KinematicBicycle4(), StraightPath([0, 0], [5, 0]), MpcProblem(4, 2, 5, 0.01, Q=1.0, R=1.0))
     x0 = np.array([0.0, 0.0, 0.0, 1.0])
     c.step(x0, c.initial_warm(x0))
-    assert c.step_spec == fast_step.StepSpec(4)
+    assert c.step_spec == compiled_step.StepSpec(4)
     cache_dir = Path(c._step_fn.stats.cache_path)
-    assert any(cache_dir.glob("fast_step.control_step_kinematic4-*.nbi")), f"no cache index in {cache_dir}"
+    assert any(cache_dir.glob("compiled_step.control_step_kinematic4-*.nbi")), f"no cache index in {cache_dir}"
     code = (
         "import json, numpy as np\n"
-        "from mpcdrive.control import fast\n"
+        "from mpcdrive.control import compiled_mpc\n"
         "from mpcdrive.models import KinematicBicycle4\n"
         "from mpcdrive.ocp import MpcProblem\n"
         "from mpcdrive.paths import CirclePath\n"
-        "c = fast.CompiledLtvMpc(KinematicBicycle4(), CirclePath(), MpcProblem(4, 2, 7, 0.01, Q=1.0, R=1.0))\n"
+        "c = compiled_mpc.CompiledLtvMpc(KinematicBicycle4(), CirclePath(), MpcProblem(4, 2, 7, 0.01, Q=1.0, R=1.0))\n"
         "x = np.array([1.5, 0.0, 1.6, 1.0])\n"
         "c.step(x, c.initial_warm(x))\n"
-        "st = fast.control_step(fast.StepSpec(4)).stats\n"
+        "st = compiled_mpc.control_step(compiled_mpc.StepSpec(4)).stats\n"
         "import sys\n"
         "print(json.dumps({'hits': sum(st.cache_hits.values()), 'misses': sum(st.cache_misses.values()),\n"
         "                  'sparse': 'scipy.sparse' in sys.modules}))\n"
     )
-    src = str(Path(fast.__file__).resolve().parents[2])
+    src = str(Path(compiled_mpc.__file__).resolve().parents[2])
     proc = subprocess.run(
         [sys.executable, "-c", code],
         capture_output=True,
@@ -639,7 +637,7 @@ def test_a_kinematic_step_compiles_without_the_other_models_code(run_with_empty_
 def _guard_cases():
     """Controllers whose assembly needs one feature more than a smaller spec has: (controller
     arguments, keywords, its spec[, the smaller spec; else its spec without extras])."""
-    from mpcdrive.control.fast_step import StepSpec
+    from mpcdrive.control.compiled_step import StepSpec
     from mpcdrive.ocp.avoidance import AvoidanceConfig
     from mpcdrive.scene import Circle, Obstacle
 
@@ -677,26 +675,26 @@ def test_a_step_refuses_an_assembly_that_needs_more_than_its_spec(case):
     """Each compiled step is compiled for its StepSpec, the code of what it leaves out left out;
     a step handed an assembly that needs one of those fails loudly (status 3) instead of
     ignoring it, and the controller's own step solves it."""
-    from mpcdrive.control import fast_step
+    from mpcdrive.control import compiled_step
     from mpcdrive.ocp.assembly import MODE_NO_PLAN
 
     args, kwargs, spec, *smaller = _guard_cases()[case]
     smaller = smaller[0] if smaller else replace(spec, extras=False)
     c = CompiledLtvMpc(*args, **kwargs)
-    assert c.step_spec == spec and c._step_fn is fast_step.control_step(spec)
+    assert c.step_spec == spec and c._step_fn is compiled_step.control_step(spec)
     out = np.empty(c._out_size)
     x = np.zeros(c.nx)
     if c.nx == 4:
         x[3] = 1.0
-    call = (c._step_struct, x, 0.0, 0.0, np.zeros(c.nu), c._noX, c._noU, MODE_NO_PLAN, fast_step.STAGE_ALL, out)
-    assert fast_step.control_step(smaller)(*call) == 3
+    call = (c._step_struct, x, 0.0, 0.0, np.zeros(c.nu), c._noX, c._noU, MODE_NO_PLAN, compiled_step.STAGE_ALL, out)
+    assert compiled_step.control_step(smaller)(*call) == 3
     assert c._step_fn(*call) == 0
 
 
 def test_step_specs_name_their_compiled_function():
     """Each spec has its own function name (numba's cache files are named after it) and says in
     words what it has; a model kind without a compiled step is refused."""
-    from mpcdrive.control.fast_step import StepSpec, control_step
+    from mpcdrive.control.compiled_step import StepSpec, control_step
 
     assert StepSpec(3).name == "control_step_kinematic3"
     assert StepSpec(6, obstacle_cost=True, extras=True).name == "control_step_dynamic_obstacle_cost_extras"
@@ -853,7 +851,7 @@ def test_fast_path_obstacle_cost_changes_the_command():
 
 
 def test_obstacle_formulations_the_fast_path_declines_are_named():
-    from mpcdrive.control.fast import obstacles_unsupported_reason
+    from mpcdrive.control.compiled_mpc import obstacles_unsupported_reason
     from mpcdrive.ocp.avoidance import AvoidanceConfig
     from mpcdrive.scene import Circle, Obstacle
     from mpcdrive.scene.obstacles import ConstantVelocity, TrajectoryMotion
@@ -1068,7 +1066,7 @@ def test_the_relax_rung_shares_its_parents_compiled_step():
     """The relax rung's controller drops the state bounds, so its problem alone would need a
     smaller step: it runs its parent's instead of compiling another; a spec that lacks a feature
     the problem needs is refused."""
-    from mpcdrive.control.fast_step import StepSpec
+    from mpcdrive.control.compiled_step import StepSpec
 
     bounds = dict(Q=1.0, R=1.0, u_min=[-STEER, -3.0], u_max=[STEER, 3.0], x_min=[-np.inf] * 3 + [0.0])
     args = (KinematicBicycle4(), StraightPath([0, 0], [10, 0]), MpcProblem(4, 2, 10, 0.05, **bounds))
@@ -1086,7 +1084,7 @@ def test_a_spec_with_more_features_runs_the_problem_the_same():
     """``step_spec`` may name a step with more code than the problem needs (the relax rung runs
     its parent's): the branches it adds are off for this assembly, so the plans are the same."""
     from mpcdrive.bench.problems import p1
-    from mpcdrive.control.fast_step import StepSpec
+    from mpcdrive.control.compiled_step import StepSpec
 
     bp = p1(N=10)
     plain = CompiledLtvMpc(bp.model, bp.path, bp.problem, bp.config)

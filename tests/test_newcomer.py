@@ -146,7 +146,7 @@ def test_first_compile_is_announced_once(tmp_path):
     one line says so, once per spec."""
     import logging
 
-    from mpcdrive.control import fast
+    from mpcdrive.control import compiled_mpc
 
     records = []
     handler = logging.Handler()
@@ -156,19 +156,19 @@ def test_first_compile_is_announced_once(tmp_path):
     old_level = log.level
     log.setLevel(logging.INFO)
     try:
-        announced = set(fast._announced)
-        fast._announced.clear()
-        real = fast._jitcache.has_cache
-        fast._jitcache.has_cache = lambda dispatcher: False
+        announced = set(compiled_mpc._announced)
+        compiled_mpc._announced.clear()
+        real = compiled_mpc._jitcache.has_cache
+        compiled_mpc._jitcache.has_cache = lambda dispatcher: False
         try:
-            fast._announce_compile(fast.control_step(fast.StepSpec(3)))
-            fast._announce_compile(fast.control_step(fast.StepSpec(3)))
+            compiled_mpc._announce_compile(compiled_mpc.control_step(compiled_mpc.StepSpec(3)))
+            compiled_mpc._announce_compile(compiled_mpc.control_step(compiled_mpc.StepSpec(3)))
             # another spec: its own step, its own line
-            fast._announce_compile(fast.control_step(fast.StepSpec(3, extras=True)))
+            compiled_mpc._announce_compile(compiled_mpc.control_step(compiled_mpc.StepSpec(3, extras=True)))
         finally:
-            fast._jitcache.has_cache = real
-            fast._announced.clear()
-            fast._announced.update(announced)
+            compiled_mpc._jitcache.has_cache = real
+            compiled_mpc._announced.clear()
+            compiled_mpc._announced.update(announced)
     finally:
         log.removeHandler(handler)
         log.setLevel(old_level)
@@ -194,7 +194,7 @@ def test_has_cache_tells_the_steps_of_two_specs_apart(run_with_empty_numba_cache
     look cached (an empty cache directory: nothing is compiled here)."""
     code = (
         "from mpcdrive import _jitcache\n"
-        "from mpcdrive.control.fast_step import StepSpec, control_step\n"
+        "from mpcdrive.control.compiled_step import StepSpec, control_step\n"
         "a, b = control_step(StepSpec(3)), control_step(StepSpec(3, extras=True))\n"
         "before = [_jitcache.has_cache(a), _jitcache.has_cache(b)]\n"
         "where, stem = _jitcache._cache_location(a)\n"

@@ -32,7 +32,7 @@ import pytest
 import scipy.linalg as sla
 
 from mpcdrive.control import LtvMpc, MpcConfig, PythonLtvMpc
-from mpcdrive.control.fast import CompiledLtvMpc, CondensedSettings
+from mpcdrive.control.compiled_mpc import CompiledLtvMpc, CondensedSettings
 from mpcdrive.models import KinematicBicycle3, KinematicBicycle4
 from mpcdrive.models.discretize import discrete_step
 from mpcdrive.ocp import MpcProblem

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from mpcdrive.control import FastPathUnavailable, LtvMpc, MpcConfig, PythonLtvMpc
-from mpcdrive.control.fast import CompiledLtvMpc, CondensedSettings
+from mpcdrive.control.compiled_mpc import CompiledLtvMpc, CondensedSettings
 from mpcdrive.models import KinematicBicycle3, KinematicBicycle4
 from mpcdrive.models.discretize import discrete_step
 from mpcdrive.ocp import MpcProblem
@@ -182,7 +182,7 @@ def test_factory_lets_osqp_solve_the_compiled_stage_qp_beyond_the_condensed_limi
     model = KinematicBicycle3(1.0)
     path = StraightPath([0.0, 0.0], [20.0, 0.0])
     pb = MpcProblem(3, 1, 200, 0.05, Q=np.diag([1.0, 5.0, 1.0]), R=1.0, u_min=-0.5, u_max=0.5)  # 200 variables
-    from mpcdrive.control.fast import CondensedSettings
+    from mpcdrive.control.compiled_mpc import CondensedSettings
 
     with pytest.warns(FastPathUnavailable, match="condensed solver not used: .*max_variables=100.*OSQP solves"):
         c = LtvMpc(model, path, pb, condensed_settings=CondensedSettings(max_variables=100))

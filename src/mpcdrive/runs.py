@@ -10,7 +10,15 @@ class BuildError(ValueError):
     """The scenario could not be built into an experiment (bad input)."""
 
 
-def run_into(spec, out_dir: Path, progress=None, source: str | None = None, extra_outputs=None, prepare=None):
+def run_into(
+    spec,
+    out_dir: Path,
+    progress=None,
+    source: str | None = None,
+    extra_outputs=None,
+    prepare=None,
+    plant_factory=None,
+):
     """Run ``spec`` and write its files into ``out_dir``: ``trajectory.csv``, ``metrics.json``,
     ``scenario.yaml``, the figures and the interactive ``report.html`` (``extra_outputs(result,
     out_dir)`` writes more and returns a dict: under ``commonroad`` a
@@ -20,7 +28,8 @@ def run_into(spec, out_dir: Path, progress=None, source: str | None = None, extr
     (or None). Returns (result, metrics, figures, footprint), ``metrics`` a
     :class:`~mpcdrive.sim.Metrics`; BuildError when the scenario does not build. ``prepare(exp)``
     (optional) returns the built experiment to run instead (e.g. another simulator's traffic);
-    a plant with a ``close()`` is closed once the run is over."""
+    a plant with a ``close()`` is closed once the run is over. ``plant_factory``: as
+    :func:`~mpcdrive.scenarios.build_experiment`'s (a CommonRoad plant needs it)."""
     from contextlib import nullcontext
 
     from .io import write_json, write_trajectory_csv
@@ -32,7 +41,7 @@ def run_into(spec, out_dir: Path, progress=None, source: str | None = None, extr
 
     out_dir = Path(out_dir).resolve()  # figure paths relative to the working directory would not embed
     try:
-        exp = build_experiment(spec)
+        exp = build_experiment(spec, plant_factory=plant_factory)
         if prepare is not None:
             exp = prepare(exp)
     except ValueError as e:

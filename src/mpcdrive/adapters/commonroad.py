@@ -67,7 +67,9 @@ def available() -> bool:
 
 @dataclass(frozen=True, eq=False)
 class CommonRoadImport:
-    """A CommonRoad file read and mapped: ``spec`` runs with :func:`build_experiment`."""
+    """A CommonRoad file read and mapped: ``spec`` runs with
+    :func:`~mpcdrive.scenarios.build_experiment` (on a CommonRoad plant, :func:`with_vehicle`'s
+    ``plant``, given :func:`~.commonroad_vehicles.commonroad_plant` as its ``plant_factory``)."""
 
     file: Path
     scenario: object  # commonroad Scenario
@@ -589,7 +591,9 @@ def with_vehicle(imp: CommonRoadImport, vehicle: str | None = None, plant: str |
     """``imp`` driven with the CommonRoad ``vehicle`` (``ford_escort``, ``bmw_320i``,
     ``vw_vanagon``: the controller's parameters and limits, the solution's vehicle type and the
     checks') and, with ``plant`` (``ks``, ``st``, ``mb``), that CommonRoad model as the plant
-    (:func:`~.commonroad_vehicles.apply_vehicle`); unchanged when both are None. ValueError for an
+    (:func:`~.commonroad_vehicles.apply_vehicle`; built by
+    :func:`~.commonroad_vehicles.commonroad_plant`, the ``plant_factory`` of
+    :func:`~mpcdrive.scenarios.build_experiment`); unchanged when both are None. ValueError for an
     unknown name."""
     from dataclasses import replace
 

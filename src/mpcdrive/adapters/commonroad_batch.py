@@ -106,6 +106,7 @@ def drive_file(task: BatchTask) -> dict:
     a failure is the row's ``error``."""
     from ..runs import run_into
     from .commonroad import load_commonroad
+    from .commonroad_vehicles import commonroad_plant
 
     t0 = time.perf_counter()
     row = _empty_row()
@@ -121,6 +122,7 @@ def drive_file(task: BatchTask) -> dict:
             source=task.file,
             extra_outputs=imp.write_outputs,
             prepare=imp.prepare_experiment,
+            plant_factory=commonroad_plant,
         )
         cr = m.commonroad
         if cr is None:

@@ -152,6 +152,19 @@ def apply_vehicle(spec, vehicle: str, plant: str | None = None):
     return ScenarioSpec.model_validate(data)
 
 
+def commonroad_plant(model: str, vehicle: str) -> CommonRoadPlant:
+    """The CommonRoad plant ``model`` (``commonroad_ks | commonroad_st | commonroad_mb``) of the
+    CommonRoad ``vehicle``: the ``plant_factory`` of :func:`mpcdrive.scenarios.build_experiment`
+    (and :func:`mpcdrive.runs.run_into`) for scenarios on CommonRoad's vehicle models. ValueError
+    naming the extra when it is not installed."""
+    if not available():
+        raise ValueError(
+            f"plant.model {model} needs the commonroad extra: pip install 'mpcdrive[commonroad]' "
+            "(package commonroad-vehicle-models)"
+        )
+    return CommonRoadPlant(PLANT_MODELS[model], vehicle)
+
+
 class PlantModelError(RuntimeError):
     """A CommonRoad vehicle model's equations cannot be evaluated at the plant's state."""
 

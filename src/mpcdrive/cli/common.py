@@ -144,7 +144,8 @@ def _check_traffic_flags(traffic: str | None, prediction: str | None) -> None:
 
 def _run_into(spec, out_dir: Path, show_progress: bool, source: str | None = None, extra_outputs=None, prepare=None):
     """:func:`mpcdrive.runs.run_into` with a progress bar on stderr; a scenario that does not
-    build is bad input."""
+    build is bad input. CommonRoad plants are built by the CommonRoad adapter."""
+    from ..adapters.commonroad_vehicles import commonroad_plant
     from ..runs import BuildError, run_into
 
     try:
@@ -155,6 +156,7 @@ def _run_into(spec, out_dir: Path, show_progress: bool, source: str | None = Non
             source=source,
             extra_outputs=extra_outputs,
             prepare=prepare,
+            plant_factory=commonroad_plant,
         )
     except BuildError as e:
         raise BadInput(str(e)) from None

@@ -58,7 +58,7 @@ from ..types import (  # noqa: F401  (the rung names are re-exported here, their
 
 if TYPE_CHECKING:
     from ..ocp.qp import LtvQp
-    from .condensed import CondensedBackend
+    from .condensed_backend import CondensedBackend
 
 #: rungs that always yield a command
 TERMINAL_FALLBACKS: tuple[str, ...] = (FALLBACK_BRAKE, FALLBACK_HOLD)
@@ -156,7 +156,7 @@ class FallbackLadder:
     given: a callable ``(d, warm)``
     returning ``(u, WarmStart, X_pred)`` from the controller's own relaxed solve, or None when it
     fails. The rungs read ``x`` and ``s_m`` of the step data ``d`` (and, for the built-in
-    ``relax``, its stage QP and linearization: :class:`~mpcdrive.control.mpc.StepData`).
+    ``relax``, its stage QP and linearization: :class:`~mpcdrive.control.mpc_base.StepData`).
     """
 
     def __init__(
@@ -194,7 +194,7 @@ class FallbackLadder:
             backend = controller.backend
             if getattr(backend, "name", None) == "condensed":
                 # the controller's own solver, on the step's stage QP posed for the relaxed problem
-                from .condensed import CondensedBackend
+                from .condensed_backend import CondensedBackend
 
                 s = backend.settings
                 self.relax_backend = CondensedBackend(rpb, dataclasses.replace(s, max_iter=2 * s.max_iter))
@@ -308,7 +308,7 @@ class FallbackLadder:
     # -- the ladder -----------------------------------------------------------------------------
     def run(self, d, warm: WarmStart) -> tuple[np.ndarray, str, WarmStart, np.ndarray]:
         """(command (nu,), rung name, next warm start, predicted states (N+1, nx)) for step data
-        ``d`` (:class:`~mpcdrive.control.mpc.StepData`, or anything with ``x`` and ``s_m`` when
+        ``d`` (:class:`~mpcdrive.control.mpc_base.StepData`, or anything with ``x`` and ``s_m`` when
         ``relax`` was given) after a failed solve."""
         rungs = {
             FALLBACK_RELAX: self._relax,

@@ -1,6 +1,6 @@
 """Scenario files (YAML, validated by pydantic) and the built-in experiments."""
 
-from .build import Experiment, build_experiment, run_experiment
+from .build import Experiment, PlantFactory, build_experiment, run_experiment
 from .loader import (
     ScenarioError,
     builtin_ids,
@@ -14,6 +14,7 @@ from .schema import ScenarioSpec
 
 __all__ = [
     "Experiment",
+    "PlantFactory",
     "ScenarioError",
     "ScenarioSpec",
     "build_experiment",

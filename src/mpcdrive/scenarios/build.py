@@ -423,19 +423,6 @@ def build_speed_profile(spec, path: ReferencePath, friction: float) -> SpeedProf
     )
 
 
-def commonroad_plant(model: str, vehicle: str) -> ObservedPlant:
-    """The CommonRoad plant ``model`` (``commonroad_ks | commonroad_st | commonroad_mb``) of the
-    CommonRoad ``vehicle``; ValueError naming the extra when it is not installed."""
-    from ..adapters import commonroad_vehicles as crv  # imports vehiclemodels only when used
-
-    if not crv.available():
-        raise ValueError(
-            f"plant.model {model} needs the commonroad extra: pip install 'mpcdrive[commonroad]' "
-            "(package commonroad-vehicle-models)"
-        )
-    return crv.CommonRoadPlant(crv.PLANT_MODELS[model], vehicle)
-
-
 def build_actuator(spec) -> SteeringActuator | None:
     """The plant's steering actuator of a resolved ``plant.steering_actuator`` (None: ``ideal``, or
     a CommonRoad plant, which steers itself)."""
@@ -461,8 +448,25 @@ def _noise(spec: NoiseSpec | None) -> Disturbance | None:
     )
 
 
-def build_experiment(spec: ScenarioSpec) -> Experiment:
-    """Models, path, QP (built once), controller and plant of a scenario."""
+#: builds the plant of a ``plant.model`` that the core has no model of, CommonRoad's vehicle
+#: models (``commonroad_ks | commonroad_st | commonroad_mb``), from that name and
+#: ``plant.vehicle``: :func:`mpcdrive.adapters.commonroad_vehicles.commonroad_plant`
+PlantFactory = Callable[[str, str], ObservedPlant]
+
+
+def build_experiment(spec: ScenarioSpec, *, plant_factory: PlantFactory | None = None) -> Experiment:
+    """Models, path, QP (built once), controller and plant of a scenario.
+
+    A scenario on one of CommonRoad's vehicle models (``plant.model: commonroad_*``) needs
+    ``plant_factory``, which builds that plant (the CommonRoad adapter's
+    :func:`~mpcdrive.adapters.commonroad_vehicles.commonroad_plant`; ``mpcdrive run`` passes it):
+    the scenarios know no adapter. Without one such a scenario is a ValueError."""
+    if spec.plant_model in COMMONROAD_PLANTS and plant_factory is None:
+        raise ValueError(
+            f"plant.model {spec.plant_model} is a CommonRoad vehicle model, built by the CommonRoad adapter: "
+            "build_experiment(spec, plant_factory=commonroad_plant), "
+            "from mpcdrive.adapters.commonroad_vehicles import commonroad_plant"
+        )
     v = spec.vehicle
     c = spec.controller
     steer = math.radians(c.max_steer_deg)
@@ -569,7 +573,8 @@ def build_experiment(spec: ScenarioSpec) -> Experiment:
     plant_v = v.model_copy(update=errors) if errors else v
     same = pl.model == "same" and pl.param_scale is None and not errors
     if spec.plant_model in COMMONROAD_PLANTS:
-        plant = commonroad_plant(spec.plant_model, pl.vehicle)
+        assert plant_factory is not None  # checked above
+        plant = plant_factory(spec.plant_model, pl.vehicle)
         plant_model = plant.model  # observed as kinematic4 (x, y, yaw, v at the centre of gravity)
     else:
         plant_model = model if same else build_model(spec.plant_model, plant_v, pl.param_scale)

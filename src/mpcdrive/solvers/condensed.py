@@ -1,6 +1,6 @@
 """Compiled solve pieces of the condensed MPC QP, beyond the dense active-set kernel.
 
-The controller (:mod:`mpcdrive.control.fast_step`) builds, each step, the stage data of a
+The controller (:mod:`mpcdrive.control.compiled_step`) builds, each step, the stage data of a
 linear-quadratic problem -- dynamics ``x_{k+1} = A_k x_k + B_k u_k + c_k``, state cost
 ``x' W_k x - 2 q_k' x``, input cost ``(u - u_ref)' R (u - u_ref)`` -- and its condensed form
 onto the inputs (and slacks): ``minimize 1/2 z' H z + g' z  subject to  C z >= b``. The

@@ -1,8 +1,8 @@
 """What the compiled LTV-MPC step covers.
 
 :func:`fast_unsupported_reason` (and :func:`obstacles_unsupported_reason` for the obstacles)
-says why :class:`~mpcdrive.control.fast.CompiledLtvMpc` cannot solve a problem exactly as
-:class:`~mpcdrive.control.mpc.PythonLtvMpc` would, so that :class:`~mpcdrive.control.mpc.LtvMpc`
+says why :class:`~mpcdrive.control.compiled_mpc.CompiledLtvMpc` cannot solve a problem exactly as
+:class:`~mpcdrive.control.python_mpc.PythonLtvMpc` would, so that :class:`~mpcdrive.control.mpc.LtvMpc`
 can use the Python assembly instead (and
 :func:`~mpcdrive.solvers.condensed_setup.condensed_unsupported_reason`: why the condensed solver
 cannot, so that OSQP solves).
@@ -20,7 +20,7 @@ from ..paths.compiled import path_arrays
 from ..paths.profile_compiled import profile_array
 from ..scene.obstacles import Circle, ConstantVelocity, Polygon, Static, TrajectoryMotion
 from ..solvers.condensed_setup import CondensedSettings, condensed_unsupported_reason
-from .mpc import MpcConfig
+from .mpc_config import MpcConfig
 
 
 def obstacles_unsupported_reason(obstacles, avoidance: AvoidanceConfig | None) -> str | None:

@@ -10,8 +10,8 @@ reference; see :mod:`mpcdrive.paths.profile_compiled`) --, linearization along t
 previous plan or the paper's frozen point, Euler / RK4 / ``exp`` discrete models, cost, input /
 rate / state bounds, soft lane bound with slack, the fallback ladder of ``config.fallback`` --
 its ``relax`` rung on a second compiled controller for the relaxed problem) but runs every step in one
-numba-compiled call (:func:`~mpcdrive.control.fast_step.control_step` of its
-:class:`~mpcdrive.control.fast_step.StepSpec`, compiled for the
+numba-compiled call (:func:`~mpcdrive.control.compiled_step.control_step` of its
+:class:`~mpcdrive.control.compiled_step.StepSpec`, compiled for the
 vehicle model and the features the problem uses) on typed containers allocated at
 construction: the step assembly's description and work (:class:`~mpcdrive.ocp.assembly.StepAssembly`; the
 assembly in :mod:`mpcdrive.ocp.assembly`, its obstacle cost terms in :mod:`mpcdrive.ocp.obstacle_cost_compiled`),
@@ -49,9 +49,9 @@ and inputs, as ``DynamicBicycle.reference`` computes them).
 Compiled functions use numba's on-disk cache, so only the first process on a machine compiles
 (tens of seconds); later processes load the machine code.
 
-Problems the compiled step does not cover (see :func:`~mpcdrive.control.fast_setup.fast_unsupported_reason`)
+Problems the compiled step does not cover (see :func:`~mpcdrive.control.compiled_setup.fast_unsupported_reason`)
 are refused here with a ValueError naming the reason; :class:`~mpcdrive.control.mpc.LtvMpc` then
-builds the Python assembly (:class:`~mpcdrive.control.mpc.PythonLtvMpc`) and says so.
+builds the Python assembly (:class:`~mpcdrive.control.python_mpc.PythonLtvMpc`) and says so.
 """
 
 from __future__ import annotations
@@ -88,8 +88,8 @@ from ..ocp.avoidance_compiled import SIDE_NONE
 from ..ocp.obstacle_cost_compiled import OBS_GAUSSIAN, OBS_NONE, OBS_POTENTIAL, cost_obstacle_arrays
 from ..ocp.stage_qp import new_stage_qp
 from ..solvers.condensed_setup import CondensedSettings, new_condensed_work
-from .fast_setup import fast_unsupported_reason, obstacles_unsupported_reason, uses_rows
-from .fast_step import (
+from .compiled_setup import fast_unsupported_reason, obstacles_unsupported_reason, uses_rows
+from .compiled_step import (
     _BAD_STATE,
     STAGE_ALL,
     STAGE_COST,
@@ -101,7 +101,8 @@ from .fast_step import (
     control_step,
 )
 from .fallback import FALLBACK_HOLD, FALLBACK_RELAX, FallbackConfig, FallbackLadder, relaxed_problem
-from .mpc import FastPathUnavailable, LtvMpc, MpcConfig, StageQpSolve, StepData, solver_in_reach
+from .mpc_base import FastPathUnavailable, LtvMpc, StageQpSolve, StepData, solver_in_reach
+from .mpc_config import MpcConfig
 
 
 _announced: set = set()
@@ -113,7 +114,7 @@ SOLVERS: tuple[str, ...] = ("condensed", "osqp")
 
 def _announce_compile(step_fn, what: str = "") -> None:
     """Log one line (logger ``mpcdrive``, INFO; the CLI prints it) before the first compile of
-    the compiled step ``step_fn`` (one per :class:`~mpcdrive.control.fast_step.StepSpec`) on a machine: it is
+    the compiled step ``step_fn`` (one per :class:`~mpcdrive.control.compiled_step.StepSpec`) on a machine: it is
     built from numba's cache when one exists for these sources. ``what`` names the step."""
     if step_fn in _announced:
         return
@@ -130,11 +131,11 @@ class CompiledLtvMpc(LtvMpc):
     """:class:`~mpcdrive.control.mpc.LtvMpc` with every step compiled (see the module text).
 
     Same interface and results as the Python assembly
-    (:class:`~mpcdrive.control.mpc.PythonLtvMpc`); statuses ``ok``, ``infeasible``,
+    (:class:`~mpcdrive.control.python_mpc.PythonLtvMpc`); statuses ``ok``, ``infeasible``,
     ``max_iter``, ``failed``; after a failed solve the ladder of ``config.fallback`` (its
     ``relax`` rung on a second compiled controller built here for the relaxed problem), the rung
     named in ``ControlOutput.fallback``. Obstacles with a cost formulation (see
-    :func:`~mpcdrive.control.fast_setup.obstacles_unsupported_reason`) enter each QP as the cost's
+    :func:`~mpcdrive.control.compiled_setup.obstacles_unsupported_reason`) enter each QP as the cost's
     convex model at the linearization trajectory; the constraint formulations (``hard``,
     ``corridor``) as rows built by ``ocp.avoidance`` between two compiled stages, their passing
     sides kept in ``WarmStart.sides``; ``config.sqp_max_iterations > 1`` re-linearizes and
@@ -143,7 +144,7 @@ class CompiledLtvMpc(LtvMpc):
     :mod:`mpcdrive.scene.road`, evaluated in the compiled step on the road's tables. Built
     directly, a problem the compiled step does not cover is a ValueError naming the reason.
 
-    ``step_spec``: the compiled step to run (:class:`~mpcdrive.control.fast_step.StepSpec`);
+    ``step_spec``: the compiled step to run (:class:`~mpcdrive.control.compiled_step.StepSpec`);
     None: the least one the problem needs (``self.step_spec``). A spec with more features runs
     the same problem with the same results, and lets controllers share one compiled step (the
     relax rung's controller takes its parent's); one that lacks a feature the problem needs is
@@ -412,7 +413,7 @@ class CompiledLtvMpc(LtvMpc):
             self._relaxed.set_lateral_reference(offset)
 
     def set_speed_cap(self, v_mps: float | None, decel_mps2: float | None = None) -> None:
-        """As :meth:`LtvMpc.set_speed_cap <mpcdrive.control.mpc.PythonLtvMpc.set_speed_cap>` (the step
+        """As :meth:`LtvMpc.set_speed_cap <mpcdrive.control.python_mpc.PythonLtvMpc.set_speed_cap>` (the step
         then runs in two stages, the capped references placed between them)."""
         self._speed_cap = checked_speed_cap(v_mps, decel_mps2, self._follow_decel)
         if self._relaxed is not None:
@@ -436,7 +437,7 @@ class CompiledLtvMpc(LtvMpc):
             self._relaxed.set_longitudinal_plan(s_m, v_mps)
 
     def set_obstacles(self, obstacles) -> None:
-        """Replace the obstacles, as :meth:`LtvMpc.set_obstacles <mpcdrive.control.mpc.PythonLtvMpc.set_obstacles>`
+        """Replace the obstacles, as :meth:`LtvMpc.set_obstacles <mpcdrive.control.python_mpc.PythonLtvMpc.set_obstacles>`
         does (fresh predictions of moving ones each step; index j keeps naming the same
         obstacle; nothing is rebuilt). With a constraint formulation any number may be given;
         with a cost formulation the compiled obstacle table keeps the number given at
@@ -546,8 +547,8 @@ class CompiledLtvMpc(LtvMpc):
         return code, new_sides
 
     def prepare(self, x, warm: WarmStart, around=None, s_m: float | None = None) -> StepData:
-        """The stage QP of one step, as :meth:`LtvMpc.prepare <mpcdrive.control.mpc.PythonLtvMpc.prepare>`
-        gives it (:class:`~mpcdrive.control.mpc.StepData`) but assembled by the compiled step:
+        """The stage QP of one step, as :meth:`LtvMpc.prepare <mpcdrive.control.python_mpc.PythonLtvMpc.prepare>`
+        gives it (:class:`~mpcdrive.control.mpc_base.StepData`) but assembled by the compiled step:
         projection, references, linearization, road rows, obstacle rows or cost terms, per-stage
         input bounds. ``around=(X, U)`` re-linearizes at an SQP iterate. The stage QP is the one
         the compiled step solves, valid until the controller's next step; a step whose model or

@@ -1,4 +1,4 @@
-"""The compiled step of :class:`~mpcdrive.control.fast.CompiledLtvMpc`.
+"""The compiled step of :class:`~mpcdrive.control.compiled_mpc.CompiledLtvMpc`.
 
 :func:`control_step` gives the compiled step of a :class:`StepSpec` (the vehicle model, and
 whether there is an obstacle cost; constraint rows, a speed profile or the friction circle): one
@@ -38,7 +38,7 @@ from ..solvers.condensed import condensed_solve, write_plan
 STAGE_ALL, STAGE_LINEARIZE, STAGE_SOLVE, STAGE_COST, STAGE_FOLLOW = 0, 1, 2, 3, 4
 
 #: status code of a non-finite measured state (raised as ValueError by
-#: :meth:`CompiledLtvMpc.step <mpcdrive.control.fast.CompiledLtvMpc.step>`)
+#: :meth:`CompiledLtvMpc.step <mpcdrive.control.compiled_mpc.CompiledLtvMpc.step>`)
 _BAD_STATE = 4
 
 
