@@ -101,6 +101,18 @@ def resolve_scene(
     return problem, scene
 
 
+def projection_guess(warm: WarmStart) -> float:
+    """Where [m] to look for the car on the path at the step that receives ``warm``: the arc
+    length it had at the step before advanced by what that step's plan drove in a control period
+    (the distance between its first two states). The projection searches a window of a few metres
+    around it: a car at 28 m/s with a 0.2 s period moves 5.6 m a step, out of reach of a window
+    around where it was. Without a plan (the first step) the arc length itself."""
+    X = warm.X
+    if X is None or len(X) < 2:
+        return float(warm.s_m)
+    return float(warm.s_m) + math.hypot(float(X[1, 0] - X[0, 0]), float(X[1, 1] - X[0, 1]))
+
+
 def checked_road(current: Road | None, road: Road) -> Road:
     """``road`` for a ``set_road`` call: a ValueError when the controller was built without a
     road (its QP has no road rows) or ``road`` is not a Road with the same knots."""

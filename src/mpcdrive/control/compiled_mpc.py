@@ -81,7 +81,14 @@ from ..scene.world import Scene
 from ..solvers.dense_qp import STATUS_WORDS
 from ..solvers.osqp_backend import OsqpSettings
 from ..types import ControlOutput, WarmStart
-from .base import checked_obstacles, checked_plan, checked_road, checked_speed_cap, resolve_scene
+from .base import (
+    checked_obstacles,
+    checked_plan,
+    checked_road,
+    checked_speed_cap,
+    projection_guess,
+    resolve_scene,
+)
 
 from ..ocp.assembly import MODE_ITERATE, MODE_NO_PLAN, MODE_SHIFTED_PLAN, StepAssembly
 from ..ocp.avoidance_compiled import SIDE_NONE
@@ -558,11 +565,11 @@ class CompiledLtvMpc(LtvMpc):
         N, nx, nu = self.N, self.nx, self.nu
         if around is not None:
             X, U, mode = around[0], around[1], MODE_ITERATE
-            s_guess = float(warm.s_m if s_m is None else s_m)
+            s_guess = projection_guess(warm) if s_m is None else float(s_m)
         elif warm.X is not None and warm.U is not None:
-            X, U, mode, s_guess = warm.X, warm.U, MODE_SHIFTED_PLAN, float(warm.s_m)
+            X, U, mode, s_guess = warm.X, warm.U, MODE_SHIFTED_PLAN, projection_guess(warm)
         else:
-            X, U, mode, s_guess = self._noX, self._noU, MODE_NO_PLAN, float(warm.s_m)
+            X, U, mode, s_guess = self._noX, self._noU, MODE_NO_PLAN, projection_guess(warm)
         X = np.ascontiguousarray(X, dtype=float)
         U = np.ascontiguousarray(U, dtype=float)
         if X.shape != (N + 1, nx) or U.shape != (N, nu):
@@ -606,7 +613,7 @@ class CompiledLtvMpc(LtvMpc):
         t_s = float(warm.t_s)
         info = self._info
         code, new_sides = self._run(
-            x, float(warm.s_m), t_s, u_prev, X, U, MODE_SHIFTED_PLAN if has_plan else MODE_NO_PLAN, warm.sides, out
+            x, projection_guess(warm), t_s, u_prev, X, U, MODE_SHIFTED_PLAN if has_plan else MODE_NO_PLAN, warm.sides, out
         )
         N, nx, nu = self.N, self.nx, self.nu
         cfg = self.config

@@ -31,7 +31,14 @@ from ..solvers.osqp_backend import OsqpBackend, OsqpSettings
 from ..solvers.projected_gradient import ProjectedGradientBackend, ProjectedGradientSettings
 from ..types import WarmStart
 from ..units import TWO_PI, wrap_angle
-from .base import checked_obstacles, checked_plan, checked_road, checked_speed_cap, resolve_scene
+from .base import (
+    checked_obstacles,
+    checked_plan,
+    checked_road,
+    checked_speed_cap,
+    projection_guess,
+    resolve_scene,
+)
 from .fallback import FallbackLadder
 from .mpc_base import SOLVERS, Assembly, LtvMpc, Solver, StepData, solver_in_reach
 from .mpc_config import MpcConfig
@@ -214,7 +221,7 @@ class PythonLtvMpc(LtvMpc):
         cfg, model = self.config, self.model
         N, dt = self.N, self.dt_s
         if s_m is None:
-            s0, e_y = self.path.project(x[:2], warm.s_m, cfg.projection_window_m)
+            s0, e_y = self.path.project(x[:2], projection_guess(warm), cfg.projection_window_m)
         else:
             s0, e_y = self.path.project(x[:2], s_m, cfg.projection_window_m)
         e_psi = wrap_angle(x[2] - float(self.path.heading(s0)))

@@ -25,6 +25,7 @@ import time
 
 import numpy as np
 
+from ..control.base import projection_guess
 from ..ocp.avoidance_compiled import ObstacleTable, table_of
 from ..scene.road import Road
 from ..scene.world import Scene
@@ -107,6 +108,7 @@ class PlannedMpc:
             wanted_speed=wanted,
             goal=goal,
             band_steps=int(math.ceil(mpc.N * mpc.dt_s / cfg.dt_s)),
+            cache_step_s=float(mpc.dt_s),
         )
         self.config = cfg
         self.goal = goal
@@ -119,6 +121,7 @@ class PlannedMpc:
         self._lateral = None
         names = list(mpc.model.input_names)
         self._accel = names.index("accel")
+        self._wheelbase = self.planner.limits.wheelbase_m
         self.plans = 0
         self.plan_time_s = 0.0
         #: one row per replanning: (t [s], kind, target, lane, offset [m], safe, ttc [s], pairs
@@ -149,7 +152,7 @@ class PlannedMpc:
         x = np.asarray(x, float)
         if np.all(np.isfinite(x[:4])):
             t_s = float(warm.t_s)
-            s_m, e_y = mpc.path.project(x[:2], warm.s_m, mpc.config.projection_window_m)
+            s_m, e_y = mpc.path.project(x[:2], projection_guess(warm), mpc.config.projection_window_m)
             s_m, e_y = float(s_m), float(e_y)
             v = float(mpc.model.speed(x))
             e_psi = wrap_angle(float(x[2]) - float(mpc.path.heading(s_m)))
@@ -160,8 +163,10 @@ class PlannedMpc:
             due = self.maneuver is None or t_s - self._planned_at >= self.replan_s - 1e-9
             if due:
                 self._table = table_of(mpc.obstacles, self._table)
-                a0 = float(warm.u_prev[self._accel]) if warm.u_prev is not None else 0.0
-                self.maneuver = self.planner.plan(t_s, s_m, e_y, v, math.tan(e_psi), a0, self._table)
+                u = warm.u_prev
+                a0 = float(u[self._accel]) if u is not None else 0.0
+                kappa = math.tan(float(u[0])) / self._wheelbase if u is not None else 0.0
+                self.maneuver = self.planner.plan(t_s, s_m, e_y, v, math.tan(e_psi), a0, self._table, kappa)
                 self._planned_at = t_s
                 self.plans += 1
                 m = self.maneuver

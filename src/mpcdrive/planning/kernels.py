@@ -264,14 +264,12 @@ def lateral_candidates(w):
             nT = 1 if on_line else w.lat_lengths_s.shape[0]
             # the shortest move: its peak curvature 5.77 |dd| / L^2 half the vehicle's tightest
             L_min = max(par[P_LAT_MIN], math.sqrt(5.77 * abs(line0 + off - w.ego[E_D]) / (0.5 * par[P_KAPPA_MAX])))
-            # the shortest move and one half as long again (evasive, driven slowly), then the moves
-            # over each duration at the car's speed
+            # the moves over each duration at the car's speed (short, sharp moves are the evasive
+            # ones' below: a quintic's curvature rises fastest at its start, beyond the steering
+            # rate at any but a crawling speed)
             last = 0.0
-            for m in range(nT + (2 if nT > 1 else 0)):
-                if nT > 1 and m < 2:
-                    L = L_min * (1.0 if m == 0 else 1.6)
-                else:
-                    L = max(L_min, v_len * w.lat_lengths_s[m - (2 if nT > 1 else 0)])
+            for m in range(nT):
+                L = max(L_min, v_len * w.lat_lengths_s[m])
                 if L - last < 0.5:
                     continue  # the same move (a slow car: every duration gives the shortest move)
                 last = L
@@ -714,20 +712,86 @@ def _evasive_step(d, th, kap, s_prev, v_prev, v, dt, grid, lane_line, lane, off,
 
 
 @subroutine
+def _first_contact(
+    i, j, par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v, ob_s, ob_e, ob_hl, ob_hw, dt,
+    discs, rel_idx, n_rel, p_disc_s, p_disc_d,
+):  # fmt: skip
+    """When [s] pair (``i``, ``j``)'s discs first come within their radius and the margin of one
+    of the obstacles ``rel_idx[:n_rel]`` (swept between samples, as :func:`check_pair` checks
+    them), inf if never: the part of a pair's check that rejects most pairs, run before the rest
+    (costs, road, vehicle)."""
+    if n_rel == 0:
+        return math.inf
+    K = lon_s.shape[1] - 1
+    lane_i = lat_lane[i]
+    coef = lat_coef[i]
+    L, off = lat_len[i], lat_off[i]
+    s0 = ego[E_S]
+    nd = discs.shape[0]
+    rn = par[P_R_DISC] + par[P_MARGIN]
+    evasive = L < 0.0
+    ev_d, ev_th, ev_k = ego[E_D], math.atan(ego[E_SLOPE]), ego[E_CURV]
+    for k in range(K + 1):
+        s, v = lon_s[j, k], lon_v[j, k]
+        if evasive:
+            if k > 0:
+                ev_d, ev_th, ev_k = _evasive_step(
+                    ev_d, ev_th, ev_k, lon_s[j, k - 1], lon_v[j, k - 1], v, dt, grid, lane_line, lane_i, off, par,
+                    EVASIVE_HARD if L > -1.5 else EVASIVE_GENTLE,
+                )  # fmt: skip
+            d, d1 = ev_d, math.tan(ev_th)
+        else:
+            d, d1, _ = _lat_eval(coef, L, s0, lane_line, lane_i, off, grid, s)
+        nrm = math.sqrt(1.0 + d1 * d1)
+        cth, sth = 1.0 / nrm, d1 / nrm
+        t = k * dt
+        for q_o in range(n_rel):
+            o = rel_idx[q_o]
+            So = ob_s[o, k]
+            if not math.isfinite(So):
+                continue
+            Eo, HL, HW = ob_e[o, k], ob_hl[o, k], ob_hw[o, k]
+            prev = k > 0 and math.isfinite(ob_s[o, k - 1])
+            for q in range(nd):
+                qs = s + discs[q] * cth - So
+                qd = d + discs[q] * sth - Eo
+                if prev:
+                    q0s = p_disc_s[q] - ob_s[o, k - 1]
+                    q0d = p_disc_d[q] - ob_e[o, k - 1]
+                    bl = max(HL, ob_hl[o, k - 1]) + rn
+                    bw = max(HW, ob_hw[o, k - 1]) + rn
+                    if _segment_hits_box(q0s, q0d, qs, qd, bl, bw):
+                        seg = math.hypot(qs - q0s, qd - q0d)
+                        if seg > rn or min(
+                            _box_distance(q0s, q0d, bl - rn, bw - rn),
+                            _box_distance(0.5 * (qs + q0s), 0.5 * (qd + q0d), bl - rn, bw - rn),
+                            _box_distance(qs, qd, bl - rn, bw - rn),
+                        ) < rn:
+                            return t - dt
+                elif k == 0 and _box_distance(qs, qd, HL, HW) < rn:
+                    return 0.0
+        for q in range(nd):
+            p_disc_s[q] = s + discs[q] * cth
+            p_disc_d[q] = d + discs[q] * sth
+    return math.inf
+
+
+@subroutine
 def check_pair(
     i, j, excess0, write, bound, par, grid, ego, goal_arr, g_kappa, g_heading, lane_left, lane_right, lane_line, lane_kind,
     same_left, same_right, all_left, all_right, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v, lon_a, ob_s, ob_e,
-    ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs,
+    ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs, rel_idx, n_rel, scratch,
 ):  # fmt: skip
     """(safe, feasible, rate, ttc [s], cost [s], goal) of lateral move ``i`` with profile ``j``
     (``feasible``: within the vehicle's curvature and friction circle; ``rate``: the largest
-    change of curvature over a step relative to what the steering rate allows, > 1 where the
-    move steers faster than the vehicle can);
+    change of the move's curvature (the path's own left out) over a step relative to what the
+    steering rate allows, > 1 where the move steers faster than the vehicle can);
     ``excess0`` [m]: how far the car is outside the road now (a maneuver may not go further
     out, and gets a second to come back in; -2: the car is in an oncoming lane). With ``write``,
     the maneuver and its relations to the obstacles go into ``relation`` and ``plan_*``; else
     the check stops at the first contact (the time to collision is known) or once the cost
-    passes ``bound`` [s] (it cannot be chosen), returning it unsafe."""
+    passes ``bound`` [s] (it cannot be chosen), returning it unsafe, and looks only at the
+    obstacles ``rel_idx[:n_rel]`` (those that may come near the pair: :func:`_near_obstacles`)."""
     K = lon_s.shape[1] - 1
     horizon = K * dt
     hl, hw, co = par[P_HL], par[P_HW], par[P_CO]
@@ -765,8 +829,15 @@ def check_pair(
     kappa_prev = 0.0
     nd = discs.shape[0]
     rn = par[P_R_DISC] + margin
-    p_disc_s = np.empty(nd)
-    p_disc_d = np.empty(nd)
+    p_disc_s = scratch[0]
+    p_disc_d = scratch[1]
+    if not write:
+        first = _first_contact(
+            i, j, par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v, ob_s, ob_e, ob_hl,
+            ob_hw, dt, discs, rel_idx, n_rel, p_disc_s, p_disc_d,
+        )  # fmt: skip
+        if first < math.inf:
+            return False, True, 0.0, first, 0.0, False
     hit = False
     evasive = L < 0.0
     # the evasive move's state: offset, heading and curvature relative to the path
@@ -795,8 +866,10 @@ def check_pair(
         if k > 0:
             if abs(kappa) > kappa_max or a * a + a_lat * a_lat > fric2:
                 feasible = False
-            rate = max(rate, abs(kappa - kappa_prev) / kappa_step)
-        kappa_prev = kappa
+            # the steering rate the move adds (the route's own bends are the reference's: its
+            # speed profile slows for them, the controller steers them)
+            rate = max(rate, abs(k_move - kappa_prev) / kappa_step)
+        kappa_prev = k_move
         # lateral comfort: the move's own lateral acceleration
         a_move = v2 * k_move / lat_ref
         cost += a_move * a_move * dt
@@ -825,7 +898,8 @@ def check_pair(
                     if min(dc + hws, hi) - max(dc - hws, lo) > 0.05:
                         cost += c_onc * dt
         # the obstacles
-        for o in range(n_obs):
+        for q_o in range(n_obs if write else n_rel):
+            o = q_o if write else rel_idx[q_o]
             So = ob_s[o, k]
             if not math.isfinite(So):
                 if write:
@@ -947,6 +1021,80 @@ def _excess_now(par, grid, ego, lane_left, lane_right, lane_kind, same_left, sam
     return max(_road_excess(grid, same_left, same_right, par, s0, d0, cth, sth), 0.0)
 
 
+#: the ranges of :func:`_ranges`: (lo, hi) along and across the path
+RANGE_S_LO, RANGE_S_HI, RANGE_D_LO, RANGE_D_HI = 0, 1, 2, 3
+
+
+@subroutine
+def _ranges(par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, nlat, lon_s, nlon, ob_s, ob_e, ob_hl,
+            ob_hw, n_obs, discs, lat_rng, lon_rng, ob_rng):  # fmt: skip
+    """Where each candidate and each obstacle can be over the horizon: lateral moves across the
+    path (``lat_rng`` (n, 2): the quintic's extremes on a grid of its length and the line past it,
+    an evasive move between its start and its target with half a lane's overshoot), profiles
+    along it (``lon_rng``), obstacles both (``ob_rng`` (n, 4), their extents included); the
+    car's discs, their radius and the margin, and a time gap at the top speed are added to the
+    candidates' ranges. Pairs check only the obstacles whose ranges meet theirs."""
+    K = lon_s.shape[1] - 1
+    s0 = ego[E_S]
+    reach = par[P_R_DISC] + par[P_MARGIN]
+    spread = 0.0
+    for q in range(discs.shape[0]):
+        spread = max(spread, abs(discs[q]))
+    lat_pad = reach + 0.5 * spread  # the discs of a car yawed up to 30 deg
+    lon_pad = reach + spread + par[P_V_MAX] * par[P_TIME_GAP]
+    s_far = s0 + 1.0
+    for j in range(nlon):
+        lon_rng[j, 0] = lon_s[j, 0] - lon_pad
+        lon_rng[j, 1] = lon_s[j, K] + lon_pad
+        s_far = max(s_far, lon_s[j, K])
+    for i in range(nlat):
+        lane = lat_lane[i]
+        L = lat_len[i]
+        lo, hi = math.inf, -math.inf
+        if L > 0.0:
+            for q in range(9):
+                d = poly_eval(lat_coef[i], L * q / 8.0)[0]
+                lo, hi = min(lo, d), max(hi, d)
+            s_end = s0 + L
+        else:  # evasive: from the car to the target line, overshooting by up to half a lane
+            lo, hi = ego[E_D] - 1.75, ego[E_D] + 1.75
+            s_end = s0
+        # the line (and offset) past the move, to the farthest profile's end
+        for q in range(9):
+            d = grid_row_at(grid, lane_line, lane, s_end + (s_far - s_end) * q / 8.0) + lat_off[i]
+            lo, hi = min(lo, d), max(hi, d)
+        lat_rng[i, 0] = lo - lat_pad
+        lat_rng[i, 1] = hi + lat_pad
+    for o in range(n_obs):
+        slo, shi, dlo, dhi = math.inf, -math.inf, math.inf, -math.inf
+        for k in range(K + 1):
+            So = ob_s[o, k]
+            if not math.isfinite(So):
+                continue
+            slo = min(slo, So - ob_hl[o, k])
+            shi = max(shi, So + ob_hl[o, k])
+            dlo = min(dlo, ob_e[o, k] - ob_hw[o, k])
+            dhi = max(dhi, ob_e[o, k] + ob_hw[o, k])
+        ob_rng[o, RANGE_S_LO] = slo
+        ob_rng[o, RANGE_S_HI] = shi
+        ob_rng[o, RANGE_D_LO] = dlo
+        ob_rng[o, RANGE_D_HI] = dhi
+
+
+@subroutine
+def _near_obstacles(i, j, lat_rng, lon_rng, ob_rng, n_obs, rel_idx):
+    """The obstacles whose ranges meet pair (``i``, ``j``)'s, into ``rel_idx``; their number."""
+    n = 0
+    for o in range(n_obs):
+        if ob_rng[o, RANGE_D_HI] < lat_rng[i, 0] or ob_rng[o, RANGE_D_LO] > lat_rng[i, 1]:
+            continue
+        if ob_rng[o, RANGE_S_HI] < lon_rng[j, 0] or ob_rng[o, RANGE_S_LO] > lon_rng[j, 1]:
+            continue
+        rel_idx[n] = o
+        n += 1
+    return n
+
+
 @njit(cache=True)
 def plan(w):
     """One replanning on the struct ``w`` (:class:`~.work.PlannerWork`): candidates, checks,
@@ -971,15 +1119,32 @@ def plan(w):
     keys, codes = w.keys, w.order
     nlat, nlon = w.lat_n[0], w.lon_n[0]
     m = 0
+    now = int(ego[E_LANE])
+    lon_kind, lon_target = w.lon_kind, w.lon_target
     for i in range(nlat):
         for j in range(nlon):
             if lon_ok[j] == 0:
+                continue
+            # following a lane's leader goes with moves into that lane (or staying), stopping
+            # behind something in the car's lane with moves inside it
+            if lon_kind[j] == LON_FOLLOW and lat_lane[i] != int(lon_target[j]) and lat_lane[i] != now:
+                continue
+            if lon_kind[j] == LON_STOP and lat_lane[i] != now:
                 continue
             keys[m] = lat_cost[i] + lon_cost[j]
             codes[m] = i * MAX_LON + j
             m += 1
     order = np.argsort(keys[:m])
     excess0 = _excess_now(par, grid, ego, lane_left, lane_right, lane_kind, same_left, same_right)
+    lat_rng = np.empty((max(nlat, 1), 2))
+    lon_rng = np.empty((max(nlon, 1), 2))
+    ob_rng = np.empty((max(n_obs, 1), 4))
+    rel_idx = np.empty(max(n_obs, 1), np.int64)
+    scratch = np.empty((2, discs.shape[0]))
+    _ranges(
+        par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, nlat, lon_s, nlon, ob_s, ob_e, ob_hl, ob_hw,
+        n_obs, discs, lat_rng, lon_rng, ob_rng,
+    )  # fmt: skip
     # the choice: the cheapest safe maneuver within the vehicle's limits; else the safe one that
     # steers least beyond the steering rate (the controller steers at its limit, the obstacle
     # rows keep the clearance); else the one hit latest (time to collision), feasible first
@@ -995,10 +1160,12 @@ def plan(w):
             break
         code = codes[order[q]]
         i, j = code // MAX_LON, code % MAX_LON
+        n_rel = _near_obstacles(i, j, lat_rng, lon_rng, ob_rng, n_obs, rel_idx)
         safe, feasible, rate, ttc, pair, goal = check_pair(
             i, j, excess0, False, best_total - key, par, grid, ego, goal_arr, g_kappa, g_heading, lane_left,
             lane_right, lane_line, lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len, lat_lane,
-            lat_off, lon_s, lon_v, lon_a, ob_s, ob_e, ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs,
+            lat_off, lon_s, lon_v, lon_a, ob_s, ob_e, ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d,
+            discs, rel_idx, n_rel, scratch,
         )  # fmt: skip
         checked += 1
         total = key + pair
@@ -1035,7 +1202,8 @@ def plan(w):
     safe, feasible, rate, ttc, pair, goal = check_pair(
         i, j, excess0, True, math.inf, par, grid, ego, goal_arr, g_kappa, g_heading, lane_left, lane_right, lane_line,
         lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v,
-        lon_a, ob_s, ob_e, ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs,
+        lon_a, ob_s, ob_e, ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs, rel_idx, 0,
+        scratch,
     )  # fmt: skip
     r[R_I] = i
     r[R_J] = j

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..ocp.avoidance_compiled import ObstacleTable
-from ..paths.compiled import PathArrays, path_arrays
+from ..paths.compiled import PathArrays, path_arrays, path_eval
 from ..scene.road import Road
 from . import kernels
 from .config import PlannerConfig, VehicleLimits
@@ -105,6 +105,8 @@ __all__ = ["LateralMove", "Maneuver", "ManeuverPlanner", "PlanningGoal"]
 GRID_M = 0.5
 #: how far [m] the grid reaches past the path's ends (the road is constant beyond them)
 GRID_PAST_M = 20.0
+#: the time steps [count] of the obstacles' box cache (60 s at 0.1 s); later ones are computed
+TRACK_CACHE_STEPS = 600
 #: obstacles farther across the path than this [m] at every sample are not checked
 LATERAL_RANGE_M = 25.0
 #: how close [m, m, m/s] (along, across, speed) the car must be to the last maneuver for a
@@ -234,7 +236,9 @@ class ManeuverPlanner:
     lane) along ``path`` for a vehicle with ``limits``; ``wanted_speed`` is the speed [m/s] the
     car wants along the path (a callable of arc length, e.g. a speed profile's ``speed``, or a
     number); ``goal`` a :class:`PlanningGoal` or None; ``band_steps``: how many steps of the
-    maneuver the controller's road (``Maneuver.lanes``) covers."""
+    maneuver the controller's road (``Maneuver.lanes``) covers; ``cache_step_s``: the time step
+    [s] the replannings come on (the control period), on whose grid the obstacles' boxes are
+    kept between replannings (0: none kept)."""
 
     def __init__(
         self,
@@ -245,6 +249,7 @@ class ManeuverPlanner:
         wanted_speed=None,
         goal: PlanningGoal | None = None,
         band_steps: int | None = None,
+        cache_step_s: float = 0.0,
     ):
         cfg = config or PlannerConfig()
         self.config = cfg
@@ -354,6 +359,11 @@ class ManeuverPlanner:
         self._t = cfg.dt_s * np.arange(K + 1)
         self.previous: Maneuver | None = None
         self._planned_t = 0.0
+        #: the obstacles' boxes already projected, per obstacle and time step of ``cache_step_s``
+        #: (the replanning period: a replanning shares all but its newest samples with the last)
+        self.cache_step_s = cache_step_s
+        self._cache = np.zeros((0, 0, 4))
+        self._cache_of: ObstacleTable | None = None
         self._range_m = limits.max_speed_mps * cfg.horizon_s + 60.0
         self.set_goal(goal)
         # compile (or load) the kernels now, not in the first control step
@@ -385,6 +395,12 @@ class ManeuverPlanner:
         self.previous = None
         self.set_goal(goal)
 
+    def _pose(self, s_m: float, d_m: float) -> tuple[float, float, float, float]:
+        """(x, y, heading, curvature) of the point ``d_m`` [m] left of the path at ``s_m`` [m]."""
+        pa = self._pa
+        x, y, h, k = path_eval(pa.kind, pa.geo, pa.tab_s, pa.tab_xy, pa.tab_h, pa.tab_k, float(s_m))
+        return x - math.sin(h) * d_m, y + math.cos(h) * d_m, h, k
+
     def lane_at(self, s_m: float, d_m: float) -> int:
         """The lane holding offset ``d_m`` at ``s_m`` (else the one whose line is nearest)."""
         w = self.work
@@ -403,7 +419,7 @@ class ManeuverPlanner:
         return min(pool, key=lambda r: abs(at(w.lane_line, r) - d_m) + (0.0 if w.lane_kind[r] != LANE_ONCOMING else 1e-3))
 
     def _on_plan(self, t_s: float, s_m: float, e_y_m: float, v_mps: float):
-        """(s, d, v, a, slope, curvature) where the last maneuver has the car at ``t_s``, when the
+        """(s, d, v, a, slope) where the last maneuver has the car at ``t_s``, when the
         car is that close to it (``PLAN_TOLERANCE``), else None: a controller tracking the plan
         is then replanned from the plan, so that successive choices stay consistent (a
         maneuver the controller lags a little behind is not dropped for it)."""
@@ -422,7 +438,7 @@ class ManeuverPlanner:
             return None
         h = 0.25
         d1 = (float(m.lateral(s + h)) - float(m.lateral(s - h))) / (2.0 * h)
-        return s, d, v, a, d1, m.lateral.curvature(s)
+        return s, d, v, a, d1
 
     def plan(
         self,
@@ -433,20 +449,26 @@ class ManeuverPlanner:
         slope: float,
         accel_mps2: float,
         obstacles: ObstacleTable,
+        curvature_1pm: float = 0.0,
     ) -> Maneuver:
         """Replan for the car at time ``t_s`` [s], arc length ``s_m`` [m], offset ``e_y_m`` [m],
         speed ``v_mps`` [m/s] with heading slope ``slope`` (tan of its heading relative to the
-        path) and acceleration ``accel_mps2`` [m/s^2], among the ``obstacles`` (their compiled
+        path), acceleration ``accel_mps2`` [m/s^2] and path curvature ``curvature_1pm`` [1/m] (its
+        steering's: tan(delta) / wheelbase), among the ``obstacles`` (their compiled
         table, on the same clock)."""
         t0 = time.perf_counter()
         w = self.work
         cfg = self.config
         prev = self.previous
         e = w.ego
-        curv = 0.0 if prev is None else prev.lateral.curvature(s_m)
         on = self._on_plan(t_s, s_m, e_y_m, v_mps)
         if on is not None:  # on the last maneuver: go on from where it has the car (consistent choices)
-            s_m, e_y_m, v_mps, accel_mps2, slope, curv = on
+            s_m, e_y_m, v_mps, accel_mps2, slope = on
+        # the lateral move starts at the car's curvature relative to the path's (as d''), within
+        # what the vehicle can turn at its speed
+        top = min(self.limits.max_curvature_1pm, self.limits.friction_mps2 / max(v_mps, 1.0) ** 2)
+        kappa = min(max(curvature_1pm, -top), top) - self._pose(s_m, 0.0)[3]
+        curv = kappa * (1.0 + min(slope * slope, 1.0)) ** 1.5
         e[E_S], e[E_D], e[E_V], e[E_T] = s_m, e_y_m, max(v_mps, 0.0), t_s
         e[E_SLOPE] = min(max(slope, -1.0), 1.0)
         e[E_A] = min(max(accel_mps2, -self.limits.max_decel_mps2), self.limits.max_accel_mps2)
@@ -454,9 +476,13 @@ class ManeuverPlanner:
         e[E_LANE] = self.lane_at(s_m, e_y_m)
         e[E_PREV_LANE] = -1.0 if prev is None else prev.lane
         e[E_PREV_OFF] = 0.0 if prev is None else prev.offset_m
+        x, y, _, _ = self._pose(s_m, e_y_m)
+        if obstacles is not self._cache_of:  # other obstacles (fresh predictions): a new cache
+            self._cache = np.full((len(obstacles.obstacles), TRACK_CACHE_STEPS, 4), np.nan)
+            self._cache_of = obstacles
         n = obstacle_tracks(
-            obstacles, self._pa, t_s, cfg.dt_s, s_m, self._range_m, LATERAL_RANGE_M, w.ob_s, w.ob_e, w.ob_hl, w.ob_hw,
-            self._index,
+            obstacles, self._pa, t_s, cfg.dt_s, s_m, (x, y), self._range_m, LATERAL_RANGE_M, w.ob_s, w.ob_e, w.ob_hl,
+            w.ob_hw, self._index, self._cache, self.cache_step_s,
         )  # fmt: skip
         w.ob_n[0] = n
         kernels.plan(self._struct)

@@ -22,6 +22,7 @@ from ..paths.compiled import PathArrays, path_eval, path_project
 
 #: the search margin [m] of each later pose of a track beyond the distance from the one before
 TRACK_MARGIN_M = 2.0
+_NO_CACHE = np.zeros((0, 0, 4))
 
 
 def obstacle_tracks(
@@ -30,6 +31,7 @@ def obstacle_tracks(
     t0_s: float,
     dt_s: float,
     s_m: float,
+    xy_m: tuple[float, float],
     range_m: float,
     lateral_m: float,
     out_s: np.ndarray,
@@ -37,39 +39,69 @@ def obstacle_tracks(
     out_hl: np.ndarray,
     out_hw: np.ndarray,
     index: np.ndarray,
+    cache: np.ndarray | None = None,
+    cache_step_s: float = 0.0,
 ) -> int:
     """Fill rows of ``out_*`` (O, K+1) with the tracks of the obstacles of ``tab`` in range of
-    arc length ``s_m`` [m] at times ``t0_s + k dt_s`` [s] (NaN where absent); ``index`` (O,) gets
-    each row's obstacle index. Returns the number of rows."""
+    arc length ``s_m`` [m] (the car at ``xy_m`` [m]) at times ``t0_s + k dt_s`` [s] (NaN where
+    absent); ``index`` (O,) gets each row's obstacle index. Returns the number of rows.
+
+    ``cache`` (n, C, 4) (NaN: empty) keeps each obstacle's box at the times ``i cache_step_s`` [s]
+    (i < C) for the next calls (the same obstacles: a new table needs a new cache): when the
+    times of the call lie on that grid, a box already computed is taken from it (a replanning
+    every control step shares all but its last samples with the one before)."""
     n = len(tab.obstacles)
     if n == 0:
         return 0
+    c0, c_step = -1, 0
+    if cache is None or cache_step_s <= 0.0:
+        cache = _NO_CACHE
+    else:
+        q0, qs = t0_s / cache_step_s, dt_s / cache_step_s
+        if abs(q0 - round(q0)) < 1e-6 and abs(qs - round(qs)) < 1e-6 and round(qs) >= 1:
+            c0, c_step = int(round(q0)), int(round(qs))
     return int(
         _tracks_kernel(
             pa.kind, pa.geo, pa.tab_s, pa.tab_xy, pa.tab_h, pa.tab_k, float(t0_s), float(dt_s), float(s_m),
-            float(range_m), float(lateral_m), *tab.motion, tab.life, tab.has_life, tab.shape, tab.radius, tab.verts,
-            tab.nverts, out_s, out_e, out_hl, out_hw, index,
+            float(xy_m[0]), float(xy_m[1]), float(range_m), float(lateral_m), *tab.motion, tab.life, tab.has_life, tab.shape, tab.radius, tab.verts,
+            tab.nverts, out_s, out_e, out_hl, out_hw, index, cache, c0, c_step,
         )
     )  # fmt: skip
 
 
 @njit(cache=True)
 def _tracks_kernel(
-    kind, geo, tab_s, tab_xy, tab_h, tab_k, t0, dt, s_m, range_m, lateral_m, pose, vel, tr_lo, tr_hi, tr_t, tr_d,
-    life, has_life, shape, radius, verts, nverts, out_s, out_e, out_hl, out_hw, index,
+    kind, geo, tab_s, tab_xy, tab_h, tab_k, t0, dt, s_m, x_m, y_m, range_m, lateral_m, pose, vel, tr_lo, tr_hi, tr_t,
+    tr_d, life, has_life, shape, radius, verts, nverts, out_s, out_e, out_hl, out_hw, index, cache, c0, c_step,
 ):  # fmt: skip
     rows, K1 = out_s.shape
     n_obs = pose.shape[0]
     dist = np.empty(rows)
+    s_row = np.empty(K1)
+    e_row = np.empty(K1)
+    hl_row = np.empty(K1)
+    hw_row = np.empty(K1)
+    t_end = t0 + (K1 - 1) * dt
     used = 0
     for j in range(n_obs):
+        # an obstacle farther from the car than the range at the horizon's start, middle and end
+        # (and where it exists) is not tracked
+        far = True
+        for q in range(3):
+            t = t0 + 0.5 * q * (t_end - t0)
+            if has_life[j]:
+                t = min(max(t, life[j, 0]), life[j, 1])
+                if life[j, 1] < t0 or life[j, 0] > t_end:
+                    break
+            x, y, _ = pose_at(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d)
+            if math.hypot(x - x_m, y - y_m) <= range_m + lateral_m:
+                far = False
+                break
+        if far:
+            continue
         # with every row in use, the track replaces the farthest one if it is nearer
         r = used if used < rows else -1
-        s_row = np.empty(K1)
-        e_row = np.empty(K1)
-        hl_row = np.empty(K1)
-        hw_row = np.empty(K1)
-        guess, window, px, py, first = s_m, range_m, 0.0, 0.0, True
+        guess, window, px, py, first, prev_s = s_m, range_m, 0.0, 0.0, True, s_m
         near = math.inf
         keep = False
         for k in range(K1):
@@ -80,12 +112,33 @@ def _tracks_kernel(
             hw_row[k] = math.nan
             if has_life[j] and not (life[j, 0] <= t and t <= life[j, 1]):
                 continue
+            ci = c0 + k * c_step if c0 >= 0 else -1
+            if 0 <= ci < cache.shape[1] and math.isfinite(cache[j, ci, 0]):
+                # the same obstacle at the same time, projected at an earlier replanning
+                s, e, hl, hw = cache[j, ci, 0], cache[j, ci, 1], cache[j, ci, 2], cache[j, ci, 3]
+                guess = s + (s - prev_s if not first else 0.0)
+                first = False
+                prev_s = s
+                px, py = pose_at(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d)[:2]
+                s_row[k], e_row[k], hl_row[k], hw_row[k] = s, e, hl, hw
+                ds = abs(s - s_m) - hl
+                if ds <= range_m and abs(e) - hw <= lateral_m:
+                    keep = True
+                    near = min(near, max(ds, 0.0) + max(abs(e) - hw, 0.0))
+                continue
             x, y, yaw = pose_at(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d)
-            if not first:
-                window = math.hypot(x - px, y - py) + TRACK_MARGIN_M
+            if first:
+                # the path between the car and the obstacle is about as long as the way between
+                # them (a bend makes it longer: half as long again, and a lane's width)
+                window = min(range_m, 1.5 * math.hypot(x - x_m, y - y_m) + 2.0 * lateral_m)
+            else:
+                # near where the last step's motion along the path takes it (a car driving along
+                # the road), within the margin and a tenth of its way (one crossing it)
+                window = 0.1 * math.hypot(x - px, y - py) + TRACK_MARGIN_M
             s, e = path_project(kind, geo, tab_s, tab_xy, guess, window, x, y)
+            guess = s + (s - prev_s if not first else 0.0)
             first = False
-            guess, px, py = s, x, y
+            prev_s, px, py = s, x, y
             s_row[k] = s
             e_row[k] = e
             if shape[j] == SHAPE_CIRCLE:
@@ -100,6 +153,8 @@ def _tracks_kernel(
                     hw = max(hw, abs(sn * vx + c * vy))
             hl_row[k] = hl
             hw_row[k] = hw
+            if 0 <= ci < cache.shape[1]:
+                cache[j, ci, 0], cache[j, ci, 1], cache[j, ci, 2], cache[j, ci, 3] = s, e, hl, hw
             ds = abs(s - s_m) - hl
             if ds <= range_m and abs(e) - hw <= lateral_m:
                 keep = True
