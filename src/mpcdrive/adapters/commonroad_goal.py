@@ -36,6 +36,11 @@ _LIMIT_PRESET = PRESETS["commonroad_bmw_320i"]
 _PLAN_DS_M = 0.25  # grid of the speed profiles compared while planning
 _MISSED = "no cruise speed"  # how the note of a plan that misses the goal window begins
 APPROACH_LEAD_M = 5.0  # a slower approach is back at the goal speed this far before the region [m]
+#: the fastest change of curvature [1/(m s)] the reference speed lets the steering follow: the
+#: controller's steering rate (0.95 of CommonRoad's 0.4 rad/s, the same for its three cars) over
+#: the longest wheelbase of them (the BMW 320i's 2.58 m): the speed slows where a bend sets in
+#: faster than that (a roundabout's exit, a tight turn at a junction)
+CURVATURE_RATE_1PMS = 0.95 * _LIMIT_PRESET.max_steer_rate_rad_s / _LIMIT_PRESET.params.wheelbase_m
 
 
 #: the share of the tyres' friction circle (CommonRoad's ``a_max``, the radius its feasibility
@@ -85,6 +90,7 @@ class DrivePlan:
             "curvature_window_m": 0.3,
             "start_m": self.start_m,
             "top_speed_until": [list(c) for c in self.top_speed_until],
+            "curvature_rate_max_1pms": CURVATURE_RATE_1PMS,
         }
 
 
@@ -112,6 +118,7 @@ def _profile(path, v_cruise: float, v0: float, accel: float, p0: np.ndarray, cap
         curvature_window_m=0.3,
         s_start_m=start_arc(path, p0),
         top_speed_until=caps,
+        curvature_rate_max_1pms=CURVATURE_RATE_1PMS,
     )
 
 

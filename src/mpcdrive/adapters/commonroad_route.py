@@ -427,6 +427,22 @@ def lane_candidates(net, route) -> dict[int, bool]:
     return out
 
 
+def _touching_path(intervals: list[list]) -> list[list]:
+    """Of the lanes met along a normal (``[right, left, oncoming]`` offsets, sorted), those that
+    touch the one at the path (offset 0; else the nearest) through a chain of lanes no more than
+    ``LANE_MERGE_M`` apart."""
+    if not intervals:
+        return intervals
+    at = min(range(len(intervals)), key=lambda k: 0.0 if intervals[k][0] <= 0.0 <= intervals[k][1] else min(
+        abs(intervals[k][0]), abs(intervals[k][1])))  # fmt: skip
+    lo = hi = at
+    while lo > 0 and intervals[lo][0] - intervals[lo - 1][1] <= LANE_MERGE_M:
+        lo -= 1
+    while hi < len(intervals) - 1 and intervals[hi + 1][0] - intervals[hi][1] <= LANE_MERGE_M:
+        hi += 1
+    return intervals[lo : hi + 1]
+
+
 def lane_strips(net, route, line: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, bool]]:
     """The lanes along the polyline ``line`` (M, 2) as strips: per lane (left, right) (M,) offsets
     [m] from the line (positive left; NaN where the lane is absent) and whether it goes the other
@@ -468,6 +484,9 @@ def lane_strips(net, route, line: np.ndarray) -> list[tuple[np.ndarray, np.ndarr
                 merged[-1][1] = max(merged[-1][1], l_)
             else:
                 merged.append([r, l_, other])
+        # only the lanes beside the path's own, touching one another: a lanelet across a
+        # roundabout's island or a median is another road
+        merged = _touching_path(merged)
         used: set[int] = set()
         for r, l_, other in merged:
             best, best_ov = -1, 0.0
@@ -495,4 +514,3 @@ def lane_strips(net, route, line: np.ndarray) -> list[tuple[np.ndarray, np.ndarr
         rt[idx] = np.interp(idx, found, rt[found])
         out.append((lf, rt, other))
     return out
-

@@ -49,6 +49,11 @@ class ConstantSpeed:
         return s0_m + self.v_mps * np.asarray(t_s, float)
 
 
+#: the distance [m] over which the change of the path's curvature is measured for the steering
+#: rate's speed limit (either side of each point)
+CURVATURE_RATE_BASE_M = 2.0
+
+
 class SpeedProfile:
     """Speed profile of ``path``.
 
@@ -63,7 +68,10 @@ class SpeedProfile:
     forward pass then accelerates to ``v_max_mps`` after ``s_until_m``); ds_m : grid spacing [m]; curvature_window_m : the
     curvature used at s is the largest |kappa| within +- this distance (guards against sampling a
     bend between grid points); friction_circle : share the friction between lateral and longitudinal
-    acceleration.
+    acceleration; curvature_rate_max_1pms : the fastest change of path curvature the vehicle can
+    steer [1/(m s)] (its steering rate over its wheelbase): the speed is at most this over the
+    path's |d kappa / d s| (a bend that sets in within a few metres is entered slowly enough for
+    the steering to follow; None: no such limit).
 
     Attributes ``s_m`` (M,) and ``v_mps`` (M,) hold the grid; :meth:`speed` interpolates it
     (periodically on a closed path; clamped to the end values on an open one).
@@ -84,6 +92,7 @@ class SpeedProfile:
         friction_circle: bool = True,
         s_start_m: float = 0.0,
         top_speed_until: tuple[tuple[float, float], ...] = (),
+        curvature_rate_max_1pms: float | None = None,
     ):
         for name, val in (
             ("lateral_accel_max_mps2", lateral_accel_max_mps2),
@@ -96,6 +105,10 @@ class SpeedProfile:
         for name, v_opt in (("v_start_mps", v_start_mps), ("v_end_mps", v_end_mps)):
             if v_opt is not None and not (math.isfinite(v_opt) and v_opt >= 0):
                 raise ValueError(f"{name} must be >= 0, got {v_opt}")
+        if curvature_rate_max_1pms is not None and not (
+            math.isfinite(curvature_rate_max_1pms) and curvature_rate_max_1pms > 0
+        ):
+            raise ValueError(f"curvature_rate_max_1pms must be a positive number, got {curvature_rate_max_1pms}")
         if curvature_window_m < 0 or not math.isfinite(curvature_window_m):
             raise ValueError(f"curvature_window_m must be >= 0, got {curvature_window_m}")
         if not (math.isfinite(s_start_m) and 0.0 <= s_start_m <= float(path.length_m)):
@@ -128,18 +141,23 @@ class SpeedProfile:
         else:
             s = np.linspace(0.0, self.length_m, n)
         self.ds_m = float(s[1] - s[0])
-        kappa = np.abs(np.asarray(path.curvature(s), float))
-        if curvature_window_m > 0:
-            half = int(math.ceil(curvature_window_m / self.ds_m))
-            if self.closed:
-                padded = np.concatenate([kappa[-half:], kappa, kappa[:half]])
-            else:
-                padded = np.concatenate([np.full(half, kappa[0]), kappa, np.full(half, kappa[-1])])
-            win = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1)
-            kappa = win.max(axis=1)
+        signed = np.asarray(path.curvature(s), float)
+        kappa = self._window_max(np.abs(signed), curvature_window_m)
         self.s_m = s
         self.abs_kappa = kappa
         self.v_limit_mps = np.minimum(self.v_max_mps, np.sqrt(self.lateral_accel_max_mps2 / np.maximum(kappa, 1e-12)))
+        self.curvature_rate_max_1pms = curvature_rate_max_1pms
+        if curvature_rate_max_1pms is not None:
+            # the change of curvature over CURVATURE_RATE_BASE_M either side (a waypoint path's
+            # curvature jitters over centimetres; the steering follows the change over metres)
+            h = max(1, int(round(CURVATURE_RATE_BASE_M / self.ds_m)))
+            if self.closed:
+                ahead, behind = np.roll(signed, -h), np.roll(signed, h)
+            else:
+                padded = np.concatenate([np.full(h, signed[0]), signed, np.full(h, signed[-1])])
+                ahead, behind = padded[2 * h :], padded[: -2 * h]
+            dk = np.abs(ahead - behind) / (2.0 * h * self.ds_m)
+            np.minimum(self.v_limit_mps, curvature_rate_max_1pms / np.maximum(dk, 1e-12), out=self.v_limit_mps)
         for s_until, v_cap in caps:
             np.minimum(self.v_limit_mps, v_cap, out=self.v_limit_mps, where=s <= s_until)
         self.v_mps = self._passes(v_start_mps, v_end_mps)
@@ -154,6 +172,18 @@ class SpeedProfile:
         self._s_grid = np.r_[self.s_m, self.length_m] if self.closed else self.s_m
 
     # -- construction -----------------------------------------------------------------------
+    def _window_max(self, a: np.ndarray, window_m: float) -> np.ndarray:
+        """``a`` on the grid, each value the largest within +- ``window_m`` [m] (periodic on a
+        closed path)."""
+        if window_m <= 0:
+            return a
+        half = int(math.ceil(window_m / self.ds_m))
+        if self.closed:
+            padded = np.concatenate([a[-half:], a, a[:half]])
+        else:
+            padded = np.concatenate([np.full(half, a[0]), a, np.full(half, a[-1])])
+        return np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1).max(axis=1)
+
     def _long_limit(self, a_max: float, v: float, kappa: float) -> float:
         if not self.friction_circle:
             return a_max

@@ -35,6 +35,10 @@ from .planner import Maneuver, ManeuverPlanner, PlanningGoal
 
 __all__ = ["PlannedMpc", "vehicle_limits"]
 
+#: a car within this distance [m] of the line its maneuver keeps to tracks the line itself (the
+#: controller corrects a tracking error that size; a maneuver from where the car is would carry it)
+KEEP_LINE_M = 0.5
+
 
 def vehicle_limits(mpc) -> VehicleLimits:
     """The :class:`VehicleLimits` of an MPC: its footprint, its model's wheelbase, its input,
@@ -119,6 +123,8 @@ class PlannedMpc:
         self._band: tuple[int, ...] | None = None
         self._table: ObstacleTable | None = None
         self._lateral = None
+        self._line_key: tuple | None = None
+        self._line_ref = None
         names = list(mpc.model.input_names)
         self._accel = names.index("accel")
         self._wheelbase = self.planner.limits.wheelbase_m
@@ -134,6 +140,27 @@ class PlannedMpc:
         if name == "mpc":
             raise AttributeError(name)
         return getattr(self.mpc, name)
+
+    def _lane_line(self, m: Maneuver, s_m: float, e_y_m: float):
+        """The lateral reference of maneuver ``m`` for the car at (``s_m``, ``e_y_m``) [m]: None
+        (the path) when it keeps to the route lane's line, the line plus offset of its lane when
+        it keeps to that one (the car within ``KEEP_LINE_M`` of it), else its lateral move."""
+        lat = m.lateral
+        target = float(lat(s_m + 1.0))  # just ahead: a move under way is not yet on its line
+        on_line = abs(float(np.interp(s_m, lat.knots_m, lat.line_m)) + lat.offset_m - e_y_m) <= KEEP_LINE_M
+        if (
+            not on_line
+            or abs(target - (float(np.interp(s_m + 1.0, lat.knots_m, lat.line_m)) + lat.offset_m)) > KEEP_LINE_M
+        ):
+            return lat
+        if m.lane == self.road.route_lane and lat.offset_m == 0.0 and self.road.lanes:
+            return None
+        key = (m.lane, lat.offset_m)
+        if self._line_key != key:
+            knots, line, off = lat.knots_m, lat.line_m, lat.offset_m
+            self._line_ref = lambda s: np.interp(s, knots, line) + off
+            self._line_key = key
+        return self._line_ref
 
     def _lanes_now(self, s_m: float, e_y_m: float) -> set[int]:
         """The lanes the body overlaps at (s, e_y) [m] (its half width around the offset)."""
@@ -185,9 +212,13 @@ class PlannedMpc:
                 s_ref[past] = m.s_m[-1] + m.v_mps[-1] * (tau[past] - m.t_s[-1])
             s_ref = np.maximum.accumulate(s_ref - s_ref[0] + s_m)
             mpc.set_longitudinal_plan(s_ref, np.maximum(v_ref, 0.0))
-            if m.lateral is not self._lateral:
-                mpc.set_lateral_reference(m.lateral)
-                self._lateral = m.lateral
+            # the lateral reference: a maneuver that keeps the car on its lane's line (plus its
+            # offset) gives the controller that line, so that it corrects the car's tracking error
+            # itself; a move to another line gives the move
+            line = self._lane_line(m, s_m, e_y)
+            if line is not self._lateral:
+                mpc.set_lateral_reference(line)
+                self._lateral = line
             if getattr(mpc, "avoidance", None) is not None:
                 # the obstacle rows keep the maneuver's side of each obstacle it checked
                 idx = np.clip(np.rint(tau[1:] / self.config.dt_s).astype(np.int64), 0, len(m.t_s) - 1)
@@ -199,4 +230,3 @@ class PlannedMpc:
         out = mpc.step(x, warm)
         # the step's time is the whole step's: the planning too
         return dataclasses.replace(out, solve_time_s=time.perf_counter() - t0)
-

@@ -96,6 +96,7 @@ from .work import (
     P_ROAD_START,
     P_SHIFT,
     P_STANDSTILL,
+    P_STOP_V,
     P_TIME_GAP,
     P_V_MAX,
     P_BAND_K,
@@ -762,11 +763,15 @@ def _first_contact(
                     bw = max(HW, ob_hw[o, k - 1]) + rn
                     if _segment_hits_box(q0s, q0d, qs, qd, bl, bw):
                         seg = math.hypot(qs - q0s, qd - q0d)
-                        if seg > rn or min(
-                            _box_distance(q0s, q0d, bl - rn, bw - rn),
-                            _box_distance(0.5 * (qs + q0s), 0.5 * (qd + q0d), bl - rn, bw - rn),
-                            _box_distance(qs, qd, bl - rn, bw - rn),
-                        ) < rn:
+                        if (
+                            seg > rn
+                            or min(
+                                _box_distance(q0s, q0d, bl - rn, bw - rn),
+                                _box_distance(0.5 * (qs + q0s), 0.5 * (qd + q0d), bl - rn, bw - rn),
+                                _box_distance(qs, qd, bl - rn, bw - rn),
+                            )
+                            < rn
+                        ):
                             return t - dt
                 elif k == 0 and _box_distance(qs, qd, HL, HW) < rn:
                     return 0.0
@@ -930,11 +935,15 @@ def check_pair(
                             # the rounded box: the disc's nearest approach (a segment no longer
                             # than the radius: its ends and middle; else the square box)
                             seg = math.hypot(qs - q0s, qd - q0d)
-                            if seg > rn or min(
-                                _box_distance(q0s, q0d, bl - rn, bw - rn),
-                                _box_distance(0.5 * (qs + q0s), 0.5 * (qd + q0d), bl - rn, bw - rn),
-                                _box_distance(qs, qd, bl - rn, bw - rn),
-                            ) < rn:
+                            if (
+                                seg > rn
+                                or min(
+                                    _box_distance(q0s, q0d, bl - rn, bw - rn),
+                                    _box_distance(0.5 * (qs + q0s), 0.5 * (qd + q0d), bl - rn, bw - rn),
+                                    _box_distance(qs, qd, bl - rn, bw - rn),
+                                )
+                                < rn
+                            ):
                                 ttc = t - dt
                                 hit = True
                     elif k == 0 and _box_distance(qs, qd, HL, HW) < rn:
@@ -969,6 +978,16 @@ def check_pair(
                     need = (v2 - v_o * v_o) / (2.0 * par[P_D_MAX] * 0.8) + margin
                     if -rs - bx < need:
                         ttc = min(ttc, horizon + 0.5 * dt)
+                    # ending stopped (or crawling) behind an obstacle that stands for good: the car would wait
+                    # there for ever (it misses its goal), unless it steers round it later
+                    if v < par[P_CREEP] and -rs - bx < par[P_STANDSTILL] + 2.0 * par[P_LAT_MIN] + margin:
+                        if _standing(ob_s, o, K, dt):
+                            cost += par[P_C_GOAL]
+        if k == K and not hit and math.isfinite(par[P_ROAD_END]):
+            # beyond the horizon: braking still stops inside the road's end
+            front = s + (hl + co) * cth + hw * abs(sth)
+            if par[P_ROAD_END] - par[P_ROAD_MARGIN] - front < v2 / (2.0 * par[P_D_MAX] * 0.8):
+                ttc = min(ttc, horizon + 0.5 * dt)
         for q in range(nd):
             p_disc_s[q] = s + discs[q] * cth
             p_disc_d[q] = d + discs[q] * sth

@@ -261,7 +261,9 @@ class ManeuverPlanner:
             raise ValueError("the maneuver planner drives open paths (a closed track has no lanes to change to)")
         pa = path_arrays(path)
         if pa is None:
-            raise ValueError(f"the maneuver planner needs a straight, circle or waypoint path, got {type(path).__name__}")
+            raise ValueError(
+                f"the maneuver planner needs a straight, circle or waypoint path, got {type(path).__name__}"
+            )
         self._pa: PathArrays = pa
         K = cfg.steps
         self.K = K
@@ -416,7 +418,9 @@ class ManeuverPlanner:
         L = len(w.lane_kind)
         inside = [r for r in range(L) if at(w.lane_right, r) <= d_m <= at(w.lane_left, r)]
         pool = inside or list(range(L))
-        return min(pool, key=lambda r: abs(at(w.lane_line, r) - d_m) + (0.0 if w.lane_kind[r] != LANE_ONCOMING else 1e-3))
+        return min(
+            pool, key=lambda r: abs(at(w.lane_line, r) - d_m) + (0.0 if w.lane_kind[r] != LANE_ONCOMING else 1e-3)
+        )
 
     def _on_plan(self, t_s: float, s_m: float, e_y_m: float, v_mps: float):
         """(s, d, v, a, slope) where the last maneuver has the car at ``t_s``, when the

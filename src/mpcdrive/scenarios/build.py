@@ -420,6 +420,7 @@ def build_speed_profile(spec, path: ReferencePath, friction: float) -> SpeedProf
         friction_circle=spec.friction_circle,
         s_start_m=min(spec.start_m, float(path.length_m)),
         top_speed_until=tuple((float(su), float(vc)) for su, vc in spec.top_speed_until),
+        curvature_rate_max_1pms=spec.curvature_rate_max_1pms,
     )
 
 

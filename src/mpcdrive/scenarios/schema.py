@@ -387,7 +387,8 @@ class SpeedProfileSpec(_Strict):
     speed <= ``v_max_mps``; ``v_start_mps`` / ``v_end_mps`` pin the ends of an open path,
     ``v_start_mps`` at ``start_m`` [m] along it (where the car starts when the path begins behind it);
     ``top_speed_until`` rows ``[s_until_m, v_mps]`` cap the top speed at ``v_mps`` up to arc length
-    ``s_until_m`` (a slower approach, then on at ``v_max_mps``)."""
+    ``s_until_m`` (a slower approach, then on at ``v_max_mps``); ``curvature_rate_max_1pms``: the
+    fastest change of curvature the steering follows [1/(m s)] (speed <= it over |d kappa / d s|)."""
 
     lateral_accel_fraction: Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)] = 0.8
     lateral_accel_max_mps2: Positive | None = None
@@ -400,6 +401,7 @@ class SpeedProfileSpec(_Strict):
     friction_circle: bool = True
     start_m: NonNeg = 0.0
     top_speed_until: list[tuple[NonNeg, Positive]] = []
+    curvature_rate_max_1pms: Positive | None = None
 
 
 class ControllerSpec(_Strict):

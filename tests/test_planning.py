@@ -1,0 +1,231 @@
+"""The maneuver planner (mpcdrive.planning): its polynomials, its evasive move, its obstacle
+tracks against a numpy oracle, and its choices on a straight road in the situations it exists
+for (a parked car with traffic behind, both lanes blocked, a pass through the oncoming lane,
+the road's end, a goal window), each a choice a wrong planner gets wrong."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mpcdrive.ocp.avoidance_compiled import table_of
+from mpcdrive.paths.compiled import path_arrays
+from mpcdrive.paths.straight import StraightPath
+from mpcdrive.paths.waypoints import WaypointPath
+from mpcdrive.planning import ManeuverPlanner, PlannerConfig, PlanningGoal, VehicleLimits
+from mpcdrive.planning import kernels
+from mpcdrive.planning.tracks import obstacle_tracks
+from mpcdrive.scene.obstacles import ConstantVelocity, Obstacle, TrajectoryMotion, rectangle
+from mpcdrive.scene.road import Lane, Road
+
+W = 3.5  # lane width [m]
+PATH = StraightPath((0.0, 0.0), (400.0, 0.0))
+#: a BMW 320i as CommonRoad describes it, the controller's limits (kinematic4, 3 footprint discs)
+LIMITS = VehicleLimits(
+    length_m=4.508,
+    width_m=1.61,
+    wheelbase_m=2.579,
+    max_steer_rad=1.066,
+    max_steer_rate_rad_s=0.38,
+    max_accel_mps2=6.9,
+    max_decel_mps2=6.9,
+    max_speed_mps=22.0,
+    friction_mps2=10.35,
+    disc_offsets_m=(-1.503, 0.0, 1.503),
+    disc_radius_m=math.hypot(0.751, 0.805),
+)
+
+
+def two_lanes(oncoming: bool = False, end_m: float | None = None) -> Road:
+    """A straight road: the route lane centred on the path and a lane to its left (going the
+    car's way, or the other way), 3.5 m each; ``end_m``: where the mapped road ends."""
+    s = np.array([0.0, 400.0])
+    lanes = (
+        Lane("route", np.zeros(2), np.full(2, W / 2), np.full(2, -W / 2)),
+        Lane("left", np.full(2, W), np.full(2, 1.5 * W), np.full(2, W / 2), oncoming=oncoming),
+    )
+    road = Road(s, W / 2, -W / 2, 0.1, lanes, 0)
+    if end_m is not None:
+        object.__setattr__(road, "end_m", end_m)
+    return road
+
+
+def car(x: float, y: float = 0.0, v: float = 0.0) -> Obstacle:
+    """A 4.5 m x 1.8 m car at (x, y) [m] at t = 0 driving ``v`` [m/s] along +x (-x for v < 0)."""
+    return Obstacle(rectangle(4.5, 1.8), (x, y, 0.0 if v >= 0 else math.pi), ConstantVelocity(v, 0.0))
+
+
+def planner(road: Road | None = None, speed: float = 12.0, goal=None, **cfg) -> ManeuverPlanner:
+    return ManeuverPlanner(PATH, road or two_lanes(), LIMITS, PlannerConfig(**cfg), wanted_speed=speed, goal=goal)
+
+
+def plan(pl: ManeuverPlanner, obstacles, *, s=20.0, d=0.0, v=12.0, t=0.0):
+    return pl.plan(t, s, d, v, 0.0, 0.0, table_of(list(obstacles) or [car(-500.0)], None))
+
+
+# -- polynomials and the evasive move --------------------------------------------------------------
+@pytest.mark.parametrize("T", [0.7, 2.0, 5.5])
+def test_quintic_meets_both_ends(T):
+    c = np.empty(6)
+    kernels_quintic(1.0, 2.0, -0.5, 10.0, 0.3, 0.2, T, c)
+    p0 = poly(c, 0.0)
+    p1 = poly(c, T)
+    assert p0 == pytest.approx((1.0, 2.0, -0.5), abs=1e-12)
+    assert p1 == pytest.approx((10.0, 0.3, 0.2), abs=1e-9)
+
+
+def kernels_quintic(*args):
+    from numba import njit
+
+    @njit
+    def run(x0, v0, a0, x1, v1, a1, T, c):
+        kernels.quintic(x0, v0, a0, x1, v1, a1, T, c)
+
+    run(*args)
+
+
+def poly(c, t):
+    from numba import njit
+
+    @njit
+    def run(c, t):
+        p, d1, d2, _ = kernels.poly_eval(c, t)
+        return p, d1, d2
+
+    return run(c, t)
+
+
+def test_evasive_move_steers_within_the_rate_and_settles_on_the_line():
+    """From straight ahead at 8 m/s to a line 3.5 m left: the curvature never changes faster than
+    the steering rate allows, and the move ends on the line (no swing past it by more than a few
+    centimetres) with its heading along the path."""
+    from numba import njit
+
+    pl = planner()
+    w = pl.work
+    par, grid, line = w.par.copy(), w.grid.copy(), w.lane_line.copy()
+
+    @njit
+    def run(par, grid, line):
+        d, th, kap = 0.0, 0.0, 0.0
+        out = np.empty((200, 3))
+        s = 0.0
+        for k in range(200):
+            d, th, kap = kernels._evasive_step(d, th, kap, s, 8.0, 8.0, 0.2, grid, line, 1, 0.0, par, 0.4)
+            s += 1.6
+            out[k, 0], out[k, 1], out[k, 2] = d, th, kap
+        return out
+
+    out = run(par, grid, line)
+    rate = np.abs(np.diff(np.r_[0.0, out[:, 2]])) / 0.2
+    assert rate.max() <= LIMITS.max_curvature_rate_1pms * (1 + 1e-9)
+    assert out[:, 0].max() <= W + 0.05
+    assert out[-1, 0] == pytest.approx(W, abs=0.01) and abs(out[-1, 1]) < 1e-3
+    assert np.max(np.abs(out[:, 2]) * 64.0) <= 0.4 * LIMITS.friction_mps2 * (1 + 1e-9)
+
+
+# -- tracks against the path's own projection --------------------------------------------------------
+def test_obstacle_tracks_match_the_paths_projection():
+    path = WaypointPath([(0.0, 0.0), (40.0, 0.0), (80.0, 20.0), (140.0, 30.0)], ds_m=0.2)
+    t = np.arange(0.0, 4.01, 0.5)
+    pts = np.column_stack([10.0 + 12.0 * t, 1.0 + 2.0 * t])
+    yaw = np.full(len(t), math.atan2(2.0, 12.0))
+    motion = TrajectoryMotion(t, pts[:, 0] - pts[0, 0], pts[:, 1] - pts[0, 1], yaw - yaw[0])
+    rec = Obstacle(rectangle(4.0, 2.0), (pts[0, 0], pts[0, 1], yaw[0]), motion)
+    obs = [car(30.0, 3.0, 5.0), rec, car(1000.0)]
+    tab = table_of(obs, None)
+    K = 20
+    out = [np.full((8, K + 1), np.nan) for _ in range(4)]
+    index = np.zeros(8, np.int64)
+    n = obstacle_tracks(tab, path_arrays(path), 0.0, 0.2, 5.0, (5.0, 0.0), 200.0, 25.0, *out, index)
+    assert n == 2 and set(index[:n]) == {0, 1}  # the far car is out of range
+    for r in range(n):
+        ob = obs[index[r]]
+        for k in range(K + 1):
+            x, y, _ = ob.pose_at(0.2 * k)
+            s, e = path.project(np.array([x, y]))
+            assert out[0][r, k] == pytest.approx(float(s), abs=1e-6)
+            assert out[1][r, k] == pytest.approx(float(e), abs=1e-6)
+
+
+# -- choices -------------------------------------------------------------------------------------------
+def test_free_road_keeps_the_lane_at_the_wanted_speed():
+    m = plan(planner(), [])
+    assert m.safe and m.lane == 0 and m.lanes == (0,)
+    assert m.v_mps[-1] == pytest.approx(12.0, abs=0.5)
+    assert np.max(np.abs(m.d_m)) < 0.05
+
+
+def test_parked_car_with_traffic_behind_is_passed_at_speed_not_braked_for():
+    """A parked car 30 m ahead in the car's lane and a car 18 m behind at 10 m/s that does not
+    brake (recorded traffic): stopping behind the parked car is hit from behind, passing in the
+    free left lane is not. The maneuver changes lane and keeps its speed."""
+    m = plan(planner(), [car(50.0), car(2.0, 0.0, 10.0)], s=20.0, v=12.0)
+    assert m.safe
+    assert m.lane == 1 and m.d_m[-1] == pytest.approx(W, abs=0.3)
+    assert m.v_mps.min() > 8.0  # no braking into the car behind
+
+
+def test_both_lanes_blocked_stops_before_the_obstacle():
+    m = plan(planner(), [car(60.0), car(62.0, W)], s=20.0, v=12.0)
+    assert m.safe and m.lane == 0
+    assert m.v_mps[-1] < 1.0  # stopping (the last metre at a crawl)
+    front = m.s_m.max() + 0.5 * LIMITS.length_m
+    assert front < 60.0 - 2.25  # behind the cars' rear
+
+
+def test_oncoming_lane_is_used_to_pass_only_when_allowed_and_free():
+    road = two_lanes(oncoming=True)
+    blocked = [car(60.0)]
+    assert plan(planner(road, oncoming=True), blocked, v=12.0).lane == 1
+    # not allowed: the car stops behind the obstacle
+    m = plan(planner(road, oncoming=False), blocked, v=12.0)
+    assert m.lane == 0 and m.v_mps[-1] < 0.1
+    # an oncoming car in that lane meets the pass: the car waits
+    m = plan(planner(road, oncoming=True), blocked + [car(110.0, W, -12.0)], v=12.0)
+    assert m.safe and (m.lane == 0 or np.all(m.d_m < W / 2 - 0.9)) and m.v_mps[-1] < 0.1
+
+
+def test_the_road_end_is_a_stop_with_the_whole_body_inside():
+    pl = planner(two_lanes(end_m=60.0))
+    for s in (20.0, 30.0, 40.0):
+        m = plan(pl, [], s=s, v=10.0)
+        assert m.safe
+        # inside the end, and able to stop before it at the vehicle's braking
+        front = m.s_m + 0.5 * LIMITS.length_m
+        assert np.all(front <= 60.0 - 0.1 + 1e-6)
+        assert front[-1] + m.v_mps[-1] ** 2 / (2 * LIMITS.max_decel_mps2) <= 60.0
+
+
+def test_goal_window_is_met_when_the_car_would_otherwise_be_early():
+    """The goal 40-45 m ahead between 5.0 and 5.4 s: at the wanted 12 m/s the car is there at 2 s;
+    the maneuver arrives inside the window."""
+    goal = PlanningGoal(arc_m=(60.0, 65.0), time_s=(5.0, 5.4))
+    m = plan(planner(goal=goal), [], s=20.0, v=12.0)
+    assert m.goal and m.safe
+    inside = (m.s_m >= 60.0) & (m.s_m <= 65.0) & (m.t_s >= 5.0 - 1e-9) & (m.t_s <= 5.4 + 1e-9)
+    assert inside.any()
+
+
+def test_replanning_is_deterministic():
+    obs = [car(50.0), car(2.0, 0.0, 10.0), car(90.0, W, 8.0)]
+    a = plan(planner(), obs)
+    b = plan(planner(), obs)
+    for f in ("s_m", "v_mps", "d_m"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f))
+    assert (a.kind, a.lane, a.checked, a.candidates) == (b.kind, b.lane, b.checked, b.candidates)
+
+
+@pytest.mark.parametrize(
+    "field, value", [("horizon_s", 0.0), ("dt_s", 0.5), ("margin_m", -0.1), ("lateral_s", ()), ("time_gap_s", math.nan)]
+)
+def test_bad_settings_are_refused_naming_them(field, value):
+    with pytest.raises(ValueError, match=field):
+        PlannerConfig(**{field: value})
+
+
+def test_a_goal_interval_must_be_ordered():
+    with pytest.raises(ValueError, match="arc_m"):
+        PlanningGoal(arc_m=(10.0, 5.0))
