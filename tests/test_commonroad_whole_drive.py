@@ -1,0 +1,90 @@
+"""The whole drive is judged, not only the drive up to the goal: a CommonRoad run that reaches
+its goal and then collides or leaves the road has not passed."""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mpcdrive.adapters.commonroad import available
+
+if not available():
+    pytest.skip(
+        "the commonroad extra (commonroad-io, commonroad-drivability-checker) is not installed", allow_module_level=True
+    )
+
+from mpcdrive.adapters import commonroad_figures  # noqa: E402
+from mpcdrive.adapters.commonroad import check_drives, load_commonroad  # noqa: E402
+from mpcdrive.scenarios import build_experiment, run_experiment  # noqa: E402
+from mpcdrive.sim import apply_goal_region, compute_metrics  # noqa: E402
+
+DIR = Path(__file__).resolve().parent / "data" / "commonroad"
+
+
+def _run(path: Path, out_dir: Path, monkeypatch) -> dict:
+    """Drive ``path`` (the default vehicle and plant) and judge it as ``mpcdrive run`` does:
+    (the written ``commonroad`` block, the metrics, the verdict)."""
+    monkeypatch.setattr(
+        commonroad_figures, "write_scene_figure", lambda imp, result, out_dir, step: Path(out_dir) / "scene.png"
+    )
+    imp = load_commonroad(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = run_experiment(build_experiment(imp.spec))
+    out_dir.mkdir(parents=True)
+    cr = imp.write_outputs(res, out_dir)["commonroad"]
+    m = apply_goal_region(compute_metrics(res), cr.goal_reached, cr)
+    return {"cr": cr, "m": m, "v": m.verdict, "res": res, "imp": imp}
+
+
+def test_a_collision_after_the_goal_fails_the_whole_drive_only(tmp_path, monkeypatch):
+    """ZAM_Tutorial-1_2_T-1 driven, then its states after the goal moved onto the parked car: the
+    checks up to the goal pass as before, the whole drive's collision check fails at the first
+    moved state, and the verdict says the collision came after the goal."""
+    got = _run(DIR / "ZAM_Tutorial-1_2_T-1.xml", tmp_path / "run", monkeypatch)
+    imp, res = got["imp"], got["res"]
+    assert got["cr"].passed and got["cr"].whole_drive.passed
+    goal, whole = check_drives(imp, res)
+    g = goal.goal_step
+    assert g is not None and g + 1 < len(res.t_s) and whole.steps_checked == len(res.t_s)
+    parked = next(o for o in imp.scenario.obstacles if o.obstacle_role.value == "static")
+    x = res.x.copy()
+    x[g + 1 :, :2] = np.asarray(parked.initial_state.position, float)
+    hit = replace(res, x=x)
+    goal, whole = check_drives(imp, hit)
+    assert goal.collision_free and goal.road_compliant and goal.feasible and goal.goal_step == g
+    assert not whole.collision_free and whole.collision_step == g + 1
+    (tmp_path / "hit").mkdir()
+    cr = imp.write_outputs(hit, tmp_path / "hit")["commonroad"]
+    assert not cr.passed and cr.collision_free and not cr.whole_drive.collision_free
+    assert cr.whole_drive.collision_t_s == pytest.approx(hit.t_s[g + 1])
+    v = apply_goal_region(compute_metrics(hit), cr.goal_reached, cr).verdict
+    assert v.unsafe and v.collided and v.part("goal").ok is True
+    assert f"after the goal at t = {hit.t_s[g + 1]:.2f} s" in v.part("collision").reason
+
+
+def test_the_batch_row_and_table_say_what_failed_over_the_whole_drive():
+    from mpcdrive.adapters.commonroad_batch import _empty_row, summary_markdown, verdict
+
+    up_to_goal = dict(collision_free=True, road_compliant=True, ks_feasible=True, goal_reached=True)
+    whole = {"collision_free": True, "road_compliant": False, "feasible": True, "passed": False}
+    whole.update(off_road_t_s=9.5, past_road_end_m=2.26, collision_t_s=None, infeasible_t_s=None)
+    past_end = {**_empty_row(), **up_to_goal, "solution_valid": True, "whole_drive": whole}
+    hit = {**past_end, "whole_drive": {**whole, "road_compliant": True, "collision_free": False, "collision_t_s": 7.3}}
+    hit["whole_drive"]["past_road_end_m"] = 0.0
+    clean = {**past_end, "passed": True, "whole_drive": {**whole, "road_compliant": True, "passed": True}}
+    assert verdict(past_end) == "failed: off road beyond the road's start or end"
+    assert verdict(hit) == "failed: collision after the goal"
+    assert verdict(clean) == "passed"
+    md = summary_markdown({"a.xml": past_end, "b.xml": hit, "c.xml": clean})
+    assert "| whole drive |" in md
+    assert (
+        "| `a.xml` | failed: off road beyond the road's start or end | yes | yes | yes | yes | no: off road 9.5 s (2.26 m"
+        in md
+    )
+    assert "| `b.xml` | failed: collision after the goal | yes | yes | yes | yes | no: collision 7.3 s |" in md
+    assert "| `c.xml` | passed | yes | yes | yes | yes | yes |" in md
