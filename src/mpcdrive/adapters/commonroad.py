@@ -14,7 +14,9 @@ Import:
   puts the car in the goal region inside the goal's time window.
 * **Road.** The route's lanelets edge by edge along the centre line (the controller keeps the
   body inside them), the same-direction lanes beside them as neighbour lanes; where the route
-  lane tapers narrower than any car, the lanes beside it join the road there (:func:`_road`).
+  lane tapers narrower than any car, the lanes beside it join the road there (:func:`_road`);
+  where the route's first / last lanelet is where the mapped road begins / ends, the road's
+  ``start_m`` / ``end_m`` (:func:`_road_ends`): a body beyond them is off the road.
 * **Obstacles.** Static and dynamic obstacles with rectangle / circle / polygon shapes; a dynamic
   obstacle's recorded trajectory is its known prediction (:class:`TrajectoryMotion`).
 * **Vehicle.** ``kinematic4`` (speed state) with the CommonRoad Ford Escort preset's wheelbase,
@@ -38,7 +40,7 @@ import numpy as np
 from ..models.presets import PRESETS
 from ..scenarios.schema import ScenarioSpec
 from ..sim.metrics import CommonRoadCheck, WholeDriveCheck
-from .commonroad_goal import DrivePlan, accel_limit, friction_accel, plan_drive
+from .commonroad_goal import DrivePlan, accel_limit, friction_accel, plan_drive, road_ends_m
 from .commonroad_route import drivable_lanelets, point, route_edges, route_ends, scalar
 
 PRESET = "commonroad_ford_escort"
@@ -196,6 +198,17 @@ def _road(net, route, line: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     return s, left, right, neighbours
 
 
+def _road_ends(net, plan: DrivePlan) -> tuple[float | None, float | None]:
+    """(start_m, end_m) [m] along the reference path the run follows (built as the scenario's
+    path is) where the mapped road begins / ends around the route
+    (:func:`~.commonroad_goal.road_ends_m`; None where the lanelet network goes on)."""
+    from ..scenarios.build import build_path
+    from ..scenarios.schema import WaypointsSpec
+
+    path = build_path(WaypointsSpec(type="waypoints", points=[tuple(map(float, p)) for p in plan.centerline], ds_m=0.2))
+    return road_ends_m(net, plan.route, path)
+
+
 def _distinct_steps(states: list) -> list:
     """``states`` with one state per time step: of states sharing a time step the later one.
 
@@ -247,6 +260,7 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
     v0 = max(0.0, scalar(getattr(init, "velocity", None)) or 0.0)
     plan = plan_drive(net, pp, p0, yaw0, v0, dt)
     s_k, left_k, right_k, neighbours = _road(net, plan.route, plan.centerline)
+    start_m, end_m = _road_ends(net, plan)
     pre = PRESETS[PRESET]
     v_max = max(plan.v_cruise_mps, v0) + 2.0
     a_lim = accel_limit(v_max)
@@ -270,6 +284,9 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
                 "widths": [[float(a), float(b), float(c)] for a, b, c in zip(s_k, left_k, right_k)],
                 "neighbours": neighbours.tolist() if NEIGHBOUR_LANES else None,
                 "margin_m": ROAD_MARGIN_M,
+                # where the mapped road begins / ends along the path (None: it goes on)
+                "start_m": start_m,
+                "end_m": end_m,
                 # a goal region on the route inside a time window: back in the route lane by its end
                 "return_by_s": plan.goal_window_s[1]
                 if plan.goal_arc_m is not None

@@ -120,6 +120,30 @@ def start_arc(path, p0: np.ndarray) -> float:
     return float(min(max(path.project(np.asarray(p0, float), 0.0, 10.0)[0], 0.0), path.length_m))
 
 
+#: how far [m] along the path from its own end a route's closing edge is looked for (the path
+#: ends on the route's last lanelet's centre line; a slanted edge reaches a few metres from it)
+END_SEARCH_M = 20.0
+
+
+def road_ends_m(net, route, path) -> tuple[float | None, float | None]:
+    """(start_m, end_m): the arc lengths [m] along ``path`` (the route's reference path; its
+    ends extend along their tangents) where the mapped road begins / ends around ``route``
+    (:func:`~.commonroad_route.mapped_road_ends`; None where the network goes on). A closing
+    edge counts from its point nearest the road (a slanted edge: its near corner), and of lanes
+    side by side the road reaches as far as the farthest: past a lane's end the lane beside it is
+    still road. Each edge is projected near its own end of the path (a route that comes back
+    to where it began has both edges in one place)."""
+    start, end = cr.mapped_road_ends(net, route)
+
+    def arcs(pts: np.ndarray, near_m: float) -> np.ndarray:  # (lanelets, 2): each closing edge's points
+        s = [path.project(np.asarray(q, float), near_m, END_SEARCH_M)[0] for q in pts]
+        return np.array(s, float).reshape(-1, 2)
+
+    start_m = None if start is None else float(np.min(arcs(start, 0.0).max(axis=1)))
+    end_m = None if end is None else float(np.max(arcs(end, path.length_m).min(axis=1)))
+    return start_m, end_m
+
+
 def _cut(line: np.ndarray, s_end: float) -> np.ndarray:
     s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(line, axis=0).T))]
     k = int(np.searchsorted(s, s_end))
