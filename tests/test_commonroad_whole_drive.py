@@ -1,5 +1,10 @@
 """The whole drive is judged, not only the drive up to the goal: a CommonRoad run that reaches
-its goal and then collides or leaves the road has not passed."""
+its goal and then collides, leaves the road or drives past the end of the mapped road has not
+passed; and where the route ends at the road's end, the car stops with its whole body on it.
+
+The road-end scenarios are the generated ``road_end`` family (``scenario_families.py``): a single
+lane whose last lanelet has no successor, the goal region just before its end.
+"""
 
 from __future__ import annotations
 
@@ -17,12 +22,41 @@ if not available():
         "the commonroad extra (commonroad-io, commonroad-drivability-checker) is not installed", allow_module_level=True
     )
 
-from mpcdrive.adapters import commonroad_figures  # noqa: E402
+import scenario_families as sf  # noqa: E402
+
+from mpcdrive.adapters import commonroad_figures, commonroad_goal  # noqa: E402
 from mpcdrive.adapters.commonroad import check_drives, load_commonroad  # noqa: E402
+from mpcdrive.adapters.commonroad_goal import FRONT_REACH_M, ROAD_MARGIN_M  # noqa: E402
 from mpcdrive.scenarios import build_experiment, run_experiment  # noqa: E402
 from mpcdrive.sim import apply_goal_region, compute_metrics  # noqa: E402
 
 DIR = Path(__file__).resolve().parent / "data" / "commonroad"
+
+
+def _line_length(line: np.ndarray) -> float:
+    return float(np.sum(np.hypot(*np.diff(line, axis=0).T)))
+
+
+def test_the_road_ends_where_the_network_does_and_the_path_stops_inside_it(tmp_path):
+    """The road_end family: the route's last lanelet has no successor, so the road's ``end_m``
+    is its end (the lanelet's closing edge, as far along the path as the lane reaches), and the
+    path ends the longest CommonRoad car's front overhang and the road margin before it. A route
+    whose lanes go on has no end there (USA_Lanker-1_1_T-1 starts mid-network)."""
+    for seed in (0, 1):
+        imp = load_commonroad(sf.write_scenario("road_end", seed, tmp_path))
+        net = imp.scenario.lanelet_network
+        last = net.find_lanelet_by_id(imp.route[-1])
+        assert not last.successor
+        road = imp.spec.road
+        # the closing edge, straight across the lane: its centre is the road's end along the path
+        path = build_experiment(imp.spec).path
+        s_end, _ = path.project(np.asarray(last.center_vertices[-1], float), path.length_m, 10.0)
+        assert road.end_m == pytest.approx(s_end, abs=0.02)
+        assert _line_length(imp.centerline) == pytest.approx(road.end_m - FRONT_REACH_M - ROAD_MARGIN_M, abs=0.05)
+        first = net.find_lanelet_by_id(imp.route[0])
+        assert not first.predecessor and road.start_m is not None and road.start_m < 0.0  # the lane begins behind
+    lanker = load_commonroad(DIR / "USA_Lanker-1_1_T-1.xml")
+    assert lanker.spec.road.start_m is None
 
 
 def _run(path: Path, out_dir: Path, monkeypatch) -> dict:
@@ -39,6 +73,33 @@ def _run(path: Path, out_dir: Path, monkeypatch) -> dict:
     cr = imp.write_outputs(res, out_dir)["commonroad"]
     m = apply_goal_region(compute_metrics(res), cr.goal_reached, cr)
     return {"cr": cr, "m": m, "v": m.verdict, "res": res, "imp": imp}
+
+
+def test_a_car_stopping_past_the_road_end_after_the_goal_fails_and_one_stopping_inside_passes(tmp_path, monkeypatch):
+    """With the old reference (the path to the road's end, the car's centre stopping there) the
+    drive reaches the goal and CommonRoad's checks up to it pass, but the body ends up about a
+    half car length beyond the end of the mapped road: the whole drive is off the road, after the
+    goal, and the run fails. With the path stopping inside, it passes."""
+    scenario = sf.write_scenario("road_end", 0, tmp_path)
+    with monkeypatch.context() as mp:
+        mp.setattr(commonroad_goal, "stop_inside", lambda net, route, line: line)
+        old = _run(scenario, tmp_path / "old", mp)
+    cr, v = old["cr"], old["v"]
+    assert cr.goal_reached and cr.collision_free and cr.road_compliant and cr.ks_feasible and cr.solution_valid
+    w = cr.whole_drive
+    assert w is not None and not w.road_compliant and w.collision_free and w.feasible
+    half = 0.5 * old["imp"].spec.vehicle.length_m
+    assert w.past_road_end_m == pytest.approx(half, abs=0.1)
+    assert w.off_road_t_s > w.goal_t_s and not cr.passed
+    assert v.failed and v.unsafe and v.part("goal").ok is True
+    assert v.part("road").reason.startswith("left the road after the goal at t = ")
+    assert "m beyond the road's start or end" in v.part("road").reason
+    assert "whole drive: OFF THE ROAD after the goal" in v.part("commonroad").reason
+    # mpcdrive's own measure of the road agrees: the body left it past the end
+    assert old["m"].max_lane_excess_m == pytest.approx(w.past_road_end_m, abs=1e-3)
+    new = _run(scenario, tmp_path / "new", monkeypatch)
+    assert new["cr"].passed and new["v"].passed, new["v"].text()
+    assert new["cr"].whole_drive.past_road_end_m == 0.0 and new["m"].max_lane_excess_m <= 1e-3
 
 
 def test_a_collision_after_the_goal_fails_the_whole_drive_only(tmp_path, monkeypatch):

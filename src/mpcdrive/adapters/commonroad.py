@@ -40,15 +40,13 @@ import numpy as np
 from ..models.presets import PRESETS
 from ..scenarios.schema import ScenarioSpec
 from ..sim.metrics import CommonRoadCheck, WholeDriveCheck
-from .commonroad_goal import DrivePlan, accel_limit, friction_accel, plan_drive, road_ends_m
+from .commonroad_goal import ROAD_MARGIN_M, DrivePlan, accel_limit, friction_accel, plan_drive, road_ends_m
 from .commonroad_route import drivable_lanelets, point, route_edges, route_ends, scalar
 
 PRESET = "commonroad_ford_escort"
 #: the lanes beside the route that go its way are the road's neighbour lanes: a lane decision
 #: layer opens them to pass a blocked stretch (control.lanes)
 NEIGHBOUR_LANES = True
-#: distance [m] the body keeps from the road's edges
-ROAD_MARGIN_M = 0.1
 #: a route lane narrower than this [m] (the widest CommonRoad vehicle and the road margin on both
 #: sides) takes in the same-direction lanes beside it (:func:`_road`)
 TAPER_WIDTH_M = max(p.width_m for n, p in PRESETS.items() if n.startswith("commonroad_")) + 2 * ROAD_MARGIN_M

@@ -10,6 +10,10 @@
   in the region inside the time window that way and the goal's speed range admits a stop, the path
   ends in the middle of the route's stretch in the region instead (the car stops inside it, arriving
   by the window's end).
+* **Road's end.** Where the route ends at the end of the mapped road (a lane without a
+  successor, nothing beside it going on: :func:`~.commonroad_route.mapped_road_ends`), the path
+  ends :data:`FRONT_REACH_M` + :data:`ROAD_MARGIN_M` before it (:func:`stop_inside`): the car
+  stops with its whole body on the road, its front bumper the road margin short of the end.
 * **Speed.** The cruise speed (the profile's top speed) is the goal speed range's middle, else
   the initial speed (:data:`DEFAULT_SPEED_MPS` for a car starting at rest); with a time window it
   is the speed closest to that (inside the goal's speed range) whose profile is in the goal region
@@ -36,6 +40,13 @@ _LIMIT_PRESET = PRESETS["commonroad_bmw_320i"]
 _PLAN_DS_M = 0.25  # grid of the speed profiles compared while planning
 _MISSED = "no cruise speed"  # how the note of a plan that misses the goal window begins
 APPROACH_LEAD_M = 5.0  # a slower approach is back at the goal speed this far before the region [m]
+#: distance [m] the body keeps from the road's edges (the controller's road margin), and the
+#: front bumper from the mapped road's end where the car stops there
+ROAD_MARGIN_M = 0.1
+#: how far [m] the front bumper reaches ahead of the reference point (the centre of gravity, the
+#: middle of CommonRoad's rectangle) on the longest CommonRoad vehicle (VW Vanagon: 4.569 m): one
+#: path serves every ``--vehicle``
+FRONT_REACH_M = max(0.5 * p.length_m for n, p in PRESETS.items() if n.startswith("commonroad_"))
 
 
 #: the share of the tyres' friction circle (CommonRoad's ``a_max``, the radius its feasibility
@@ -144,6 +155,19 @@ def road_ends_m(net, route, path) -> tuple[float | None, float | None]:
     return start_m, end_m
 
 
+def stop_inside(net, route, line: np.ndarray) -> np.ndarray:
+    """``line`` (the route's centre line) ending where a car stopping at its end has its whole
+    body on the road: :data:`FRONT_REACH_M` + :data:`ROAD_MARGIN_M` before the mapped road's end
+    where the route ends there (and never closer than a metre ahead of the car, which stands a
+    metre along the line); unchanged where the road goes on past the line's end."""
+    _, end_m = road_ends_m(net, route, _line_path(line))
+    length = float(np.sum(np.hypot(*np.diff(line, axis=0).T)))
+    if end_m is None:
+        return line
+    s_stop = max(end_m - FRONT_REACH_M - ROAD_MARGIN_M, min(2.0, length))
+    return _cut(line, s_stop) if s_stop < length - 1e-6 else line
+
+
 def _cut(line: np.ndarray, s_end: float) -> np.ndarray:
     s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(line, axis=0).T))]
     k = int(np.searchsorted(s, s_end))
@@ -180,6 +204,7 @@ def plan_drive(net, pp, p0: np.ndarray, yaw0: float, v0: float, dt_s: float) -> 
         route = cr.lane_forward(net, [starts[0]], max(v_want, v0) * t_last + brake_m, from_m=cr._arc_to(first, p0))
         line = cr.route_centerline(net, route, p0, max(v_want, v0) * t_last + brake_m)
         route = cr.trim_route(net, route, line)
+        line = stop_inside(net, route, line)
         return _finish(
             route, line, "follow lane", v_want, pb, note="time-only goal: follows the lane, stops at its end"
         )
@@ -187,7 +212,7 @@ def plan_drive(net, pp, p0: np.ndarray, yaw0: float, v0: float, dt_s: float) -> 
     if route is None:
         raise ValueError(f"no route from lanelet(s) {starts} to the goal lanelets {sorted(goals)}")
     goal_xy = cr.point(shapes[0].center) if shapes else None
-    line = cr.route_centerline(net, route, p0, goal_xy=goal_xy)
+    line = stop_inside(net, route, cr.route_centerline(net, route, p0, goal_xy=goal_xy))
     # the route's stretch in the goal region (the centre line's point nearest a small region it misses)
     arc = (cr.arc_inside(line, shapes) or cr.nearest_arc(line, shapes)) if shapes else None
     if arc is None:  # a goal of lanelets only, or a region the centre line misses: stop at the route's end
@@ -253,7 +278,7 @@ def _through(g: _GoalDrive):
     a slower approach that speeds up to the goal's speed before the region (:func:`_approaches`)."""
     ahead, v_want, v_range, pb = g.ahead, g.v_want, g.v_range, g.pb
     window = pb.window
-    line = cr.route_centerline(g.net, ahead, g.p0, goal_xy=g.goal_xy)
+    line = stop_inside(g.net, ahead, cr.route_centerline(g.net, ahead, g.p0, goal_xy=g.goal_xy))
     arc = cr.arc_inside(line, g.shapes) or cr.nearest_arc(line, g.shapes)
     s_end = float(np.sum(np.hypot(*np.diff(line, axis=0).T)))
     best = None
