@@ -149,3 +149,22 @@ def test_the_batch_row_and_table_say_what_failed_over_the_whole_drive():
     )
     assert "| `b.xml` | failed: collision after the goal | yes | yes | yes | yes | no: collision 7.3 s |" in md
     assert "| `c.xml` | passed | yes | yes | yes | yes | yes |" in md
+
+
+def test_past_the_goal_the_car_drives_on_along_its_lane_where_the_network_goes_on():
+    """DEU_Cologne-63_5_I-1: the car starts in the goal region, on lanelet 6, which goes on into
+    lanelet 22. The route used to end with lanelet 6 and the car stopped at its end with its
+    nose in lanelet 22 ("stops in it"); now the route goes on along the lane (each lanelet the
+    one the lane continues into) far enough that the reference is still driving when the run
+    ends, at the goal window's end."""
+    from mpcdrive.adapters.commonroad_route import next_in_lane
+
+    imp = load_commonroad(DIR / "DEU_Cologne-63_5_I-1.xml.gz")
+    plan, net = imp.plan, imp.scenario.lanelet_network
+    assert plan.mode == "through goal" and "stops" not in plan.note, plan.note
+    assert imp.route[0] == 6 and len(imp.route) > 2
+    for k in range(1, len(imp.route)):
+        assert imp.route[k] == next_in_lane(net, imp.route[k - 1], imp.route[:k])
+    prof = build_experiment(imp.spec).speed_profile
+    assert imp.spec.duration_s == pytest.approx(plan.goal_window_s[1] + imp.spec.dt_s)
+    assert prof.time_at(prof.path.length_m) > imp.spec.duration_s + 1.0

@@ -5,8 +5,10 @@
   time at the cruise speed plus the braking distance.
 * **Where to stop.** The reference speed is a curvature / friction limited
   :class:`~mpcdrive.paths.speed_profile.SpeedProfile` that ends at 0 where the path ends. With a
-  goal region the path goes on along the lane past it and the car drives through it (a region
-  reaching the route's end holds the car when it stops there); when no cruise speed has the car
+  goal region the path goes on along the lane past it (:func:`~.commonroad_route.lane_forward`:
+  with a time window, as far as the car drives by the window's end, when the run ends, and its
+  braking distance) and the car drives through it and on (a region reaching the route's end
+  holds the car when it stops there); when no cruise speed has the car
   in the region inside the time window that way and the goal's speed range admits a stop, the path
   ends in the middle of the route's stretch in the region instead (the car stops inside it, arriving
   by the window's end).
@@ -217,7 +219,14 @@ def plan_drive(net, pp, p0: np.ndarray, yaw0: float, v0: float, dt_s: float) -> 
     arc = (cr.arc_inside(line, shapes) or cr.nearest_arc(line, shapes)) if shapes else None
     if arc is None:  # a goal of lanelets only, or a region the centre line misses: stop at the route's end
         return _finish(route, line, "stop at route end", v_want, pb, note="stops at the end of the goal lanelet")
-    ahead = cr.lane_forward(net, route, arc[1] + brake_m)
+    # past the goal the route goes on along the lane (where the network does): far enough to
+    # brake after the region, and with a time window, for the car to drive on at its top speed
+    # until the run ends (the window's end) and brake then, rather than stop at the route's end
+    ahead_m = arc[1] + brake_m
+    if window is not None and math.isfinite(window[1]):
+        car_m = cr._arc_to(net.find_lanelet_by_id(route[0]), p0)  # (lane_forward counts from the lanelet's start)
+        ahead_m = max(ahead_m, car_m + max(v_hi, v0) * window[1] + brake_m)
+    ahead = cr.lane_forward(net, route, ahead_m)
     ctx = _GoalDrive(net, route, ahead, line, shapes, arc, p0, v_want, (v_lo, v_hi), v_goal, pb, goal_xy)
     first = None
     for way in (_through, _stop):
