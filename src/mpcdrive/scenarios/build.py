@@ -314,6 +314,10 @@ def build_road(spec, path: ReferencePath, track: Track | None = None) -> Road | 
         else:
             s, wl, wr = (np.array(c, float) for c in zip(*spec.widths))
             road = Road.from_widths(s, wl, wr, spec.margin_m, period if s[-1] - s[0] < period else 0.0)
+        if spec.start_m is not None or spec.end_m is not None:
+            if period > 0:
+                raise ValueError("road start_m / end_m: a closed path's road has no ends")
+            road = road.with_ends(spec.start_m, spec.end_m)
         return road if spec.neighbours is None else _with_neighbours(road, spec.neighbours)
     if track is not None and track.has_widths:
         assert track.width_left_m is not None and track.width_right_m is not None
@@ -333,7 +337,7 @@ def _with_neighbours(road: Road, rows) -> Road:
         Lane("route", 0.5 * (left + right), left, right),
         Lane("left", left + 0.5 * el, left + el, left),
     )
-    return Road(s, left, right, road.margin_m, lanes, 1, road.period_m)
+    return Road(s, left, right, road.margin_m, lanes, 1, road.period_m, road.start_m, road.end_m)
 
 
 def dynamic_params(v, scale=None) -> DynamicParams:
