@@ -579,7 +579,7 @@ def test_batch_writes_a_row_per_file_and_survives_a_broken_one(tmp_path):
     src = tmp_path / "in"
     src.mkdir()
     (src / "broken.xml").write_text("<commonRoad><lanelet")
-    (src / "DEU_A9-3_1_T-1.xml").write_bytes((DIR / "DEU_A9-3_1_T-1.xml").read_bytes())
+    (src / "USA_Peach-1_1_T-1.xml").write_bytes((DIR / "USA_Peach-1_1_T-1.xml").read_bytes())
     out = tmp_path / "out"
     r = subprocess.run(
         [sys.executable, "-m", "mpcdrive.cli", "commonroad", str(src), "--out", str(out), "--workers", "1"],
@@ -588,11 +588,11 @@ def test_batch_writes_a_row_per_file_and_survives_a_broken_one(tmp_path):
     )
     assert r.returncode == 0, r.stderr
     rows = json.loads((out / "summary.json").read_text())
-    assert set(rows) == {"broken.xml", "DEU_A9-3_1_T-1.xml"}
+    assert set(rows) == {"broken.xml", "USA_Peach-1_1_T-1.xml"}
     assert rows["broken.xml"]["error"] and not rows["broken.xml"]["passed"]
     assert not (out / "broken").exists()
-    a9 = rows["DEU_A9-3_1_T-1.xml"]
-    assert a9["error"] is None and a9["passed"]
+    peach = rows["USA_Peach-1_1_T-1.xml"]
+    assert peach["error"] is None and peach["passed"]
     for key in (
         "passed",
         "collision_free",
@@ -604,11 +604,13 @@ def test_batch_writes_a_row_per_file_and_survives_a_broken_one(tmp_path):
         "solve_time_us",
         "wall_s",
         "error",
+        "whole_drive",
     ):
-        assert key in a9
-    assert set(a9["solve_time_us"]) == {"p50", "p99"}
+        assert key in peach
+    assert set(peach["solve_time_us"]) == {"p50", "p99"}
+    assert peach["whole_drive"]["passed"] and peach["whole_drive"]["states_checked"] >= 2
     for f in ("solution.xml", "trajectory.csv", "metrics.json", "report.html", "commonroad_scene.png"):
-        assert (out / "DEU_A9-3_1_T-1" / f).is_file(), f
+        assert (out / "USA_Peach-1_1_T-1" / f).is_file(), f
     progress = [ln for ln in r.stderr.splitlines() if ln.startswith("[")]
     assert len(progress) == 2 and all(ln.startswith(("[1/2] ", "[2/2] ")) for ln in progress)
     assert "broken.xml error" in r.stderr

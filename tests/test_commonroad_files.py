@@ -40,15 +40,21 @@ def test_a_trajectory_repeating_its_initial_time_step_reads_once():
 
 
 def test_a_route_ending_where_its_lanelet_ends_keeps_the_lanes_width():
-    """DEU_Gar-1_1_T-1's route ends where its lanelet 47240 ends, on the lanelet's slanted closing
-    edge: measured there the road was 0.05 m to its left, and the file was refused as narrower
-    than the car. The edges are measured on into the successor: the road is the lane's width
-    (2.2 m at the narrowest, the lane's end) up to the route's end."""
+    """DEU_Gar-1_1_T-1's goal is on its start lanelet 47240, whose end is a slanted closing edge.
+    A route ending there (as the file's did before the route went on past the goal along the
+    lane) measured at its last point the road 0.05 m to its left, and the file was refused as
+    narrower than the car. The edges are measured on into the successor: the road is the lane's
+    width (2.2 m at the narrowest, the lane's end) up to the route's end."""
+    from mpcdrive.adapters import commonroad_route as cr
+    from mpcdrive.adapters.commonroad import _road
+
     imp = load_commonroad(DIR / "DEU_Gar-1_1_T-1.xml")
-    assert imp.route == (47240,)
-    w = np.array(imp.spec.road.widths)
-    assert w[:, 1:].sum(axis=1).min() > 2.1
-    assert w[-1, 1] == pytest.approx(w[-2, 1], abs=0.06) and w[-1, 2] == pytest.approx(w[-2, 2], abs=0.06)
+    assert imp.route[0] == 47240
+    net = imp.scenario.lanelet_network
+    line = cr.route_centerline(net, [47240], np.asarray(imp.planning_problem.initial_state.position, float))
+    _, left, right, _ = _road(net, (47240,), line)
+    assert (left + right).min() > 2.1
+    assert left[-1] == pytest.approx(left[-2], abs=0.06) and right[-1] == pytest.approx(right[-2], abs=0.06)
 
 
 def _make_cases():

@@ -198,3 +198,56 @@ def test_a_drive_on_the_readme_circle_reports_its_exact_excess():
         exact = max(exact, np.hypot(poly[:, 0], poly[:, 1]).max() - 2.0, 1.0 - max(d, 0.0))
     assert exact > 0.02
     assert compute_metrics(r).max_lane_excess_m == pytest.approx(exact, abs=TOL)
+
+
+def test_a_body_past_the_road_end_is_outside_by_how_far_it_reaches():
+    """A straight road from s = 2 m to s = 10 m (a lane with no predecessor / successor): a body
+    whose nose is 2.24 m past the end is 2.24 m outside, one wholly before it 0; a corner also
+    beyond a side edge is outside by the straight-line distance to the road's corner; behind the
+    start likewise. Poses at random, each against the exact rectangle."""
+    road = Road.from_widths([0.0, 12.0], [1.5, 1.5], [1.5, 1.5], 0.0, start_m=2.0, end_m=10.0)
+    path = StraightPath((0.0, 0.0), (12.0, 0.0))  # (the path goes on past the road's end)
+    car = Footprint(4.48, 1.8)
+    nose = np.array([[10.0 - 2.24, 0.0, 0.0]])  # the centre 2.24 m before the end: the nose on it
+    assert road.measure_excess_m(path, nose, nose[:, 0], car)[0] == pytest.approx(0.0, abs=TOL)
+    past = nose + [2.24, 0.0, 0.0]
+    assert road.measure_excess_m(path, past, past[:, 0], car)[0] == pytest.approx(2.24, abs=TOL)
+    assert road.measure_end_excess_m(path, past, past[:, 0], car)[0] == pytest.approx(2.24, abs=TOL)
+    # without its ends the same road reports nothing
+    assert road.with_ends(None, None).measure_excess_m(path, past, past[:, 0], car)[0] == 0.0
+    rng = np.random.default_rng(11)
+    poses = np.column_stack([rng.uniform(-1.0, 14.0, 300), rng.uniform(-1.0, 1.0, 300), rng.uniform(-0.4, 0.4, 300)])
+    got = road.measure_excess_m(path, poses, poses[:, 0], car)
+    ends = road.measure_end_excess_m(path, poses, poses[:, 0], car)
+    exact, exact_ends = [], []
+    for p in poses:
+        c = car.polygon(*p).points  # a convex body: its farthest point outside is a corner
+        side = np.maximum(np.abs(c[:, 1]) - 1.5, 0.0)
+        beyond = np.maximum(np.maximum(c[:, 0] - 10.0, 2.0 - c[:, 0]), 0.0)
+        exact.append(np.max(np.hypot(side, beyond)))
+        exact_ends.append(np.max(beyond))
+    assert np.count_nonzero(np.array(exact_ends) > 0.1) > 50
+    np.testing.assert_allclose(got, exact, rtol=0, atol=TOL)
+    np.testing.assert_allclose(ends, exact_ends, rtol=0, atol=TOL)
+    # the controller rows' form (body_excess_m) counts the ends too
+    rows = road.body_excess_m(poses[:, 0], poses[:, 1], 0.0, poses[:, 2], car)
+    assert np.all(rows >= np.array(exact_ends) - 1e-9)
+    assert float(road.body_excess_m(past[0, 0], 0.0, 0.0, 0.0, car)) == pytest.approx(2.24)
+
+
+def test_road_ends_are_kept_by_every_road_built_from_it():
+    from mpcdrive.scenarios.build import build_road
+    from mpcdrive.scenarios.schema import RoadSpec
+
+    road = Road.from_widths([0.0, 5.0], [1.0, 1.2], [1.0, 1.0], 0.1, start_m=-1.0, end_m=4.0)
+    spec = RoadSpec(widths=[(0.0, 1.0, 1.0), (5.0, 1.2, 1.0)], neighbours=[(0.0, 3.0, 0.0)], start_m=-1.0, end_m=4.0)
+    built = build_road(spec, StraightPath((0.0, 0.0), (5.0, 0.0)))
+    assert built is not None and len(built.lanes) == 3
+    for r in (road, built, built.whole(), built.band([1]), built.band([1, 2])):
+        assert (r.start_m, r.end_m) == (-1.0, 4.0)
+    with pytest.raises(ValueError, match="start_m .* must be before"):
+        Road.per_side(1.0, 1.0).with_ends(3.0, 2.0)
+    with pytest.raises(ValueError, match="periodic"):
+        Road.from_widths([0.0, 5.0], [1.0, 1.0], [1.0, 1.0], 0.0, period_m=10.0, end_m=4.0)
+    with pytest.raises(ValueError, match="start_m 3 m must be before"):
+        RoadSpec(lane_width_m=3.0, start_m=3.0, end_m=1.0)

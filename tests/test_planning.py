@@ -46,10 +46,7 @@ def two_lanes(oncoming: bool = False, end_m: float | None = None) -> Road:
         Lane("route", np.zeros(2), np.full(2, W / 2), np.full(2, -W / 2)),
         Lane("left", np.full(2, W), np.full(2, 1.5 * W), np.full(2, W / 2), oncoming=oncoming),
     )
-    road = Road(s, W / 2, -W / 2, 0.1, lanes, 0)
-    if end_m is not None:
-        object.__setattr__(road, "end_m", end_m)
-    return road
+    return Road(s, W / 2, -W / 2, 0.1, lanes, 0, end_m=end_m)
 
 
 def car(x: float, y: float = 0.0, v: float = 0.0) -> Obstacle:

@@ -238,3 +238,65 @@ def test_no_warning_on_builtin_or_commonroad_scenarios():
             warn_suspicious(reject_initial_overlap(imp.spec, str(f)), str(f))
             checked += 1
         assert checked >= 8
+
+
+def _commonroad_run(whole: dict, events=()) -> dict:
+    """The metrics of a CommonRoad run that passed CommonRoad's checks up to the goal (step 40,
+    t = 4 s), with ``whole`` the checks of its whole drive."""
+    block = {"collision_free": True, "road_compliant": True, "feasible": True, "states_checked": 90}
+    block.update(goal_t_s=4.0, collision_t_s=None, off_road_t_s=None, infeasible_t_s=None, past_road_end_m=None)
+    block.update(whole)
+    block["passed"] = block["collision_free"] and block["road_compliant"] and block["feasible"]
+    return {
+        "collisions": len(events),
+        "collision_events": list(events),
+        "min_obstacle_clearance_m": 1.0,
+        "road_given": True,
+        "max_lane_excess_m": 0.0,
+        "goal_region_reached": True,
+        "commonroad": {
+            "collision_free": True,
+            "road_compliant": True,
+            "ks_feasible": True,
+            "goal_reached": True,
+            "goal_step": 40,
+            "vehicle_model": "ST",
+            "solution_valid": True,
+            "passed": block["passed"],
+            "whole_drive": block,
+        },
+    }
+
+
+def test_a_drive_that_reaches_the_goal_and_then_collides_or_leaves_the_road_is_not_passed():
+    clean = run_verdict(_commonroad_run({}))
+    assert clean.passed and "whole drive clean (90 states)" in clean.text()
+    # a collision 3.3 s after the goal that only CommonRoad's checker saw
+    hit = run_verdict(_commonroad_run({"collision_free": False, "collision_t_s": 7.3}))
+    assert hit.failed and hit.unsafe and hit.collided
+    assert hit.part("collision").reason.startswith(
+        "the CommonRoad checker found a collision after the goal at t = 7.30 s"
+    )
+    assert hit.part("commonroad").reason.endswith("; whole drive: COLLISION after the goal at t = 7.30 s")
+    assert hit.part("goal").ok is True  # the goal was reached safely: what came after fails the drive
+    # past the mapped road's end after the goal (the drivability checker's boundary is open there)
+    off = run_verdict(_commonroad_run({"road_compliant": False, "off_road_t_s": 9.5, "past_road_end_m": 2.24}))
+    assert off.failed and off.off_road and off.part("goal").ok is True
+    assert (
+        off.part("road").reason
+        == "left the road after the goal at t = 9.50 s (the body 2.24 m beyond the road's start or end)"
+    )
+    assert "whole drive: OFF THE ROAD after the goal at t = 9.50 s (the body 2.24 m beyond" in off.text()
+    # infeasible after the goal: failed, not unsafe
+    slip = run_verdict(_commonroad_run({"feasible": False, "infeasible_t_s": 6.0}))
+    assert slip.failed and not slip.unsafe
+    assert slip.reasons == [
+        "CommonRoad checker: collision-free, road-compliant, ST-feasible, goal reached at step 40; "
+        "whole drive: not ST-feasible after the goal at t = 6.00 s"
+    ]
+    # mpcdrive's own contact before the goal still means the goal was not reached safely; one after it does not
+    event = {"obstacle": 0, "name": "car", "step": 0, "steps": 1, "depth_m": 0.1}
+    before = run_verdict(_commonroad_run({"collision_free": False, "collision_t_s": 3.0}, [{**event, "t_s": 3.0}]))
+    after = run_verdict(_commonroad_run({"collision_free": False, "collision_t_s": 5.0}, [{**event, "t_s": 5.0}]))
+    assert before.part("goal").ok is False and after.part("goal").ok is True
+    assert before.collided and after.collided

@@ -14,7 +14,9 @@ Import:
   puts the car in the goal region inside the goal's time window.
 * **Road.** The route's lanelets edge by edge along the centre line (the controller keeps the
   body inside them), the same-direction lanes beside them as neighbour lanes; where the route
-  lane tapers narrower than any car, the lanes beside it join the road there (:func:`_road`).
+  lane tapers narrower than any car, the lanes beside it join the road there (:func:`_road`);
+  where the route's first / last lanelet is where the mapped road begins / ends, the road's
+  ``start_m`` / ``end_m`` (:func:`_road_ends`): a body beyond them is off the road.
 * **Obstacles.** Static and dynamic obstacles with rectangle / circle / polygon shapes; a dynamic
   obstacle's recorded trajectory is its known prediction (:class:`TrajectoryMotion`).
 * **Vehicle.** ``kinematic4`` (speed state) with the CommonRoad Ford Escort preset's wheelbase,
@@ -30,15 +32,15 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from ..models.presets import PRESETS
 from ..scenarios.schema import ScenarioSpec
-from ..sim.metrics import CommonRoadCheck
-from .commonroad_goal import DrivePlan, accel_limit, friction_accel, goal_spec, plan_drive
+from ..sim.metrics import CommonRoadCheck, WholeDriveCheck
+from .commonroad_goal import ROAD_MARGIN_M, DrivePlan, accel_limit, friction_accel, goal_spec, plan_drive, road_ends_m
 from .commonroad_route import drivable_lanelets, lane_strips, point, route_edges, route_ends, scalar
 
 PRESET = "commonroad_ford_escort"
@@ -47,8 +49,6 @@ PRESET = "commonroad_ford_escort"
 NEIGHBOUR_LANES = True
 #: the most lanes beside the route lane given to the planner (the nearest)
 MAX_LANES_BESIDE = 10
-#: distance [m] the body keeps from the road's edges
-ROAD_MARGIN_M = 0.1
 #: a route lane narrower than this [m] (the widest CommonRoad vehicle and the road margin on both
 #: sides) takes in the same-direction lanes beside it (:func:`_road`)
 TAPER_WIDTH_M = max(p.width_m for n, p in PRESETS.items() if n.startswith("commonroad_")) + 2 * ROAD_MARGIN_M
@@ -98,28 +98,29 @@ class CommonRoadImport:
         """Write ``solution.xml`` (up to the goal, else the whole drive) and ``commonroad_scene.png``
         (commonroad-io's renderer), hand the lanelet polygons to the replay (``result.meta``), and
         return the ``commonroad`` metrics (:class:`~mpcdrive.sim.CommonRoadCheck`): route, plan,
-        goal step, the drivability checker's verdicts and whether CommonRoad's solution checker
-        accepts the solution. Among SUMO traffic the checks and the figure take the vehicles as
-        SUMO drove them, and ``sumo.json`` is written (:func:`~.commonroad_traffic.sumo_report`)."""
+        goal step, the drivability checker's verdicts up to the goal, whether CommonRoad's
+        solution checker accepts the solution, and the verdicts of the whole drive (one check of
+        every state: :func:`check_drives`). Among SUMO traffic the checks and the figure take the
+        vehicles as SUMO drove them, and ``sumo.json`` is written
+        (:func:`~.commonroad_traffic.sumo_report`)."""
         from .commonroad_figures import lanelet_polygons, write_scene_figure
 
         plant = self.runtime.get("plant")
         if plant is not None:
-            from dataclasses import replace
-
             from ..io import write_json
             from .commonroad_traffic import driven_scenario, sumo_report
 
             plant.close()
             self = replace(self, scenario=driven_scenario(self, plant), runtime={})
-            whole = check_drive(self, result, whole_drive=True)
+        report, whole = check_drives(self, result)
+        if plant is not None:
             write_json(Path(out_dir) / "sumo.json", sumo_report(self, plant, result, whole))
-        report = check_drive(self, result)
         path = write_solution(self, result, Path(out_dir), report.goal_step)
-        # CommonRoad's own solution checker has the last word (its road boundary is a triangulation
-        # closed at the road's ends, stricter than the checks above)
+        # CommonRoad's own solution checker has the last word up to the goal (its road boundary is
+        # a triangulation closed at the road's ends, stricter than the checks above); after the
+        # goal the drive goes on, and the whole of it is judged too
         valid, why = solution_accepted(self, path) if report.passed else (False, "not checked: the drive did not pass")
-        passed = report.passed and valid
+        passed = report.passed and valid and whole.passed_whole
         fig = write_scene_figure(self, result, Path(out_dir), report.goal_step)
         result.meta["lanelets"] = lanelet_polygons(self.scenario)
         plan = self.plan
@@ -140,6 +141,7 @@ class CommonRoadImport:
                 vehicle_model=solution_model(self, result),
                 solution_valid=valid,
                 solution_check=why,
+                whole_drive=whole.whole_drive_check(result),
             ),
             "figures": [fig.name],
         }
@@ -227,6 +229,17 @@ def _lane_rows(net, route, line: np.ndarray, left: np.ndarray, right: np.ndarray
     return lanes
 
 
+def _road_ends(net, plan: DrivePlan) -> tuple[float | None, float | None]:
+    """(start_m, end_m) [m] along the reference path the run follows (built as the scenario's
+    path is) where the mapped road begins / ends around the route
+    (:func:`~.commonroad_goal.road_ends_m`; None where the lanelet network goes on)."""
+    from ..scenarios.build import build_path
+    from ..scenarios.schema import WaypointsSpec
+
+    path = build_path(WaypointsSpec(type="waypoints", points=[tuple(map(float, p)) for p in plan.centerline], ds_m=0.2))
+    return road_ends_m(net, plan.route, path)
+
+
 def _distinct_steps(states: list) -> list:
     """``states`` with one state per time step: of states sharing a time step the later one.
 
@@ -278,6 +291,7 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
     v0 = max(0.0, scalar(getattr(init, "velocity", None)) or 0.0)
     plan = plan_drive(net, pp, p0, yaw0, v0, dt)
     s_k, left_k, right_k, _ = _road(net, plan.route, plan.centerline)
+    start_m, end_m = _road_ends(net, plan)
     pre = PRESETS[PRESET]
     v_max = max(plan.v_cruise_mps, v0) + 2.0
     a_lim = accel_limit(v_max)
@@ -301,6 +315,9 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
                 "widths": [[float(a), float(b), float(c)] for a, b, c in zip(s_k, left_k, right_k)],
                 "lane_rows": _lane_rows(net, plan.route, plan.centerline, left_k, right_k) if NEIGHBOUR_LANES else None,
                 "margin_m": ROAD_MARGIN_M,
+                # where the mapped road begins / ends along the path (None: it goes on)
+                "start_m": start_m,
+                "end_m": end_m,
                 # a goal region on the route inside a time window: back in the route lane by its end
                 "return_by_s": plan.goal_window_s[1]
                 if plan.goal_arc_m is not None
@@ -504,8 +521,14 @@ def write_solution(imp: CommonRoadImport, result, out_dir: Path, last_step: int 
 
 @dataclass(frozen=True)
 class CheckReport:
-    """The drivability checker's verdicts on a driven trajectory; ``feasible`` under the vehicle
-    model ``model`` (``KS``, or ``ST`` for a drive on the ST plant)."""
+    """The drivability checker's verdicts on a driven trajectory's first ``steps_checked`` states;
+    ``feasible`` under the vehicle model ``model`` (``KS``, or ``ST`` for a drive on the ST plant).
+    ``collision_step``, ``off_road_step``, ``infeasible_step``: the first state that failed each
+    check (None: none did). ``past_end_m``: how far [m] the body reached behind the mapped
+    road's start or past its end (mpcdrive's measure, ``meta["road_end_excess_m"]``; None: not
+    judged, or a road without ends), counted as off the road (``off_road_step``) only in a
+    report of the whole drive (:meth:`with_road_ends`): up to the goal CommonRoad's own checks
+    judge, and its solution checker closes the road's ends itself."""
 
     collision_free: bool
     road_compliant: bool
@@ -513,11 +536,20 @@ class CheckReport:
     goal_step: int | None
     steps_checked: int
     model: str = "KS"
+    collision_step: int | None = None
+    off_road_step: int | None = None
+    infeasible_step: int | None = None
+    past_end_m: float | None = None
 
     @property
     def passed(self) -> bool:
         """Collision-free, on the road, feasible and at the goal."""
         return self.collision_free and self.road_compliant and self.feasible and self.goal_step is not None
+
+    @property
+    def passed_whole(self) -> bool:
+        """Collision-free, on the road and feasible over the states checked (the goal aside)."""
+        return self.collision_free and self.road_compliant and self.feasible
 
     def line(self) -> str:
         goal = "not reached" if self.goal_step is None else f"reached at step {self.goal_step}"
@@ -526,12 +558,94 @@ class CheckReport:
             f"{self.model}-feasible {self.feasible}, goal {goal}, {self.steps_checked} states"
         )
 
+    def until(self, last: int) -> CheckReport:
+        """This report cut to states 0 .. ``last``: a check fails there when its first failing
+        state is among them (the checks judge each state, or each step from the state before,
+        on its own: the verdicts on a drive's first states are those of the whole drive's)."""
+        if last + 1 >= self.steps_checked:
+            return self
+        collision, off_road, infeasible = (
+            k if k is not None and k <= last else None
+            for k in (self.collision_step, self.off_road_step, self.infeasible_step)
+        )
+        return replace(
+            self,
+            collision_free=collision is None,
+            road_compliant=off_road is None,
+            feasible=infeasible is None,
+            steps_checked=last + 1,
+            collision_step=collision,
+            off_road_step=off_road,
+            infeasible_step=infeasible,
+        )
+
+    def with_road_ends(self, result) -> CheckReport:
+        """This report with the body's reach past the mapped road's start or end (more than
+        :data:`~mpcdrive.sim.LANE_TOLERANCE_M`) counted as off the road: the drivability checker's
+        road boundary is open at the road's ends (a car driving off the end of the map is on no
+        boundary), mpcdrive's road knows them (:attr:`~mpcdrive.scene.Road.end_m`)."""
+        from ..sim import LANE_TOLERANCE_M
+
+        past = result.meta.get("road_end_excess_m")
+        if past is None:
+            return self
+        past = np.asarray(past, float)[: self.steps_checked]
+        beyond = np.flatnonzero(past > LANE_TOLERANCE_M)
+        off = self.off_road_step
+        if beyond.size:
+            off = int(beyond[0]) if off is None else min(off, int(beyond[0]))
+        return replace(
+            self,
+            road_compliant=off is None,
+            off_road_step=off,
+            past_end_m=float(past.max()) if past.size else 0.0,
+        )
+
+    def whole_drive_check(self, result) -> WholeDriveCheck:
+        """This report of the whole drive as ``metrics.json["commonroad"]["whole_drive"]``, the
+        first failing states as times [s] of ``result``."""
+        t = np.asarray(result.t_s, float)
+
+        def at(k: int | None) -> float | None:
+            return None if k is None else float(t[k])
+
+        return WholeDriveCheck(
+            collision_free=self.collision_free,
+            road_compliant=self.road_compliant,
+            feasible=self.feasible,
+            states_checked=self.steps_checked,
+            collision_t_s=at(self.collision_step),
+            off_road_t_s=at(self.off_road_step),
+            infeasible_t_s=at(self.infeasible_step),
+            past_road_end_m=self.past_end_m,
+            goal_t_s=at(self.goal_step),
+        )
+
+
+def check_drives(imp: CommonRoadImport, result) -> tuple[CheckReport, CheckReport]:
+    """(up to the goal, whole drive): the drivability checker's verdicts on the drive up to the
+    goal (else all of it; CommonRoad's verdict, as :func:`check_drive`) and on the whole drive,
+    step 0 to the end of the run, the body's reach past the mapped road's ends counted as off
+    the road (:meth:`CheckReport.with_road_ends`). Every state is checked once: the report up to
+    the goal is the whole drive's cut there (:meth:`CheckReport.until`)."""
+    whole = _check_states(imp, result)
+    goal = whole if whole.goal_step is None else whole.until(whole.goal_step)
+    return goal, whole.with_road_ends(result)
+
 
 def check_drive(imp: CommonRoadImport, result, whole_drive: bool = False) -> CheckReport:
     """Check the driven trajectory (up to the goal, else all of it; all of it with
-    ``whole_drive``) with the drivability checker: collisions with the scenario's obstacles,
-    road boundary, and feasibility of the solution's trajectory under its model (KS; ST for a
-    drive on the ST plant) with the run's vehicle."""
+    ``whole_drive``, the body's reach past the mapped road's ends then counted as off the road)
+    with the drivability checker: collisions with the scenario's obstacles, road boundary, and
+    feasibility of the solution's trajectory under its model (KS; ST for a drive on the ST
+    plant) with the run's vehicle (:func:`check_drives` gives both at the cost of one)."""
+    goal, whole = check_drives(imp, result)
+    return whole if whole_drive else goal
+
+
+def _check_states(imp: CommonRoadImport, result) -> CheckReport:
+    """The drivability checker on every state of the drive, with the first state that fails
+    each check; ``goal_step`` the planning problem's (:func:`goal_step`)."""
     from commonroad.geometry.shape import Rectangle
     from commonroad.prediction.prediction import TrajectoryPrediction
     from commonroad.scenario.state import CustomState
@@ -545,7 +659,7 @@ def check_drive(imp: CommonRoadImport, result, whole_drive: bool = False) -> Che
     from commonroad_dc.feasibility.vehicle_dynamics import VehicleDynamics, VehicleType
 
     g = goal_step(imp, result)
-    last = g if g is not None and not whole_drive else len(result.t_s) - 1
+    last = len(result.t_s) - 1
     v = imp.spec.vehicle
     centre_states = [
         CustomState(
@@ -555,22 +669,42 @@ def check_drive(imp: CommonRoadImport, result, whole_drive: bool = False) -> Che
         )
         for k in range(last + 1)
     ]
+    steps = [st.time_step for st in centre_states]
     ego_traj = Trajectory(centre_states[0].time_step, centre_states)
     ego = create_collision_object(TrajectoryPrediction(ego_traj, Rectangle(v.length_m, v.width_m)))
     cc = create_collision_checker(imp.scenario)
-    collision_free = not cc.collide(ego)
+    collision = None
+    if cc.collide(ego):  # which state: the obstacles as they are at its time step
+        collision = _first(len(steps), lambda k: cc.time_slice(steps[k]).collide(ego.obstacle_at_time(steps[k])))
     _, road = create_road_boundary_obstacle(imp.scenario, method="obb_rectangles")
-    road_ok = not road.collide(ego)
+    off_road = _first(len(steps), lambda k: road.collide(ego.obstacle_at_time(steps[k]))) if road.collide(ego) else None
     vtype = VehicleType[imp.vehicle_type]
     model = solution_model(imp, result)
     if model == "ST":  # feasible under the model it was driven on
         traj, dyn = st_solution_trajectory(imp, result, last), VehicleDynamics.ST(vtype)
     else:
         traj, dyn = solution_trajectory(imp, result, last), VehicleDynamics.KS(vtype)
-    feasible, _ = trajectory_feasibility(traj, dyn, imp.spec.dt_s)
+    feasible, inputs = trajectory_feasibility(traj, dyn, imp.spec.dt_s)
+    # the inputs reconstructed up to and including the step that fails: its target state's index
+    infeasible = None if feasible else len(inputs.state_list)
     return CheckReport(
-        bool(collision_free), bool(road_ok), bool(feasible), g, last + 1, "ST" if model == "ST" else "KS"
+        collision is None,
+        off_road is None,
+        bool(feasible),
+        g,
+        last + 1,
+        "ST" if model == "ST" else "KS",
+        collision,
+        off_road,
+        infeasible,
     )
+
+
+def _first(n: int, failed) -> int:
+    """The first k < n with ``failed(k)``: the checker found the drive failing, so one does (if
+    none is found state by state, the first state: counted as failing from the start, which
+    fails the verdict up to the goal as well, as the checker's own verdict does)."""
+    return next((k for k in range(n) if failed(k)), 0)
 
 
 def solution_accepted(imp: CommonRoadImport, solution_file: Path) -> tuple[bool, str]:
@@ -595,8 +729,6 @@ def with_vehicle(imp: CommonRoadImport, vehicle: str | None = None, plant: str |
     :func:`~.commonroad_vehicles.commonroad_plant`, the ``plant_factory`` of
     :func:`~mpcdrive.scenarios.build_experiment`); unchanged when both are None. ValueError for an
     unknown name."""
-    from dataclasses import replace
-
     if vehicle is None and plant is None:
         return imp
     from .commonroad_vehicles import apply_vehicle, solution_vehicle_type

@@ -14,6 +14,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..sim.verdict import LANE_TOLERANCE_M
+
 ROW_FIELDS = (
     "passed",
     "collision_free",
@@ -25,6 +27,7 @@ ROW_FIELDS = (
     "solve_time_us",
     "wall_s",
     "error",
+    "whole_drive",
 )
 SUFFIXES = (".xml", ".xml.gz")
 
@@ -98,6 +101,7 @@ def _empty_row() -> dict:
         "traffic": None,
         "prediction": None,
         "sumo": None,
+        "whole_drive": None,
     }
 
 
@@ -144,6 +148,7 @@ def drive_file(task: BatchTask) -> dict:
             vehicle_model=cr.vehicle_model,
             plan=cr.plan,
             sumo=_sumo_row(Path(task.out_dir)),
+            whole_drive=None if cr.whole_drive is None else cr.whole_drive.as_dict(),
         )
     except Exception as e:  # a file's failure is its row; the batch goes on
         import shutil
@@ -208,7 +213,47 @@ def verdict(row: dict) -> str:
     ]
     if not failed and row.get("solution_valid") is False:
         failed = [f"solution rejected by valid_solution ({row.get('solution_check')})"]
+    failed += [name for name in _whole_drive_failures(row) if name not in failed]
     return "failed: " + ", ".join(failed or ["unknown"])
+
+
+def _whole_drive_failures(row: dict) -> list[str]:
+    """The checks of the whole drive (``row["whole_drive"]``) that failed where the checks up to
+    the goal did not: ``collision after the goal``, ``off road beyond the road's start or end``, ..."""
+    w = row.get("whole_drive") or {}
+    after = " after the goal" if row.get("goal_reached") else ""
+    out = []
+    for key, up_to_goal, name in (
+        ("collision_free", "collision_free", "collision"),
+        ("road_compliant", "road_compliant", "off road"),
+        ("feasible", "ks_feasible", f"{row.get('vehicle_model') or 'KS'}-infeasible"),
+    ):
+        if w.get(key) is False and row.get(up_to_goal) is not False:
+            beyond = key == "road_compliant" and (w.get("past_road_end_m") or 0.0) > LANE_TOLERANCE_M
+            out.append(name + (" beyond the road's start or end" if beyond else after))
+    return out
+
+
+def _whole_drive_cell(r: dict) -> str:
+    """``yes``, or what failed first over the whole drive and when: ``no: off road 10.7 s (2.25 m
+    beyond its start or end)``; ``-`` without the checks."""
+    w = r.get("whole_drive")
+    if not w:
+        return "-"
+    if w.get("passed"):
+        return "yes"
+    failed = []
+    for key, t_key, name in (
+        ("collision_free", "collision_t_s", "collision"),
+        ("road_compliant", "off_road_t_s", "off road"),
+        ("feasible", "infeasible_t_s", "infeasible"),
+    ):
+        if w.get(key) is False:
+            t = w.get(t_key)
+            failed.append(name + ("" if t is None else f" {t:.1f} s"))
+            if key == "road_compliant" and (w.get("past_road_end_m") or 0.0) > LANE_TOLERANCE_M:
+                failed[-1] += f" ({w['past_road_end_m']:.2f} m beyond its start or end)"
+    return "no: " + ", ".join(failed)
 
 
 def _cell(v, fmt="{:.2f}") -> str:
@@ -239,8 +284,10 @@ def summary_markdown(rows: dict, header: str = "") -> str:
         "",
         f"{passed} of {n} files passed (collision-free, on the road, feasible and at the goal, as "
         "CommonRoad's drivability checker judges the drive up to the goal, and the solution accepted by "
-        "CommonRoad's solution checker). Feasible: under the solution's vehicle model, KS (ST for a "
-        "drive on the ST plant).",
+        "CommonRoad's solution checker; and the whole drive, start to end of the run, collision-free, on "
+        "the road and not past its mapped end, and feasible). Feasible: under the solution's vehicle model, "
+        "KS (ST for a drive on the ST plant). The columns collision-free to goal reached are up to the goal; "
+        "whole drive: the checks of the whole drive (what failed first, when).",
         "",
         "Min clearance: footprint to obstacle over the checked drive (whole run in brackets when smaller). "
         "Step: the controller's whole step (lane decision, obstacle terms, QP), wall time.",
@@ -248,16 +295,16 @@ def summary_markdown(rows: dict, header: str = "") -> str:
         "Traffic: recorded (replayed) or sumo (SUMO drives the vehicles, reacting to the ego); prediction: "
         "known (the recorded futures) or lane (constant speed along the lane, growing uncertainty).",
         "",
-        "| file | verdict | collision-free | road-compliant | feasible | goal reached | "
+        "| file | verdict | collision-free | road-compliant | feasible | goal reached | whole drive | "
         "min clearance [m] | solver failures | step p50 / p99 [us] | wall [s] | traffic / prediction |",
-        "|" + "---|" * 11,
+        "|" + "---|" * 12,
     ]
     for name, r in rows.items():
         st = r["solve_time_us"]
         lines.append(
             f"| `{name}` | {'error' if r.get('error') else verdict(r).split(' (')[0]} | {_cell(r['collision_free'])} | "
             f"{_cell(r['road_compliant'])} | {_cell(r['ks_feasible'])} | {_cell(r['goal_reached'])} | "
-            f"{_clearance_cell(r)} | {_cell(r['solver_failures'])} | "
+            f"{_whole_drive_cell(r)} | {_clearance_cell(r)} | {_cell(r['solver_failures'])} | "
             f"{_cell(st['p50'], '{:.0f}')} / {_cell(st['p99'], '{:.0f}')} | {_cell(r['wall_s'], '{:.1f}')} | "
             f"{r.get('traffic') or '-'} / {r.get('prediction') or '-'} |"
         )

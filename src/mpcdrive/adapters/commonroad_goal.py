@@ -5,11 +5,17 @@
   time at the cruise speed plus the braking distance.
 * **Where to stop.** The reference speed is a curvature / friction limited
   :class:`~mpcdrive.paths.speed_profile.SpeedProfile` that ends at 0 where the path ends. With a
-  goal region the path goes on along the lane past it and the car drives through it (a region
-  reaching the route's end holds the car when it stops there); when no cruise speed has the car
+  goal region the path goes on along the lane past it (:func:`~.commonroad_route.lane_forward`:
+  with a time window, as far as the car drives by the window's end, when the run ends, and its
+  braking distance) and the car drives through it and on (a region reaching the route's end
+  holds the car when it stops there); when no cruise speed has the car
   in the region inside the time window that way and the goal's speed range admits a stop, the path
   ends in the middle of the route's stretch in the region instead (the car stops inside it, arriving
   by the window's end).
+* **Road's end.** Where the route ends at the end of the mapped road (a lane without a
+  successor, nothing beside it going on: :func:`~.commonroad_route.mapped_road_ends`), the path
+  ends :data:`FRONT_REACH_M` + :data:`ROAD_MARGIN_M` before it (:func:`stop_inside`): the car
+  stops with its whole body on the road, its front bumper the road margin short of the end.
 * **Speed.** The cruise speed (the profile's top speed) is the goal speed range's middle, else
   the initial speed (:data:`DEFAULT_SPEED_MPS` for a car starting at rest); with a time window it
   is the speed closest to that (inside the goal's speed range) whose profile is in the goal region
@@ -41,6 +47,13 @@ APPROACH_LEAD_M = 5.0  # a slower approach is back at the goal speed this far be
 #: the longest wheelbase of them (the BMW 320i's 2.58 m): the speed slows where a bend sets in
 #: faster than that (a roundabout's exit, a tight turn at a junction)
 CURVATURE_RATE_1PMS = 0.95 * _LIMIT_PRESET.max_steer_rate_rad_s / _LIMIT_PRESET.params.wheelbase_m
+#: distance [m] the body keeps from the road's edges (the controller's road margin), and the
+#: front bumper from the mapped road's end where the car stops there
+ROAD_MARGIN_M = 0.1
+#: how far [m] the front bumper reaches ahead of the reference point (the centre of gravity, the
+#: middle of CommonRoad's rectangle) on the longest CommonRoad vehicle (VW Vanagon: 4.569 m): one
+#: path serves every ``--vehicle``
+FRONT_REACH_M = max(0.5 * p.length_m for n, p in PRESETS.items() if n.startswith("commonroad_"))
 
 
 #: the share of the tyres' friction circle (CommonRoad's ``a_max``, the radius its feasibility
@@ -127,6 +140,43 @@ def start_arc(path, p0: np.ndarray) -> float:
     return float(min(max(path.project(np.asarray(p0, float), 0.0, 10.0)[0], 0.0), path.length_m))
 
 
+#: how far [m] along the path from its own end a route's closing edge is looked for (the path
+#: ends on the route's last lanelet's centre line; a slanted edge reaches a few metres from it)
+END_SEARCH_M = 20.0
+
+
+def road_ends_m(net, route, path) -> tuple[float | None, float | None]:
+    """(start_m, end_m): the arc lengths [m] along ``path`` (the route's reference path; its
+    ends extend along their tangents) where the mapped road begins / ends around ``route``
+    (:func:`~.commonroad_route.mapped_road_ends`; None where the network goes on). A closing
+    edge counts from its point nearest the road (a slanted edge: its near corner), and of lanes
+    side by side the road reaches as far as the farthest: past a lane's end the lane beside it is
+    still road. Each edge is projected near its own end of the path (a route that comes back
+    to where it began has both edges in one place)."""
+    start, end = cr.mapped_road_ends(net, route)
+
+    def arcs(pts: np.ndarray, near_m: float) -> np.ndarray:  # (lanelets, 2): each closing edge's points
+        s = [path.project(np.asarray(q, float), near_m, END_SEARCH_M)[0] for q in pts]
+        return np.array(s, float).reshape(-1, 2)
+
+    start_m = None if start is None else float(np.min(arcs(start, 0.0).max(axis=1)))
+    end_m = None if end is None else float(np.max(arcs(end, path.length_m).min(axis=1)))
+    return start_m, end_m
+
+
+def stop_inside(net, route, line: np.ndarray) -> np.ndarray:
+    """``line`` (the route's centre line) ending where a car stopping at its end has its whole
+    body on the road: :data:`FRONT_REACH_M` + :data:`ROAD_MARGIN_M` before the mapped road's end
+    where the route ends there (and never closer than a metre ahead of the car, which stands a
+    metre along the line); unchanged where the road goes on past the line's end."""
+    _, end_m = road_ends_m(net, route, _line_path(line))
+    length = float(np.sum(np.hypot(*np.diff(line, axis=0).T)))
+    if end_m is None:
+        return line
+    s_stop = max(end_m - FRONT_REACH_M - ROAD_MARGIN_M, min(2.0, length))
+    return _cut(line, s_stop) if s_stop < length - 1e-6 else line
+
+
 def _cut(line: np.ndarray, s_end: float) -> np.ndarray:
     s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(line, axis=0).T))]
     k = int(np.searchsorted(s, s_end))
@@ -163,6 +213,7 @@ def plan_drive(net, pp, p0: np.ndarray, yaw0: float, v0: float, dt_s: float) -> 
         route = cr.lane_forward(net, [starts[0]], max(v_want, v0) * t_last + brake_m, from_m=cr._arc_to(first, p0))
         line = cr.route_centerline(net, route, p0, max(v_want, v0) * t_last + brake_m)
         route = cr.trim_route(net, route, line)
+        line = stop_inside(net, route, line)
         return _finish(
             route, line, "follow lane", v_want, pb, note="time-only goal: follows the lane, stops at its end"
         )
@@ -170,12 +221,19 @@ def plan_drive(net, pp, p0: np.ndarray, yaw0: float, v0: float, dt_s: float) -> 
     if route is None:
         raise ValueError(f"no route from lanelet(s) {starts} to the goal lanelets {sorted(goals)}")
     goal_xy = cr.point(shapes[0].center) if shapes else None
-    line = cr.route_centerline(net, route, p0, goal_xy=goal_xy)
+    line = stop_inside(net, route, cr.route_centerline(net, route, p0, goal_xy=goal_xy))
     # the route's stretch in the goal region (the centre line's point nearest a small region it misses)
     arc = (cr.arc_inside(line, shapes) or cr.nearest_arc(line, shapes)) if shapes else None
     if arc is None:  # a goal of lanelets only, or a region the centre line misses: stop at the route's end
         return _finish(route, line, "stop at route end", v_want, pb, note="stops at the end of the goal lanelet")
-    ahead = cr.lane_forward(net, route, arc[1] + brake_m)
+    # past the goal the route goes on along the lane (where the network does): far enough to
+    # brake after the region, and with a time window, for the car to drive on at its top speed
+    # until the run ends (the window's end) and brake then, rather than stop at the route's end
+    ahead_m = arc[1] + brake_m
+    if window is not None and math.isfinite(window[1]):
+        car_m = cr._arc_to(net.find_lanelet_by_id(route[0]), p0)  # (lane_forward counts from the lanelet's start)
+        ahead_m = max(ahead_m, car_m + max(v_hi, v0) * window[1] + brake_m)
+    ahead = cr.lane_forward(net, route, ahead_m)
     ctx = _GoalDrive(net, route, ahead, line, shapes, arc, p0, v_want, (v_lo, v_hi), v_goal, pb, goal_xy)
     first = None
     for way in (_through, _stop):
@@ -236,7 +294,7 @@ def _through(g: _GoalDrive):
     a slower approach that speeds up to the goal's speed before the region (:func:`_approaches`)."""
     ahead, v_want, v_range, pb = g.ahead, g.v_want, g.v_range, g.pb
     window = pb.window
-    line = cr.route_centerline(g.net, ahead, g.p0, goal_xy=g.goal_xy)
+    line = stop_inside(g.net, ahead, cr.route_centerline(g.net, ahead, g.p0, goal_xy=g.goal_xy))
     arc = cr.arc_inside(line, g.shapes) or cr.nearest_arc(line, g.shapes)
     s_end = float(np.sum(np.hypot(*np.diff(line, axis=0).T)))
     best = None
@@ -394,4 +452,3 @@ def goal_spec(pp, line: np.ndarray, plan: DrivePlan) -> dict | None:
             out["yaw_deg"] = [math.degrees(yaw[0]), math.degrees(yaw[1])]
         return out
     return None
-

@@ -15,6 +15,9 @@
   it, the route follows the lane: a lanelet's only successor, else the intersection's straight
   successor, else the successor whose neighbours continue the lanelet's neighbours; it stops at a
   dead end or where the network leaves the choice open (no invented turns).
+* **Road ends.** The mapped road begins at the route's first lanelet when neither it nor a
+  same-direction lanelet beside it has a predecessor, and ends at its last likewise without
+  successors (:func:`mapped_road_ends`): a body beyond them is off the road.
 * **Centreline.** The lanelets' centre polylines joined (a lane change blends from one centre
   line to the other over the last :data:`LANE_CHANGE_M` of the lanelet it leaves, or before the
   goal when that lies beside it), resampled
@@ -364,6 +367,22 @@ def route_ends(net, route) -> set[int]:
     a few centimetres away."""
     first, last = net.find_lanelet_by_id(int(route[0])), net.find_lanelet_by_id(int(route[-1]))
     return {int(i) for i in (*first.predecessor, *last.successor)}
+
+
+def mapped_road_ends(net, route) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Where the mapped road begins and ends around the route: the closing edges (their two
+    points each, (2 n, 2) [m]) of the route's first lanelet and the same-direction lanelets beside
+    it when none of them has a predecessor, and likewise of its last lanelet and those beside it
+    when none has a successor; None where the network goes on (a lanelet beside that continues
+    is road to drive on)."""
+    out: list[np.ndarray | None] = []
+    for lid, attr, k in ((route[0], "predecessor", 0), (route[-1], "successor", -1)):
+        here = [net.find_lanelet_by_id(i) for i in sorted(drivable_lanelets(net, [lid], neighbours=True))]
+        if any(getattr(ll, attr) for ll in here):
+            out.append(None)
+        else:
+            out.append(np.array([p for ll in here for p in (ll.left_vertices[k], ll.right_vertices[k])], float))
+    return out[0], out[1]
 
 
 def route_edges(net, lanelet_ids, line: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -613,7 +613,15 @@ class CompiledLtvMpc(LtvMpc):
         t_s = float(warm.t_s)
         info = self._info
         code, new_sides = self._run(
-            x, projection_guess(warm), t_s, u_prev, X, U, MODE_SHIFTED_PLAN if has_plan else MODE_NO_PLAN, warm.sides, out
+            x,
+            projection_guess(warm),
+            t_s,
+            u_prev,
+            X,
+            U,
+            MODE_SHIFTED_PLAN if has_plan else MODE_NO_PLAN,
+            warm.sides,
+            out,
         )
         N, nx, nu = self.N, self.nx, self.nu
         cfg = self.config

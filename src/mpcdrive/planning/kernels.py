@@ -96,7 +96,6 @@ from .work import (
     P_ROAD_START,
     P_SHIFT,
     P_STANDSTILL,
-    P_STOP_V,
     P_TIME_GAP,
     P_V_MAX,
     P_BAND_K,

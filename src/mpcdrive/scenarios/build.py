@@ -334,6 +334,10 @@ def build_road(spec, path: ReferencePath, track: Track | None = None) -> Road | 
         else:
             s, wl, wr = (np.array(c, float) for c in zip(*spec.widths))
             road = Road.from_widths(s, wl, wr, spec.margin_m, period if s[-1] - s[0] < period else 0.0)
+        if spec.start_m is not None or spec.end_m is not None:
+            if period > 0:
+                raise ValueError("road start_m / end_m: a closed path's road has no ends")
+            road = road.with_ends(spec.start_m, spec.end_m)
         if spec.lane_rows:
             return _with_lanes(road, spec.lane_rows)
         return road if spec.neighbours is None else _with_neighbours(road, spec.neighbours)
@@ -351,7 +355,7 @@ def _with_lanes(road: Road, lanes) -> Road:
         s_n, lf, rt = (np.array(c, float) for c in zip(*ln.rows))
         left, right = np.interp(s, s_n, lf), np.interp(s, s_n, rt)
         out.append(Lane(ln.name, 0.5 * (left + right), left, right, oncoming=ln.oncoming))
-    return Road(s, road.left_m, road.right_m, road.margin_m, tuple(out), 0, road.period_m)
+    return Road(s, road.left_m, road.right_m, road.margin_m, tuple(out), 0, road.period_m, road.start_m, road.end_m)
 
 
 def _with_neighbours(road: Road, rows) -> Road:
@@ -366,7 +370,7 @@ def _with_neighbours(road: Road, rows) -> Road:
         Lane("route", 0.5 * (left + right), left, right),
         Lane("left", left + 0.5 * el, left + el, left),
     )
-    return Road(s, left, right, road.margin_m, lanes, 1, road.period_m)
+    return Road(s, left, right, road.margin_m, lanes, 1, road.period_m, road.start_m, road.end_m)
 
 
 def dynamic_params(v, scale=None) -> DynamicParams:

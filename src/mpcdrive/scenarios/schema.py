@@ -317,7 +317,10 @@ class RoadSpec(_Strict):
     own lane (e.g. a goal region on it): no change out of it starts that cannot return by then;
     ``lanes``: settings of that decision layer by the names of
     :class:`~mpcdrive.control.lanes.LaneConfig` (e.g. ``{time_gap_s: 2.0, turn_out_mps: 1.5}``;
-    the rest its defaults, the body's length and width the vehicle's)."""
+    the rest its defaults, the body's length and width the vehicle's). ``start_m`` / ``end_m``
+    [m] (optional): the arc lengths along the path where the mapped road begins / ends (a lane
+    without a predecessor / successor); a body behind the start or past the end is off the road
+    (the edges are held constant up to them; None: the road goes on)."""
 
     lane_width_m: Positive | None = None
     left_width_m: NonNeg | None = None
@@ -328,6 +331,8 @@ class RoadSpec(_Strict):
     margin_m: NonNeg = 0.05
     return_by_s: NonNeg | None = None
     lanes: dict[str, float] | None = None
+    start_m: Finite | None = None
+    end_m: Finite | None = None
 
     @field_validator("lanes")
     @classmethod
@@ -366,6 +371,8 @@ class RoadSpec(_Strict):
             raise ValueError("the road has no width somewhere (left + right width is 0)")
         if self.lanes is not None and self.neighbours is None:
             raise ValueError("road.lanes sets the lane decision layer, which needs neighbours")
+        if self.start_m is not None and self.end_m is not None and not self.start_m < self.end_m:
+            raise ValueError(f"the road's start_m {self.start_m:g} m must be before its end_m {self.end_m:g} m")
         return self
 
     @property

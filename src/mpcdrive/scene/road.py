@@ -20,7 +20,11 @@ narrower than the body needs, both bounds are the middle of what there is: the r
 for, never an infeasible QP. A drive is judged by the same rule without its linearization
 (:meth:`Road.measure_excess_m`): every point of the body's outline, in the world frame, against
 the edges at its own arc length, exact to a tenth of a millimetre; :meth:`Road.body_excess_m`
-is the rows' form of it (the controller's quick checks).
+is the rows' form of it (the controller's quick checks). A road may end (``start_m`` / ``end_m``:
+where the mapped road begins / ends along the path, e.g. a lane with no successor): a point
+behind the start or past the end is outside by how far it is beyond it (with its distance beyond
+a side edge, the straight-line distance to the road's corner). The controller's rows do not see
+the ends: a reference that stops the body inside the road keeps it there.
 
 The functions are numba-compiled and called both from numpy code (the OSQP controller) and from
 the compiled control step.
@@ -251,7 +255,10 @@ class Road:
     path, positive left) at arc lengths ``s_m`` [m]; the body stays ``margin_m`` inside them.
     ``lanes`` (optional) are the lanes between the edges, ``route_lane`` the index of the one the
     route follows; ``period_m`` > 0 makes the tables periodic (a closed path of that length, the
-    knots spanning one lap). Build with :meth:`constant`, :meth:`per_side` or :meth:`from_widths`."""
+    knots spanning one lap). ``start_m`` / ``end_m`` [m] (optional; None: the road goes on, as it
+    always does on a closed path): the arc lengths along the path where the mapped road begins /
+    ends, beyond which the body is outside it (:meth:`measure_excess_m`); the edges' tables are
+    held constant up to them. Build with :meth:`constant`, :meth:`per_side` or :meth:`from_widths`."""
 
     s_m: np.ndarray
     left_m: np.ndarray
@@ -260,6 +267,8 @@ class Road:
     lanes: tuple[Lane, ...]
     route_lane: int
     period_m: float
+    start_m: float | None
+    end_m: float | None
 
     def __init__(
         self,
@@ -270,6 +279,8 @@ class Road:
         lanes: tuple[Lane, ...] = (),
         route_lane: int = 0,
         period_m: float = 0.0,
+        start_m: float | None = None,
+        end_m: float | None = None,
     ):
         s = np.atleast_1d(np.asarray(s_m, float)).copy()
         left = np.broadcast_to(np.asarray(left_m, float), s.shape).copy()
@@ -298,6 +309,13 @@ class Road:
             for name in ("center_m", "left_m", "right_m"):
                 if np.shape(getattr(ln, name)) != s.shape:
                     raise ValueError(f"lane {ln.name}: {name} must have one value per road knot ({s.size})")
+        for name, end in (("start_m", start_m), ("end_m", end_m)):
+            if end is not None and (isinstance(end, bool) or not math.isfinite(end)):
+                raise ValueError(f"road {name} must be a finite arc length [m] or None, got {end!r}")
+            if end is not None and period_m > 0:
+                raise ValueError(f"a periodic road (a closed path) has no {name}: it goes on lap after lap")
+        if start_m is not None and end_m is not None and not start_m < end_m:
+            raise ValueError(f"road start_m {start_m:g} m must be before its end_m {end_m:g} m")
         for name, value in (
             ("s_m", s),
             ("left_m", left),
@@ -306,6 +324,8 @@ class Road:
             ("lanes", tuple(lanes)),
             ("route_lane", int(route_lane)),
             ("period_m", float(period_m)),
+            ("start_m", None if start_m is None else float(start_m)),
+            ("end_m", None if end_m is None else float(end_m)),
         ):
             object.__setattr__(self, name, value)
 
@@ -321,15 +341,45 @@ class Road:
         return cls.from_widths([0.0], [left_width_m], [right_width_m], margin_m)
 
     @classmethod
-    def from_widths(cls, s_m, left_width_m, right_width_m, margin_m: float = 0.05, period_m: float = 0.0) -> Road:
+    def from_widths(
+        cls,
+        s_m,
+        left_width_m,
+        right_width_m,
+        margin_m: float = 0.05,
+        period_m: float = 0.0,
+        start_m: float | None = None,
+        end_m: float | None = None,
+    ) -> Road:
         """Edges at distances ``left_width_m`` / ``right_width_m`` [m] (>= 0, per knot) to either
-        side of the path at arc lengths ``s_m`` [m]; one lane between them."""
+        side of the path at arc lengths ``s_m`` [m]; one lane between them; ``start_m`` /
+        ``end_m`` [m]: where the road begins / ends along the path (None: it goes on)."""
         s = np.atleast_1d(np.asarray(s_m, float))
         wl = np.broadcast_to(np.asarray(left_width_m, float), s.shape)
         wr = np.broadcast_to(np.asarray(right_width_m, float), s.shape)
         if np.any(wl < 0) or np.any(wr < 0):
             raise ValueError("road widths must be >= 0")
-        return cls(s, wl, -wr, margin_m, period_m=period_m)
+        return cls(s, wl, -wr, margin_m, period_m=period_m, start_m=start_m, end_m=end_m)
+
+    def with_ends(self, start_m: float | None, end_m: float | None) -> Road:
+        """This road beginning at ``start_m`` and ending at ``end_m`` [m] along the path (None: it
+        goes on there), everything else kept."""
+        return Road(
+            self.s_m,
+            self.left_m,
+            self.right_m,
+            self.margin_m,
+            self.lanes,
+            self.route_lane,
+            self.period_m,
+            start_m,
+            end_m,
+        )
+
+    @property
+    def has_ends(self) -> bool:
+        """Whether the road begins or ends somewhere along the path (``start_m`` / ``end_m``)."""
+        return self.start_m is not None or self.end_m is not None
 
     # -- the rule -------------------------------------------------------------------------------
     def edges(self, s_m) -> tuple[np.ndarray, np.ndarray]:
@@ -360,15 +410,25 @@ class Road:
         """How far [m] the body is outside the road (0 inside) by the rule of :meth:`bounds` with
         no margin, for the reference point at lateral offset(s) ``e_y_m``: the controller rows'
         form (sampled points, the curvature's ``kappa d^2 / 2``), which over-reports on tight
-        curves by millimetres. A drive is judged by :meth:`measure_excess_m`, exact."""
+        curves by millimetres; a body reaching past the road's start or end (its corners' distance
+        along the path, ``d`` of :func:`body_bounds`) is outside by that much as well. A drive is
+        judged by :meth:`measure_excess_m`, exact."""
         lo, hi = self._bounds(s_m, kappa, yaw_rel_rad, footprint, 0.0)
         e = np.asarray(e_y_m, float)
-        return np.maximum(np.maximum(e - hi, lo - e), 0.0)
+        side = np.maximum(np.maximum(e - hi, lo - e), 0.0)
+        if not self.has_ends:
+            return side
+        c = footprint.corners()  # (4, 2) body frame
+        yaw = np.asarray(yaw_rel_rad, float)[..., None]
+        d = c[:, 0] * np.cos(yaw) - c[:, 1] * np.sin(yaw)  # each corner's distance along the path
+        along = np.asarray(s_m, float)[..., None] + d
+        return np.maximum(side, self._past_ends_m(along).max(axis=-1))
 
     def measure_excess_m(self, path: ProjectingPath, poses, s_m, footprint: Footprint) -> np.ndarray:
         """(K,) how far [m] the body was outside the road at each of the poses ``poses`` (K, >= 3)
         ``[x m, y m, yaw rad, ...]`` of its reference point, whose arc lengths on ``path`` are
-        ``s_m`` (K,) [m] (0 inside; no margin): the measure a drive is judged by.
+        ``s_m`` (K,) [m] (0 inside; no margin): the measure a drive is judged by. A point behind
+        ``start_m`` or past ``end_m`` is outside by how far (:meth:`_points_excess`).
 
         Exact in the world frame, unlike :meth:`body_excess_m` (the controller rows' linearized
         rule): points along the body's outline are each projected onto ``path`` (its
@@ -379,13 +439,17 @@ class Road:
         a sampling error of at most :data:`EXCESS_SAMPLING_TOL_M`; where a side crosses a knot at
         which an edge bends, the point on the knot is measured too. So the measure is exact to
         that tolerance on the path as it is represented (a waypoint path's own table)."""
+        return self._measure(path, poses, s_m, footprint, sides=True)
+
+    def _measure(self, path: ProjectingPath, poses, s_m, footprint: Footprint, sides: bool) -> np.ndarray:
+        """:meth:`measure_excess_m` (``sides``) or only its ends' share (:meth:`measure_end_excess_m`)."""
         X = np.asarray(poses, float)
         S = np.asarray(s_m, float).reshape(-1)
         K = len(S)
         if X.ndim != 2 or X.shape[0] != K or X.shape[1] < 3:
             raise ValueError(f"poses must be (K, 3) with one row per arc length ({K}), got shape {X.shape}")
         out = np.zeros(K)
-        if K == 0:
+        if K == 0 or not (sides or self.has_ends):
             return out
         corners = footprint.corners()  # (4, 2) counter-clockwise, body frame
         reach = float(np.max(np.hypot(corners[:, 0], corners[:, 1])))  # of a body point from (x, y)
@@ -403,15 +467,39 @@ class Road:
                 P.reshape(-1, 2), np.repeat(S[ks], P.shape[1]), np.broadcast_to(window, (P.shape[0] * P.shape[1],))
             )
             s_pts, e_pts = s_pts.reshape(len(ks), 4, int(n)), e_pts.reshape(len(ks), 4, int(n))
-            out[ks] = self._points_excess(s_pts, e_pts).reshape(len(ks), -1).max(axis=1)
-            if knots.size:  # the points of the sides on the knots where an edge bends
+            out[ks] = self._points_excess(s_pts, e_pts, sides).reshape(len(ks), -1).max(axis=1)
+            if sides and knots.size:  # the points of the sides on the knots where an edge bends
                 out[ks] = np.maximum(out[ks], self._knot_excess(path, knots, s_pts, body, X[ks], S[ks], window))
         return out
 
-    def _points_excess(self, s_pts: np.ndarray, e_pts: np.ndarray) -> np.ndarray:
-        """Excess [m] of points at arc lengths ``s_pts`` and lateral offsets ``e_pts`` (0 inside)."""
-        left, right = self.edges(s_pts)
-        return np.maximum(np.maximum(e_pts - left, right - e_pts), 0.0)
+    def measure_end_excess_m(self, path: ProjectingPath, poses, s_m, footprint: Footprint) -> np.ndarray:
+        """(K,) how far [m] the body reached behind the road's start or past its end at each pose
+        (the arc length of its outline's points against ``start_m`` / ``end_m``; 0 for a road
+        without ends): the part of :meth:`measure_excess_m` the road's ends account for."""
+        return self._measure(path, poses, s_m, footprint, sides=False)
+
+    def _points_excess(self, s_pts: np.ndarray, e_pts: np.ndarray, sides: bool = True) -> np.ndarray:
+        """Excess [m] of points at arc lengths ``s_pts`` and lateral offsets ``e_pts`` (0 inside):
+        beyond a side edge, behind the start or past the end (both: the distance to the road's
+        corner); only the ends' share without ``sides``."""
+        if sides:
+            left, right = self.edges(s_pts)
+            side = np.maximum(np.maximum(e_pts - left, right - e_pts), 0.0)
+        else:
+            side = np.zeros(np.shape(s_pts))
+        if not self.has_ends:
+            return side
+        return np.hypot(side, self._past_ends_m(s_pts))
+
+    def _past_ends_m(self, s_pts) -> np.ndarray:
+        """How far [m] arc lengths ``s_pts`` lie behind ``start_m`` or past ``end_m`` (0 between)."""
+        s = np.asarray(s_pts, float)
+        past = np.zeros(s.shape)
+        if self.start_m is not None:
+            past = np.maximum(past, self.start_m - s)
+        if self.end_m is not None:
+            past = np.maximum(past, s - self.end_m)
+        return past
 
     def _outline_counts(self, path: ProjectingPath, S: np.ndarray, reach: float, footprint: Footprint) -> np.ndarray:
         """(K,) points per side of the body outline at each step: the fewest (2^j + 1, 5 to
@@ -527,7 +615,15 @@ class Road:
         left = np.max([self.lanes[i].left_m for i in idx], axis=0)
         right = np.min([self.lanes[i].right_m for i in idx], axis=0)
         return Road(
-            self.s_m, left, np.minimum(right, left - 1e-6), self.margin_m, self.lanes, self.route_lane, self.period_m
+            self.s_m,
+            left,
+            np.minimum(right, left - 1e-6),
+            self.margin_m,
+            self.lanes,
+            self.route_lane,
+            self.period_m,
+            self.start_m,
+            self.end_m,
         )
 
     def whole(self) -> Road:
@@ -538,7 +634,9 @@ class Road:
             return self
         left = np.maximum(self.left_m, np.max([ln.left_m for ln in self.lanes], axis=0))
         right = np.minimum(self.right_m, np.min([ln.right_m for ln in self.lanes], axis=0))
-        return Road(self.s_m, left, right, self.margin_m, self.lanes, self.route_lane, self.period_m)
+        return Road(
+            self.s_m, left, right, self.margin_m, self.lanes, self.route_lane, self.period_m, self.start_m, self.end_m
+        )
 
     def profile(self, length_m: float, ds_m: float = 0.5) -> np.ndarray:
         """(M, 3) rows ``[s_m, left_m, right_m]`` over arc lengths 0..``length_m`` [m] (every

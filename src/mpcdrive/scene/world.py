@@ -81,6 +81,7 @@ class Scene:
 def _same_road(a: Road, b: Road) -> bool:
     return (
         a.period_m == b.period_m
+        and (a.start_m, a.end_m) == (b.start_m, b.end_m)
         and np.array_equal(a.s_m, b.s_m)
         and np.array_equal(a.left_m, b.left_m)
         and np.array_equal(a.right_m, b.right_m)

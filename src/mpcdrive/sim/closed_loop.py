@@ -361,9 +361,11 @@ def simulate(
     differs); ``road`` / ``obstacles`` / ``footprint`` name parts of it, the older way. Only a
     controller without a scene (a baseline) takes its scene from here. With a road the body's
     excess outside the whole road (every lane: :meth:`Scene.judged_road`) is measured at each
-    step, exactly (``SimResult.lane_excess_m``, :meth:`Road.measure_excess_m`, 0 inside). With
-    obstacles the signed distance between the body and every obstacle is measured at each step
-    and, where they may meet in between, on the swept motion between the steps
+    step, exactly (``SimResult.lane_excess_m``, :meth:`Road.measure_excess_m`, 0 inside); a road
+    that begins or ends along the path adds the ends' share of it, how far the body reached
+    behind its start or past its end, in ``meta["road_end_excess_m"]``. With obstacles the
+    signed distance between the body and every obstacle is measured at each step and, where
+    they may meet in between, on the swept motion between the steps
     (:mod:`mpcdrive.sim.contact`): ``SimResult.clearance_m`` at the logged steps (negative =
     overlap), the obstacles' poses in ``meta["obstacles"]``, the number of contacts in
     ``meta["collisions"]``, each contact (which obstacle, when it began, how deep; also one
@@ -563,6 +565,8 @@ def simulate(
     if road is not None:
         lane_excess = road.measure_excess_m(path, Xs[sl], S[sl], footprint)
         profile = road.profile(path.length_m)
+        if road.has_ends:  # (K,) the ends' share of the excess [m]
+            meta["road_end_excess_m"] = road.measure_end_excess_m(path, Xs[sl], S[sl], footprint)
     v = model.speed(Xs[sl])
     steer = Us[sl, 0]
     accel = Us[sl, list(model.input_names).index("accel")] if "accel" in model.input_names else np.zeros(k_end)

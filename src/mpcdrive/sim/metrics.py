@@ -25,6 +25,7 @@ __all__ = [
     "CommonRoadCheck",
     "Metrics",
     "SolveTimes",
+    "WholeDriveCheck",
     "apply_goal_region",
     "compute_metrics",
     "lane_excess_per_step",
@@ -69,6 +70,44 @@ class SolveTimes:
 
 
 @dataclass(frozen=True)
+class WholeDriveCheck:
+    """The drivability checker's verdicts on the whole drive, step 0 to the end of the run
+    (``metrics.json["commonroad"]["whole_drive"]``): a drive that reaches the goal and then
+    collides or leaves the road has not passed.
+
+    collision_free : against the scenario's obstacles; road_compliant : inside the road boundary
+    and not past the mapped road's start or end (the boundary the checker builds does not close
+    the road's ends: the body's reach past them is mpcdrive's measure, ``past_road_end_m``);
+    feasible : every state reachable from the one before under the solution's model;
+    states_checked : the states judged; collision_t_s, off_road_t_s, infeasible_t_s : the time
+    [s] of the first state that failed each check (None: none did); past_road_end_m : how far
+    [m] the body reached behind the road's start or past its end (0 inside; None: the road has
+    no ends along the route); goal_t_s : when the goal was reached [s] (None: never), so a
+    failure reads as before or after it."""
+
+    collision_free: bool
+    road_compliant: bool
+    feasible: bool
+    states_checked: int
+    collision_t_s: float | None = None
+    off_road_t_s: float | None = None
+    infeasible_t_s: float | None = None
+    past_road_end_m: float | None = None
+    goal_t_s: float | None = None
+
+    @property
+    def passed(self) -> bool:
+        """Collision-free, on the road and feasible from start to end."""
+        return self.collision_free and self.road_compliant and self.feasible
+
+    def as_dict(self) -> dict[str, Any]:
+        """The JSON object of ``metrics.json["commonroad"]["whole_drive"]`` (``passed`` included)."""
+        d: dict[str, Any] = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        d["passed"] = self.passed
+        return d
+
+
+@dataclass(frozen=True)
 class CommonRoadCheck:
     """The CommonRoad block of a run's metrics (``metrics.json["commonroad"]``, written by the
     CommonRoad adapter, docs/commonroad.md): the drivability checker's verdicts on the drive and
@@ -79,10 +118,12 @@ class CommonRoadCheck:
     whose state is in the planning problem's goal (None: never); collision_free, road_compliant :
     the drive up to the goal (else all of it) against the obstacles and the road boundary;
     ks_feasible : the solution trajectory is feasible for its model (``vehicle_model``);
-    states_checked : the states judged; passed : all of these and ``solution_valid``;
-    solution : the solution file's name; vehicle_type : CommonRoad's vehicle type;
-    vehicle_model : the model of the solution's states (``KS``, ``ST``); solution_valid,
-    solution_check : CommonRoad's solution checker's verdict and message."""
+    states_checked : the states judged; passed : all of these, ``solution_valid`` and the whole
+    drive's checks; solution : the solution file's name; vehicle_type : CommonRoad's vehicle
+    type; vehicle_model : the model of the solution's states (``KS``, ``ST``); solution_valid,
+    solution_check : CommonRoad's solution checker's verdict and message; whole_drive : the
+    checks of the whole drive, start to end of the run (:class:`WholeDriveCheck`; None where
+    they were not made)."""
 
     file: str
     route_lanelets: tuple[int, ...]
@@ -99,11 +140,13 @@ class CommonRoadCheck:
     vehicle_model: str
     solution_valid: bool
     solution_check: str
+    whole_drive: WholeDriveCheck | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """The JSON object of ``metrics.json["commonroad"]`` (keys in field order)."""
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         d["route_lanelets"] = list(self.route_lanelets)
+        d["whole_drive"] = None if self.whole_drive is None else self.whole_drive.as_dict()
         return d
 
 

@@ -362,7 +362,47 @@ def checker_phrase(cr: Mapping[str, Any]) -> str:
         )
     if cr.get("solution_valid") is False:
         words.append("solution rejected by CommonRoad's solution checker")
-    return "CommonRoad checker: " + ", ".join(words)
+    text = "CommonRoad checker: " + ", ".join(words)
+    whole = whole_drive_phrase(cr)
+    return text if whole is None else f"{text}; {whole}"
+
+
+def _when(t_s: float, goal_t_s: float | None) -> str:
+    """``after the goal at t = 7.30 s`` (a time past the goal's), else ``at t = 7.30 s``."""
+    return ("after the goal " if goal_t_s is not None and t_s > goal_t_s else "") + f"at t = {t_s:.2f} s"
+
+
+def _past_end(w: Mapping[str, Any]) -> str:
+    """`` (the body 2.24 m beyond the road's start or end)`` where the body reached past the mapped road's
+    start or end, else ''."""
+    past = w.get("past_road_end_m")
+    beyond = isinstance(past, (int, float)) and past > LANE_TOLERANCE_M
+    return f" (the body {past:.3g} m beyond the road's start or end)" if beyond else ""
+
+
+def whole_drive_phrase(cr: Mapping[str, Any]) -> str | None:
+    """The CommonRoad checks of the whole drive, start to end of the run
+    (``metrics["commonroad"]["whole_drive"]``): ``whole drive clean`` or what failed first and
+    when, e.g. ``whole drive: COLLISION after the goal at t = 7.30 s``; None without them."""
+    w = cr.get("whole_drive")
+    if not w:
+        return None
+    goal_t = w.get("goal_t_s")
+    failed = []
+    if w.get("collision_free") is False:
+        failed.append(
+            "COLLISION" + (f" {_when(w['collision_t_s'], goal_t)}" if w.get("collision_t_s") is not None else "")
+        )
+    if w.get("road_compliant") is False:
+        t = w.get("off_road_t_s")
+        failed.append("OFF THE ROAD" + (f" {_when(t, goal_t)}" if t is not None else "") + _past_end(w))
+    if w.get("feasible") is False:
+        model = cr.get("vehicle_model") or "KS"
+        t = w.get("infeasible_t_s")
+        failed.append(f"not {model}-feasible" + (f" {_when(t, goal_t)}" if t is not None else ""))
+    if not failed:
+        return f"whole drive clean ({w.get('states_checked')} states)"
+    return "whole drive: " + ", ".join(failed)
 
 
 def _commonroad_part(cr: Mapping[str, Any]) -> VerdictPart:
@@ -372,12 +412,27 @@ def _commonroad_part(cr: Mapping[str, Any]) -> VerdictPart:
 
 #: the parts of external checkers: metrics key -> the part judged from that block of the metrics
 #: (present only when the metrics hold the block). CommonRoad's drivability and solution checkers
-#: up to the goal are ``commonroad``; another checker (e.g. a verdict on the whole drive) adds its
-#: key and function here
+#: up to the goal and its drivability checks of the whole drive (``commonroad.whole_drive``) are
+#: ``commonroad``; another checker adds its key and function here
 EXTERNAL_PARTS: dict[str, Callable[[Mapping[str, Any]], VerdictPart]] = {"commonroad": _commonroad_part}
 
 
 # -- the verdict ---------------------------------------------------------------------------------------
+def _safe_to_goal(m: Mapping[str, Any], collided: bool, off_road: bool) -> tuple[bool, bool]:
+    """(collided, off the road) up to the goal: for a CommonRoad run its checker's verdicts up to
+    the goal and mpcdrive's contacts that began by then (what happens after the goal fails the
+    drive, not the goal); for any other run, the whole run's."""
+    cr = m.get("commonroad") or {}
+    if "road_compliant" not in cr:
+        return collided, off_road
+    goal_t = (cr.get("whole_drive") or {}).get("goal_t_s")
+    off_to_goal = cr["road_compliant"] is False
+    if goal_t is None:  # (no time of the goal: the whole run's contacts, as the metrics say)
+        return collided, off_to_goal
+    before = any(e.get("t_s", 0.0) <= goal_t for e in m.get("collision_events") or [])
+    return cr.get("collision_free") is False or before, off_to_goal
+
+
 def _goal_part(m: Mapping[str, Any], crit: VerdictCriteria, collided: bool, off_road: bool) -> VerdictPart:
     region = m.get("goal_region_reached")
     cr = m.get("commonroad") or {}
@@ -421,17 +476,25 @@ def run_verdict(m: Mapping[str, Any]) -> RunVerdict:
             else _part(True, None),
         )
     ]
-    collided = bool(m.get("collisions")) or bool(m.get("collision_events")) or cr.get("collision_free") is False
+    whole = cr.get("whole_drive") or {}
+    cr_collided = cr.get("collision_free") is False or whole.get("collision_free") is False
+    collided = bool(m.get("collisions")) or bool(m.get("collision_events")) or cr_collided
     phrase = collision_phrase(m)
-    if cr.get("collision_free") is False and not (m.get("collisions") or m.get("collision_events")):
-        phrase = "the CommonRoad checker found a collision" + (f" ({phrase})" if phrase else "")
+    if cr_collided and not (m.get("collisions") or m.get("collision_events")):
+        t = None if cr.get("collision_free") is False else whole.get("collision_t_s")
+        when = "" if t is None else f" {_when(t, whole.get('goal_t_s'))}"
+        phrase = f"the CommonRoad checker found a collision{when}" + (f" ({phrase})" if phrase else "")
     # without obstacles (no phrase) there is nothing to judge
     parts.append(("collision", _part(False if collided else None if phrase is None else True, phrase)))
     lane = lane_phrase(m, crit.max_lane_excess_m)
     if "road_compliant" in cr:  # an external checker's road (CommonRoad's lanelets) is the authority
-        off_road = cr["road_compliant"] is False
-        if off_road and not lane.startswith("left"):
+        off_to_goal = cr["road_compliant"] is False
+        off_road = off_to_goal or whole.get("road_compliant") is False
+        if off_to_goal and not lane.startswith("left"):
             lane = "the CommonRoad checker found the car off the road"
+        elif off_road and not off_to_goal:  # on the road up to the goal, not after it
+            t = whole.get("off_road_t_s")
+            lane = "left the road" + ("" if t is None else f" {_when(t, whole.get('goal_t_s'))}") + _past_end(whole)
         parts.append(("road", VerdictPart(not off_road, lane, lane if off_road else None)))
     elif m.get("road_given") is False:
         off_road = False
@@ -439,7 +502,7 @@ def run_verdict(m: Mapping[str, Any]) -> RunVerdict:
     else:
         off_road = float(m.get("max_lane_excess_m") or 0.0) > crit.max_lane_excess_m
         parts.append(("road", _part(not off_road, lane)))
-    parts.append(("goal", _goal_part(m, crit, collided, off_road)))
+    parts.append(("goal", _goal_part(m, crit, *_safe_to_goal(m, collided, off_road))))
     for key, judge in EXTERNAL_PARTS.items():
         block = m.get(key)
         if block:
