@@ -167,8 +167,8 @@ def test_parked_car_with_traffic_behind_is_passed_at_speed_not_braked_for():
 
 def test_both_lanes_blocked_stops_before_the_obstacle():
     m = plan(planner(), [car(60.0), car(62.0, W)], s=20.0, v=12.0)
-    assert m.safe and m.lane == 0
-    assert m.v_mps[-1] < 1.0  # stopping (the last metre at a crawl)
+    assert m.safe
+    assert m.v_mps[-1] < 1.0  # stopping (the last metre at a crawl), in either lane
     front = m.s_m.max() + 0.5 * LIMITS.length_m
     assert front < 60.0 - 2.25  # behind the cars' rear
 

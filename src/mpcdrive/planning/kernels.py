@@ -977,9 +977,9 @@ def check_pair(
                     need = (v2 - v_o * v_o) / (2.0 * par[P_D_MAX] * 0.8) + margin
                     if -rs - bx < need:
                         ttc = min(ttc, horizon + 0.5 * dt)
-                    # ending stopped (or crawling) behind an obstacle that stands for good: the car would wait
+                    # ending bound to stop behind an obstacle that stands for good: the car would wait
                     # there for ever (it misses its goal), unless it steers round it later
-                    if v < par[P_CREEP] and -rs - bx < par[P_STANDSTILL] + 2.0 * par[P_LAT_MIN] + margin:
+                    if -rs - bx < v2 / (2.0 * par[P_D_COMF]) + par[P_STANDSTILL] + 2.0 * par[P_LAT_MIN] + margin:
                         if _standing(ob_s, o, K, dt):
                             cost += par[P_C_GOAL]
         if k == K and not hit and math.isfinite(par[P_ROAD_END]):
