@@ -508,14 +508,13 @@ def test_a_parked_car_too_close_to_swerve_round_at_speed_is_passed_slowly(plant)
     """ZAM_Tutorial_Urban-3_2 on CommonRoad's KS / ST model of the BMW 320i: a parked car 9 m
     ahead at 9 m/s, the left lane free. Swerving at speed left the road (0.25 / 0.98 m: the
     steering at its rate limit, the controller speeding up to 11 m/s along its linearized rows).
-    The lane layer sees that its ramp cannot clear the car at 9 m/s and caps the references at
-    ``turn_out_mps``: the car brakes while easing out, draws level slowly and then drives on.
-    Judged by CommonRoad's drivability checker: collision-free, on the road, feasible, goal
-    reached."""
+    The maneuver planner's lane changes at 9 m/s cannot clear the car within the steering rate;
+    its evasive move, steering as fast as the vehicle can, clears it only with the car braking
+    hard first: the car brakes while easing out, draws level slowly and then drives on. Judged by
+    CommonRoad's drivability checker: collision-free, on the road, feasible, goal reached."""
     from pathlib import Path
 
     from mpcdrive.adapters import commonroad as cr
-    from mpcdrive.control.lanes import LaneConfig
 
     if not cr.available():
         pytest.skip("commonroad-io / drivability checker not installed")
@@ -530,13 +529,9 @@ def test_a_parked_car_too_close_to_swerve_round_at_speed_is_passed_slowly(plant)
     ob = imp.scenario.obstacles[0]
     rear = ob.initial_state.position[0] - 0.5 * ob.obstacle_shape.length
     front = res.x[:, 0] + 0.5 * imp.spec.vehicle.length_m
-    # drawing level with the parked car at the capped speed (beside it the rows that keep the
-    # body's rear clear of it may ask for more, to swing the yaw back)
     level = int(np.argmax(front >= rear))
-    assert level > 0 and res.v_mps[level] < LaneConfig().turn_out_mps + 0.5
-    assert res.v_mps[:level].min() > 1.0  # braking while easing out, not stopping
+    assert level > 0 and res.v_mps[level] < 0.5 * res.v_mps[0]  # drawing level slowly
     assert res.x[:, 1].max() > 2.0  # beside it in the left lane
-    # feasibility under the solution's model: the ST plant's own states on ST
     assert rep.model == plant.upper() and f"{plant.upper()}-feasible True" in rep.line()
     assert np.min(res.clearance_m) > 0.3 and compute_metrics(res).solver_failures == 0
 

@@ -1,13 +1,13 @@
-"""Passing through a neighbour lane (control.lanes.LaneChoosingMpc on a road with
-``neighbours``): a parked car in the route lane with the left lane free is passed and the car
-comes back; with both lanes blocked it stops before the obstacles without contact."""
+"""Passing through a neighbour lane (the maneuver planner, planning.driver.PlannedMpc, on a road
+with ``neighbours``): a parked car in the route lane with the left lane free is passed and the
+car comes back; with both lanes blocked it stops before the obstacles without contact."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from mpcdrive.control.lanes import LaneChoosingMpc
+from mpcdrive.planning.driver import PlannedMpc
 from mpcdrive.scenarios import build_experiment, run_experiment
 from mpcdrive.scenarios.schema import ScenarioSpec
 from mpcdrive.sim import LANE_TOLERANCE_M, compute_metrics
@@ -50,7 +50,7 @@ BESIDE = {"shape": "rectangle", "position": [50.0, 3.5], "length_m": 4.5, "width
 @pytest.mark.parametrize("backend", ["fast", "osqp"])
 def test_parked_car_with_a_free_neighbour_lane_is_passed(backend):
     exp = build_experiment(ScenarioSpec.model_validate(_spec([PARKED], backend)))
-    assert isinstance(exp.controller, LaneChoosingMpc)
+    assert isinstance(exp.controller, PlannedMpc)
     res = run_experiment(exp)
     m = compute_metrics(res)
     assert m["collisions"] == 0 and m["min_obstacle_clearance_m"] > 0.2
@@ -60,9 +60,9 @@ def test_parked_car_with_a_free_neighbour_lane_is_passed(backend):
     assert abs(res.e_y_m[-1]) < 0.2  # and back in the route lane
 
 
-def test_the_step_time_includes_the_lane_decision():
-    """solve_time_s is the whole step's: with an MPC that reports no time at all, the lane
-    controller's steps still take the decision's time."""
+def test_the_step_time_includes_the_planning():
+    """solve_time_s is the whole step's: with an MPC that reports no time at all, the planned
+    controller's steps still take the replanning's time."""
     import dataclasses
 
     exp = build_experiment(ScenarioSpec.model_validate(_spec([PARKED], "fast")))
@@ -91,7 +91,7 @@ def test_both_lanes_blocked_stops_before_them_with_clearance(backend):
     assert m["max_lane_excess_m"] <= LANE_TOLERANCE_M
     # it braked at the vehicle's capability when it had to, never beyond
     assert np.min(res.accel_mps2) >= -8.0 - 1e-9
-    assert exp.controller.decision.action in ("stop", "keep")  # waiting in its lane: no change
+    assert exp.controller.maneuver.v_mps.max() < 0.1  # waiting
 
 
 def _both_solvers(neighbours: bool):
@@ -162,33 +162,6 @@ def test_speed_cap_is_kept_the_same_by_both_solvers():
             c.set_speed_cap(3.0, 0.0)
 
 
-def test_no_change_out_of_the_route_lane_that_cannot_return_by_return_by_s():
-    """A car ahead at 4 m/s with the left lane free: overtaken as usual, but not when the car
-    must be back in its lane by 3 s (a goal region on it): then it follows in its lane.
-
-    Held by the stop constraint alone (no ``follow_gap_s``) the car weaves inside its lane
-    (measured 0.52-0.66 m, depending on the solver and the machine's rounding): its speed
-    references run on through the stop line, and driving at an angle buys speed at the same
-    progress. With car following the references fall back behind the car and it does not."""
-    slow = {**PARKED, "velocity_mps": [4.0, 0.0], "name": "slow"}
-    spec = _spec([slow])
-    res = run_experiment(build_experiment(ScenarioSpec.model_validate(spec)))
-    assert res.e_y_m.max() > 1.5  # overtaken
-    spec["road"]["return_by_s"] = 3.0
-    exp = build_experiment(ScenarioSpec.model_validate(spec))
-    assert exp.controller.return_by_s == 3.0
-    res = run_experiment(exp)
-    m = compute_metrics(res)
-    assert m["collisions"] == 0 and m["min_obstacle_clearance_m"] > 0.2
-    # the body inside the route lane (3.5 m wide, the BMW 1.61 m wide, the road's 0.1 m margin)
-    room_m = 3.5 / 2 - 1.61 / 2 - 0.1
-    assert np.abs(res.e_y_m).max() < room_m
-    spec["avoidance"]["follow_gap_s"] = 1.0
-    res = run_experiment(build_experiment(ScenarioSpec.model_validate(spec)))
-    m = compute_metrics(res)
-    assert np.abs(res.e_y_m).max() < 0.05 and m["collisions"] == 0 and m["min_obstacle_clearance_m"] > 0.2
-
-
 def test_a_route_lane_wider_than_the_lane_of_the_path_does_not_pull_the_car_off_the_path():
     """The route lane's table two lanes wide, the path in its left one (a CommonRoad route moving
     over a lane: its lanelets side by side), a neighbour lane to the left: on a free road the car
@@ -197,42 +170,41 @@ def test_a_route_lane_wider_than_the_lane_of_the_path_does_not_pull_the_car_off_
     spec = _spec([])
     spec["road"] = {"widths": [[0.0, 1.75, 5.25]], "neighbours": [[0.0, 3.5, 0.0]], "margin_m": 0.1}
     exp = build_experiment(ScenarioSpec.model_validate(spec))
-    assert isinstance(exp.controller, LaneChoosingMpc)
+    assert isinstance(exp.controller, PlannedMpc)
     res = run_experiment(exp)
     assert np.max(np.abs(res.e_y_m)) < 0.05
     assert compute_metrics(res)["max_lane_excess_m"] == 0.0
 
 
-def test_every_lane_setting_is_reachable_from_yaml_and_bad_ones_are_refused():
-    """road.lanes sets the decision layer's LaneConfig by its field names (each field, changed
-    from its default, arrives); the body's size defaults to the vehicle's; unknown names, bad
-    values and lanes without neighbours are refused with the reason."""
+def test_every_planner_setting_is_reachable_from_yaml_and_bad_ones_are_refused():
+    """``planner`` sets the maneuver planner's PlannerConfig by its field names (each field, changed
+    from its default, arrives) and ``replan_s`` its replanning period; unknown names and bad values
+    are refused with the reason."""
     import dataclasses
 
-    from mpcdrive.control.lanes import LaneConfig
+    from mpcdrive.planning import PlannerConfig
     from mpcdrive.scenarios.loader import ScenarioError, validate_scenario_data
 
     exp = build_experiment(ScenarioSpec.model_validate(_spec([PARKED])))
-    cfg = exp.controller.config
-    fp = exp.mpc.footprint
-    assert (cfg.ego_length_m, cfg.ego_width_m) == (fp.length_m, fp.width_m)
-    assert (
-        dataclasses.replace(cfg, ego_length_m=LaneConfig().ego_length_m, ego_width_m=LaneConfig().ego_width_m)
-        == LaneConfig()
-    )
-    for f in dataclasses.fields(LaneConfig):
-        default = getattr(LaneConfig(), f.name)
-        value = 7.0 if default is None else default * 1.5 + 0.5
-        spec = _spec([PARKED])
-        spec["road"]["lanes"] = {f.name: value}
-        got = getattr(build_experiment(ScenarioSpec.model_validate(spec)).controller.config, f.name)
-        assert got == pytest.approx(value), f.name
-    for lanes, words in (({"time_gap": 1.0}, "unknown lane setting"), ({"turn_out_mps": -1.0}, "turn_out_mps")):
-        spec = _spec([PARKED])
-        spec["road"]["lanes"] = lanes
+    assert exp.controller.config == PlannerConfig() and exp.controller.replan_s == 0.0
+    changed = {
+        "lateral_s": [3.0, 5.0],
+        "speed_s": [2.5],
+        "oncoming": True,
+        "horizon_s": 5.0,
+        "dt_s": 0.25,
+    }
+    for f in dataclasses.fields(PlannerConfig):
+        value = changed.get(f.name, getattr(PlannerConfig(), f.name) * 1.5 + 0.5)
+        spec = _spec([PARKED]) | {"planner": {f.name: value, "replan_s": 0.3}}
+        c = build_experiment(ScenarioSpec.model_validate(spec)).controller
+        got = getattr(c.config, f.name)
+        assert got == (tuple(value) if isinstance(value, list) else pytest.approx(value)), f.name
+        assert c.replan_s == 0.3
+    for planner, words in (
+        ({"time_gap": 1.0}, "unknown planner setting"),
+        ({"margin_m": -1.0}, "margin_m"),
+        ({"replan_s": 0.8}, "replan_s"),
+    ):
         with pytest.raises(ScenarioError, match=words):
-            validate_scenario_data(spec, "lanes.yaml")
-    spec = _spec([PARKED], neighbours=False)
-    spec["road"]["lanes"] = {"time_gap_s": 2.0}
-    with pytest.raises(ScenarioError, match="needs neighbours"):
-        validate_scenario_data(spec, "lanes.yaml")
+            validate_scenario_data(_spec([PARKED]) | {"planner": planner}, "planner.yaml")

@@ -128,10 +128,10 @@ def test_wrappers_are_looked_through():
             _drive(wrapped, steps=2, obstacles=())
 
 
-def test_the_lane_layer_is_judged_on_the_whole_road():
-    """A lane decision layer narrows the MPC's road to the band it allows; its scene is the full
-    road and the drive is judged inside every lane (Road.whole)."""
-    from mpcdrive.control.lanes import LaneChoosingMpc
+def test_the_planned_mpc_is_judged_on_the_whole_road():
+    """The maneuver planner narrows the MPC's road to the lanes its maneuver uses; its scene is
+    the full road and the drive is judged inside every lane (Road.whole)."""
+    from mpcdrive.planning.driver import PlannedMpc
 
     s = np.array([0.0, 3.0])
     lanes = (
@@ -142,10 +142,17 @@ def test_the_lane_layer_is_judged_on_the_whole_road():
     whole = road.whole()
     np.testing.assert_allclose(whole.left_m, 0.5)
     np.testing.assert_allclose(whole.right_m, -1.5)
-    mpc = LtvMpc(MODEL, PATH, _problem(), scene=Scene(road.band((1,)), (), BODY))
-    lane = LaneChoosingMpc(mpc, road)
-    assert lane.scene.road is road and lane.scene.judged_road().right_m[0] == -1.5
-    r = simulate(lane, Plant(MODEL), PATH, [0.0, -0.9, 0.0], 0.05, 4)
+    from mpcdrive.control import MpcConfig
+    from mpcdrive.models import KinematicBicycle4
+
+    model = KinematicBicycle4()
+    problem = MpcProblem(
+        4, 2, 10, 0.05, Q=[1, 1, 1, 1], R=[1.0, 0.1], u_min=[-0.5, -3.0], u_max=[0.5, 3.0], road=road.band((1,))
+    )
+    mpc = LtvMpc(model, PATH, problem, MpcConfig(v_ref_mps=0.5), scene=Scene(road.band((1,)), (), BODY))
+    planned = PlannedMpc(mpc, road)
+    assert planned.scene.road is road and planned.scene.judged_road().right_m[0] == -1.5
+    r = simulate(planned, Plant(model), PATH, [0.0, -0.9, 0.0, 0.5], 0.05, 4)
     assert r.lane_excess_m is not None and r.lane_excess_m[0] == 0.0  # in the right lane: inside
     assert Road.constant(1.0).whole().left_m[0] == 0.5  # no lanes: the road itself
 

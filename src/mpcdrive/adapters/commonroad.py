@@ -318,12 +318,6 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
                 # where the mapped road begins / ends along the path (None: it goes on)
                 "start_m": start_m,
                 "end_m": end_m,
-                # a goal region on the route inside a time window: back in the route lane by its end
-                "return_by_s": plan.goal_window_s[1]
-                if plan.goal_arc_m is not None
-                and plan.goal_window_s is not None
-                and math.isfinite(plan.goal_window_s[1])
-                else None,
             },
             "initial_state": {"x_m": float(p0[0]), "y_m": float(p0[1]), "yaw_deg": math.degrees(yaw0), "v_mps": v0},
             # the maneuver planner's goal, and its pass through the oncoming lane when no lane

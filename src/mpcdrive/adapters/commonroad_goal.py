@@ -428,6 +428,45 @@ def frenet_interval(line: np.ndarray, points: np.ndarray) -> tuple[tuple[float, 
     return (float(min(S)), float(max(S))), (float(min(E)), float(max(E)))
 
 
+#: how far [m] to either side of the route the goal region's lateral extent is looked for, and
+#: the step [m] of the search
+GOAL_SEARCH_M, GOAL_STEP_M = 8.0, 0.1
+
+
+def _lateral_band(line: np.ndarray, shapes, arc: tuple[float, float]) -> tuple[float, float] | None:
+    """(lo, hi) [m]: the lateral offsets from the polyline ``line`` that lie inside the goal
+    ``shapes`` all along the route's stretch ``arc`` [m] in them (at each point every metre, the
+    stretch of the normal through it inside the region; their common part), None where the line
+    is inside nowhere. A goal of one lane is that lane, not the lanes beside it."""
+    import shapely
+
+    area = shapely.union_all([sh.shapely_object for sh in shapes])
+    shapely.prepare(area)
+    p = np.asarray(line, float)
+    s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(p, axis=0).T))]
+    t = np.gradient(p, axis=0)
+    t /= np.maximum(np.hypot(t[:, 0], t[:, 1]), 1e-12)[:, None]
+    n = np.column_stack([-t[:, 1], t[:, 0]])
+    idx = np.flatnonzero((s >= arc[0] - 1e-9) & (s <= arc[1] + 1e-9))
+    d = np.arange(-GOAL_SEARCH_M, GOAL_SEARCH_M + GOAL_STEP_M / 2, GOAL_STEP_M)
+    zero = int(np.argmin(np.abs(d)))
+    lo, hi = -math.inf, math.inf
+    found = False
+    for i in idx:
+        q = p[i] + d[:, None] * n[i]
+        inside = shapely.contains_xy(area, q[:, 0], q[:, 1])
+        if not inside[zero]:
+            continue
+        a = zero
+        while a > 0 and inside[a - 1]:
+            a -= 1
+        b = zero
+        while b < len(d) - 1 and inside[b + 1]:
+            b += 1
+        lo, hi, found = max(lo, float(d[a])), min(hi, float(d[b])), True
+    return (lo, hi) if found and lo <= hi else None
+
+
 def goal_spec(pp, line: np.ndarray, plan: DrivePlan) -> dict | None:
     """The scenario's ``goal`` entry (the maneuver planner's goal) of planning problem ``pp`` along
     the route's centre line ``line``: the route's stretch in the goal region and the region's
@@ -438,8 +477,11 @@ def goal_spec(pp, line: np.ndarray, plan: DrivePlan) -> dict | None:
         if not shapes:
             continue
         arc, offset = frenet_interval(line, np.vstack([_vertices(sh) for sh in shapes]))
-        if plan.goal_arc_m is not None:
-            arc = (min(arc[0], plan.goal_arc_m[0]), max(arc[1], plan.goal_arc_m[1]))
+        if plan.goal_arc_m is not None:  # the route's own stretch inside the region
+            arc = plan.goal_arc_m
+            band = _lateral_band(line, shapes, arc)
+            if band is not None:
+                offset = band
         out: dict = {"arc_m": list(arc), "offset_m": list(offset)}
         if plan.goal_window_s is not None:
             lo, hi = plan.goal_window_s

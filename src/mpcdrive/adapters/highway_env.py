@@ -19,10 +19,10 @@ episode's end); :class:`HighwayEnvMpcDriver` is the controller:
   lane -- or one cutting in, judged where the ego meets it -- it slows down and follows at a time
   gap instead of overtaking. Vehicles beyond the influence distance (20 m) are ignored, the
   nearest three considered.
-* **Lanes (highway-v0).** With ``settings.lanes`` (:func:`highway_settings`) the controller is
-  :class:`~mpcdrive.control.lanes.LaneChoosingMpc`: its decision layer picks the lane on
-  highway-v0's straight parallel lanes, and the MPC keeps the body inside the lanes the decision
-  allows and follows its lateral ramp (docs/highway.md), as on every other road with lanes.
+* **Lanes (highway-v0).** With ``settings.planner`` (:func:`highway_settings`) the controller is
+  :class:`~mpcdrive.planning.driver.PlannedMpc`: the maneuver planner chooses the lane, the offset
+  and the speed on highway-v0's straight parallel lanes, and the MPC keeps the body inside the
+  lanes the maneuver uses and follows it (docs/highway.md), as on every other road with lanes.
 * **Solver.** The default :class:`~mpcdrive.control.mpc.LtvMpc` (compiled step, condensed
   solver), as everywhere; a one-line notice names the reason where it does not cover a problem.
 
@@ -44,7 +44,8 @@ from typing import Literal
 
 import numpy as np
 
-from ..control.lanes import LaneChoosingMpc, LaneConfig, LaneDecision
+from ..planning import Maneuver, PlannerConfig
+from ..planning.driver import PlannedMpc
 from ..control.mpc import LtvMpc, MpcConfig
 from ..ocp.avoidance import AvoidanceConfig
 from ..ocp.problem import MpcProblem
@@ -153,7 +154,7 @@ def straight_road(network, lane_index) -> tuple[Road, StraightPath, dict]:
     lanes = network.graph[fr][to]
     route = network.get_lane(lane_index)
     if not all(type(ln).__name__ == "StraightLane" for ln in lanes):
-        raise ValueError("the lane decision layer needs straight lanes (highway-v0)")
+        raise ValueError("the maneuver planner on highway-env needs straight lanes (highway-v0)")
     path = StraightPath(route.start, route.end)
     out = []
     for j, ln in enumerate(lanes):
@@ -205,7 +206,7 @@ class DriverSettings:
     )
     prediction: Literal["lane", "constant_velocity"] = "lane"
     tau_lateral_s: float = 1.0
-    lanes: LaneConfig | None = None
+    planner: PlannerConfig | None = None
 
     def __post_init__(self):
         if int(self.horizon) != self.horizon or self.horizon < 1:
@@ -222,19 +223,21 @@ class DriverSettings:
             raise ValueError(f"prediction must be 'lane' or 'constant_velocity', got {self.prediction!r}")
         if not self.tau_lateral_s > 0:
             raise ValueError(f"tau_lateral_s must be positive, got {self.tau_lateral_s}")
-        if self.lanes is not None and not isinstance(self.lanes, LaneConfig):
-            raise ValueError(f"lanes must be a LaneConfig or None, got {type(self.lanes).__name__}")
+        if self.planner is not None and not isinstance(self.planner, PlannerConfig):
+            raise ValueError(f"planner must be a PlannerConfig or None, got {type(self.planner).__name__}")
 
 
 def highway_settings(v_ref_mps: float = 30.0, **overrides) -> DriverSettings:
     """:class:`DriverSettings` for highway-v0: ``v_ref_mps`` [m/s] (highway-env's speed limit
     and top of its speed reward is 30 m/s), vehicles considered within 60 m (the nearest 4),
-    and the lane decision layer (:mod:`mpcdrive.control.lanes`) wanting that speed."""
+    and the maneuver planner (:mod:`mpcdrive.planning`) wanting that speed (its check grid the
+    policy period, highway-env's 1 s at the default 1 Hz being too coarse for the swept checks: the
+    planner checks every 0.2 s within it)."""
     base = dict(
         v_ref_mps=v_ref_mps,
         speed_limits_mps=(0.0, v_ref_mps + 5.0),
         avoidance=AvoidanceConfig("hard", margin_m=0.3, influence_m=60.0, max_obstacles=4, follow_gap_s=1.0),
-        lanes=LaneConfig(desired_speed_mps=v_ref_mps, standstill_m=6.0, rear_time_gap_s=0.6),
+        planner=PlannerConfig(),
     )
     return DriverSettings(**{**base, **overrides})
 
@@ -247,8 +250,8 @@ class HighwayEnvMpcDriver:
     Built once per episode (after ``env.reset``): path from the ego's lane, model from the
     vehicle's length, QP from the action ranges. At each step the loop hands it the plant's
     traffic (:meth:`set_obstacles`; ``others``, their order fixed, an obstacle's index its
-    identity); :meth:`step` passes them to the MPC and solves (with ``settings.lanes`` the
-    :class:`~mpcdrive.control.lanes.LaneChoosingMpc` takes the lane decision first). Its outputs'
+    identity); :meth:`step` passes them to the MPC and solves (with ``settings.planner`` the
+    :class:`~mpcdrive.planning.driver.PlannedMpc` plans the maneuver first). Its outputs'
     path coordinates are those on :attr:`path` (the route lane's centreline). The controller's period
     is the policy period ``1 / policy_frequency``. With steering only (no longitudinal action)
     the ego cannot slow down behind a slower car in its lane: it keeps its lane and speed, and
@@ -264,9 +267,9 @@ class HighwayEnvMpcDriver:
         self.env = env
         self.settings = settings
         self.lane_index = tuple(vehicle.lane_index)
-        # highway-v0's straight parallel lanes: a decision layer picks the lane to drive in
+        # highway-v0's straight parallel lanes: the maneuver planner picks the lane to drive in
         self.road: Road | None = None
-        if settings.lanes is not None:
+        if settings.planner is not None:
             self.road, self.path, lane_paths = straight_road(u.road.network, self.lane_index)
             self.lane_half_width_m = 0.5 * float(u.road.network.get_lane(self.lane_index).width)
         else:
@@ -344,8 +347,8 @@ class HighwayEnvMpcDriver:
             avoidance=s.avoidance,
             footprint=self.footprint,
         )
-        #: the MPC (compiled), with ``settings.lanes`` wrapped in a LaneChoosingMpc on highway-v0's road
-        self.controller = mpc if self.road is None or s.lanes is None else LaneChoosingMpc(mpc, self.road, s.lanes)
+        #: the MPC (compiled), with ``settings.planner`` wrapped in a PlannedMpc on highway-v0's road
+        self.controller = mpc if self.road is None or s.planner is None else PlannedMpc(mpc, self.road, s.planner)
 
     # -- the controller interface (sim.simulate) -----------------------------------------------
     @property
@@ -363,7 +366,7 @@ class HighwayEnvMpcDriver:
     @property
     def safety_road(self) -> Road:
         """The road a run is judged on along :attr:`path`: highway-v0's whole road (every lane)
-        with the lane decision layer, else the lane around the path."""
+        with the maneuver planner, else the lane around the path."""
         return self.road if self.road is not None else self.lane_road
 
     @property
@@ -373,9 +376,9 @@ class HighwayEnvMpcDriver:
         return Scene(self.safety_road, (), self.footprint)
 
     @property
-    def decision(self) -> LaneDecision | None:
-        """The lane decision layer's last decision (None without ``settings.lanes``)."""
-        return getattr(self.controller, "decision", None) if self.road is not None else None
+    def maneuver(self) -> Maneuver | None:
+        """The maneuver planner's last maneuver (None without ``settings.planner``)."""
+        return getattr(self.controller, "maneuver", None) if self.road is not None else None
 
     def initial_warm(self, x0) -> WarmStart:
         return self.controller.initial_warm(x0)
@@ -386,7 +389,7 @@ class HighwayEnvMpcDriver:
 
     def step(self, x, warm: WarmStart) -> ControlOutput:
         """One control step from the measured state ``x`` with the last obstacles given (with
-        ``settings.lanes`` the lane decision first: :attr:`decision`)."""
+        ``settings.planner`` the maneuver first: :attr:`maneuver`)."""
         x = np.asarray(x, float)
         if self._obstacles:
             self.controller.set_obstacles(self._obstacles)

@@ -1017,7 +1017,7 @@ def check_pair(
         # (and past it) without being in it
         if goal_arr[G_T_HI] <= ego[E_T] + horizon or (passed_goal and ego[E_S] <= goal_arr[G_S_HI]):
             cost += par[P_C_GOAL]
-    safe = not hit and ttc > horizon
+    safe = not hit and ttc == math.inf  # nothing hit, and braking still works past the horizon
     return safe, feasible, rate, ttc, cost, goal
 
 

@@ -16,7 +16,6 @@ from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from ..models.presets import PRESETS
 from ..control.fallback import DEFAULT_LADDER, check_ladder
-from ..control.lanes import LaneConfig
 from ..control.mpc import MpcConfig
 from ..planning.config import PlannerConfig
 from ..ocp.avoidance import AvoidanceConfig
@@ -310,14 +309,12 @@ class RoadSpec(_Strict):
     One of: ``lane_width_m`` (a lane centred on the path), ``left_width_m`` and ``right_width_m``
     (the edges' distances to either side of the path), or ``widths`` (rows ``[s_m, left_width_m,
     right_width_m]`` at increasing arc lengths, linear in between: a road that narrows or widens
-    is followed exactly). ``neighbours`` (rows ``[s_m, left_m, right_m]``): how far lanes going
-    the same way reach beyond the road's left / right edge (0 where there is none); with them a
-    lane decision layer lets the car change into a free neighbour lane to pass a blocked
-    stretch, and come back; ``return_by_s`` [s]: the time by which the car must be back in its
-    own lane (e.g. a goal region on it): no change out of it starts that cannot return by then;
-    ``lanes``: settings of that decision layer by the names of
-    :class:`~mpcdrive.control.lanes.LaneConfig` (e.g. ``{time_gap_s: 2.0, turn_out_mps: 1.5}``;
-    the rest its defaults, the body's length and width the vehicle's). ``start_m`` / ``end_m``
+    is followed exactly). The road's other lanes, which the maneuver planner (the scenario's
+    ``planner`` settings) changes into: ``neighbours`` (rows ``[s_m, left_m, right_m]``): how far
+    lanes going the same way reach beyond the road's left / right edge (0 where there is none:
+    one lane each side), or ``lane_rows``: each lane beside the route lane with its edges and
+    direction (a CommonRoad import gives every lane of the carriageway and the first oncoming
+    lane). ``start_m`` / ``end_m``
     [m] (optional): the arc lengths along the path where the mapped road begins / ends (a lane
     without a predecessor / successor); a body behind the start or past the end is off the road
     (the edges are held constant up to them; None: the road goes on)."""
@@ -329,22 +326,8 @@ class RoadSpec(_Strict):
     neighbours: list[tuple[NonNeg, NonNeg, NonNeg]] | None = None
     lane_rows: list[LaneRowsSpec] | None = None
     margin_m: NonNeg = 0.05
-    return_by_s: NonNeg | None = None
-    lanes: dict[str, float] | None = None
     start_m: Finite | None = None
     end_m: Finite | None = None
-
-    @field_validator("lanes")
-    @classmethod
-    def _lane_config(cls, v):
-        if v is None:
-            return v
-        known = set(LaneConfig.__dataclass_fields__)
-        unknown = sorted(set(v) - known)
-        if unknown:
-            raise ValueError(f"unknown lane setting(s) {unknown}; known: {sorted(known)}")
-        LaneConfig(**v)  # its own checks, with its own messages
-        return v
 
     @model_validator(mode="after")
     def _one_form(self):
@@ -369,8 +352,8 @@ class RoadSpec(_Strict):
                 raise ValueError("neighbours: rows [s_m, left_m, right_m] with increasing s_m")
         if self.min_width_m <= 0:
             raise ValueError("the road has no width somewhere (left + right width is 0)")
-        if self.lanes is not None and self.neighbours is None:
-            raise ValueError("road.lanes sets the lane decision layer, which needs neighbours")
+        if self.neighbours is not None and self.lane_rows:
+            raise ValueError("give the road's other lanes as one of: neighbours or lane_rows")
         if self.start_m is not None and self.end_m is not None and not self.start_m < self.end_m:
             raise ValueError(f"the road's start_m {self.start_m:g} m must be before its end_m {self.end_m:g} m")
         return self
@@ -657,7 +640,8 @@ class ScenarioSpec(_Strict):
     laps: Positive | None = None
     verdict: VerdictSpec = VerdictSpec()
     #: the maneuver planner's settings (:class:`~mpcdrive.planning.config.PlannerConfig` names and
-    #: ``replan_s``); it drives a road with lanes (``road.neighbours``)
+    #: ``replan_s``): it drives every road with lanes (``road.neighbours`` or ``road.lane_rows``),
+    #: and a road without when the scenario gives settings (``planner: {}``)
     planner: dict[str, float | bool | list[float]] | None = None
     goal: GoalSpec | None = None
 
