@@ -72,7 +72,8 @@ def test_import_maps_route_obstacles_and_initial_state(name):
     w = np.hypot(*(ll.left_vertices - ll.right_vertices).T)
     s0, left0, right0 = spec.road.widths[2]
     assert w.min() - 0.1 <= left0 + right0 <= w.max() + 0.1
-    assert len(spec.road.neighbours) == len(spec.road.widths)
+    # every lane beside the route on the road's knots
+    assert all(len(ln.rows) == len(spec.road.widths) for ln in spec.road.lane_rows or [])
     # dynamic obstacles carry their recorded trajectories as known predictions
     for o, entry in zip(imp.scenario.obstacles, spec.obstacles):
         if o.obstacle_role.value == "dynamic":
@@ -251,7 +252,7 @@ def test_parked_car_is_passed_through_the_free_neighbour_lane(capsys):
     assert res.e_y_m.max() > 1.0  # over in the neighbour lane beside the parked car
     assert np.min(res.clearance_m) > 0.3
     # no neighbour lane: it stops behind the car (the first 6 s)
-    road = imp.spec.road.model_copy(update={"neighbours": None})
+    road = imp.spec.road.model_copy(update={"lane_rows": None})
     spec = imp.spec.model_copy(update={"road": road, "duration_s": 6.0})
     res = run_experiment(build_experiment(spec))
     rep = check_drive(replace(imp, spec=spec), res)

@@ -464,7 +464,7 @@ def test_commonroad_file_on_a_commonroad_plant_stops_behind_the_parked_car(plant
     if not cr.available():
         pytest.skip("commonroad-io / drivability checker not installed")
     imp = cr.load_commonroad(Path(__file__).resolve().parent / "data" / "commonroad" / "ZAM_Tutorial_Urban-3_2.xml")
-    road = imp.spec.road.model_copy(update={"neighbours": None})
+    road = imp.spec.road.model_copy(update={"lane_rows": None})
     spec = apply_vehicle(imp.spec.model_copy(update={"duration_s": 8.0, "road": road}), "ford_escort", plant)
     exp = build_experiment(spec, plant_factory=commonroad_plant)
     res = run_experiment(exp)

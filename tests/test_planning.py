@@ -15,7 +15,7 @@ from mpcdrive.paths.compiled import path_arrays
 from mpcdrive.paths.straight import StraightPath
 from mpcdrive.paths.waypoints import WaypointPath
 from mpcdrive.planning import ManeuverPlanner, PlannerConfig, PlanningGoal, VehicleLimits
-from mpcdrive.planning import kernels
+from mpcdrive.planning import frenet
 from mpcdrive.planning.tracks import obstacle_tracks
 from mpcdrive.scene.obstacles import ConstantVelocity, Obstacle, TrajectoryMotion, rectangle
 from mpcdrive.scene.road import Lane, Road
@@ -78,7 +78,7 @@ def kernels_quintic(*args):
 
     @njit
     def run(x0, v0, a0, x1, v1, a1, T, c):
-        kernels.quintic(x0, v0, a0, x1, v1, a1, T, c)
+        frenet.quintic(x0, v0, a0, x1, v1, a1, T, c)
 
     run(*args)
 
@@ -88,7 +88,7 @@ def poly(c, t):
 
     @njit
     def run(c, t):
-        p, d1, d2, _ = kernels.poly_eval(c, t)
+        p, d1, d2, _ = frenet.poly_eval(c, t)
         return p, d1, d2
 
     return run(c, t)
@@ -110,7 +110,7 @@ def test_evasive_move_steers_within_the_rate_and_settles_on_the_line():
         out = np.empty((200, 3))
         s = 0.0
         for k in range(200):
-            d, th, kap = kernels._evasive_step(d, th, kap, s, 8.0, 8.0, 0.2, grid, line, 1, 0.0, par, 0.4)
+            d, th, kap = frenet.evasive_step(d, th, kap, s, 8.0, 8.0, 0.2, grid, line, 1, 0.0, par, 0.4)
             s += 1.6
             out[k, 0], out[k, 1], out[k, 2] = d, th, kap
         return out

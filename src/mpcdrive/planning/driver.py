@@ -20,6 +20,7 @@ reached, is dropped: the car drives on along its lane.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 import math
 import time
 
@@ -124,7 +125,7 @@ class PlannedMpc:
         self._table: ObstacleTable | None = None
         self._lateral = None
         self._line_key: tuple | None = None
-        self._line_ref = None
+        self._line_ref: Callable[[np.ndarray], np.ndarray] | None = None
         names = list(mpc.model.input_names)
         self._accel = names.index("accel")
         self._wheelbase = self.planner.limits.wheelbase_m

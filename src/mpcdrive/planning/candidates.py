@@ -1,0 +1,468 @@
+"""The planner's candidates, compiled (numba subroutines; the method is :mod:`.kernels`'s):
+lateral moves to every lane's line (and offsets inside the car's lane, and evasive moves),
+longitudinal profiles (speed targets, stops at points, the wanted-speed profile, the intelligent
+driver model behind each lane's leader, the goal's arrival), and each profile's own cost."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._subroutine import subroutine
+from .work import (
+    E_A,
+    E_CURV,
+    E_D,
+    E_LANE,
+    E_PREV_LANE,
+    E_PREV_OFF,
+    E_S,
+    E_SLOPE,
+    E_T,
+    E_V,
+    G_HAS,
+    G_S_HI,
+    G_S_LO,
+    G_T_HI,
+    G_T_LO,
+    G_V_HI,
+    G_V_LO,
+    LANE_ONCOMING,
+    LON_FOLLOW,
+    LON_GOAL,
+    LON_REFERENCE,
+    LON_SPEED,
+    LON_STOP,
+    MAX_LAT,
+    MAX_LON,
+    P_A_COMF,
+    P_A_MAX,
+    P_C_CHANGE,
+    P_C_SWITCH,
+    P_CO,
+    P_CREEP,
+    P_D_COMF,
+    P_D_MAX,
+    P_HL,
+    P_HW,
+    P_JERK_REF,
+    P_KAPPA_MAX,
+    P_LAT_MIN,
+    P_MARGIN,
+    P_ONCOMING,
+    P_ROAD_END,
+    P_ROAD_MARGIN,
+    P_SHIFT,
+    P_STANDSTILL,
+    P_TIME_GAP,
+    P_V_MAX,
+)
+
+from .frenet import grid_at, grid_row_at, poly_eval, quintic
+
+#: the wanted-speed profile's time constant [s]: how fast the speed follows the wanted one
+SPEED_TAU_S = 1.0
+#: jerk [m/s^3] of the numeric profiles (reference, follow): a firm but comfortable onset
+PROFILE_JERK_MPS3 = 5.0
+#: a pair whose curvature exceeds the vehicle's by this share is infeasible (the controller's
+#: model and the planner's Frenet approximation differ by about that)
+KAPPA_SLACK = 1.05
+#: at most this many stop points are sampled (the nearest)
+MAX_STOPS = 4
+
+
+# -- lateral candidates ---------------------------------------------------------------------------
+@subroutine
+def _add_lateral(w, lane, off, L, cost):
+    n = w.lat_n[0]
+    if n >= MAX_LAT:
+        return
+    s0 = w.ego[E_S]
+    s1 = s0 + L
+    ds = w.grid[1]
+    line = grid_row_at(w.grid, w.lane_line, lane, s1)
+    slope = (grid_row_at(w.grid, w.lane_line, lane, s1 + ds) - line) / ds
+    w.lat_lane[n] = lane
+    w.lat_off[n] = off
+    w.lat_len[n] = L
+    if L > 0.0:
+        quintic(w.ego[E_D], w.ego[E_SLOPE], w.ego[E_CURV], line + off, slope, 0.0, L, w.lat_coef[n])
+    w.lat_cost[n] = cost
+    w.lat_n[0] = n + 1
+
+
+#: lanes whose line is farther than this [m] from the car are not sampled (two lanes over and a
+#: half: a maneuver of the horizon changes one or two lanes)
+LANE_REACH_M = 9.0
+
+
+@subroutine
+def _lane_open(w, lane, s0):
+    """Whether ``lane`` is wide enough for the car here or just ahead (a lane that has ended or
+    not begun, narrower than the body and the road's margins, is no target) and within
+    ``LANE_REACH_M`` of it."""
+    par = w.par
+    if abs(grid_row_at(w.grid, w.lane_line, lane, s0) - w.ego[E_D]) > LANE_REACH_M:
+        return False
+    best = 0.0
+    for q in range(3):
+        s = s0 + q * par[P_LAT_MIN]
+        best = max(best, grid_row_at(w.grid, w.lane_left, lane, s) - grid_row_at(w.grid, w.lane_right, lane, s))
+    return best >= 2.0 * par[P_HW] + 2.0 * par[P_ROAD_MARGIN]
+
+
+@subroutine
+def lateral_candidates(w):
+    """Moves to every lane's line (the car's own lane also to offsets inside it), over the
+    lengths the car drives in ``lat_lengths_s`` at its speed (module docstring)."""
+    par = w.par
+    w.lat_n[0] = 0
+    s0, v0 = w.ego[E_S], w.ego[E_V]
+    now = int(w.ego[E_LANE])
+    prev = int(w.ego[E_PREV_LANE])
+    v_want = grid_at(w.grid, w.g_vref, s0)
+    v_len = 0.5 * (v0 + max(v0, v_want))
+    for lane in range(w.lane_kind.shape[0]):
+        kind = w.lane_kind[lane]
+        if kind == LANE_ONCOMING and par[P_ONCOMING] == 0.0:
+            continue
+        if lane != now and not _lane_open(w, lane, s0):
+            continue
+        width_ahead = grid_row_at(w.grid, w.lane_left, lane, s0 + par[P_LAT_MIN]) - grid_row_at(
+            w.grid, w.lane_right, lane, s0 + par[P_LAT_MIN]
+        )
+        base = 0.0
+        if lane != now:
+            base += par[P_C_CHANGE]
+        if prev >= 0 and lane != prev:
+            base += par[P_C_SWITCH]
+        room = 0.5 * width_ahead - par[P_HW] - par[P_ROAD_MARGIN]
+        shift = min(par[P_SHIFT], room) if lane == now else 0.0
+        n_off = 3 if shift > 0.05 else 1
+        line0 = grid_row_at(w.grid, w.lane_line, lane, s0)
+        for q in range(n_off):
+            off = 0.0 if q == 0 else (shift if q == 1 else -shift)
+            cost = base
+            if q > 0 and not (lane == prev and w.ego[E_PREV_OFF] * off > 0.0):
+                cost += 0.2 * shift  # off the lane's line (not the offset chosen last)
+            # a car on the line already, heading along it, has one move: stay
+            on_line = abs(line0 + off - w.ego[E_D]) < 0.05 and abs(w.ego[E_SLOPE]) < 0.02
+            nT = 1 if on_line else w.lat_lengths_s.shape[0]
+            # the shortest move: its peak curvature 5.77 |dd| / L^2 half the vehicle's tightest
+            L_min = max(par[P_LAT_MIN], math.sqrt(5.77 * abs(line0 + off - w.ego[E_D]) / (0.5 * par[P_KAPPA_MAX])))
+            # the moves over each duration at the car's speed (short, sharp moves are the evasive
+            # ones' below: a quintic's curvature rises fastest at its start, beyond the steering
+            # rate at any but a crawling speed)
+            last = 0.0
+            for m in range(nT):
+                L = max(L_min, v_len * w.lat_lengths_s[m])
+                if L - last < 0.5:
+                    continue  # the same move (a slow car: every duration gives the shortest move)
+                last = L
+                _add_lateral(w, lane, off, L, cost)
+    # evasive moves: to every other lane's line, steering as fast as the vehicle can (numeric,
+    # with the longitudinal profile they are paired with: ``lat_len`` < 0)
+    # (``lat_len`` -1: up to the friction circle's share EVASIVE_HARD; -2: EVASIVE_GENTLE)
+    for lane in range(w.lane_kind.shape[0]):
+        kind = w.lane_kind[lane]
+        if lane == now or (kind == LANE_ONCOMING and par[P_ONCOMING] == 0.0):
+            continue
+        if not _lane_open(w, lane, s0):
+            continue
+        cost = par[P_C_CHANGE] + (par[P_C_SWITCH] if prev >= 0 and lane != prev else 0.0)
+        _add_lateral(w, lane, 0.0, -1.0, cost)
+        _add_lateral(w, lane, 0.0, -2.0, cost)
+    # hold the offset the car has (a maneuver that stops where it is, mid-change)
+    _add_lateral(w, now, w.ego[E_D] - grid_row_at(w.grid, w.lane_line, now, s0), par[P_LAT_MIN], par[P_C_SWITCH])
+
+
+# -- longitudinal candidates -----------------------------------------------------------------------
+@subroutine
+def _new_lon(w, kind, target):
+    n = w.lon_n[0]
+    if n >= MAX_LON:
+        return -1
+    w.lon_kind[n] = kind
+    w.lon_target[n] = target
+    w.lon_n[0] = n + 1
+    return n
+
+
+@subroutine
+def _fill_quintic(w, n, c, T):
+    """Samples of the quintic ``c`` (in t) up to ``T``, then its end speed held."""
+    K = w.lon_s.shape[1] - 1
+    dt = w.dt[0]
+    pT, vT, _, _ = poly_eval(c, T)
+    for k in range(K + 1):
+        t = k * dt
+        if t <= T:
+            p, v, a, _ = poly_eval(c, t)
+        else:
+            p, v, a = pT + vT * (t - T), vT, 0.0
+        w.lon_s[n, k] = p
+        w.lon_v[n, k] = v
+        w.lon_a[n, k] = a
+
+
+@subroutine
+def _speed_target(w, v1, T, c):
+    """A quartic to speed ``v1`` with zero acceleration at ``T`` (in ``c`` as a quintic)."""
+    s0, v0, a0 = w.ego[E_S], w.ego[E_V], w.ego[E_A]
+    dv = v1 - v0 - a0 * T
+    da = -a0
+    c4 = -(dv - 0.5 * T * da) / (2.0 * T**3)
+    c3 = (da - 12.0 * T * T * c4) / (6.0 * T)
+    c[0] = s0
+    c[1] = v0
+    c[2] = 0.5 * a0
+    c[3] = c3
+    c[4] = c4
+    c[5] = 0.0
+
+
+@subroutine
+def _numeric(w, n, lane, top):
+    """The wanted-speed profile (``lane`` < 0) or the intelligent driver model behind ``lane``'s
+    leader (wanting the top speed with ``top``), integrated on the grid with the profile jerk."""
+    par, grid, g_vref, ego = w.par, w.grid, w.g_vref, w.ego
+    lon_s, lon_v, lon_a = w.lon_s, w.lon_v, w.lon_a
+    ob_s, ob_e, ob_hl, ob_hw, n_obs = w.ob_s, w.ob_e, w.ob_hl, w.ob_hw, w.ob_n[0]
+    lane_left, lane_right = w.lane_left, w.lane_right
+    K = lon_s.shape[1] - 1
+    dt = w.dt[0]
+    s, v, a = ego[E_S], ego[E_V], ego[E_A]
+    hl = par[P_HL] + par[P_CO]
+    a_c, b_c = par[P_A_COMF], par[P_D_COMF]
+    v_max, d_max = par[P_V_MAX], par[P_D_MAX]
+    standstill, time_gap = par[P_STANDSTILL], par[P_TIME_GAP]
+    sqrt_ab = 2.0 * math.sqrt(a_c * b_c)
+    j = PROFILE_JERK_MPS3 * dt
+    for k in range(K + 1):
+        lon_s[n, k] = s
+        lon_v[n, k] = v
+        lon_a[n, k] = a
+        if k == K:
+            break
+        v_want = v_max if top else min(grid_at(grid, g_vref, s + v * SPEED_TAU_S), v_max)
+        if lane < 0:
+            a_des = (v_want - v) / SPEED_TAU_S
+            a_des = min(max(a_des, -b_c), a_c)
+        else:
+            # the road's end is a leader that stands (the car stops with its front inside it)
+            gap = par[P_ROAD_END] - par[P_ROAD_MARGIN] - (s + hl) if math.isfinite(par[P_ROAD_END]) else math.inf
+            v_lead = 0.0
+            for o in range(n_obs):
+                So = ob_s[o, k]
+                if not math.isfinite(So):
+                    continue
+                g = So - ob_hl[o, k] - (s + hl)
+                if g < -hl or g >= gap:
+                    continue
+                lo = grid_row_at(grid, lane_right, lane, So)
+                hi = grid_row_at(grid, lane_left, lane, So)
+                e, hw = ob_e[o, k], ob_hw[o, k]
+                if min(e + hw, hi) - max(e - hw, lo) > 0.3:
+                    gap = g
+                    S1 = ob_s[o, k + 1]
+                    v_lead = (S1 - So) / dt if math.isfinite(S1) else 0.0
+            ratio = v / max(v_want, 0.1)
+            a_des = a_c * (1.0 - ratio**4)
+            if math.isfinite(gap):
+                s_star = standstill + max(0.0, v * time_gap + v * (v - v_lead) / sqrt_ab)
+                if gap <= 0.1:
+                    a_des = -d_max
+                else:
+                    a_des -= a_c * (s_star / gap) ** 2
+            a_des = min(max(a_des, -d_max), a_c)
+        a = min(max(a_des, a - j), a + j)
+        v_new = v + a * dt
+        if v_new < 0.0:
+            v_new = 0.0
+            a = -v / dt
+        s += 0.5 * (v + v_new) * dt
+        v = v_new
+
+
+@subroutine
+def _standing(ob_s, o, K, dt):
+    """Whether obstacle row ``o`` stands (moves less than 0.5 m over the horizon)."""
+    lo, hi = math.inf, -math.inf
+    for k in range(K + 1):
+        if math.isfinite(ob_s[o, k]):
+            lo = min(lo, ob_s[o, k])
+            hi = max(hi, ob_s[o, k])
+    return hi - lo < 0.5
+
+
+@subroutine
+def _stop_at(w, s_stop, c):
+    """Quintics to a stop at ``s_stop`` over the durations that brake comfortably (and half as
+    hard again): added as candidates."""
+    s0, v0 = w.ego[E_S], w.ego[E_V]
+    D = s_stop - s0
+    if D < 0.05:
+        D = 0.0
+    b = w.par[P_D_COMF]
+    # a constant deceleration stops in 2 D / v0; from (near) standstill a quintic covers D in T
+    # with a peak acceleration of 5.77 D / T^2
+    T0 = max(2.0 * D / max(v0, 0.1), math.sqrt(5.77 * D / b), v0 / b, 0.5)
+    for f in (1.0, 1.5):
+        n = _new_lon(w, LON_STOP, s_stop)
+        if n < 0:
+            return
+        T = T0 * f
+        quintic(s0, v0, w.ego[E_A], s0 + D, 0.0, 0.0, T, c)
+        _fill_quintic(w, n, c, T)
+
+
+@subroutine
+def longitudinal_candidates(w, c):
+    par = w.par
+    w.lon_n[0] = 0
+    s0, v0 = w.ego[E_S], w.ego[E_V]
+    v_want = min(grid_at(w.grid, w.g_vref, s0), par[P_V_MAX])
+    n = _new_lon(w, LON_REFERENCE, v_want)
+    _numeric(w, n, -1, False)
+    # speed targets: hold, the wanted speed, the top speed, half the speed, a stop
+    nV = w.speed_s.shape[0]
+    targets = (v0, v_want, par[P_V_MAX], 0.5 * v0, par[P_CREEP], 0.0)
+    for q in range(6):
+        v1 = targets[q]
+        dup = False
+        for p in range(q):
+            if abs(targets[p] - v1) < 0.25:
+                dup = True
+        if dup:
+            continue
+        # a slowing target also at the vehicle's hard braking (the quartic's peak is 1.5 dv / T)
+        hard = v1 < v0 - 0.5
+        for m in range(nV + (1 if hard else 0)):
+            if m == nV:
+                T = max(1.5 * (v0 - v1) / (0.9 * par[P_D_MAX]), 0.3)
+            else:
+                T = w.speed_s[m]
+                if v1 == 0.0:
+                    T = max(T, v0 / par[P_D_COMF])
+            n = _new_lon(w, LON_SPEED, v1)
+            if n < 0:
+                return
+            _speed_target(w, v1, T, c)
+            _fill_quintic(w, n, c, T)
+            # a stop quartic that rolls back is no stop: hold at the first standstill
+            if v1 == 0.0:
+                K = w.lon_s.shape[1] - 1
+                for k in range(1, K + 1):
+                    if w.lon_v[n, k] <= 0.0:
+                        for kk in range(k, K + 1):
+                            w.lon_s[n, kk] = w.lon_s[n, k - 1]
+                            w.lon_v[n, kk] = 0.0
+                            w.lon_a[n, kk] = 0.0
+                        break
+    # the intelligent driver model behind each lane's leader, wanting the wanted speed or the
+    # top speed (keeping up with traffic faster than the car wants to drive, a car behind)
+    for lane in range(w.lane_kind.shape[0]):
+        if w.lane_kind[lane] == LANE_ONCOMING and par[P_ONCOMING] == 0.0:
+            continue
+        if lane != int(w.ego[E_LANE]) and not _lane_open(w, lane, s0):
+            continue
+        for top in range(2):
+            n = _new_lon(w, LON_FOLLOW, lane)
+            if n < 0:
+                return
+            _numeric(w, n, lane, top == 1)
+    # stops: before the first obstacles in the car's lane (a parked car, the conflict zone of a
+    # crossing one), inside the road's end
+    hl = par[P_HL] + par[P_CO]
+    ob_s = w.ob_s
+    K = ob_s.shape[1] - 1
+    now = int(w.ego[E_LANE])
+    stops = np.empty(MAX_STOPS + 1)
+    ns = 0
+    for o in range(w.ob_n[0]):
+        for k in range(K + 1):
+            So = w.ob_s[o, k]
+            if not math.isfinite(So):
+                continue
+            front = So - w.ob_hl[o, k]
+            if front < s0 + hl - 0.5:
+                continue
+            lo = grid_row_at(w.grid, w.lane_right, now, So)
+            hi = grid_row_at(w.grid, w.lane_left, now, So)
+            e, hw = w.ob_e[o, k], w.ob_hw[o, k]
+            if min(e + hw, hi) - max(e - hw, lo) > 0.0:
+                stop = front - par[P_STANDSTILL] - hl
+                if k == 0 and _standing(ob_s, o, K, w.dt[0]):
+                    # behind a standing obstacle: the room to steer round it later
+                    need = e + hw + par[P_HW] + par[P_MARGIN] - (w.ego[E_D] - par[P_HW])
+                    need = min(need, w.ego[E_D] + par[P_HW] - (e - hw - par[P_HW] - par[P_MARGIN]))
+                    stop -= math.sqrt(5.77 * max(need, 0.0) / (0.5 * par[P_KAPPA_MAX]))
+                if ns < MAX_STOPS:
+                    stops[ns] = stop
+                    ns += 1
+                else:  # keep the nearest
+                    far = 0
+                    for q in range(1, ns):
+                        if stops[q] > stops[far]:
+                            far = q
+                    if stop < stops[far]:
+                        stops[far] = stop
+                break
+    if math.isfinite(par[P_ROAD_END]):
+        stops[ns] = par[P_ROAD_END] - par[P_ROAD_MARGIN] - hl
+        ns += 1
+    for q in range(ns):
+        if stops[q] > s0 + v0 * w.dt[0] * (w.lon_s.shape[1] - 1) + 60.0:
+            continue  # beyond what the horizon can reach: the speed targets cover it
+        _stop_at(w, max(stops[q], s0), c)
+    # the goal: in its region inside its time window
+    g = w.goal
+    if g[G_HAS] != 0.0 and math.isfinite(g[G_T_HI]) and g[G_T_HI] > w.ego[E_T] and g[G_S_HI] > s0:
+        t_lo = max(g[G_T_LO], w.ego[E_T] + 0.2)
+        t_mid = 0.5 * (t_lo + g[G_T_HI])
+        s_mid = 0.5 * (max(g[G_S_LO], s0) + g[G_S_HI])
+        T = t_mid - w.ego[E_T]
+        v_goal = (s_mid - s0) / T
+        if math.isfinite(g[G_V_LO]):
+            v_goal = min(max(v_goal, g[G_V_LO]), g[G_V_HI])
+        v_goal = min(max(v_goal, 0.0), par[P_V_MAX])
+        horizon = w.dt[0] * (w.lon_s.shape[1] - 1)
+        n = _new_lon(w, LON_GOAL, s_mid)
+        if n >= 0:
+            if T <= horizon:
+                quintic(s0, v0, w.ego[E_A], s_mid, v_goal, 0.0, T, c)
+                _fill_quintic(w, n, c, T)
+            else:
+                _speed_target(w, min(max((s_mid - s0) / T, 0.0), par[P_V_MAX]), min(w.speed_s[0], T), c)
+                _fill_quintic(w, n, c, min(w.speed_s[0], T))
+
+
+@subroutine
+def longitudinal_costs(w):
+    """Each profile's limits (``lon_ok``) and its own cost: the time it ends behind (or ahead of)
+    the wanted-speed profile, its jerk and its braking beyond the comfortable."""
+    par = w.par
+    lon_s, lon_v, lon_a, lon_ok, lon_cost = w.lon_s, w.lon_v, w.lon_a, w.lon_ok, w.lon_cost
+    K = lon_s.shape[1] - 1
+    dt = w.dt[0]
+    s_ref = lon_s[0, K]
+    v_scale = max(0.5 * (w.ego[E_V] + lon_v[0, K]), 1.0)
+    v_max, a_max, d_max, d_comf, j_ref = par[P_V_MAX], par[P_A_MAX], par[P_D_MAX], par[P_D_COMF], par[P_JERK_REF]
+    for n in range(w.lon_n[0]):
+        ok = 1
+        cost = 0.0
+        for k in range(K + 1):
+            v, a = lon_v[n, k], lon_a[n, k]
+            if v < -0.05 or v > v_max + 0.05:
+                ok = 0
+            if a > a_max + 1e-6 or a < -d_max - 1e-6:
+                ok = 0
+            if k > 0:
+                jerk = (a - lon_a[n, k - 1]) / dt / j_ref
+                cost += jerk * jerk * dt
+            if a < -d_comf:
+                cost += ((-a - d_comf) / d_comf) * dt * 4.0
+        cost += abs(s_ref - lon_s[n, K]) / v_scale
+        lon_ok[n] = ok
+        lon_cost[n] = cost

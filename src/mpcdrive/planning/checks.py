@@ -1,0 +1,525 @@
+"""The planner's checks of a maneuver (a lateral move paired with a longitudinal profile),
+compiled (numba subroutines; the method is :mod:`.kernels`'s): contact with every obstacle's
+predicted box (swept between samples, on the controller's footprint discs), the road's edges and
+ends, the vehicle's curvature, friction circle and steering rate, the goal, and the maneuver's
+costs."""
+
+from __future__ import annotations
+
+import math
+
+
+from .._subroutine import subroutine
+from .work import (
+    E_CURV,
+    E_D,
+    E_S,
+    E_SLOPE,
+    E_T,
+    G_D_HI,
+    G_D_LO,
+    G_HAS,
+    G_HAS_YAW,
+    G_S_HI,
+    G_S_LO,
+    G_T_HI,
+    G_T_LO,
+    G_V_HI,
+    G_V_LO,
+    G_YAW_HI,
+    G_YAW_LO,
+    LANE_ONCOMING,
+    LANE_ROUTE,
+    P_C_GAP,
+    P_C_GOAL,
+    P_C_OFFROUTE,
+    P_C_ONCOMING,
+    P_CO,
+    P_R_DISC,
+    P_D_COMF,
+    P_D_MAX,
+    P_FRICTION,
+    P_HL,
+    P_HW,
+    P_KAPPA_MAX,
+    P_KAPPA_RATE,
+    P_LAT_MIN,
+    P_LAT_REF,
+    P_MARGIN,
+    P_ROAD_END,
+    P_ROAD_MARGIN,
+    P_ROAD_START,
+    P_STANDSTILL,
+    P_TIME_GAP,
+    P_V_MAX,
+    REL_AHEAD,
+    REL_BEHIND,
+    REL_CLEAR,
+    REL_LEFT,
+    REL_RIGHT,
+)
+
+from .candidates import KAPPA_SLACK, _standing
+from .frenet import EVASIVE_GENTLE, EVASIVE_HARD, evasive_step, grid_at, grid_row_at, lateral_at, poly_eval
+
+
+# -- checking a pair ---------------------------------------------------------------------------------
+@subroutine
+def _segment_hits_box(x0, y0, x1, y1, bx, by):
+    """Whether the segment (x0, y0)-(x1, y1) meets the box |x| < bx, |y| < by (slabs)."""
+    t0, t1 = 0.0, 1.0
+    dx, dy = x1 - x0, y1 - y0
+    if abs(dx) < 1e-12:
+        if abs(x0) >= bx:
+            return False
+    else:
+        ta, tb = (-bx - x0) / dx, (bx - x0) / dx
+        if ta > tb:
+            ta, tb = tb, ta
+        t0, t1 = max(t0, ta), min(t1, tb)
+        if t0 > t1:
+            return False
+    if abs(dy) < 1e-12:
+        if abs(y0) >= by:
+            return False
+    else:
+        ta, tb = (-by - y0) / dy, (by - y0) / dy
+        if ta > tb:
+            ta, tb = tb, ta
+        t0, t1 = max(t0, ta), min(t1, tb)
+        if t0 > t1:
+            return False
+    return True
+
+
+@subroutine
+def _box_distance(x, y, bx, by):
+    """Distance from the point (x, y) to the box |x| <= bx, |y| <= by (0 inside)."""
+    dx = max(abs(x) - bx, 0.0)
+    dy = max(abs(y) - by, 0.0)
+    return math.sqrt(dx * dx + dy * dy)
+
+
+@subroutine
+def _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth):
+    """How far [m] the body's corners at (s, d), yawed (cos, sin) from the path, are outside the
+    edges ``left_tab`` / ``right_tab`` less the road's margin, or past the road's ends (the left
+    corners against the left edge, the right ones against the right edge)."""
+    hl, hw, co, rm = par[P_HL], par[P_HW], par[P_CO], par[P_ROAD_MARGIN]
+    front, rear = co + hl, co - hl
+    worst = 0.0
+    for q in range(2):
+        ax = front if q == 0 else rear
+        # left corner (ay = hw) and right corner (ay = -hw)
+        s_l = s + ax * cth - hw * sth
+        d_l = d + ax * sth + hw * cth
+        s_r = s + ax * cth + hw * sth
+        d_r = d + ax * sth - hw * cth
+        worst = max(worst, d_l - (grid_at(grid, left_tab, s_l) - rm), (grid_at(grid, right_tab, s_r) + rm) - d_r)
+        if q == 0:
+            worst = max(worst, max(s_l, s_r) - (par[P_ROAD_END] - rm))
+        else:
+            worst = max(worst, (par[P_ROAD_START] + rm) - min(s_l, s_r))
+    return worst
+
+
+@subroutine
+def _first_contact(
+    i, j, par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v, ob_s, ob_e, ob_hl, ob_hw, dt,
+    discs, rel_idx, n_rel, p_disc_s, p_disc_d,
+):  # fmt: skip
+    """When [s] pair (``i``, ``j``)'s discs first come within their radius and the margin of one
+    of the obstacles ``rel_idx[:n_rel]`` (swept between samples, as :func:`check_pair` checks
+    them), inf if never: the part of a pair's check that rejects most pairs, run before the rest
+    (costs, road, vehicle)."""
+    if n_rel == 0:
+        return math.inf
+    K = lon_s.shape[1] - 1
+    lane_i = lat_lane[i]
+    coef = lat_coef[i]
+    L, off = lat_len[i], lat_off[i]
+    s0 = ego[E_S]
+    nd = discs.shape[0]
+    rn = par[P_R_DISC] + par[P_MARGIN]
+    evasive = L < 0.0
+    ev_d, ev_th, ev_k = ego[E_D], math.atan(ego[E_SLOPE]), ego[E_CURV]
+    for k in range(K + 1):
+        s, v = lon_s[j, k], lon_v[j, k]
+        if evasive:
+            if k > 0:
+                ev_d, ev_th, ev_k = evasive_step(
+                    ev_d, ev_th, ev_k, lon_s[j, k - 1], lon_v[j, k - 1], v, dt, grid, lane_line, lane_i, off, par,
+                    EVASIVE_HARD if L > -1.5 else EVASIVE_GENTLE,
+                )  # fmt: skip
+            d, d1 = ev_d, math.tan(ev_th)
+        else:
+            d, d1, _ = lateral_at(coef, L, s0, lane_line, lane_i, off, grid, s)
+        nrm = math.sqrt(1.0 + d1 * d1)
+        cth, sth = 1.0 / nrm, d1 / nrm
+        t = k * dt
+        for q_o in range(n_rel):
+            o = rel_idx[q_o]
+            So = ob_s[o, k]
+            if not math.isfinite(So):
+                continue
+            Eo, HL, HW = ob_e[o, k], ob_hl[o, k], ob_hw[o, k]
+            prev = k > 0 and math.isfinite(ob_s[o, k - 1])
+            for q in range(nd):
+                qs = s + discs[q] * cth - So
+                qd = d + discs[q] * sth - Eo
+                if prev:
+                    q0s = p_disc_s[q] - ob_s[o, k - 1]
+                    q0d = p_disc_d[q] - ob_e[o, k - 1]
+                    bl = max(HL, ob_hl[o, k - 1]) + rn
+                    bw = max(HW, ob_hw[o, k - 1]) + rn
+                    if _segment_hits_box(q0s, q0d, qs, qd, bl, bw):
+                        seg = math.hypot(qs - q0s, qd - q0d)
+                        if (
+                            seg > rn
+                            or min(
+                                _box_distance(q0s, q0d, bl - rn, bw - rn),
+                                _box_distance(0.5 * (qs + q0s), 0.5 * (qd + q0d), bl - rn, bw - rn),
+                                _box_distance(qs, qd, bl - rn, bw - rn),
+                            )
+                            < rn
+                        ):
+                            return t - dt
+                elif k == 0 and _box_distance(qs, qd, HL, HW) < rn:
+                    return 0.0
+        for q in range(nd):
+            p_disc_s[q] = s + discs[q] * cth
+            p_disc_d[q] = d + discs[q] * sth
+    return math.inf
+
+
+@subroutine
+def check_pair(
+    i, j, excess0, write, bound, par, grid, ego, goal_arr, g_kappa, g_heading, lane_left, lane_right, lane_line, lane_kind,
+    same_left, same_right, all_left, all_right, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v, lon_a, ob_s, ob_e,
+    ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs, rel_idx, n_rel, scratch,
+):  # fmt: skip
+    """(safe, feasible, rate, ttc [s], cost [s], goal) of lateral move ``i`` with profile ``j``
+    (``feasible``: within the vehicle's curvature and friction circle; ``rate``: the largest
+    change of the move's curvature (the path's own left out) over a step relative to what the
+    steering rate allows, > 1 where the move steers faster than the vehicle can);
+    ``excess0`` [m]: how far the car is outside the road now (a maneuver may not go further
+    out, and gets a second to come back in; -2: the car is in an oncoming lane). With ``write``,
+    the maneuver and its relations to the obstacles go into ``relation`` and ``plan_*``; else
+    the check stops at the first contact (the time to collision is known) or once the cost
+    passes ``bound`` [s] (it cannot be chosen), returning it unsafe, and looks only at the
+    obstacles ``rel_idx[:n_rel]`` (those that may come near the pair: :func:`_near_obstacles`)."""
+    K = lon_s.shape[1] - 1
+    horizon = K * dt
+    hl, hw, co = par[P_HL], par[P_HW], par[P_CO]
+    margin = par[P_MARGIN]
+    kappa_max = par[P_KAPPA_MAX] * KAPPA_SLACK
+    kappa_step = par[P_KAPPA_RATE] * KAPPA_SLACK * dt + 1e-9
+    fric2 = par[P_FRICTION] ** 2 * 1.0001
+    lat_ref, c_onc, c_off = par[P_LAT_REF], par[P_C_ONCOMING], par[P_C_OFFROUTE]
+    time_gap, c_gap = par[P_TIME_GAP], par[P_C_GAP]
+    lane_i = lat_lane[i]
+    coef = lat_coef[i]
+    L, off = lat_len[i], lat_off[i]
+    s0 = ego[E_S]
+    in_oncoming = excess0 < -1.0
+    use_all = lane_kind[lane_i] == LANE_ONCOMING or in_oncoming
+    if in_oncoming:
+        excess0 = 0.0
+    left_tab = all_left if use_all else same_left
+    right_tab = all_right if use_all else same_right
+    nl = lane_kind.shape[0]
+    has_onc = False
+    route = 0
+    for lane in range(nl):
+        if lane_kind[lane] == LANE_ONCOMING:
+            has_onc = True
+        if lane_kind[lane] == LANE_ROUTE:
+            route = lane
+    ttc = math.inf
+    feasible = True
+    rate = 0.0
+    cost = 0.0
+    goal = False
+    passed_goal = False
+    has_goal = goal_arr[G_HAS] != 0.0
+    kappa_prev = 0.0
+    nd = discs.shape[0]
+    rn = par[P_R_DISC] + margin
+    p_disc_s = scratch[0]
+    p_disc_d = scratch[1]
+    if not write:
+        first = _first_contact(
+            i, j, par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v, ob_s, ob_e, ob_hl,
+            ob_hw, dt, discs, rel_idx, n_rel, p_disc_s, p_disc_d,
+        )  # fmt: skip
+        if first < math.inf:
+            return False, True, 0.0, first, 0.0, False
+    hit = False
+    evasive = L < 0.0
+    # the evasive move's state: offset, heading and curvature relative to the path
+    ev_d, ev_th, ev_k = ego[E_D], math.atan(ego[E_SLOPE]), ego[E_CURV]
+    for k in range(K + 1):
+        s, v, a = lon_s[j, k], lon_v[j, k], lon_a[j, k]
+        if evasive:
+            if k > 0:
+                ev_d, ev_th, ev_k = evasive_step(
+                    ev_d, ev_th, ev_k, lon_s[j, k - 1], lon_v[j, k - 1], v, dt, grid, lane_line, lane_i, off, par,
+                    EVASIVE_HARD if L > -1.5 else EVASIVE_GENTLE,
+                )  # fmt: skip
+            d1 = math.tan(ev_th)
+            d, d2 = ev_d, ev_k * (1.0 + d1 * d1) ** 1.5  # the plane curve's d'' of that curvature
+        else:
+            d, d1, d2 = lateral_at(coef, L, s0, lane_line, lane_i, off, grid, s)
+        t = k * dt
+        nrm = math.sqrt(1.0 + d1 * d1)
+        cth, sth = 1.0 / nrm, d1 / nrm
+        # the path's curvature plus the move's (a plane curve y = d(x))
+        k_move = d2 / (nrm * nrm * nrm)
+        kappa = grid_at(grid, g_kappa, s) + k_move
+        speed = v * nrm
+        v2 = speed * speed
+        a_lat = v2 * kappa
+        if k > 0:
+            if abs(kappa) > kappa_max or a * a + a_lat * a_lat > fric2:
+                feasible = False
+            # the steering rate the move adds (the route's own bends are the reference's: its
+            # speed profile slows for them, the controller steers them)
+            rate = max(rate, abs(k_move - kappa_prev) / kappa_step)
+        kappa_prev = k_move
+        # lateral comfort: the move's own lateral acceleration
+        a_move = v2 * k_move / lat_ref
+        cost += a_move * a_move * dt
+        # the road
+        if not hit:
+            allow = excess0 * max(0.0, 1.0 - t) + 1e-3
+            if _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth) > allow:
+                ttc = t
+                hit = True
+        sc = s + co * cth
+        dc = d + co * sth
+        hws = hw * cth + hl * abs(sth)
+        hls = hl * cth + hw * abs(sth)
+        # lanes: time out of the route lane, in the oncoming lane
+        lo = grid_row_at(grid, lane_right, route, sc)
+        hi = grid_row_at(grid, lane_left, route, sc)
+        if not (lo <= dc and dc <= hi):
+            cost += c_off * dt
+            if k == K:  # ending out of the route lane: the time it stays out beyond the horizon
+                cost += c_off * horizon
+        if has_onc:
+            for lane in range(nl):
+                if lane_kind[lane] == LANE_ONCOMING:
+                    lo = grid_row_at(grid, lane_right, lane, sc)
+                    hi = grid_row_at(grid, lane_left, lane, sc)
+                    if min(dc + hws, hi) - max(dc - hws, lo) > 0.05:
+                        cost += c_onc * dt
+        # the obstacles
+        for q_o in range(n_obs if write else n_rel):
+            o = q_o if write else rel_idx[q_o]
+            So = ob_s[o, k]
+            if not math.isfinite(So):
+                if write:
+                    relation[o, k] = REL_CLEAR
+                continue
+            rs = sc - So
+            rd = dc - ob_e[o, k]
+            bx = hls + ob_hl[o, k]
+            by = hws + ob_hw[o, k]
+            Eo, HL, HW = ob_e[o, k], ob_hl[o, k], ob_hw[o, k]
+            # the body as the controller's discs: each keeps its radius and the margin off the box
+            near = False
+            blocked = False
+            for q in range(nd):
+                qs = s + discs[q] * cth - So
+                qd = d + discs[q] * sth - Eo
+                if abs(qs) < HL + rn:
+                    near = True
+                    if abs(qd) < HW + rn:
+                        blocked = True
+                if not hit:
+                    if k > 0 and math.isfinite(ob_s[o, k - 1]):
+                        q0s = p_disc_s[q] - ob_s[o, k - 1]
+                        q0d = p_disc_d[q] - ob_e[o, k - 1]
+                        bl = max(HL, ob_hl[o, k - 1]) + rn
+                        bw = max(HW, ob_hw[o, k - 1]) + rn
+                        if _segment_hits_box(q0s, q0d, qs, qd, bl, bw):
+                            # the rounded box: the disc's nearest approach (a segment no longer
+                            # than the radius: its ends and middle; else the square box)
+                            seg = math.hypot(qs - q0s, qd - q0d)
+                            if (
+                                seg > rn
+                                or min(
+                                    _box_distance(q0s, q0d, bl - rn, bw - rn),
+                                    _box_distance(0.5 * (qs + q0s), 0.5 * (qd + q0d), bl - rn, bw - rn),
+                                    _box_distance(qs, qd, bl - rn, bw - rn),
+                                )
+                                < rn
+                            ):
+                                ttc = t - dt
+                                hit = True
+                    elif k == 0 and _box_distance(qs, qd, HL, HW) < rn:
+                        ttc = 0.0
+                        hit = True
+            if write:
+                if blocked:
+                    relation[o, k] = REL_AHEAD if rs > 0.0 else REL_BEHIND
+                elif near:
+                    relation[o, k] = REL_LEFT if rd > 0.0 else REL_RIGHT
+                else:
+                    relation[o, k] = REL_CLEAR
+            # time gaps to the cars ahead of and behind the car in its lane
+            if abs(rd) < by:
+                gap = abs(rs) - bx
+                if gap > 0.0:
+                    if rs < 0.0:  # the obstacle ahead
+                        tg = gap / max(speed, 1.0)
+                        if tg < time_gap:
+                            cost += c_gap * (1.0 - tg / time_gap) * dt
+                    elif k < K and math.isfinite(ob_s[o, k + 1]):
+                        v_o = (ob_s[o, k + 1] - So) / dt
+                        if v_o > speed - 0.5 and v_o > 0.5:  # closing in (it does not react)
+                            tg = gap / v_o
+                            if tg < time_gap:
+                                cost += c_gap * (1.0 - tg / time_gap) * dt
+                if k == K and rs < 0.0 and not hit:
+                    # beyond the horizon: braking still stops behind the car ahead
+                    v_o = 0.0
+                    if math.isfinite(ob_s[o, k - 1]):
+                        v_o = max((So - ob_s[o, k - 1]) / dt, 0.0)
+                    need = (v2 - v_o * v_o) / (2.0 * par[P_D_MAX] * 0.8) + margin
+                    if -rs - bx < need:
+                        ttc = min(ttc, horizon + 0.5 * dt)
+                    # ending bound to stop behind an obstacle that stands for good: the car would wait
+                    # there for ever (it misses its goal), unless it steers round it later
+                    if -rs - bx < v2 / (2.0 * par[P_D_COMF]) + par[P_STANDSTILL] + 2.0 * par[P_LAT_MIN] + margin:
+                        if _standing(ob_s, o, K, dt):
+                            cost += par[P_C_GOAL]
+        if k == K and not hit and math.isfinite(par[P_ROAD_END]):
+            # beyond the horizon: braking still stops inside the road's end
+            front = s + (hl + co) * cth + hw * abs(sth)
+            if par[P_ROAD_END] - par[P_ROAD_MARGIN] - front < v2 / (2.0 * par[P_D_MAX] * 0.8):
+                ttc = min(ttc, horizon + 0.5 * dt)
+        for q in range(nd):
+            p_disc_s[q] = s + discs[q] * cth
+            p_disc_d[q] = d + discs[q] * sth
+        if not write and (hit or cost > bound):
+            return False, feasible, rate, ttc, cost, goal
+        # the goal
+        if has_goal and s > goal_arr[G_S_HI]:
+            passed_goal = True
+        if has_goal and not goal:
+            tt = ego[E_T] + t
+            if goal_arr[G_T_LO] - 1e-9 <= tt and tt <= goal_arr[G_T_HI] + 1e-9:
+                if goal_arr[G_S_LO] <= s and s <= goal_arr[G_S_HI] and goal_arr[G_D_LO] <= d and d <= goal_arr[G_D_HI]:
+                    if goal_arr[G_V_LO] - 1e-6 <= speed and speed <= goal_arr[G_V_HI] + 1e-6:
+                        ok = True
+                        if goal_arr[G_HAS_YAW] != 0.0:
+                            yaw = grid_at(grid, g_heading, s) + math.atan(d1)
+                            mid = 0.5 * (goal_arr[G_YAW_LO] + goal_arr[G_YAW_HI])
+                            dev = (yaw - mid + math.pi) % (2.0 * math.pi) - math.pi
+                            ok = abs(dev) <= 0.5 * (goal_arr[G_YAW_HI] - goal_arr[G_YAW_LO]) + 1e-9
+                        goal = ok
+        if write:
+            plan_s[k] = s
+            plan_v[k] = v
+            plan_a[k] = a
+            plan_d[k] = d
+    if has_goal and not goal and goal_arr[G_T_HI] >= ego[E_T]:
+        # missed: the window closes within the horizon, or the maneuver drives through the region
+        # (and past it) without being in it
+        if goal_arr[G_T_HI] <= ego[E_T] + horizon or (passed_goal and ego[E_S] <= goal_arr[G_S_HI]):
+            cost += par[P_C_GOAL]
+    safe = not hit and ttc == math.inf  # nothing hit, and braking still works past the horizon
+    return safe, feasible, rate, ttc, cost, goal
+
+
+@subroutine
+def _excess_now(par, grid, ego, lane_left, lane_right, lane_kind, same_left, same_right):
+    """How far [m] the car's body is outside the same-direction lanes now (-2: in an oncoming
+    lane, judged against all lanes then)."""
+    s0, d0 = ego[E_S], ego[E_D]
+    nrm = math.sqrt(1.0 + ego[E_SLOPE] ** 2)
+    cth, sth = 1.0 / nrm, ego[E_SLOPE] / nrm
+    hws = par[P_HW] * cth + par[P_HL] * abs(sth)
+    dc = d0 + par[P_CO] * sth
+    for lane in range(lane_kind.shape[0]):
+        if lane_kind[lane] == LANE_ONCOMING:
+            lo = grid_row_at(grid, lane_right, lane, s0)
+            hi = grid_row_at(grid, lane_left, lane, s0)
+            if min(dc + hws, hi) - max(dc - hws, lo) > 0.0:
+                return -2.0
+    return max(_road_excess(grid, same_left, same_right, par, s0, d0, cth, sth), 0.0)
+
+
+#: the ranges of :func:`_ranges`: (lo, hi) along and across the path
+RANGE_S_LO, RANGE_S_HI, RANGE_D_LO, RANGE_D_HI = 0, 1, 2, 3
+
+
+@subroutine
+def _ranges(par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, nlat, lon_s, nlon, ob_s, ob_e, ob_hl,
+            ob_hw, n_obs, discs, lat_rng, lon_rng, ob_rng):  # fmt: skip
+    """Where each candidate and each obstacle can be over the horizon: lateral moves across the
+    path (``lat_rng`` (n, 2): the quintic's extremes on a grid of its length and the line past it,
+    an evasive move between its start and its target with half a lane's overshoot), profiles
+    along it (``lon_rng``), obstacles both (``ob_rng`` (n, 4), their extents included); the
+    car's discs, their radius and the margin, and a time gap at the top speed are added to the
+    candidates' ranges. Pairs check only the obstacles whose ranges meet theirs."""
+    K = lon_s.shape[1] - 1
+    s0 = ego[E_S]
+    reach = par[P_R_DISC] + par[P_MARGIN]
+    spread = 0.0
+    for q in range(discs.shape[0]):
+        spread = max(spread, abs(discs[q]))
+    lat_pad = reach + 0.5 * spread  # the discs of a car yawed up to 30 deg
+    lon_pad = reach + spread + par[P_V_MAX] * par[P_TIME_GAP]
+    s_far = s0 + 1.0
+    for j in range(nlon):
+        lon_rng[j, 0] = lon_s[j, 0] - lon_pad
+        lon_rng[j, 1] = lon_s[j, K] + lon_pad
+        s_far = max(s_far, lon_s[j, K])
+    for i in range(nlat):
+        lane = lat_lane[i]
+        L = lat_len[i]
+        lo, hi = math.inf, -math.inf
+        if L > 0.0:
+            for q in range(9):
+                d = poly_eval(lat_coef[i], L * q / 8.0)[0]
+                lo, hi = min(lo, d), max(hi, d)
+            s_end = s0 + L
+        else:  # evasive: from the car to the target line, overshooting by up to half a lane
+            lo, hi = ego[E_D] - 1.75, ego[E_D] + 1.75
+            s_end = s0
+        # the line (and offset) past the move, to the farthest profile's end
+        for q in range(9):
+            d = grid_row_at(grid, lane_line, lane, s_end + (s_far - s_end) * q / 8.0) + lat_off[i]
+            lo, hi = min(lo, d), max(hi, d)
+        lat_rng[i, 0] = lo - lat_pad
+        lat_rng[i, 1] = hi + lat_pad
+    for o in range(n_obs):
+        slo, shi, dlo, dhi = math.inf, -math.inf, math.inf, -math.inf
+        for k in range(K + 1):
+            So = ob_s[o, k]
+            if not math.isfinite(So):
+                continue
+            slo = min(slo, So - ob_hl[o, k])
+            shi = max(shi, So + ob_hl[o, k])
+            dlo = min(dlo, ob_e[o, k] - ob_hw[o, k])
+            dhi = max(dhi, ob_e[o, k] + ob_hw[o, k])
+        ob_rng[o, RANGE_S_LO] = slo
+        ob_rng[o, RANGE_S_HI] = shi
+        ob_rng[o, RANGE_D_LO] = dlo
+        ob_rng[o, RANGE_D_HI] = dhi
+
+
+@subroutine
+def _near_obstacles(i, j, lat_rng, lon_rng, ob_rng, n_obs, rel_idx):
+    """The obstacles whose ranges meet pair (``i``, ``j``)'s, into ``rel_idx``; their number."""
+    n = 0
+    for o in range(n_obs):
+        if ob_rng[o, RANGE_D_HI] < lat_rng[i, 0] or ob_rng[o, RANGE_D_LO] > lat_rng[i, 1]:
+            continue
+        if ob_rng[o, RANGE_S_HI] < lon_rng[j, 0] or ob_rng[o, RANGE_S_LO] > lon_rng[j, 1]:
+            continue
+        rel_idx[n] = o
+        n += 1
+    return n
