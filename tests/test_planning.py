@@ -110,7 +110,7 @@ def test_evasive_move_steers_within_the_rate_and_settles_on_the_line():
         out = np.empty((200, 3))
         s = 0.0
         for k in range(200):
-            d, th, kap = frenet.evasive_step(d, th, kap, s, 8.0, 8.0, 0.2, grid, line, 1, 0.0, par, 0.4)
+            d, th, kap, s = frenet.evasive_step(d, th, kap, s, 8.0, 8.0, 0.2, grid, line, 1, 0.0, par, 0.4)
             s += 1.6
             out[k, 0], out[k, 1], out[k, 2] = d, th, kap
         return out

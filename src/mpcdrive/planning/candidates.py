@@ -68,6 +68,10 @@ PROFILE_JERK_MPS3 = 5.0
 #: a pair whose curvature exceeds the vehicle's by this share is infeasible (the controller's
 #: model and the planner's Frenet approximation differ by about that)
 KAPPA_SLACK = 1.05
+#: a car farther than this [m] from its lane's line, or heading away from it more steeply than
+#: this slope, also gets the gentle evasive move back onto the line
+EVASIVE_BACK_M = 0.3
+EVASIVE_BACK_SLOPE = 0.05
 #: at most this many stop points are sampled (the nearest)
 MAX_STOPS = 4
 
@@ -166,7 +170,14 @@ def lateral_candidates(w):
     # (``lat_len`` -1: up to the friction circle's share EVASIVE_HARD; -2: EVASIVE_GENTLE)
     for lane in range(w.lane_kind.shape[0]):
         kind = w.lane_kind[lane]
-        if lane == now or (kind == LANE_ONCOMING and par[P_ONCOMING] == 0.0):
+        if kind == LANE_ONCOMING and par[P_ONCOMING] == 0.0:
+            continue
+        if lane == now:
+            # back onto its own line, steering as fast as needed: a car off its line or heading
+            # away from it (a quintic from that heading swings far out before it turns back)
+            off_line = abs(w.ego[E_D] - grid_row_at(w.grid, w.lane_line, now, s0))
+            if off_line > EVASIVE_BACK_M or abs(w.ego[E_SLOPE]) > EVASIVE_BACK_SLOPE:
+                _add_lateral(w, lane, 0.0, -2.0, 0.0)
             continue
         if not _lane_open(w, lane, s0):
             continue

@@ -143,16 +143,20 @@ def _first_contact(
     rn = par[P_R_DISC] + par[P_MARGIN]
     evasive = L < 0.0
     ev_d, ev_th, ev_k = ego[E_D], math.atan(ego[E_SLOPE]), ego[E_CURV]
+    s = s0
+    d1 = ego[E_SLOPE]
     for k in range(K + 1):
-        s, v = lon_s[j, k], lon_v[j, k]
+        v = lon_v[j, k]
         if evasive:
             if k > 0:
-                ev_d, ev_th, ev_k = evasive_step(
-                    ev_d, ev_th, ev_k, lon_s[j, k - 1], lon_v[j, k - 1], v, dt, grid, lane_line, lane_i, off, par,
+                ev_d, ev_th, ev_k, s = evasive_step(
+                    ev_d, ev_th, ev_k, s, lon_v[j, k - 1], v, dt, grid, lane_line, lane_i, off, par,
                     EVASIVE_HARD if L > -1.5 else EVASIVE_GENTLE,
                 )  # fmt: skip
             d, d1 = ev_d, math.tan(ev_th)
         else:
+            if k > 0:  # the profile is the car's way; along the path it is that over the slope
+                s += (lon_s[j, k] - lon_s[j, k - 1]) / math.sqrt(1.0 + d1 * d1)
             d, d1, _ = lateral_at(coef, L, s0, lane_line, lane_i, off, grid, s)
         nrm = math.sqrt(1.0 + d1 * d1)
         cth, sth = 1.0 / nrm, d1 / nrm
@@ -258,17 +262,23 @@ def check_pair(
     evasive = L < 0.0
     # the evasive move's state: offset, heading and curvature relative to the path
     ev_d, ev_th, ev_k = ego[E_D], math.atan(ego[E_SLOPE]), ego[E_CURV]
+    s = s0
+    d1 = ego[E_SLOPE]
     for k in range(K + 1):
-        s, v, a = lon_s[j, k], lon_v[j, k], lon_a[j, k]
+        # the profile gives the car's speed and the way it drives (``lon_s``); the path's arc
+        # length follows from the move's slope
+        v, a = lon_v[j, k], lon_a[j, k]
         if evasive:
             if k > 0:
-                ev_d, ev_th, ev_k = evasive_step(
-                    ev_d, ev_th, ev_k, lon_s[j, k - 1], lon_v[j, k - 1], v, dt, grid, lane_line, lane_i, off, par,
+                ev_d, ev_th, ev_k, s = evasive_step(
+                    ev_d, ev_th, ev_k, s, lon_v[j, k - 1], v, dt, grid, lane_line, lane_i, off, par,
                     EVASIVE_HARD if L > -1.5 else EVASIVE_GENTLE,
                 )  # fmt: skip
             d1 = math.tan(ev_th)
             d, d2 = ev_d, ev_k * (1.0 + d1 * d1) ** 1.5  # the plane curve's d'' of that curvature
         else:
+            if k > 0:
+                s += (lon_s[j, k] - lon_s[j, k - 1]) / math.sqrt(1.0 + d1 * d1)
             d, d1, d2 = lateral_at(coef, L, s0, lane_line, lane_i, off, grid, s)
         t = k * dt
         nrm = math.sqrt(1.0 + d1 * d1)
@@ -276,7 +286,7 @@ def check_pair(
         # the path's curvature plus the move's (a plane curve y = d(x))
         k_move = d2 / (nrm * nrm * nrm)
         kappa = grid_at(grid, g_kappa, s) + k_move
-        speed = v * nrm
+        speed = v
         v2 = speed * speed
         a_lat = v2 * kappa
         if k > 0:

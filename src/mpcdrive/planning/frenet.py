@@ -110,8 +110,9 @@ def evasive_step(d, th, kap, s_prev, v_prev, v, dt, grid, lane_line, lane, off, 
     the heading there within the vehicle's curvature, the friction circle at the speed and the
     steering rate, and no sharper than it can unwind by the time the heading is reached (no
     overshoot). Integrated in ``EVASIVE_SUBSTEPS`` substeps along the longitudinal profile (speed
-    linear over the step); ``share`` of the friction circle turns the car at most. Returns (d,
-    heading, curvature) relative to the path."""
+    linear over the step, from the path's arc length ``s_prev`` [m]); ``share`` of the friction
+    circle turns the car at most. Returns (d, heading, curvature) relative to the path and the
+    arc length [m] the car has reached along the path."""
     h = dt / EVASIVE_SUBSTEPS
     k_rate = par[P_KAPPA_RATE]
     dk = k_rate * h
@@ -137,5 +138,5 @@ def evasive_step(d, th, kap, s_prev, v_prev, v, dt, grid, lane_line, lane, off, 
         kap = min(max(want, kap - dk), kap + dk)
         th += kap * ds
         d += math.sin(th) * ds
-        s += ds
-    return d, th, kap
+        s += math.cos(th) * ds
+    return d, th, kap, s

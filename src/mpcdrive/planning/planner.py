@@ -197,8 +197,9 @@ class LateralMove:
 class Maneuver:
     """A replanning's choice.
 
-    t_s : (K+1,) times after the replanning [s]; s_m, v_mps, a_mps2 : the longitudinal profile
-    along the path; d_m : the lateral offset [m]; lateral : the :class:`LateralMove`; lane : the
+    t_s : (K+1,) times after the replanning [s]; s_m : the car's arc length along the path [m];
+    v_mps, a_mps2 : its speed and acceleration (along its own way, which a lateral move slants
+    against the path); d_m : the lateral offset [m]; lateral : the :class:`LateralMove`; lane : the
     lane it ends in (index into the road's lanes); offset_m : its offset from that lane's line;
     kind : the longitudinal profile's kind (``reference``, ``speed``, ``stop``, ``follow``,
     ``goal``) and target its number (speed [m/s], stop point [m], lane); safe : checked free of

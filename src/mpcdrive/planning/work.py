@@ -136,7 +136,7 @@ class PlannerWork:
     lat_n: np.ndarray  # (1,) int
     lon_kind: np.ndarray  # (MAX_LON,) int LON_*
     lon_target: np.ndarray  # (MAX_LON,) target speed [m/s] or stop point [m] or lane
-    lon_s: np.ndarray  # (MAX_LON, K+1) [m]
+    lon_s: np.ndarray  # (MAX_LON, K+1) the way the car drives [m] (along the path where it runs along it)
     lon_v: np.ndarray  # (MAX_LON, K+1) [m/s]
     lon_a: np.ndarray  # (MAX_LON, K+1) [m/s^2]
     lon_ok: np.ndarray  # (MAX_LON,) int: within the vehicle's limits
@@ -147,7 +147,7 @@ class PlannerWork:
     keys: np.ndarray  # (MAX_LAT * MAX_LON,) work space
     result: np.ndarray  # (N_RESULT,)
     plan_s: np.ndarray  # (K+1,) the chosen maneuver: arc length [m]
-    plan_v: np.ndarray  # (K+1,) speed along the path [m/s]
+    plan_v: np.ndarray  # (K+1,) the car's speed [m/s]
     plan_a: np.ndarray  # (K+1,) acceleration [m/s^2]
     plan_d: np.ndarray  # (K+1,) lateral offset [m]
     plan_lanes: np.ndarray  # (L,) int: lanes the body overlaps over the maneuver's first second
