@@ -36,13 +36,9 @@ from ..scene.road import Road, lin_arc_lengths
 from . import avoidance_compiled as _ac
 from .avoidance_cost import obstacle_cost, position_cost, sigma_inv
 from .frenet import FrenetBox, FrenetBoxes, frenet_box, frenet_boxes
+from .relations import checked_relations, step_modes
 
 __all__ = [
-    "REL_AHEAD",
-    "REL_BEHIND",
-    "REL_CLEAR",
-    "REL_LEFT",
-    "REL_RIGHT",
     "SIDE_BLOCKED",
     "SIDE_LEFT",
     "SIDE_RIGHT",
@@ -59,13 +55,9 @@ __all__ = [
 ]
 
 Formulation = Literal["hard", "corridor", "potential", "gaussian"]
-#: a maneuver planner's relation to an obstacle at a step (:meth:`Avoidance.set_relations`): the
-#: car is clear of it, behind it, ahead of it, beside it on its left / right
-REL_CLEAR, REL_BEHIND, REL_AHEAD, REL_LEFT, REL_RIGHT = 0, 1, 2, 3, 4
+
 SIDE_LEFT, SIDE_RIGHT, SIDE_BLOCKED = _ac.SIDE_LEFT, _ac.SIDE_RIGHT, _ac.SIDE_BLOCKED
-#: the rows of each relation: the passing side (a lateral row on SIDE_LEFT / SIDE_RIGHT) and the mode
-_REL_SIDE = np.array([_ac.SIDE_NONE, SIDE_BLOCKED, _ac.SIDE_NONE, SIDE_LEFT, SIDE_RIGHT], np.int64)
-_REL_MODE = np.array([_ac.MODE_AVOID, _ac.MODE_STOP, _ac.MODE_AHEAD, _ac.MODE_AVOID, _ac.MODE_AVOID], np.int64)
+
 #: an obstacle coming towards the car along its path, or crossing its road, faster than this
 #: [m/s], on the car's road where they meet, is yielded to (a stop row before it), not passed beside
 ONCOMING_MPS = 1.0
@@ -307,43 +299,11 @@ class Avoidance:
         return self.half_width + margin + self.config.margin_m + obstacle_side
 
     def set_relations(self, relations: dict[int, np.ndarray] | None) -> None:
-        """Take a maneuver planner's relations to the obstacles from the next step on: obstacle
-        index -> (N,) codes of steps 1..N (``REL_*``: clear of it, behind it, ahead of it, beside
-        it on its left / right). The rows of a named obstacle then keep that relation at each step
-        (a stop row behind it, a keep-ahead row, a lateral row on that side, the nearest-point
-        half-plane), the planned maneuver's side of it; the others are decided as before. None
-        or an empty dict: no planner."""
-        out: dict[int, np.ndarray] = {}
-        for j, codes in (relations or {}).items():
-            c = np.asarray(codes, np.int64)
-            if c.shape != (self.N,):
-                raise ValueError(f"relations of obstacle {j}: {self.N} codes (steps 1..N) needed, got {c.shape}")
-            if np.any((c < REL_CLEAR) | (c > REL_RIGHT)):
-                raise ValueError(f"relations of obstacle {j}: codes must be REL_* ({REL_CLEAR}..{REL_RIGHT})")
-            out[int(j)] = c
-        self.relations = out
-
-    def _step_modes(self, rel, sides, following, ahead) -> tuple[np.ndarray, np.ndarray]:
-        """(side (n, N), mode (n, N)) of the obstacles ``rel`` at steps 1..N: from the planner's
-        relations where it names the obstacle, else the step's decisions for every step (a stop
-        row before an obstacle blocking the way ahead, a keep-ahead row for a car following)."""
-        n = len(rel)
-        side = np.empty((n, self.N), np.int64)
-        mode = np.empty((n, self.N), np.int64)
-        for i, j in enumerate(rel):
-            codes = self.relations.get(j)
-            if codes is not None:
-                side[i] = _REL_SIDE[codes]
-                mode[i] = _REL_MODE[codes]
-                continue
-            side[i] = sides[j]
-            if sides[j] == SIDE_BLOCKED and ahead[j]:
-                mode[i] = _ac.MODE_STOP
-            elif j in following:
-                mode[i] = _ac.MODE_AHEAD
-            else:
-                mode[i] = _ac.MODE_AVOID
-        return side, mode
+        """Take a maneuver planner's relations to the obstacles from the next step on
+        (:func:`~.relations.checked_relations`: obstacle index -> (N,) ``REL_*`` codes of steps
+        1..N); the rows of a named obstacle keep that relation at each step, the others are
+        decided as before. None or an empty dict: no planner."""
+        self.relations = checked_relations(relations, self.N)
 
     def _decide(self, rel: list[int], boxes, packed, x: np.ndarray, s_arr: np.ndarray, memory: AvoidanceMemory):
         """The decisions of one step (compiled: :func:`~mpcdrive.ocp.avoidance_compiled.decide`)
@@ -646,7 +606,7 @@ class Avoidance:
         a, b = self._a, self._b
         if packed is None:
             packed = self._packed(rel, boxes, centers, world)
-        side, mode = self._step_modes(rel, sides, following, ahead)
+        side, mode = step_modes(rel, sides, following, ahead, self.relations, self.N)
         pres = self._presence(rel, present)
         shape, radius, centers_a, outlines_a, nverts, box = packed
         _ac.hard_rows(
@@ -693,7 +653,7 @@ class Avoidance:
         P = lin[None, :, :2] + off[..., None] * np.column_stack([c, s])[None]  # disc centres (nd, N, 2)
         s_disc = s_arr[None, 1:] + off
         # every considered obstacle at once: arrays (n_obs, nd, N[, 2]), obstacle i in row slot i
-        side_k, mode_k = self._step_modes(rel, sides, following, ahead)
+        side_k, mode_k = step_modes(rel, sides, following, ahead, self.relations, self.N)
         side = side_k.astype(float)[:, None, :]
         s_lo, s_hi, s_ref, e_lo, e_hi = (
             np.stack([getattr(boxes[j], f)[1:] for j in rel])[:, None, :]
@@ -725,16 +685,10 @@ class Avoidance:
                 steps = mode_k[i] == md
                 if not steps.any():
                     continue
-                if md == _ac.MODE_STOP:
-                    # stop behind an obstacle now ahead: the disc's arc length at most its near end
-                    # less the clearance (the nearest-point normal points forward once the
-                    # linearization passes it)
+                if md == _ac.MODE_STOP:  # behind its near end less the clearance
                     tb, qs = self._stop_plane(np.tile(s_lo[i, 0] - self.stop_gap_m, nd), (s_lin + off).ravel(), r_need)
                     nb = -tb.reshape(nd, -1, 2)
-                else:
-                    # keep ahead of a car following in the lane: the disc's arc length at least its
-                    # far end plus the clearance, never beyond the disc's reference (the car keeps
-                    # to its own plan: no speeding away, no swerving, no braking for it)
+                else:  # ahead of its far end plus the clearance, never beyond the disc's reference
                     s_end = np.minimum(np.tile(s_hi[i, 0], nd), (s_disc - r_need).ravel())
                     tb, qs = self._stop_plane(s_end, (s_lin + off).ravel(), r_need, ahead=True)
                     nb = tb.reshape(nd, -1, 2)

@@ -344,7 +344,9 @@ def check_pair(
                 qd = d + discs[q] * sth - Eo
                 if abs(qs) < HL + rn:
                     near = True
-                    if abs(qd) < HW + rn:
+                    # within reach across and along: behind (or ahead of) it where the gap along
+                    # the path is the larger, beside it round its corner where the gap across is
+                    if abs(qd) < HW + rn and abs(qd) - HW < abs(qs) - HL:
                         blocked = True
                 if not hit:
                     if k > 0 and math.isfinite(ob_s[o, k - 1]):

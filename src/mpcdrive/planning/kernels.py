@@ -36,6 +36,9 @@ import numpy as np
 from numba import njit
 
 from .work import (
+    REL_CLEAR,
+    REL_LEFT,
+    REL_RIGHT,
     E_LANE,
     LON_FOLLOW,
     LON_STOP,
@@ -184,6 +187,21 @@ def plan(w):
     r[R_TARGET] = w.lon_target[j]
     r[R_GOAL] = 1.0 if goal else 0.0
     r[R_RATE] = rate
+    # an obstacle the maneuver passes beside is passed on that side at every step it is not
+    # behind or ahead of it: the controller's lateral row acts where the car is level with it
+    # (before that, the nearest-point half-plane of a car still behind its corner would hold
+    # the car back as it turns out)
+    K = lon_s.shape[1] - 1
+    for o in range(n_obs):
+        side = REL_CLEAR
+        for k in range(K + 1):
+            if relation[o, k] == REL_LEFT or relation[o, k] == REL_RIGHT:
+                side = relation[o, k]
+                break
+        if side != REL_CLEAR:
+            for k in range(K + 1):
+                if relation[o, k] == REL_CLEAR:
+                    relation[o, k] = side
     # the lanes the body overlaps over the controller's horizon (its road)
     K = min(lon_s.shape[1] - 1, int(par[P_BAND_K]))
     plan_lanes = w.plan_lanes

@@ -14,22 +14,16 @@ import numpy as np
 from numba import njit
 
 from .._structs import define_struct, to_struct
-from ..ocp import avoidance as _av
+from ..ocp.relations import REL_AHEAD, REL_BEHIND, REL_CLEAR, REL_LEFT, REL_RIGHT
 
 #: lane kinds (``lane_kind``)
 LANE_ROUTE, LANE_SAME, LANE_ONCOMING = 0, 1, 2
 #: longitudinal profile kinds (``lon_kind``)
 LON_REFERENCE, LON_SPEED, LON_STOP, LON_FOLLOW, LON_GOAL = 0, 1, 2, 3, 4
 LON_NAMES = ("reference", "speed", "stop", "follow", "goal")
-#: relations of the chosen maneuver to an obstacle at a step (``relation``): the codes the
-#: controller's obstacle rows take (:meth:`mpcdrive.ocp.avoidance.Avoidance.set_relations`)
-REL_CLEAR, REL_BEHIND, REL_AHEAD, REL_LEFT, REL_RIGHT = (
-    _av.REL_CLEAR,
-    _av.REL_BEHIND,
-    _av.REL_AHEAD,
-    _av.REL_LEFT,
-    _av.REL_RIGHT,
-)
+#: relations of the chosen maneuver to an obstacle at a step (``relation``) are the codes the
+#: controller's obstacle rows take (:mod:`mpcdrive.ocp.relations`: REL_*)
+__all__ = ["REL_AHEAD", "REL_BEHIND", "REL_CLEAR", "REL_LEFT", "REL_RIGHT", "PlannerWork", "new_work"]
 
 # slots of ``ego``
 E_S, E_D, E_SLOPE, E_CURV, E_V, E_A, E_T, E_LANE, E_PREV_LANE, E_PREV_OFF, E_PREV_KIND = range(11)
