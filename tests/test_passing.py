@@ -83,7 +83,9 @@ def test_without_a_neighbour_lane_it_stops_behind_the_parked_car():
 
 @pytest.mark.parametrize("backend", ["fast", "osqp"])
 def test_both_lanes_blocked_stops_before_them_with_clearance(backend):
-    exp = build_experiment(ScenarioSpec.model_validate(_spec([PARKED, BESIDE], backend)))
+    # it closes up to the standstill gap at a walking pace (a stop anywhere behind costs the
+    # same: the road is blocked for good), then waits
+    exp = build_experiment(ScenarioSpec.model_validate(_spec([PARKED, BESIDE], backend) | {"duration_s": 22.0}))
     res = run_experiment(exp)
     m = compute_metrics(res)
     assert m["collisions"] == 0 and m["min_obstacle_clearance_m"] > 0.0
@@ -195,7 +197,7 @@ def test_every_planner_setting_is_reachable_from_yaml_and_bad_ones_are_refused()
         "dt_s": 0.25,
     }
     for f in dataclasses.fields(PlannerConfig):
-        value = changed.get(f.name, getattr(PlannerConfig(), f.name) * 1.5 + 0.5)
+        value = changed[f.name] if f.name in changed else getattr(PlannerConfig(), f.name) * 1.5 + 0.5
         spec = _spec([PARKED]) | {"planner": {f.name: value, "replan_s": 0.3}}
         c = build_experiment(ScenarioSpec.model_validate(spec)).controller
         got = getattr(c.config, f.name)

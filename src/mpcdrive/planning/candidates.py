@@ -308,6 +308,16 @@ def _standing(ob_s, o, K, dt):
 
 
 @subroutine
+def _turn_out_m(par, d, e, hw):
+    """The length [m] a car at lateral offset ``d`` needs behind a standing obstacle (centre
+    ``e``, half width ``hw``) to steer round it from standstill, to whichever side is nearer:
+    a lateral move of ``dd`` at half the steering range takes sqrt(5.77 dd / (kappa_max / 2))."""
+    need = e + hw + par[P_HW] + par[P_MARGIN] - (d - par[P_HW])
+    need = min(need, d + par[P_HW] - (e - hw - par[P_HW] - par[P_MARGIN]))
+    return math.sqrt(5.77 * max(need, 0.0) / (0.5 * par[P_KAPPA_MAX]))
+
+
+@subroutine
 def _stop_at(w, s_stop, c):
     """Quintics to a stop at ``s_stop`` over the durations that brake comfortably (and half as
     hard again): added as candidates."""
@@ -406,9 +416,7 @@ def longitudinal_candidates(w, c):
                 stop = front - par[P_STANDSTILL] - hl
                 if k == 0 and _standing(ob_s, o, K, w.dt[0]):
                     # behind a standing obstacle: the room to steer round it later
-                    need = e + hw + par[P_HW] + par[P_MARGIN] - (w.ego[E_D] - par[P_HW])
-                    need = min(need, w.ego[E_D] + par[P_HW] - (e - hw - par[P_HW] - par[P_MARGIN]))
-                    stop -= math.sqrt(5.77 * max(need, 0.0) / (0.5 * par[P_KAPPA_MAX]))
+                    stop -= _turn_out_m(par, w.ego[E_D], e, hw)
                 if ns < MAX_STOPS:
                     stops[ns] = stop
                     ns += 1

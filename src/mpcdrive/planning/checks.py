@@ -59,7 +59,7 @@ from .work import (
     REL_RIGHT,
 )
 
-from .candidates import KAPPA_SLACK, _standing
+from .candidates import KAPPA_SLACK, _standing, _turn_out_m
 from .frenet import EVASIVE_GENTLE, EVASIVE_HARD, evasive_step, grid_at, grid_row_at, lateral_at, poly_eval
 
 
@@ -402,8 +402,10 @@ def check_pair(
                     if -rs - bx < need:
                         ttc = min(ttc, horizon + 0.5 * dt)
                     # ending bound to stop behind an obstacle that stands for good: the car would wait
-                    # there for ever (it misses its goal), unless it steers round it later
-                    if -rs - bx < v2 / (2.0 * par[P_D_COMF]) + par[P_STANDSTILL] + 2.0 * par[P_LAT_MIN] + margin:
+                    # there for ever (it misses its goal), unless it steers round it later (a stop
+                    # that leaves the room to turn out is within that room and a shortest move)
+                    room = _turn_out_m(par, d, ob_e[o, k], ob_hw[o, k]) + par[P_STANDSTILL] + par[P_LAT_MIN]
+                    if -rs - bx < v2 / (2.0 * par[P_D_COMF]) + room:
                         if _standing(ob_s, o, K, dt):
                             cost += par[P_C_GOAL]
         if k == K and not hit and math.isfinite(par[P_ROAD_END]):
@@ -469,13 +471,15 @@ RANGE_S_LO, RANGE_S_HI, RANGE_D_LO, RANGE_D_HI = 0, 1, 2, 3
 
 @subroutine
 def _ranges(par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, nlat, lon_s, nlon, ob_s, ob_e, ob_hl,
-            ob_hw, n_obs, discs, lat_rng, lon_rng, ob_rng):  # fmt: skip
+            ob_hw, n_obs, dt, discs, lat_rng, lon_rng, ob_rng):  # fmt: skip
     """Where each candidate and each obstacle can be over the horizon: lateral moves across the
     path (``lat_rng`` (n, 2): the quintic's extremes on a grid of its length and the line past it,
     an evasive move between its start and its target with half a lane's overshoot), profiles
     along it (``lon_rng``), obstacles both (``ob_rng`` (n, 4), their extents included); the
     car's discs, their radius and the margin, and a time gap at the top speed are added to the
-    candidates' ranges. Pairs check only the obstacles whose ranges meet theirs."""
+    candidates' ranges, and ahead of a profile's end the way it needs to brake and the room to
+    turn out behind a standing obstacle (the terminal checks of :func:`check_pair`). Pairs check
+    only the obstacles whose ranges meet theirs."""
     K = lon_s.shape[1] - 1
     s0 = ego[E_S]
     reach = par[P_R_DISC] + par[P_MARGIN]
@@ -484,10 +488,20 @@ def _ranges(par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, nla
         spread = max(spread, abs(discs[q]))
     lat_pad = reach + 0.5 * spread  # the discs of a car yawed up to 30 deg
     lon_pad = reach + spread + par[P_V_MAX] * par[P_TIME_GAP]
+    # ahead of a profile's end: what the terminal checks look at (braking still stops behind
+    # the car ahead; a stop behind a standing obstacle leaves the room to turn out)
+    ob_hw_max = 0.0
+    for o in range(n_obs):
+        for k in range(K + 1):
+            if math.isfinite(ob_s[o, k]):
+                ob_hw_max = max(ob_hw_max, ob_hw[o, k])
+    room = _turn_out_m(par, 0.0, 0.0, ob_hw_max) + par[P_STANDSTILL] + par[P_LAT_MIN]
     s_far = s0 + 1.0
     for j in range(nlon):
+        v_end = (lon_s[j, K] - lon_s[j, K - 1]) / dt
+        stop_m = v_end * v_end / (2.0 * min(par[P_D_COMF], 0.8 * par[P_D_MAX]))
         lon_rng[j, 0] = lon_s[j, 0] - lon_pad
-        lon_rng[j, 1] = lon_s[j, K] + lon_pad
+        lon_rng[j, 1] = lon_s[j, K] + max(lon_pad, reach + spread + stop_m + room)
         s_far = max(s_far, lon_s[j, K])
     for i in range(nlat):
         lane = lat_lane[i]

@@ -67,6 +67,11 @@ from .checks import _excess_now, _near_obstacles, _ranges, check_pair
 from .frenet import grid_row_at
 
 
+PARALLEL_M = 0.5
+"""How far [m] an obstacle may drift sideways over the approach and still count as keeping to
+its line (a tenth of a lane width is well inside a car's lane keeping)."""
+
+
 @njit(cache=True)
 def plan(w):
     """One replanning on the struct ``w`` (:class:`~.work.PlannerWork`): candidates, checks,
@@ -115,7 +120,7 @@ def plan(w):
     scratch = np.empty((2, discs.shape[0]))
     _ranges(
         par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, nlat, lon_s, nlon, ob_s, ob_e, ob_hl, ob_hw,
-        n_obs, discs, lat_rng, lon_rng, ob_rng,
+        n_obs, dt, discs, lat_rng, lon_rng, ob_rng,
     )  # fmt: skip
     # the choice: the cheapest safe maneuver within the vehicle's limits; else the safe one that
     # steers least beyond the steering rate (the controller steers at its limit, the obstacle
@@ -187,21 +192,27 @@ def plan(w):
     r[R_TARGET] = w.lon_target[j]
     r[R_GOAL] = 1.0 if goal else 0.0
     r[R_RATE] = rate
-    # an obstacle the maneuver passes beside is passed on that side at every step it is not
-    # behind or ahead of it: the controller's lateral row acts where the car is level with it
-    # (before that, the nearest-point half-plane of a car still behind its corner would hold
-    # the car back as it turns out)
+    # an obstacle that keeps to its line (a parked car, a car in the next lane) and that the
+    # maneuver passes beside is passed on that side over the approach too: the controller's
+    # lateral row acts from the start (the nearest-point half-plane of a car still behind its
+    # corner would hold the car back as it turns out). A crossing car keeps its own relations.
     K = lon_s.shape[1] - 1
     for o in range(n_obs):
-        side = REL_CLEAR
+        first = -1
         for k in range(K + 1):
             if relation[o, k] == REL_LEFT or relation[o, k] == REL_RIGHT:
-                side = relation[o, k]
+                first = k
                 break
-        if side != REL_CLEAR:
-            for k in range(K + 1):
-                if relation[o, k] == REL_CLEAR:
-                    relation[o, k] = side
+        if first <= 0:
+            continue
+        side = relation[o, first]
+        e_first = ob_e[o, first]
+        for k in range(first - 1, -1, -1):
+            if relation[o, k] != REL_CLEAR or not math.isfinite(ob_s[o, k]):
+                break
+            if abs(ob_e[o, k] - e_first) > PARALLEL_M:
+                break
+            relation[o, k] = side
     # the lanes the body overlaps over the controller's horizon (its road)
     K = min(lon_s.shape[1] - 1, int(par[P_BAND_K]))
     plan_lanes = w.plan_lanes
