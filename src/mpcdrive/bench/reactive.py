@@ -18,7 +18,7 @@ collision checks and the output trajectory. Setup is reported once, apart.
 
 * initial: ``plan()`` from the problem's initial state, once cold, then ``--repeat`` times;
 * loop: the planner's own closed loop (it follows its plan, replans every 3 steps) for up to
-  ``--loop`` ``plan()`` calls, ending earlier at the goal, at a failed plan or at the budget.
+  ``--loop`` ``plan()`` calls, ending earlier at the goal, at a failed or raising plan, at the budget.
 """
 
 from __future__ import annotations
@@ -99,8 +99,8 @@ class FileResult:
     initial: CallTimes = field(default_factory=CallTimes)  # the repeats after the cold call
     loop: CallTimes = field(default_factory=CallTimes)  # closed-loop replannings, the first included
     loop_steps: int = 0  # closed-loop time steps driven [planner dt]
-    loop_end: str | None = None  # goal / not found / calls / budget / trajectory ended
-    error: str | None = None  # one line
+    loop_end: str | None = None  # goal / not found / calls / budget / trajectory ended / the error raised
+    error: str | None = None  # one line: setup or the initial plan() raised
 
 
 def read_file(reader: Any, file: Path) -> tuple[Any, Any]:
@@ -111,6 +111,10 @@ def read_file(reader: Any, file: Path) -> tuple[Any, Any]:
         plain = Path(tmp) / file.name.removesuffix(".gz")
         plain.write_bytes(gzip.decompress(file.read_bytes()))
         return reader(str(plain)).open()
+
+
+def _one_line(e: Exception) -> str:
+    return f"{type(e).__name__}: {e}".splitlines()[0][:200]
 
 
 def _timed_plan(planner: Any) -> tuple[Any, float]:
@@ -160,42 +164,34 @@ def bench_file(
                 restart()
                 res.loop, res.loop_steps, res.loop_end = _closed_loop(planner, frame, cc, loop, loop_budget_s)
     except Exception as e:  # any failure of reading, setup or planning is a result of this file
-        res.error = f"{type(e).__name__}: {e}".splitlines()[0][:200]
+        res.error = _one_line(e)
     return res
 
 
 def _closed_loop(planner: Any, frame: Any, cc: Any, calls: int, budget_s: float) -> tuple[CallTimes, int, str]:
-    """The planner's own loop (its examples): follow the plan, replan every ``replanning_frequency`` steps."""
+    """The planner's own loop (its examples): follow the plan, replan every ``replanning_frequency`` steps;
+    (plan() times, steps driven, how it ended)."""
     every = planner.config.planning.replanning_frequency
     times: list[float] = []
-    plan, step, end = None, 0, "calls"
-    while True:
-        if planner.goal_reached():
-            end = "goal"
-            break
+    plan, step = None, 0
+    while not planner.goal_reached():
         k = step % every
         if k == 0:
             if len(times) >= calls or sum(times) >= budget_s:
-                end = "calls" if len(times) >= calls else "budget"
-                break
-            plan, dt_s = _timed_plan(planner)
+                return CallTimes.of(times), step, "calls" if len(times) >= calls else "budget"
+            try:
+                plan, dt_s = _timed_plan(planner)
+            except Exception as e:  # the planner raises, e.g. when a sample leaves its reference path's domain
+                return CallTimes.of(times), step, _one_line(e)
             times.append(dt_s)
             if plan is None:
-                end = "not found"
-                break
-        states = plan[0].state_list
-        if 1 + k >= len(states):
-            end = "trajectory ended"
-            break
-        state = states[1 + k]
-        planner.reset(
-            initial_state_cart=state,
-            initial_state_curv=(plan[1][1 + k], plan[2][1 + k]),
-            collision_checker=cc,
-            coordinate_system=frame,
-        )
+                return CallTimes.of(times), step, "not found"
+        if 1 + k >= len(plan[0].state_list):
+            return CallTimes.of(times), step, "trajectory ended"
+        state, curv = plan[0].state_list[1 + k], (plan[1][1 + k], plan[2][1 + k])
+        planner.reset(initial_state_cart=state, initial_state_curv=curv, collision_checker=cc, coordinate_system=frame)
         step += 1
-    return CallTimes.of(times), step, end
+    return CallTimes.of(times), step, "goal"
 
 
 def _versions() -> dict[str, str]:
