@@ -12,9 +12,10 @@ replanning every 3 steps, 4 sampling levels, vehicle BMW 320i): route and refere
 (``create_initial_ref_path``), curvilinear frame (``create_coordinate_system``), collision
 checker with the road boundary (``ReactivePlanner(config)``). One exception: the planner runs in
 one process (``debug.multiproc = False``; ``--multiproc`` restores the shipped 6 worker processes
-forked in every call). Only ``plan()`` is timed (``time.perf_counter`` around the call): sampling
-the trajectory bundle, level by level until one is valid, kinematic checks, sorting by cost,
-collision checks and the output trajectory. Setup is reported once, apart.
+forked in every call, which hang for good when one of them raises); ``--steps`` sets the horizon.
+Only ``plan()`` is timed (``time.perf_counter`` around the call): sampling the trajectory bundle,
+level by level until one is valid, kinematic checks, sorting by cost, collision checks and the
+output trajectory. Setup is reported once, apart.
 
 * initial: ``plan()`` from the problem's initial state, once cold, then ``--repeat`` times;
 * loop: the planner's own closed loop (it follows its plan, replans every 3 steps) for up to
@@ -125,7 +126,7 @@ def _timed_plan(planner: Any) -> tuple[Any, float]:
 
 
 def bench_file(
-    file: str | Path, repeat: int = 5, loop: int = 30, loop_budget_s: float = 60.0, multiproc: bool = False
+    file: str | Path, repeat: int = 5, loop: int = 30, budget_s: float = 60.0, multiproc: bool = False, steps: int = 0
 ) -> FileResult:
     """Time ``plan()`` on one file's first planning problem (module docstring); errors end up in ``error``."""
     rp = load_planner()
@@ -140,6 +141,8 @@ def bench_file(
             problem = next(iter(pps.planning_problem_dict.values()))
             config = rp.config()
             config.debug.multiproc = multiproc
+            if steps:  # planning horizon [planner steps of dt]; shipped: 60
+                config.planning.time_steps_computation = steps
             config.update(scenario=scenario, planning_problem=problem)
             config.planning_problem_set = pps
             t0 = time.perf_counter()
@@ -162,7 +165,7 @@ def bench_file(
             res.initial = CallTimes.of(times)
             if loop > 0:
                 restart()
-                res.loop, res.loop_steps, res.loop_end = _closed_loop(planner, frame, cc, loop, loop_budget_s)
+                res.loop, res.loop_steps, res.loop_end = _closed_loop(planner, frame, cc, loop, budget_s)
     except Exception as e:  # any failure of reading, setup or planning is a result of this file
         res.error = _one_line(e)
     return res
@@ -227,6 +230,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--loop", type=int, default=30, help="most plan() calls in the closed loop (0: none)")
     ap.add_argument("--loop-budget-s", type=float, default=60.0, help="stop a file's loop after this much plan() [s]")
     ap.add_argument("--multiproc", action="store_true", help="the shipped default: 6 worker processes per call")
+    ap.add_argument("--steps", type=int, default=0, help="planning horizon [steps of 0.1 s]; 0: as shipped (60)")
     ap.add_argument("--json", type=Path, help="write the figures to this file")
     args = ap.parse_args(argv)
     try:
@@ -238,7 +242,7 @@ def main(argv: list[str] | None = None) -> int:
     meta |= {k: v for k, v in vars(args).items() if k not in ("files", "json")}  # repeat, loop, budget, multiproc
     results = []
     for file in args.files:
-        results.append(bench_file(file, args.repeat, args.loop, args.loop_budget_s, args.multiproc))
+        results.append(bench_file(file, args.repeat, args.loop, args.loop_budget_s, args.multiproc, args.steps))
         print(_row(results[-1]), flush=True)
     meta["loadavg_end"] = os.getloadavg()
     if args.json:
