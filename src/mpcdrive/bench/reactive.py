@@ -179,7 +179,8 @@ def _closed_loop(planner: Any, frame: Any, cc: Any, calls: int, budget_s: float)
     (plan() times, steps driven, how it ended)."""
     every = planner.config.planning.replanning_frequency
     times: list[float] = []
-    plan, step = None, 0
+    plan: Any = None  # (trajectory, longitudinal states, lateral states) of the last plan()
+    step = 0
     while not planner.goal_reached():
         k = step % every
         if k == 0:
