@@ -76,37 +76,51 @@ def _run(path: Path, out_dir: Path, monkeypatch) -> dict:
 
 
 def test_a_car_stopping_past_the_road_end_after_the_goal_fails_and_one_stopping_inside_passes(tmp_path, monkeypatch):
-    """With the old reference (the path to the road's end, the car's centre stopping there) the
-    drive reaches the goal and CommonRoad's checks up to it pass, but the body ends up about a
-    half car length beyond the end of the mapped road: the whole drive is off the road, after the
-    goal, and the run fails. With the path stopping inside, it passes."""
+    """The road_end family driven as shipped: the car reaches the goal and stops with its whole
+    body inside the mapped road. The same drive with its states after the goal moved 3 m on
+    along the car's heading (and the road's measure of them taken again), so that the body ends
+    past the road's end: CommonRoad's checks up to the goal pass as before, the whole drive leaves
+    the road after the goal, and the run fails, saying so."""
     scenario = sf.write_scenario("road_end", 0, tmp_path)
-    with monkeypatch.context() as mp:
-        mp.setattr(commonroad_goal, "stop_inside", lambda net, route, line: line)
-        old = _run(scenario, tmp_path / "old", mp)
-    cr, v = old["cr"], old["v"]
-    assert cr.goal_reached and cr.collision_free and cr.road_compliant and cr.ks_feasible and cr.solution_valid
+    got = _run(scenario, tmp_path / "run", monkeypatch)
+    assert got["cr"].passed and got["v"].passed, got["v"].text()
+    assert got["cr"].whole_drive.past_road_end_m == 0.0 and got["m"].max_lane_excess_m <= 1e-3
+    imp, res = got["imp"], got["res"]
+    goal, _ = check_drives(imp, res)
+    g = goal.goal_step
+    assert g is not None and g + 1 < len(res.t_s)
+    x, s = res.x.copy(), res.s_m.copy()
+    yaw = x[-1, 2]
+    x[g + 1 :, 0] += 3.0 * np.cos(yaw)
+    x[g + 1 :, 1] += 3.0 * np.sin(yaw)
+    s[g + 1 :] += 3.0
+    exp = build_experiment(imp.spec)
+    road = exp.road.whole()
+    end = road.measure_end_excess_m(exp.path, x, s, exp.mpc.footprint)
+    excess = np.maximum(road.measure_excess_m(exp.path, x, s, exp.mpc.footprint), end)
+    past = replace(res, x=x, s_m=s, lane_excess_m=excess, meta={**res.meta, "road_end_excess_m": end})
+    assert end[: g + 1].max() == 0.0 and end[-1] > 1.0
+    (tmp_path / "past").mkdir()
+    cr = imp.write_outputs(past, tmp_path / "past")["commonroad"]
+    assert cr.goal_reached and cr.collision_free and cr.road_compliant and cr.ks_feasible and not cr.passed
     w = cr.whole_drive
-    assert w is not None and not w.road_compliant and w.collision_free and w.feasible
-    half = 0.5 * old["imp"].spec.vehicle.length_m
-    assert w.past_road_end_m == pytest.approx(half, abs=0.1)
-    assert w.off_road_t_s > w.goal_t_s and not cr.passed
+    assert w is not None and not w.road_compliant and w.collision_free
+    assert w.past_road_end_m == pytest.approx(end.max()) and w.off_road_t_s > w.goal_t_s
+    m = apply_goal_region(compute_metrics(past), cr.goal_reached, cr)
+    v = m.verdict
     assert v.failed and v.unsafe and v.part("goal").ok is True
     assert v.part("road").reason.startswith("left the road after the goal at t = ")
     assert "m beyond the road's start or end" in v.part("road").reason
     assert "whole drive: OFF THE ROAD after the goal" in v.part("commonroad").reason
     # mpcdrive's own measure of the road agrees: the body left it past the end
-    assert old["m"].max_lane_excess_m == pytest.approx(w.past_road_end_m, abs=1e-3)
-    new = _run(scenario, tmp_path / "new", monkeypatch)
-    assert new["cr"].passed and new["v"].passed, new["v"].text()
-    assert new["cr"].whole_drive.past_road_end_m == 0.0 and new["m"].max_lane_excess_m <= 1e-3
+    assert m.max_lane_excess_m == pytest.approx(w.past_road_end_m, abs=1e-3)
 
 
 def test_a_collision_after_the_goal_fails_the_whole_drive_only(tmp_path, monkeypatch):
-    """ZAM_Tutorial-1_2_T-1 driven, then its states after the goal moved onto the parked car: the
-    checks up to the goal pass as before, the whole drive's collision check fails at the first
-    moved state, and the verdict says the collision came after the goal."""
-    got = _run(DIR / "ZAM_Tutorial-1_2_T-1.xml", tmp_path / "run", monkeypatch)
+    """ZAM_Tutorial_Urban-3_2 driven, then its states after the goal moved onto the parked car:
+    the checks up to the goal pass as before, the whole drive's collision check fails at the
+    first moved state, and the verdict says the collision came after the goal."""
+    got = _run(DIR / "ZAM_Tutorial_Urban-3_2.xml", tmp_path / "run", monkeypatch)
     imp, res = got["imp"], got["res"]
     assert got["cr"].passed and got["cr"].whole_drive.passed
     goal, whole = check_drives(imp, res)

@@ -102,7 +102,7 @@ def test_as_dict_is_the_old_metrics_dict(source, tmp_path_factory):
     assert isinstance(m, Metrics)
     d = m.as_dict()
     assert list(d) == [*EXPECTED_KEYS, LAST_KEY]
-    assert [f.name for f in dataclasses.fields(Metrics)] == [*EXPECTED_KEYS, "commonroad", LAST_KEY]
+    assert [f.name for f in dataclasses.fields(Metrics)] == [*EXPECTED_KEYS, "commonroad", "planner", LAST_KEY]
     for key, value in d.items():
         assert _plain_json(value), f"{key}: {value!r} is not plain JSON"
     # every value round-trips through JSON (the runs have no NaN: each step has a lateral error)
@@ -139,8 +139,11 @@ def test_metrics_is_a_read_only_mapping_over_the_json_view(tmp_path_factory, tmp
     assert dict(m) == d and {**m} == d and m == d and len(m) == len(keys) and list(m) == keys
     assert m["collisions"] == m.collisions and m.get("max_lane_excess_m") == m.max_lane_excess_m
     assert "commonroad" not in m and m.get("commonroad") is None
+    assert "planner" not in m and m.get("planner") is None  # no lanes: no maneuver planner
     with pytest.raises(KeyError):
         m["commonroad"]
+    with pytest.raises(KeyError):
+        m["planner"]
     with pytest.raises(KeyError):
         m["no_such_key"]
     # the items are copies: changing one changes nothing

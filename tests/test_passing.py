@@ -58,6 +58,11 @@ def test_parked_car_with_a_free_neighbour_lane_is_passed(backend):
     assert res.x_final[0] > 80.0  # past the parked car, on its way
     assert res.e_y_m.max() > 1.5  # over in the left lane beside it
     assert abs(res.e_y_m[-1]) < 0.2  # and back in the route lane
+    # metrics.json["planner"]: a replanning every control step, what each checked and cost
+    p = m["planner"]
+    assert p["replannings"] == m["steps"] and p["unsafe"] == 0
+    assert 0 < p["checked"]["p50"] <= p["sampled"]["p50"] and p["checked"]["max"] <= p["sampled"]["max"]
+    assert 0 < p["plan_time_us"]["p50"] <= p["plan_time_us"]["p99"] <= p["plan_time_us"]["max"]
 
 
 def test_the_step_time_includes_the_planning():

@@ -102,6 +102,7 @@ def _empty_row() -> dict:
         "prediction": None,
         "sumo": None,
         "whole_drive": None,
+        "planner": None,
     }
 
 
@@ -149,6 +150,7 @@ def drive_file(task: BatchTask) -> dict:
             plan=cr.plan,
             sumo=_sumo_row(Path(task.out_dir)),
             whole_drive=None if cr.whole_drive is None else cr.whole_drive.as_dict(),
+            planner=m.planner,
         )
     except Exception as e:  # a file's failure is its row; the batch goes on
         import shutil
@@ -273,6 +275,15 @@ def _clearance_cell(r: dict) -> str:
     return _cell(c)
 
 
+def _planner_cell(r: dict) -> str:
+    """The replanning column: wall time p50 / p99 [us] and pairs checked / sampled (medians)."""
+    p = r.get("planner")
+    if not p or not p.get("replannings"):
+        return "-"
+    t = p["plan_time_us"]
+    return f"{t['p50']:.0f} / {t['p99']:.0f} ({p['checked']['p50']:.0f} / {p['sampled']['p50']:.0f})"
+
+
 def summary_markdown(rows: dict, header: str = "") -> str:
     """``summary.md``: one table row per file, then the errors in words."""
     n = len(rows)
@@ -290,14 +301,17 @@ def summary_markdown(rows: dict, header: str = "") -> str:
         "whole drive: the checks of the whole drive (what failed first, when).",
         "",
         "Min clearance: footprint to obstacle over the checked drive (whole run in brackets when smaller). "
-        "Step: the controller's whole step (lane decision, obstacle terms, QP), wall time.",
+        "Step: the controller's whole step (maneuver planner, obstacle terms, QP), wall time. "
+        "Replanning: the maneuver planner's call, wall time, median / p99, and the candidate pairs it "
+        "checked of those it sampled (median).",
         "",
         "Traffic: recorded (replayed) or sumo (SUMO drives the vehicles, reacting to the ego); prediction: "
         "known (the recorded futures) or lane (constant speed along the lane, growing uncertainty).",
         "",
         "| file | verdict | collision-free | road-compliant | feasible | goal reached | whole drive | "
-        "min clearance [m] | solver failures | step p50 / p99 [us] | wall [s] | traffic / prediction |",
-        "|" + "---|" * 12,
+        "min clearance [m] | solver failures | step p50 / p99 [us] | replanning p50 / p99 [us] (checked / sampled) | "
+        "wall [s] | traffic / prediction |",
+        "|" + "---|" * 13,
     ]
     for name, r in rows.items():
         st = r["solve_time_us"]
@@ -305,7 +319,8 @@ def summary_markdown(rows: dict, header: str = "") -> str:
             f"| `{name}` | {'error' if r.get('error') else verdict(r).split(' (')[0]} | {_cell(r['collision_free'])} | "
             f"{_cell(r['road_compliant'])} | {_cell(r['ks_feasible'])} | {_cell(r['goal_reached'])} | "
             f"{_whole_drive_cell(r)} | {_clearance_cell(r)} | {_cell(r['solver_failures'])} | "
-            f"{_cell(st['p50'], '{:.0f}')} / {_cell(st['p99'], '{:.0f}')} | {_cell(r['wall_s'], '{:.1f}')} | "
+            f"{_cell(st['p50'], '{:.0f}')} / {_cell(st['p99'], '{:.0f}')} | {_planner_cell(r)} | "
+            f"{_cell(r['wall_s'], '{:.1f}')} | "
             f"{r.get('traffic') or '-'} / {r.get('prediction') or '-'} |"
         )
     rejected = [

@@ -342,12 +342,17 @@ def check_pair(
             for q in range(nd):
                 qs = s + discs[q] * cth - So
                 qd = d + discs[q] * sth - Eo
-                if abs(qs) < HL + rn:
-                    near = True
-                    # within reach across and along: behind (or ahead of) it where the gap along
-                    # the path is the larger, beside it round its corner where the gap across is
-                    if abs(qd) < HW + rn and abs(qd) - HW < abs(qs) - HL:
+                # in line with it across: behind (or ahead of) it, at any distance (the
+                # controller's stop or keep-ahead row, which the maneuver keeps); level with it
+                # along and clear across: beside it; within reach both ways (round its corner):
+                # behind or ahead where the gap along the path is the larger, else beside
+                if abs(qd) < HW + rn:
+                    if abs(qs) >= HL + rn or abs(qd) - HW < abs(qs) - HL:
                         blocked = True
+                    else:
+                        near = True
+                elif abs(qs) < HL + rn:
+                    near = True
                 if not hit:
                     if k > 0 and math.isfinite(ob_s[o, k - 1]):
                         q0s = p_disc_s[q] - ob_s[o, k - 1]

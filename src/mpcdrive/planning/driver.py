@@ -137,6 +137,27 @@ class PlannedMpc:
         self._t_mpc = mpc.dt_s * np.arange(mpc.N + 1)
         road.bounds(0.0, 0.0, 0.0, mpc.footprint)  # load the road's kernel now: each band change uses it
 
+    def stats(self) -> dict:
+        """The replannings of the run so far (``metrics.json["planner"]``): their number, how
+        many had no safe maneuver, the pairs each sampled and checked (median, largest) and its
+        wall time [us] (median, p99, largest)."""
+        if not self.log:
+            return {"replannings": 0, "unsafe": 0, "sampled": None, "checked": None, "plan_time_us": None}
+        sampled = np.array([r[8] for r in self.log], float)
+        checked = np.array([r[7] for r in self.log], float)
+        us = 1e6 * np.array([r[9] for r in self.log], float)
+        return {
+            "replannings": len(self.log),
+            "unsafe": sum(1 for r in self.log if not r[5]),
+            "sampled": {"p50": float(np.median(sampled)), "max": int(sampled.max())},
+            "checked": {"p50": float(np.median(checked)), "max": int(checked.max())},
+            "plan_time_us": {
+                "p50": float(np.percentile(us, 50)),
+                "p99": float(np.percentile(us, 99)),
+                "max": float(us.max()),
+            },
+        }
+
     def __getattr__(self, name):  # the MPC's attributes (problem, N, nx, path, obstacles ...)
         if name == "mpc":
             raise AttributeError(name)

@@ -641,7 +641,7 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
     # the run is judged against the controller's scene: the whole road (a pass through a
     # neighbour lane is inside), the obstacles, the body
     road = None if exp.road is None else exp.road.whole()
-    return simulate(
+    res = simulate(
         exp.controller,
         exp.plant,
         exp.path,
@@ -666,3 +666,20 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
         control_period_s=spec.controller.period_s,
         between_solves=spec.controller.between_solves,
     )
+    planned = _planned(exp.controller)
+    if planned is not None:
+        res.meta["planner"] = planned.stats()
+    return res
+
+
+def _planned(controller):
+    """The maneuver-planning controller inside ``controller`` (wrappers keep it as ``inner``), or None."""
+    from ..planning.driver import PlannedMpc
+
+    for _ in range(8):
+        if isinstance(controller, PlannedMpc):
+            return controller
+        controller = controller.__dict__.get("inner")
+        if controller is None:
+            return None
+    return None

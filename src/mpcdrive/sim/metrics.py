@@ -243,8 +243,15 @@ class Metrics(Mapping[str, Any]):
     commonroad : the CommonRoad block (:class:`CommonRoadCheck`) of a run of a CommonRoad file,
     None otherwise (then the key is absent from ``metrics.json``).
 
+    Maneuver planner (a run on a road with lanes, docs/planning.md):
+
+    planner : ``{replannings, unsafe, sampled: {p50, max}, checked: {p50, max}, plan_time_us:
+    {p50, p99, max}}``: the replannings, those without a safe maneuver, the candidate pairs each
+    sampled and checked, and its wall time [µs] (from ``meta["planner"]``); None without a
+    planner (then the key is absent from ``metrics.json``).
+
     The JSON view: :meth:`as_dict` gives ``metrics.json``'s dict (nested records as dicts,
-    ``collision_events`` a list, no ``commonroad`` key when it is None). A Metrics is also a
+    ``collision_events`` a list, no ``commonroad`` / ``planner`` key when it is None). A Metrics is also a
     read-only :class:`~collections.abc.Mapping` over that view, so code written for the dict works:
     ``m["collisions"]``, ``m["solve_time_us"]["p50"]``, ``m.get("commonroad")``, ``dict(m)``,
     ``{**m}``, ``json.dumps(dict(m))``; items are fresh copies (changing one changes nothing).
@@ -284,6 +291,7 @@ class Metrics(Mapping[str, Any]):
     steering_actuator: SteeringActuator | None
     criteria: VerdictCriteria = VerdictCriteria(max_final_lateral_error_m=0.5 * Footprint().width_m)
     commonroad: CommonRoadCheck | None = None
+    planner: dict | None = None
     verdict: RunVerdict = field(init=False)
 
     def __post_init__(self) -> None:
@@ -297,25 +305,27 @@ class Metrics(Mapping[str, Any]):
 
     def as_dict(self) -> dict[str, Any]:
         """The run's ``metrics.json`` as a dict of plain JSON types (numbers, bools, strings,
-        None, lists, dicts), keys in the order of the fields (``commonroad`` only when given)."""
+        None, lists, dicts), keys in the order of the fields (``commonroad`` and ``planner`` only
+        when given)."""
         return {k: self[k] for k in self}
 
     # -- the read-only Mapping over the JSON view -------------------------------------------------
     def __getitem__(self, key: str) -> Any:
-        if key not in _FIELD_NAMES or (key == "commonroad" and self.commonroad is None):
+        if key not in _FIELD_NAMES or (key in _OPTIONAL and getattr(self, key) is None):
             raise KeyError(key)
         return _plain(getattr(self, key))
 
     def __iter__(self) -> Iterator[str]:
-        return (k for k in _KEYS if k != "commonroad" or self.commonroad is not None)
+        return (k for k in _KEYS if k not in _OPTIONAL or getattr(self, k) is not None)
 
     def __len__(self) -> int:
-        return len(_KEYS) - (self.commonroad is None)
+        return len(_KEYS) - sum(getattr(self, k) is None for k in _OPTIONAL)
 
 
 #: the keys of ``metrics.json`` in order (``commonroad`` only for CommonRoad runs, ``verdict`` last)
 _KEYS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(Metrics))
 _FIELD_NAMES = frozenset(_KEYS)
+_OPTIONAL = ("commonroad", "planner")  # keys absent from metrics.json when None
 
 
 def lane_excess_per_step(result: SimResult) -> np.ndarray | None:
@@ -404,6 +414,7 @@ def compute_metrics(result: SimResult, criteria: VerdictCriteria | None = None) 
         **dataclasses.asdict(_saturation(result, steer0, solved)),
         steering_actuator=result.meta.get("steering_actuator"),
         criteria=criteria,
+        planner=result.meta.get("planner"),
     )
 
 
