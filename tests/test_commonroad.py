@@ -105,8 +105,8 @@ def test_bad_xml_exits_2_with_one_line(tmp_path):
 
 # checker verdicts we expect per scenario: (collision-free, road-compliant, KS-feasible, goal reached)
 EXPECTED_VERDICTS = {
-    "ZAM_Tutorial-1_1_T-1.xml": (True, True, True, True),
-    "ZAM_Tutorial-1_2_T-1.xml": (True, True, True, True),
+    "ESP_Toledo-10_1_T-1.xml.gz": (True, True, True, True),
+    "DEU_A9-3_1_T-1.xml": (True, True, True, True),
     "C-DEU_B471-2_1.xml": (True, True, True, True),
     "FRA_Anglet-1_1_T-1.xml": (True, True, True, True),
 }
@@ -155,7 +155,7 @@ def test_checker_catches_a_colliding_and_an_off_road_trajectory():
 def test_solution_file_round_trips(tmp_path):
     from commonroad.common.solution import CommonRoadSolutionReader
 
-    imp, res, _ = drive("ZAM_Tutorial-1_1_T-1.xml")
+    imp, res, _ = drive("ESP_Toledo-10_1_T-1.xml.gz")
     rep = check_drive(imp, res)
     path = write_solution(imp, res, tmp_path, rep.goal_step)
     sol = CommonRoadSolutionReader.open(str(path))
@@ -189,7 +189,7 @@ def test_cli_runs_a_commonroad_file(tmp_path):
             "-m",
             "mpcdrive.cli",
             "run",
-            str(DIR / "ZAM_Tutorial-1_1_T-1.xml"),
+            str(DIR / "ESP_Toledo-10_1_T-1.xml.gz"),
             "--vehicle",
             "vw_vanagon",
             "-q",
@@ -201,7 +201,7 @@ def test_cli_runs_a_commonroad_file(tmp_path):
     )
     assert r.returncode == 0, r.stderr
     (out,) = (tmp_path / "runs").iterdir()
-    assert out.name.startswith("ZAM_Tutorial-1_1_T-1-")
+    assert out.name.startswith("ESP_Toledo-10_1_T-1-")
     cr = json.loads((out / "metrics.json").read_text())["commonroad"]
     assert cr["goal_reached"] and cr["collision_free"] and cr["road_compliant"] and cr["ks_feasible"]
     assert cr["vehicle_type"] == "VW_VANAGON" and cr["solution_valid"], cr["solution_check"]
@@ -539,7 +539,7 @@ def test_a_goal_passed_too_early_at_its_slowest_speed_is_approached_slower():
 
 
 # -- solutions CommonRoad accepts -----------------------------------------------------------------
-@pytest.mark.parametrize("name", ["ZAM_Tutorial-1_1_T-1.xml", "DEU_A9-3_1_T-1.xml"])
+@pytest.mark.parametrize("name", ["ESP_Toledo-10_1_T-1.xml.gz", "DEU_A9-3_1_T-1.xml"])
 def test_valid_solution_accepts_the_written_solution(name, tmp_path):
     from commonroad.common.solution import CommonRoadSolutionReader
     from commonroad_dc.feasibility.solution_checker import valid_solution

@@ -538,7 +538,7 @@ def test_a_parked_car_too_close_to_swerve_round_at_speed_is_passed_slowly(plant)
 
 def test_st_plant_settles_onto_the_lane_without_a_limit_cycle():
     """The BMW on CommonRoad's ST model, 1 m right of the lane centre with 25 deg of yaw at 9 m/s
-    (ZAM_Tutorial_Urban-3_2's road, its parked car left out). The ST model lags the kinematic
+    (ZAM_Tutorial_Urban-3_2's road, its own lane only, its parked car left out). The ST model lags the kinematic
     controller's prediction (tyre slip; braking makes it oversteer), so a road bound on the very
     next step could not be kept and bought its slack with the steering at its rate limit: a limit
     cycle of +-0.7 m with the speed dipping to 6 m/s. With that step's bounds holding where the
@@ -551,9 +551,13 @@ def test_st_plant_settles_onto_the_lane_without_a_limit_cycle():
         load_commonroad(Path(__file__).parent / "data" / "commonroad" / "ZAM_Tutorial_Urban-3_2.xml"), "bmw_320i", "st"
     )
     init = imp.spec.initial_state.model_copy(update={"y_m": -1.0, "yaw_deg": 25.0})
-    spec = imp.spec.model_copy(update={"obstacles": [], "initial_state": init, "duration_s": 8.0})
+    road = imp.spec.road.model_copy(update={"lane_rows": None})  # its own lane only
+    spec = imp.spec.model_copy(update={"obstacles": [], "initial_state": init, "duration_s": 8.0, "road": road})
     res = run_experiment(build_experiment(spec, plant_factory=commonroad_plant))
     late = res.t_s >= 4.0
     assert np.abs(res.e_y_m[late]).max() < 0.1
-    assert res.v_mps.min() > 8.0 and res.v_mps.max() < 10.0
+    # the planner slows to turn back into the lane (25 deg at 9 m/s is beyond what the steering
+    # rate unwinds in the lane's width), then speeds up again: no oscillation of the speed either
+    assert res.v_mps.min() > 4.0 and res.v_mps.max() < 10.0
+    assert np.all(np.diff(res.v_mps[res.t_s >= 4.0]) > -0.05) and res.v_mps[-1] > 8.5
     assert compute_metrics(res).solver_failures == 0

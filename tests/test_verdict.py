@@ -202,7 +202,7 @@ def test_commonroad_checker_verdicts_make_a_run_unsafe():
     assert "CommonRoad checker: COLLISION, road-compliant, KS-feasible, goal reached at step 12" in v.text()
 
 
-@pytest.mark.parametrize("name", ["ZAM_Tutorial-1_2_T-1.xml", "FRA_Anglet-1_1_T-1.xml"])
+@pytest.mark.parametrize("name", ["C-DEU_B471-2_1.xml", "FRA_Anglet-1_1_T-1.xml"])
 def test_commonroad_goal_reached_follows_the_planning_problem(tmp_path, name):
     pytest.importorskip("commonroad_dc")
     out = tmp_path / "out"

@@ -36,6 +36,7 @@ import numpy as np
 from numba import njit
 
 from .work import (
+    PARALLEL_M,
     REL_CLEAR,
     REL_LEFT,
     REL_RIGHT,
@@ -65,11 +66,6 @@ from .work import (
 from .candidates import lateral_candidates, longitudinal_candidates, longitudinal_costs
 from .checks import _excess_now, _near_obstacles, _ranges, check_pair
 from .frenet import grid_row_at
-
-
-PARALLEL_M = 0.5
-"""How far [m] an obstacle may drift sideways over the approach and still count as keeping to
-its line (a tenth of a lane width is well inside a car's lane keeping)."""
 
 
 @njit(cache=True)

@@ -88,6 +88,9 @@ MAX_LAT = 64
 MAX_LON = 64
 MAX_LANES = 12
 MAX_OBS = 64
+PARALLEL_M = 0.5
+"""How far [m] an obstacle may drift sideways over the horizon and still count as keeping to its
+line (a parked car, a car in its lane): a tenth of a lane width, well inside a car's lane keeping."""
 
 
 @dataclass(frozen=True, eq=False)
