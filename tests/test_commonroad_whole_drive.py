@@ -24,7 +24,7 @@ if not available():
 
 import scenario_families as sf  # noqa: E402
 
-from mpcdrive.adapters import commonroad_figures, commonroad_goal  # noqa: E402
+from mpcdrive.adapters import commonroad_figures  # noqa: E402
 from mpcdrive.adapters.commonroad import check_drives, load_commonroad  # noqa: E402
 from mpcdrive.adapters.commonroad_goal import FRONT_REACH_M, ROAD_MARGIN_M  # noqa: E402
 from mpcdrive.scenarios import build_experiment, run_experiment  # noqa: E402

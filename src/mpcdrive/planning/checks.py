@@ -11,7 +11,6 @@ import math
 
 from .._subroutine import subroutine
 from .work import (
-    PARALLEL_M,
     E_CURV,
     E_D,
     E_S,
@@ -345,12 +344,13 @@ def check_pair(
                 qd = d + discs[q] * sth - Eo
                 # squarely behind (or ahead of) it, the disc's centre within its width: the
                 # controller's stop or keep-ahead row, which the maneuver keeps, at any distance
-                # for an obstacle that keeps to its line; level with it along and clear across:
-                # beside it; within reach both ways (round its corner): behind or ahead where the
-                # gap along the path is the larger, else beside
+                # (else the nearest-point half-plane, taken about the controller's own last
+                # prediction, may open the side the maneuver does not take); level with it along
+                # and clear across: beside it; within reach both ways (round its corner): behind
+                # or ahead where the gap along the path is the larger, else beside
                 if abs(qd) < HW + rn:
                     if abs(qs) >= HL + rn:
-                        if abs(qd) < HW and write and _keeps_line(ob_s, ob_e, o):
+                        if abs(qd) < HW:
                             blocked = True
                     elif abs(qd) - HW < abs(qs) - HL:
                         blocked = True
@@ -455,20 +455,6 @@ def check_pair(
             cost += par[P_C_GOAL]
     safe = not hit and ttc == math.inf  # nothing hit, and braking still works past the horizon
     return safe, feasible, rate, ttc, cost, goal
-
-
-@subroutine
-def _keeps_line(ob_s, ob_e, o):
-    """Whether obstacle row ``o`` keeps to its line over the horizon (its lateral offset within
-    :data:`~.work.PARALLEL_M` of its first)."""
-    e0 = math.nan
-    for k in range(ob_s.shape[1]):
-        if math.isfinite(ob_s[o, k]):
-            if e0 != e0:
-                e0 = ob_e[o, k]
-            elif abs(ob_e[o, k] - e0) > PARALLEL_M:
-                return False
-    return True
 
 
 @subroutine
