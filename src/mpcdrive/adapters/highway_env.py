@@ -230,14 +230,14 @@ class DriverSettings:
 def highway_settings(v_ref_mps: float = 30.0, **overrides) -> DriverSettings:
     """:class:`DriverSettings` for highway-v0: ``v_ref_mps`` [m/s] (highway-env's speed limit
     and top of its speed reward is 30 m/s), vehicles considered within 60 m (the nearest 4),
-    and the maneuver planner (:mod:`mpcdrive.planning`) wanting that speed (its check grid the
-    policy period, highway-env's 1 s at the default 1 Hz being too coarse for the swept checks: the
-    planner checks every 0.2 s within it)."""
+    and the maneuver planner (:mod:`mpcdrive.planning`) wanting that speed. highway-v0 has no
+    route: every lane goes where the ego goes, so a second out of the lane the ego started in
+    costs nothing (``off_route_s_per_s = 0``); a lane change still costs its ``lane_change_s``."""
     base = dict(
         v_ref_mps=v_ref_mps,
         speed_limits_mps=(0.0, v_ref_mps + 5.0),
         avoidance=AvoidanceConfig("hard", margin_m=0.3, influence_m=60.0, max_obstacles=4, follow_gap_s=1.0),
-        planner=PlannerConfig(),
+        planner=PlannerConfig(off_route_s_per_s=0.0),
     )
     return DriverSettings(**{**base, **overrides})
 

@@ -2,7 +2,8 @@
 
 Each obstacle of an :class:`~mpcdrive.ocp.avoidance_compiled.ObstacleTable` that is present at
 some time of the horizon is placed at each sample time ``t0 + k dt`` (its motion: standing,
-constant velocity or a recorded trajectory), projected onto the reference path (the first pose
+constant velocity or a recorded trajectory, going on at its last velocity past the trajectory's
+end where the obstacle's life does not end there), projected onto the reference path (the first pose
 searched within range of the car, each later one near the one before) and given its box along
 the path: centre (s, e) and half extents along and across the path at its yaw relative to the
 path's heading. An obstacle is kept when it comes within ``range_m`` along the path and
@@ -19,10 +20,29 @@ from numba import njit
 
 from ..ocp.avoidance_compiled import SHAPE_CIRCLE, ObstacleTable, pose_at
 from ..paths.compiled import PathArrays, path_eval, path_project
+from .._subroutine import subroutine
 
 #: the search margin [m] of each later pose of a track beyond the distance from the one before
 TRACK_MARGIN_M = 2.0
 _NO_CACHE = np.zeros((0, 0, 4))
+
+
+@subroutine
+def pose_ahead(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d):
+    """:func:`~mpcdrive.ocp.avoidance_compiled.pose_at`, except that past the last sample of a
+    predicted trajectory the obstacle goes on at that last segment's velocity (a prediction over
+    the controller's 3 s horizon held still for the planner's 6 s would park every car at 3 s)."""
+    lo, hi = tr_lo[j], tr_hi[j]
+    if hi - lo >= 2 and t > tr_t[hi - 1]:
+        h = tr_t[hi - 1] - tr_t[hi - 2]
+        if h > 0.0:
+            f = (t - tr_t[hi - 1]) / h
+            return (
+                pose[j, 0] + tr_d[hi - 1, 0] + f * (tr_d[hi - 1, 0] - tr_d[hi - 2, 0]),
+                pose[j, 1] + tr_d[hi - 1, 1] + f * (tr_d[hi - 1, 1] - tr_d[hi - 2, 1]),
+                pose[j, 2] + tr_d[hi - 1, 2],
+            )
+    return pose_at(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d)
 
 
 def obstacle_tracks(
@@ -93,7 +113,7 @@ def _tracks_kernel(
                 t = min(max(t, life[j, 0]), life[j, 1])
                 if life[j, 1] < t0 or life[j, 0] > t_end:
                     break
-            x, y, _ = pose_at(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d)
+            x, y, _ = pose_ahead(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d)
             if math.hypot(x - x_m, y - y_m) <= range_m + lateral_m:
                 far = False
                 break
@@ -119,14 +139,14 @@ def _tracks_kernel(
                 guess = s + (s - prev_s if not first else 0.0)
                 first = False
                 prev_s = s
-                px, py = pose_at(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d)[:2]
+                px, py = pose_ahead(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d)[:2]
                 s_row[k], e_row[k], hl_row[k], hw_row[k] = s, e, hl, hw
                 ds = abs(s - s_m) - hl
                 if ds <= range_m and abs(e) - hw <= lateral_m:
                     keep = True
                     near = min(near, max(ds, 0.0) + max(abs(e) - hw, 0.0))
                 continue
-            x, y, yaw = pose_at(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d)
+            x, y, yaw = pose_ahead(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d)
             if first:
                 # the path between the car and the obstacle is about as long as the way between
                 # them (a bend makes it longer: half as long again, and a lane's width)
