@@ -235,7 +235,7 @@ def test_vehicle_flags_are_checked(tmp_path):
 @pytest.mark.slow
 def test_parked_car_is_passed_through_the_free_neighbour_lane(capsys):
     """ZAM_Tutorial_Urban-3_2 ("critical evasive"): a parked car blocks the route lanelet 12 m ahead
-    at 9 m/s; the lanelet to its left goes the same way and is free. The lane decision layer opens
+    at 9 m/s; the lanelet to its left goes the same way and is free. The maneuver planner opens
     it, the car passes and comes back: collision-free, on the road, KS-feasible, goal reached, and
     the solution accepted. Without the neighbour lane it stops behind the car instead."""
     imp = load_commonroad(DIR / "ZAM_Tutorial_Urban-3_2.xml")

@@ -483,8 +483,8 @@ def test_us101_a_route_moving_over_a_lane_in_dense_traffic_stays_on_the_road(pla
     """USA_US101-3_1 (route lanelets 31 -> 33: the path blends into the next lanelet, where a car
     drives beside the ego) on CommonRoad's KS / ST model of the BMW 320i: judged by CommonRoad's
     drivability checker, collision-free and on the road (the car beside was once taken for a
-    crossing car and the ego braked and yawed off the road; the lane layer's first ramp once
-    pulled it towards the edge)."""
+    crossing car and the ego braked and yawed off the road; the removed lane layer's first ramp
+    once pulled it towards the edge)."""
     from pathlib import Path
 
     from mpcdrive.adapters import commonroad as cr

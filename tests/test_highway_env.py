@@ -320,7 +320,7 @@ def test_highway_road_is_the_lanes_along_the_route_lane(gym):
 @pytest.mark.slow
 def test_highway_v0_overtakes_a_slower_car_without_a_crash(gym):
     """highway-v0 with its default traffic (50 IDM/MOBIL cars, all slower than the ego wants):
-    the MPC with the lane decision layer stays on the road, never crashes, and in a seed where
+    the MPC with the maneuver planner stays on the road, never crashes, and in a seed where
     a slower car is ahead it changes lanes and passes a car that was ahead of it in its lane."""
     from mpcdrive.adapters.highway_env import highway_config
     from mpcdrive.adapters.highway_eval import highway_episode

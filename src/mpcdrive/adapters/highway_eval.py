@@ -1,4 +1,4 @@
-"""highway-env's ``highway-v0`` driven by the MPC with the lane decision layer, against
+"""highway-env's ``highway-v0`` driven by the MPC with the maneuver planner, against
 highway-env's own IDM/MOBIL driver on the same seeds (docs/highway.md). Needs the ``highway``
 extra; ``python -m mpcdrive.adapters.highway_eval`` runs the 20-seed evaluation."""
 

@@ -147,7 +147,7 @@ class PlannerWork:
     plan_v: np.ndarray  # (K+1,) the car's speed [m/s]
     plan_a: np.ndarray  # (K+1,) acceleration [m/s^2]
     plan_d: np.ndarray  # (K+1,) lateral offset [m]
-    plan_lanes: np.ndarray  # (L,) int: lanes the body overlaps over the maneuver's first second
+    plan_lanes: np.ndarray  # (L,) int: lanes the body overlaps over the controller's horizon
     relation: np.ndarray  # (O, K+1) int REL_*
 
     def struct(self):

@@ -28,7 +28,7 @@ class PredictingController:
     """``inner`` driving among ``obstacles`` it knows only through ``predictor``.
 
     target : the object whose ``set_obstacles`` receives the predictions (default ``inner``; the
-    MPC under a lane layer or a state adapter); period_s : the control period [s] (the
+    MPC under the maneuver planner or a state adapter); period_s : the control period [s] (the
     velocity of a recorded obstacle is its displacement over it). The step's ``solve_time_s``
     includes the prediction.
     """
