@@ -79,12 +79,13 @@ def test_import_maps_route_obstacles_and_initial_state(name):
         if o.obstacle_role.value == "dynamic":
             states = o.prediction.trajectory.state_list
             last = states[-1]
-            assert entry.trajectory.points[-2] == pytest.approx(tuple(last.position))
-            assert entry.trajectory.t_s[-2] == pytest.approx(last.time_step * spec.dt_s)
-            # then extended at the last velocity
-            v = (last.position - states[-2].position) / spec.dt_s
-            extra = entry.trajectory.t_s[-1] - entry.trajectory.t_s[-2]
-            assert entry.trajectory.points[-1] == pytest.approx(tuple(last.position + v * extra))
+            assert entry.trajectory.points[-1] == pytest.approx(tuple(last.position))
+            assert entry.trajectory.t_s[-1] == pytest.approx(last.time_step * spec.dt_s)
+            # and it exists over its recording only, as in CommonRoad (neither avoided nor hit
+            # before its first state or after its last)
+            assert entry.lifetime_s == pytest.approx(
+                (o.initial_state.time_step * spec.dt_s, last.time_step * spec.dt_s)
+            )
         else:
             assert entry.trajectory is None
 
@@ -291,7 +292,7 @@ def test_interval_valued_obstacle_states_import():
         mid = 0.5 * (st.orientation.start + st.orientation.end)
         assert math.radians(entry.yaw_deg) == pytest.approx(mid)
         last = o.prediction.trajectory.state_list[-1]
-        assert entry.trajectory.points[-2] == pytest.approx(tuple(last.position.center))
+        assert entry.trajectory.points[-1] == pytest.approx(tuple(last.position.center))
 
 
 # The route to the goal, as commonroad-route-planner plans it: from a lanelet holding the start

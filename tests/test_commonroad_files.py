@@ -33,10 +33,11 @@ def test_a_trajectory_repeating_its_initial_time_step_reads_once():
         assert np.all(np.diff(t) > 0), entry.name
         recorded = o.prediction.trajectory.state_list
         assert recorded[0].time_step == o.initial_state.time_step  # the repeat is in the file
-        # one point per recorded step (the repeated one once) and the extrapolated end
-        assert len(traj.points) == len(recorded) + 1
+        # one point per recorded step (the repeated one once), over the obstacle's lifetime
+        assert len(traj.points) == len(recorded)
         assert traj.points[0] == pytest.approx(tuple(recorded[0].position))
-        assert traj.points[-2] == pytest.approx(tuple(recorded[-1].position))
+        assert traj.points[-1] == pytest.approx(tuple(recorded[-1].position))
+        assert entry.lifetime_s == pytest.approx((t[0], t[-1]))
 
 
 def test_a_route_ending_where_its_lanelet_ends_keeps_the_lanes_width():

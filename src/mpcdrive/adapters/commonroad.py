@@ -52,7 +52,6 @@ MAX_LANES_BESIDE = 10
 #: a route lane narrower than this [m] (the widest CommonRoad vehicle and the road margin on both
 #: sides) takes in the same-direction lanes beside it (:func:`_road`)
 TAPER_WIDTH_M = max(p.width_m for n, p in PRESETS.items() if n.startswith("commonroad_")) + 2 * ROAD_MARGIN_M
-_EXTRAPOLATE_S = 10.0  # recorded obstacle trajectories are extended this long at their last velocity
 
 
 def available() -> bool:
@@ -170,13 +169,8 @@ def _obstacle_entry(o, dt: float) -> dict:
         yaws = list(np.unwrap([scalar(getattr(s, "orientation", None)) or yaw for s in states]))
         t = [scalar(s.time_step) * dt for s in states]
         pts = [tuple(map(float, point(s.position))) for s in states]
-        if len(states) >= 2:
-            # past the end of the recording the obstacle keeps its last velocity (not a sudden stop)
-            vx, vy = ((pts[-1][0] - pts[-2][0]) / (t[-1] - t[-2]), (pts[-1][1] - pts[-2][1]) / (t[-1] - t[-2]))
-            t.append(t[-1] + _EXTRAPOLATE_S)
-            pts.append((pts[-1][0] + vx * _EXTRAPOLATE_S, pts[-1][1] + vy * _EXTRAPOLATE_S))
-            yaws.append(yaws[-1])
         entry["trajectory"] = {"t_s": t, "points": pts, "yaw_deg": [math.degrees(y) for y in yaws]}
+        entry["lifetime_s"] = (t[0], t[-1])
     return entry
 
 
