@@ -196,6 +196,21 @@ def test_the_road_end_is_a_stop_with_the_whole_body_inside():
         assert front[-1] + m.v_mps[-1] ** 2 / (2 * LIMITS.max_decel_mps2) <= 60.0
 
 
+def test_a_car_drifting_into_the_road_margin_turns_back_inside_the_road():
+    """The car 0.055 m inside the road's margin (0.25 m) at its right edge, heading out of the
+    lane at 0.05 rad: a maneuver may use the margin for the first second (no plan can turn a car
+    round at once), never the road beyond its edge, and is back out of the margin after it."""
+    pl = planner()
+    half = 0.5 * LIMITS.width_m
+    d0 = -W / 2 + 0.25 + half - 0.055
+    m = pl.plan(0.0, 20.0, d0, 12.0, -0.05, 0.0, table_of([car(-500.0)], None))
+    assert m.safe
+    t = np.asarray(m.t_s)
+    corner = 0.5 * LIMITS.length_m * 0.05  # the front corner's reach beyond the body's side at that yaw
+    assert np.min(m.d_m) - half - corner >= -W / 2 - 1e-6  # never beyond the lane's edge
+    assert np.all(m.d_m[t >= 1.0] - half >= -W / 2 + 0.25 - 0.02)  # out of the margin after 1 s
+
+
 def test_goal_window_is_met_when_the_car_would_otherwise_be_early():
     """The goal 40-45 m ahead between 5.0 and 5.4 s: at the wanted 12 m/s the car is there at 2 s;
     the maneuver arrives inside the window."""

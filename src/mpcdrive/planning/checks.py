@@ -301,7 +301,10 @@ def check_pair(
         cost += a_move * a_move * dt
         # the road
         if not hit:
-            allow = excess0 * max(0.0, 1.0 - t) + 1e-3
+            # the road's margin is room for the controller's tracking: over the first second a
+            # maneuver may use it (a car drifting towards the edge needs that long to turn back),
+            # never the road beyond its edge, and what it uses shrinks to nothing by then
+            allow = (excess0 + par[P_ROAD_MARGIN]) * max(0.0, 1.0 - t) + 1e-3
             if _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth) > allow:
                 ttc = t
                 hit = True
