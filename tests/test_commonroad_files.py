@@ -214,10 +214,13 @@ def test_a_refused_obstacle_is_one_line_naming_it(tmp_path, monkeypatch, capsys)
 
     monkeypatch.setattr(cr, "_distinct_steps", lambda states: states)
     f = DIR / "DEU_Cologne-63_5_I-1.xml.gz"
-    first = cr._read_file  # the first obstacle's id, as the file gives it
     from commonroad.common.file_reader import CommonRoadFileReader
 
-    oid = first(CommonRoadFileReader, f)[0].obstacles[0].obstacle_id
+    from mpcdrive.adapters.commonroad_file import read_file
+
+    oid = (
+        read_file(CommonRoadFileReader, f)[0].obstacles[0].obstacle_id
+    )  # the first obstacle's id, as the file gives it
     with pytest.raises(ValueError) as e:
         cr.load_commonroad(f)
     msg = str(e.value)

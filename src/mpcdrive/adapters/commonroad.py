@@ -40,6 +40,7 @@ import numpy as np
 from ..models.presets import PRESETS
 from ..scenarios.schema import ScenarioSpec
 from ..sim.metrics import CommonRoadCheck, WholeDriveCheck
+from .commonroad_file import read_file
 from .commonroad_goal import ROAD_MARGIN_M, DrivePlan, accel_limit, friction_accel, goal_spec, plan_drive, road_ends_m
 from .commonroad_route import drivable_lanelets, lane_strips, point, route_edges, route_ends, scalar
 
@@ -251,19 +252,6 @@ def _distinct_steps(states: list) -> list:
     return out
 
 
-def _read_file(reader, file: Path):
-    """(scenario, planning problems) of a ``.xml`` file, or of a gzip-compressed ``.xml.gz``."""
-    if not file.name.endswith(".gz"):
-        return reader(str(file)).open()
-    import gzip
-    import tempfile
-
-    with tempfile.TemporaryDirectory() as tmp:
-        plain = Path(tmp) / file.name.removesuffix(".gz")
-        plain.write_bytes(gzip.decompress(file.read_bytes()))
-        return reader(str(plain)).open()
-
-
 def load_commonroad(file: str | Path) -> CommonRoadImport:
     """Read a CommonRoad scenario file and map it (first planning problem); ValueError on a file
     we cannot read or map."""
@@ -271,7 +259,7 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
 
     file = Path(file)
     try:
-        scenario, pps = _read_file(CommonRoadFileReader, file)
+        scenario, pps = read_file(CommonRoadFileReader, file)
     except Exception as e:  # the reader raises anything from lxml errors to KeyError
         raise ValueError(f"not a readable CommonRoad scenario ({type(e).__name__}: {e})".splitlines()[0]) from None
     if not pps.planning_problem_dict:

@@ -26,11 +26,9 @@ from __future__ import annotations
 
 import argparse
 import copy
-import gzip
 import json
 import os
 import sys
-import tempfile
 import time
 import warnings
 from dataclasses import asdict, dataclass, field
@@ -39,6 +37,8 @@ from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
+
+from ..adapters.commonroad_file import read_file
 
 INSTALL_HINT = (
     "commonroad-reactive-planner is not installed: it is an optional baseline with an environment of its own "
@@ -102,16 +102,6 @@ class FileResult:
     loop_steps: int = 0  # closed-loop time steps driven [planner dt]
     loop_end: str | None = None  # goal / not found / calls / budget / trajectory ended / the error raised
     error: str | None = None  # one line: setup or the initial plan() raised
-
-
-def read_file(reader: Any, file: Path) -> tuple[Any, Any]:
-    """(scenario, planning problem set) of a ``.xml`` file or a gzip-compressed ``.xml.gz``."""
-    if not file.name.endswith(".gz"):
-        return reader(str(file)).open()
-    with tempfile.TemporaryDirectory() as tmp:
-        plain = Path(tmp) / file.name.removesuffix(".gz")
-        plain.write_bytes(gzip.decompress(file.read_bytes()))
-        return reader(str(plain)).open()
 
 
 def _one_line(e: Exception) -> str:
