@@ -137,7 +137,7 @@ class PlannedMpc:
         self._t_mpc = mpc.dt_s * np.arange(mpc.N + 1)
         road.bounds(0.0, 0.0, 0.0, mpc.footprint)  # load the road's kernel now: each band change uses it
 
-    def stats(self) -> dict:
+    def planner_stats(self) -> dict:
         """The replannings of the run so far (``metrics.json["planner"]``): their number, how
         many had no safe maneuver, the pairs each sampled and checked (median, largest) and its
         wall time [us] (median, p99, largest)."""

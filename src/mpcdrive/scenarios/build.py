@@ -24,7 +24,7 @@ from ..paths import CirclePath, ReferencePath, StraightPath, WaypointPath
 from ..paths.speed_profile import SpeedProfile
 from ..paths.tracks import Track, load_track_csv, track_from_text
 from ..sim.actuator import SteeringActuator
-from ..sim.closed_loop import Disturbance, ObservedPlant, Plant, simulate
+from ..sim.closed_loop import Disturbance, ObservedPlant, Plant, inner_attr, simulate
 from ..sim.verdict import VerdictCriteria
 from ..ocp.avoidance import AvoidanceConfig
 from ..scene.footprint import Footprint
@@ -666,20 +666,7 @@ def run_experiment(exp: Experiment, progress: Callable[[int, int], None] | None 
         control_period_s=spec.controller.period_s,
         between_solves=spec.controller.between_solves,
     )
-    planned = _planned(exp.controller)
-    if planned is not None:
-        res.meta["planner"] = planned.stats()
+    planner_stats = inner_attr(exp.controller, "planner_stats")  # a maneuver planner's, where one drives
+    if planner_stats is not None:
+        res.meta["planner"] = planner_stats()
     return res
-
-
-def _planned(controller):
-    """The maneuver-planning controller inside ``controller`` (wrappers keep it as ``inner``), or None."""
-    from ..planning.driver import PlannedMpc
-
-    for _ in range(8):
-        if isinstance(controller, PlannedMpc):
-            return controller
-        controller = controller.__dict__.get("inner")
-        if controller is None:
-            return None
-    return None

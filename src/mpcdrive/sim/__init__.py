@@ -1,7 +1,7 @@
 """Closed-loop simulation: plant, disturbances, measurement noise, full log, metrics, verdict."""
 
 from .actuator import ActuatorState, SteeringActuator
-from .closed_loop import Disturbance, Plant, simulate
+from .closed_loop import Disturbance, Plant, inner_attr, simulate
 from ..scene.footprint import Footprint
 from .metrics import (
     LANE_TOLERANCE_M,
@@ -33,6 +33,7 @@ __all__ = [
     "WholeDriveCheck",
     "apply_goal_region",
     "compute_metrics",
+    "inner_attr",
     "lane_excess_per_step",
     "run_verdict",
     "simulate",

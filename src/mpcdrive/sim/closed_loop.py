@@ -191,7 +191,7 @@ def judged_scene(
     be the same world (a ValueError naming what differs). The older arguments ``road``,
     ``obstacles``, ``footprint`` name parts of it (the rest is the controller's); a controller
     without a scene (a baseline) is judged against what is given (nothing: an empty scene)."""
-    own = _inner_attr(controller, "scene")
+    own = inner_attr(controller, "scene")
     if own is not None and not isinstance(own, Scene):
         raise ValueError(f"the controller's scene must be a mpcdrive.scene.Scene, got {type(own).__name__}")
     parts = {"road": road, "obstacles": obstacles, "footprint": footprint}
@@ -245,9 +245,10 @@ def solve_interval(dt_s: float, control_period_s: float | None, name: str = "con
     return m
 
 
-def _inner_attr(controller, name: str):
+def inner_attr(controller, name: str):
     """Attribute ``name`` of ``controller`` or, if it has none, of the controller it wraps
-    (``inner``, as the state adapter and the delay compensator do); None if none has it."""
+    (``inner``, as the state adapter, the delay compensator and the predicting controller do;
+    up to 8 deep); None if none has it."""
     c = controller
     for _ in range(8):
         if c is None:
@@ -261,7 +262,7 @@ def _inner_attr(controller, name: str):
 
 def _horizon_step_s(controller) -> float | None:
     """The horizon step [s] of ``controller`` (or of the controller it wraps), None if unknown."""
-    dt = _inner_attr(controller, "dt_s")
+    dt = inner_attr(controller, "dt_s")
     return float(dt) if isinstance(dt, numbers.Real) and not isinstance(dt, bool) else None
 
 
@@ -272,7 +273,7 @@ def steering_meta(controller, plant) -> dict:
     key without one), and ``steering_actuator``, the plant's (a :class:`SteeringActuator`; ideal
     without one; not recorded for an observed plant, which steers itself)."""
     meta: dict = {}
-    pb = _inner_attr(controller, "problem")
+    pb = inner_attr(controller, "problem")
     lo, hi = getattr(pb, "u_min", None), getattr(pb, "u_max", None)
     if lo is not None and hi is not None:
         meta["steer_limits_rad"] = (float(lo[0]), float(hi[0]))
@@ -295,7 +296,7 @@ def _plan_slope(controller, out, nu: int) -> np.ndarray | None:
     if U.ndim != 2 or U.shape[0] < 2 or U.shape[1] != nu or not np.all(np.isfinite(U[1])):
         return None
     u1 = U[1]
-    pb = _inner_attr(controller, "problem")
+    pb = inner_attr(controller, "problem")
     lo, hi = getattr(pb, "u_min", None), getattr(pb, "u_max", None)
     if lo is not None and hi is not None:
         u1 = np.clip(u1, lo, hi)
