@@ -182,3 +182,33 @@ def test_past_the_goal_the_car_drives_on_along_its_lane_where_the_network_goes_o
     prof = build_experiment(imp.spec).speed_profile
     assert imp.spec.duration_s == pytest.approx(plan.goal_window_s[1] + imp.spec.dt_s)
     assert prof.time_at(prof.path.length_m) > imp.spec.duration_s + 1.0
+
+
+def test_a_missed_goal_says_which_of_its_parts_the_closest_state_missed(tmp_path, monkeypatch):
+    """The road_end family driven, then cut short or late: the run says why the goal was missed.
+    Cut 2 s before it reaches the goal, the drive's last state is the closest, outside the goal's
+    position by about the way it had left to go; the whole drive shifted 100 s late is in the
+    position but outside the time window; and the verdict's words carry the reason."""
+    from mpcdrive.adapters.commonroad import goal_miss
+    from mpcdrive.sim.verdict import checker_phrase
+
+    got = _run(sf.write_scenario("road_end", 0, tmp_path), tmp_path / "run", monkeypatch)
+    imp, res = got["imp"], got["res"]
+    assert got["cr"].goal_reached and got["cr"].goal_miss is None
+    g = got["cr"].goal_step
+    dt = imp.spec.dt_s
+    k = g - int(round(2.0 / dt))
+    short = replace(res, t_s=res.t_s[: k + 1], x=res.x[: k + 1])
+    why = goal_miss(imp, short)
+    assert why is not None and why.startswith(f"closest at t = {res.t_s[k]:.2f} s: outside the goal's position (")
+    gap = float(why.split("(")[1].split(" m away")[0])
+    # the way left along the (straight) lane to the goal state, less the region's reach behind it
+    left_m = float(np.hypot(*(res.x[g, :2] - res.x[k, :2])))
+    assert 0.0 < gap <= left_m + 0.1
+    late = replace(res, t_s=res.t_s + 100.0)
+    why_late = goal_miss(imp, late)
+    assert why_late is not None and "outside the goal's time window" in why_late
+    assert "goal's position" not in why_late
+    words = checker_phrase({"goal_reached": False, "goal_miss": why, "collision_free": True, "road_compliant": True})
+    assert f"goal not reached ({why})" in words
+

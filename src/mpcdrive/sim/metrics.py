@@ -123,7 +123,8 @@ class CommonRoadCheck:
     type; vehicle_model : the model of the solution's states (``KS``, ``ST``); solution_valid,
     solution_check : CommonRoad's solution checker's verdict and message; whole_drive : the
     checks of the whole drive, start to end of the run (:class:`WholeDriveCheck`; None where
-    they were not made)."""
+    they were not made); goal_miss : where the goal was missed, why in words (the goal's parts
+    the closest state misses, :func:`~mpcdrive.adapters.commonroad.goal_miss`; None when reached)."""
 
     file: str
     route_lanelets: tuple[int, ...]
@@ -141,6 +142,7 @@ class CommonRoadCheck:
     solution_valid: bool
     solution_check: str
     whole_drive: WholeDriveCheck | None = None
+    goal_miss: str | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """The JSON object of ``metrics.json["commonroad"]`` (keys in field order)."""

@@ -358,7 +358,7 @@ def checker_phrase(cr: Mapping[str, Any]) -> str:
             if goal and step is not None
             else "goal reached"
             if goal
-            else "goal not reached"
+            else "goal not reached" + (f" ({cr['goal_miss']})" if cr.get("goal_miss") else "")
         )
     if cr.get("solution_valid") is False:
         words.append("solution rejected by CommonRoad's solution checker")
