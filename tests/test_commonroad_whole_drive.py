@@ -212,3 +212,19 @@ def test_a_missed_goal_says_which_of_its_parts_the_closest_state_missed(tmp_path
     words = checker_phrase({"goal_reached": False, "goal_miss": why, "collision_free": True, "road_compliant": True})
     assert f"goal not reached ({why})" in words
 
+
+def test_a_car_placed_at_the_road_start_drives_off_and_is_not_behind_the_road(tmp_path, monkeypatch):
+    """ZAM-Ramp-1_1-T-1 places the car at rest with its centre on the mapped road's start (its
+    rear 2.25 m behind it). The ground it stands on counts as road (``START_CLEAR_M`` behind its
+    start), so the whole drive is not off the road at t = 0; the wanted speed, which starts from
+    0 there, is looked up ahead, so the car drives off and reaches the goal. CommonRoad's own
+    solution checker still rejects the solution: its road boundary is closed at the road's
+    start, and the initial state already touches it (the file's doing), which the run says."""
+    from mpcdrive.adapters.commonroad import START_CLEAR_M
+
+    got = _run(DIR / "ZAM-Ramp-1_1-T-1.xml", tmp_path / "run", monkeypatch)
+    imp, cr, res = got["imp"], got["cr"], got["res"]
+    assert imp.spec.road.start_m is not None and imp.spec.road.start_m <= imp.plan.start_m - START_CLEAR_M + 1e-9
+    assert res.x[-1, 3] > 5.0 and cr.goal_reached
+    assert cr.whole_drive.road_compliant and cr.whole_drive.past_road_end_m == 0.0
+    assert not cr.solution_valid and "lanelet boundaries" in cr.solution_check and not cr.passed

@@ -155,6 +155,19 @@ def test_free_road_keeps_the_lane_at_the_wanted_speed():
     assert np.max(np.abs(m.d_m)) < 0.05
 
 
+def test_a_car_at_rest_where_the_wanted_speed_starts_from_zero_drives_off():
+    """The wanted speed rises from 0 at the car (at rest at s = 20 m) at 2 m/s^2 up to 12 m/s, as
+    a reference profile from standstill does: the maneuver picks up speed, it does not stand
+    still for want of speed where the car is."""
+
+    def wanted(s):
+        return np.minimum(np.sqrt(2.0 * 2.0 * np.maximum(np.asarray(s, float) - 20.0, 0.0)), 12.0)
+
+    pl = ManeuverPlanner(PATH, two_lanes(), LIMITS, PlannerConfig(), wanted_speed=wanted)
+    m = plan(pl, [], s=20.0, v=0.0)
+    assert m.safe and m.v_mps[-1] > 8.0 and m.s_m[-1] > 40.0
+
+
 def test_parked_car_with_traffic_behind_is_passed_at_speed_not_braked_for():
     """A parked car 30 m ahead in the car's lane and a car 18 m behind at 10 m/s that does not
     brake (recorded traffic): stopping behind the parked car is hit from behind, passing in the

@@ -41,7 +41,16 @@ from ..models.presets import PRESETS
 from ..scenarios.schema import ScenarioSpec
 from ..sim.metrics import CommonRoadCheck, WholeDriveCheck
 from .commonroad_file import read_file
-from .commonroad_goal import ROAD_MARGIN_M, DrivePlan, accel_limit, friction_accel, goal_spec, plan_drive, road_ends_m
+from .commonroad_goal import (
+    FRONT_REACH_M,
+    ROAD_MARGIN_M,
+    DrivePlan,
+    accel_limit,
+    friction_accel,
+    goal_spec,
+    plan_drive,
+    road_ends_m,
+)
 from .commonroad_route import drivable_lanelets, lane_strips, point, route_edges, route_ends, scalar
 
 PRESET = "commonroad_ford_escort"
@@ -50,6 +59,12 @@ PRESET = "commonroad_ford_escort"
 NEIGHBOUR_LANES = True
 #: the most lanes beside the route lane given to the planner (the nearest)
 MAX_LANES_BESIDE = 10
+#: how far [m] behind the car's start (its reference point) the road reaches at least: the
+#: longest CommonRoad body's corner (half its length and width) and half a metre, so a car
+#: placed at the mapped road's start is not "behind the road" for standing where it was put
+START_CLEAR_M = (
+    math.hypot(FRONT_REACH_M, 0.5 * max(p.width_m for n, p in PRESETS.items() if n.startswith("commonroad_"))) + 0.5
+)
 #: a route lane narrower than this [m] (the widest CommonRoad vehicle and the road margin on both
 #: sides) takes in the same-direction lanes beside it (:func:`_road`)
 TAPER_WIDTH_M = max(p.width_m for n, p in PRESETS.items() if n.startswith("commonroad_")) + 2 * ROAD_MARGIN_M
@@ -233,7 +248,12 @@ def _road_ends(net, plan: DrivePlan) -> tuple[float | None, float | None]:
     from ..scenarios.schema import WaypointsSpec
 
     path = build_path(WaypointsSpec(type="waypoints", points=[tuple(map(float, p)) for p in plan.centerline], ds_m=0.2))
-    return road_ends_m(net, plan.route, path)
+    start_m, end_m = road_ends_m(net, plan.route, path)
+    if start_m is not None:
+        # the ground the car stands on at its start is road: a scenario may place the car with its
+        # rear behind the mapped road's start (that is the file's doing, not the drive's)
+        start_m = min(start_m, plan.start_m - START_CLEAR_M)
+    return start_m, end_m
 
 
 def _distinct_steps(states: list) -> list:

@@ -63,6 +63,17 @@ from .frenet import grid_at, grid_row_at, poly_eval, quintic
 
 #: the wanted-speed profile's time constant [s]: how fast the speed follows the wanted one
 SPEED_TAU_S = 1.0
+
+
+@subroutine
+def wanted_speed_ahead(w, s, v):
+    """The wanted speed [m/s] where the car will be in :data:`SPEED_TAU_S` (at arc length ``s``
+    [m], speed ``v`` [m/s], speeding up at the comfort acceleration): looked up ahead, so a car at
+    rest where the reference speed starts from 0 sees the speed it is to pick up."""
+    tau = SPEED_TAU_S
+    return min(grid_at(w.grid, w.g_vref, s + v * tau + 0.5 * w.par[P_A_COMF] * tau * tau), w.par[P_V_MAX])
+
+
 #: jerk [m/s^3] of the numeric profiles (reference, follow): a firm but comfortable onset
 PROFILE_JERK_MPS3 = 5.0
 #: a pair whose curvature exceeds the vehicle's by this share is infeasible (the controller's
@@ -125,7 +136,7 @@ def lateral_candidates(w):
     s0, v0 = w.ego[E_S], w.ego[E_V]
     now = int(w.ego[E_LANE])
     prev = int(w.ego[E_PREV_LANE])
-    v_want = grid_at(w.grid, w.g_vref, s0)
+    v_want = wanted_speed_ahead(w, s0, v0)
     v_len = 0.5 * (v0 + max(v0, v_want))
     for lane in range(w.lane_kind.shape[0]):
         kind = w.lane_kind[lane]
@@ -237,7 +248,7 @@ def _speed_target(w, v1, T, c):
 def _numeric(w, n, lane, top):
     """The wanted-speed profile (``lane`` < 0) or the intelligent driver model behind ``lane``'s
     leader (wanting the top speed with ``top``), integrated on the grid with the profile jerk."""
-    par, grid, g_vref, ego = w.par, w.grid, w.g_vref, w.ego
+    par, grid, ego = w.par, w.grid, w.ego
     lon_s, lon_v, lon_a = w.lon_s, w.lon_v, w.lon_a
     ob_s, ob_e, ob_hl, ob_hw, n_obs = w.ob_s, w.ob_e, w.ob_hl, w.ob_hw, w.ob_n[0]
     lane_left, lane_right = w.lane_left, w.lane_right
@@ -256,7 +267,7 @@ def _numeric(w, n, lane, top):
         lon_a[n, k] = a
         if k == K:
             break
-        v_want = v_max if top else min(grid_at(grid, g_vref, s + v * SPEED_TAU_S), v_max)
+        v_want = v_max if top else wanted_speed_ahead(w, s, v)
         if lane < 0:
             a_des = (v_want - v) / SPEED_TAU_S
             a_des = min(max(a_des, -b_c), a_c)
@@ -343,7 +354,7 @@ def longitudinal_candidates(w, c):
     par = w.par
     w.lon_n[0] = 0
     s0, v0 = w.ego[E_S], w.ego[E_V]
-    v_want = min(grid_at(w.grid, w.g_vref, s0), par[P_V_MAX])
+    v_want = wanted_speed_ahead(w, s0, v0)
     n = _new_lon(w, LON_REFERENCE, v_want)
     _numeric(w, n, -1, False)
     # speed targets: hold, the wanted speed, the top speed, half the speed, a stop
