@@ -427,6 +427,35 @@ def test_time_only_goal_follows_the_lane_not_the_straightest_branch():
     assert lane_forward(net, [2], 1000.0) == [2, 22]  # one successor: forced
 
 
+def test_where_nothing_says_which_branch_the_lane_takes_it_goes_on_into_the_one_turning_least():
+    """The same network without lane 2 (nothing beside lane 1 says which successor goes on) and
+    with the successors listed turn first: the lane goes on straight into 23, not into the left
+    curve 21, and not stopping at the fork (a time-only goal near a junction used to stop the car
+    3 m on, at the fork: ARG_Carcarana-13_1_T-1)."""
+    from commonroad.scenario.lanelet import Lanelet, LaneletNetwork
+
+    from mpcdrive.adapters.commonroad_route import lane_forward
+
+    def lane(lid, center, **kw):
+        c = np.asarray(center, float)
+        d = np.gradient(c, axis=0)
+        n = np.column_stack([-d[:, 1], d[:, 0]]) / np.hypot(*d.T)[:, None]
+        return Lanelet(c + 1.75 * n, c, c - 1.75 * n, lid, **kw)
+
+    x = np.linspace(0, 50, 26)
+    phi = np.linspace(0, math.pi / 2, 40)
+    curve = np.column_stack([50 + 60.0 * np.sin(phi), 60.0 * (1 - np.cos(phi))])
+    xe = np.linspace(50, 150, 51)
+    bare = LaneletNetwork.create_from_lanelet_list(
+        [
+            lane(1, np.column_stack([x, np.zeros_like(x)]), successor=[21, 23]),
+            lane(21, curve, predecessor=[1]),
+            lane(23, np.column_stack([xe, np.zeros_like(xe)]), predecessor=[1]),
+        ]
+    )
+    assert lane_forward(bare, [1], 1000.0) == [1, 23]
+
+
 @pytest.mark.parametrize(
     "name",
     [

@@ -189,7 +189,10 @@ def _continues_neighbours(net, ll, succ_id: int) -> bool:
 
 
 def next_in_lane(net, lid: int, visited) -> int | None:
-    """The successor continuing lanelet ``lid``'s lane, None at a dead end or an open choice."""
+    """The successor continuing lanelet ``lid``'s lane, None at a dead end: the only one; else
+    the intersection's straight-on successor; else the one beside its neighbours' successors
+    (the lane goes on as part of the same road); else, where nothing says which branch the lane
+    goes on into, the branch that turns least (:func:`_turn_rad`)."""
     ll = net.find_lanelet_by_id(lid)
     succ = [s for s in ll.successor if s not in visited]
     if len(succ) <= 1:
@@ -200,12 +203,22 @@ def next_in_lane(net, lid: int, visited) -> int | None:
     cont = [s for s in succ if _continues_neighbours(net, ll, s)]
     if len(cont) == 1:
         return cont[0]
-    return None
+    return min(cont or succ, key=lambda s: (_turn_rad(net, ll, s), s))
+
+
+def _turn_rad(net, ll, succ_id: int) -> float:
+    """How far [rad] successor ``succ_id`` turns from lanelet ``ll``'s heading at its end: the
+    angle between ``ll``'s last segment and the chord from the successor's start to its end."""
+    cv = ll.center_vertices
+    h0 = math.atan2(cv[-1, 1] - cv[-2, 1], cv[-1, 0] - cv[-2, 0])
+    sv = net.find_lanelet_by_id(succ_id).center_vertices
+    h1 = math.atan2(sv[-1, 1] - sv[0, 1], sv[-1, 0] - sv[0, 0])
+    return abs(math.remainder(h1 - h0, 2.0 * math.pi))
 
 
 def lane_forward(net, route: list[int], length_m: float, from_m: float = 0.0) -> list[int]:
-    """``route`` continued along its last lanelet's lane until it is ``length_m`` long past
-    ``from_m`` (arc length along the route's first lanelet), a dead end or an open choice."""
+    """``route`` continued along its last lanelet's lane (:func:`next_in_lane`) until it is
+    ``length_m`` long past ``from_m`` (arc length along the route's first lanelet) or a dead end."""
     route = list(route)
     total = sum(float(net.find_lanelet_by_id(i).distance[-1]) for i in route) - from_m
     while total < length_m:
