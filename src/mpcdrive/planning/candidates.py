@@ -67,11 +67,13 @@ SPEED_TAU_S = 1.0
 
 @subroutine
 def wanted_speed_ahead(w, s, v):
-    """The wanted speed [m/s] where the car will be in :data:`SPEED_TAU_S` (at arc length ``s``
-    [m], speed ``v`` [m/s], speeding up at the comfort acceleration): looked up ahead, so a car at
-    rest where the reference speed starts from 0 sees the speed it is to pick up."""
+    """The wanted speed [m/s] the wanted-speed profile steers for, at arc length ``s`` [m] and
+    speed ``v`` [m/s]: looked up where the car will be in :data:`SPEED_TAU_S`, at least as far as
+    it gets in that time from rest at the comfort acceleration (a car at rest where the reference
+    speed starts from 0 sees the speed it is to pick up)."""
     tau = SPEED_TAU_S
-    return min(grid_at(w.grid, w.g_vref, s + v * tau + 0.5 * w.par[P_A_COMF] * tau * tau), w.par[P_V_MAX])
+    ahead = max(v * tau, 0.5 * w.par[P_A_COMF] * tau * tau)
+    return min(grid_at(w.grid, w.g_vref, s + ahead), w.par[P_V_MAX])
 
 
 #: jerk [m/s^3] of the numeric profiles (reference, follow): a firm but comfortable onset
@@ -136,7 +138,7 @@ def lateral_candidates(w):
     s0, v0 = w.ego[E_S], w.ego[E_V]
     now = int(w.ego[E_LANE])
     prev = int(w.ego[E_PREV_LANE])
-    v_want = wanted_speed_ahead(w, s0, v0)
+    v_want = grid_at(w.grid, w.g_vref, s0)
     v_len = 0.5 * (v0 + max(v0, v_want))
     for lane in range(w.lane_kind.shape[0]):
         kind = w.lane_kind[lane]
@@ -354,7 +356,7 @@ def longitudinal_candidates(w, c):
     par = w.par
     w.lon_n[0] = 0
     s0, v0 = w.ego[E_S], w.ego[E_V]
-    v_want = wanted_speed_ahead(w, s0, v0)
+    v_want = min(grid_at(w.grid, w.g_vref, s0), par[P_V_MAX])
     n = _new_lon(w, LON_REFERENCE, v_want)
     _numeric(w, n, -1, False)
     # speed targets: hold, the wanted speed, the top speed, half the speed, a stop
