@@ -429,9 +429,11 @@ def test_time_only_goal_follows_the_lane_not_the_straightest_branch():
 
 def test_where_nothing_says_which_branch_the_lane_takes_it_goes_on_into_the_one_turning_least():
     """The same network without lane 2 (nothing beside lane 1 says which successor goes on) and
-    with the successors listed turn first: the lane goes on straight into 23, not into the left
-    curve 21, and not stopping at the fork (a time-only goal near a junction used to stop the car
-    3 m on, at the fork: ARG_Carcarana-13_1_T-1)."""
+    with the successors listed turn first: a time-only goal's lane (``choose``) goes on straight
+    into 23, not into the left curve 21, and not stopping at the fork (a time-only goal near a
+    junction used to stop the car 3 m on, at the fork: ARG_Carcarana-13_1_T-1). Past a goal
+    region the route still ends at such a fork (on DEU_Flensburg-62 the least-turning branch
+    has a 1.5 m radius kink no car can follow)."""
     from commonroad.scenario.lanelet import Lanelet, LaneletNetwork
 
     from mpcdrive.adapters.commonroad_route import lane_forward
@@ -453,7 +455,8 @@ def test_where_nothing_says_which_branch_the_lane_takes_it_goes_on_into_the_one_
             lane(23, np.column_stack([xe, np.zeros_like(xe)]), predecessor=[1]),
         ]
     )
-    assert lane_forward(bare, [1], 1000.0) == [1, 23]
+    assert lane_forward(bare, [1], 1000.0, choose=True) == [1, 23]
+    assert lane_forward(bare, [1], 1000.0) == [1]  # past a goal region the route ends at the fork
 
 
 @pytest.mark.parametrize(

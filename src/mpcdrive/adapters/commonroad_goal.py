@@ -210,7 +210,11 @@ def plan_drive(net, pp, p0: np.ndarray, yaw0: float, v0: float, dt_s: float) -> 
     brake_m = max(v_hi, v0) ** 2 / (2 * accel) + 10.0
     if not goals:
         first = net.find_lanelet_by_id(starts[0])
-        route = cr.lane_forward(net, [starts[0]], max(v_want, v0) * t_last + brake_m, from_m=cr._arc_to(first, p0))
+        # a time-only goal is to drive on for its whole time: at a fork nothing decides, the
+        # branch that turns least (after a goal region the route may end at such a fork instead)
+        route = cr.lane_forward(
+            net, [starts[0]], max(v_want, v0) * t_last + brake_m, from_m=cr._arc_to(first, p0), choose=True
+        )
         line = cr.route_centerline(net, route, p0, max(v_want, v0) * t_last + brake_m)
         route = cr.trim_route(net, route, line)
         line = stop_inside(net, route, line)

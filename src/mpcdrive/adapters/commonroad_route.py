@@ -188,11 +188,12 @@ def _continues_neighbours(net, ll, succ_id: int) -> bool:
     return False
 
 
-def next_in_lane(net, lid: int, visited) -> int | None:
+def next_in_lane(net, lid: int, visited, choose: bool = False) -> int | None:
     """The successor continuing lanelet ``lid``'s lane, None at a dead end: the only one; else
     the intersection's straight-on successor; else the one beside its neighbours' successors
     (the lane goes on as part of the same road); else, where nothing says which branch the lane
-    goes on into, the branch that turns least (:func:`_turn_rad`)."""
+    goes on into, None (an open choice), or with ``choose`` the branch that turns least
+    (:func:`_turn_rad`)."""
     ll = net.find_lanelet_by_id(lid)
     succ = [s for s in ll.successor if s not in visited]
     if len(succ) <= 1:
@@ -203,6 +204,8 @@ def next_in_lane(net, lid: int, visited) -> int | None:
     cont = [s for s in succ if _continues_neighbours(net, ll, s)]
     if len(cont) == 1:
         return cont[0]
+    if not choose:
+        return None
     return min(cont or succ, key=lambda s: (_turn_rad(net, ll, s), s))
 
 
@@ -216,13 +219,14 @@ def _turn_rad(net, ll, succ_id: int) -> float:
     return abs(math.remainder(h1 - h0, 2.0 * math.pi))
 
 
-def lane_forward(net, route: list[int], length_m: float, from_m: float = 0.0) -> list[int]:
+def lane_forward(net, route: list[int], length_m: float, from_m: float = 0.0, choose: bool = False) -> list[int]:
     """``route`` continued along its last lanelet's lane (:func:`next_in_lane`) until it is
-    ``length_m`` long past ``from_m`` (arc length along the route's first lanelet) or a dead end."""
+    ``length_m`` long past ``from_m`` (arc length along the route's first lanelet), a dead end or
+    an open choice (with ``choose``: the branch that turns least there)."""
     route = list(route)
     total = sum(float(net.find_lanelet_by_id(i).distance[-1]) for i in route) - from_m
     while total < length_m:
-        nxt = next_in_lane(net, route[-1], route)
+        nxt = next_in_lane(net, route[-1], route, choose)
         if nxt is None:
             break
         route.append(nxt)
