@@ -29,6 +29,10 @@ from .work import (
     G_V_HI,
     G_V_LO,
     LANE_ONCOMING,
+    LANE_ROUTE,
+    LAT_BACK,
+    LAT_BACK_LANE,
+    LAT_BACK_LEN,
     LON_FOLLOW,
     LON_GOAL,
     LON_REFERENCE,
@@ -105,6 +109,7 @@ def _add_lateral(w, lane, off, L, cost):
     w.lat_len[n] = L
     if L > 0.0:
         quintic(w.ego[E_D], w.ego[E_SLOPE], w.ego[E_CURV], line + off, slope, 0.0, L, w.lat_coef[n])
+    w.lat_coef[n, LAT_BACK] = math.inf  # no return (a pass sets one: _add_pass)
     w.lat_cost[n] = cost
     w.lat_n[0] = n + 1
 
@@ -197,8 +202,96 @@ def lateral_candidates(w):
         cost = par[P_C_CHANGE] + (par[P_C_SWITCH] if prev >= 0 and lane != prev else 0.0)
         _add_lateral(w, lane, 0.0, -1.0, cost)
         _add_lateral(w, lane, 0.0, -2.0, cost)
+    _passes(w, v_len)
     # hold the offset the car has (a maneuver that stops where it is, mid-change)
     _add_lateral(w, now, w.ego[E_D] - grid_row_at(w.grid, w.lane_line, now, s0), par[P_LAT_MIN], par[P_C_SWITCH])
+
+
+#: the durations [s] over which a pass returns to the route lane
+PASS_BACK_S = (2.0, 3.0)
+
+
+@subroutine
+def _route_blocker_clear_m(w):
+    """(where [m] the car's rear is past the nearest obstacle standing in the route lane ahead of
+    the car (its front plus the margin), where the car's front reaches its rear (less the
+    margin), the route lane): inf, inf without one within the horizon's reach."""
+    par = w.par
+    K = w.ob_s.shape[1] - 1
+    s0 = w.ego[E_S]
+    route = 0
+    for lane in range(w.lane_kind.shape[0]):
+        if w.lane_kind[lane] == LANE_ROUTE:
+            route = lane
+    reach = s0 + par[P_V_MAX] * K * w.dt[0]
+    best = math.inf
+    reach_rear = math.inf
+    e_b, hw_b = 0.0, 0.0
+    for o in range(w.ob_n[0]):
+        So = w.ob_s[o, 0]
+        if not math.isfinite(So) or So < s0 or So > reach or not _standing(w.ob_s, o, K, w.dt[0]):
+            continue
+        lo = grid_row_at(w.grid, w.lane_right, route, So)
+        hi = grid_row_at(w.grid, w.lane_left, route, So)
+        e, hw = w.ob_e[o, 0], w.ob_hw[o, 0]
+        if min(e + hw, hi) - max(e - hw, lo) > 0.0:
+            # the car's rear (centre offset co, half length hl) past the obstacle's front
+            clear = So + w.ob_hl[o, 0] + par[P_HL] - par[P_CO] + par[P_MARGIN]
+            if clear < best:
+                best = clear
+                reach_rear = So - w.ob_hl[o, 0] - par[P_HL] - par[P_CO] - par[P_MARGIN]
+                e_b, hw_b = e, hw
+    return best, reach_rear, e_b, hw_b, route
+
+
+@subroutine
+def _passes(w, v_len):
+    """Passes of an obstacle standing in the route lane: a move into another lane (each of that
+    lane's moves sampled so far, or staying on it when the car is there) that returns to the route
+    lane once the car's rear is past the obstacle (``_route_blocker_clear_m``), blended back over
+    each of :data:`PASS_BACK_S` at the car's pace: the two lane changes of an overtaking, which a
+    move that stays in the other lane (into oncoming traffic, say) cannot be. The move out is one
+    that is on the other lane's line by the time the car's front reaches the obstacle: a longer
+    one would put the pass off from one replanning to the next until the swerve left is too sharp
+    (measured: a bound of only the body clear of the obstacle's side passed 2 of the 10 generated
+    blocked-lane scenarios, this one 7)."""
+    clear, rear, _, _, route = _route_blocker_clear_m(w)
+    if not math.isfinite(clear):
+        return
+    par = w.par
+    s0 = w.ego[E_S]
+    prev = int(w.ego[E_PREV_LANE])
+    n0 = w.lat_n[0]
+    for i in range(n0):
+        lane = w.lat_lane[i]
+        if lane == route or w.lat_len[i] <= 0.0 or w.lat_off[i] != 0.0:
+            continue
+        L = w.lat_len[i]
+        if s0 + L > rear and not (lane == int(w.ego[E_LANE]) and L <= par[P_LAT_MIN] + 1e-9):
+            continue  # out too late (staying on the lane the car is in is no move out)
+        width = grid_row_at(w.grid, w.lane_line, lane, clear) - grid_row_at(w.grid, w.lane_line, route, clear)
+        L_min = math.sqrt(5.77 * abs(width) / (0.5 * par[P_KAPPA_MAX]))
+        for m in range(len(PASS_BACK_S)):
+            n = w.lat_n[0]
+            if n >= MAX_LAT:
+                return
+            for c in range(LAT_BACK):
+                w.lat_coef[n, c] = w.lat_coef[i, c]
+            w.lat_lane[n] = lane
+            w.lat_off[n] = 0.0
+            w.lat_len[n] = L
+            w.lat_coef[n, LAT_BACK] = max(clear - s0, L)
+            w.lat_coef[n, LAT_BACK_LEN] = max(L_min, v_len * PASS_BACK_S[m], 1.0)
+            w.lat_coef[n, LAT_BACK_LANE] = route
+            # the way back is a lane change too; the choice it continues is judged by the lane it
+            # ends in (the move's own switch cost out, the return's in)
+            cost = w.lat_cost[i] + par[P_C_CHANGE]
+            if prev >= 0 and lane != prev:
+                cost -= par[P_C_SWITCH]
+            if prev >= 0 and route != prev:
+                cost += par[P_C_SWITCH]
+            w.lat_cost[n] = cost
+            w.lat_n[0] = n + 1
 
 
 # -- longitudinal candidates -----------------------------------------------------------------------

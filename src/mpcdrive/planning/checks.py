@@ -528,10 +528,16 @@ def _ranges(par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, nla
         else:  # evasive: from the car to the target line, overshooting by up to half a lane
             lo, hi = ego[E_D] - 1.75, ego[E_D] + 1.75
             s_end = s0
-        # the line (and offset) past the move, to the farthest profile's end
+        # the line (and offset) past the move, to the farthest profile's end (a pass: and the
+        # line of the lane it returns to)
+        back = L > 0.0 and math.isfinite(lat_coef[i, 6])
         for q in range(9):
-            d = grid_row_at(grid, lane_line, lane, s_end + (s_far - s_end) * q / 8.0) + lat_off[i]
+            sq = s_end + (s_far - s_end) * q / 8.0
+            d = grid_row_at(grid, lane_line, lane, sq) + lat_off[i]
             lo, hi = min(lo, d), max(hi, d)
+            if back:
+                d = grid_row_at(grid, lane_line, int(lat_coef[i, 8]), sq)
+                lo, hi = min(lo, d), max(hi, d)
         lat_rng[i, 0] = lo - lat_pad
         lat_rng[i, 1] = hi + lat_pad
     for o in range(n_obs):

@@ -182,8 +182,10 @@ def plan(w):
     r[R_J] = j
     r[R_COST] = best_total
     r[R_TTC] = ttc
-    r[R_LANE] = lat_lane[i]
-    r[R_OFF] = lat_off[i]
+    # the lane the maneuver ends in (a pass: the one it returns to)
+    passing = lat_len[i] > 0.0 and math.isfinite(lat_coef[i, 6])
+    r[R_LANE] = int(lat_coef[i, 8]) if passing else lat_lane[i]
+    r[R_OFF] = 0.0 if passing else lat_off[i]
     r[R_KIND] = w.lon_kind[j]
     r[R_TARGET] = w.lon_target[j]
     r[R_GOAL] = 1.0 if goal else 0.0

@@ -496,11 +496,11 @@ class ManeuverPlanner:
         if i < 0:
             raise RuntimeError("the maneuver planner found no candidate (no lane and no speed profile to sample)")
         lane = int(r[R_LANE])
-        if w.lat_len[i] > 0.0:
+        if w.lat_len[i] > 0.0 and not math.isfinite(w.lat_coef[i, 6]):
             lateral = LateralMove(
                 float(s_m), float(w.lat_len[i]), w.lat_coef[i].copy(), self._knots, self._lines[lane], float(r[R_OFF])
             )
-        else:  # an evasive move: its samples along the maneuver
+        else:  # an evasive move or a pass: its samples along the maneuver
             keep = np.r_[True, np.diff(w.plan_s) > 1e-3]
             lateral = LateralMove(
                 float(s_m), 0.0, np.zeros(6), self._knots, self._lines[lane], float(r[R_OFF]),

@@ -25,6 +25,11 @@ LON_NAMES = ("reference", "speed", "stop", "follow", "goal")
 #: controller's obstacle rows take (:mod:`mpcdrive.ocp.relations`: REL_*)
 __all__ = ["REL_AHEAD", "REL_BEHIND", "REL_CLEAR", "REL_LEFT", "REL_RIGHT", "PlannerWork", "new_work"]
 
+#: columns of ``lat_coef``: the quintic's six coefficients, then a pass's return to another lane
+#: (LAT_BACK: where along the move [m] it starts, inf: no return; LAT_BACK_LEN: its length [m];
+#: LAT_BACK_LANE: the lane it returns to)
+LAT_BACK, LAT_BACK_LEN, LAT_BACK_LANE = 6, 7, 8
+LAT_COLS = 9
 # slots of ``ego``
 E_S, E_D, E_SLOPE, E_CURV, E_V, E_A, E_T, E_LANE, E_PREV_LANE, E_PREV_OFF, E_PREV_KIND = range(11)
 # slots of ``goal``
@@ -128,7 +133,7 @@ class PlannerWork:
     lat_lane: np.ndarray  # (MAX_LAT,) int
     lat_off: np.ndarray  # (MAX_LAT,) offset from the lane's line [m]
     lat_len: np.ndarray  # (MAX_LAT,) length of the move [m]
-    lat_coef: np.ndarray  # (MAX_LAT, 6) quintic d(u), u = s - s0
+    lat_coef: np.ndarray  # (MAX_LAT, LAT_COLS) quintic d(u), u = s - s0; then the return (LAT_BACK...)
     lat_cost: np.ndarray  # (MAX_LAT,)
     lat_n: np.ndarray  # (1,) int
     lon_kind: np.ndarray  # (MAX_LON,) int LON_*
@@ -189,7 +194,7 @@ def new_work(K: int, grid_s: np.ndarray, n_lanes: int) -> dict:
         lat_lane=np.zeros(MAX_LAT, np.int64),
         lat_off=f(MAX_LAT),
         lat_len=f(MAX_LAT),
-        lat_coef=f((MAX_LAT, 6)),
+        lat_coef=f((MAX_LAT, LAT_COLS)),
         lat_cost=f(MAX_LAT),
         lat_n=np.zeros(1, np.int64),
         lon_kind=np.zeros(MAX_LON, np.int64),
