@@ -371,16 +371,20 @@ def test_route_matches_commonroad_route_planners(name):
     assert ours in theirs, (ours, rec["routes"])
 
 
+def _lanelet(lid, center, **kw):
+    """A 3.5 m wide lanelet along the centre line ``center``."""
+    from commonroad.scenario.lanelet import Lanelet
+
+    c = np.asarray(center, float)
+    d = np.gradient(c, axis=0)
+    n = np.column_stack([-d[:, 1], d[:, 0]]) / np.hypot(*d.T)[:, None]
+    return Lanelet(c + 1.75 * n, c, c - 1.75 * n, lid, **kw)
+
+
 def _two_lane_network_with_exit():
     """Two lanes heading east for 50 m (2 left of 1), then both curving left together (11 left of
     12... as successors 21 / 22), and on the right lane a straight exit 23."""
-    from commonroad.scenario.lanelet import Lanelet, LaneletNetwork
-
-    def lane(lid, center, **kw):
-        c = np.asarray(center, float)
-        d = np.gradient(c, axis=0)
-        n = np.column_stack([-d[:, 1], d[:, 0]]) / np.hypot(*d.T)[:, None]
-        return Lanelet(c + 1.75 * n, c, c - 1.75 * n, lid, **kw)
+    from commonroad.scenario.lanelet import LaneletNetwork
 
     x = np.linspace(0, 50, 26)
     phi = np.linspace(0, math.pi / 2, 40)
@@ -389,24 +393,24 @@ def _two_lane_network_with_exit():
     def arc(r, y0):  # left turn of radius r starting at (50, y0) heading east
         return np.column_stack([50 + r * np.sin(phi), y0 + r * (1 - np.cos(phi))])
 
-    l1 = lane(
+    l1 = _lanelet(
         1,
         np.column_stack([x, np.zeros_like(x)]),
         successor=[21, 23],
         adjacent_left=2,
         adjacent_left_same_direction=True,
     )
-    l2 = lane(
+    l2 = _lanelet(
         2,
         np.column_stack([x, np.full_like(x, 3.5)]),
         successor=[22],
         adjacent_right=1,
         adjacent_right_same_direction=True,
     )
-    l21 = lane(21, arc(r_right, 0.0), predecessor=[1], adjacent_left=22, adjacent_left_same_direction=True)
-    l22 = lane(22, arc(r_right - 3.5, 3.5), predecessor=[2], adjacent_right=21, adjacent_right_same_direction=True)
+    l21 = _lanelet(21, arc(r_right, 0.0), predecessor=[1], adjacent_left=22, adjacent_left_same_direction=True)
+    l22 = _lanelet(22, arc(r_right - 3.5, 3.5), predecessor=[2], adjacent_right=21, adjacent_right_same_direction=True)
     xe = np.linspace(50, 150, 51)
-    l23 = lane(23, np.column_stack([xe, np.zeros_like(xe)]), predecessor=[1])
+    l23 = _lanelet(23, np.column_stack([xe, np.zeros_like(xe)]), predecessor=[1])
     return LaneletNetwork.create_from_lanelet_list([l1, l2, l21, l22, l23])
 
 
@@ -434,15 +438,9 @@ def test_where_nothing_says_which_branch_the_lane_takes_it_goes_on_into_the_one_
     junction used to stop the car 3 m on, at the fork: ARG_Carcarana-13_1_T-1). Past a goal
     region the route still ends at such a fork (on DEU_Flensburg-62 the least-turning branch
     has a 1.5 m radius kink no car can follow)."""
-    from commonroad.scenario.lanelet import Lanelet, LaneletNetwork
+    from commonroad.scenario.lanelet import LaneletNetwork
 
     from mpcdrive.adapters.commonroad_route import lane_forward
-
-    def lane(lid, center, **kw):
-        c = np.asarray(center, float)
-        d = np.gradient(c, axis=0)
-        n = np.column_stack([-d[:, 1], d[:, 0]]) / np.hypot(*d.T)[:, None]
-        return Lanelet(c + 1.75 * n, c, c - 1.75 * n, lid, **kw)
 
     x = np.linspace(0, 50, 26)
     phi = np.linspace(0, math.pi / 2, 40)
@@ -450,9 +448,9 @@ def test_where_nothing_says_which_branch_the_lane_takes_it_goes_on_into_the_one_
     xe = np.linspace(50, 150, 51)
     bare = LaneletNetwork.create_from_lanelet_list(
         [
-            lane(1, np.column_stack([x, np.zeros_like(x)]), successor=[21, 23]),
-            lane(21, curve, predecessor=[1]),
-            lane(23, np.column_stack([xe, np.zeros_like(xe)]), predecessor=[1]),
+            _lanelet(1, np.column_stack([x, np.zeros_like(x)]), successor=[21, 23]),
+            _lanelet(21, curve, predecessor=[1]),
+            _lanelet(23, np.column_stack([xe, np.zeros_like(xe)]), predecessor=[1]),
         ]
     )
     assert lane_forward(bare, [1], 1000.0, choose=True) == [1, 23]
