@@ -498,3 +498,71 @@ def goal_spec(pp, line: np.ndarray, plan: DrivePlan) -> dict | None:
             out["yaw_deg"] = [math.degrees(yaw[0]), math.degrees(yaw[1])]
         return out
     return None
+
+
+def goal_miss(imp, result) -> str | None:
+    """Why no state of the drive (``result``, on the import ``imp``:
+    :class:`~.commonroad.CommonRoadImport`) is in the goal region, in words: the goal's parts (position,
+    time window, orientation, speed) that the drive's closest state misses, with the figures;
+    None when the goal was reached or the planning problem has no goal states. The closest state
+    is the one meeting most parts, position first, earliest on a tie."""
+    goal = imp.planning_problem.goal
+    dt = imp.spec.dt_s
+    best: tuple | None = None
+    for g in goal.state_list:
+        for k in range(len(result.t_s)):
+            x = result.x[k]
+            parts = _goal_parts(g, np.array([x[0], x[1]]), float(x[2]), float(x[3]), int(round(result.t_s[k] / dt)), dt)
+            if not parts:
+                continue
+            met = sum(ok for ok, _, _ in parts.values())
+            pos = parts.get("position", (True, "", 0.0))
+            key = (pos[0], met, -pos[2], -k)
+            if best is None or key > best[0]:
+                best = (key, k, parts)
+    if best is None:
+        return None
+    _, k, parts = best
+    missed = [why for ok, why, _ in parts.values() if not ok]
+    if not missed:
+        return None
+    return f"closest at t = {result.t_s[k]:.2f} s: " + "; ".join(missed)
+
+
+def _goal_parts(g, xy: np.ndarray, yaw: float, v_mps: float, step: int, dt: float) -> dict:
+    """Each part of one goal state as ``name: (met, why not in words, distance in m)`` (the
+    distance to the goal's position; 0 for the other parts)."""
+    parts: dict = {}
+    if getattr(g, "time_step", None) is not None:
+        lo, hi = g.time_step.start, g.time_step.end
+        parts["time"] = (
+            bool(g.time_step.contains(step)),
+            f"t = {step * dt:.2f} s is outside the goal's time window [{lo * dt:.2f}, {hi * dt:.2f}] s",
+            0.0,
+        )
+    if g.has_value("position"):
+        inside = bool(g.position.contains_point(xy))
+        shape = getattr(g.position, "shapely_object", None)
+        if shape is None and hasattr(g.position, "shapes"):
+            from shapely.ops import unary_union
+
+            shape = unary_union([s.shapely_object for s in g.position.shapes])
+        from shapely.geometry import Point
+
+        d_m = 0.0 if inside or shape is None else float(shape.distance(Point(xy)))
+        parts["position"] = (inside, f"outside the goal's position ({d_m:.1f} m away)", d_m)
+    if g.has_value("orientation"):
+        o = g.orientation
+        parts["orientation"] = (
+            bool(o.contains(yaw)) or bool(o.contains(yaw + 2 * np.pi)) or bool(o.contains(yaw - 2 * np.pi)),
+            f"heading {yaw:.2f} rad is outside [{o.start:.2f}, {o.end:.2f}] rad",
+            0.0,
+        )
+    if g.has_value("velocity"):
+        w = g.velocity
+        parts["velocity"] = (
+            bool(w.contains(v_mps)),
+            f"speed {v_mps:.2f} m/s is outside [{w.start:.2f}, {w.end:.2f}] m/s",
+            0.0,
+        )
+    return parts

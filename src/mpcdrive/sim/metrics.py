@@ -124,7 +124,7 @@ class CommonRoadCheck:
     solution_check : CommonRoad's solution checker's verdict and message; whole_drive : the
     checks of the whole drive, start to end of the run (:class:`WholeDriveCheck`; None where
     they were not made); goal_miss : where the goal was missed, why in words (the goal's parts
-    the closest state misses, :func:`~mpcdrive.adapters.commonroad.goal_miss`; None when reached)."""
+    the closest state misses, :func:`~mpcdrive.adapters.commonroad_goal.goal_miss`; None when reached)."""
 
     file: str
     route_lanelets: tuple[int, ...]
