@@ -95,6 +95,13 @@ MAX_STOPS = 4
 
 # -- lateral candidates ---------------------------------------------------------------------------
 @subroutine
+def shortest_move_m(par, dd):
+    """The shortest quintic move [m] across ``dd`` [m] (>= 0): its peak curvature 5.77 dd / L^2 half
+    the vehicle's tightest."""
+    return math.sqrt(5.77 * dd / (0.5 * par[P_KAPPA_MAX]))
+
+
+@subroutine
 def _add_lateral(w, lane, off, L, cost):
     n = w.lat_n[0]
     if n >= MAX_LAT:
@@ -109,7 +116,7 @@ def _add_lateral(w, lane, off, L, cost):
     w.lat_len[n] = L
     if L > 0.0:
         quintic(w.ego[E_D], w.ego[E_SLOPE], w.ego[E_CURV], line + off, slope, 0.0, L, w.lat_coef[n])
-    w.lat_coef[n, LAT_BACK] = math.inf  # no return (a pass sets one: _add_pass)
+    w.lat_coef[n, LAT_BACK] = math.inf  # no return (a pass sets one: _passes)
     w.lat_cost[n] = cost
     w.lat_n[0] = n + 1
 
@@ -171,8 +178,7 @@ def lateral_candidates(w):
             # a car on the line already, heading along it, has one move: stay
             on_line = abs(line0 + off - w.ego[E_D]) < 0.05 and abs(w.ego[E_SLOPE]) < 0.02
             nT = 1 if on_line else w.lat_lengths_s.shape[0]
-            # the shortest move: its peak curvature 5.77 |dd| / L^2 half the vehicle's tightest
-            L_min = max(par[P_LAT_MIN], math.sqrt(5.77 * abs(line0 + off - w.ego[E_D]) / (0.5 * par[P_KAPPA_MAX])))
+            L_min = max(par[P_LAT_MIN], shortest_move_m(par, abs(line0 + off - w.ego[E_D])))
             # the moves over each duration at the car's speed (short, sharp moves are the evasive
             # ones' below: a quintic's curvature rises fastest at its start, beyond the steering
             # rate at any but a crawling speed)
@@ -212,7 +218,7 @@ PASS_BACK_S = (2.0, 3.0)
 
 
 @subroutine
-def _route_blocker_clear_m(w):
+def _route_blocker(w):
     """(where [m] the car's rear is past the nearest obstacle standing in the route lane ahead of
     the car (its front plus the margin), where the car's front reaches its rear (less the
     margin), the route lane): inf, inf without one within the horizon's reach."""
@@ -226,7 +232,6 @@ def _route_blocker_clear_m(w):
     reach = s0 + par[P_V_MAX] * K * w.dt[0]
     best = math.inf
     reach_rear = math.inf
-    e_b, hw_b = 0.0, 0.0
     for o in range(w.ob_n[0]):
         So = w.ob_s[o, 0]
         if not math.isfinite(So) or So < s0 or So > reach or not _standing(w.ob_s, o, K, w.dt[0]):
@@ -240,22 +245,21 @@ def _route_blocker_clear_m(w):
             if clear < best:
                 best = clear
                 reach_rear = So - w.ob_hl[o, 0] - par[P_HL] - par[P_CO] - par[P_MARGIN]
-                e_b, hw_b = e, hw
-    return best, reach_rear, e_b, hw_b, route
+    return best, reach_rear, route
 
 
 @subroutine
 def _passes(w, v_len):
     """Passes of an obstacle standing in the route lane: a move into another lane (each of that
     lane's moves sampled so far, or staying on it when the car is there) that returns to the route
-    lane once the car's rear is past the obstacle (``_route_blocker_clear_m``), blended back over
+    lane once the car's rear is past the obstacle (:func:`_route_blocker`), blended back over
     each of :data:`PASS_BACK_S` at the car's pace: the two lane changes of an overtaking, which a
     move that stays in the other lane (into oncoming traffic, say) cannot be. The move out is one
     that is on the other lane's line by the time the car's front reaches the obstacle: a longer
     one would put the pass off from one replanning to the next until the swerve left is too sharp
     (measured: a bound of only the body clear of the obstacle's side passed 2 of the 10 generated
     blocked-lane scenarios, this one 7)."""
-    clear, rear, _, _, route = _route_blocker_clear_m(w)
+    clear, rear, route = _route_blocker(w)
     if not math.isfinite(clear):
         return
     par = w.par
@@ -270,7 +274,7 @@ def _passes(w, v_len):
         if s0 + L > rear and not (lane == int(w.ego[E_LANE]) and L <= par[P_LAT_MIN] + 1e-9):
             continue  # out too late (staying on the lane the car is in is no move out)
         width = grid_row_at(w.grid, w.lane_line, lane, clear) - grid_row_at(w.grid, w.lane_line, route, clear)
-        L_min = math.sqrt(5.77 * abs(width) / (0.5 * par[P_KAPPA_MAX]))
+        L_min = shortest_move_m(par, abs(width))
         for m in range(len(PASS_BACK_S)):
             n = w.lat_n[0]
             if n >= MAX_LAT:
@@ -420,7 +424,7 @@ def _turn_out_m(par, d, e, hw):
     a lateral move of ``dd`` at half the steering range takes sqrt(5.77 dd / (kappa_max / 2))."""
     need = e + hw + par[P_HW] + par[P_MARGIN] - (d - par[P_HW])
     need = min(need, d + par[P_HW] - (e - hw - par[P_HW] - par[P_MARGIN]))
-    return math.sqrt(5.77 * max(need, 0.0) / (0.5 * par[P_KAPPA_MAX]))
+    return shortest_move_m(par, max(need, 0.0))
 
 
 @subroutine

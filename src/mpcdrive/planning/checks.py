@@ -11,6 +11,7 @@ import math
 
 from .._subroutine import subroutine
 from .work import (
+    LAT_BACK_LANE,
     E_CURV,
     E_D,
     E_S,
@@ -60,7 +61,7 @@ from .work import (
 )
 
 from .candidates import KAPPA_SLACK, _standing, _turn_out_m
-from .frenet import EVASIVE_GENTLE, EVASIVE_HARD, evasive_step, grid_at, grid_row_at, lateral_at, poly_eval
+from .frenet import EVASIVE_GENTLE, EVASIVE_HARD, evasive_step, grid_at, grid_row_at, is_pass, lateral_at, poly_eval
 
 
 # -- checking a pair ---------------------------------------------------------------------------------
@@ -530,13 +531,13 @@ def _ranges(par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, nla
             s_end = s0
         # the line (and offset) past the move, to the farthest profile's end (a pass: and the
         # line of the lane it returns to)
-        back = L > 0.0 and math.isfinite(lat_coef[i, 6])
+        back = is_pass(lat_coef[i], L)
         for q in range(9):
             sq = s_end + (s_far - s_end) * q / 8.0
             d = grid_row_at(grid, lane_line, lane, sq) + lat_off[i]
             lo, hi = min(lo, d), max(hi, d)
             if back:
-                d = grid_row_at(grid, lane_line, int(lat_coef[i, 8]), sq)
+                d = grid_row_at(grid, lane_line, int(lat_coef[i, LAT_BACK_LANE]), sq)
                 lo, hi = min(lo, d), max(hi, d)
         lat_rng[i, 0] = lo - lat_pad
         lat_rng[i, 1] = hi + lat_pad

@@ -10,6 +10,9 @@ import math
 
 from .._subroutine import subroutine
 from .work import (
+    LAT_BACK,
+    LAT_BACK_LANE,
+    LAT_BACK_LEN,
     P_FRICTION,
     P_KAPPA_MAX,
     P_KAPPA_RATE,
@@ -71,11 +74,18 @@ def poly_eval(c, t):
 
 
 @subroutine
+def is_pass(coef, L):
+    """Whether the lateral move with ``coef`` (a row of ``lat_coef``) and length ``L`` is a pass:
+    a quintic move out with a return (:data:`~.work.LAT_BACK` finite)."""
+    return L > 0.0 and math.isfinite(coef[LAT_BACK])
+
+
+@subroutine
 def lateral_at(coef, L, s0, lane_line, lane, off, grid, s):
     """(d, d', d'') of the lateral move with quintic ``coef`` over length ``L`` from ``s0``, then
-    ``lane``'s line plus ``off``, at ``s``; for a pass (``coef[6]`` finite) from ``s0 + coef[6]``
-    on blended over ``coef[7]`` [m] onto the line of lane ``coef[8]`` (a smooth step,
-    10 t^3 - 15 t^4 + 6 t^5, of the gap between the two lines)."""
+    ``lane``'s line plus ``off``, at ``s``; for a pass (:func:`is_pass`) from ``s0`` plus its
+    ``LAT_BACK`` on blended over ``LAT_BACK_LEN`` [m] onto the line of lane ``LAT_BACK_LANE`` (a
+    smooth step, 10 t^3 - 15 t^4 + 6 t^5, of the gap between the two lines)."""
     u = s - s0
     ds = grid[1]
     if u < L:
@@ -86,19 +96,19 @@ def lateral_at(coef, L, s0, lane_line, lane, off, grid, s):
         a = grid_row_at(grid, lane_line, lane, s)
         b = grid_row_at(grid, lane_line, lane, s + ds)
         d, d1, d2 = a + off, (b - a) / ds, 0.0
-    back = coef[6]
+    back = coef[LAT_BACK]
     if not (u > back):  # no return (inf), or not yet
         return d, d1, d2
-    L2 = coef[7]
+    L2 = coef[LAT_BACK_LEN]
     tau = min((u - back) / L2, 1.0)
-    lane2 = int(coef[8])
+    lane2 = int(coef[LAT_BACK_LANE])
     a = grid_row_at(grid, lane_line, lane2, s)
     b = grid_row_at(grid, lane_line, lane2, s + ds)
     gap = a - d
     gap1 = (b - a) / ds - d1
-    h = tau * tau * tau * (10.0 + tau * (-15.0 + 6.0 * tau))
     if tau >= 1.0:
         return d + gap, d1 + gap1, d2
+    h = tau * tau * tau * (10.0 + tau * (-15.0 + 6.0 * tau))
     h1 = 30.0 * tau * tau * (1.0 - tau) * (1.0 - tau) / L2
     h2 = 60.0 * tau * (1.0 - tau) * (1.0 - 2.0 * tau) / (L2 * L2)
     return d + h * gap, d1 + h * gap1 + h1 * gap, d2 + h2 * gap + 2.0 * h1 * gap1

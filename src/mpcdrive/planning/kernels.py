@@ -36,6 +36,7 @@ import numpy as np
 from numba import njit
 
 from .work import (
+    LAT_BACK_LANE,
     PARALLEL_M,
     REL_CLEAR,
     REL_LEFT,
@@ -65,7 +66,7 @@ from .work import (
 
 from .candidates import lateral_candidates, longitudinal_candidates, longitudinal_costs
 from .checks import _excess_now, _near_obstacles, _ranges, check_pair
-from .frenet import grid_row_at
+from .frenet import grid_row_at, is_pass
 
 
 @njit(cache=True)
@@ -183,8 +184,8 @@ def plan(w):
     r[R_COST] = best_total
     r[R_TTC] = ttc
     # the lane the maneuver ends in (a pass: the one it returns to)
-    passing = lat_len[i] > 0.0 and math.isfinite(lat_coef[i, 6])
-    r[R_LANE] = int(lat_coef[i, 8]) if passing else lat_lane[i]
+    passing = is_pass(lat_coef[i], lat_len[i])
+    r[R_LANE] = int(lat_coef[i, LAT_BACK_LANE]) if passing else lat_lane[i]
     r[R_OFF] = 0.0 if passing else lat_off[i]
     r[R_KIND] = w.lon_kind[j]
     r[R_TARGET] = w.lon_target[j]

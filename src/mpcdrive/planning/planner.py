@@ -47,6 +47,7 @@ from .work import (
     G_YAW_LO,
     LANE_ONCOMING,
     LANE_ROUTE,
+    LAT_BACK,
     LANE_SAME,
     LON_NAMES,
     MAX_LANES,
@@ -496,7 +497,7 @@ class ManeuverPlanner:
         if i < 0:
             raise RuntimeError("the maneuver planner found no candidate (no lane and no speed profile to sample)")
         lane = int(r[R_LANE])
-        if w.lat_len[i] > 0.0 and not math.isfinite(w.lat_coef[i, 6]):
+        if w.lat_len[i] > 0.0 and not math.isfinite(w.lat_coef[i, LAT_BACK]):
             lateral = LateralMove(
                 float(s_m), float(w.lat_len[i]), w.lat_coef[i].copy(), self._knots, self._lines[lane], float(r[R_OFF])
             )
