@@ -44,6 +44,7 @@ from .commonroad_file import read_file
 from .commonroad_goal import (
     FRONT_REACH_M,
     ROAD_MARGIN_M,
+    WIDEST_M,
     DrivePlan,
     accel_limit,
     friction_accel,
@@ -63,12 +64,10 @@ MAX_LANES_BESIDE = 10
 #: how far [m] behind the car's start (its reference point) the road reaches at least: the
 #: longest CommonRoad body's corner (half its length and width) and half a metre, so a car
 #: placed at the mapped road's start is not "behind the road" for standing where it was put
-START_CLEAR_M = (
-    math.hypot(FRONT_REACH_M, 0.5 * max(p.width_m for n, p in PRESETS.items() if n.startswith("commonroad_"))) + 0.5
-)
+START_CLEAR_M = math.hypot(FRONT_REACH_M, 0.5 * WIDEST_M) + 0.5
 #: a route lane narrower than this [m] (the widest CommonRoad vehicle and the road margin on both
 #: sides) takes in the same-direction lanes beside it (:func:`_road`)
-TAPER_WIDTH_M = max(p.width_m for n, p in PRESETS.items() if n.startswith("commonroad_")) + 2 * ROAD_MARGIN_M
+TAPER_WIDTH_M = WIDEST_M + 2 * ROAD_MARGIN_M
 
 
 def available() -> bool:

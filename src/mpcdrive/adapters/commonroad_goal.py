@@ -54,6 +54,8 @@ ROAD_MARGIN_M = 0.1
 #: middle of CommonRoad's rectangle) on the longest CommonRoad vehicle (VW Vanagon: 4.569 m): one
 #: path serves every ``--vehicle``
 FRONT_REACH_M = max(0.5 * p.length_m for n, p in PRESETS.items() if n.startswith("commonroad_"))
+#: the widest CommonRoad vehicle's width [m] (the VW Vanagon's)
+WIDEST_M = max(p.width_m for n, p in PRESETS.items() if n.startswith("commonroad_"))
 
 
 #: the share of the tyres' friction circle (CommonRoad's ``a_max``, the radius its feasibility
@@ -505,64 +507,63 @@ def goal_miss(imp, result) -> str | None:
     :class:`~.commonroad.CommonRoadImport`) is in the goal region, in words: the goal's parts (position,
     time window, orientation, speed) that the drive's closest state misses, with the figures;
     None when the goal was reached or the planning problem has no goal states. The closest state
-    is the one meeting most parts, position first, earliest on a tie."""
-    goal = imp.planning_problem.goal
+    is the one meeting most parts, position first, then nearest the goal's position, earliest on
+    a tie."""
+    from shapely.geometry import Point
+    from shapely.ops import unary_union
+
     dt = imp.spec.dt_s
     best: tuple | None = None
-    for g in goal.state_list:
+    for g in imp.planning_problem.goal.state_list:
+        pos = g.position if g.has_value("position") else None
+        shape = None
+        if pos is not None:
+            shape = getattr(pos, "shapely_object", None)
+            if shape is None and hasattr(pos, "shapes"):
+                shape = unary_union([sh.shapely_object for sh in pos.shapes])
         for k in range(len(result.t_s)):
             x = result.x[k]
-            parts = _goal_parts(g, np.array([x[0], x[1]]), float(x[2]), float(x[3]), int(round(result.t_s[k] / dt)), dt)
+            xy = np.array([x[0], x[1]])
+            inside = pos is None or bool(pos.contains_point(xy))
+            d_m = 0.0 if inside or shape is None else float(shape.distance(Point(xy)))
+            parts = _goal_parts(g, (inside, d_m), float(x[2]), float(x[3]), int(round(result.t_s[k] / dt)), dt)
             if not parts:
                 continue
-            met = sum(ok for ok, _, _ in parts.values())
-            pos = parts.get("position", (True, "", 0.0))
-            key = (pos[0], met, -pos[2], -k)
+            met = sum(ok for ok, _ in parts.values())
+            key = (parts.get("position", (True, ""))[0], met, -d_m, -k)
             if best is None or key > best[0]:
                 best = (key, k, parts)
     if best is None:
         return None
     _, k, parts = best
-    missed = [why for ok, why, _ in parts.values() if not ok]
+    missed = [why for ok, why in parts.values() if not ok]
     if not missed:
         return None
     return f"closest at t = {result.t_s[k]:.2f} s: " + "; ".join(missed)
 
 
-def _goal_parts(g, xy: np.ndarray, yaw: float, v_mps: float, step: int, dt: float) -> dict:
-    """Each part of one goal state as ``name: (met, why not in words, distance in m)`` (the
-    distance to the goal's position; 0 for the other parts)."""
+def _goal_parts(g, where: tuple[bool, float], yaw: float, v_mps: float, step: int, dt: float) -> dict:
+    """Each part of one goal state as ``name: (met, why not in words)``; ``where``: whether the
+    state is in the goal's position, and its distance [m] from it (0 inside)."""
     parts: dict = {}
     if getattr(g, "time_step", None) is not None:
         lo, hi = g.time_step.start, g.time_step.end
         parts["time"] = (
             bool(g.time_step.contains(step)),
             f"t = {step * dt:.2f} s is outside the goal's time window [{lo * dt:.2f}, {hi * dt:.2f}] s",
-            0.0,
         )
     if g.has_value("position"):
-        inside = bool(g.position.contains_point(xy))
-        shape = getattr(g.position, "shapely_object", None)
-        if shape is None and hasattr(g.position, "shapes"):
-            from shapely.ops import unary_union
-
-            shape = unary_union([s.shapely_object for s in g.position.shapes])
-        from shapely.geometry import Point
-
-        d_m = 0.0 if inside or shape is None else float(shape.distance(Point(xy)))
-        parts["position"] = (inside, f"outside the goal's position ({d_m:.1f} m away)", d_m)
-    if g.has_value("orientation"):
+        parts["position"] = (where[0], f"outside the goal's position ({where[1]:.1f} m away)")
+    if g.has_value("orientation"):  # (AngleInterval.contains takes the angle modulo 2 pi)
         o = g.orientation
         parts["orientation"] = (
-            bool(o.contains(yaw)) or bool(o.contains(yaw + 2 * np.pi)) or bool(o.contains(yaw - 2 * np.pi)),
+            bool(o.contains(yaw)),
             f"heading {yaw:.2f} rad is outside [{o.start:.2f}, {o.end:.2f}] rad",
-            0.0,
         )
     if g.has_value("velocity"):
         w = g.velocity
         parts["velocity"] = (
             bool(w.contains(v_mps)),
             f"speed {v_mps:.2f} m/s is outside [{w.start:.2f}, {w.end:.2f}] m/s",
-            0.0,
         )
     return parts
