@@ -272,3 +272,21 @@ def test_bad_settings_are_refused_naming_them(field, value):
 def test_a_goal_interval_must_be_ordered():
     with pytest.raises(ValueError, match="arc_m"):
         PlanningGoal(arc_m=(10.0, 5.0))
+
+
+def test_a_goal_window_no_profile_can_reach_is_paid_by_all_and_prunes_the_search():
+    """The goal 280 m ahead with its window closing at 3 s: no profile gets there (12 m/s and
+    6.9 m/s^2 cover 67 m), so every maneuver pays the miss. The choice is the one without the
+    goal, its cost that plus the miss, and the search stops early as it does without the goal
+    (the miss is part of the pairs' bound: an exhaustive search before)."""
+    obs = [car(90.0, W, 8.0)]
+    goal = PlanningGoal(arc_m=(300.0, 305.0), time_s=(0.0, 3.0))
+    cfg = PlannerConfig()
+    with_goal = plan(planner(goal=goal), obs)
+    without = plan(planner(), obs)
+    assert not with_goal.goal
+    assert (with_goal.kind, with_goal.lane) == (without.kind, without.lane)
+    np.testing.assert_allclose(with_goal.s_m, without.s_m)
+    np.testing.assert_allclose(with_goal.d_m, without.d_m)
+    assert with_goal.cost_s == pytest.approx(without.cost_s + cfg.goal_miss_s, abs=1e-9)
+    assert with_goal.checked <= without.checked + 2 < with_goal.candidates

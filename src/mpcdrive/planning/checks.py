@@ -199,7 +199,7 @@ def _first_contact(
 
 @subroutine
 def check_pair(
-    i, j, excess0, write, bound, par, grid, ego, goal_arr, g_kappa, g_heading, lane_left, lane_right, lane_line, lane_kind,
+    i, j, excess0, write, bound, prepaid, par, grid, ego, goal_arr, g_kappa, g_heading, lane_left, lane_right, lane_line, lane_kind,
     same_left, same_right, all_left, all_right, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v, lon_a, ob_s, ob_e,
     ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs, rel_idx, n_rel, scratch,
 ):  # fmt: skip
@@ -212,7 +212,9 @@ def check_pair(
     the maneuver and its relations to the obstacles go into ``relation`` and ``plan_*``; else
     the check stops at the first contact (the time to collision is known) or once the cost
     passes ``bound`` [s] (it cannot be chosen), returning it unsafe, and looks only at the
-    obstacles ``rel_idx[:n_rel]`` (those that may come near the pair: :func:`_near_obstacles`)."""
+    obstacles ``rel_idx[:n_rel]`` (those that may come near the pair: :func:`_near_obstacles`).
+    ``prepaid`` [s]: the goal's miss cost already counted in the pair's bound
+    (:func:`goal_missed_by_profile`), left out of the cost returned."""
     K = lon_s.shape[1] - 1
     horizon = K * dt
     hl, hw, co = par[P_HL], par[P_HW], par[P_CO]
@@ -456,9 +458,39 @@ def check_pair(
         # missed: the window closes within the horizon, or the maneuver drives through the region
         # (and past it) without being in it
         if goal_arr[G_T_HI] <= ego[E_T] + horizon or (passed_goal and ego[E_S] <= goal_arr[G_S_HI]):
-            cost += par[P_C_GOAL]
+            cost += par[P_C_GOAL] - prepaid
     safe = not hit and ttc == math.inf  # nothing hit, and braking still works past the horizon
     return safe, feasible, rate, ttc, cost, goal
+
+
+@subroutine
+def goal_missed_by_profile(par, ego, goal_arr, lon_s, lon_v, nlon, dt, out):
+    """Into ``out[j]``: the goal's miss cost [s] that every pair with profile ``j`` pays for
+    sure (:func:`check_pair`'s last term), else 0. The window closes within the horizon, and at
+    no step inside it does the profile have the car at the goal's speed with the distance it
+    drives reaching the region's start (a move's path is never longer than the distance driven:
+    it runs along the path at most). The pairs' bound counts it, so that where no profile reaches
+    a closing window the search still stops early."""
+    K = lon_s.shape[1] - 1
+    t0 = ego[E_T]
+    for j in range(nlon):
+        out[j] = 0.0
+    if goal_arr[G_HAS] == 0.0 or goal_arr[G_T_HI] < t0 or goal_arr[G_T_HI] > t0 + K * dt:
+        return
+    for j in range(nlon):
+        reach = False
+        for k in range(K + 1):
+            tt = t0 + k * dt
+            if tt < goal_arr[G_T_LO] - 1e-9 or tt > goal_arr[G_T_HI] + 1e-9:
+                continue
+            v = lon_v[j, k]
+            if v < goal_arr[G_V_LO] - 1e-6 or v > goal_arr[G_V_HI] + 1e-6:
+                continue
+            if ego[E_S] + lon_s[j, k] - lon_s[j, 0] >= goal_arr[G_S_LO]:
+                reach = True
+                break
+        if not reach:
+            out[j] = par[P_C_GOAL]
 
 
 @subroutine

@@ -65,7 +65,7 @@ from .work import (
 )
 
 from .candidates import lateral_candidates, longitudinal_candidates, longitudinal_costs
-from .checks import _excess_now, _near_obstacles, _ranges, check_pair
+from .checks import _excess_now, _near_obstacles, _ranges, check_pair, goal_missed_by_profile
 from .frenet import grid_row_at, is_pass
 
 
@@ -92,6 +92,9 @@ def plan(w):
     discs = w.discs
     keys, codes = w.keys, w.order
     nlat, nlon = w.lat_n[0], w.lon_n[0]
+    # the goal's miss cost that a profile pays for sure belongs in the pairs' bound
+    prepaid = np.empty(max(nlon, 1))
+    goal_missed_by_profile(par, ego, goal_arr, lon_s, lon_v, nlon, dt, prepaid)
     m = 0
     now = int(ego[E_LANE])
     lon_kind, lon_target = w.lon_kind, w.lon_target
@@ -105,7 +108,7 @@ def plan(w):
                 continue
             if lon_kind[j] == LON_STOP and lat_lane[i] != now:
                 continue
-            keys[m] = lat_cost[i] + lon_cost[j]
+            keys[m] = lat_cost[i] + lon_cost[j] + prepaid[j]
             codes[m] = i * MAX_LON + j
             m += 1
     order = np.argsort(keys[:m])
@@ -136,7 +139,7 @@ def plan(w):
         i, j = code // MAX_LON, code % MAX_LON
         n_rel = _near_obstacles(i, j, lat_rng, lon_rng, ob_rng, n_obs, rel_idx)
         safe, feasible, rate, ttc, pair, goal = check_pair(
-            i, j, excess0, False, best_total - key, par, grid, ego, goal_arr, g_kappa, g_heading, lane_left,
+            i, j, excess0, False, best_total - key, prepaid[j], par, grid, ego, goal_arr, g_kappa, g_heading, lane_left,
             lane_right, lane_line, lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len, lat_lane,
             lat_off, lon_s, lon_v, lon_a, ob_s, ob_e, ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d,
             discs, rel_idx, n_rel, scratch,
@@ -174,7 +177,7 @@ def plan(w):
         return
     i, j = best // MAX_LON, best % MAX_LON
     safe, feasible, rate, ttc, pair, goal = check_pair(
-        i, j, excess0, True, math.inf, par, grid, ego, goal_arr, g_kappa, g_heading, lane_left, lane_right, lane_line,
+        i, j, excess0, True, math.inf, prepaid[j], par, grid, ego, goal_arr, g_kappa, g_heading, lane_left, lane_right, lane_line,
         lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v,
         lon_a, ob_s, ob_e, ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs, rel_idx, 0,
         scratch,
