@@ -691,3 +691,19 @@ def test_batch_with_a_commonroad_plant_and_vehicle(tmp_path):
     assert "commonroad_ks" in scen and "commonroad_bmw_320i" in scen
     sol = CommonRoadSolutionReader.open(str(tmp_path / "USA_Lanker-1_1_T-1" / "solution.xml"))
     assert sol.planning_problem_solutions[0].vehicle_type == VehicleType.BMW_320i
+
+
+def test_the_path_round_a_bend_has_no_curvature_spike_where_it_heads_along_an_axis():
+    """A lane round a circle of radius 12.6 m in chords of 0.96 m (a roundabout's ring), through
+    the headings pi/2 and pi: the reference path's curvature stays within 5 % of 1 / R (0.8 %
+    measured). A shape-preserving curve (pchip) flattens x(t) where x peaks: its curvature was
+    off by 68 % there, a spike the steering rate could not follow."""
+    from mpcdrive.adapters.commonroad_goal import line_path
+    from mpcdrive.adapters.commonroad_route import smooth
+
+    R = 12.6
+    a = np.linspace(-0.25 * math.pi, 1.25 * math.pi, int(1.5 * math.pi * R / 0.96) + 1)
+    path = line_path(smooth(R * np.column_stack([np.cos(a), np.sin(a)])))
+    s = np.linspace(5.0, path.length_m - 5.0, 400)
+    assert np.max(np.abs(path.curvature(s) * R - 1.0)) < 0.05
+

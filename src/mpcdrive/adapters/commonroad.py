@@ -50,6 +50,8 @@ from .commonroad_goal import (
     friction_accel,
     goal_miss,
     goal_spec,
+    line_path,
+    path_spec,
     plan_drive,
     road_ends_m,
 )
@@ -244,10 +246,7 @@ def _road_ends(net, plan: DrivePlan) -> tuple[float | None, float | None]:
     """(start_m, end_m) [m] along the reference path the run follows (built as the scenario's
     path is) where the mapped road begins / ends around the route
     (:func:`~.commonroad_goal.road_ends_m`; None where the lanelet network goes on)."""
-    from ..scenarios.build import build_path
-    from ..scenarios.schema import WaypointsSpec
-
-    path = build_path(WaypointsSpec(type="waypoints", points=[tuple(map(float, p)) for p in plan.centerline], ds_m=0.2))
+    path = line_path(plan.centerline)
     start_m, end_m = road_ends_m(net, plan.route, path)
     if start_m is not None:
         # the ground the car stands on at its start is road: a scenario may place the car with its
@@ -313,7 +312,7 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
                 "speed_mps": max(plan.v_cruise_mps, 0.1),
                 "footprint_discs": 3,
             },
-            "path": {"type": "waypoints", "points": [tuple(map(float, p)) for p in plan.centerline], "ds_m": 0.2},
+            "path": path_spec(plan.centerline),
             "road": {
                 "widths": [[float(a), float(b), float(c)] for a, b, c in zip(s_k, left_k, right_k)],
                 "lane_rows": _lane_rows(net, plan.route, plan.centerline, left_k, right_k) if NEIGHBOUR_LANES else None,

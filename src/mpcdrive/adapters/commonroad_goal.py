@@ -109,15 +109,30 @@ class DrivePlan:
         }
 
 
-def _line_path(line: np.ndarray):
-    """The reference path along the centre line ``line`` (M, 2) [m]."""
+def path_spec(line: np.ndarray) -> dict:
+    """The scenario's ``path`` entry for the centre line ``line`` (M, 2) [m]: a cubic spline
+    through it, tabulated every 0.2 m. The line is smoothed already, so the spline does not
+    overshoot, and its curvature is continuous; a shape-preserving curve (pchip) would flatten
+    x(t) and y(t) at each waypoint where one of them peaks (wherever the road heads along an
+    axis), a curvature spike that the steering rate cannot follow."""
+    return {
+        "type": "waypoints",
+        "points": [tuple(map(float, p)) for p in line],
+        "ds_m": 0.2,
+        "interpolation": "spline",
+    }
+
+
+def line_path(line: np.ndarray):
+    """The reference path along the centre line ``line`` (M, 2) [m] (:func:`path_spec`)."""
     from ..paths import WaypointPath
 
-    return WaypointPath(line, ds_m=0.2)
+    spec = path_spec(line)
+    return WaypointPath(line, ds_m=spec["ds_m"], interpolation=spec["interpolation"])
 
 
 def _profile(path, v_cruise: float, v0: float, accel: float, p0: np.ndarray, caps: tuple = ()):
-    """The speed profile along ``path`` (:func:`_line_path`), starting at ``v0`` where the car
+    """The speed profile along ``path`` (:func:`line_path`), starting at ``v0`` where the car
     (``p0``) is (``caps``: its ``top_speed_until``)."""
     from ..paths.speed_profile import SpeedProfile
 
@@ -171,7 +186,7 @@ def stop_inside(net, route, line: np.ndarray) -> np.ndarray:
     body on the road: :data:`FRONT_REACH_M` + :data:`ROAD_MARGIN_M` before the mapped road's end
     where the route ends there (and never closer than a metre ahead of the car, which stands a
     metre along the line); unchanged where the road goes on past the line's end."""
-    _, end_m = road_ends_m(net, route, _line_path(line))
+    _, end_m = road_ends_m(net, route, line_path(line))
     length = float(np.sum(np.hypot(*np.diff(line, axis=0).T)))
     if end_m is None:
         return line
@@ -275,7 +290,7 @@ def _stop(g: _GoalDrive):
         return None
     window = pb.window
     stop_line = _cut(line, 0.5 * (arc[0] + arc[1]))
-    path = _line_path(stop_line)
+    path = line_path(stop_line)
     for v in _candidates(v_want, *v_range):
         prof = _profile(path, v, pb.v0, pb.accel, pb.p0)
         t_in = float(prof.time_at(min(arc[0] + 1.0, path.length_m)))
@@ -306,7 +321,7 @@ def _through(g: _GoalDrive):
     best = None
     tries = [(v, ()) for v in _candidates(v_want, *v_range)]
     tries += _approaches(v_want, v_range, pb, arc)
-    path = _line_path(line)
+    path = line_path(line)
     for v, caps in tries:
         t_in, t_out, miss = _timing(_profile(path, v, pb.v0, pb.accel, pb.p0, caps), arc, s_end, window)
         if best is None or miss < best[2]:
@@ -382,7 +397,7 @@ class _Problem:
 def _finish(
     route, line, mode: str, v: float, pb: _Problem, *, arc=None, arrival=None, note="", caps: tuple = ()
 ) -> DrivePlan:
-    path = _line_path(line)
+    path = line_path(line)
     prof = _profile(path, v, pb.v0, pb.accel, pb.p0, caps)
     duration = float(prof.time_at(path.length_m)) + RUN_ON_S
     if pb.window is not None:
