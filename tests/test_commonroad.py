@@ -707,3 +707,14 @@ def test_the_path_round_a_bend_has_no_curvature_spike_where_it_heads_along_an_ax
     s = np.linspace(5.0, path.length_m - 5.0, 400)
     assert np.max(np.abs(path.curvature(s) * R - 1.0)) < 0.05
 
+
+def test_plans_aim_inside_the_goals_speed_range():
+    """A plan at the very bound of the goal's speed range left the car 0.001 m/s below it
+    (USA_US101-3): plans aim 0.3 m/s inside each bound (a quarter of a narrow range; a lower
+    bound of 0, a stop, stays)."""
+    from mpcdrive.adapters.commonroad_goal import inside_speeds
+
+    assert inside_speeds((12.59, 18.59)) == pytest.approx((12.89, 18.29))
+    assert inside_speeds((0.0, 5.0)) == pytest.approx((0.0, 4.7))
+    assert inside_speeds((10.0, 10.4)) == pytest.approx((10.1, 10.3))
+    assert inside_speeds((3.0, math.inf)) == pytest.approx((3.3, math.inf))

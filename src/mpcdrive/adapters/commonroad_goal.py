@@ -42,6 +42,20 @@ _LIMIT_PRESET = PRESETS["commonroad_bmw_320i"]
 _PLAN_DS_M = 0.25  # grid of the speed profiles compared while planning
 _MISSED = "no cruise speed"  # how the note of a plan that misses the goal window begins
 APPROACH_LEAD_M = 5.0  # a slower approach is back at the goal speed this far before the region [m]
+#: the speeds planned for a goal keep this far [m/s] inside its speed range (at most a quarter of
+#: it): the controller's speed lags the reference by up to about that while it speeds up, and a
+#: plan at the range's very bound leaves the car just outside it
+GOAL_SPEED_MARGIN_MPS = 0.3
+
+
+def inside_speeds(v: tuple[float, float]) -> tuple[float, float]:
+    """The goal's speed range ``v`` [m/s] that the plans aim for: :data:`GOAL_SPEED_MARGIN_MPS`
+    inside each bound (a lower bound of 0, a stop, stays)."""
+    lo, hi = float(v[0]), float(v[1])
+    m = min(GOAL_SPEED_MARGIN_MPS, 0.25 * (hi - lo)) if math.isfinite(hi) else GOAL_SPEED_MARGIN_MPS
+    return (lo + m if lo > 0.0 else lo), (hi - m if math.isfinite(hi) else hi)
+
+
 #: the fastest change of curvature [1/(m s)] the reference speed lets the steering follow: the
 #: controller's steering rate (0.95 of CommonRoad's 0.4 rad/s, the same for its three cars) over
 #: the longest wheelbase of them (the BMW 320i's 2.58 m): the speed slows where a bend sets in
@@ -216,6 +230,8 @@ def plan_drive(net, pp, p0: np.ndarray, yaw0: float, v0: float, dt_s: float) -> 
     steps = cr.bounds(getattr(goal, "time_step", None))
     window = None if steps is None else (steps[0] * dt_s, steps[1] * dt_s)
     v_goal = cr.bounds(getattr(goal, "velocity", None))
+    if v_goal is not None:
+        v_goal = inside_speeds(v_goal)
     shapes = [sh for st in pp.goal.state_list for sh in cr.goal_shapes(st)]
     v_want = 0.5 * (v_goal[0] + v_goal[1]) if v_goal is not None else (v0 if v0 >= 1.0 else DEFAULT_SPEED_MPS)
     v_lo, v_hi = (max(v_goal[0], 1.0), max(v_goal[1], 1.0)) if v_goal is not None else (1.0, max(v_want, v0) * 1.25)
@@ -509,7 +525,7 @@ def goal_spec(pp, line: np.ndarray, plan: DrivePlan) -> dict | None:
             out["time_s"] = [lo, hi if math.isfinite(hi) else None]
         v = cr.bounds(getattr(st, "velocity", None))
         if v is not None:
-            out["speed_mps"] = [max(v[0], 0.0), v[1]]
+            out["speed_mps"] = list(inside_speeds((max(v[0], 0.0), v[1])))
         yaw = cr.bounds(getattr(st, "orientation", None))
         if yaw is not None and yaw[1] - yaw[0] < 2.0 * math.pi - 1e-6:
             out["yaw_deg"] = [math.degrees(yaw[0]), math.degrees(yaw[1])]
