@@ -147,6 +147,8 @@ class SpeedProfile:
         self.abs_kappa = kappa
         self.v_limit_mps = np.minimum(self.v_max_mps, np.sqrt(self.lateral_accel_max_mps2 / np.maximum(kappa, 1e-12)))
         self.curvature_rate_max_1pms = curvature_rate_max_1pms
+        #: the steering rate's speed limit [m/s] alone (inf where there is none)
+        self.steer_rate_limit_mps = np.full_like(self.v_limit_mps, np.inf)
         if curvature_rate_max_1pms is not None:
             # the change of curvature over CURVATURE_RATE_BASE_M either side (a waypoint path's
             # curvature jitters over centimetres; the steering follows the change over metres)
@@ -157,7 +159,8 @@ class SpeedProfile:
                 padded = np.concatenate([np.full(h, signed[0]), signed, np.full(h, signed[-1])])
                 ahead, behind = padded[2 * h :], padded[: -2 * h]
             dk = np.abs(ahead - behind) / (2.0 * h * self.ds_m)
-            np.minimum(self.v_limit_mps, curvature_rate_max_1pms / np.maximum(dk, 1e-12), out=self.v_limit_mps)
+            self.steer_rate_limit_mps = curvature_rate_max_1pms / np.maximum(dk, 1e-12)
+            np.minimum(self.v_limit_mps, self.steer_rate_limit_mps, out=self.v_limit_mps)
         for s_until, v_cap in caps:
             np.minimum(self.v_limit_mps, v_cap, out=self.v_limit_mps, where=s <= s_until)
         self.v_mps = self._passes(v_start_mps, v_end_mps)
@@ -230,6 +233,18 @@ class SpeedProfile:
         return cls(path, lateral_fraction * friction * g_mps2, **kw)
 
     # -- evaluation ---------------------------------------------------------------------------
+    def steer_rate_limit(self, s_m: npt.ArrayLike) -> np.ndarray:
+        """The speed [m/s] above which the path's curvature changes faster than the vehicle can
+        steer (``curvature_rate_max_1pms``, over :data:`CURVATURE_RATE_BASE_M` either side) at
+        arc length(s) ``s_m`` [m]; inf where no rate is given."""
+        s = np.asarray(s_m, float)
+        if self.closed:
+            s = np.mod(s, self.length_m)
+        lim = self.steer_rate_limit_mps
+        # interpolated as 1 / v (a curvature change per metre): inf stays inf
+        inv = np.interp(s, self.s_m, 1.0 / lim)
+        return np.divide(1.0, inv, out=np.full_like(inv, np.inf), where=inv > 0.0)
+
     def speed(self, s_m: npt.ArrayLike) -> np.ndarray | float:
         """Reference speed [m/s] at arc length(s) ``s_m`` [m]."""
         s = np.asarray(s_m, float)

@@ -114,6 +114,10 @@ class PlannerConfig:
     gap_cost_s_per_s : each second spent closer than the time gap to a car ahead or behind;
     goal_miss_s : a maneuver that, with the goal's time window inside the horizon, misses the
         goal (region, time, speed, orientation);
+    rate_excess_s : a maneuver that steers faster than the steering rate allows (its own move,
+        or the path's bends at its speed), per unit of the excess (1: twice the rate: as much as
+        a missed goal); a cost, not a wall: a hard stop within the rate is not better than
+        keeping on 1 % above it;
     jerk_ref_mps3 : the jerk [m/s^3] whose square, held for a second, costs one second;
     lat_accel_ref_mps2 : the lateral acceleration [m/s^2] whose square, held for a second, costs
         one second.
@@ -140,6 +144,7 @@ class PlannerConfig:
     switch_s: float = 1.5
     gap_cost_s_per_s: float = 3.0
     goal_miss_s: float = 20.0
+    rate_excess_s: float = 100.0
     jerk_ref_mps3: float = 4.0
     lat_accel_ref_mps2: float = 4.0
 
@@ -170,6 +175,7 @@ class PlannerConfig:
             "switch_s",
             "gap_cost_s_per_s",
             "goal_miss_s",
+            "rate_excess_s",
         ):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):

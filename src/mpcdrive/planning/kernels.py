@@ -24,8 +24,9 @@ hit over the horizon and, at its end, braking still stops the car behind the car
 (seconds of travel time, :class:`~.config.PlannerConfig`) separate into a lateral and a
 longitudinal part, which bound a pair's cost from below: pairs are checked in the order of that
 bound and the search stops when the bound passes the best safe maneuver's cost (branch and
-bound: most replannings check a handful of pairs). With no safe maneuver, the one that is hit
-latest is taken (time to collision), the cheapest among equals.
+bound: most replannings check a handful of pairs; a goal miss that a profile cannot avoid is
+part of that bound). Steering beyond the rate is a cost of the choice, not a wall. With no safe
+maneuver, the one that is hit latest is taken (time to collision), the cheapest among equals.
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ from .work import (
     P_HL,
     P_HW,
     P_BAND_K,
+    P_C_RATE,
     R_CHECKED,
     R_COMBOS,
     R_COST,
@@ -80,7 +82,7 @@ def plan(w):
     longitudinal_costs(w)
     # the struct's arrays read once (each read of a field costs a reference count)
     par, grid, ego, goal_arr = w.par, w.grid, w.ego, w.goal
-    g_kappa, g_heading = w.g_kappa, w.g_heading
+    g_kappa, g_heading, g_bend = w.g_kappa, w.g_heading, w.g_bend
     lane_left, lane_right, lane_line, lane_kind = w.lane_left, w.lane_right, w.lane_line, w.lane_kind
     same_left, same_right, all_left, all_right = w.same_left, w.same_right, w.all_left, w.all_right
     lat_coef, lat_len, lat_lane, lat_off, lat_cost = w.lat_coef, w.lat_len, w.lat_lane, w.lat_off, w.lat_cost
@@ -122,14 +124,14 @@ def plan(w):
         par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, nlat, lon_s, nlon, ob_s, ob_e, ob_hl, ob_hw,
         n_obs, dt, discs, lat_rng, lon_rng, ob_rng,
     )  # fmt: skip
-    # the choice: the cheapest safe maneuver within the vehicle's limits; else the safe one that
-    # steers least beyond the steering rate (the controller steers at its limit, the obstacle
-    # rows keep the clearance); else the one hit latest (time to collision), feasible first
+    # the choice: the cheapest safe maneuver, its steering beyond the rate costed (the controller
+    # steers at its limit, the obstacle and road rows keep the clearance); else the one hit
+    # latest (time to collision), feasible first. The rate's cost is >= 0: the pairs' bound holds.
+    c_rate = par[P_C_RATE]
     best = -1
     best_total = math.inf
     checked = 0
     n_safe = 0
-    sr, sr_rate, sr_total = -1, math.inf, math.inf
     fb, fb_ttc, fb_total, fb_feasible = -1, -1.0, math.inf, False
     for q in range(m):
         key = keys[order[q]]
@@ -139,20 +141,18 @@ def plan(w):
         i, j = code // MAX_LON, code % MAX_LON
         n_rel = _near_obstacles(i, j, lat_rng, lon_rng, ob_rng, n_obs, rel_idx)
         safe, feasible, rate, ttc, pair, goal = check_pair(
-            i, j, excess0, False, best_total - key, prepaid[j], par, grid, ego, goal_arr, g_kappa, g_heading, lane_left,
-            lane_right, lane_line, lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len, lat_lane,
-            lat_off, lon_s, lon_v, lon_a, ob_s, ob_e, ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d,
+            i, j, excess0, False, best_total - key, prepaid[j], par, grid, ego, goal_arr, g_kappa, g_heading, g_bend,
+            lane_left, lane_right, lane_line, lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len,
+            lat_lane, lat_off, lon_s, lon_v, lon_a, ob_s, ob_e, ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d,
             discs, rel_idx, n_rel, scratch,
         )  # fmt: skip
         checked += 1
         total = key + pair
         if safe and feasible:
             n_safe += 1
-            if rate <= 1.0:
-                if total < best_total:
-                    best, best_total = code, total
-            elif rate < sr_rate - 1e-9 or (abs(rate - sr_rate) <= 1e-9 and total < sr_total):
-                sr, sr_rate, sr_total = code, rate, total
+            score = total + c_rate * max(rate - 1.0, 0.0)
+            if score < best_total:
+                best, best_total = code, score
         better = False
         if feasible and not fb_feasible:
             better = True
@@ -161,12 +161,9 @@ def plan(w):
                 better = True
         if better:
             fb, fb_ttc, fb_total, fb_feasible = code, ttc, total, feasible
-    safe_found = best >= 0 or sr >= 0
+    safe_found = best >= 0
     if best < 0:
-        if sr >= 0:
-            best, best_total = sr, sr_total
-        else:
-            best, best_total = fb, fb_total
+        best, best_total = fb, fb_total
     r = w.result
     r[R_CHECKED] = checked
     r[R_COMBOS] = m
@@ -177,8 +174,8 @@ def plan(w):
         return
     i, j = best // MAX_LON, best % MAX_LON
     safe, feasible, rate, ttc, pair, goal = check_pair(
-        i, j, excess0, True, math.inf, prepaid[j], par, grid, ego, goal_arr, g_kappa, g_heading, lane_left, lane_right, lane_line,
-        lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v,
+        i, j, excess0, True, math.inf, prepaid[j], par, grid, ego, goal_arr, g_kappa, g_heading, g_bend, lane_left,
+        lane_right, lane_line, lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v,
         lon_a, ob_s, ob_e, ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs, rel_idx, 0,
         scratch,
     )  # fmt: skip

@@ -58,6 +58,7 @@ from .work import (
     P_C_CHANGE,
     P_C_GAP,
     P_C_GOAL,
+    P_C_RATE,
     P_C_OFFROUTE,
     P_C_ONCOMING,
     P_C_SWITCH,
@@ -240,7 +241,10 @@ class ManeuverPlanner:
     number); ``goal`` a :class:`PlanningGoal` or None; ``band_steps``: how many steps of the
     maneuver the controller's road (``Maneuver.lanes``) covers; ``cache_step_s``: the time step
     [s] the replannings come on (the control period), on whose grid the obstacles' boxes are
-    kept between replannings (0: none kept)."""
+    kept between replannings (0: none kept); ``steer_rate_speed``: a callable of arc length, the
+    speed [m/s] above which the path bends faster than the car can steer (a speed profile's
+    ``steer_rate_limit``; None: no such limit): a maneuver faster than that steers beyond the
+    rate."""
 
     def __init__(
         self,
@@ -252,6 +256,7 @@ class ManeuverPlanner:
         goal: PlanningGoal | None = None,
         band_steps: int | None = None,
         cache_step_s: float = 0.0,
+        steer_rate_speed=None,
     ):
         cfg = config or PlannerConfig()
         self.config = cfg
@@ -285,6 +290,9 @@ class ManeuverPlanner:
             arrays["g_vref"][:] = np.asarray(wanted_speed(grid), float)
         else:
             arrays["g_vref"][:] = float(wanted_speed)
+        if steer_rate_speed is not None:
+            v_rate = np.asarray(steer_rate_speed(grid), float)
+            arrays["g_bend"][:] = np.divide(1.0, v_rate, out=np.zeros_like(v_rate), where=v_rate > 0.0)
         left_road = np.interp(grid, road.s_m, road.left_m)
         right_road = np.interp(grid, road.s_m, road.right_m)
         if lanes:
@@ -342,6 +350,7 @@ class ManeuverPlanner:
         par[P_C_SWITCH] = cfg.switch_s
         par[P_C_GAP] = cfg.gap_cost_s_per_s
         par[P_C_GOAL] = cfg.goal_miss_s
+        par[P_C_RATE] = cfg.rate_excess_s
         par[P_JERK_REF] = cfg.jerk_ref_mps3
         par[P_LAT_REF] = cfg.lat_accel_ref_mps2
         start, end = getattr(road, "start_m", None), getattr(road, "end_m", None)

@@ -68,8 +68,9 @@ G_HAS, G_S_LO, G_S_HI, G_D_LO, G_D_HI, G_T_LO, G_T_HI, G_V_LO, G_V_HI, G_HAS_YAW
     P_BAND_K,
     P_CREEP,
     P_R_DISC,
-) = range(32)
-N_PAR = 32
+    P_C_RATE,
+) = range(33)
+N_PAR = 33
 # slots of ``result``
 (
     R_I,
@@ -108,6 +109,7 @@ class PlannerWork:
     g_kappa: np.ndarray  # (G,) path curvature [1/m]
     g_heading: np.ndarray  # (G,) path heading [rad] (unwrapped)
     g_vref: np.ndarray  # (G,) wanted speed along the path [m/s]
+    g_bend: np.ndarray  # (G,) 1 / the speed [s/m] above which the path bends faster than the car steers
     lane_left: np.ndarray  # (L, G) lane edges [m] (offsets from the path, positive left)
     lane_right: np.ndarray  # (L, G)
     lane_line: np.ndarray  # (L, G) the line driven in each lane [m]
@@ -171,6 +173,7 @@ def new_work(K: int, grid_s: np.ndarray, n_lanes: int) -> dict:
         g_kappa=f(G),
         g_heading=f(G),
         g_vref=f(G),
+        g_bend=f(G),
         lane_left=f((L, G)),
         lane_right=f((L, G)),
         lane_line=f((L, G)),
