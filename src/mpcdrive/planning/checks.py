@@ -465,14 +465,20 @@ def check_pair(
     return safe, feasible, rate, ttc, cost, goal
 
 
+#: slack [m] on the distance a profile drives when it is judged unable to reach the goal region
+#: (the evasive move's midpoint integration differs from the profile's own distance by far less)
+REACH_SLACK_M = 0.5
+
+
 @subroutine
 def goal_missed_by_profile(par, ego, goal_arr, lon_s, lon_v, nlon, dt, out):
     """Into ``out[j]``: the goal's miss cost [s] that every pair with profile ``j`` pays for
     sure (:func:`check_pair`'s last term), else 0. The window closes within the horizon, and at
     no step inside it does the profile have the car at the goal's speed with the distance it
     drives reaching the region's start (a move's path is never longer than the distance driven:
-    it runs along the path at most). The pairs' bound counts it, so that where no profile reaches
-    a closing window the search still stops early."""
+    it runs along the path at most; :data:`REACH_SLACK_M` covers the evasive move, which
+    integrates the profile's speed by midpoints). The pairs' bound counts it, so that where no
+    profile reaches a closing window the search still stops early."""
     K = lon_s.shape[1] - 1
     t0 = ego[E_T]
     for j in range(nlon):
@@ -488,7 +494,7 @@ def goal_missed_by_profile(par, ego, goal_arr, lon_s, lon_v, nlon, dt, out):
             v = lon_v[j, k]
             if v < goal_arr[G_V_LO] - 1e-6 or v > goal_arr[G_V_HI] + 1e-6:
                 continue
-            if ego[E_S] + lon_s[j, k] - lon_s[j, 0] >= goal_arr[G_S_LO]:
+            if ego[E_S] + lon_s[j, k] - lon_s[j, 0] + REACH_SLACK_M >= goal_arr[G_S_LO]:
                 reach = True
                 break
         if not reach:
