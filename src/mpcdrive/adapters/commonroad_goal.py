@@ -52,8 +52,8 @@ def inside_speeds(v: tuple[float, float]) -> tuple[float, float]:
     """The goal's speed range ``v`` [m/s] that the plans aim for: :data:`GOAL_SPEED_MARGIN_MPS`
     inside each bound (a lower bound of 0, a stop, stays)."""
     lo, hi = float(v[0]), float(v[1])
-    m = min(GOAL_SPEED_MARGIN_MPS, 0.25 * (hi - lo)) if math.isfinite(hi) else GOAL_SPEED_MARGIN_MPS
-    return (lo + m if lo > 0.0 else lo), (hi - m if math.isfinite(hi) else hi)
+    m = min(GOAL_SPEED_MARGIN_MPS, 0.25 * (hi - lo))  # (an open range: inf - m stays inf)
+    return (lo + m if lo > 0.0 else lo), hi - m
 
 
 #: the fastest change of curvature [1/(m s)] the reference speed lets the steering follow: the
@@ -123,26 +123,32 @@ class DrivePlan:
         }
 
 
+#: the reference path through the route's centre line: a cubic spline, tabulated every 0.2 m.
+#: The line is smoothed already, so the spline does not overshoot, and its curvature is
+#: continuous; a shape-preserving curve (pchip) would flatten x(t) and y(t) at each waypoint where
+#: one of them peaks (wherever the road heads along an axis), a curvature spike that the steering
+#: rate cannot follow
+PATH_INTERPOLATION = "spline"
+PATH_DS_M = 0.2
+
+
 def path_spec(line: np.ndarray) -> dict:
-    """The scenario's ``path`` entry for the centre line ``line`` (M, 2) [m]: a cubic spline
-    through it, tabulated every 0.2 m. The line is smoothed already, so the spline does not
-    overshoot, and its curvature is continuous; a shape-preserving curve (pchip) would flatten
-    x(t) and y(t) at each waypoint where one of them peaks (wherever the road heads along an
-    axis), a curvature spike that the steering rate cannot follow."""
+    """The scenario's ``path`` entry for the centre line ``line`` (M, 2) [m]
+    (:data:`PATH_INTERPOLATION`)."""
     return {
         "type": "waypoints",
         "points": [tuple(map(float, p)) for p in line],
-        "ds_m": 0.2,
-        "interpolation": "spline",
+        "ds_m": PATH_DS_M,
+        "interpolation": PATH_INTERPOLATION,
     }
 
 
 def line_path(line: np.ndarray):
-    """The reference path along the centre line ``line`` (M, 2) [m] (:func:`path_spec`)."""
+    """The reference path along the centre line ``line`` (M, 2) [m], as :func:`path_spec`
+    describes it."""
     from ..paths import WaypointPath
 
-    spec = path_spec(line)
-    return WaypointPath(line, ds_m=spec["ds_m"], interpolation=spec["interpolation"])
+    return WaypointPath(line, ds_m=PATH_DS_M, interpolation=PATH_INTERPOLATION)
 
 
 def _profile(path, v_cruise: float, v0: float, accel: float, p0: np.ndarray, caps: tuple = ()):
