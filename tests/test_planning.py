@@ -304,9 +304,9 @@ def test_a_maneuver_keeps_below_the_speed_at_which_the_path_bends_faster_than_th
         after = np.sqrt(np.maximum(36.0 + 2.0 * 2.0 * (s - 75.0), 36.0))
         return np.minimum(12.0, np.where(s < 45.0, before, np.where(s > 75.0, after, 6.0)))
 
-    def steer_rate_speed(s):
+    def bend(s):  # the inverse of that speed [s/m]; 0: no limit
         s = np.asarray(s, float)
-        return np.where((s >= 50.0) & (s <= 70.0), 6.0, np.inf)
+        return np.where((s >= 50.0) & (s <= 70.0), 1.0 / 6.0, 0.0)
 
     def in_window_top(m):
         inside = (m.s_m >= 50.0) & (m.s_m <= 70.0)
@@ -314,9 +314,7 @@ def test_a_maneuver_keeps_below_the_speed_at_which_the_path_bends_faster_than_th
         return float(np.max(m.v_mps[inside]))
 
     free = ManeuverPlanner(PATH, two_lanes(), LIMITS, PlannerConfig(), wanted_speed=wanted)
-    limited = ManeuverPlanner(
-        PATH, two_lanes(), LIMITS, PlannerConfig(), wanted_speed=wanted, steer_rate_speed=steer_rate_speed
-    )
+    limited = ManeuverPlanner(PATH, two_lanes(), LIMITS, PlannerConfig(), wanted_speed=wanted, bend=bend)
     assert in_window_top(plan(free, [])) > 6.0 * 1.05
     m = plan(limited, [])
     assert m.safe

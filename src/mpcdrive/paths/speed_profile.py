@@ -147,8 +147,9 @@ class SpeedProfile:
         self.abs_kappa = kappa
         self.v_limit_mps = np.minimum(self.v_max_mps, np.sqrt(self.lateral_accel_max_mps2 / np.maximum(kappa, 1e-12)))
         self.curvature_rate_max_1pms = curvature_rate_max_1pms
-        #: the steering rate's speed limit [m/s] alone (inf where there is none)
-        self.steer_rate_limit_mps = np.full_like(self.v_limit_mps, np.inf)
+        #: the path's curvature change per metre over the curvature rate [s/m] (0: no rate given):
+        #: the inverse of the speed above which the bend sets in faster than the steering follows
+        self.bend_s_per_m = np.zeros_like(self.v_limit_mps)
         if curvature_rate_max_1pms is not None:
             # the change of curvature over CURVATURE_RATE_BASE_M either side (a waypoint path's
             # curvature jitters over centimetres; the steering follows the change over metres)
@@ -159,8 +160,8 @@ class SpeedProfile:
                 padded = np.concatenate([np.full(h, signed[0]), signed, np.full(h, signed[-1])])
                 ahead, behind = padded[2 * h :], padded[: -2 * h]
             dk = np.abs(ahead - behind) / (2.0 * h * self.ds_m)
-            self.steer_rate_limit_mps = curvature_rate_max_1pms / np.maximum(dk, 1e-12)
-            np.minimum(self.v_limit_mps, self.steer_rate_limit_mps, out=self.v_limit_mps)
+            self.bend_s_per_m = dk / curvature_rate_max_1pms
+            np.minimum(self.v_limit_mps, curvature_rate_max_1pms / np.maximum(dk, 1e-12), out=self.v_limit_mps)
         for s_until, v_cap in caps:
             np.minimum(self.v_limit_mps, v_cap, out=self.v_limit_mps, where=s <= s_until)
         self.v_mps = self._passes(v_start_mps, v_end_mps)
@@ -233,17 +234,16 @@ class SpeedProfile:
         return cls(path, lateral_fraction * friction * g_mps2, **kw)
 
     # -- evaluation ---------------------------------------------------------------------------
-    def steer_rate_limit(self, s_m: npt.ArrayLike) -> np.ndarray:
-        """The speed [m/s] above which the path's curvature changes faster than the vehicle can
-        steer (``curvature_rate_max_1pms``, over :data:`CURVATURE_RATE_BASE_M` either side) at
-        arc length(s) ``s_m`` [m]; inf where no rate is given."""
+    def bend(self, s_m: npt.ArrayLike) -> np.ndarray:
+        """:attr:`bend_s_per_m` [s/m] at arc length(s) ``s_m`` [m]: the inverse of the speed above
+        which the path's curvature changes faster than the vehicle can steer
+        (``curvature_rate_max_1pms``, over :data:`CURVATURE_RATE_BASE_M` either side); 0 where no
+        rate is given."""
         s = np.asarray(s_m, float)
         if self.closed:
             s = np.mod(s, self.length_m)
-        lim = self.steer_rate_limit_mps
-        # interpolated as 1 / v (a curvature change per metre): inf stays inf
-        inv = np.interp(s, self.s_m, 1.0 / lim)
-        return np.divide(1.0, inv, out=np.full_like(inv, np.inf), where=inv > 0.0)
+            return np.interp(s, np.r_[self.s_m, self.length_m], np.r_[self.bend_s_per_m, self.bend_s_per_m[0]])
+        return np.interp(s, self.s_m, self.bend_s_per_m)
 
     def speed(self, s_m: npt.ArrayLike) -> np.ndarray | float:
         """Reference speed [m/s] at arc length(s) ``s_m`` [m]."""

@@ -114,7 +114,7 @@ class PlannedMpc:
             goal=goal,
             band_steps=int(math.ceil(mpc.N * mpc.dt_s / cfg.dt_s)),
             cache_step_s=float(mpc.dt_s),
-            steer_rate_speed=getattr(prof, "steer_rate_limit", None),
+            bend=getattr(prof, "bend", None),
         )
         self.config = cfg
         self.goal = goal

@@ -241,10 +241,10 @@ class ManeuverPlanner:
     number); ``goal`` a :class:`PlanningGoal` or None; ``band_steps``: how many steps of the
     maneuver the controller's road (``Maneuver.lanes``) covers; ``cache_step_s``: the time step
     [s] the replannings come on (the control period), on whose grid the obstacles' boxes are
-    kept between replannings (0: none kept); ``steer_rate_speed``: a callable of arc length, the
-    speed [m/s] above which the path bends faster than the car can steer (a speed profile's
-    ``steer_rate_limit``; None: no such limit): a maneuver faster than that steers beyond the
-    rate."""
+    kept between replannings (0: none kept); ``bend``: a callable of arc length, the inverse
+    [s/m] of the speed above which the path bends faster than the car can steer (a speed
+    profile's :meth:`~mpcdrive.paths.speed_profile.SpeedProfile.bend`; None: no such limit): a
+    maneuver faster than that steers beyond the rate."""
 
     def __init__(
         self,
@@ -256,7 +256,7 @@ class ManeuverPlanner:
         goal: PlanningGoal | None = None,
         band_steps: int | None = None,
         cache_step_s: float = 0.0,
-        steer_rate_speed=None,
+        bend=None,
     ):
         cfg = config or PlannerConfig()
         self.config = cfg
@@ -290,9 +290,8 @@ class ManeuverPlanner:
             arrays["g_vref"][:] = np.asarray(wanted_speed(grid), float)
         else:
             arrays["g_vref"][:] = float(wanted_speed)
-        if steer_rate_speed is not None:
-            v_rate = np.asarray(steer_rate_speed(grid), float)
-            arrays["g_bend"][:] = np.divide(1.0, v_rate, out=np.zeros_like(v_rate), where=v_rate > 0.0)
+        if bend is not None:
+            arrays["g_bend"][:] = np.asarray(bend(grid), float)
         left_road = np.interp(grid, road.s_m, road.left_m)
         right_road = np.interp(grid, road.s_m, road.right_m)
         if lanes:
