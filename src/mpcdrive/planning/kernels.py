@@ -95,7 +95,7 @@ def plan(w):
     keys, codes = w.keys, w.order
     nlat, nlon = w.lat_n[0], w.lon_n[0]
     # the goal's miss cost that a profile pays for sure belongs in the pairs' bound
-    prepaid = np.empty(max(nlon, 1))
+    prepaid = w.lon_goal
     goal_missed_by_profile(par, ego, goal_arr, lon_s, lon_v, nlon, dt, prepaid)
     m = 0
     now = int(ego[E_LANE])

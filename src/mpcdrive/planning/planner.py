@@ -21,6 +21,7 @@ from ..paths.compiled import PathArrays, path_arrays, path_eval
 from ..scene.road import Road
 from . import kernels
 from .config import PlannerConfig, VehicleLimits
+from .frenet import is_pass
 from .tracks import obstacle_tracks
 from .work import (
     E_A,
@@ -47,7 +48,6 @@ from .work import (
     G_YAW_LO,
     LANE_ONCOMING,
     LANE_ROUTE,
-    LAT_BACK,
     LANE_SAME,
     LON_NAMES,
     MAX_LANES,
@@ -505,7 +505,7 @@ class ManeuverPlanner:
         if i < 0:
             raise RuntimeError("the maneuver planner found no candidate (no lane and no speed profile to sample)")
         lane = int(r[R_LANE])
-        if w.lat_len[i] > 0.0 and not math.isfinite(w.lat_coef[i, LAT_BACK]):
+        if w.lat_len[i] > 0.0 and not is_pass(w.lat_coef[i], w.lat_len[i]):
             lateral = LateralMove(
                 float(s_m), float(w.lat_len[i]), w.lat_coef[i].copy(), self._knots, self._lines[lane], float(r[R_OFF])
             )

@@ -145,6 +145,7 @@ class PlannerWork:
     lon_a: np.ndarray  # (MAX_LON, K+1) [m/s^2]
     lon_ok: np.ndarray  # (MAX_LON,) int: within the vehicle's limits
     lon_cost: np.ndarray  # (MAX_LON,)
+    lon_goal: np.ndarray  # (MAX_LON,) the goal's miss cost [s] each profile pays for sure
     lon_n: np.ndarray  # (1,) int
     # the choice
     order: np.ndarray  # (MAX_LAT * MAX_LON,) int work space
@@ -207,6 +208,7 @@ def new_work(K: int, grid_s: np.ndarray, n_lanes: int) -> dict:
         lon_a=f((MAX_LON, K + 1)),
         lon_ok=np.zeros(MAX_LON, np.int64),
         lon_cost=f(MAX_LON),
+        lon_goal=f(MAX_LON),
         lon_n=np.zeros(1, np.int64),
         order=np.zeros(MAX_LAT * MAX_LON, np.int64),
         keys=f(MAX_LAT * MAX_LON),
