@@ -197,10 +197,12 @@ class Oracle:
 
 def road_excess(d, X):
     """(N,) how far the lateral offsets of X[1:] lie outside the road rows: the documented
-    ``lo_k + dlo_k (yaw_k - yawbar_k) <= n_k . p_k - offset_k <= hi_k + dhi_k (yaw_k - yawbar_k)``."""
-    dlo, dhi, ybar = d.qp.lane_dlo, d.qp.lane_dhi, d.qp.Xlin[1:, 2]
+    ``lo_k + dlo_k psi_k <= n_k . p_k - offset_k <= hi_k + dhi_k psi_k``, psi_k the yaw off the
+    linearization's less the road's turn over the distance moved along it."""
+    dlo, dhi = d.qp.lane_dlo, d.qp.lane_dhi
     e = np.einsum("ki,ki->k", d.qp.lane_n, X[1:, :2]) - d.qp.lane_b
-    dy = X[1:, 2] - ybar
+    lin = d.qp.Xlin[1:]
+    dy = X[1:, 2] - lin[:, 2] - np.einsum("ki,ki->k", d.qp.lane_t, X[1:, :2] - lin[:, :2])
     return np.maximum.reduce([e - d.qp.lane_hi - dhi * dy, d.qp.lane_lo + dlo * dy - e, np.zeros_like(e)])
 
 
@@ -263,11 +265,11 @@ def solve_oracle(pb: MpcProblem, d, u_prev) -> Oracle:
                 cons.append(X[k, i] <= pb.x_max[i])
     # the soft road rows (one slack per step for both sides) and the obstacle rows (one slack per
     # step shared by its rows; b = -inf: an unused row)
-    dlo, dhi, ybar = d.qp.lane_dlo, d.qp.lane_dhi, d.qp.Xlin[1:, 2]
+    dlo, dhi, lin, tk = d.qp.lane_dlo, d.qp.lane_dhi, d.qp.Xlin, d.qp.lane_t
     obstacle_rows = []
     for k in range(1, N + 1):
         e = d.qp.lane_n[k - 1] @ X[k, :2] - d.qp.lane_b[k - 1]
-        dy = X[k, 2] - ybar[k - 1]
+        dy = X[k, 2] - lin[k, 2] - tk[k - 1] @ (X[k, :2] - lin[k, :2])
         cons += [
             e <= d.qp.lane_hi[k - 1] + dhi[k - 1] * dy + eps[k - 1],
             e >= d.qp.lane_lo[k - 1] + dlo[k - 1] * dy - eps[k - 1],

@@ -145,17 +145,18 @@ class CasadiIpoptMpc:
                 if np.isfinite(pb.x_max[i]):
                     opti.subject_to(X[i, k + 1] <= pb.x_max[i])
         # soft road bound, as in the QP: n_k . (p_k - c_k) in [lo_k, hi_k] +- eps (the body inside
-        # the road, linearized in the yaw: lo_k + dlo_k (yaw_k - yawbar_k), the same for hi)
+        # the road, linearized in the yaw relative to the road: lo_k + dlo_k psi_k, the same for hi)
         self.lane_n = self.lane_b = None
         if core.qp.lane:
             eps = opti.variable(N)
             self.lane_n = opti.parameter(2, N)
             self.lane_b = opti.parameter(N)
-            self.lane_rows = opti.parameter(5, N)  # lo, hi, dlo, dhi, yawbar
+            self.lane_rows = opti.parameter(5, N)  # lo, hi, dlo, dhi, yawbar - t . pbar
+            self.lane_t = opti.parameter(2, N)  # the road's turn per metre moved along it
             opti.subject_to(eps >= 0)
             for k in range(N):
                 e = ca.dot(self.lane_n[:, k], X[:2, k + 1]) - self.lane_b[k]
-                dyaw = X[2, k + 1] - self.lane_rows[4, k]
+                dyaw = X[2, k + 1] - ca.dot(self.lane_t[:, k], X[:2, k + 1]) - self.lane_rows[4, k]
                 opti.subject_to(e <= self.lane_rows[1, k] + self.lane_rows[3, k] * dyaw + eps[k])
                 opti.subject_to(e >= self.lane_rows[0, k] + self.lane_rows[2, k] * dyaw - eps[k])
                 cost += pb.lane_slack_weight * eps[k] ** 2 + pb.lane_slack_weight_l1 * eps[k]
@@ -204,8 +205,10 @@ class CasadiIpoptMpc:
         if self.lane_n is not None:
             opti.set_value(self.lane_n, d.qp.lane_n.T)
             opti.set_value(self.lane_b, d.qp.lane_b)
-            dlo, dhi, yaw = d.qp.lane_dlo, d.qp.lane_dhi, d.qp.Xlin[1:, 2]
-            opti.set_value(self.lane_rows, np.vstack([d.qp.lane_lo, d.qp.lane_hi, dlo, dhi, yaw]))
+            dlo, dhi, lin = d.qp.lane_dlo, d.qp.lane_dhi, d.qp.Xlin[1:]
+            wbar = lin[:, 2] - np.einsum("ki,ki->k", d.qp.lane_t, lin[:, :2])
+            opti.set_value(self.lane_t, d.qp.lane_t.T)
+            opti.set_value(self.lane_rows, np.vstack([d.qp.lane_lo, d.qp.lane_hi, dlo, dhi, wbar]))
         if self.rows_a is not None:
             for k, a in enumerate(self.rows_a):
                 opti.set_value(a, d.qp.rowa[k])

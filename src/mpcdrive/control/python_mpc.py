@@ -301,9 +301,12 @@ class PythonLtvMpc(LtvMpc):
             st.lane_n[:, 0] = -np.sin(yaw)
             st.lane_n[:, 1] = np.cos(yaw)
             st.lane_b[:] = np.einsum("ki,ki->k", st.lane_n, at[1:, :2])
+            st.lane_t[:, 0] = at[1:, 3] * st.lane_n[:, 1]  # the road's turn per metre moved along it
+            st.lane_t[:, 1] = -at[1:, 3] * st.lane_n[:, 0]
             if rows is not None:  # the first step's bounds hold where f(x, Ubar[0]) puts the car
                 e1 = float(st.lane_n[0] @ Fbar[0, :2] - st.lane_b[0])
-                reach_first_step(rows.lo, rows.hi, rows.dlo, rows.dhi, e1, float(Fbar[0, 2] - Xlin[1, 2]))
+                dw1 = float(Fbar[0, 2] - Xlin[1, 2] - st.lane_t[0] @ (Fbar[0, :2] - Xlin[1, :2]))
+                reach_first_step(rows.lo, rows.hi, rows.dlo, rows.dhi, e1, dw1)
                 st.lane_lo[:] = rows.lo
                 st.lane_hi[:] = rows.hi
                 st.lane_dlo[:] = rows.dlo

@@ -418,12 +418,14 @@ def stage_costs(cost_obstacles, extras, asm, qp, t_s, shifted):
                     We[k, i, j] = Wq[k, i, j]
         obstacle_cost(asm, t_s, We, qt)
     if extras and asm.lane:
-        lane_n, lane_b, rlin, F = qp.lane_n, qp.lane_b, asm.rlin, asm.F
+        lane_n, lane_b, lane_t, rlin, F, Xl = qp.lane_n, qp.lane_b, qp.lane_t, asm.rlin, asm.F, qp.Xlin
         for k in range(N):
-            yaw = rlin[k + 1, 2]
+            yaw, kappa = rlin[k + 1, 2], rlin[k + 1, 3]
             lane_n[k, 0] = -math.sin(yaw)
             lane_n[k, 1] = math.cos(yaw)
             lane_b[k] = lane_n[k, 0] * rlin[k + 1, 0] + lane_n[k, 1] * rlin[k + 1, 1]
+            lane_t[k, 0] = kappa * lane_n[k, 1]  # the road's turn per metre moved along it
+            lane_t[k, 1] = -kappa * lane_n[k, 0]
         # the first step's bounds hold where the model puts the car with the first input of the
         # linearization (F[0] = f(x, Ubar[0])): reachable, so never bought with slack
         reach_first_step(
@@ -432,7 +434,7 @@ def stage_costs(cost_obstacles, extras, asm, qp, t_s, shifted):
             qp.lane_dlo,
             qp.lane_dhi,
             lane_n[0, 0] * F[0, 0] + lane_n[0, 1] * F[0, 1] - lane_b[0],
-            F[0, 2] - qp.Xlin[1, 2],
+            F[0, 2] - Xl[1, 2] - lane_t[0, 0] * (F[0, 0] - Xl[1, 0]) - lane_t[0, 1] * (F[0, 1] - Xl[1, 1]),
         )
 
 

@@ -277,13 +277,16 @@ class LtvQp:
         self.u[self.r_ubound : self.r_ubound + N * nu] = st.uhi.reshape(-1)
         if self.lane:
             n2 = np.repeat(st.lane_n[:, None, :], 2, axis=1)  # (N, 2 rows, 2)
-            self._coo_vals[self._slot_n] = n2.ravel()
             hi, lo = st.lane_b + st.lane_hi, st.lane_b + st.lane_lo
             if self.lane_yaw:
-                yaw = st.Xlin[1:, 2]
+                # the rows in w = yaw - t . p, the yaw relative to the road (ocp.stage_qp)
+                lin = st.Xlin[1:]
+                wbar = lin[:, 2] - np.einsum("ki,ki->k", st.lane_t, lin[:, :2])
+                n2 = n2 + np.stack([st.lane_dhi, st.lane_dlo], axis=1)[:, :, None] * st.lane_t[:, None, :]
                 self._coo_vals[self._slot_yaw] = np.column_stack([-st.lane_dhi, -st.lane_dlo]).ravel()
-                hi = hi - st.lane_dhi * yaw
-                lo = lo - st.lane_dlo * yaw
+                hi = hi - st.lane_dhi * wbar
+                lo = lo - st.lane_dlo * wbar
+            self._coo_vals[self._slot_n] = n2.ravel()
             self.u[self.r_lane : self.r_lane + 2 * N : 2] = hi
             self.l[self.r_lane + 1 : self.r_lane + 2 * N : 2] = lo
         if self.n_obs_rows:  # a_km . (x_k, y_k, yaw_k) + sigma_k >= b_km (b -inf: unused)

@@ -31,9 +31,12 @@ class StageQp:
     stage ``ulo``, ``uhi`` (N, nu) inside the problem's ``u_min``, ``u_max`` (nu,) (a bound is a
     row only where the problem's is finite); rate limit ``dmax`` (nu,) per step; state bounds
     ``x_min``, ``x_max`` (nx,). With ``lane`` the road rows of x_1..x_N ``lane_lo_k +
-    lane_dlo_k (yaw - ybar_k) <= lane_n_k . (x, y) - lane_b_k <= lane_hi_k + lane_dhi_k (yaw -
-    ybar_k)`` [m], ybar the yaw of the linearization trajectory ``Xlin`` (N+1, nx), slack weights
-    ``w2_lane`` (quadratic) and ``w1_lane`` (linear). ``nrow`` obstacle rows per stage
+    lane_dlo_k psi_k <= lane_n_k . (x, y) - lane_b_k <= lane_hi_k + lane_dhi_k psi_k`` [m] in the
+    body's yaw relative to the road, ``psi_k = yaw - ybar_k - lane_t_k . ((x, y) - pbar_k)``
+    [rad]: its yaw off that of the linearization trajectory ``Xlin`` (N+1, nx) (ybar, pbar), less
+    the road's turn over the distance moved along it (``lane_t`` (N, 2) [1/m]: the path's
+    curvature times its tangent, so a car that goes further into a bend meets the road turned
+    further); slack weights ``w2_lane`` (quadratic) and ``w1_lane`` (linear). ``nrow`` obstacle rows per stage
     ``rowa_kq . (x, y, yaw)_k >= rowb_kq`` (``rowb`` -inf: unused), slack weights ``w2_obs``,
     ``w1_obs``.
     """
@@ -64,6 +67,7 @@ class StageQp:
     lane_hi: np.ndarray
     lane_dlo: np.ndarray
     lane_dhi: np.ndarray
+    lane_t: np.ndarray
     Xlin: np.ndarray
     nrow: int
     rowa: np.ndarray
@@ -76,6 +80,11 @@ class StageQp:
     def struct(self):
         """The compiled struct of this stage QP (the same arrays)."""
         return to_struct(self, _build_stage_qp)
+
+    def road_yaw(self, X: np.ndarray) -> np.ndarray:
+        """psi_k of the road rows (see the class) for the states ``X`` of x_1..x_N (N, >=3) [rad]."""
+        lin = self.Xlin[1:]
+        return X[:, 2] - lin[:, 2] - np.einsum("ki,ki->k", self.lane_t, X[:, :2] - lin[:, :2])
 
     def posed_for(self, problem: MpcProblem) -> StageQp:
         """This step posed for ``problem``, a problem of the same size (e.g. the fallback's
@@ -130,6 +139,7 @@ def new_stage_qp(problem: MpcProblem, obstacle_rows: int = 0) -> StageQp:
         lane_hi=z(N),
         lane_dlo=z(N),
         lane_dhi=z(N),
+        lane_t=z((N, 2)),
         Xlin=z((N + 1, nx)),
         nrow=int(obstacle_rows),
         rowa=z((N, max(obstacle_rows, 1), 3)),

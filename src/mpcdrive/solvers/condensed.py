@@ -371,6 +371,7 @@ def condensed_solve(qp, work, x, u_prev, nx, nu, rows):
     ulo, uhi, dmax, x_min, x_max = qp.ulo, qp.uhi, qp.dmax, qp.x_min, qp.x_max
     lane, lane_n, lane_b, lane_lo, lane_hi = qp.lane, qp.lane_n, qp.lane_b, qp.lane_lo, qp.lane_hi
     lane_dlo, lane_dhi, Xlin, nrow, rowa, rowb = qp.lane_dlo, qp.lane_dhi, qp.Xlin, qp.nrow, qp.rowa, qp.rowb
+    lane_t = qp.lane_t
     C, b, rowcol, rgrp, kpos = work.C, work.b, work.rowcol, work.rgrp, work.kpos
     xf, P, lam, Vb, S, T2, Gam = work.xf, work.P, work.lam, work.Vb, work.S, work.T2, work.Gam
     H, g, z, L, J, Rq = work.H, work.g, work.z, work.L, work.J, work.Rq
@@ -529,22 +530,25 @@ def condensed_solve(qp, work, x, u_prev, nx, nu, rows):
             m_lane = m
             Xl = Xlin
             for k in range(1, N + 1):
-                # n . p - dhi yaw <= lane_b + hi - dhi yawbar (and the same with lo, >=): the
-                # road's bounds linearized in the yaw (scene.road.body_bounds)
+                # n . p - dhi w <= lane_b + hi - dhi wbar (and the same with lo, >=): the road's
+                # bounds linearized in the body's yaw relative to the road, w = yaw - t . p with
+                # t the road's turn per metre moved (scene.road.body_bounds; ocp.stage_qp)
                 n0, n1 = lane_n[k - 1, 0], lane_n[k - 1, 1]
+                t0, t1 = lane_t[k - 1, 0], lane_t[k - 1, 1]
                 dh, dl = lane_dhi[k - 1], lane_dlo[k - 1]
                 nxf = n0 * xf[k, 0] + n1 * xf[k, 1]
-                ybar = Xl[k, 2]
+                ybar = Xl[k, 2] - t0 * Xl[k, 0] - t1 * Xl[k, 1]
+                wf = xf[k, 2] - t0 * xf[k, 0] - t1 * xf[k, 1]
                 for jj in range(nzu):
                     gp = n0 * Gam[k - 1, 0, jj] + n1 * Gam[k - 1, 1, jj]
-                    gy = Gam[k - 1, 2, jj]
+                    gy = Gam[k - 1, 2, jj] - t0 * Gam[k - 1, 0, jj] - t1 * Gam[k - 1, 1, jj]
                     C[m, jj] = -(gp - dh * gy)
                     C[m + 1, jj] = gp - dl * gy
                 for jj in range(nzu, nz):
                     C[m, jj] = 0.0
                     C[m + 1, jj] = 0.0
-                b[m] = nxf - dh * xf[k, 2] - lane_b[k - 1] - lane_hi[k - 1] + dh * ybar
-                b[m + 1] = lane_b[k - 1] + lane_lo[k - 1] - dl * ybar - (nxf - dl * xf[k, 2])
+                b[m] = nxf - dh * wf - lane_b[k - 1] - lane_hi[k - 1] + dh * ybar
+                b[m + 1] = lane_b[k - 1] + lane_lo[k - 1] - dl * ybar - (nxf - dl * wf)
                 rgrp[m] = k - 1
                 rgrp[m + 1] = k - 1
                 rowcol[m] = -1
