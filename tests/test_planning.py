@@ -319,3 +319,35 @@ def test_a_maneuver_keeps_below_the_speed_at_which_the_path_bends_faster_than_th
     m = plan(limited, [])
     assert m.safe
     assert in_window_top(m) <= 6.0 * 1.05 + 1e-6
+
+
+def test_a_pass_begun_goes_on_to_where_its_move_ends():
+    """Replanned every 0.1 s from where the last maneuver has the car, a pass through the free
+    oncoming lane keeps the end of its move out: the car is beside the obstacle's lane line
+    where the first plan had it, not 1.2 m further at every replanning. (Moves sampled over the same durations from every replanning
+    kept their ends ahead of the car: the move out never arrived, the pass was dropped once no
+    move reached the lane in time, and the car braked for the blockage.)"""
+    pl = planner(two_lanes(oncoming=True), oncoming=True)
+    obs = [car(60.0)]
+
+    def arrival(m):
+        """Arc length [m] where the maneuver's body is first clear of its own lane."""
+        clear = W / 2 + 0.5 * LIMITS.width_m
+        out = np.flatnonzero(m.d_m > clear)
+        if not out.size or out[0] == 0:
+            return math.inf
+        i = out[0]  # between samples i - 1 and i, linearly
+        f = (clear - m.d_m[i - 1]) / (m.d_m[i] - m.d_m[i - 1])
+        return float(m.s_m[i - 1] + f * (m.s_m[i] - m.s_m[i - 1]))
+
+    m = plan(pl, obs, s=20.0, v=12.0)
+    first = arrival(m)
+    assert m.safe and first < 60.0 - 4.5
+    for k in range(1, 11):
+        t = 0.1 * k
+        s, d, v = (float(np.interp(0.1, m.t_s, a)) for a in (m.s_m, m.d_m, m.v_mps))
+        kappa = m.lateral.curvature(s)  # the car steering as planned (a straight path)
+        m = pl.plan(t, s, d, v, 0.0, 0.0, table_of(obs, None), kappa)
+        assert m.safe and m.v_mps.min() > 10.0, t
+        # (within the chord between the plans' 2.4 m samples; receding: 1.2 m per replanning)
+        assert arrival(m) <= first + 1.0, (t, arrival(m), first)

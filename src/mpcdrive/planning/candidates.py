@@ -17,6 +17,9 @@ from .work import (
     E_LANE,
     E_PREV_LANE,
     E_PREV_OFF,
+    E_MOVE_END,
+    E_MOVE_LANE,
+    E_MOVE_OFF,
     E_S,
     E_SLOPE,
     E_T,
@@ -182,13 +185,21 @@ def lateral_candidates(w):
             # the moves over each duration at the car's speed (short, sharp moves are the evasive
             # ones' below: a quintic's curvature rises fastest at its start, beyond the steering
             # rate at any but a crawling speed)
+            # the last choice's move, on to where it ends; the other moves to the same line pay
+            # the switch: a move sampled over the same duration from every replanning keeps its
+            # end ahead of the car and never arrives (and a later arrival is always a little
+            # gentler)
+            L_go = w.ego[E_MOVE_END] - s0
+            go_on = nT > 1 and lane == int(w.ego[E_MOVE_LANE]) and off == w.ego[E_MOVE_OFF] and L_go >= L_min
             last = 0.0
             for m in range(nT):
                 L = max(L_min, v_len * w.lat_lengths_s[m])
                 if L - last < 0.5:
                     continue  # the same move (a slow car: every duration gives the shortest move)
                 last = L
-                _add_lateral(w, lane, off, L, cost)
+                _add_lateral(w, lane, off, L, cost + (par[P_C_SWITCH] if go_on else 0.0))
+            if go_on:
+                _add_lateral(w, lane, off, L_go, cost)
     # evasive moves: to every other lane's line, steering as fast as the vehicle can (numeric,
     # with the longitudinal profile they are paired with: ``lat_len`` < 0)
     # (``lat_len`` -1: up to the friction circle's share EVASIVE_HARD; -2: EVASIVE_GENTLE)

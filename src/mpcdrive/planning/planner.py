@@ -30,6 +30,9 @@ from .work import (
     E_LANE,
     E_PREV_LANE,
     E_PREV_OFF,
+    E_MOVE_END,
+    E_MOVE_LANE,
+    E_MOVE_OFF,
     E_S,
     E_SLOPE,
     E_T,
@@ -371,6 +374,7 @@ class ManeuverPlanner:
         self._t = cfg.dt_s * np.arange(K + 1)
         self.previous: Maneuver | None = None
         self._planned_t = 0.0
+        self._move = (-1.0, 0.0, math.nan)  # the last choice's move: lane, offset, end [m]
         #: the obstacles' boxes already projected, per obstacle and time step of ``cache_step_s``
         #: (the replanning period: a replanning shares all but its newest samples with the last)
         self.cache_step_s = cache_step_s
@@ -405,6 +409,7 @@ class ManeuverPlanner:
         tab = table_of([Obstacle(Circle(1.0), (0.0, 50.0, 0.0))], None)
         self.plan(0.0, 0.0, 0.0, 1.0, 0.0, 0.0, tab)
         self.previous = None
+        self._move = (-1.0, 0.0, math.nan)
         self.set_goal(goal)
 
     def _pose(self, s_m: float, d_m: float) -> tuple[float, float, float, float]:
@@ -490,6 +495,7 @@ class ManeuverPlanner:
         e[E_LANE] = self.lane_at(s_m, e_y_m)
         e[E_PREV_LANE] = -1.0 if prev is None else prev.lane
         e[E_PREV_OFF] = 0.0 if prev is None else prev.offset_m
+        e[E_MOVE_LANE], e[E_MOVE_OFF], e[E_MOVE_END] = self._move if on is not None else (-1.0, 0.0, math.nan)
         x, y, _, _ = self._pose(s_m, e_y_m)
         if obstacles is not self._cache_of:  # other obstacles (fresh predictions): a new cache
             self._cache = np.full((len(obstacles.obstacles), TRACK_CACHE_STEPS, 4), np.nan)
@@ -505,6 +511,9 @@ class ManeuverPlanner:
         if i < 0:
             raise RuntimeError("the maneuver planner found no candidate (no lane and no speed profile to sample)")
         lane = int(r[R_LANE])
+        # the move to go on with at the next replanning (a quintic's, or a pass's move out)
+        end = float(s_m + w.lat_len[i]) if w.lat_len[i] > 0.0 else math.nan
+        self._move = (float(w.lat_lane[i]), float(w.lat_off[i]), end)
         if w.lat_len[i] > 0.0 and not is_pass(w.lat_coef[i], w.lat_len[i]):
             lateral = LateralMove(
                 float(s_m), float(w.lat_len[i]), w.lat_coef[i].copy(), self._knots, self._lines[lane], float(r[R_OFF])

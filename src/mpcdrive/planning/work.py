@@ -30,8 +30,11 @@ __all__ = ["REL_AHEAD", "REL_BEHIND", "REL_CLEAR", "REL_LEFT", "REL_RIGHT", "Pla
 #: LAT_BACK_LANE: the lane it returns to)
 LAT_BACK, LAT_BACK_LEN, LAT_BACK_LANE = 6, 7, 8
 LAT_COLS = 9
-# slots of ``ego``
-E_S, E_D, E_SLOPE, E_CURV, E_V, E_A, E_T, E_LANE, E_PREV_LANE, E_PREV_OFF, E_PREV_KIND = range(11)
+# slots of ``ego`` (E_MOVE_*: the last choice's move, its lane, offset and where it ends [m];
+# E_MOVE_END nan: none to go on with)
+E_S, E_D, E_SLOPE, E_CURV, E_V, E_A, E_T, E_LANE, E_PREV_LANE, E_PREV_OFF, E_MOVE_LANE, E_MOVE_OFF, E_MOVE_END = range(
+    13
+)
 # slots of ``goal``
 G_HAS, G_S_LO, G_S_HI, G_D_LO, G_D_HI, G_T_LO, G_T_HI, G_V_LO, G_V_HI, G_HAS_YAW, G_YAW_LO, G_YAW_HI = range(12)
 # slots of ``par`` (vehicle and settings)
@@ -188,7 +191,7 @@ def new_work(K: int, grid_s: np.ndarray, n_lanes: int) -> dict:
         speed_s=f(1),
         dt=f(1),
         discs=f(1),
-        ego=f(11),
+        ego=f(13),
         goal=f(12),
         ob_s=f((MAX_OBS, K + 1)),
         ob_e=f((MAX_OBS, K + 1)),
