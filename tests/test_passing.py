@@ -215,3 +215,26 @@ def test_every_planner_setting_is_reachable_from_yaml_and_bad_ones_are_refused()
     ):
         with pytest.raises(ScenarioError, match=words):
             validate_scenario_data(_spec([PARKED]) | {"planner": planner}, "planner.yaml")
+
+
+def test_a_pass_through_the_free_oncoming_lane_is_driven_without_braking():
+    """A car standing in the route lane 40 m ahead, the lane to the left oncoming and free, the
+    planner allowed to use it: the car passes at speed. A pass ends on the route lane's line it
+    starts from, and was handed to the controller as that line (judged 1 m ahead, where the move
+    had barely begun): the car stayed in its lane, replanned the pass from there at every
+    replanning and braked for the blockage."""
+    spec = _spec([dict(PARKED, position=[40.0, 0.0])])
+    spec["road"] = {
+        "lane_width_m": 3.5,
+        "margin_m": 0.1,
+        "lane_rows": [{"name": "oncoming", "oncoming": True, "rows": [[0.0, 5.25, 1.75]]}],
+    }
+    spec["planner"] = {"oncoming": True}
+    exp = build_experiment(ScenarioSpec.model_validate(spec))
+    res = run_experiment(exp)
+    m = compute_metrics(res)
+    assert m["collisions"] == 0 and m["min_obstacle_clearance_m"] > 0.2
+    assert m["max_lane_excess_m"] <= LANE_TOLERANCE_M
+    assert res.e_y_m.max() > 1.75  # over in the oncoming lane beside it
+    assert res.x[:, 3].min() > 8.0  # at speed: no braking for the blockage
+    assert abs(res.e_y_m[-1]) < 0.2  # and back in its own lane

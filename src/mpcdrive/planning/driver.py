@@ -126,6 +126,8 @@ class PlannedMpc:
         self._table: ObstacleTable | None = None
         self._lateral = None
         self._line_key: tuple | None = None
+        self._leaves_of: Maneuver | None = None  # the maneuver _leaves was found for
+        self._leaves = False
         self._line_ref: Callable[[np.ndarray], np.ndarray] | None = None
         names = list(mpc.model.input_names)
         self._accel = names.index("accel")
@@ -167,7 +169,12 @@ class PlannedMpc:
     def _lane_line(self, m: Maneuver, s_m: float, e_y_m: float):
         """The lateral reference of maneuver ``m`` for the car at (``s_m``, ``e_y_m``) [m]: None
         (the path) when it keeps to the route lane's line, the line plus offset of its lane when
-        it keeps to that one (the car within ``KEEP_LINE_M`` of it), else its lateral move."""
+        it keeps to that one (the car within ``KEEP_LINE_M`` of it just ahead, and the move never
+        farther from the line than the body is wide up to the maneuver's end), else its lateral
+        move. (A pass leaves the line it ends on by a lane: judged only just ahead, where its
+        move has barely begun, the pass was handed to the controller as the route's line and the
+        car stayed in its lane. Smaller moves, as between the lines of lanelets side by side in a
+        junction, stay the line's: the controller corrects them itself.)"""
         lat = m.lateral
         target = float(lat(s_m + 1.0))  # just ahead: a move under way is not yet on its line
         on_line = abs(float(np.interp(s_m, lat.knots_m, lat.line_m)) + lat.offset_m - e_y_m) <= KEEP_LINE_M
@@ -175,6 +182,13 @@ class PlannedMpc:
             not on_line
             or abs(target - (float(np.interp(s_m + 1.0, lat.knots_m, lat.line_m)) + lat.offset_m)) > KEEP_LINE_M
         ):
+            return lat
+        if self._leaves_of is not m:
+            ahead = m.s_m[m.s_m >= s_m]
+            dev = lat(ahead) - (np.interp(ahead, lat.knots_m, lat.line_m) + lat.offset_m)
+            self._leaves = bool(ahead.size) and float(np.max(np.abs(dev))) > self.mpc.footprint.width_m
+            self._leaves_of = m
+        if self._leaves:
             return lat
         if m.lane == self.road.route_lane and lat.offset_m == 0.0 and self.road.lanes:
             return None
