@@ -33,6 +33,7 @@ from .work import (
     LANE_ROUTE,
     P_C_GAP,
     P_C_GOAL,
+    P_C_RATE,
     P_C_OFFROUTE,
     P_C_ONCOMING,
     P_CO,
@@ -213,7 +214,8 @@ def check_pair(
     out, and gets a second to come back in; -2: the car is in an oncoming lane). With ``write``,
     the maneuver and its relations to the obstacles go into ``relation`` and ``plan_*``; else
     the check stops at the first contact (the time to collision is known) or once the cost
-    passes ``bound`` [s] (it cannot be chosen), returning it unsafe, and looks only at the
+    and the rate's excess costed (``rate_excess_s``, as the choice scores it) pass ``bound``
+    [s] (it cannot be chosen), returning it unsafe, and looks only at the
     obstacles ``rel_idx[:n_rel]`` (those that may come near the pair: :func:`_near_obstacles`).
     ``prepaid`` [s]: the goal's miss cost already counted in the pair's bound
     (:func:`goal_missed_by_profile`), left out of the cost returned."""
@@ -225,7 +227,7 @@ def check_pair(
     kappa_step = par[P_KAPPA_RATE] * KAPPA_SLACK * dt + 1e-9
     fric2 = par[P_FRICTION] ** 2 * 1.0001
     lat_ref, c_onc, c_off = par[P_LAT_REF], par[P_C_ONCOMING], par[P_C_OFFROUTE]
-    time_gap, c_gap = par[P_TIME_GAP], par[P_C_GAP]
+    time_gap, c_gap, c_rate = par[P_TIME_GAP], par[P_C_GAP], par[P_C_RATE]
     lane_i = lat_lane[i]
     coef = lat_coef[i]
     L, off = lat_len[i], lat_off[i]
@@ -434,7 +436,8 @@ def check_pair(
         for q in range(nd):
             p_disc_s[q] = s + discs[q] * cth
             p_disc_d[q] = d + discs[q] * sth
-        if not write and (hit or cost > bound):
+        # (the score so far: the costs and the rate's excess only grow along the maneuver)
+        if not write and (hit or cost + c_rate * max(rate - 1.0, 0.0) > bound):
             return False, feasible, rate, ttc, cost, goal
         # the goal
         if has_goal and s > goal_arr[G_S_HI]:
