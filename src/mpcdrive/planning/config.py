@@ -115,9 +115,9 @@ class PlannerConfig:
     goal_miss_s : a maneuver that, with the goal's time window inside the horizon, misses the
         goal (region, time, speed, orientation);
     rate_excess_s : a maneuver that steers faster than the steering rate allows (its own move,
-        or the path's bends at its speed), per unit of the excess (1: twice the rate: as much as
-        a missed goal); a cost, not a wall: a hard stop within the rate is not better than
-        keeping on 1 % above it;
+        or the path's bends at its speed), per unit of the excess (at 100 s: 1 % beyond the
+        rate costs 1 s, 20 % as much as a missed goal); a cost, not a wall: a hard stop within
+        the rate is not better than keeping on 1 % above it;
     jerk_ref_mps3 : the jerk [m/s^3] whose square, held for a second, costs one second;
     lat_accel_ref_mps2 : the lateral acceleration [m/s^2] whose square, held for a second, costs
         one second.
