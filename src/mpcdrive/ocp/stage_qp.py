@@ -81,11 +81,6 @@ class StageQp:
         """The compiled struct of this stage QP (the same arrays)."""
         return to_struct(self, _build_stage_qp)
 
-    def road_yaw(self, X: np.ndarray) -> np.ndarray:
-        """psi_k of the road rows (see the class) for the states ``X`` of x_1..x_N (N, >=3) [rad]."""
-        lin = self.Xlin[1:]
-        return X[:, 2] - lin[:, 2] - np.einsum("ki,ki->k", self.lane_t, X[:, :2] - lin[:, :2])
-
     def posed_for(self, problem: MpcProblem) -> StageQp:
         """This step posed for ``problem``, a problem of the same size (e.g. the fallback's
         relaxed one, :func:`mpcdrive.control.fallback.relaxed_problem`): this stage QP's per-step
