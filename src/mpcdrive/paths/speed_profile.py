@@ -239,21 +239,21 @@ class SpeedProfile:
         which the path's curvature changes faster than the vehicle can steer
         (``curvature_rate_max_1pms``, over :data:`CURVATURE_RATE_BASE_M` either side); 0 where no
         rate is given."""
-        s = np.asarray(s_m, float)
-        if self.closed:
-            s = np.mod(s, self.length_m)
-            return np.interp(s, np.r_[self.s_m, self.length_m], np.r_[self.bend_s_per_m, self.bend_s_per_m[0]])
-        return np.interp(s, self.s_m, self.bend_s_per_m)
+        return self._on_grid(self.bend_s_per_m, s_m)
 
     def speed(self, s_m: npt.ArrayLike) -> np.ndarray | float:
         """Reference speed [m/s] at arc length(s) ``s_m`` [m]."""
+        v = self._on_grid(self.v_mps, s_m)
+        return float(v) if v.ndim == 0 else v
+
+    def _on_grid(self, values: np.ndarray, s_m: npt.ArrayLike) -> np.ndarray:
+        """``values`` on the profile's grid interpolated at arc length(s) ``s_m`` [m] (a closed
+        path wraps round)."""
         s = np.asarray(s_m, float)
         if self.closed:
             s = np.mod(s, self.length_m)
-            v = np.interp(s, np.r_[self.s_m, self.length_m], np.r_[self.v_mps, self.v_mps[0]])
-        else:
-            v = np.interp(s, self.s_m, self.v_mps)
-        return float(v) if v.ndim == 0 else v
+            return np.interp(s, np.r_[self.s_m, self.length_m], np.r_[values, values[0]])
+        return np.interp(s, self.s_m, values)
 
     def time_at(self, s_m) -> np.ndarray:
         """Time [s] the profile takes from its start to arc length(s) ``s_m`` [m] (counting laps on a
