@@ -182,15 +182,15 @@ def lateral_candidates(w):
             on_line = abs(line0 + off - w.ego[E_D]) < 0.05 and abs(w.ego[E_SLOPE]) < 0.02
             nT = 1 if on_line else w.lat_lengths_s.shape[0]
             L_min = max(par[P_LAT_MIN], shortest_move_m(par, abs(line0 + off - w.ego[E_D])))
-            # the moves over each duration at the car's speed (short, sharp moves are the evasive
-            # ones' below: a quintic's curvature rises fastest at its start, beyond the steering
-            # rate at any but a crawling speed)
             # the last choice's move, on to where it ends; the other moves to the same line pay
             # the switch: a move sampled over the same duration from every replanning keeps its
             # end ahead of the car and never arrives (and a later arrival is always a little
             # gentler)
             L_go = w.ego[E_MOVE_END] - s0
             go_on = nT > 1 and lane == int(w.ego[E_MOVE_LANE]) and off == w.ego[E_MOVE_OFF] and L_go >= L_min
+            # the moves over each duration at the car's speed (short, sharp moves are the evasive
+            # ones' below: a quintic's curvature rises fastest at its start, beyond the steering
+            # rate at any but a crawling speed)
             last = 0.0
             for m in range(nT):
                 L = max(L_min, v_len * w.lat_lengths_s[m])

@@ -118,6 +118,8 @@ LATERAL_RANGE_M = 25.0
 #: replanning to go on from it rather than from the car: about what the controller's tracking
 #: leaves (a lateral error above the road's margin starts afresh from the car)
 PLAN_TOLERANCE = (1.0, 0.3, 1.0)
+#: no last move to go on with (lane, offset, end [m] of the ego's E_MOVE_* slots)
+NO_MOVE = (-1.0, 0.0, math.nan)
 
 
 @dataclass(frozen=True)
@@ -374,7 +376,7 @@ class ManeuverPlanner:
         self._t = cfg.dt_s * np.arange(K + 1)
         self.previous: Maneuver | None = None
         self._planned_t = 0.0
-        self._move = (-1.0, 0.0, math.nan)  # the last choice's move: lane, offset, end [m]
+        self._move = NO_MOVE  # the last choice's move: lane, offset, end [m]
         #: the obstacles' boxes already projected, per obstacle and time step of ``cache_step_s``
         #: (the replanning period: a replanning shares all but its newest samples with the last)
         self.cache_step_s = cache_step_s
@@ -409,7 +411,7 @@ class ManeuverPlanner:
         tab = table_of([Obstacle(Circle(1.0), (0.0, 50.0, 0.0))], None)
         self.plan(0.0, 0.0, 0.0, 1.0, 0.0, 0.0, tab)
         self.previous = None
-        self._move = (-1.0, 0.0, math.nan)
+        self._move = NO_MOVE
         self.set_goal(goal)
 
     def _pose(self, s_m: float, d_m: float) -> tuple[float, float, float, float]:
@@ -495,7 +497,7 @@ class ManeuverPlanner:
         e[E_LANE] = self.lane_at(s_m, e_y_m)
         e[E_PREV_LANE] = -1.0 if prev is None else prev.lane
         e[E_PREV_OFF] = 0.0 if prev is None else prev.offset_m
-        e[E_MOVE_LANE], e[E_MOVE_OFF], e[E_MOVE_END] = self._move if on is not None else (-1.0, 0.0, math.nan)
+        e[E_MOVE_LANE], e[E_MOVE_OFF], e[E_MOVE_END] = self._move if on is not None else NO_MOVE
         x, y, _, _ = self._pose(s_m, e_y_m)
         if obstacles is not self._cache_of:  # other obstacles (fresh predictions): a new cache
             self._cache = np.full((len(obstacles.obstacles), TRACK_CACHE_STEPS, 4), np.nan)
