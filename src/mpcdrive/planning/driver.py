@@ -183,10 +183,9 @@ class PlannedMpc:
             or abs(target - (float(np.interp(s_m + 1.0, lat.knots_m, lat.line_m)) + lat.offset_m)) > KEEP_LINE_M
         ):
             return lat
-        if self._leaves_of is not m:
-            ahead = m.s_m[m.s_m >= s_m]
-            dev = lat(ahead) - (np.interp(ahead, lat.knots_m, lat.line_m) + lat.offset_m)
-            self._leaves = bool(ahead.size) and float(np.max(np.abs(dev))) > self.mpc.footprint.width_m
+        if self._leaves_of is not m:  # the maneuver's own samples, once per replanning
+            dev = m.d_m - (np.interp(m.s_m, lat.knots_m, lat.line_m) + lat.offset_m)
+            self._leaves = float(np.max(np.abs(dev))) > self.mpc.footprint.width_m
             self._leaves_of = m
         if self._leaves:
             return lat
