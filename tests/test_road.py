@@ -189,7 +189,7 @@ def test_road_rows_turn_with_the_road_as_the_car_moves_along_it():
     (:meth:`Road.bounds` where the moved car is, in its yaw relative to the road there; central
     differences of 5 cm), for a car lagging a 12 m-radius bend by 0.2 rad (the same sampled
     point binds all along the move). The road turns by ``kappa ds`` under a car that goes further,
-    which changes a bound by ``dhi kappa`` per metre: 0.15 to 0.21 m/m here. Rows that missed it
+    which changes a bound by ``dhi kappa`` per metre: 0.15 to 0.22 m/m here. Rows that missed it
     (anchored to one heading) let a car at its steering rate speed up into a tight turn, since
     turning faster per second looked like lagging the road less, and it ran wide. The rows now
     follow the exact rule's change to a quarter of that term (measured: at most 0.03 m/m, from
