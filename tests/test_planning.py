@@ -351,3 +351,18 @@ def test_a_pass_begun_goes_on_to_where_its_move_ends():
         assert m.safe and m.v_mps.min() > 10.0, t
         # (within the chord between the plans' 2.4 m samples; receding: 1.2 m per replanning)
         assert arrival(m) <= first + 1.0, (t, arrival(m), first)
+
+
+def test_a_goal_region_shorter_than_a_step_of_the_way_is_reached_between_samples():
+    """A goal region 0.8 m long 41 m ahead, any time in 6 s at 10-14 m/s: at 12 m/s the car
+    drives 2.4 m per planning step (0.2 s), so no sample of the maneuver lies in the region; the
+    car passes through it at 3.4 s all the same. The planner judges it reached (before, every
+    maneuver was judged to miss the goal, paid its 20 s, and the search checked them all)."""
+    goal = PlanningGoal(arc_m=(61.0, 61.8), time_s=(0.0, 6.0), speed_mps=(10.0, 14.0))
+    cfg = PlannerConfig()
+    with_goal = plan(planner(goal=goal), [], s=20.0, v=12.0)
+    without = plan(planner(), [], s=20.0, v=12.0)
+    assert not np.any((with_goal.s_m >= 61.0) & (with_goal.s_m <= 61.8))  # between two samples
+    assert with_goal.goal and with_goal.safe
+    assert with_goal.cost_s < without.cost_s + 0.5 * cfg.goal_miss_s
+    assert with_goal.checked <= without.checked + 2
