@@ -366,3 +366,14 @@ def test_a_goal_region_shorter_than_a_step_of_the_way_is_reached_between_samples
     assert with_goal.goal and with_goal.safe
     assert with_goal.cost_s < without.cost_s + 0.5 * cfg.goal_miss_s
     assert with_goal.checked <= without.checked + 2
+
+
+def test_a_goal_window_of_one_instant_between_two_samples_is_met():
+    """The goal 50-70 m ahead at 3.3 s exactly (many CommonRoad files give a single time step):
+    replanning at 0.0 s, the maneuver's samples are at 3.2 and 3.4 s, the car at 12 m/s in the
+    region at both. The planner judges the goal met at 3.3 s (before, every maneuver missed it at
+    every other replanning)."""
+    goal = PlanningGoal(arc_m=(50.0, 70.0), time_s=(3.3, 3.3))
+    m = plan(planner(goal=goal), [], s=20.0, v=12.0)
+    assert not np.any(np.isclose(m.t_s, 3.3))
+    assert m.goal and m.safe

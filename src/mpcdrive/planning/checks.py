@@ -199,12 +199,34 @@ def _first_contact(
 
 
 @subroutine
+def _goal_fraction(goal_arr, s0, s1, t0, t1):
+    """Where [0, 1] on the way from arc length ``s0`` at ``t0`` to ``s1`` at ``t1`` (linear in
+    time) the middle of the stretch in the goal region and inside its time window is; -1 when
+    there is none."""
+    lo = max(t0, goal_arr[G_T_LO])
+    hi = min(t1, goal_arr[G_T_HI])
+    if s1 > s0:
+        lo = max(lo, t0 + (goal_arr[G_S_LO] - s0) / (s1 - s0) * (t1 - t0))
+        hi = min(hi, t0 + (goal_arr[G_S_HI] - s0) / (s1 - s0) * (t1 - t0))
+    elif not (goal_arr[G_S_LO] <= s0 and s0 <= goal_arr[G_S_HI]):
+        return -1.0
+    if lo > hi + 1e-9:
+        return -1.0
+    return min(max((0.5 * (lo + hi) - t0) / (t1 - t0), 0.0), 1.0)
+
+
+@subroutine
 def _in_goal(goal_arr, grid, g_heading, s, tt, speed, d, d1):
     """Whether the car at arc length ``s`` [m], offset ``d`` [m] and slope ``d1`` at time ``tt``
     [s] and ``speed`` [m/s] is in the goal (region, time window, speed and orientation ranges)."""
     if not (goal_arr[G_T_LO] - 1e-9 <= tt and tt <= goal_arr[G_T_HI] + 1e-9):
         return False
-    if not (goal_arr[G_S_LO] <= s and s <= goal_arr[G_S_HI] and goal_arr[G_D_LO] <= d and d <= goal_arr[G_D_HI]):
+    if not (
+        goal_arr[G_S_LO] - 1e-9 <= s
+        and s <= goal_arr[G_S_HI] + 1e-9
+        and goal_arr[G_D_LO] <= d
+        and d <= goal_arr[G_D_HI]
+    ):
         return False
     if not (goal_arr[G_V_LO] - 1e-6 <= speed and speed <= goal_arr[G_V_HI] + 1e-6):
         return False
@@ -462,18 +484,20 @@ def check_pair(
         if has_goal and s > goal_arr[G_S_HI]:
             passed_goal = True
         if has_goal and not goal:
-            # in the region at this step, or between the step before and this one (a region
-            # shorter than a step's way, 2.6 m at 13 m/s over 0.2 s, lies between two samples):
-            # the point of the way nearest the region's middle, the rest interpolated
-            g_s, g_t, g_v, g_d, g_d1 = s, ego[E_T] + t, speed, d, d1
-            if k > 0 and s > s_prev and s_prev < goal_arr[G_S_LO] and s > goal_arr[G_S_LO]:
-                f = (min(0.5 * (goal_arr[G_S_LO] + goal_arr[G_S_HI]), s) - s_prev) / (s - s_prev)
-                g_s = s_prev + f * (s - s_prev)
-                g_t = ego[E_T] + t - (1.0 - f) * dt
-                g_v = v_prev + f * (speed - v_prev)
-                g_d = d_prev + f * (d - d_prev)
-                g_d1 = d1_prev + f * (d1 - d1_prev)
-            goal = _in_goal(goal_arr, grid, g_heading, g_s, g_t, g_v, g_d, g_d1)
+            # on the way from the step before to this one (the car's state interpolated): the
+            # times it is in the region and inside the window, their middle. A region shorter
+            # than a step's way (2.6 m at 13 m/s over 0.2 s) or a window shorter than a step (a
+            # single instant, as many files give) lies between two samples
+            if k == 0:
+                goal = _in_goal(goal_arr, grid, g_heading, s, ego[E_T], speed, d, d1)
+            else:
+                t1 = ego[E_T] + t
+                f = _goal_fraction(goal_arr, s_prev, s, t1 - dt, t1)
+                if f >= 0.0:
+                    goal = _in_goal(
+                        goal_arr, grid, g_heading, s_prev + f * (s - s_prev), t1 - (1.0 - f) * dt,
+                        v_prev + f * (speed - v_prev), d_prev + f * (d - d_prev), d1_prev + f * (d1 - d1_prev),
+                    )  # fmt: skip
         s_prev, v_prev, d_prev, d1_prev = s, speed, d, d1
         if write:
             plan_s[k] = s
