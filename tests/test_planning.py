@@ -377,3 +377,33 @@ def test_a_goal_window_of_one_instant_between_two_samples_is_met():
     m = plan(planner(goal=goal), [], s=20.0, v=12.0)
     assert not np.any(np.isclose(m.t_s, 3.3))
     assert m.goal and m.safe
+
+
+def test_the_goal_heading_is_the_body_s_which_turns_less_than_the_path_by_the_slip():
+    """On a 25 m-radius bend to the left the centre of gravity (1.42 m ahead of the rear axle)
+    moves at a slip angle asin(1.42 / 25) = 0.057 rad to the body: the body heads that much to
+    the right of the path. A goal whose heading range holds the body's heading and not the
+    path's is met (before, the path's heading was judged and the goal missed by every maneuver)."""
+    from dataclasses import replace
+
+    ang = np.linspace(-math.pi / 2, 0.6 * math.pi, 400)  # an open arc about (0, 25), ccw
+    path = WaypointPath(np.column_stack([25.0 * np.cos(ang), 25.0 + 25.0 * np.sin(ang)]))
+    slip = math.asin(1.4227 / 25.0)
+    heading = float(path.heading(63.0))
+    goal = PlanningGoal(arc_m=(60.0, 66.0), yaw_rad=(heading - slip - 0.02, heading - slip + 0.02))
+
+    def chosen(limits):
+        pl = ManeuverPlanner(path, two_lanes(), limits, PlannerConfig(), wanted_speed=8.0, goal=goal)
+        return pl.plan(0.0, 20.0, 0.0, 8.0, 0.0, 0.0, table_of([car(-500.0)], None), 1.0 / 25.0)
+
+    m = chosen(replace(LIMITS, rear_axle_m=1.4227))
+    assert m.goal and m.safe
+    # the rear axle as the reference point: no slip, the path's heading, outside the range
+    assert not chosen(LIMITS).goal
+
+
+def test_a_rear_axle_outside_the_wheelbase_is_refused():
+    from dataclasses import replace
+
+    with pytest.raises(ValueError, match="rear_axle_m"):
+        replace(LIMITS, rear_axle_m=3.0)

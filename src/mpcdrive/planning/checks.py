@@ -38,6 +38,7 @@ from .work import (
     P_C_ONCOMING,
     P_CO,
     P_R_DISC,
+    P_REAR,
     P_D_COMF,
     P_D_MAX,
     P_FRICTION,
@@ -216,9 +217,17 @@ def _goal_fraction(goal_arr, s0, s1, t0, t1):
 
 
 @subroutine
-def _in_goal(goal_arr, grid, g_heading, s, tt, speed, d, d1):
+def _slip(par, kappa):
+    """The slip angle [rad] of the reference point's motion to the body on a path of curvature
+    ``kappa`` [1/m] (kinematic: ``asin(rear_axle kappa)``, positive turning left)."""
+    return math.asin(min(max(par[P_REAR] * kappa, -1.0), 1.0))
+
+
+@subroutine
+def _in_goal(goal_arr, grid, g_heading, s, tt, speed, d, d1, slip):
     """Whether the car at arc length ``s`` [m], offset ``d`` [m] and slope ``d1`` at time ``tt``
-    [s] and ``speed`` [m/s] is in the goal (region, time window, speed and orientation ranges)."""
+    [s] and ``speed`` [m/s] is in the goal (region, time window, speed and orientation ranges);
+    its body heads ``slip`` [rad] to the right of the way it moves."""
     if not (goal_arr[G_T_LO] - 1e-9 <= tt and tt <= goal_arr[G_T_HI] + 1e-9):
         return False
     if not (
@@ -232,7 +241,7 @@ def _in_goal(goal_arr, grid, g_heading, s, tt, speed, d, d1):
         return False
     if goal_arr[G_HAS_YAW] == 0.0:
         return True
-    yaw = grid_at(grid, g_heading, s) + math.atan(d1)
+    yaw = grid_at(grid, g_heading, s) + math.atan(d1) - slip
     mid = 0.5 * (goal_arr[G_YAW_LO] + goal_arr[G_YAW_HI])
     dev = (yaw - mid + math.pi) % (2.0 * math.pi) - math.pi
     return abs(dev) <= 0.5 * (goal_arr[G_YAW_HI] - goal_arr[G_YAW_LO]) + 1e-9
@@ -311,7 +320,7 @@ def check_pair(
     ev_d, ev_th, ev_k = ego[E_D], math.atan(ego[E_SLOPE]), ego[E_CURV]
     s = s0
     d1 = ego[E_SLOPE]
-    s_prev, v_prev, d_prev, d1_prev = s0, 0.0, 0.0, 0.0
+    s_prev, v_prev, d_prev, d1_prev, k_prev = s0, 0.0, 0.0, 0.0, 0.0
     for k in range(K + 1):
         # the profile gives the car's speed and the way it drives (``lon_s``); the path's arc
         # length follows from the move's slope
@@ -488,8 +497,9 @@ def check_pair(
             # times it is in the region and inside the window, their middle. A region shorter
             # than a step's way (2.6 m at 13 m/s over 0.2 s) or a window shorter than a step (a
             # single instant, as many files give) lies between two samples
+            # (the body heads at the slip angle to the way its reference point moves)
             if k == 0:
-                goal = _in_goal(goal_arr, grid, g_heading, s, ego[E_T], speed, d, d1)
+                goal = _in_goal(goal_arr, grid, g_heading, s, ego[E_T], speed, d, d1, _slip(par, kappa))
             else:
                 t1 = ego[E_T] + t
                 f = _goal_fraction(goal_arr, s_prev, s, t1 - dt, t1)
@@ -497,8 +507,9 @@ def check_pair(
                     goal = _in_goal(
                         goal_arr, grid, g_heading, s_prev + f * (s - s_prev), t1 - (1.0 - f) * dt,
                         v_prev + f * (speed - v_prev), d_prev + f * (d - d_prev), d1_prev + f * (d1 - d1_prev),
+                        _slip(par, k_prev + f * (kappa - k_prev)),
                     )  # fmt: skip
-        s_prev, v_prev, d_prev, d1_prev = s, speed, d, d1
+        s_prev, v_prev, d_prev, d1_prev, k_prev = s, speed, d, d1, kappa
         if write:
             plan_s[k] = s
             plan_v[k] = v

@@ -25,7 +25,10 @@ class VehicleLimits:
     friction circle the controller plans within, sqrt(a_lon^2 + a_lat^2) [m/s^2] (inf: none);
     disc_offsets_m / disc_radius_m : the discs that cover the body for the controller's obstacle
     rows (centres along the body from the reference point, radius) [m]: a maneuver keeps them
-    clear of every obstacle, as the rows will (0 radius: the rectangle's half diagonal)."""
+    clear of every obstacle, as the rows will (0 radius: the rectangle's half diagonal);
+    rear_axle_m : the rear axle behind the reference point [m]: a reference point ahead of it
+    (the centre of gravity) moves at the slip angle ``asin(rear_axle_m kappa)`` to the body on a
+    path of curvature kappa, so the body's heading is the path's less that (0: the rear axle)."""
 
     length_m: float
     width_m: float
@@ -39,12 +42,15 @@ class VehicleLimits:
     center_offset_m: float = 0.0
     disc_offsets_m: tuple[float, ...] = (0.0,)
     disc_radius_m: float = 0.0
+    rear_axle_m: float = 0.0
 
     def __post_init__(self):
         for name in ("length_m", "width_m", "wheelbase_m", "max_steer_rad", "max_steer_rate_rad_s", "friction_mps2"):
             v = getattr(self, name)
             if not (v > 0):
                 raise ValueError(f"{name} must be positive, got {v!r}")
+        if not (math.isfinite(self.rear_axle_m) and 0.0 <= self.rear_axle_m <= self.wheelbase_m):
+            raise ValueError(f"rear_axle_m must lie in [0, wheelbase_m], got {self.rear_axle_m!r}")
         for name in ("max_accel_mps2", "max_decel_mps2", "max_speed_mps"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):

@@ -42,8 +42,9 @@ KEEP_LINE_M = 0.5
 
 
 def vehicle_limits(mpc) -> VehicleLimits:
-    """The :class:`VehicleLimits` of an MPC: its footprint, its model's wheelbase, its input,
-    rate and speed bounds and its friction circle."""
+    """The :class:`VehicleLimits` of an MPC: its footprint, its model's wheelbase (and where its
+    rear axle is behind the centre of gravity), its input, rate and speed bounds and its friction
+    circle."""
     pb = mpc.problem
     fp = mpc.footprint
     names = list(mpc.model.input_names)
@@ -72,6 +73,7 @@ def vehicle_limits(mpc) -> VehicleLimits:
         center_offset_m=fp.center_offset_m,
         disc_offsets_m=tuple(float(o) for o in fp.disc_offsets_m),
         disc_radius_m=fp.disc_radius_m,
+        rear_axle_m=min(max(float(getattr(params, "lr_m", 0.0) or 0.0), 0.0), wheelbase),
     )
 
 

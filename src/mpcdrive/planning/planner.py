@@ -62,6 +62,7 @@ from .work import (
     P_C_GAP,
     P_C_GOAL,
     P_C_RATE,
+    P_REAR,
     P_C_OFFROUTE,
     P_C_ONCOMING,
     P_C_SWITCH,
@@ -355,6 +356,7 @@ class ManeuverPlanner:
         par[P_C_GAP] = cfg.gap_cost_s_per_s
         par[P_C_GOAL] = cfg.goal_miss_s
         par[P_C_RATE] = cfg.rate_excess_s
+        par[P_REAR] = limits.rear_axle_m
         par[P_JERK_REF] = cfg.jerk_ref_mps3
         par[P_LAT_REF] = cfg.lat_accel_ref_mps2
         start, end = getattr(road, "start_m", None), getattr(road, "end_m", None)

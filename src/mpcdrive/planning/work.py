@@ -72,8 +72,9 @@ G_HAS, G_S_LO, G_S_HI, G_D_LO, G_D_HI, G_T_LO, G_T_HI, G_V_LO, G_V_HI, G_HAS_YAW
     P_CREEP,
     P_R_DISC,
     P_C_RATE,
-) = range(33)
-N_PAR = 33
+    P_REAR,
+) = range(34)
+N_PAR = 34
 # slots of ``result``
 (
     R_I,
