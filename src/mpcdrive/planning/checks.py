@@ -557,7 +557,12 @@ def goal_missed_by_profile(par, ego, goal_arr, lon_s, lon_v, nlon, dt, out):
             vp = lon_v[j, k - 1] if k > 0 else v
             if max(v, vp) < goal_arr[G_V_LO] - 1e-6 or min(v, vp) > goal_arr[G_V_HI] + 1e-6:
                 continue
-            if ego[E_S] + lon_s[j, k] - lon_s[j, 0] + REACH_SLACK_M >= goal_arr[G_S_LO]:
+            # the distance driven by the window's end on that way (linear in time, as the
+            # check interpolates it: the path's arc length is never longer)
+            dist = lon_s[j, k] - lon_s[j, 0]
+            if k > 0 and tt > goal_arr[G_T_HI]:
+                dist = lon_s[j, k - 1] - lon_s[j, 0] + (goal_arr[G_T_HI] - tp) / dt * (lon_s[j, k] - lon_s[j, k - 1])
+            if ego[E_S] + dist + REACH_SLACK_M >= goal_arr[G_S_LO]:
                 reach = True
                 break
         if not reach:
