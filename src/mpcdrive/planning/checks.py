@@ -63,7 +63,17 @@ from .work import (
 )
 
 from .candidates import KAPPA_SLACK, _standing, _turn_out_m
-from .frenet import EVASIVE_GENTLE, EVASIVE_HARD, evasive_step, grid_at, grid_row_at, is_pass, lateral_at, poly_eval
+from .frenet import (
+    EVASIVE_GENTLE,
+    EVASIVE_HARD,
+    evasive_step,
+    grid_at,
+    grid_row_at,
+    heading_within,
+    is_pass,
+    lateral_at,
+    poly_eval,
+)
 
 
 # -- checking a pair ---------------------------------------------------------------------------------
@@ -241,10 +251,7 @@ def _in_goal(goal_arr, grid, g_heading, s, tt, speed, d, d1, slip):
         return False
     if goal_arr[G_HAS_YAW] == 0.0:
         return True
-    yaw = grid_at(grid, g_heading, s) + math.atan(d1) - slip
-    mid = 0.5 * (goal_arr[G_YAW_LO] + goal_arr[G_YAW_HI])
-    dev = (yaw - mid + math.pi) % (2.0 * math.pi) - math.pi
-    return abs(dev) <= 0.5 * (goal_arr[G_YAW_HI] - goal_arr[G_YAW_LO]) + 1e-9
+    return heading_within(grid_at(grid, g_heading, s) + math.atan(d1) - slip, goal_arr[G_YAW_LO], goal_arr[G_YAW_HI])
 
 
 @subroutine

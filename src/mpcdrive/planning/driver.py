@@ -73,7 +73,7 @@ def vehicle_limits(mpc) -> VehicleLimits:
         center_offset_m=fp.center_offset_m,
         disc_offsets_m=tuple(float(o) for o in fp.disc_offsets_m),
         disc_radius_m=fp.disc_radius_m,
-        rear_axle_m=min(max(float(getattr(params, "lr_m", 0.0) or 0.0), 0.0), wheelbase),
+        rear_axle_m=float(getattr(params, "lr_m", 0.0) or 0.0),
     )
 
 

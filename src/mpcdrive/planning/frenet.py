@@ -1,5 +1,5 @@
 """The planner's Frenet-frame primitives, compiled (numba subroutines): the road on its uniform
-grid (:func:`grid_at`), quintic polynomials (:func:`quintic`, :func:`poly_eval`), a lateral move
+grid (:func:`grid_at`), a heading in a range (:func:`heading_within`), quintic polynomials (:func:`quintic`, :func:`poly_eval`), a lateral move
 at an arc length (:func:`lateral_at`) and the evasive move's step (:func:`evasive_step`): steering
 towards a line as fast as the vehicle can."""
 
@@ -33,6 +33,16 @@ def grid_at(grid, tab, s):
     i = int(x)
     f = x - i
     return tab[i] * (1.0 - f) + tab[i + 1] * f
+
+
+@subroutine
+def heading_within(yaw, lo, hi):
+    """Whether heading ``yaw`` [rad] lies in the interval [``lo``, ``hi``] [rad] (lo <= hi), round
+    the circle: the one rule of a goal's heading range, for the planner's compiled checks and
+    (through ``.py_func``) for :meth:`~.planner.PlanningGoal.reached`."""
+    mid = 0.5 * (lo + hi)
+    dev = (yaw - mid + math.pi) % (2.0 * math.pi) - math.pi
+    return abs(dev) <= 0.5 * (hi - lo) + 1e-9
 
 
 @subroutine

@@ -21,7 +21,7 @@ from ..paths.compiled import PathArrays, path_arrays, path_eval
 from ..scene.road import Road
 from . import kernels
 from .config import PlannerConfig, VehicleLimits
-from .frenet import is_pass
+from .frenet import heading_within, is_pass
 from .tracks import obstacle_tracks
 from .work import (
     E_A,
@@ -151,9 +151,7 @@ class PlanningGoal:
             and self.speed_mps[0] - 1e-6 <= v_mps <= self.speed_mps[1] + 1e-6
         )
         if inside and self.yaw_rad is not None and yaw_rad is not None:
-            mid = 0.5 * (self.yaw_rad[0] + self.yaw_rad[1])
-            dev = (yaw_rad - mid + math.pi) % (2.0 * math.pi) - math.pi
-            inside = abs(dev) <= 0.5 * (self.yaw_rad[1] - self.yaw_rad[0]) + 1e-9
+            inside = heading_within.py_func(float(yaw_rad), *self.yaw_rad)
         return inside
 
 
