@@ -686,3 +686,36 @@ def test_ctrl_c_inside_an_osqp_solve_is_raised_not_a_failed_step(monkeypatch):
     monkeypatch.setattr(backend._solver, "solve", interrupted)
     with pytest.raises(KeyboardInterrupt):
         backend.solve()
+
+
+def test_ctrl_c_after_an_osqp_solves_last_look_is_raised_not_lost(monkeypatch):
+    """A SIGINT that reaches OSQP's own handler after the solve's last look at it (in the final
+    convergence test or the polish) leaves the solve "solved" and only OSQP's record set; the
+    process's handler never sees it. The backend reads the record and raises: the interrupt is
+    not lost (seen as a ``bench`` that ran to its end after Ctrl-C on a loaded machine)."""
+    import ctypes
+    import signal
+
+    pb, d = make_instance(3, kind="kinematic", lane=False, rate=True, xbounds=False, rc=False)
+    qp = LtvQp(pb)
+    backend = OsqpBackend(qp, TIGHT)
+    load(qp, **d)
+    assert backend._interrupted is not None, "the installed OSQP does not export its interrupt record"
+    assert backend.solve().status == "ok"
+    ext = ctypes.CDLL(backend._solver.ext.__file__)
+    real = backend._solver.solve
+
+    def signal_at_the_end(**kw):
+        res = real(**kw)
+        ext.osqp_start_interrupt_listener()  # OSQP's handler in place, as during the solve
+        try:
+            signal.raise_signal(signal.SIGINT)  # caught by OSQP's handler: only its record is set
+        finally:
+            ext.osqp_end_interrupt_listener()
+        return res
+
+    monkeypatch.setattr(backend._solver, "solve", signal_at_the_end)
+    with pytest.raises(KeyboardInterrupt):
+        backend.solve()
+    monkeypatch.undo()
+    assert backend.solve().status == "ok"  # the next solve starts with the record cleared

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ctypes
 import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -18,6 +19,8 @@ from ..types import (
 )
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from ..ocp.qp import LtvQp
 
 _STATUS_WORDS = {
@@ -30,6 +33,23 @@ _STATUS_WORDS = {
     "maximum iterations reached": STATUS_MAX_ITER,
     "run time limit reached": STATUS_MAX_ITER,
 }
+
+
+def _interrupt_record(ext) -> Callable[[], int] | None:
+    """OSQP's own record of a Ctrl-C (SIGINT) caught during its last solve, as a function, or
+    None where the extension does not export it.
+
+    From the start of a solve to its end OSQP replaces the process's SIGINT handler by its own,
+    which only sets this record; the solve's loop reads it at the top of each iteration. A signal
+    that lands after the last such read (in the final convergence test, the polish, the
+    unscaling) leaves the solve "solved" and the record set, and the process's own handler never
+    sees it: the interrupt would be lost. The record stays set until the next solve starts."""
+    try:
+        fn = ctypes.CDLL(ext.__file__).osqp_is_interrupted
+    except (AttributeError, OSError, TypeError):
+        return None
+    fn.restype, fn.argtypes = ctypes.c_int, []
+    return fn
 
 
 @dataclass(frozen=True)
@@ -87,6 +107,7 @@ class OsqpBackend:
 
         self._solver = osqp.OSQP()
         self._sigint = osqp.SolverStatus.OSQP_SIGINT
+        self._interrupted = _interrupt_record(getattr(self._solver, "ext", None))
         d = qp.data()
         self._solver.setup(d.P, d.q, d.A, d.l, d.u, **settings.as_kwargs())
         self._z0 = np.zeros(qp.n_var)
@@ -129,9 +150,10 @@ class OsqpBackend:
         if warm_X is not None and warm_U is not None:
             self._solver.warm_start(x=qp.pack(warm_X, warm_U, out=self._z0))
         res = self._solver.solve(raise_error=False)
-        if res.info.status_val == self._sigint:
-            # OSQP catches Ctrl-C during a solve and returns "interrupted": the user's interrupt,
-            # not a failed step to fall back from
+        if res.info.status_val == self._sigint or (self._interrupted is not None and self._interrupted()):
+            # OSQP catches Ctrl-C during a solve and returns "interrupted", or, when it came after
+            # the solve's last look, returns its result with the record set: the user's
+            # interrupt either way, not a failed step to fall back from
             raise KeyboardInterrupt
         status = _STATUS_WORDS.get(res.info.status, STATUS_FAILED)
         z = res.x
