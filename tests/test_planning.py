@@ -407,3 +407,32 @@ def test_a_rear_axle_outside_the_wheelbase_is_refused():
 
     with pytest.raises(ValueError, match="rear_axle_m"):
         replace(LIMITS, rear_axle_m=3.0)
+
+
+def test_the_search_skips_an_obstacle_only_when_no_disc_can_reach_it():
+    """``_beyond_box`` lets the contact test skip an obstacle over a step: both ends of the body's
+    reference point lie beyond one side of the obstacle's box grown by the discs' reach. Against
+    the exact swept test of every disc (any offset within the reach, any heading at either end):
+    whenever it skips, no disc's segment meets the box; and it skips most far-off cases (the test
+    would catch a prune that never fires as well as one that skips a contact)."""
+    from mpcdrive.planning.checks import _beyond_box, _segment_hits_box
+
+    beyond, hits = _beyond_box.py_func, _segment_hits_box.py_func
+    rng = np.random.default_rng(7)
+    skipped = 0
+    for _ in range(20000):
+        s0, d0, s1, d1 = rng.uniform(-12.0, 12.0, 4)
+        reach, bl, bw = rng.uniform(0.0, 2.0), rng.uniform(0.5, 3.0), rng.uniform(0.5, 2.0)
+        if not beyond(s0, d0, s1, d1, reach, bl, bw):
+            continue
+        skipped += 1
+        for _ in range(4):
+            u = rng.uniform(-reach, reach)
+            h0, h1 = rng.uniform(-math.pi, math.pi, 2)
+            a = (s0 + u * math.cos(h0), d0 + u * math.sin(h0))
+            b = (s1 + u * math.cos(h1), d1 + u * math.sin(h1))
+            assert not hits(a[0], a[1], b[0], b[1], bl, bw), (s0, d0, s1, d1, reach, bl, bw, u)
+    assert skipped > 5000
+    # a segment through the box is never skipped, however short the reach
+    assert not beyond(-5.0, 0.0, 5.0, 0.0, 0.0, 1.0, 1.0)
+    assert not beyond(3.0, 0.0, 3.0, 0.0, 2.5, 1.0, 1.0)  # beyond the box, not beyond its reach

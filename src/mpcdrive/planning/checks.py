@@ -114,6 +114,17 @@ def _box_distance(x, y, bx, by):
 
 
 @subroutine
+def _beyond_box(s0, d0, s1, d1, reach, bl, bw):
+    """Whether every point within ``reach`` of the segment (s0, d0)-(s1, d1) lies outside the box
+    |s| < bl, |d| < bw, both ends being beyond the same one of its sides (each disc of the body
+    lies within ``reach`` of its reference point: when this holds, no disc's swept segment meets
+    the box)."""
+    bl += reach + 1e-9
+    bw += reach + 1e-9
+    return (s0 > bl and s1 > bl) or (s0 < -bl and s1 < -bl) or (d0 > bw and d1 > bw) or (d0 < -bw and d1 < -bw)
+
+
+@subroutine
 def _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth):
     """How far [m] the body's corners at (s, d), yawed (cos, sin) from the path, are outside the
     edges ``left_tab`` / ``right_tab`` less the road's margin, or past the road's ends (the left
@@ -156,9 +167,14 @@ def _first_contact(
     rn = par[P_R_DISC] + par[P_MARGIN]
     evasive = L < 0.0
     ev_d, ev_th, ev_k = ego[E_D], math.atan(ego[E_SLOPE]), ego[E_CURV]
+    reach = 0.0
+    for q in range(nd):
+        reach = max(reach, abs(discs[q]))
     s = s0
     d1 = ego[E_SLOPE]
+    d = ego[E_D]
     for k in range(K + 1):
+        s_before, d_before = s, d
         v = lon_v[j, k]
         if evasive:
             if k > 0:
@@ -181,6 +197,14 @@ def _first_contact(
                 continue
             Eo, HL, HW = ob_e[o, k], ob_hl[o, k], ob_hw[o, k]
             prev = k > 0 and math.isfinite(ob_s[o, k - 1])
+            if prev:
+                if _beyond_box(
+                    s_before - ob_s[o, k - 1], d_before - ob_e[o, k - 1], s - So, d - Eo, reach,
+                    max(HL, ob_hl[o, k - 1]) + rn, max(HW, ob_hw[o, k - 1]) + rn,
+                ):  # fmt: skip
+                    continue
+            elif k > 0 or _beyond_box(s - So, d - Eo, s - So, d - Eo, reach, HL + rn, HW + rn):
+                continue
             for q in range(nd):
                 qs = s + discs[q] * cth - So
                 qd = d + discs[q] * sth - Eo
@@ -404,9 +428,11 @@ def check_pair(
             by = hws + ob_hw[o, k]
             Eo, HL, HW = ob_e[o, k], ob_hl[o, k], ob_hw[o, k]
             # the body as the controller's discs: each keeps its radius and the margin off the box
+            # (in the search, :func:`_first_contact` has tested these discs against these
+            # obstacles and found no contact, and what the loop finds besides is written only)
             near = False
             blocked = False
-            for q in range(nd):
+            for q in range(nd if write else 0):
                 qs = s + discs[q] * cth - So
                 qd = d + discs[q] * sth - Eo
                 # squarely behind (or ahead of) it, the disc's centre within its width: the
