@@ -695,12 +695,16 @@ def test_ctrl_c_after_an_osqp_solves_last_look_is_raised_not_lost(monkeypatch):
     not lost (seen as a ``bench`` that ran to its end after Ctrl-C on a loaded machine)."""
     import ctypes
     import signal
+    import sys
 
     pb, d = make_instance(3, kind="kinematic", lane=False, rate=True, xbounds=False, rc=False)
     qp = LtvQp(pb)
     backend = OsqpBackend(qp, TIGHT)
     load(qp, **d)
-    assert backend._interrupted is not None, "the installed OSQP does not export its interrupt record"
+    if backend._interrupted is None:
+        # OSQP's Linux wheels export it (the backend then falls back to the status alone)
+        assert not sys.platform.startswith("linux"), "the installed OSQP does not export its interrupt record"
+        pytest.skip("this OSQP build does not export its interrupt record")
     assert backend.solve().status == "ok"
     ext = ctypes.CDLL(backend._solver.ext.__file__)
     real = backend._solver.solve
