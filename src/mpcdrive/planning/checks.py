@@ -198,12 +198,14 @@ def _first_contact(
             Eo, HL, HW = ob_e[o, k], ob_hl[o, k], ob_hw[o, k]
             prev = k > 0 and math.isfinite(ob_s[o, k - 1])
             if prev:
-                if _beyond_box(
-                    s_before - ob_s[o, k - 1], d_before - ob_e[o, k - 1], s - So, d - Eo, reach,
-                    max(HL, ob_hl[o, k - 1]) + rn, max(HW, ob_hw[o, k - 1]) + rn,
-                ):  # fmt: skip
+                # the box over the step, grown by the radius and the margin
+                bl = max(HL, ob_hl[o, k - 1]) + rn
+                bw = max(HW, ob_hw[o, k - 1]) + rn
+                if _beyond_box(s_before - ob_s[o, k - 1], d_before - ob_e[o, k - 1], s - So, d - Eo, reach, bl, bw):
                     continue
-            elif k > 0 or _beyond_box(s - So, d - Eo, s - So, d - Eo, reach, HL + rn, HW + rn):
+            elif k > 0:
+                continue  # present from this step on: its way is swept from the next one
+            elif _beyond_box(s - So, d - Eo, s - So, d - Eo, reach, HL + rn, HW + rn):
                 continue
             for q in range(nd):
                 qs = s + discs[q] * cth - So
@@ -211,8 +213,6 @@ def _first_contact(
                 if prev:
                     q0s = p_disc_s[q] - ob_s[o, k - 1]
                     q0d = p_disc_d[q] - ob_e[o, k - 1]
-                    bl = max(HL, ob_hl[o, k - 1]) + rn
-                    bw = max(HW, ob_hw[o, k - 1]) + rn
                     if _segment_hits_box(q0s, q0d, qs, qd, bl, bw):
                         seg = math.hypot(qs - q0s, qd - q0d)
                         if (
@@ -251,17 +251,12 @@ def _goal_fraction(goal_arr, s0, s1, t0, t1):
 
 
 @subroutine
-def _slip(par, kappa):
-    """The slip angle [rad] of the reference point's motion to the body on a path of curvature
-    ``kappa`` [1/m] (kinematic: ``asin(rear_axle kappa)``, positive turning left)."""
-    return math.asin(min(max(par[P_REAR] * kappa, -1.0), 1.0))
-
-
-@subroutine
-def _in_goal(goal_arr, grid, g_heading, s, tt, speed, d, d1, slip):
+def _in_goal(goal_arr, grid, g_heading, par, s, tt, speed, d, d1, kappa):
     """Whether the car at arc length ``s`` [m], offset ``d`` [m] and slope ``d1`` at time ``tt``
     [s] and ``speed`` [m/s] is in the goal (region, time window, speed and orientation ranges);
-    its body heads ``slip`` [rad] to the right of the way it moves."""
+    on its way's curvature ``kappa`` [1/m] the body heads the slip angle ``asin(rear_axle
+    kappa)`` (kinematic; positive turning left) to the right of the way its reference point
+    moves."""
     if not (goal_arr[G_T_LO] - 1e-9 <= tt and tt <= goal_arr[G_T_HI] + 1e-9):
         return False
     if not (
@@ -275,6 +270,7 @@ def _in_goal(goal_arr, grid, g_heading, s, tt, speed, d, d1, slip):
         return False
     if goal_arr[G_HAS_YAW] == 0.0:
         return True
+    slip = math.asin(min(max(par[P_REAR] * kappa, -1.0), 1.0))
     return heading_within(grid_at(grid, g_heading, s) + math.atan(d1) - slip, goal_arr[G_YAW_LO], goal_arr[G_YAW_HI])
 
 
@@ -532,15 +528,15 @@ def check_pair(
             # single instant, as many files give) lies between two samples
             # (the body heads at the slip angle to the way its reference point moves)
             if k == 0:
-                goal = _in_goal(goal_arr, grid, g_heading, s, ego[E_T], speed, d, d1, _slip(par, kappa))
+                goal = _in_goal(goal_arr, grid, g_heading, par, s, ego[E_T], speed, d, d1, kappa)
             else:
                 t1 = ego[E_T] + t
                 f = _goal_fraction(goal_arr, s_prev, s, t1 - dt, t1)
                 if f >= 0.0:
                     goal = _in_goal(
-                        goal_arr, grid, g_heading, s_prev + f * (s - s_prev), t1 - (1.0 - f) * dt,
+                        goal_arr, grid, g_heading, par, s_prev + f * (s - s_prev), t1 - (1.0 - f) * dt,
                         v_prev + f * (speed - v_prev), d_prev + f * (d - d_prev), d1_prev + f * (d1 - d1_prev),
-                        _slip(par, k_prev + f * (kappa - k_prev)),
+                        k_prev + f * (kappa - k_prev),
                     )  # fmt: skip
         s_prev, v_prev, d_prev, d1_prev, k_prev = s, speed, d, d1, kappa
         if write:
