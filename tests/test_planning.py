@@ -436,3 +436,36 @@ def test_the_search_skips_an_obstacle_only_when_no_disc_can_reach_it():
     # a segment through the box is never skipped, however short the reach
     assert not beyond(-5.0, 0.0, 5.0, 0.0, 0.0, 1.0, 1.0)
     assert not beyond(3.0, 0.0, 3.0, 0.0, 2.5, 1.0, 1.0)  # beyond the box, not beyond its reach
+
+
+def test_a_profile_that_reaches_the_region_only_after_the_window_closes_is_a_sure_miss():
+    """The pairs' bound counts the goal's miss for a profile that cannot be in the region by the
+    window's end: the distance driven by then, interpolated between the samples around the end
+    (here 2.9 s, between 2.8 and 3.0 s), not the distance at the sample after it. At 10 m/s the
+    car has driven 29 m by 2.9 s and 30 m by 3.0 s; with the evasive move's slack of 0.5 m a
+    region from 29.7 m ahead is a sure miss, one from 29.3 m is not (it may be reached)."""
+    from mpcdrive.planning import work as W
+    from mpcdrive.planning.checks import REACH_SLACK_M, goal_missed_by_profile
+
+    dt, K = 0.2, 30
+    lon_s = np.array([10.0 * dt * np.arange(K + 1)])
+    lon_v = np.full((1, K + 1), 10.0)
+    par = np.zeros(W.N_PAR)
+    par[W.P_C_GOAL] = 20.0
+    ego = np.zeros(W.E_MOVE_END + 1)
+    ego[W.E_S], ego[W.E_T] = 100.0, 0.0
+
+    def missed(start_ahead_m):
+        goal = np.zeros(12)
+        goal[W.G_HAS] = 1.0
+        goal[W.G_S_LO], goal[W.G_S_HI] = 100.0 + start_ahead_m, 200.0
+        goal[W.G_T_LO], goal[W.G_T_HI] = 0.0, 2.9
+        goal[W.G_V_LO], goal[W.G_V_HI] = 0.0, 20.0
+        out = np.empty(1)
+        goal_missed_by_profile.py_func(par, ego, goal, lon_s, lon_v, 1, dt, out)
+        return out[0]
+
+    assert REACH_SLACK_M == 0.5
+    assert missed(29.7) == 20.0  # 29 m + 0.5 m by 2.9 s: short of it
+    assert missed(29.3) == 0.0  # within the slack of 29 m: perhaps reached
+    assert missed(10.0) == 0.0  # reached well inside the window
