@@ -85,6 +85,27 @@ def wanted_speed_ahead(w, s, v):
 
 #: jerk [m/s^3] of the numeric profiles (reference, follow): a firm but comfortable onset
 PROFILE_JERK_MPS3 = 5.0
+
+
+@subroutine
+def _wanted_accel(w, s, v, lead_s):
+    """The acceleration [m/s^2] that follows the wanted speed along the path at arc length
+    ``s`` [m] and speed ``v`` [m/s]: the wanted profile's own acceleration (v dv/ds, read
+    ``lead_s`` [s] ahead, the time the jerk-limited acceleration takes to get there) plus the
+    speed's difference from the wanted one over :data:`SPEED_TAU_S`. The profile's slowing for a
+    bend that sets in faster than the car steers is then kept, not passed 1 m/s fast (a
+    lookahead alone lags the profile's braking); from rest where the wanted speed starts at 0
+    the profile's acceleration starts the car."""
+    grid, g_vref = w.grid, w.g_vref
+    v_max = w.par[P_V_MAX]
+    h = grid[1]
+    ahead = s + v * lead_s
+    v_hi = min(grid_at(grid, g_vref, ahead + h), v_max)
+    v_lo = min(grid_at(grid, g_vref, ahead - h), v_max)
+    a_ff = (v_hi * v_hi - v_lo * v_lo) / (4.0 * h)
+    return a_ff + (min(grid_at(grid, g_vref, s), v_max) - v) / SPEED_TAU_S
+
+
 #: a pair whose curvature exceeds the vehicle's by this share is infeasible (the controller's
 #: model and the planner's Frenet approximation differ by about that)
 KAPPA_SLACK = 1.05
@@ -371,17 +392,22 @@ def _numeric(w, n, lane, top):
     standstill, time_gap = par[P_STANDSTILL], par[P_TIME_GAP]
     sqrt_ab = 2.0 * math.sqrt(a_c * b_c)
     j = PROFILE_JERK_MPS3 * dt
+    # half the time [s] the jerk takes to reach the comfort deceleration: the profile's
+    # acceleration is looked that far ahead
+    lead_s = 0.5 * b_c / PROFILE_JERK_MPS3
     for k in range(K + 1):
         lon_s[n, k] = s
         lon_v[n, k] = v
         lon_a[n, k] = a
         if k == K:
             break
-        v_want = v_max if top else wanted_speed_ahead(w, s, v)
         if lane < 0:
-            a_des = (v_want - v) / SPEED_TAU_S
-            a_des = min(max(a_des, -b_c), a_c)
+            # above the wanted speed (it slows for bends the car cannot steer faster through) the
+            # car brakes beyond the comfortable, up to its limit, to get back under it
+            a_des = _wanted_accel(w, s, v, lead_s)
+            a_des = min(max(a_des, -d_max), a_c)
         else:
+            v_want = v_max if top else wanted_speed_ahead(w, s, v)
             # the road's end is a leader that stands (the car stops with its front inside it)
             gap = par[P_ROAD_END] - par[P_ROAD_MARGIN] - (s + hl) if math.isfinite(par[P_ROAD_END]) else math.inf
             v_lead = 0.0
@@ -461,6 +487,8 @@ def _stop_at(w, s_stop, c):
 
 @subroutine
 def longitudinal_candidates(w, c):
+    """The longitudinal profiles (module docstring) into ``w.lon_*``; returns the nearest stop
+    point [m] in the car's lane (inf: none)."""
     par = w.par
     w.lon_n[0] = 0
     s0, v0 = w.ego[E_S], w.ego[E_V]
@@ -489,7 +517,7 @@ def longitudinal_candidates(w, c):
                     T = max(T, v0 / par[P_D_COMF])
             n = _new_lon(w, LON_SPEED, v1)
             if n < 0:
-                return
+                return math.inf
             _speed_target(w, v1, T, c)
             _fill_quintic(w, n, c, T)
             # a stop quartic that rolls back is no stop: hold at the first standstill
@@ -512,7 +540,7 @@ def longitudinal_candidates(w, c):
         for top in range(2):
             n = _new_lon(w, LON_FOLLOW, lane)
             if n < 0:
-                return
+                return math.inf
             _numeric(w, n, lane, top == 1)
     # stops: before the first obstacles in the car's lane (a parked car, the conflict zone of a
     # crossing one), inside the road's end
@@ -552,7 +580,9 @@ def longitudinal_candidates(w, c):
     if math.isfinite(par[P_ROAD_END]):
         stops[ns] = par[P_ROAD_END] - par[P_ROAD_MARGIN] - hl
         ns += 1
+    nearest = math.inf
     for q in range(ns):
+        nearest = min(nearest, max(stops[q], s0))
         if stops[q] > s0 + v0 * w.dt[0] * (w.lon_s.shape[1] - 1) + 60.0:
             continue  # beyond what the horizon can reach: the speed targets cover it
         _stop_at(w, max(stops[q], s0), c)
@@ -576,12 +606,16 @@ def longitudinal_candidates(w, c):
             else:
                 _speed_target(w, min(max((s_mid - s0) / T, 0.0), par[P_V_MAX]), min(w.speed_s[0], T), c)
                 _fill_quintic(w, n, c, min(w.speed_s[0], T))
+    return nearest
 
 
 @subroutine
-def longitudinal_costs(w):
+def longitudinal_costs(w, s_stop):
     """Each profile's limits (``lon_ok``) and its own cost: the time it ends behind (or ahead of)
-    the wanted-speed profile, its jerk and its braking beyond the comfortable."""
+    the wanted-speed profile, the time it loses after the horizon regaining the wanted speed
+    (no faster than lets it still stop at ``s_stop`` [m], the nearest stop point in the car's
+    lane: behind a blockage there is no speed to regain), its jerk and its braking beyond the
+    comfortable."""
     par = w.par
     lon_s, lon_v, lon_a, lon_ok, lon_cost = w.lon_s, w.lon_v, w.lon_a, w.lon_ok, w.lon_cost
     K = lon_s.shape[1] - 1
@@ -589,6 +623,7 @@ def longitudinal_costs(w):
     s_ref = lon_s[0, K]
     v_scale = max(0.5 * (w.ego[E_V] + lon_v[0, K]), 1.0)
     v_max, a_max, d_max, d_comf, j_ref = par[P_V_MAX], par[P_A_MAX], par[P_D_MAX], par[P_D_COMF], par[P_JERK_REF]
+    a_comf = max(par[P_A_COMF], 0.1)
     for n in range(w.lon_n[0]):
         ok = 1
         cost = 0.0
@@ -604,5 +639,20 @@ def longitudinal_costs(w):
             if a < -d_comf:
                 cost += ((-a - d_comf) / d_comf) * dt * 4.0
         cost += abs(s_ref - lon_s[n, K]) / v_scale
+        # ending slower than the wanted speed there: the time it loses beyond the horizon getting
+        # back to it at the comfort acceleration, (v_w - v)^2 / (2 a v_w), from the speed the
+        # profile is bound for (a stop's 0 and a speed target's target, where it gets there only
+        # after the horizon: a stop stretched past the horizon saves nothing)
+        v_w = min(grid_at(w.grid, w.g_vref, lon_s[n, K]), v_max)
+        if math.isfinite(s_stop):
+            v_w = min(v_w, math.sqrt(2.0 * d_comf * max(s_stop - lon_s[n, K], 0.0)))
+        v_end = lon_v[n, K]
+        if w.lon_kind[n] == LON_STOP:
+            v_end = 0.0
+        elif w.lon_kind[n] == LON_SPEED:
+            v_end = w.lon_target[n]
+        short = v_w - v_end
+        if short > 0.0:
+            cost += short * short / (2.0 * a_comf * max(v_w, 1.0))
         lon_ok[n] = ok
         lon_cost[n] = cost

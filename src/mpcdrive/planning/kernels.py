@@ -78,8 +78,8 @@ def plan(w):
     ``w.plan_*`` and its relations to the obstacles to ``w.relation``."""
     c = np.empty(6)
     lateral_candidates(w)
-    longitudinal_candidates(w, c)
-    longitudinal_costs(w)
+    s_stop = longitudinal_candidates(w, c)
+    longitudinal_costs(w, s_stop)
     # the struct's arrays read once (each read of a field costs a reference count)
     par, grid, ego, goal_arr = w.par, w.grid, w.ego, w.goal
     g_kappa, g_heading, g_bend = w.g_kappa, w.g_heading, w.g_bend
