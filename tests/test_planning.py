@@ -367,6 +367,23 @@ def test_above_the_wanted_speed_the_profile_brakes_beyond_the_comfortable_to_get
     assert np.all(np.diff(v) <= 1e-9) and float(np.interp(2.0, t, v)) < 8.5 and v[-1] < 7.3
 
 
+def test_the_goal_is_judged_for_the_car_when_it_lags_the_plan_it_goes_on_from():
+    """At 12 m/s the wanted speed reaches the goal region (from 55.6 m, window closing at 3 s)
+    0.4 m inside it at the window's end. A replanning 0.1 s later finds the car 0.8 m behind the
+    last maneuver (within the tolerance it goes on from the maneuver, not the car): the region is
+    judged for the car, so the maneuver chosen gets the car into it in time; judged for the plan,
+    holding the speed leaves the car 0.4 m short."""
+    goal = PlanningGoal(arc_m=(55.6, 200.0), time_s=(0.0, 3.0))
+    pl = planner(goal=goal)
+    free = table_of([car(-500.0)], None)
+    m0 = pl.plan(0.0, 20.0, 0.0, 12.0, 0.0, 0.0, free)
+    assert m0.goal and float(np.interp(3.0, m0.t_s, m0.s_m)) < 55.6 + 0.8
+    lag = 0.8
+    m = pl.plan(0.1, float(np.interp(0.1, m0.t_s, m0.s_m)) - lag, 0.0, 12.0, 0.0, 0.0, free)
+    assert m.safe and m.goal
+    assert float(np.interp(2.9, m.t_s, m.s_m)) - lag >= 55.6
+
+
 def test_a_pass_begun_goes_on_to_where_its_move_ends():
     """Replanned every 0.1 s from where the last maneuver has the car, a pass through the free
     oncoming lane keeps the end of its move out: the car is beside the obstacle's lane line

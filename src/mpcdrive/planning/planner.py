@@ -483,8 +483,15 @@ class ManeuverPlanner:
         prev = self.previous
         e = w.ego
         on = self._on_plan(t_s, s_m, e_y_m, v_mps)
+        lag = 0.0
         if on is not None:  # on the last maneuver: go on from where it has the car (consistent choices)
+            lag = on[0] - s_m
             s_m, e_y_m, v_mps, accel_mps2, slope = on
+        if self.goal is not None:
+            # the goal is for the car, which is ``lag`` [m] behind where the plan has it: its
+            # region is judged that much further along the plan's way
+            w.goal[G_S_LO] = self.goal.arc_m[0] + lag
+            w.goal[G_S_HI] = self.goal.arc_m[1] + lag
         # the lateral move starts at the car's curvature relative to the path's (as d''), within
         # what the vehicle can turn at its speed
         top = min(self.limits.max_curvature_1pm, self.limits.friction_mps2 / max(v_mps, 1.0) ** 2)
