@@ -74,10 +74,11 @@ SPEED_TAU_S = 1.0
 
 @subroutine
 def wanted_speed_ahead(w, s, v):
-    """The wanted speed [m/s] the wanted-speed profile steers for, at arc length ``s`` [m] and
-    speed ``v`` [m/s]: looked up where the car will be in :data:`SPEED_TAU_S`, at least as far as
-    it gets in that time from rest at the comfort acceleration (a car at rest where the reference
-    speed starts from 0 sees the speed it is to pick up)."""
+    """The wanted speed [m/s] the intelligent driver model behind a leader wants, at arc length
+    ``s`` [m] and speed ``v`` [m/s]: looked up where the car will be in :data:`SPEED_TAU_S`, at
+    least as far as it gets in that time from rest at the comfort acceleration (a car at rest
+    where the reference speed starts from 0 sees the speed it is to pick up). The wanted-speed
+    profile itself follows :func:`_wanted_accel`."""
     tau = SPEED_TAU_S
     ahead = max(v * tau, 0.5 * w.par[P_A_COMF] * tau * tau)
     return min(grid_at(w.grid, w.g_vref, s + ahead), w.par[P_V_MAX])
@@ -88,10 +89,10 @@ PROFILE_JERK_MPS3 = 5.0
 
 
 @subroutine
-def _wanted_accel(w, s, v, lead_s):
+def _wanted_accel(w, s, v):
     """The acceleration [m/s^2] that follows the wanted speed along the path at arc length
-    ``s`` [m] and speed ``v`` [m/s]: the wanted profile's own acceleration (v dv/ds, read
-    ``lead_s`` [s] ahead, the time the jerk-limited acceleration takes to get there) plus the
+    ``s`` [m] and speed ``v`` [m/s]: the wanted profile's own acceleration (v dv/ds, read ahead
+    by half the time :data:`PROFILE_JERK_MPS3` takes to reach the comfort deceleration) plus the
     speed's difference from the wanted one over :data:`SPEED_TAU_S`. The profile's slowing for a
     bend that sets in faster than the car steers is then kept, not passed 1 m/s fast (a
     lookahead alone lags the profile's braking); from rest where the wanted speed starts at 0
@@ -99,7 +100,7 @@ def _wanted_accel(w, s, v, lead_s):
     grid, g_vref = w.grid, w.g_vref
     v_max = w.par[P_V_MAX]
     h = grid[1]
-    ahead = s + v * lead_s
+    ahead = s + v * (0.5 * w.par[P_D_COMF] / PROFILE_JERK_MPS3)
     v_hi = min(grid_at(grid, g_vref, ahead + h), v_max)
     v_lo = min(grid_at(grid, g_vref, ahead - h), v_max)
     a_ff = (v_hi * v_hi - v_lo * v_lo) / (4.0 * h)
@@ -392,9 +393,6 @@ def _numeric(w, n, lane, top):
     standstill, time_gap = par[P_STANDSTILL], par[P_TIME_GAP]
     sqrt_ab = 2.0 * math.sqrt(a_c * b_c)
     j = PROFILE_JERK_MPS3 * dt
-    # half the time [s] the jerk takes to reach the comfort deceleration: the profile's
-    # acceleration is looked that far ahead
-    lead_s = 0.5 * b_c / PROFILE_JERK_MPS3
     for k in range(K + 1):
         lon_s[n, k] = s
         lon_v[n, k] = v
@@ -404,7 +402,7 @@ def _numeric(w, n, lane, top):
         if lane < 0:
             # above the wanted speed (it slows for bends the car cannot steer faster through) the
             # car brakes beyond the comfortable, up to its limit, to get back under it
-            a_des = _wanted_accel(w, s, v, lead_s)
+            a_des = _wanted_accel(w, s, v)
             a_des = min(max(a_des, -d_max), a_c)
         else:
             v_want = v_max if top else wanted_speed_ahead(w, s, v)
@@ -488,7 +486,7 @@ def _stop_at(w, s_stop, c):
 @subroutine
 def longitudinal_candidates(w, c):
     """The longitudinal profiles (module docstring) into ``w.lon_*``; returns the nearest stop
-    point [m] in the car's lane (inf: none)."""
+    point [m] in the car's lane (inf: none, or the profiles' slots ran out before the stops)."""
     par = w.par
     w.lon_n[0] = 0
     s0, v0 = w.ego[E_S], w.ego[E_V]
@@ -623,7 +621,7 @@ def longitudinal_costs(w, s_stop):
     s_ref = lon_s[0, K]
     v_scale = max(0.5 * (w.ego[E_V] + lon_v[0, K]), 1.0)
     v_max, a_max, d_max, d_comf, j_ref = par[P_V_MAX], par[P_A_MAX], par[P_D_MAX], par[P_D_COMF], par[P_JERK_REF]
-    a_comf = max(par[P_A_COMF], 0.1)
+    a_comf = par[P_A_COMF]
     for n in range(w.lon_n[0]):
         ok = 1
         cost = 0.0
