@@ -501,6 +501,50 @@ def test_the_search_skips_an_obstacle_only_when_no_disc_can_reach_it():
     assert not beyond(3.0, 0.0, 3.0, 0.0, 2.5, 1.0, 1.0)  # beyond the box, not beyond its reach
 
 
+def test_the_road_lookup_is_skipped_only_where_no_corner_can_leave_the_road():
+    """``_clear_of_edges`` lets the search skip the body's corner lookups at a step: the body keeps
+    clear of the tightest edges within its reach (``road_windows``). Against the exact corners
+    (``_road_excess``) on winding random edges and road ends, any offset and heading: whenever
+    it says clear, no corner is beyond the allowance; and it says so for most bodies well inside
+    the road (a skip that never fires fails as well as one that hides a departure)."""
+    from mpcdrive.planning import work as W
+    from mpcdrive.planning.checks import _clear_of_edges, _road_excess
+    from mpcdrive.planning.work import P_CO, P_HL, P_HW, P_ROAD_END, P_ROAD_MARGIN, P_ROAD_START
+
+    clear_of, excess = _clear_of_edges.py_func, _road_excess.py_func
+    rng = np.random.default_rng(11)
+    G, ds = 200, 0.5
+    grid_s = np.arange(G) * ds
+    arrays = W.new_work(10, grid_s, 1)
+    said, inside = 0, 0
+    for trial in range(40):
+        left = 3.0 + np.cumsum(rng.normal(0.0, 0.15, G))
+        right = -3.0 + np.cumsum(rng.normal(0.0, 0.15, G))
+        for name, tab in (("same_left", left), ("same_right", right), ("all_left", left + 3.5), ("all_right", right)):
+            arrays[name][:] = tab
+        par = arrays["par"]
+        par[P_HL], par[P_HW], par[P_CO] = rng.uniform(1.5, 2.6), rng.uniform(0.8, 1.0), rng.uniform(-0.5, 1.5)
+        par[P_ROAD_MARGIN] = rng.uniform(0.0, 0.3)
+        par[P_ROAD_START], par[P_ROAD_END] = (5.0, 90.0) if trial % 2 else (-math.inf, math.inf)
+        front, rear = abs(par[P_CO] + par[P_HL]), abs(par[P_CO] - par[P_HL])
+        W.road_windows(arrays, math.hypot(max(front, rear), par[P_HW]))
+        for _ in range(500):
+            s, d = rng.uniform(-5.0, 105.0), rng.uniform(-4.0, 4.0)
+            yaw = rng.uniform(-0.6, 0.6)
+            cth, sth = math.cos(yaw), math.sin(yaw)
+            allow = rng.uniform(1e-3, 0.5)
+            row = 2 * int(rng.integers(2))
+            lt, rt = (arrays["all_left"], arrays["all_right"]) if row else (arrays["same_left"], arrays["same_right"])
+            exact = excess(arrays["grid"], lt, rt, par, s, d, cth, sth)
+            if clear_of(arrays["grid"], arrays["edge_win"], row, par, s, d, cth, sth, allow):
+                said += 1
+                assert exact <= allow, (trial, s, d, yaw, allow, exact)
+            elif abs(d) < 0.5 and abs(yaw) < 0.1 and 20.0 < s < 80.0 and exact <= 0.0:
+                inside += 1
+    assert said > 2000
+    assert inside < 0.2 * said  # bodies well inside are skipped, not looked up
+
+
 def test_a_profile_that_reaches_the_region_only_after_the_window_closes_is_a_sure_miss():
     """The pairs' bound counts the goal's miss for a profile that cannot be in the region by the
     window's end: the distance driven by then, interpolated between the samples around the end

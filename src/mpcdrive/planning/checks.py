@@ -148,16 +148,44 @@ def _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth):
 
 
 @subroutine
-def _first_contact(
+def _clear_of_edges(grid, edge_win, row, par, s, d, cth, sth, allow):
+    """Whether the body at (s, d), yawed (cos, sin) from the path, keeps within ``allow`` [m] of
+    the edges and the road's ends for sure: its corners lie within ``|ax| |sin| + hw cos`` across
+    of ``d`` (``ax`` the larger of the front's and the rear's distance from the reference point)
+    and along within the reach that ``edge_win``'s rows ``row`` (left) and ``row + 1`` (right) are
+    tightest over (:func:`~.work.road_windows`). True only where :func:`_road_excess` is at most
+    ``allow``; False says nothing (the corners are then looked up)."""
+    rm = par[P_ROAD_MARGIN]
+    hw = par[P_HW]
+    front, rear = par[P_CO] + par[P_HL], par[P_CO] - par[P_HL]
+    x = (s - grid[0]) * grid[3]
+    g = 0 if x <= 0.0 else min(int(x), edge_win.shape[1] - 1)
+    across = max(abs(front), abs(rear)) * abs(sth) + hw * cth
+    clear = allow - 1e-9
+    return (
+        d + across - (edge_win[row, g] - rm) <= clear
+        and (edge_win[row + 1, g] + rm) - (d - across) <= clear
+        and s + front * cth + hw * abs(sth) - (par[P_ROAD_END] - rm) <= clear
+        and (par[P_ROAD_START] + rm) - (s + rear * cth - hw * abs(sth)) <= clear
+    )
+
+
+@subroutine
+def _first_hit(
     i, j, par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v, ob_s, ob_e, ob_hl, ob_hw, dt,
-    discs, rel_idx, n_rel, p_disc_s, p_disc_d,
+    discs, rel_idx, n_rel, p_disc_s, p_disc_d, excess0, left_tab, right_tab, edge_win, win_row, path,
 ):  # fmt: skip
-    """When [s] pair (``i``, ``j``)'s discs first come within their radius and the margin of one
-    of the obstacles ``rel_idx[:n_rel]`` (swept between samples, as :func:`check_pair` checks
-    them), inf if never: the part of a pair's check that rejects most pairs, run before the rest
-    (costs, road, vehicle)."""
-    if n_rel == 0:
-        return math.inf
+    """The part of a pair's check that rejects most pairs, run before the rest (costs, lanes,
+    vehicle): the step at which pair (``i``, ``j``) first leaves the road (its body's corners
+    beyond the edges ``left_tab`` / ``right_tab`` by more than the allowance of
+    :func:`check_pair`, which starts at ``excess0`` [m] and shrinks to nothing over the first
+    second; where the body keeps clear of the tightest edges within its reach, ``edge_win``'s
+    rows ``win_row`` and ``win_row + 1``, the corners are not looked up) or its discs first come within their radius and the margin of one of the obstacles
+    ``rel_idx[:n_rel]`` (swept between samples, as :func:`check_pair` checks them). Returns
+    (``k``, time [s]): ``k`` >= 0 the road's step (its time ``k dt``), -1 an obstacle's contact
+    (the time the swept check gives it), -2 neither (time inf). The way the pair drives, (arc
+    length, offset, slope, d'') per step, goes to ``path`` up to the step returned (all of it
+    with none), where :func:`check_pair` reads it instead of driving the pair again."""
     K = lon_s.shape[1] - 1
     lane_i = lat_lane[i]
     coef = lat_coef[i]
@@ -165,6 +193,7 @@ def _first_contact(
     s0 = ego[E_S]
     nd = discs.shape[0]
     rn = par[P_R_DISC] + par[P_MARGIN]
+    road_margin = par[P_ROAD_MARGIN]
     evasive = L < 0.0
     ev_d, ev_th, ev_k = ego[E_D], math.atan(ego[E_SLOPE]), ego[E_CURV]
     reach = 0.0
@@ -183,13 +212,23 @@ def _first_contact(
                     EVASIVE_HARD if L > -1.5 else EVASIVE_GENTLE,
                 )  # fmt: skip
             d, d1 = ev_d, math.tan(ev_th)
+            d2 = ev_k * (1.0 + d1 * d1) ** 1.5  # the plane curve's d'' of that curvature
         else:
             if k > 0:  # the profile is the car's way; along the path it is that over the slope
                 s += (lon_s[j, k] - lon_s[j, k - 1]) / math.sqrt(1.0 + d1 * d1)
-            d, d1, _ = lateral_at(coef, L, s0, lane_line, lane_i, off, grid, s)
+            d, d1, d2 = lateral_at(coef, L, s0, lane_line, lane_i, off, grid, s)
+        path[k, 0] = s
+        path[k, 1] = d
+        path[k, 2] = d1
+        path[k, 3] = d2
         nrm = math.sqrt(1.0 + d1 * d1)
         cth, sth = 1.0 / nrm, d1 / nrm
         t = k * dt
+        # the road first (its time is the step's; an obstacle's swept contact is the step before)
+        allow = (excess0 + road_margin) * max(0.0, 1.0 - t) + 1e-3
+        road_hit = not _clear_of_edges(grid, edge_win, win_row, par, s, d, cth, sth, allow) and (
+            _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth) > allow
+        )
         for q_o in range(n_rel):
             o = rel_idx[q_o]
             So = ob_s[o, k]
@@ -224,13 +263,15 @@ def _first_contact(
                             )
                             < rn
                         ):
-                            return t - dt
+                            return -1, t - dt
                 elif k == 0 and _box_distance(qs, qd, HL, HW) < rn:
-                    return 0.0
+                    return -1, 0.0
+        if road_hit:
+            return k, t
         for q in range(nd):
             p_disc_s[q] = s + discs[q] * cth
             p_disc_d[q] = d + discs[q] * sth
-    return math.inf
+    return -2, math.inf
 
 
 @subroutine
@@ -278,7 +319,8 @@ def _in_goal(goal_arr, grid, g_heading, par, s, tt, speed, d, d1, kappa):
 def check_pair(
     i, j, excess0, write, bound, prepaid, par, grid, ego, goal_arr, g_kappa, g_heading, g_bend, lane_left, lane_right,
     lane_line, lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v, lon_a, ob_s, ob_e,
-    ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs, rel_idx, n_rel, scratch,
+    ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs, rel_idx, n_rel, scratch, path,
+    edge_win,
 ):  # fmt: skip
     """(safe, feasible, rate, ttc [s], cost [s], goal) of lateral move ``i`` with profile ``j``
     (``feasible``: within the vehicle's curvature and friction circle; ``rate``: the largest
@@ -292,7 +334,9 @@ def check_pair(
     the check stops at the first contact (the time to collision is known) or once the cost
     and the rate's excess costed (``rate_excess_s``, as the choice scores it) pass ``bound``
     [s] (it cannot be chosen), returning it unsafe, and looks only at the
-    obstacles ``rel_idx[:n_rel]`` (those that may come near the pair: :func:`_near_obstacles`).
+    obstacles ``rel_idx[:n_rel]`` (those that may come near the pair: :func:`_near_obstacles`),
+    after :func:`_first_hit` (an obstacle's contact ends the check there; the road's is the
+    check's own, reached on the way :func:`_first_hit` left in ``path`` (K + 1, 4)).
     ``prepaid`` [s]: the goal's miss cost already counted in the pair's bound
     (:func:`goal_missed_by_profile`), left out of the cost returned."""
     K = lon_s.shape[1] - 1
@@ -335,12 +379,15 @@ def check_pair(
     p_disc_s = scratch[0]
     p_disc_d = scratch[1]
     if not write:
-        first = _first_contact(
+        first, t_first = _first_hit(
             i, j, par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v, ob_s, ob_e, ob_hl,
-            ob_hw, dt, discs, rel_idx, n_rel, p_disc_s, p_disc_d,
+            ob_hw, dt, discs, rel_idx, n_rel, p_disc_s, p_disc_d, excess0, left_tab, right_tab, edge_win,
+            2 if use_all else 0, path,
         )  # fmt: skip
-        if first < math.inf:
-            return False, True, 0.0, first, 0.0, False
+        if first == -1:
+            return False, True, 0.0, t_first, 0.0, False
+    else:
+        first = -2
     hit = False
     evasive = L < 0.0
     # the evasive move's state: offset, heading and curvature relative to the path
@@ -352,7 +399,9 @@ def check_pair(
         # the profile gives the car's speed and the way it drives (``lon_s``); the path's arc
         # length follows from the move's slope
         v, a = lon_v[j, k], lon_a[j, k]
-        if evasive:
+        if not write:  # the way :func:`_first_hit` drove
+            s, d, d1, d2 = path[k, 0], path[k, 1], path[k, 2], path[k, 3]
+        elif evasive:
             if k > 0:
                 ev_d, ev_th, ev_k, s = evasive_step(
                     ev_d, ev_th, ev_k, s, lon_v[j, k - 1], v, dt, grid, lane_line, lane_i, off, par,
@@ -387,9 +436,14 @@ def check_pair(
         if not hit:
             # the road's margin is room for the controller's tracking: over the first second a
             # maneuver may use it (a car drifting towards the edge needs that long to turn back),
-            # never the road beyond its edge, and what it uses shrinks to nothing by then
-            allow = (excess0 + par[P_ROAD_MARGIN]) * max(0.0, 1.0 - t) + 1e-3
-            if _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth) > allow:
+            # never the road beyond its edge, and what it uses shrinks to nothing by then (in the
+            # search, :func:`_first_hit` has found the step that leaves the road, if any)
+            if write:
+                allow = (excess0 + par[P_ROAD_MARGIN]) * max(0.0, 1.0 - t) + 1e-3
+                if _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth) > allow:
+                    ttc = t
+                    hit = True
+            elif k == first:
                 ttc = t
                 hit = True
         sc = s + co * cth
@@ -424,7 +478,7 @@ def check_pair(
             by = hws + ob_hw[o, k]
             Eo, HL, HW = ob_e[o, k], ob_hl[o, k], ob_hw[o, k]
             # the body as the controller's discs: each keeps its radius and the margin off the box
-            # (in the search, :func:`_first_contact` has tested these discs against these
+            # (in the search, :func:`_first_hit` has tested these discs against these
             # obstacles and found no contact, and what the loop finds besides is written only)
             near = False
             blocked = False

@@ -25,8 +25,11 @@ hit over the horizon and, at its end, braking still stops the car behind the car
 longitudinal part, which bound a pair's cost from below: pairs are checked in the order of that
 bound and the search stops when the bound passes the best safe maneuver's cost (branch and
 bound: most replannings check a handful of pairs; a goal miss that a profile cannot avoid is
-part of that bound). Steering beyond the rate is a cost of the choice, not a wall. With no safe
-maneuver, the one that is hit latest is taken (time to collision), the cheapest among equals.
+part of that bound). A pair's check first drives it through the obstacles and the road alone
+(what rejects most pairs) and stops at its first harm; the costs, lanes and vehicle limits
+follow on the way it drove. Steering beyond the rate is a cost of the choice, not a wall. With no
+safe maneuver, the one that is hit latest (its time to collision: the first harm, leaving the
+road or touching an obstacle) is taken, the cheapest among equals.
 """
 
 from __future__ import annotations
@@ -85,6 +88,7 @@ def plan(w):
     g_kappa, g_heading, g_bend = w.g_kappa, w.g_heading, w.g_bend
     lane_left, lane_right, lane_line, lane_kind = w.lane_left, w.lane_right, w.lane_line, w.lane_kind
     same_left, same_right, all_left, all_right = w.same_left, w.same_right, w.all_left, w.all_right
+    edge_win = w.edge_win
     lat_coef, lat_len, lat_lane, lat_off, lat_cost = w.lat_coef, w.lat_len, w.lat_lane, w.lat_off, w.lat_cost
     lon_s, lon_v, lon_a, lon_ok, lon_cost = w.lon_s, w.lon_v, w.lon_a, w.lon_ok, w.lon_cost
     ob_s, ob_e, ob_hl, ob_hw = w.ob_s, w.ob_e, w.ob_hl, w.ob_hw
@@ -120,6 +124,7 @@ def plan(w):
     ob_rng = np.empty((max(n_obs, 1), 4))
     rel_idx = np.empty(max(n_obs, 1), np.int64)
     scratch = np.empty((2, discs.shape[0]))
+    path = np.empty((lon_s.shape[1], 4))
     _ranges(
         par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, nlat, lon_s, nlon, ob_s, ob_e, ob_hl, ob_hw,
         n_obs, dt, discs, lat_rng, lon_rng, ob_rng,
@@ -144,7 +149,7 @@ def plan(w):
             i, j, excess0, False, best_total - key, prepaid[j], par, grid, ego, goal_arr, g_kappa, g_heading, g_bend,
             lane_left, lane_right, lane_line, lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len,
             lat_lane, lat_off, lon_s, lon_v, lon_a, ob_s, ob_e, ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d,
-            discs, rel_idx, n_rel, scratch,
+            discs, rel_idx, n_rel, scratch, path, edge_win,
         )  # fmt: skip
         checked += 1
         total = key + pair
@@ -177,7 +182,7 @@ def plan(w):
         i, j, excess0, True, math.inf, prepaid[j], par, grid, ego, goal_arr, g_kappa, g_heading, g_bend, lane_left,
         lane_right, lane_line, lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v,
         lon_a, ob_s, ob_e, ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs, rel_idx, 0,
-        scratch,
+        scratch, path, edge_win,
     )  # fmt: skip
     r[R_I] = i
     r[R_J] = j

@@ -8,6 +8,8 @@ the slots of the small scalar arrays.
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -122,6 +124,7 @@ class PlannerWork:
     same_right: np.ndarray  # (G,)
     all_left: np.ndarray  # (G,) edges of all lanes (the oncoming ones too)
     all_right: np.ndarray  # (G,)
+    edge_win: np.ndarray  # (4, G) the four edges above at their tightest within a body's reach (road_windows)
     par: np.ndarray  # (N_PAR,) vehicle and settings
     lat_lengths_s: np.ndarray  # (nT,) durations of lateral moves [s]
     speed_s: np.ndarray  # (nV,) durations of speed changes [s]
@@ -187,6 +190,7 @@ def new_work(K: int, grid_s: np.ndarray, n_lanes: int) -> dict:
         same_right=f(G),
         all_left=f(G),
         all_right=f(G),
+        edge_win=f((4, G)),
         par=f(N_PAR),
         lat_lengths_s=f(1),
         speed_s=f(1),
@@ -224,6 +228,28 @@ def new_work(K: int, grid_s: np.ndarray, n_lanes: int) -> dict:
         plan_lanes=np.zeros(L, np.int64),
         relation=np.zeros((MAX_OBS, K + 1), np.int64),
     )
+
+
+def road_windows(arrays: dict, reach_m: float) -> None:
+    """Fill ``edge_win``: each of ``same_left``, ``same_right``, ``all_left``, ``all_right`` at its
+    tightest (the left edges' least, the right edges' greatest) over the grid points within
+    ``reach_m`` [m] (plus a grid step either way) of each point: what a body whose corners lie
+    within ``reach_m`` of its reference point can meet of the edges, interpolated as the checks
+    interpolate them (``checks._first_hit`` skips the corners' own lookups where it keeps clear
+    of these)."""
+    ds = float(arrays["grid"][1])
+    G = arrays["same_left"].shape[0]
+    W = int(math.ceil(max(reach_m, 0.0) / ds)) + 1
+    out = arrays["edge_win"]
+    for r, (name, tight) in enumerate(
+        (("same_left", np.min), ("same_right", np.max), ("all_left", np.min), ("all_right", np.max))
+    ):
+        tab = arrays[name]
+        if G == 0:
+            continue
+        # sliding window over the padded table (the ends repeat: beyond them the checks hold the end value)
+        padded = np.concatenate((np.full(W, tab[0]), tab, np.full(W, tab[-1])))
+        out[r] = tight(np.lib.stride_tricks.sliding_window_view(padded, 2 * W + 1), axis=1)
 
 
 _PlannerWorkType, _PlannerWorkStruct = define_struct(PlannerWork, __name__)
