@@ -559,3 +559,39 @@ def test_both_solvers_match_the_oracle(seed):
 @pytest.mark.parametrize("seed", SLOW_SEEDS)
 def test_both_solvers_match_the_oracle_on_more_instances(seed):
     run_case(seed, steps=4)
+
+
+@pytest.mark.parametrize("seed", FAST_SEEDS[:4])
+def test_a_guess_of_the_slack_groups_changes_the_rounds_not_the_solution(seed):
+    """The compiled solver flags the slack groups of the last solve that needed slacks (shifted
+    a step) from the first round of a solve that needs them (``soft_solve``'s ``kprev``): a
+    guess. Whatever the guess (none, every group, a random half), the step's inputs and plan are
+    the same, and the groups a solve ends with, given back as the guess, never cost more
+    active-set iterations than no guess."""
+    case = make_case(seed)
+    fast, x = case.fast, case.x
+    warm = case.ref.initial_warm(x)
+    out = case.ref.step(x, warm)  # a plan to go on from (the steps below shift it)
+    x = discrete_step(case.ref.model, x, out.u, case.ref.dt_s, "rk4")
+    warm = out.warm
+    kprev = fast._work.kprev
+    rng = np.random.default_rng(seed)
+    runs = {}
+    for name, guess in (
+        ("none", np.zeros_like(kprev)),
+        ("all", np.ones_like(kprev)),
+        ("random", rng.integers(0, 2, kprev.shape)),
+    ):
+        kprev[:] = np.roll(guess, 1)  # (the step moves it on a step before the solve)
+        o = fast.step(x, warm)
+        runs[name] = (o, int(fast._info[3]), kprev.copy())
+    base = runs["none"][0]
+    assert runs["none"][2].any(), "the instance's solve needs no slack: the guess is never used"
+    for name, (o, _, _) in runs.items():
+        assert o.status == base.status == "ok", name
+        np.testing.assert_allclose(o.u, base.u, atol=1e-7, err_msg=name)
+        np.testing.assert_allclose(o.X_pred, base.X_pred, atol=1e-6, err_msg=name)
+    # the groups the unguessed solve ended with, as the guess
+    kprev[:] = np.roll(runs["none"][2], 1)
+    fast.step(x, warm)
+    assert int(fast._info[3]) <= runs["none"][1]

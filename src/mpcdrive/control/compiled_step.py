@@ -27,9 +27,9 @@ from numba import njit
 from .._structs import define_struct, to_struct
 from .._subroutine import subroutine
 from ..models.compiled import KIND_DYNAMIC, KIND_KINEMATIC3, KIND_KINEMATIC4
-from ..ocp.assembly import follow_references_into, linearize, stage_costs
+from ..ocp.assembly import MODE_ITERATE, MODE_SHIFTED_PLAN, follow_references_into, linearize, stage_costs
 from ..ocp.obstacle_cost_compiled import OBS_NONE
-from ..solvers.condensed import condensed_solve, write_plan
+from ..solvers.condensed import condensed_solve, shift_soft_guess, write_plan
 
 #: stages of a step: all of it; up to the linearization trajectory (obstacle rows are built from
 #: it in Python by ``ocp.avoidance``); the rest, with those rows in the stage QP; of the rest,
@@ -159,6 +159,8 @@ def _control_step(kind, cost_obstacles, extras, step, x, s_guess, t_s, u_prev, X
     stage_costs(cost_obstacles, extras, asm, qp, t_s, stage != STAGE_ALL)
     if stage == STAGE_COST:
         return 0
+    if mode != MODE_ITERATE:  # a new control step: the last one's slack groups a step on
+        shift_soft_guess(work, qp.N, mode == MODE_SHIFTED_PLAN)
     code, iters = condensed_solve(qp, work, x, u_prev, nx, nu, extras)
     info[3] = iters
     if code != 0:

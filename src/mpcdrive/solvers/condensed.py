@@ -250,6 +250,7 @@ def soft_solve(
     max_iter,
     tol,
     soft,
+    kprev,
 ):
     """The condensed QP with soft rows, their slacks only where they can be nonzero.
 
@@ -267,7 +268,12 @@ def soft_solve(
     without a slack exceeds it (or with a slack on every group that has rows: the full problem). The slacks' sign rows follow row m (``rowcol`` names their single
     nonzero; the other rows written per step are marked dense there). z[:nzu] holds the inputs.
     ``soft``: there may be soft rows; a constant False leaves the code of the slacks out (then
-    ``m_soft`` must be ``m``)."""
+    ``m_soft`` must be ``m``). ``kprev`` (2N): the groups that had a slack in the last solve
+    that needed slacks (:func:`shift_soft_guess` moves them on a step each control step); when
+    this one needs slacks, those groups are flagged with the others from the first round (a
+    guess: a slack that stays zero costs a variable, a missing one a round; the rounds end as
+    before, when no group without a slack needs one, at the same solution), and ``kprev`` then
+    holds this solve's groups."""
     for i in range(m):
         isact[i] = 0  # no guess of the active set
     code, iters = gi_solve(
@@ -277,6 +283,10 @@ def soft_solve(
         return code, iters
     if code == 0 and _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, True):
         return 0, iters
+    for grp in range(2 * N):  # the groups that had a slack in the solve before: a guess
+        if kprev[grp] != 0:
+            kpos[grp] = 1
+        kprev[grp] = 0
     # the flags so far spread to the later groups with rows, as every later round's do
     for grp in range(2 * N):
         if kpos[grp] != 0:
@@ -340,6 +350,8 @@ def soft_solve(
             if kpos[grp] > 0:
                 kpos[grp] = 1
         if _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, False):
+            for grp in range(2 * N):
+                kprev[grp] = kpos[grp]
             return 0, iters
         _flag_later_groups(kpos, m_soft, m, rgrp, N, gsum)
     return 3, iters
@@ -600,9 +612,23 @@ def condensed_solve(qp, work, x, u_prev, nx, nu, rows):
                     kpos[f0 + k] = 1
     code, iters = soft_solve(
         H, g, C, b, m, m_lane, rgrp, N, nzu, kpos, qp.w2_lane, qp.w1_lane, qp.w2_obs, qp.w1_obs, gsum, z, lamq, active, isact,
-        rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, work.max_iter, tol, rows,
+        rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, work.max_iter, tol, rows, work.kprev,
     )  # fmt: skip
     return code, iters
+
+
+@subroutine
+def shift_soft_guess(work, N, new_plan):
+    """Move the slack groups of the last solve with slacks (``work.kprev``) on by a step for the
+    next control step's (its plan is the last one's shifted), or drop them (``new_plan`` False: no
+    plan to go on from, e.g. the first step)."""
+    kprev = work.kprev
+    for f0 in range(0, 2 * N, N):
+        for k in range(N):
+            if not new_plan:
+                kprev[f0 + k] = 0
+            elif k < N - 1:
+                kprev[f0 + k] = kprev[f0 + k + 1]
 
 
 @subroutine
@@ -664,7 +690,8 @@ class CondensedWork:
     feasibility tolerance of a row (scaled by its norm). The rest is work space: the condensing
     (``xf``, ``P``, ``lam``, ``Vb``, ``S``, ``T2``, ``Gam``), the QP (``H``, ``g``, the solution
     ``z``) and the active-set method (``L``, ``J``, ``Rq``, ``d``, ``zdir``, ``r``, ``uq``,
-    ``sq``, ``rown``, ``lamq``, ``active``, ``isact``, ``rgrp``, ``kpos``, ``gsum``), the
+    ``sq``, ``rown``, ``lamq``, ``active``, ``isact``, ``rgrp``, ``kpos``, ``gsum``; ``kprev``
+    the slack groups of the last solve, kept for the next), the
     Riccati recursion (``Kg``, ``kf``, ``PA``, ``Mg``, ``Gg``, ``qv``)."""
 
     nz: int
@@ -702,6 +729,7 @@ class CondensedWork:
     isact: np.ndarray
     rgrp: np.ndarray
     kpos: np.ndarray
+    kprev: np.ndarray
     gsum: np.ndarray
     Kg: np.ndarray
     kf: np.ndarray

@@ -188,6 +188,7 @@ def new_condensed_work(problem: MpcProblem, settings: CondensedSettings, obstacl
         isact=np.zeros(mq, dtype=np.int64),
         rgrp=np.zeros(mq, dtype=np.int64),
         kpos=np.zeros(2 * N, dtype=np.int64),
+        kprev=np.zeros(2 * N, dtype=np.int64),
         gsum=z(2 * N),
         Kg=z((N, nu, nx)),
         kf=z((N, nu)),
