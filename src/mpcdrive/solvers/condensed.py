@@ -259,14 +259,15 @@ def soft_solve(
     ``rgrp[rr]`` (the lane rows of step k to group k, slack weights ``w2l`` quadratic, ``w1l``
     linear; the obstacle rows of step k to group N + k, weights ``w2o``, ``w1o``), one slack per
     group shared by its rows, as in ``ocp.qp``. Without soft rows (``m_soft == m``) that is one
-    solve of the hard QP. First the inputs alone, soft rows hard: if that
-    solves and no group's multipliers sum to more than its slack's l1 weight, zero slacks satisfy
-    the optimality conditions of the soft problem (exact penalty), so it is its solution. Else
-    slacks are given to the groups flagged in ``kpos`` (1 = slack; the caller flags those the
-    linearization violates) and every group whose multipliers exceed the weight, each with the
-    groups with rows after it (:func:`_flag_later_groups`), and solved again until no group
-    without a slack exceeds it (or with a slack on every group that has rows: the full problem). The slacks' sign rows follow row m (``rowcol`` names their single
-    nonzero; the other rows written per step are marked dense there). z[:nzu] holds the inputs.
+    solve of the hard QP. First (unless groups are flagged) the inputs alone, soft rows hard: if
+    that solves and no group's multipliers sum to more than its slack's l1 weight, zero slacks
+    satisfy the optimality conditions of the soft problem (exact penalty), so it is its solution.
+    Else slacks are given to the groups flagged in ``kpos`` (1 = slack; the caller flags those
+    the linearization violates) and every group whose multipliers exceed the weight, each with
+    the groups with rows after it (:func:`_flag_later_groups`), and solved again until no group
+    without a slack exceeds it (or with a slack on every group that has rows: the full
+    problem). The slacks' sign rows follow row m (``rowcol`` names their single nonzero; the
+    other rows written per step are marked dense there). z[:nzu] holds the inputs.
     ``soft``: there may be soft rows; a constant False leaves the code of the slacks out (then
     ``m_soft`` must be ``m``). ``kprev`` (2N): the groups that had a slack in the last solve
     that needed slacks (:func:`shift_soft_guess` moves them on a step each control step); when
@@ -276,13 +277,22 @@ def soft_solve(
     holds this solve's groups."""
     for i in range(m):
         isact[i] = 0  # no guess of the active set
-    code, iters = gi_solve(
-        H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol
-    )
     if not soft or m_soft == m:  # no soft rows: the QP is that one
-        return code, iters
-    if code == 0 and _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, True):
-        return 0, iters
+        return gi_solve(
+            H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol
+        )
+    # the hard solve first, unless the caller flagged groups (rows the linearization is on or
+    # beyond): those mostly need their slacks, and the rounds then start without it
+    flagged = False
+    for grp in range(2 * N):
+        flagged = flagged or kpos[grp] != 0
+    code, iters = 0, 0
+    if not flagged:
+        code, iters = gi_solve(
+            H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol
+        )
+        if code == 0 and _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, True):
+            return 0, iters
     for grp in range(2 * N):  # the groups that had a slack in the solve before: a guess
         if kprev[grp] != 0:
             kpos[grp] = 1
