@@ -125,7 +125,9 @@ class PlannedMpc:
         self.maneuver: Maneuver | None = None
         self._planned_at = -math.inf
         self._band: tuple[int, ...] | None = None
-        self._table: ObstacleTable | None = None
+        # the obstacles' table now, not in the first control step (a step rebuilds it only when
+        # the MPC is handed other obstacles)
+        self._table: ObstacleTable | None = table_of(mpc.obstacles, None)
         self._lateral = None
         self._line_key: tuple | None = None
         self._leaves_of: Maneuver | None = None  # the maneuver _leaves was found for
