@@ -251,6 +251,7 @@ def soft_solve(
     tol,
     soft,
     kprev,
+    skip_hard,
 ):
     """The condensed QP with soft rows, their slacks only where they can be nonzero.
 
@@ -259,7 +260,7 @@ def soft_solve(
     ``rgrp[rr]`` (the lane rows of step k to group k, slack weights ``w2l`` quadratic, ``w1l``
     linear; the obstacle rows of step k to group N + k, weights ``w2o``, ``w1o``), one slack per
     group shared by its rows, as in ``ocp.qp``. Without soft rows (``m_soft == m``) that is one
-    solve of the hard QP. First (unless groups are flagged) the inputs alone, soft rows hard: if
+    solve of the hard QP. First (unless ``skip_hard``) the inputs alone, soft rows hard: if
     that solves and no group's multipliers sum to more than its slack's l1 weight, zero slacks
     satisfy the optimality conditions of the soft problem (exact penalty), so it is its solution.
     Else slacks are given to the groups flagged in ``kpos`` (1 = slack; the caller flags those
@@ -281,13 +282,10 @@ def soft_solve(
         return gi_solve(
             H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol
         )
-    # the hard solve first, unless the caller flagged groups (rows the linearization is on or
-    # beyond): those mostly need their slacks, and the rounds then start without it
-    flagged = False
-    for grp in range(2 * N):
-        flagged = flagged or kpos[grp] != 0
+    # the hard solve first, unless the caller says it fails for sure enough to skip it
+    # (``skip_hard``: the linearization trajectory lies well beyond a soft row)
     code, iters = 0, 0
-    if not flagged:
+    if not skip_hard:
         code, iters = gi_solve(
             H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol
         )
@@ -516,6 +514,7 @@ def condensed_solve(qp, work, x, u_prev, nx, nu, rows):
             r0 += 2
     m = work.m_const
     m_lane = m
+    beyond = False  # the linearization trajectory is beyond a soft row by more than BEYOND_M
     if rows and work.gamma:
         # Gam[k] = d x_{k+1} / d z: Gam[k] = A_k Gam[k-1] in the first k blocks, B_k in block k,
         # zero after it (never written)
@@ -608,23 +607,34 @@ def condensed_solve(qp, work, x, u_prev, nx, nu, rows):
                 dev = lane_n[k, 0] * px + lane_n[k, 1] * py - lane_b[k]
                 if dev > lane_hi[k] - 1e-3 or dev < lane_lo[k] + 1e-3:
                     kpos[k] = 1
+                if dev > lane_hi[k] + BEYOND_M or dev < lane_lo[k] - BEYOND_M:
+                    beyond = True
         if nrow > 0:
             for k in range(N):
                 Xl = Xlin[k + 1]
                 for q in range(nrow):
-                    if rowb[k, q] > -math.inf and (
-                        rowa[k, q, 0] * Xl[0] + rowa[k, q, 1] * Xl[1] + rowa[k, q, 2] * Xl[2] < rowb[k, q] + 1e-3
-                    ):
-                        kpos[N + k] = 1
+                    if rowb[k, q] > -math.inf:
+                        val = rowa[k, q, 0] * Xl[0] + rowa[k, q, 1] * Xl[1] + rowa[k, q, 2] * Xl[2]
+                        if val < rowb[k, q] + 1e-3:
+                            kpos[N + k] = 1
+                        if val < rowb[k, q] - BEYOND_M:
+                            beyond = True
         for f0 in range(0, 2 * N, N):  # and the 3 steps after each (RTI plans move a little)
             for k in range(N - 1, 0, -1):
                 if kpos[f0 + k - 1] == 1 or (k >= 2 and kpos[f0 + k - 2] == 1) or (k >= 3 and kpos[f0 + k - 3] == 1):
                     kpos[f0 + k] = 1
     code, iters = soft_solve(
         H, g, C, b, m, m_lane, rgrp, N, nzu, kpos, qp.w2_lane, qp.w1_lane, qp.w2_obs, qp.w1_obs, gsum, z, lamq, active, isact,
-        rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, work.max_iter, tol, rows, work.kprev,
+        rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, work.max_iter, tol, rows, work.kprev, beyond,
     )  # fmt: skip
     return code, iters
+
+
+#: how far [m] beyond a soft row (a road bound, an obstacle's half-plane) the linearization
+#: trajectory lies where the QP with its soft rows hard is not tried first: a plan that far in
+#: is rarely pulled out of it by one step's inputs, and the hard try then costs an active-set
+#: solve for nothing (nearer, as where a plan keeps to a bound, the hard QP mostly solves)
+BEYOND_M = 0.05
 
 
 @subroutine
