@@ -251,7 +251,6 @@ def soft_solve(
     tol,
     soft,
     kprev,
-    skip_hard,
 ):
     """The condensed QP with soft rows, their slacks only where they can be nonzero.
 
@@ -260,15 +259,14 @@ def soft_solve(
     ``rgrp[rr]`` (the lane rows of step k to group k, slack weights ``w2l`` quadratic, ``w1l``
     linear; the obstacle rows of step k to group N + k, weights ``w2o``, ``w1o``), one slack per
     group shared by its rows, as in ``ocp.qp``. Without soft rows (``m_soft == m``) that is one
-    solve of the hard QP. First (unless ``skip_hard``) the inputs alone, soft rows hard: if
-    that solves and no group's multipliers sum to more than its slack's l1 weight, zero slacks
-    satisfy the optimality conditions of the soft problem (exact penalty), so it is its solution.
-    Else slacks are given to the groups flagged in ``kpos`` (1 = slack; the caller flags those
-    the linearization violates) and every group whose multipliers exceed the weight, each with
-    the groups with rows after it (:func:`_flag_later_groups`), and solved again until no group
-    without a slack exceeds it (or with a slack on every group that has rows: the full
-    problem). The slacks' sign rows follow row m (``rowcol`` names their single nonzero; the
-    other rows written per step are marked dense there). z[:nzu] holds the inputs.
+    solve of the hard QP. First the inputs alone, soft rows hard: if that
+    solves and no group's multipliers sum to more than its slack's l1 weight, zero slacks satisfy
+    the optimality conditions of the soft problem (exact penalty), so it is its solution. Else
+    slacks are given to the groups flagged in ``kpos`` (1 = slack; the caller flags those the
+    linearization violates) and every group whose multipliers exceed the weight, each with the
+    groups with rows after it (:func:`_flag_later_groups`), and solved again until no group
+    without a slack exceeds it (or with a slack on every group that has rows: the full problem). The slacks' sign rows follow row m (``rowcol`` names their single
+    nonzero; the other rows written per step are marked dense there). z[:nzu] holds the inputs.
     ``soft``: there may be soft rows; a constant False leaves the code of the slacks out (then
     ``m_soft`` must be ``m``). ``kprev`` (2N): the groups that had a slack in the last solve
     that needed slacks (:func:`shift_soft_guess` moves them on a step each control step); when
@@ -278,19 +276,13 @@ def soft_solve(
     holds this solve's groups."""
     for i in range(m):
         isact[i] = 0  # no guess of the active set
+    code, iters = gi_solve(
+        H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol
+    )
     if not soft or m_soft == m:  # no soft rows: the QP is that one
-        return gi_solve(
-            H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol
-        )
-    # the hard solve first, unless the caller says it fails for sure enough to skip it
-    # (``skip_hard``: the linearization trajectory lies well beyond a soft row)
-    code, iters = 0, 0
-    if not skip_hard:
-        code, iters = gi_solve(
-            H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol
-        )
-        if code == 0 and _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, True):
-            return 0, iters
+        return code, iters
+    if code == 0 and _group_excess(lam, m_soft, m, rgrp, N, w1l, w1o, gsum, kpos, True):
+        return 0, iters
     for grp in range(2 * N):  # the groups that had a slack in the solve before: a guess
         if kprev[grp] != 0:
             kpos[grp] = 1
@@ -514,7 +506,6 @@ def condensed_solve(qp, work, x, u_prev, nx, nu, rows):
             r0 += 2
     m = work.m_const
     m_lane = m
-    beyond = False  # the linearization trajectory is beyond a soft row by more than BEYOND_M
     if rows and work.gamma:
         # Gam[k] = d x_{k+1} / d z: Gam[k] = A_k Gam[k-1] in the first k blocks, B_k in block k,
         # zero after it (never written)
@@ -607,34 +598,23 @@ def condensed_solve(qp, work, x, u_prev, nx, nu, rows):
                 dev = lane_n[k, 0] * px + lane_n[k, 1] * py - lane_b[k]
                 if dev > lane_hi[k] - 1e-3 or dev < lane_lo[k] + 1e-3:
                     kpos[k] = 1
-                if dev > lane_hi[k] + BEYOND_M or dev < lane_lo[k] - BEYOND_M:
-                    beyond = True
         if nrow > 0:
             for k in range(N):
                 Xl = Xlin[k + 1]
                 for q in range(nrow):
-                    if rowb[k, q] > -math.inf:
-                        val = rowa[k, q, 0] * Xl[0] + rowa[k, q, 1] * Xl[1] + rowa[k, q, 2] * Xl[2]
-                        if val < rowb[k, q] + 1e-3:
-                            kpos[N + k] = 1
-                        if val < rowb[k, q] - BEYOND_M:
-                            beyond = True
+                    if rowb[k, q] > -math.inf and (
+                        rowa[k, q, 0] * Xl[0] + rowa[k, q, 1] * Xl[1] + rowa[k, q, 2] * Xl[2] < rowb[k, q] + 1e-3
+                    ):
+                        kpos[N + k] = 1
         for f0 in range(0, 2 * N, N):  # and the 3 steps after each (RTI plans move a little)
             for k in range(N - 1, 0, -1):
                 if kpos[f0 + k - 1] == 1 or (k >= 2 and kpos[f0 + k - 2] == 1) or (k >= 3 and kpos[f0 + k - 3] == 1):
                     kpos[f0 + k] = 1
     code, iters = soft_solve(
         H, g, C, b, m, m_lane, rgrp, N, nzu, kpos, qp.w2_lane, qp.w1_lane, qp.w2_obs, qp.w1_obs, gsum, z, lamq, active, isact,
-        rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, work.max_iter, tol, rows, work.kprev, beyond,
+        rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, work.max_iter, tol, rows, work.kprev,
     )  # fmt: skip
     return code, iters
-
-
-#: how far [m] beyond a soft row (a road bound, an obstacle's half-plane) the linearization
-#: trajectory lies where the QP with its soft rows hard is not tried first: a plan that far in
-#: is rarely pulled out of it by one step's inputs, and the hard try then costs an active-set
-#: solve for nothing (nearer, as where a plan keeps to a bound, the hard QP mostly solves)
-BEYOND_M = 0.05
 
 
 @subroutine
