@@ -148,6 +148,15 @@ def _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth):
 
 
 @subroutine
+def _road_allowance(excess0, par, t):
+    """How far [m] beyond the road's edges less its margin a maneuver's body may be at ``t`` [s]
+    after the replanning: the road's margin is room for the controller's tracking, and over the
+    first second a maneuver may use it (a car drifting towards the edge needs that long to turn
+    back) and the ``excess0`` [m] the car is out now, shrinking to nothing by then."""
+    return (excess0 + par[P_ROAD_MARGIN]) * max(0.0, 1.0 - t) + 1e-3
+
+
+@subroutine
 def _clear_of_edges(grid, edge_win, row, par, s, d, cth, sth, allow):
     """Whether the body at (s, d), yawed (cos, sin) from the path, keeps within ``allow`` [m] of
     the edges and the road's ends for sure: its corners lie within ``|ax| |sin| + hw cos`` across
@@ -177,11 +186,11 @@ def _first_hit(
 ):  # fmt: skip
     """The part of a pair's check that rejects most pairs, run before the rest (costs, lanes,
     vehicle): the step at which pair (``i``, ``j``) first leaves the road (its body's corners
-    beyond the edges ``left_tab`` / ``right_tab`` by more than the allowance of
-    :func:`check_pair`, which starts at ``excess0`` [m] and shrinks to nothing over the first
-    second; where the body keeps clear of the tightest edges within its reach, ``edge_win``'s
-    rows ``win_row`` and ``win_row + 1``, the corners are not looked up) or its discs first come within their radius and the margin of one of the obstacles
-    ``rel_idx[:n_rel]`` (swept between samples, as :func:`check_pair` checks them). Returns
+    beyond the edges ``left_tab`` / ``right_tab`` by more than :func:`_road_allowance`; where
+    the body keeps clear of the tightest edges within its reach, ``edge_win``'s rows
+    ``win_row`` and ``win_row + 1``, the corners are not looked up) or its discs first come
+    within their radius and the margin of one of the obstacles ``rel_idx[:n_rel]`` (swept
+    between samples, as :func:`check_pair` checks them). Returns
     (``k``, time [s]): ``k`` >= 0 the road's step (its time ``k dt``), -1 an obstacle's contact
     (the time the swept check gives it), -2 neither (time inf). The way the pair drives, (arc
     length, offset, slope, d'') per step, goes to ``path`` up to the step returned (all of it
@@ -193,7 +202,6 @@ def _first_hit(
     s0 = ego[E_S]
     nd = discs.shape[0]
     rn = par[P_R_DISC] + par[P_MARGIN]
-    road_margin = par[P_ROAD_MARGIN]
     evasive = L < 0.0
     ev_d, ev_th, ev_k = ego[E_D], math.atan(ego[E_SLOPE]), ego[E_CURV]
     reach = 0.0
@@ -225,7 +233,7 @@ def _first_hit(
         cth, sth = 1.0 / nrm, d1 / nrm
         t = k * dt
         # the road first (its time is the step's; an obstacle's swept contact is the step before)
-        allow = (excess0 + road_margin) * max(0.0, 1.0 - t) + 1e-3
+        allow = _road_allowance(excess0, par, t)
         road_hit = not _clear_of_edges(grid, edge_win, win_row, par, s, d, cth, sth, allow) and (
             _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth) > allow
         )
@@ -434,13 +442,9 @@ def check_pair(
         cost += a_move * a_move * dt
         # the road
         if not hit:
-            # the road's margin is room for the controller's tracking: over the first second a
-            # maneuver may use it (a car drifting towards the edge needs that long to turn back),
-            # never the road beyond its edge, and what it uses shrinks to nothing by then (in the
-            # search, :func:`_first_hit` has found the step that leaves the road, if any)
+            # the road (in the search, :func:`_first_hit` has found the step that leaves it, if any)
             if write:
-                allow = (excess0 + par[P_ROAD_MARGIN]) * max(0.0, 1.0 - t) + 1e-3
-                if _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth) > allow:
+                if _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth) > _road_allowance(excess0, par, t):
                     ttc = t
                     hit = True
             elif k == first:

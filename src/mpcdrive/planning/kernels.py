@@ -88,7 +88,7 @@ def plan(w):
     g_kappa, g_heading, g_bend = w.g_kappa, w.g_heading, w.g_bend
     lane_left, lane_right, lane_line, lane_kind = w.lane_left, w.lane_right, w.lane_line, w.lane_kind
     same_left, same_right, all_left, all_right = w.same_left, w.same_right, w.all_left, w.all_right
-    edge_win = w.edge_win
+    edge_win, path = w.edge_win, w.path
     lat_coef, lat_len, lat_lane, lat_off, lat_cost = w.lat_coef, w.lat_len, w.lat_lane, w.lat_off, w.lat_cost
     lon_s, lon_v, lon_a, lon_ok, lon_cost = w.lon_s, w.lon_v, w.lon_a, w.lon_ok, w.lon_cost
     ob_s, ob_e, ob_hl, ob_hw = w.ob_s, w.ob_e, w.ob_hl, w.ob_hw
@@ -124,7 +124,6 @@ def plan(w):
     ob_rng = np.empty((max(n_obs, 1), 4))
     rel_idx = np.empty(max(n_obs, 1), np.int64)
     scratch = np.empty((2, discs.shape[0]))
-    path = np.empty((lon_s.shape[1], 4))
     _ranges(
         par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, nlat, lon_s, nlon, ob_s, ob_e, ob_hl, ob_hw,
         n_obs, dt, discs, lat_rng, lon_rng, ob_rng,

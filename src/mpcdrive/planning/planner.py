@@ -371,10 +371,7 @@ class ManeuverPlanner:
         else:  # one disc round the whole body
             arrays["discs"] = np.array([limits.center_offset_m])
             par[P_R_DISC] = math.hypot(0.5 * limits.length_m, 0.5 * limits.width_m)
-        # the edges at their tightest within the body's reach (the corners' farthest from the
-        # reference point, along or across, is within the hypotenuse of these)
-        front, rear = abs(limits.center_offset_m + par[P_HL]), abs(limits.center_offset_m - par[P_HL])
-        road_windows(arrays, math.hypot(max(front, rear), par[P_HW]))
+        road_windows(arrays)  # the edges at their tightest within the body's reach
         self.work = PlannerWork(**arrays)
         self._struct = self.work.struct()
         self._index = np.zeros(MAX_OBS, np.int64)

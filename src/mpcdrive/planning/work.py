@@ -163,6 +163,7 @@ class PlannerWork:
     plan_a: np.ndarray  # (K+1,) acceleration [m/s^2]
     plan_d: np.ndarray  # (K+1,) lateral offset [m]
     plan_lanes: np.ndarray  # (L,) int: lanes the body overlaps over the controller's horizon
+    path: np.ndarray  # (K+1, 4) work space: the way a pair drives (arc length, offset, slope, d'')
     relation: np.ndarray  # (O, K+1) int REL_*
 
     def struct(self):
@@ -226,27 +227,30 @@ def new_work(K: int, grid_s: np.ndarray, n_lanes: int) -> dict:
         plan_a=f(K + 1),
         plan_d=f(K + 1),
         plan_lanes=np.zeros(L, np.int64),
+        path=f((K + 1, 4)),
         relation=np.zeros((MAX_OBS, K + 1), np.int64),
     )
 
 
-def road_windows(arrays: dict, reach_m: float) -> None:
+def road_windows(arrays: dict) -> None:
     """Fill ``edge_win``: each of ``same_left``, ``same_right``, ``all_left``, ``all_right`` at its
-    tightest (the left edges' least, the right edges' greatest) over the grid points within
-    ``reach_m`` [m] (plus a grid step either way) of each point: what a body whose corners lie
-    within ``reach_m`` of its reference point can meet of the edges, interpolated as the checks
-    interpolate them (``checks._first_hit`` skips the corners' own lookups where it keeps clear
-    of these)."""
+    tightest (the left edges' least, the right edges' greatest) over the grid points within the
+    body's reach (plus a grid step either way) of each point: what the body's corners can meet of
+    the edges, interpolated as the checks interpolate them (``checks._clear_of_edges`` skips the
+    corners' own lookups where the body keeps clear of these). The reach, from ``par``: no corner
+    lies farther along the path from the reference point than the hypotenuse of the half width
+    and the farther of the front and the rear."""
+    par = arrays["par"]
+    reach_m = math.hypot(max(abs(par[P_CO] + par[P_HL]), abs(par[P_CO] - par[P_HL])), par[P_HW])
     ds = float(arrays["grid"][1])
-    G = arrays["same_left"].shape[0]
-    W = int(math.ceil(max(reach_m, 0.0) / ds)) + 1
+    if arrays["same_left"].shape[0] == 0:
+        return
+    W = int(math.ceil(reach_m / ds)) + 1
     out = arrays["edge_win"]
     for r, (name, tight) in enumerate(
         (("same_left", np.min), ("same_right", np.max), ("all_left", np.min), ("all_right", np.max))
     ):
         tab = arrays[name]
-        if G == 0:
-            continue
         # sliding window over the padded table (the ends repeat: beyond them the checks hold the end value)
         padded = np.concatenate((np.full(W, tab[0]), tab, np.full(W, tab[-1])))
         out[r] = tight(np.lib.stride_tricks.sliding_window_view(padded, 2 * W + 1), axis=1)
