@@ -60,6 +60,34 @@ def lane_map(scenario):
     return LaneMap(lanes)
 
 
+def lane_trajectory(o, lanes, dt_s: float, duration_s: float) -> dict | None:
+    """The trajectory entry (``t_s``, ``points``, ``yaw_deg``) of a CommonRoad vehicle known by
+    its initial state only (an interactive scenario's traffic, which a traffic simulator would
+    drive): its initial speed held along its lane (``lanes``, :func:`lane_map`; straight on
+    where it is on none) every ``dt_s`` [s] over ``duration_s`` [s], as
+    :class:`~mpcdrive.prediction.LanePredictor` predicts a car. None for a car standing (below
+    the predictor's least speed), which stays where it is."""
+    from ..prediction import LanePredictor
+    from ..prediction.predictor import Observation, PredictionConfig
+
+    st = o.initial_state
+    v = float(getattr(st, "velocity", 0.0) or 0.0)
+    horizon = max(float(duration_s), dt_s)
+    cfg = PredictionConfig(horizon_s=horizon, dt_s=dt_s, bands_s=(horizon,))
+    if not v >= cfg.min_speed_mps:
+        return None
+    x, y = (float(c) for c in np.asarray(st.position, float)[:2])
+    yaw = float(getattr(st, "orientation", 0.0) or 0.0)
+    pred = LanePredictor(lanes, cfg)
+    P, yaws = pred.path(Observation(0.0, (x, y, yaw), v, None))  # type: ignore[arg-type]
+    t0 = float(st.time_step) * dt_s
+    return {
+        "t_s": [t0 + float(t) for t in pred.taus_s],
+        "points": [(float(a), float(b)) for a, b in P],
+        "yaw_deg": [math.degrees(float(h)) for h in yaws],
+    }
+
+
 def with_traffic(imp, traffic: str | None = None, prediction: str | None = None, settings=None):
     """``imp`` driven among ``traffic`` with ``prediction`` (:func:`check_modes`; ValueError as
     there, and naming the extra when SUMO is not installed). SUMO traffic lasts at least
