@@ -394,6 +394,7 @@ class CompiledLtvMpc(LtvMpc):
         self._step_fn(
             self._step_struct, x, 0.0, 0.0, np.zeros(self.nu), self._noX, self._noU, MODE_NO_PLAN, STAGE_FOLLOW, out
         )
+        follow_references(a.s_arr, a.v_arr, None, 0.0, self.dt_s, 1.0)  # its compiled loop, loaded
 
     # -- obstacles and road (the properties from LtvMpc) ---------------------------------------
     def set_road(self, road: Road) -> None:
@@ -460,7 +461,7 @@ class CompiledLtvMpc(LtvMpc):
             if reason is not None:
                 raise ValueError(f"the fast backend cannot take these obstacles: {reason}")
             self._load_cost_obstacles(obstacles)
-        avoidance.obstacles = list(obstacles)
+        avoidance.obstacles = tuple(obstacles)
         if self._relaxed is not None:  # the relax rung avoids the same obstacles
             self._relaxed.set_obstacles(obstacles)
 

@@ -253,7 +253,7 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
     @property
     def obstacles(self) -> tuple[Obstacle, ...]:
         """The obstacles the controller avoids (empty without avoidance)."""
-        return () if self.avoidance is None else tuple(self.avoidance.obstacles)
+        return () if self.avoidance is None else self.avoidance.obstacles
 
     @property
     def road(self) -> Road | None:

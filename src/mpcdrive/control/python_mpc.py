@@ -207,7 +207,7 @@ class PythonLtvMpc(LtvMpc):
         the same obstacle from call to call: the passing side chosen for it is remembered in
         ``warm.sides`` under that index. Only a controller built with obstacles has the rows."""
         avoidance, obstacles = checked_obstacles(self.avoidance, obstacles)
-        avoidance.obstacles = list(obstacles)
+        avoidance.obstacles = tuple(obstacles)
 
     # -- one control step (step, _solve and finish from StageQpSolve; initial_warm, _check_state
     # and _check_warm from TrackingWarmStart) -------------------------------------------------

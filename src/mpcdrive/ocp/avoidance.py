@@ -180,7 +180,7 @@ class Avoidance:
         road: Road | None,
     ):
         self.config = config
-        self.obstacles = list(obstacles)
+        self.obstacles = tuple(obstacles)  # a tuple: mpc.obstacles hands on this very object
         self.path = path
         self.footprint = footprint
         self.N, self.dt_s = N, dt_s

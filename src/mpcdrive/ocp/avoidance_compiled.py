@@ -133,6 +133,8 @@ def obstacle_table(obstacles: list[Obstacle]) -> ObstacleTable:
 def table_of(obstacles, cached: ObstacleTable | None) -> ObstacleTable:
     """``cached`` if it describes these very ``obstacles`` (the same objects, in order), else
     their new :class:`ObstacleTable` (it holds them: the identities stay unique)."""
+    if cached is not None and cached.obstacles is obstacles:  # the tuple it was built from
+        return cached
     if cached is not None and len(cached.obstacles) == len(obstacles):
         if all(a is b for a, b in zip(cached.obstacles, obstacles)):
             return cached

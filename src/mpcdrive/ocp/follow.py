@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 __all__ = ["follow_references"]
 
@@ -34,8 +35,20 @@ def follow_references(
     else:
         v_line = np.append(np.diff(s_max) / dt_s, (s_max[-1] - s_max[-2]) / dt_s if N > 1 else 0.0)
     s_out, v_out = np.empty(N + 1), np.empty(N + 1)
-    v = max(float(v0_mps), 0.0)
-    s, held = float(s_arr[0]), False
+    held = _follow(
+        np.asarray(s_arr, float), np.asarray(v_arr, float), np.asarray(s_max, float), v_line,
+        float(v0_mps), float(dt_s), float(decel_mps2), float(v_cap_mps), s_out, v_out,
+    )  # fmt: skip
+    return (s_out, v_out) if held else None
+
+
+@njit(cache=True)
+def _follow(s_arr, v_arr, s_max, v_line, v0_mps, dt_s, decel_mps2, v_cap_mps, s_out, v_out):
+    """:func:`follow_references`' loop over the horizon (compiled: it runs every control step);
+    writes ``s_out``, ``v_out``, returns whether the line or the cap held the car back."""
+    N = len(s_arr) - 1
+    v = max(v0_mps, 0.0)
+    s, held = s_arr[0], False
     s_out[0], v_out[0] = s, v
     for k in range(1, N + 1):
         room = s_max[k - 1] - s  # now; < 0: past the line, fall back behind it
@@ -46,6 +59,6 @@ def follow_references(
         v_allow = min(v_allow, v_cap_mps)
         held |= v_allow < v_arr[k]
         v_next = max(min(v_arr[k], v_allow), v - decel_mps2 * dt_s, 0.0)
-        s = min(s + 0.5 * (v + v_next) * dt_s, float(s_arr[k]))
+        s = min(s + 0.5 * (v + v_next) * dt_s, s_arr[k])
         s_out[k], v_out[k], v = s, v_next, v_next
-    return (s_out, v_out) if held else None
+    return held

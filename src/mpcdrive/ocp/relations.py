@@ -31,9 +31,13 @@ def checked_relations(relations: dict | None, N: int) -> dict[int, np.ndarray]:
         c = np.asarray(codes, np.int64)
         if c.shape != (N,):
             raise ValueError(f"relations of obstacle {j}: {N} codes (steps 1..N) needed, got {c.shape}")
-        if np.any((c < REL_CLEAR) | (c > REL_RIGHT)):
-            raise ValueError(f"relations of obstacle {j}: codes must be REL_* ({REL_CLEAR}..{REL_RIGHT})")
         out[int(j)] = c
+    if out:  # the codes checked all at once (a planner names a few hundred obstacles a step)
+        c = np.stack(list(out.values()))
+        bad = np.flatnonzero(np.any((c < REL_CLEAR) | (c > REL_RIGHT), axis=1))
+        if len(bad):
+            j = list(out)[int(bad[0])]
+            raise ValueError(f"relations of obstacle {j}: codes must be REL_* ({REL_CLEAR}..{REL_RIGHT})")
     return out
 
 
