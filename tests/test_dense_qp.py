@@ -258,3 +258,57 @@ def test_soft_lane_shaped_qps_are_exact_and_agree_with_osqp():
         )
         zo = o.solve(raise_error=False).x
         assert np.abs(r.z - zo).max() <= OSQP_TOL * (1 + np.abs(zo).max()), trial
+
+
+def _gi(H, g, C, b, rowspan):
+    """:func:`gi_solve` on one QP with the given ``rowspan``: (status code, z)."""
+    from mpcdrive.solvers.dense_qp import gi_solve, single_nonzero_columns
+
+    n, m = len(g), len(b)
+    z, lam = np.zeros(n), np.zeros(m)
+    vec = np.zeros((4, n))
+    code, _ = gi_solve(
+        H, g, C, b, m, n, z, lam, np.zeros(n, np.int64), np.zeros(m, np.int64), single_nonzero_columns(C),
+        np.ascontiguousarray(rowspan, np.int64), np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n)),
+        vec[0], vec[1], vec[2], vec[3], np.zeros(m), np.zeros(m), 10 * (n + m), 1e-9,
+    )  # fmt: skip
+    return code, z
+
+
+def test_rows_read_only_where_they_may_be_nonzero_give_the_same_solution():
+    """The rows of a condensed MPC QP at stage k reach the first k inputs and one slack: read
+    only there (``rowspan``: leading columns, one more column) the solve is the one that reads
+    every column. A span that leaves out a nonzero changes it: the span is what is read."""
+    from mpcdrive.solvers.dense_qp import row_spans
+
+    rng = np.random.default_rng(7)
+    changed = 0
+    for _ in range(40):
+        nu, n_stage, n_slack = 2, int(rng.integers(3, 12)), 3
+        nzu = nu * n_stage
+        n = nzu + n_slack
+        m = int(rng.integers(10, 60))
+        M = rng.normal(size=(n, n))
+        H, g = M @ M.T + 0.1 * np.eye(n), 3 * rng.normal(size=n)
+        C, span = np.zeros((m, n)), np.zeros((m, 2), np.int64)
+        for i in range(m):
+            k = int(rng.integers(1, n_stage + 1))
+            C[i, : k * nu] = rng.normal(size=k * nu)
+            span[i] = (k * nu, -1)
+            if rng.random() < 0.5:  # a soft row: its slack
+                j = nzu + int(rng.integers(n_slack))
+                C[i, j] = 1.0
+                span[i, 1] = j
+        b = C @ rng.normal(size=n) + rng.uniform(-1.0, 0.5, size=m)
+        whole = np.column_stack([np.full(m, n), np.full(m, -1)])
+        code_w, z_w = _gi(H, g, C, b, whole)
+        code_s, z_s = _gi(H, g, C, b, span)
+        assert code_s == code_w
+        if code_w == 0:
+            assert np.abs(z_s - z_w).max() <= EXACT_TOL * (1 + np.abs(z_w).max())
+            short = span.copy()
+            short[:, 0] = np.maximum(short[:, 0] - nu, 0)  # each row's last stage left out
+            code_c, z_c = _gi(H, g, C, b, short)
+            changed += code_c != 0 or np.abs(z_c - z_w).max() > 1e-6
+        assert np.array_equal(row_spans(C)[:, 0], np.where(span[:, 1] >= 0, span[:, 1] + 1, span[:, 0]))
+    assert changed >= 10

@@ -238,6 +238,7 @@ def soft_solve(
     active,
     isact,
     rowcol,
+    rowspan,
     L,
     J,
     Rq,
@@ -277,7 +278,7 @@ def soft_solve(
     for i in range(m):
         isact[i] = 0  # no guess of the active set
     code, iters = gi_solve(
-        H, g, C, b, m, nzu, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol
+        H, g, C, b, m, nzu, z, lam, active, isact, rowcol, rowspan, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol
     )
     if not soft or m_soft == m:  # no soft rows: the QP is that one
         return code, iters
@@ -325,8 +326,10 @@ def soft_solve(
             for cc in range(nzu, n2):
                 C[rr, cc] = 0.0
             grp = rgrp[rr]
+            rowspan[rr, 1] = -1
             if kpos[grp] > 0:
                 C[rr, nzu + kpos[grp] - 1] = 1.0
+                rowspan[rr, 1] = nzu + kpos[grp] - 1
         for a in range(nk):
             rr = m + a
             for cc in range(n2):
@@ -338,7 +341,29 @@ def soft_solve(
         # the rows active at the end of the solve before (as a guess: the same rows, slacks on
         # more groups) are added first
         code, it2 = gi_solve(
-            H, g, C, b, m + nk, n2, z, lam, active, isact, rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, max_iter, tol
+            H,
+            g,
+            C,
+            b,
+            m + nk,
+            n2,
+            z,
+            lam,
+            active,
+            isact,
+            rowcol,
+            rowspan,
+            L,
+            J,
+            Rq,
+            d,
+            zdir,
+            r,
+            uq,
+            sq,
+            rown,
+            max_iter,
+            tol,
         )
         iters += it2
         if code != 0:
@@ -385,6 +410,7 @@ def condensed_solve(qp, work, x, u_prev, nx, nu, rows):
     lane_dlo, lane_dhi, Xlin, nrow, rowa, rowb = qp.lane_dlo, qp.lane_dhi, qp.Xlin, qp.nrow, qp.rowa, qp.rowb
     lane_t = qp.lane_t
     C, b, rowcol, rgrp, kpos = work.C, work.b, work.rowcol, work.rgrp, work.kpos
+    rowspan = work.rowspan
     xf, P, lam, Vb, S, T2, Gam = work.xf, work.P, work.lam, work.Vb, work.S, work.T2, work.Gam
     H, g, z, L, J, Rq = work.H, work.g, work.z, work.L, work.J, work.Rq
     d, zdir, r, uq = work.d, work.zdir, work.r, work.uq
@@ -524,6 +550,8 @@ def condensed_solve(qp, work, x, u_prev, nx, nu, rows):
             for i in range(nx):
                 if math.isfinite(x_min[i]):
                     rowcol[m] = -1
+                    rowspan[m, 0] = k * nu  # x_k depends on u_0 .. u_{k-1} only
+                    rowspan[m, 1] = -1
                     for jj in range(nzu):
                         C[m, jj] = Gam[k - 1, i, jj]
                     for jj in range(nzu, nz):
@@ -532,6 +560,8 @@ def condensed_solve(qp, work, x, u_prev, nx, nu, rows):
                     m += 1
                 if math.isfinite(x_max[i]):
                     rowcol[m] = -1
+                    rowspan[m, 0] = k * nu
+                    rowspan[m, 1] = -1
                     for jj in range(nzu):
                         C[m, jj] = -Gam[k - 1, i, jj]
                     for jj in range(nzu, nz):
@@ -565,6 +595,10 @@ def condensed_solve(qp, work, x, u_prev, nx, nu, rows):
                 rgrp[m + 1] = k - 1
                 rowcol[m] = -1
                 rowcol[m + 1] = -1
+                rowspan[m, 0] = k * nu
+                rowspan[m + 1, 0] = k * nu
+                rowspan[m, 1] = -1
+                rowspan[m + 1, 1] = -1
                 m += 2
         if nrow > 0:
             # obstacle half-planes a . (x_k, y_k, yaw_k) >= b of this step (b = -inf: unused)
@@ -582,6 +616,8 @@ def condensed_solve(qp, work, x, u_prev, nx, nu, rows):
                     b[m] = rowb[k - 1, q] - (r0_ * xf[k, 0] + r1_ * xf[k, 1] + r2_ * xf[k, 2])
                     rgrp[m] = N + k - 1
                     rowcol[m] = -1
+                    rowspan[m, 0] = k * nu
+                    rowspan[m, 1] = -1
                     m += 1
 
     # -- solve, then the plan and the command --------------------------------------------------
@@ -612,7 +648,7 @@ def condensed_solve(qp, work, x, u_prev, nx, nu, rows):
                     kpos[f0 + k] = 1
     code, iters = soft_solve(
         H, g, C, b, m, m_lane, rgrp, N, nzu, kpos, qp.w2_lane, qp.w1_lane, qp.w2_obs, qp.w1_obs, gsum, z, lamq, active, isact,
-        rowcol, L, J, Rq, d, zdir, r, uq, sq, rown, work.max_iter, tol, rows, work.kprev,
+        rowcol, rowspan, L, J, Rq, d, zdir, r, uq, sq, rown, work.max_iter, tol, rows, work.kprev,
     )  # fmt: skip
     return code, iters
 
@@ -685,7 +721,8 @@ class CondensedWork:
     :func:`mpcdrive.solvers.condensed_setup.new_condensed_work`): ``nz`` variables (inputs and
     slacks), ``mq`` rows of ``C z >= b`` at most, the first ``m_const`` constant (the u_0 rate
     rows from ``r_rate0``), ``rowcol`` the single nonzero column of each constant row (-1:
-    dense); ``gamma``: the step adds state, road or obstacle rows; ``riccati``: try the
+    dense), ``rowspan`` (mq, 2) where each row may be nonzero (its leading columns, one more
+    column: :func:`~mpcdrive.solvers.dense_qp.gi_solve`); ``gamma``: the step adds state, road or obstacle rows; ``riccati``: try the
     unconstrained minimizer first; ``max_iter`` active-set changes at most, ``tol`` the
     feasibility tolerance of a row (scaled by its norm). The rest is work space: the condensing
     (``xf``, ``P``, ``lam``, ``Vb``, ``S``, ``T2``, ``Gam``), the QP (``H``, ``g``, the solution
@@ -705,6 +742,7 @@ class CondensedWork:
     C: np.ndarray
     b: np.ndarray
     rowcol: np.ndarray
+    rowspan: np.ndarray
     xf: np.ndarray
     P: np.ndarray
     lam: np.ndarray

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..ocp.problem import MpcProblem
 from .condensed import CondensedWork, input_bound_rows
-from .dense_qp import single_nonzero_columns
+from .dense_qp import row_spans, single_nonzero_columns
 
 
 @dataclass(frozen=True)
@@ -74,7 +74,9 @@ class ConstantRows:
     """The rows of ``C z >= b`` of the condensed QP, sized for every row a step can add:
     ``C`` (mq, nz), ``b`` (mq,) hold the constant rows first (``m_const`` of them; the u_0 rate
     rows from ``r_rate0`` have a b that follows u_prev); ``rowcol`` (mq,) the single nonzero
-    column of each constant row (-1: dense); ``gamma``: a step adds state, road or obstacle rows."""
+    column of each constant row (-1: dense); ``gamma``: a step adds state, road or obstacle rows;
+    ``rowspan`` (mq, 2) where each row may be nonzero (``gi_solve``'s argument; the rows a step
+    writes get theirs with them)."""
 
     C: np.ndarray
     b: np.ndarray
@@ -82,6 +84,7 @@ class ConstantRows:
     m_const: int
     r_rate0: int
     gamma: bool
+    rowspan: np.ndarray
 
     @property
     def mq(self) -> int:
@@ -98,7 +101,9 @@ def constant_rows(problem: MpcProblem, nz: int, n_orow: int = 0) -> ConstantRows
         b[: len(crows)] = rhs
     rowcol = np.full(mq, -1, dtype=np.int64)
     rowcol[: len(crows)] = single_nonzero_columns(C[: len(crows)])
-    return ConstantRows(C, b, rowcol, len(crows), r_rate0, n_var > 0)
+    rowspan = np.column_stack([np.full(mq, nz), np.full(mq, -1)]).astype(np.int64)  # the step's rows: written with them
+    rowspan[: len(crows)] = row_spans(C[: len(crows)])
+    return ConstantRows(C, b, rowcol, len(crows), r_rate0, n_var > 0, rowspan)
 
 
 def _constant_rows(problem: MpcProblem, nz: int, n_orow: int = 0):
@@ -164,6 +169,7 @@ def new_condensed_work(problem: MpcProblem, settings: CondensedSettings, obstacl
         C=cr.C,
         b=cr.b,
         rowcol=cr.rowcol,
+        rowspan=cr.rowspan,
         xf=z((N + 1, nx)),
         P=z((N + 1, nx, nx)),
         lam=z((N + 1, nx)),
