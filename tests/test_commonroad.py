@@ -625,6 +625,24 @@ def test_valid_solution_accepts_the_written_solution(name, tmp_path):
     assert ok
 
 
+@pytest.mark.skipif(sys.platform == "win32", reason="the checker runs in a forked child where the platform forks")
+def test_a_crash_of_commonroads_solution_checker_is_a_rejection_not_the_end_of_the_run(monkeypatch, tmp_path):
+    """CommonRoad's solution checker triangulates the road in compiled code, which crashed the
+    whole process on a generated map. It runs in a child process: its answer comes back as it
+    gave it, and a crash (here a segmentation fault of the child) is a rejection that says so."""
+    import os
+    import signal
+
+    import mpcdrive.adapters.commonroad as cr
+
+    imp = imported("USA_Lanker-1_1_T-1.xml")
+    monkeypatch.setattr(cr, "_check_solution", lambda *a: (True, "accepted"))
+    assert cr.solution_accepted(imp, tmp_path / "solution.xml") == (True, "accepted")
+    monkeypatch.setattr(cr, "_check_solution", lambda *a: os.kill(os.getpid(), signal.SIGSEGV))
+    ok, why = cr.solution_accepted(imp, tmp_path / "solution.xml")
+    assert not ok and "crashed (SIGSEGV)" in why
+
+
 def test_a_drive_on_the_st_plant_is_written_as_an_st_solution_commonroad_accepts(tmp_path):
     """On the ST plant the car slips: rebuilt as KS states its drive failed CommonRoad's KS
     feasibility check on 5 of the 14 files. The solution is the plant's own ST trajectory,
