@@ -228,3 +228,30 @@ def test_sweep_figures_have_labelled_axes_with_units_and_data():
     ax = fig.axes[0]
     assert ax.get_xlabel() == "initial_state.y_m" and ax.get_ylabel() == "RMS lateral error [m]"
     assert sorted(len(line.get_xdata()) for line in ax.get_lines()) == [4, 6]
+
+
+def _die_on_two(task):
+    """A task function whose process dies (a segmentation fault) on task 2 (top level: the
+    workers import it)."""
+    import os
+    import signal
+
+    if task == 2:
+        os.kill(os.getpid(), signal.SIGSEGV)
+    return {"task": task}
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="SIGSEGV by os.kill")
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_task_whose_process_dies_gets_its_row_and_the_others_go_on(workers):
+    """A crash in compiled code kills its worker and breaks the pool: the task it ran gets the
+    crash row (tried again alone first), every other task its own row."""
+    from mpcdrive.sweep.runner import SweepError, run_parallel
+
+    rows = run_parallel(_die_on_two, list(range(6)), workers=workers, crashed=lambda t, why: {"task": t, "died": why})
+    by = {r["task"]: r for r in rows}
+    assert sorted(by) == list(range(6)) and len(rows) == 6
+    assert "process died" in by[2]["died"]
+    assert all("died" not in r for t, r in by.items() if t != 2)
+    with pytest.raises(SweepError, match="worker process died"):
+        run_parallel(_die_on_two, list(range(4)), workers=2)

@@ -106,6 +106,17 @@ def _empty_row() -> dict:
     }
 
 
+def crashed_row(task: BatchTask, reason: str) -> dict:
+    """The row of a file whose run's process died (a crash in compiled code): an error naming it;
+    no run folder is kept."""
+    import shutil
+
+    row = _empty_row()
+    row.update(file=Path(task.file).name, error=f"the run crashed: {reason}")
+    shutil.rmtree(task.out_dir, ignore_errors=True)
+    return row
+
+
 def drive_file(task: BatchTask) -> dict:
     """Import, drive, write and check one file; its summary row (with ``file``). Never raises:
     a failure is the row's ``error``."""
@@ -370,7 +381,7 @@ def run_batch(
 
     out_dir = Path(out_dir)
     tasks = [BatchTask(str(f), str(out_dir / file_stem(f)), configure) for f in files]
-    got = run_parallel(drive_file, tasks, backend, workers, progress=progress)
+    got = run_parallel(drive_file, tasks, backend, workers, progress=progress, crashed=crashed_row)
     by_name = {r["file"]: r for r in got}
     rows = {Path(f).name: {k: v for k, v in by_name[Path(f).name].items() if k != "file"} for f in files}
     write_json(out_dir / "summary.json", rows)

@@ -350,29 +350,79 @@ def _signals_deferred():
         raise KeyboardInterrupt
 
 
-def _run_local(tasks, workers: int, progress: Progress | None, fn=run_task) -> list[dict]:
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-
-    if workers == 1 or len(tasks) == 1:
+def _run_local(tasks, workers: int, progress: Progress | None, fn=run_task, crashed=None) -> list[dict]:
+    """``fn(task)`` for every task on a pool of ``workers`` processes (inline for one worker or
+    one task unless ``crashed`` is given). At most ``workers`` tasks are in flight, so a worker
+    that dies (a crash in compiled code: a segmentation fault) breaks the pool with only those
+    tasks in it: each is tried again alone, in a pool of its own, and one that dies alone gets
+    the row ``crashed(task, reason)`` (without ``crashed`` the pool's error is raised); the other
+    tasks go on in a new pool."""
+    if (workers == 1 or len(tasks) == 1) and crashed is None:
         return _run_inline(tasks, progress, fn)
-    before = set(multiprocessing.active_children())
     rows: list[dict] = []
+    queue, alone = list(tasks), []
+    while queue or alone:
+        if alone:  # a task that was in flight when a worker died: alone, in a pool of its own
+            task = alone.pop(0)
+            broken, _ = _pool_rows([task], 1, fn, rows, progress, len(tasks))
+            if broken:
+                if crashed is None:
+                    raise SweepError("a worker process died (a crash in compiled code?) running a task")
+                rows.append(crashed(task, "its process died (a crash in compiled code, e.g. a segmentation fault)"))
+                if progress is not None:
+                    progress(len(rows), len(tasks), rows[-1])
+            continue
+        broken, started = _pool_rows(queue, workers, fn, rows, progress, len(tasks))
+        # those in flight when a worker died are tried alone; those never started, in a new pool
+        queue = queue[started:]
+        alone += broken
+    return rows
+
+
+def _pool_rows(tasks, workers: int, fn, rows: list, progress: Progress | None, total: int) -> list:
+    """Run ``tasks`` in order on a new pool of ``workers`` processes, at most ``workers`` in
+    flight, appending each result to ``rows``; returns (the tasks in flight when a worker died,
+    else []; how many tasks were started). A pool a worker died in is given up: the tasks after
+    those in flight are not started."""
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
+
+    before = set(multiprocessing.active_children())
+    todo = list(tasks)
+    broken: list = []
+    started = 0
     with _signals_raise():
         ex = ProcessPoolExecutor(max_workers=workers, mp_context=_mp_context(), initializer=_ignore_sigint)
         try:
-            with _signals_deferred():  # workers start inside submit(): never leave one half-started
-                pending = {ex.submit(fn, t) for t in tasks}
-            while pending:
-                done, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+            running: dict = {}
+            while todo or running:
+                while todo and len(running) < workers and not broken:
+                    task = todo.pop(0)
+                    with _signals_deferred():  # workers start inside submit(): never leave one half-started
+                        running[ex.submit(fn, task)] = task
+                    started += 1
+                if not running:
+                    break
+                done, _ = wait(set(running), timeout=0.5, return_when=FIRST_COMPLETED)
                 for f in done:
-                    rows.append(f.result())
+                    task = running.pop(f)
+                    try:
+                        rows.append(f.result())
+                    except BrokenProcessPool:
+                        broken.append(task)
+                        continue
                     if progress is not None:
-                        progress(len(rows), len(tasks), rows[-1])
+                        progress(len(rows), total, rows[-1])
+                if broken and not running:
+                    break
         except BaseException:  # Ctrl-C or an error: stop the workers now, not after their runs
             _stop_pool(ex, before)
             raise
-        ex.shutdown(wait=True)
-    return rows
+        if broken:
+            _stop_pool(ex, before)
+        else:
+            ex.shutdown(wait=True)
+    return broken, started
 
 
 def _stop_pool(ex, before: set) -> None:
@@ -455,9 +505,12 @@ def run_parallel(
     workers: int | None = None,
     address: str | None = None,
     progress: Progress | None = None,
+    crashed: Callable | None = None,
 ) -> list:
     """``fn(task)`` for every task, in completion order, on ``backend`` (as :func:`run_sweep`);
-    ``fn`` must be a top-level function that never raises (its result reports an error)."""
+    ``fn`` must be a top-level function that never raises (its result reports an error). With
+    ``crashed`` every task runs in a worker process (one worker too), and a task whose process
+    dies gets the row ``crashed(task, reason)``: the others go on (:func:`_run_local`)."""
     if backend not in ("local", "ray"):
         raise SweepError(f"--backend must be 'local' or 'ray', got {backend!r}")
     if address is not None and backend != "ray":
@@ -468,4 +521,4 @@ def run_parallel(
         raise SweepError("--workers is only for --backend local (Ray uses the cluster's CPUs)")
     if backend == "ray":
         return _run_ray(tasks, address, progress, fn)
-    return _run_local(tasks, workers or os.cpu_count() or 1, progress, fn)
+    return _run_local(tasks, workers or os.cpu_count() or 1, progress, fn, crashed)
