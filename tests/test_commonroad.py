@@ -633,7 +633,7 @@ def test_a_crash_of_commonroads_solution_checker_is_a_rejection_not_the_end_of_t
     import os
     import signal
 
-    import mpcdrive.adapters.commonroad as cr
+    import mpcdrive.adapters.commonroad_solution as cr
 
     imp = imported("USA_Lanker-1_1_T-1.xml")
     monkeypatch.setattr(cr, "_check_solution", lambda *a: (True, "accepted"))

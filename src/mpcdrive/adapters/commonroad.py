@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import math
 import re
-import signal
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -57,6 +56,7 @@ from .commonroad_goal import (
     road_ends_m,
 )
 from .commonroad_route import drivable_lanelets, lane_strips, point, route_edges, route_ends, scalar
+from .commonroad_solution import solution_accepted
 
 PRESET = "commonroad_ford_escort"
 #: the lanes beside the route (each lane of the carriageway, the first oncoming lane) are the
@@ -723,60 +723,6 @@ def _first(n: int, failed) -> int:
     none is found state by state, the first state: counted as failing from the start, which
     fails the verdict up to the goal as well, as the checker's own verdict does)."""
     return next((k for k in range(n) if failed(k)), 0)
-
-
-def solution_accepted(imp: CommonRoadImport, solution_file: Path) -> tuple[bool, str]:
-    """(accepted, reason): CommonRoad's own solution checker
-    (``commonroad_dc.feasibility.solution_checker.valid_solution``) on the written solution file.
-
-    The checker builds the road's boundary in compiled code that can crash the process on some
-    maps (a segmentation fault triangulating a generated road with a bend): where the platform
-    forks, it runs in a child process, and a crash is a rejection that says so, the run and a
-    batch going on."""
-    import multiprocessing as mp
-
-    if "fork" not in mp.get_all_start_methods():
-        return _check_solution(imp.scenario, imp.problems, str(solution_file))
-    ctx = mp.get_context("fork")
-    recv, send = ctx.Pipe(duplex=False)
-    child = ctx.Process(target=_check_solution_child, args=(imp.scenario, imp.problems, str(solution_file), send))
-    try:
-        child.start()
-    except (AssertionError, OSError):  # a daemonic process cannot have children; no fork left
-        recv.close()
-        send.close()
-        return _check_solution(imp.scenario, imp.problems, str(solution_file))
-    send.close()
-    try:
-        got = recv.recv()
-    except EOFError:  # the child died without answering
-        got = None
-    finally:
-        recv.close()
-        child.join()
-    if got is None:
-        code = child.exitcode
-        how = signal.Signals(-code).name if code is not None and code < 0 else f"exit code {code}"
-        return False, f"CommonRoad's solution checker crashed ({how}) on this scenario: not accepted"
-    return got
-
-
-def _check_solution(scenario, problems, solution_file: str) -> tuple[bool, str]:
-    from commonroad.common.solution import CommonRoadSolutionReader
-    from commonroad_dc.feasibility.solution_checker import valid_solution
-
-    try:
-        sol = CommonRoadSolutionReader.open(solution_file)
-        ok, _ = valid_solution(scenario, problems, sol)
-    except Exception as e:  # the checker raises SolutionCheckerException (and others) with its reason
-        return False, " ".join(f"{type(e).__name__}: {e}".split())[:300]
-    return bool(ok), "accepted" if ok else "rejected"
-
-
-def _check_solution_child(scenario, problems, solution_file: str, send) -> None:
-    """:func:`_check_solution` in a forked child, its answer sent back."""
-    send.send(_check_solution(scenario, problems, solution_file))
-    send.close()
 
 
 def with_vehicle(imp: CommonRoadImport, vehicle: str | None = None, plant: str | None = None) -> CommonRoadImport:
