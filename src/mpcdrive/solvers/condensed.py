@@ -260,14 +260,16 @@ def soft_solve(
     ``rgrp[rr]`` (the lane rows of step k to group k, slack weights ``w2l`` quadratic, ``w1l``
     linear; the obstacle rows of step k to group N + k, weights ``w2o``, ``w1o``), one slack per
     group shared by its rows, as in ``ocp.qp``. Without soft rows (``m_soft == m``) that is one
-    solve of the hard QP. First the inputs alone, soft rows hard: if that
-    solves and no group's multipliers sum to more than its slack's l1 weight, zero slacks satisfy
-    the optimality conditions of the soft problem (exact penalty), so it is its solution. Else
-    slacks are given to the groups flagged in ``kpos`` (1 = slack; the caller flags those the
-    linearization violates) and every group whose multipliers exceed the weight, each with the
-    groups with rows after it (:func:`_flag_later_groups`), and solved again until no group
-    without a slack exceeds it (or with a slack on every group that has rows: the full problem). The slacks' sign rows follow row m (``rowcol`` names their single
-    nonzero; the other rows written per step are marked dense there). z[:nzu] holds the inputs.
+    solve of the hard QP. First the inputs alone, soft rows hard: if that solves and no group's
+    multipliers sum to more than its slack's l1 weight, zero slacks satisfy the optimality
+    conditions of the soft problem (exact penalty), so it is its solution. Else slacks are given
+    to the groups flagged in ``kpos`` (1 = slack; the caller flags those the linearization
+    violates) and every group whose multipliers exceed the weight, each with the groups with rows
+    after it (:func:`_flag_later_groups`), and solved again until no group without a slack
+    exceeds it (or with a slack on every group that has rows: the full problem). The slacks' sign
+    rows follow row m (``rowcol`` names their single nonzero; the other rows written per step are
+    marked dense there, and ``rowspan`` gets each soft row's slack column). z[:nzu] holds the
+    inputs.
     ``soft``: there may be soft rows; a constant False leaves the code of the slacks out (then
     ``m_soft`` must be ``m``). ``kprev`` (2N): the groups that had a slack in the last solve
     that needed slacks (:func:`shift_soft_guess` moves them on a step each control step); when
@@ -341,30 +343,9 @@ def soft_solve(
         # the rows active at the end of the solve before (as a guess: the same rows, slacks on
         # more groups) are added first
         code, it2 = gi_solve(
-            H,
-            g,
-            C,
-            b,
-            m + nk,
-            n2,
-            z,
-            lam,
-            active,
-            isact,
-            rowcol,
-            rowspan,
-            L,
-            J,
-            Rq,
-            d,
-            zdir,
-            r,
-            uq,
-            sq,
-            rown,
-            max_iter,
-            tol,
-        )
+            H, g, C, b, m + nk, n2, z, lam, active, isact, rowcol, rowspan, L, J, Rq, d, zdir, r, uq, sq, rown,
+            max_iter, tol,
+        )  # fmt: skip
         iters += it2
         if code != 0:
             if full:
@@ -722,14 +703,14 @@ class CondensedWork:
     slacks), ``mq`` rows of ``C z >= b`` at most, the first ``m_const`` constant (the u_0 rate
     rows from ``r_rate0``), ``rowcol`` the single nonzero column of each constant row (-1:
     dense), ``rowspan`` (mq, 2) where each row may be nonzero (its leading columns, one more
-    column: :func:`~mpcdrive.solvers.dense_qp.gi_solve`); ``gamma``: the step adds state, road or obstacle rows; ``riccati``: try the
-    unconstrained minimizer first; ``max_iter`` active-set changes at most, ``tol`` the
-    feasibility tolerance of a row (scaled by its norm). The rest is work space: the condensing
-    (``xf``, ``P``, ``lam``, ``Vb``, ``S``, ``T2``, ``Gam``), the QP (``H``, ``g``, the solution
-    ``z``) and the active-set method (``L``, ``J``, ``Rq``, ``d``, ``zdir``, ``r``, ``uq``,
-    ``sq``, ``rown``, ``lamq``, ``active``, ``isact``, ``rgrp``, ``kpos``, ``gsum``; ``kprev``
-    the slack groups of the last solve, kept for the next), the
-    Riccati recursion (``Kg``, ``kf``, ``PA``, ``Mg``, ``Gg``, ``qv``)."""
+    column: :func:`~mpcdrive.solvers.dense_qp.gi_solve`); ``gamma``: the step adds state, road
+    or obstacle rows; ``riccati``: try the unconstrained minimizer first; ``max_iter``
+    active-set changes at most, ``tol`` the feasibility tolerance of a row (scaled by its norm).
+    The rest is work space: the condensing (``xf``, ``P``, ``lam``, ``Vb``, ``S``, ``T2``,
+    ``Gam``), the QP (``H``, ``g``, the solution ``z``) and the active-set method (``L``, ``J``,
+    ``Rq``, ``d``, ``zdir``, ``r``, ``uq``, ``sq``, ``rown``, ``lamq``, ``active``, ``isact``,
+    ``rgrp``, ``kpos``, ``gsum``; ``kprev`` the slack groups of the last solve, kept for the
+    next), the Riccati recursion (``Kg``, ``kf``, ``PA``, ``Mg``, ``Gg``, ``qv``)."""
 
     nz: int
     mq: int

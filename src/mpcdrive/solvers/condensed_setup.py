@@ -101,7 +101,8 @@ def constant_rows(problem: MpcProblem, nz: int, n_orow: int = 0) -> ConstantRows
         b[: len(crows)] = rhs
     rowcol = np.full(mq, -1, dtype=np.int64)
     rowcol[: len(crows)] = single_nonzero_columns(C[: len(crows)])
-    rowspan = np.column_stack([np.full(mq, nz), np.full(mq, -1)]).astype(np.int64)  # the step's rows: written with them
+    rowspan = np.full((mq, 2), -1, dtype=np.int64)
+    rowspan[:, 0] = nz  # whole rows; the rows a step writes get their spans with them
     rowspan[: len(crows)] = row_spans(C[: len(crows)])
     return ConstantRows(C, b, rowcol, len(crows), r_rate0, n_var > 0, rowspan)
 

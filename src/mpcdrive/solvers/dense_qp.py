@@ -113,6 +113,15 @@ def _givens(a, b):
     return a / h, b / h, h
 
 
+@subroutine
+def _span(rowspan, i, n):
+    """(the leading columns to read, the one more column or -1) of row ``i`` read whole, within
+    ``n`` columns (a ``rowspan`` of :func:`gi_solve`: the more column counts only past the lead)."""
+    e = min(rowspan[i, 0], n)
+    jx = rowspan[i, 1]
+    return e, (jx if e <= jx < n else -1)
+
+
 @subroutine(fastmath=_FM)
 def gi_solve(
     H, g, C, b, m, n, z, lam, active, isact, rowcol, rowspan, L, Jt, R, d, zdir, r, u, s, rownorm, max_iter, tol
@@ -153,10 +162,10 @@ def gi_solve(
             t = C[i, j1] * C[i, j1]
         else:
             t = 0.0
-            for j in range(min(rowspan[i, 0], n)):
+            e, jx = _span(rowspan, i, n)
+            for j in range(e):
                 t += C[i, j] * C[i, j]
-            jx = rowspan[i, 1]
-            if 0 <= jx < n and jx >= rowspan[i, 0]:
+            if jx >= 0:
                 t += C[i, jx] * C[i, jx]
         rownorm[i] = math.sqrt(t)
         if not (math.isfinite(t) and math.isfinite(b[i])):
@@ -180,10 +189,10 @@ def gi_solve(
                 t = C[i, j1] * z[j1] - b[i]
             else:
                 t = 0.0
-                for j in range(min(rowspan[i, 0], n)):
+                e, jx = _span(rowspan, i, n)
+                for j in range(e):
                     t += C[i, j] * z[j]
-                jx = rowspan[i, 1]
-                if 0 <= jx < n and jx >= rowspan[i, 0]:
+                if jx >= 0:
                     t += C[i, jx] * z[jx]
                 t -= b[i]
             s[i] = t
@@ -220,14 +229,12 @@ def gi_solve(
                     d[j] = t
                     dd += t * t
             else:
-                ep = min(rowspan[p, 0], n)
-                jx = rowspan[p, 1]
-                extra = 0 <= jx < n and jx >= ep
+                ep, jx = _span(rowspan, p, n)
                 for j in range(n):
                     t = 0.0
                     for i in range(ep):
                         t += Jt[j, i] * C[p, i]
-                    if extra:
+                    if jx >= 0:
                         t += Jt[j, jx] * C[p, jx]
                     d[j] = t
                     dd += t * t
@@ -333,10 +340,10 @@ def gi_solve(
                 sp = C[p, jp] * z[jp] - b[p]
             else:
                 sp = 0.0
-                for j in range(min(rowspan[p, 0], n)):
+                ep, jx = _span(rowspan, p, n)
+                for j in range(ep):
                     sp += C[p, j] * z[j]
-                jx = rowspan[p, 1]
-                if 0 <= jx < n and jx >= rowspan[p, 0]:
+                if jx >= 0:
                     sp += C[p, jx] * z[jx]
                 sp -= b[p]
     for k in range(q):
