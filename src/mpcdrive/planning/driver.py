@@ -262,8 +262,7 @@ class PlannedMpc:
             if getattr(mpc, "avoidance", None) is not None:
                 # the obstacle rows keep the maneuver's side of each obstacle it checked
                 idx = np.clip(np.rint(tau[1:] / self.config.dt_s).astype(np.int64), 0, len(m.t_s) - 1)
-                rel = m.relations[:, idx].astype(np.int64)
-                mpc.set_obstacle_relations(dict(zip(m.obstacle_index.tolist(), rel)))
+                mpc.set_obstacle_relations(dict(zip(m.obstacle_index.tolist(), m.relations[:, idx])))
             band = tuple(sorted(set(m.lanes) | self._lanes_now(s_m, e_y))) if self.road.lanes else ()
             if band and band != self._band:
                 mpc.set_road(self.road.band(band))
