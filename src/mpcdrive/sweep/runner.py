@@ -379,7 +379,7 @@ def _run_local(tasks, workers: int, progress: Progress | None, fn=run_task, cras
     return rows
 
 
-def _pool_rows(tasks, workers: int, fn, rows: list, progress: Progress | None, total: int) -> list:
+def _pool_rows(tasks, workers: int, fn, rows: list, progress: Progress | None, total: int) -> tuple[list, int]:
     """Run ``tasks`` in order on a new pool of ``workers`` processes, at most ``workers`` in
     flight, appending each result to ``rows``; returns (the tasks in flight when a worker died,
     else []; how many tasks were started). A pool a worker died in is given up: the tasks after
@@ -413,8 +413,6 @@ def _pool_rows(tasks, workers: int, fn, rows: list, progress: Progress | None, t
                         continue
                     if progress is not None:
                         progress(len(rows), total, rows[-1])
-                if broken and not running:
-                    break
         except BaseException:  # Ctrl-C or an error: stop the workers now, not after their runs
             _stop_pool(ex, before)
             raise
