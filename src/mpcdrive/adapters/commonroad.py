@@ -57,6 +57,7 @@ from .commonroad_goal import (
 )
 from .commonroad_route import drivable_lanelets, lane_strips, point, route_edges, route_ends, scalar
 from .commonroad_solution import solution_accepted
+from .commonroad_traffic import lane_trajectories
 
 PRESET = "commonroad_ford_escort"
 #: the lanes beside the route (each lane of the carriageway, the first oncoming lane) are the
@@ -194,26 +195,6 @@ def _obstacle_entry(o, dt: float) -> dict:
     return entry
 
 
-def _predict_initial_only(scenario, entries: list[dict], dt: float, duration_s: float) -> None:
-    """Give each moving vehicle known only by its initial state (an interactive scenario's
-    traffic, meant to be driven by a traffic simulator) a trajectory: its speed held along its
-    lane (:func:`~.commonroad_traffic.lane_trajectory`). Left standing, a car entering a
-    single-lane ring at 7 m/s blocks it for the whole drive. CommonRoad's checkers judge the
-    drive against the file as it is (such a car exists at its initial time only)."""
-    from commonroad.scenario.obstacle import DynamicObstacle
-
-    from .commonroad_traffic import lane_map, lane_trajectory
-
-    lanes = None
-    for o, entry in zip(scenario.obstacles, entries):
-        if "trajectory" in entry or not isinstance(o, DynamicObstacle):
-            continue
-        lanes = lanes or lane_map(scenario)
-        traj = lane_trajectory(o, lanes, dt, duration_s)
-        if traj is not None:  # present from its start on, its last pose held past the drive's
-            entry["trajectory"] = traj
-
-
 def _road(net, route, line: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(s, left, right, neighbours) of the road along the centre line ``line``: the route's
     lanelets edge by edge (a lane that narrows is followed as it narrows; measured on into the
@@ -319,7 +300,14 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
     v_max = max(plan.v_cruise_mps, v0) + 2.0
     a_lim = accel_limit(v_max)
     obstacles = [_obstacle_entry(o, dt) for o in scenario.obstacles]
-    _predict_initial_only(scenario, obstacles, dt, plan.duration_s)
+    # a moving vehicle known by its initial state only (an interactive scenario's traffic) drives
+    # on along its lane: left standing, a car entering a single-lane ring at 7 m/s blocked the
+    # drive. Present from its start on, its last pose held past the drive; CommonRoad's checks
+    # judge against the file as it is (such a car exists at its initial time only)
+    driven = lane_trajectories(scenario, dt, plan.duration_s)
+    for o, entry in zip(scenario.obstacles, obstacles):
+        if o.obstacle_id in driven:
+            entry["trajectory"] = driven[o.obstacle_id]
     spec = _validated(
         {
             # named after the file the user passed (a file's internal benchmark id can be another's)

@@ -60,32 +60,39 @@ def lane_map(scenario):
     return LaneMap(lanes)
 
 
-def lane_trajectory(o, lanes, dt_s: float, duration_s: float) -> dict | None:
-    """The trajectory entry (``t_s``, ``points``, ``yaw_deg``) of a CommonRoad vehicle known by
-    its initial state only (an interactive scenario's traffic, which a traffic simulator would
-    drive): its initial speed held along its lane (``lanes``, :func:`lane_map`; straight on
-    where it is on none) every ``dt_s`` [s] over ``duration_s`` [s], as
-    :class:`~mpcdrive.prediction.LanePredictor` predicts a car. None for a car standing (below
-    the predictor's least speed), which stays where it is."""
+def lane_trajectories(scenario, dt_s: float, duration_s: float) -> dict[int, dict]:
+    """The trajectory entries (``t_s``, ``points``, ``yaw_deg``), by obstacle id, of the moving
+    vehicles of ``scenario`` known by their initial state only (an interactive scenario's
+    traffic, which a traffic simulator would drive): each one's initial speed held along its lane
+    (:func:`lane_map`; straight on where it is on none) every ``dt_s`` [s] over ``duration_s``
+    [s], as :class:`~mpcdrive.prediction.LanePredictor` predicts a car. A car standing (below the
+    predictor's least speed) has none: it stays where it is."""
     from ..prediction import LanePredictor
     from ..prediction.predictor import Observation, PredictionConfig
 
-    st = o.initial_state
-    v = float(getattr(st, "velocity", 0.0) or 0.0)
     horizon = max(float(duration_s), dt_s)
     cfg = PredictionConfig(horizon_s=horizon, dt_s=dt_s, bands_s=(horizon,))
-    if not v >= cfg.min_speed_mps:
-        return None
-    x, y = (float(c) for c in np.asarray(st.position, float)[:2])
-    yaw = float(getattr(st, "orientation", 0.0) or 0.0)
-    pred = LanePredictor(lanes, cfg)
-    P, yaws = pred.path(Observation(0.0, (x, y, yaw), v, None))  # type: ignore[arg-type]
-    t0 = float(st.time_step) * dt_s
-    return {
-        "t_s": [t0 + float(t) for t in pred.taus_s],
-        "points": [(float(a), float(b)) for a, b in P],
-        "yaw_deg": [math.degrees(float(h)) for h in yaws],
-    }
+    moving = [
+        o
+        for o in scenario.dynamic_obstacles
+        if o.prediction is None and float(getattr(o.initial_state, "velocity", 0.0) or 0.0) >= cfg.min_speed_mps
+    ]
+    if not moving:
+        return {}
+    pred = LanePredictor(lane_map(scenario), cfg)
+    out = {}
+    for o in moving:
+        st = o.initial_state
+        x, y = (float(c) for c in np.asarray(st.position, float)[:2])
+        yaw = float(getattr(st, "orientation", 0.0) or 0.0)
+        P, yaws = pred.path(Observation(0.0, (x, y, yaw), float(st.velocity), None))  # type: ignore[arg-type]
+        t0 = float(st.time_step) * dt_s
+        out[o.obstacle_id] = {
+            "t_s": [t0 + float(t) for t in pred.taus_s],
+            "points": [(float(a), float(b)) for a, b in P],
+            "yaw_deg": [math.degrees(float(h)) for h in yaws],
+        }
+    return out
 
 
 def with_traffic(imp, traffic: str | None = None, prediction: str | None = None, settings=None):
