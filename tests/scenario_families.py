@@ -251,6 +251,19 @@ def _straight_lanes(length: float, width: float, n_lanes: int = 2, pieces: int =
     return out
 
 
+def _single_lane(parts, width: float) -> list:
+    """A single lane ``width`` wide along the polylines ``parts`` (points, tangents), a lanelet
+    each (ids 1, 2, ...), each the next one's predecessor, solid edges."""
+    edges = dict(line_marking_left_vertices=LineMarking.SOLID, line_marking_right_vertices=LineMarking.SOLID)
+    out = []
+    for k, part in enumerate(parts):
+        lid = k + 1
+        pred = [lid - 1] if k > 0 else []
+        succ = [lid + 1] if k < len(parts) - 1 else []
+        out.append(_lanelet(lid, part, width, predecessor=pred, successor=succ, **edges))
+    return out
+
+
 def _smooth01(u):
     """0 -> 1 with zero slope at both ends (half a cosine), ``u`` clipped to [0, 1]."""
     u = np.clip(u, 0.0, 1.0)
@@ -447,7 +460,6 @@ def make_road_end(seed: int):
     total = x0 + v0 * rng.uniform(4.5, 7.0) + 0.5 * v0 * v0 / 3.0  # the road's length along its centre line
     bend = rng.random() < 0.6
     last = rng.uniform(20.0, 35.0)
-    edges = dict(line_marking_left_vertices=LineMarking.SOLID, line_marking_right_vertices=LineMarking.SOLID)
     if bend:
         radius = rng.uniform(40.0, 80.0)
         angle = rng.choice([-1.0, 1.0]) * rng.uniform(0.3, 0.6)
@@ -462,12 +474,7 @@ def make_road_end(seed: int):
         heading = 0.0
         end = np.array([total, 0.0])
         parts = [_line((0.0, 0.0), (total - last, 0.0)), _line((total - last, 0.0), end)]
-    lanelets = []
-    for k, part in enumerate(parts):
-        lid = k + 1
-        pred = [lid - 1] if k > 0 else []
-        succ = [lid + 1] if k < len(parts) - 1 else []
-        lanelets.append(_lanelet(lid, part, w, predecessor=pred, successor=succ, **edges))
+    lanelets = _single_lane(parts, w)
     g_len = rng.uniform(8.0, 15.0)
     far = rng.uniform(0.5, 2.0)  # the region's far edge before the road's end
     u = np.array([math.cos(heading), math.sin(heading)])
@@ -625,15 +632,9 @@ def make_interactive_lead(seed: int):
     t1 = (s_g + CAR_L + 2.0 - x_l) / v_l
     window = (t1 + 13.0 / v_l + 0.2, t1 + 13.0 / v_l + 0.2 + min(1.0, g_len / v_l - 13.0 / v_l - 0.6))
     total = s_g + g_len + 80.0
-    edges = dict(line_marking_left_vertices=LineMarking.SOLID, line_marking_right_vertices=LineMarking.SOLID)
     cut = s_g + 0.5 * g_len + rng.uniform(5.0, 20.0)  # where the two lanelets meet
     parts = [_line((0.0, 0.0), (cut, 0.0)), _line((cut, 0.0), (total, 0.0))]
-    lanelets = []
-    for k, part in enumerate(parts):
-        lid = k + 1
-        pred = [lid - 1] if k > 0 else []
-        succ = [lid + 1] if k < len(parts) - 1 else []
-        lanelets.append(_lanelet(lid, part, w, predecessor=pred, successor=succ, **edges))
+    lanelets = _single_lane(parts, w)
     sc = _scenario("InteractiveLead", seed, lanelets, [_initial_only(100, x_l, 0.0, 0.0, v_l)])
     pps = _problem(_initial(x0, 0.0, 0.0, v0), (s_g + 0.5 * g_len, 0.0), 0.0, g_len, w - 0.3, window)
     return sc, pps
