@@ -156,6 +156,8 @@ def test_checker_catches_a_colliding_and_an_off_road_trajectory():
 def test_solution_file_round_trips(tmp_path):
     from commonroad.common.solution import CommonRoadSolutionReader
 
+    from mpcdrive.adapters.commonroad import solution_trajectory
+
     imp, res, _ = drive("ESP_Toledo-10_1_T-1.xml.gz")
     rep = check_drive(imp, res)
     path = write_solution(imp, res, tmp_path, rep.goal_step)
@@ -166,7 +168,9 @@ def test_solution_file_round_trips(tmp_path):
     assert len(states) == rep.goal_step + 1
     k = len(states) - 1
     assert states[k].position == pytest.approx(res.x[k, :2], abs=1e-6)
-    assert states[k].orientation == pytest.approx(res.x[k, 2], abs=1e-6)
+    # the rear axle's heading: on a kinematic plant the yaw, up to the chords' second-order error
+    assert states[k].orientation == pytest.approx(solution_trajectory(imp, res).state_list[k].orientation, abs=1e-6)
+    assert states[k].orientation == pytest.approx(res.x[k, 2], abs=1e-3)
     assert states[k].velocity == pytest.approx(res.x[k, 3], rel=1e-2)  # rear-axle speed, v cos(beta)
 
 
@@ -663,6 +667,39 @@ def test_a_drive_on_the_st_plant_is_written_as_an_st_solution_commonroad_accepts
     assert sol.planning_problem_solutions[0].vehicle_model == VehicleModel.ST
     ok, _ = valid_solution(imp.scenario, imp.problems, sol)
     assert ok
+
+
+def test_a_drive_on_the_mb_plant_is_a_ks_solution_that_moves_the_rear_axle_where_its_orientation_points(tmp_path):
+    """DEU_Flensburg-81's first 2 s on the MB plant: at 25 m/s in a bend, braking, the rear tyres
+    slip (the rear axle travels up to 0.02 rad off the yaw). Written with the yaw as the KS
+    orientation the drive failed CommonRoad's KS feasibility check at 0.6 s (the rear axle moved
+    2.2 cm off where a kinematic step can reach, 2 cm allowed); the KS state holds the rear axle's
+    direction of travel, and CommonRoad finds the drive feasible; the solution file holds it."""
+    from commonroad.common.solution import CommonRoadSolutionReader, VehicleModel
+    from commonroad_dc.feasibility.feasibility_checker import trajectory_feasibility
+    from commonroad_dc.feasibility.vehicle_dynamics import VehicleDynamics, VehicleType
+
+    from mpcdrive.adapters.commonroad import solution_model, solution_trajectory, with_vehicle
+    from mpcdrive.adapters.commonroad_vehicles import commonroad_plant
+
+    imp = with_vehicle(load_commonroad(DIR / "DEU_Flensburg-81_1_T-1.xml.gz"), "bmw_320i", "mb")
+    imp = replace(imp, spec=imp.spec.model_copy(update={"duration_s": 2.0}))
+    res = run_experiment(build_experiment(imp.spec, plant_factory=commonroad_plant))
+    assert solution_model(imp, res) == "KS"
+    traj = solution_trajectory(imp, res)
+    slip = np.array([s.orientation for s in traj.state_list]) - res.x[:, 2]
+    assert 0.01 < np.abs(slip).max() < 0.05
+    rep = check_drive(imp, res, whole_drive=True)
+    assert rep.feasible and rep.collision_free and rep.road_compliant, rep.line()
+    dyn = VehicleDynamics.KS(VehicleType[imp.vehicle_type])
+    for st, yaw in zip(traj.state_list, res.x[:, 2]):
+        st.orientation = float(yaw)
+    assert not trajectory_feasibility(traj, dyn, imp.spec.dt_s)[0]  # the body's yaw as orientation
+    path = write_solution(imp, res, tmp_path)
+    sol = CommonRoadSolutionReader.open(str(path))
+    written = sol.planning_problem_solutions[0]
+    assert written.vehicle_model == VehicleModel.KS
+    assert [s.orientation for s in written.trajectory.state_list] == pytest.approx(list(res.x[:, 2] + slip), abs=1e-4)
 
 
 # -- the batch command ------------------------------------------------------------------------------

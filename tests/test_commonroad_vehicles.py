@@ -564,3 +564,33 @@ def test_st_plant_settles_onto_the_lane_without_a_limit_cycle():
     assert res.v_mps.min() > PlannerConfig().creep_mps and res.v_mps.max() < 10.0
     assert np.all(np.diff(res.v_mps[res.t_s >= 4.0]) > -0.05) and res.v_mps[-1] > 8.5
     assert compute_metrics(res).solver_failures == 0
+
+
+@pytest.mark.parametrize("kind", ["ks", "st", "mb"])
+def test_the_rear_axle_heading_of_a_drive_is_the_yaw_plus_the_rear_axles_slip(kind):
+    """In a steady bend at 25 m/s (3.5 m/s^2) the rear axle dragged along the driven positions
+    (what a KS state of the drive holds as orientation) points where the plant's own rear axle
+    travels: the yaw plus its slip angle ``atan2(v_y - lr r, v_x)`` (several hundredths of a rad
+    on ST and MB, 0 on KS)."""
+    from mpcdrive.models.kinematic import rear_axle_heading
+
+    plant = CommonRoadPlant(kind, "bmw_320i")
+    lr = float(plant.p.b)
+    xp = plant.initial_state([0.0, 0.0, 0.0, 25.0])
+    states = [xp]
+    for _ in range(300):
+        xp = plant.step(xp, [0.016, 0.0], 0.01)
+        states.append(xp)
+    P = np.array(states)
+    obs = plant.observe(P)
+    heading = rear_axle_heading(obs[:, :2], obs[0, 2], lr)
+    if kind == "ks":
+        slip = 0.0
+    else:
+        vx, vy = (
+            (P[-1, 3] * math.cos(P[-1, 6]), P[-1, 3] * math.sin(P[-1, 6])) if kind == "st" else (P[-1, 3], P[-1, 10])
+        )
+        slip = math.atan2(vy - lr * P[-1, 5], vx)
+        assert abs(slip) > 0.01
+    assert 3.0 < obs[-1, 3] * (obs[-1, 2] - obs[-2, 2]) / 0.01 < 4.0
+    assert heading[-1] - obs[-1, 2] == pytest.approx(slip, abs=1e-3)

@@ -371,3 +371,33 @@ def test_kinematic_params_properties():
     assert p.lq == pytest.approx(0.6)
     with pytest.raises(ValueError):
         KinematicBicycle3(v_mps=float("nan"))
+
+
+def test_rear_axle_heading_of_a_kinematic_drive_is_its_yaw():
+    """A kinematic bicycle's rear axle rolls the way the body points: dragged along the centre of
+    gravity's path, the tractrix point lr behind it keeps the yaw (turning both ways, speeding up,
+    stopping and standing; 10 ms steps: the chord's error is second order)."""
+    p = KinematicParams(lf_m=1.2, lr_m=1.4)
+    model = KinematicBicycle4(p)
+    x = np.array([3.0, -2.0, 0.7, 12.0])
+    xs = [x]
+    for k in range(900):
+        t = 0.01 * k
+        u = np.array([0.25 * math.sin(0.8 * t), -6.0 if t > 6.0 else 0.3])
+        x = discrete_step(model, x, u, 0.01, "rk4")
+        x[3] = max(x[3], 0.0)
+        xs.append(x)
+    X = np.array(xs)
+    assert X[-1, 3] == 0.0 and abs(X[:, 2].max() - X[:, 2].min()) > 1.0  # it turned, and it stopped
+    theta = _kin.rear_axle_heading(X[:, :2], X[0, 2], p.lr_m)
+    assert np.abs(theta - X[:, 2]).max() < 1e-3
+    # standing still (repeated positions) holds the heading
+    held = _kin.rear_axle_heading(np.repeat(X[-1:, :2], 5, axis=0), 0.3, p.lr_m)
+    assert held == pytest.approx(np.full(5, 0.3))
+
+
+def test_rear_axle_heading_refuses_bad_input():
+    with pytest.raises(ValueError, match="positions must be"):
+        _kin.rear_axle_heading(np.zeros((3, 3)), 0.0, 1.0)
+    with pytest.raises(ValueError, match="lr_m must be a positive length"):
+        _kin.rear_axle_heading(np.zeros((3, 2)), 0.0, 0.0)

@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..models.kinematic import rear_axle_heading
 from ..models.presets import PRESETS
 from ..scenarios.schema import ScenarioSpec
 from ..sim.metrics import CommonRoadCheck, WholeDriveCheck
@@ -437,10 +438,16 @@ def solution_trajectory(imp: CommonRoadImport, result, last_step: int | None = N
     (default: all).
 
     Positions are the centre of gravity (CommonRoad's KS states are given there; its model moves
-    the rear axle, ``lr`` behind), the velocity is the rear axle's, ``v cos(beta)`` with the slip
-    angle ``beta = atan(lr / L tan(delta))``, and the steering angle of state k is the mean of the
-    commands held before and after it (KS steers with a bounded rate, our plant holds each command
-    for a step: the ramp through the means covers the same mean steering per step)."""
+    the rear axle, ``lr`` behind, the way the orientation points). The orientation is that rear
+    axle's heading dragged along the driven positions
+    (:func:`~mpcdrive.models.kinematic.rear_axle_heading`): the yaw on a kinematic plant; on a
+    plant whose tyres slip (CommonRoad's ST and MB) the yaw plus the rear axle's slip angle, which
+    a kinematic model cannot hold otherwise (the collision and road checks of
+    :func:`check_drives` turn the body by its own yaw). The velocity is the rear axle's,
+    ``v cos(beta)`` with the slip angle ``beta = atan(lr / L tan(delta))``, and the steering
+    angle of state k is the mean of the commands held before and after it (KS steers with a
+    bounded rate, our plant holds each command for a step: the ramp through the means covers the
+    same mean steering per step)."""
     from commonroad.scenario.state import KSState
     from commonroad.scenario.trajectory import Trajectory
 
@@ -448,20 +455,19 @@ def solution_trajectory(imp: CommonRoadImport, result, last_step: int | None = N
     lr, wheelbase = v.lr_m, v.lf_m + v.lr_m
     n = len(result.t_s) if last_step is None else last_step + 1
     steer = np.asarray(result.steer_rad, float)
-    states = []
-    for k in range(n):
-        x = result.x[k]
-        before = steer[k - 1] if k > 0 else steer[0]
-        beta = math.atan(lr / wheelbase * math.tan(steer[k]))
-        states.append(
-            KSState(
-                time_step=int(round(result.t_s[k] / imp.spec.dt_s)),
-                position=np.array([x[0], x[1]], float),
-                steering_angle=float(0.5 * (before + steer[k])),
-                velocity=float(x[3] * math.cos(beta)),
-                orientation=float(x[2]),
-            )
+    X = np.asarray(result.x, float)
+    heading = rear_axle_heading(X[:n, :2], float(X[0, 2]), lr)
+    speed = X[:n, 3] * np.cos(np.arctan(lr / wheelbase * np.tan(steer[:n])))
+    states = [
+        KSState(
+            time_step=int(round(result.t_s[k] / imp.spec.dt_s)),
+            position=np.array([X[k, 0], X[k, 1]], float),
+            steering_angle=float(0.5 * ((steer[k - 1] if k > 0 else steer[0]) + steer[k])),
+            velocity=float(speed[k]),
+            orientation=float(heading[k]),
         )
+        for k in range(n)
+    ]
     return Trajectory(states[0].time_step, states)
 
 

@@ -35,6 +35,35 @@ class KinematicParams:
         return self.lr_m / (self.lf_m + self.lr_m)
 
 
+def rear_axle_heading(xy: np.ndarray, yaw0_rad: float, lr_m: float) -> np.ndarray:
+    """(K,) heading [rad] of the point ``lr_m`` behind a path of centre-of-gravity positions
+    ``xy`` (K, 2) that moves the way it points, starting at ``yaw0_rad``: a kinematic bicycle's
+    rear axle (which rolls without slip) dragged along by its centre of gravity, the tractrix
+    ``dtheta/ds = sin(chi - theta) / lr`` with ``chi`` the direction the centre of gravity travels.
+
+    Each step takes the chord between two positions as the travel (``chi`` its direction, ``s``
+    its length), where the tractrix solves in closed form: ``tan((chi - theta) / 2)`` shrinks by
+    ``exp(-s / lr)``. The heading turns only as the car travels: standing, it holds. On a
+    kinematic car it is the yaw; on one whose tyres slip, the yaw plus the rear axle's slip angle
+    up to how far the rear axle lags behind a sudden change (what a kinematic state of that drive
+    holds as its orientation)."""
+    p = np.asarray(xy, dtype=float)
+    if p.ndim != 2 or p.shape[1] != 2 or len(p) < 1:
+        raise ValueError(f"positions must be (K >= 1, 2), got shape {p.shape}")
+    if not (np.isfinite(lr_m) and lr_m > 0):
+        raise ValueError(f"lr_m must be a positive length in m, got {lr_m!r}")
+    step = np.diff(p, axis=0)
+    chi = np.arctan2(step[:, 1], step[:, 0])
+    shrink = np.exp(-np.hypot(step[:, 0], step[:, 1]) / lr_m)
+    out = np.empty(len(p))
+    out[0] = theta = float(yaw0_rad)
+    for k in range(len(step)):
+        lag = (chi[k] - theta + np.pi) % (2.0 * np.pi) - np.pi
+        theta += lag - 2.0 * np.arctan(np.tan(0.5 * lag) * shrink[k])  # unwrapped, as the yaw is
+        out[k + 1] = theta
+    return out
+
+
 def steady_state_equations(kappa, lq, lr_m, ns):
     """Steady-state (steering [rad], slip angle beta [rad]) on curvature kappa [1/m] with math
     functions from ``ns`` (numpy, or numba when compiled): the single definition used by
