@@ -433,6 +433,10 @@ def goal_step(imp: CommonRoadImport, result) -> int | None:
     return None
 
 
+#: plants whose rear axle rolls the way the body points (no tyre slip): their yaw is the KS orientation
+_NO_SLIP_PLANTS = ("kinematic3", "kinematic4", "commonroad_ks")
+
+
 def solution_trajectory(imp: CommonRoadImport, result, last_step: int | None = None):
     """The driven trajectory as a CommonRoad KS trajectory from step 0 to ``last_step``
     (default: all).
@@ -440,9 +444,10 @@ def solution_trajectory(imp: CommonRoadImport, result, last_step: int | None = N
     Positions are the centre of gravity (CommonRoad's KS states are given there; its model moves
     the rear axle, ``lr`` behind, the way the orientation points). The orientation is that rear
     axle's heading dragged along the driven positions
-    (:func:`~mpcdrive.models.kinematic.rear_axle_heading`): the yaw on a kinematic plant; on a
-    plant whose tyres slip (CommonRoad's ST and MB) the yaw plus the rear axle's slip angle, which
-    a kinematic model cannot hold otherwise (the collision and road checks of
+    (:func:`~mpcdrive.models.kinematic.rear_axle_heading`), on a kinematic plant its yaw (the same
+    up to the chords' second-order error, which the yaw does not have); on a plant whose tyres
+    slip (CommonRoad's ST and MB, the dynamic models) the yaw plus the rear axle's slip angle,
+    which a kinematic model cannot hold otherwise (the collision and road checks of
     :func:`check_drives` turn the body by its own yaw). The velocity is the rear axle's,
     ``v cos(beta)`` with the slip angle ``beta = atan(lr / L tan(delta))``, and the steering
     angle of state k is the mean of the commands held before and after it (KS steers with a
@@ -456,7 +461,8 @@ def solution_trajectory(imp: CommonRoadImport, result, last_step: int | None = N
     n = len(result.t_s) if last_step is None else last_step + 1
     steer = np.asarray(result.steer_rad, float)
     X = np.asarray(result.x, float)
-    heading = rear_axle_heading(X[:n, :2], float(X[0, 2]), lr)
+    rolls = imp.spec.plant_model in _NO_SLIP_PLANTS
+    heading = X[:n, 2].copy() if rolls else rear_axle_heading(X[:n, :2], float(X[0, 2]), lr)
     speed = X[:n, 3] * np.cos(np.arctan(lr / wheelbase * np.tan(steer[:n])))
     states = [
         KSState(
