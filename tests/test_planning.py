@@ -321,6 +321,34 @@ def test_a_maneuver_keeps_below_the_speed_at_which_the_path_bends_faster_than_th
     assert in_window_top(m) <= 6.0 * 1.05 + 1e-6
 
 
+def test_the_steering_the_routes_bends_ask_is_in_the_pairs_bound():
+    """Between 50 and 70 m the path bends faster than the car steers above 6 m/s, and the wanted
+    speed stays 12 m/s: every profile that keeps its speed there steers beyond the rate with any
+    lateral move. That cost (``rate_excess_s`` per unit of the rate's excess) is each profile's
+    own (``lon_bend``: the speed times the bend along the way it drives, over the checks' 5 %
+    slack), so it is in the pairs' bound: the first pair checked is the choice, on a free road and
+    behind a parked car with a car beside (the search checked 108 and 152 of the pairs when the
+    rate was found in the check alone), and the choice is the same maneuver at the same cost."""
+    from mpcdrive.planning.candidates import KAPPA_SLACK
+
+    def bend(s):
+        s = np.asarray(s, float)
+        return np.where((s >= 50.0) & (s <= 70.0), 1.0 / 6.0, 0.0)
+
+    for obs in ([], [car(95.0, 0.0, 0.0), car(60.0, W, 12.0)]):
+        pl = ManeuverPlanner(PATH, two_lanes(), LIMITS, PlannerConfig(), wanted_speed=12.0, bend=bend)
+        m = plan(pl, obs)
+        w = pl.work
+        n = int(w.lon_n[0])
+        grid_s = w.grid[0] + w.grid[1] * np.arange(len(w.g_bend))  # the bend as the planner samples it
+        want = np.max(w.lon_v[:n, 1:] * np.interp(w.lon_s[:n, 1:], grid_s, w.g_bend), axis=1) / KAPPA_SLACK
+        np.testing.assert_allclose(w.lon_bend[:n], want, rtol=1e-12)
+        assert (want[w.lon_ok[:n] == 1] > 1.0).sum() > 5  # many profiles steer beyond the rate
+        assert m.safe and m.checked <= 2 < m.candidates
+        assert m.kind == "speed" and m.lane == 0
+        assert m.cost_s == pytest.approx(7.79, abs=0.01)
+
+
 def test_the_wanted_speed_is_followed_through_a_bend_it_slows_for_not_passed_fast():
     """A speed profile slows at its braking limit (3 m/s^2, the comfort deceleration) from 12 m/s
     to exactly the 6 m/s at which the path between 50 and 70 m bends as fast as the car steers,

@@ -613,7 +613,9 @@ def longitudinal_costs(w, s_stop):
     the wanted-speed profile, the time it loses after the horizon regaining the wanted speed
     (no faster than lets it still stop at ``s_stop`` [m], the nearest stop point in the car's
     lane: behind a blockage there is no speed to regain), its jerk and its braking beyond the
-    comfortable."""
+    comfortable; and (``lon_bend``) the steering rate the route's own bends ask at its speeds,
+    relative to the vehicle's (the speed times ``g_bend`` along the distance it drives, > 1:
+    faster than the car steers), which every lateral move with it steers at least."""
     par = w.par
     lon_s, lon_v, lon_a, lon_ok, lon_cost = w.lon_s, w.lon_v, w.lon_a, w.lon_ok, w.lon_cost
     K = lon_s.shape[1] - 1
@@ -622,11 +624,15 @@ def longitudinal_costs(w, s_stop):
     v_scale = max(0.5 * (w.ego[E_V] + lon_v[0, K]), 1.0)
     v_max, a_max, d_max, d_comf, j_ref = par[P_V_MAX], par[P_A_MAX], par[P_D_MAX], par[P_D_COMF], par[P_JERK_REF]
     a_comf = par[P_A_COMF]
+    g_bend, lon_bend = w.g_bend, w.lon_bend
     for n in range(w.lon_n[0]):
         ok = 1
         cost = 0.0
+        bend = 0.0
         for k in range(K + 1):
             v, a = lon_v[n, k], lon_a[n, k]
+            if k > 0:
+                bend = max(bend, v * grid_at(w.grid, g_bend, lon_s[n, k]) / KAPPA_SLACK)
             if v < -0.05 or v > v_max + 0.05:
                 ok = 0
             if a > a_max + 1e-6 or a < -d_max - 1e-6:
@@ -654,3 +660,4 @@ def longitudinal_costs(w, s_stop):
             cost += short * short / (2.0 * a_comf * max(v_w, 1.0))
         lon_ok[n] = ok
         lon_cost[n] = cost
+        lon_bend[n] = bend

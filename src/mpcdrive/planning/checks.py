@@ -325,7 +325,7 @@ def _in_goal(goal_arr, grid, g_heading, par, s, tt, speed, d, d1, kappa):
 
 @subroutine
 def check_pair(
-    i, j, excess0, write, bound, prepaid, par, grid, ego, goal_arr, g_kappa, g_heading, g_bend, lane_left, lane_right,
+    i, j, excess0, write, bound, prepaid, par, grid, ego, goal_arr, g_kappa, g_heading, rate0, lane_left, lane_right,
     lane_line, lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v, lon_a, ob_s, ob_e,
     ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs, rel_idx, n_rel, scratch, path,
     edge_win,
@@ -333,9 +333,9 @@ def check_pair(
     """(safe, feasible, rate, ttc [s], cost [s], goal) of lateral move ``i`` with profile ``j``
     (``feasible``: within the vehicle's curvature and friction circle; ``rate``: the largest
     change of the move's curvature (the path's own left out) over a step relative to what the
-    steering rate allows, or the speed times ``g_bend`` (the inverse of the speed above which the
-    path itself bends faster than the car steers), > 1 where the move steers faster than the
-    vehicle can);
+    steering rate allows, or ``rate0``, the rate the route's own bends ask at the profile's speeds
+    (``lon_bend``, :func:`~.candidates.longitudinal_costs`), > 1 where the move steers faster than
+    the vehicle can);
     ``excess0`` [m]: how far the car is outside the road now (a maneuver may not go further
     out, and gets a second to come back in; -2: the car is in an oncoming lane). With ``write``,
     the maneuver and its relations to the obstacles go into ``relation`` and ``plan_*``; else
@@ -376,7 +376,7 @@ def check_pair(
             route = lane
     ttc = math.inf
     feasible = True
-    rate = 0.0
+    rate = rate0
     cost = 0.0
     goal = False
     passed_goal = False
@@ -433,9 +433,8 @@ def check_pair(
         if k > 0:
             if abs(kappa) > kappa_max or a * a + a_lat * a_lat > fric2:
                 feasible = False
-            # the steering rate the move adds, and the route's own bends at this speed (those the
-            # speed profile slows for: a maneuver faster there steers beyond the rate as well)
-            rate = max(rate, abs(k_move - kappa_prev) / kappa_step, v * grid_at(grid, g_bend, s) / KAPPA_SLACK)
+            # the steering rate the move adds (the route's own bends at the profile's speeds: rate0)
+            rate = max(rate, abs(k_move - kappa_prev) / kappa_step)
         kappa_prev = k_move
         # lateral comfort: the move's own lateral acceleration
         a_move = v2 * k_move / lat_ref

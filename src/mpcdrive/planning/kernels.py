@@ -85,7 +85,7 @@ def plan(w):
     longitudinal_costs(w, s_stop)
     # the struct's arrays read once (each read of a field costs a reference count)
     par, grid, ego, goal_arr = w.par, w.grid, w.ego, w.goal
-    g_kappa, g_heading, g_bend = w.g_kappa, w.g_heading, w.g_bend
+    g_kappa, g_heading, lon_bend = w.g_kappa, w.g_heading, w.lon_bend
     lane_left, lane_right, lane_line, lane_kind = w.lane_left, w.lane_right, w.lane_line, w.lane_kind
     same_left, same_right, all_left, all_right = w.same_left, w.same_right, w.all_left, w.all_right
     edge_win, path = w.edge_win, w.path
@@ -98,9 +98,15 @@ def plan(w):
     discs = w.discs
     keys, codes = w.keys, w.order
     nlat, nlon = w.lat_n[0], w.lon_n[0]
-    # the goal's miss cost that a profile pays for sure belongs in the pairs' bound
+    # the goal's miss cost that a profile pays for sure belongs in the pairs' bound, and so does
+    # the cost of steering beyond the rate that the route's bends ask at its speeds (the choice
+    # scores the rate's excess, and a pair steers at least at its profile's ``lon_bend``)
     prepaid = w.lon_goal
     goal_missed_by_profile(par, ego, goal_arr, lon_s, lon_v, nlon, dt, prepaid)
+    c_rate = par[P_C_RATE]
+    bend_cost = np.empty(max(nlon, 1))
+    for j in range(nlon):
+        bend_cost[j] = c_rate * max(lon_bend[j] - 1.0, 0.0)
     m = 0
     now = int(ego[E_LANE])
     lon_kind, lon_target = w.lon_kind, w.lon_target
@@ -114,7 +120,7 @@ def plan(w):
                 continue
             if lon_kind[j] == LON_STOP and lat_lane[i] != now:
                 continue
-            keys[m] = lat_cost[i] + lon_cost[j] + prepaid[j]
+            keys[m] = lat_cost[i] + lon_cost[j] + prepaid[j] + bend_cost[j]
             codes[m] = i * MAX_LON + j
             m += 1
     order = np.argsort(keys[:m])
@@ -130,8 +136,8 @@ def plan(w):
     )  # fmt: skip
     # the choice: the cheapest safe maneuver, its steering beyond the rate costed (the controller
     # steers at its limit, the obstacle and road rows keep the clearance); else the one hit
-    # latest (time to collision), feasible first. The rate's cost is >= 0: the pairs' bound holds.
-    c_rate = par[P_C_RATE]
+    # latest (time to collision), feasible first. The rate's cost is at least the bends' (in the
+    # key): the pairs' bound holds.
     best = -1
     best_total = math.inf
     checked = 0
@@ -143,15 +149,16 @@ def plan(w):
             break
         code = codes[order[q]]
         i, j = code // MAX_LON, code % MAX_LON
+        base = key - bend_cost[j]  # the rate's cost is the check's
         n_rel = _near_obstacles(i, j, lat_rng, lon_rng, ob_rng, n_obs, rel_idx)
         safe, feasible, rate, ttc, pair, goal = check_pair(
-            i, j, excess0, False, best_total - key, prepaid[j], par, grid, ego, goal_arr, g_kappa, g_heading, g_bend,
+            i, j, excess0, False, best_total - base, prepaid[j], par, grid, ego, goal_arr, g_kappa, g_heading, lon_bend[j],
             lane_left, lane_right, lane_line, lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len,
             lat_lane, lat_off, lon_s, lon_v, lon_a, ob_s, ob_e, ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d,
             discs, rel_idx, n_rel, scratch, path, edge_win,
         )  # fmt: skip
         checked += 1
-        total = key + pair
+        total = base + pair
         if safe and feasible:
             n_safe += 1
             score = total + c_rate * max(rate - 1.0, 0.0)
@@ -178,7 +185,7 @@ def plan(w):
         return
     i, j = best // MAX_LON, best % MAX_LON
     safe, feasible, rate, ttc, pair, goal = check_pair(
-        i, j, excess0, True, math.inf, prepaid[j], par, grid, ego, goal_arr, g_kappa, g_heading, g_bend, lane_left,
+        i, j, excess0, True, math.inf, prepaid[j], par, grid, ego, goal_arr, g_kappa, g_heading, lon_bend[j], lane_left,
         lane_right, lane_line, lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v,
         lon_a, ob_s, ob_e, ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs, rel_idx, 0,
         scratch, path, edge_win,
