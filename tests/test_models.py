@@ -401,3 +401,30 @@ def test_rear_axle_heading_refuses_bad_input():
         _kin.rear_axle_heading(np.zeros((3, 3)), 0.0, 1.0)
     with pytest.raises(ValueError, match="lr_m must be a positive length"):
         _kin.rear_axle_heading(np.zeros((3, 2)), 0.0, 0.0)
+
+
+def test_path_steering_of_a_kinematic_drive_is_its_steering():
+    """The steering with which a kinematic bicycle turns its rear axle along the driven positions
+    (atan(L dtheta / ds), the rear axle's heading dragged along them) is the steering it drove
+    with, within 2e-3 rad on 10 ms steps; standing, the path says nothing (NaN)."""
+    p = KinematicParams(lf_m=1.2, lr_m=1.4)
+    model = KinematicBicycle4(p)
+    x = np.array([0.0, 0.0, 0.2, 8.0])
+    xs, steer = [x], []
+    for k in range(800):
+        t = 0.01 * k
+        u = np.array([0.3 * math.sin(0.9 * t), -4.0 if t > 5.0 else 0.0])
+        steer.append(u[0])
+        x = discrete_step(model, x, u, 0.01, "rk4")
+        x[3] = max(x[3], 0.0)
+        xs.append(x)
+    X = np.array(xs)
+    theta = _kin.rear_axle_heading(X[:, :2], X[0, 2], p.lr_m)
+    delta = _kin.path_steering(X[:, :2], theta, p.lf_m + p.lr_m)
+    moving = X[:, 3] > 3.0  # 5 cm or more over the two 10 ms steps around the state
+    held = np.array(steer + [steer[-1]])  # the input held over the step after each state
+    mid = 0.5 * (held + np.concatenate(([held[0]], held[:-1])))  # around the state
+    assert np.abs(delta[moving] - mid[moving]).max() < 5e-3
+    assert np.isnan(delta[-5:]).all() and X[-1, 3] == 0.0
+    with pytest.raises(ValueError, match="wheelbase_m must be a positive length"):
+        _kin.path_steering(X[:, :2], theta, -1.0)

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..models.kinematic import rear_axle_heading
+from ..models.kinematic import path_steering, rear_axle_heading
 from ..models.presets import PRESETS
 from ..scenarios.schema import ScenarioSpec
 from ..sim.metrics import CommonRoadCheck, WholeDriveCheck
@@ -449,10 +449,15 @@ def solution_trajectory(imp: CommonRoadImport, result, last_step: int | None = N
     slip (CommonRoad's ST and MB, the dynamic models) the yaw plus the rear axle's slip angle,
     which a kinematic model cannot hold otherwise (the collision and road checks of
     :func:`check_drives` turn the body by its own yaw). The velocity is the rear axle's,
-    ``v cos(beta)`` with the slip angle ``beta = atan(lr / L tan(delta))``, and the steering
-    angle of state k is the mean of the commands held before and after it (KS steers with a
-    bounded rate, our plant holds each command for a step: the ramp through the means covers the
-    same mean steering per step)."""
+    ``v cos(beta)`` with the slip angle ``beta = atan(lr / L tan(delta))``. The steering angle of
+    state k on a kinematic plant is the mean of the commands held before and after it (KS steers
+    with a bounded rate, our plant holds each command for a step: the ramp through the means
+    covers the same mean steering per step); on a plant whose tyres slip, the steering with which
+    a KS car turns its rear axle along the drive, ``atan(L dtheta / ds)`` over the steps around
+    the state (:func:`~mpcdrive.models.kinematic.path_steering`; where the car stands, the
+    commands' mean): the wheels of a car that slips turn less or more than that for the same
+    path (MB oversteers while braking), and the feasibility check asks whether a KS car, within
+    its steering rate, drives that path."""
     from commonroad.scenario.state import KSState
     from commonroad.scenario.trajectory import Trajectory
 
@@ -461,14 +466,20 @@ def solution_trajectory(imp: CommonRoadImport, result, last_step: int | None = N
     n = len(result.t_s) if last_step is None else last_step + 1
     steer = np.asarray(result.steer_rad, float)
     X = np.asarray(result.x, float)
-    rolls = imp.spec.plant_model in _NO_SLIP_PLANTS
-    heading = X[:n, 2].copy() if rolls else rear_axle_heading(X[:n, :2], float(X[0, 2]), lr)
+    steering = 0.5 * (np.concatenate((steer[:1], steer[: n - 1])) + steer[:n])
+    if imp.spec.plant_model in _NO_SLIP_PLANTS:
+        heading = X[:n, 2].copy()
+    else:
+        heading = rear_axle_heading(X[:n, :2], float(X[0, 2]), lr)
+        if n >= 2:
+            from_path = path_steering(X[:n, :2], heading, wheelbase)
+            steering = np.where(np.isnan(from_path), steering, from_path)
     speed = X[:n, 3] * np.cos(np.arctan(lr / wheelbase * np.tan(steer[:n])))
     states = [
         KSState(
             time_step=int(round(result.t_s[k] / imp.spec.dt_s)),
             position=np.array([X[k, 0], X[k, 1]], float),
-            steering_angle=float(0.5 * ((steer[k - 1] if k > 0 else steer[0]) + steer[k])),
+            steering_angle=float(steering[k]),
             velocity=float(speed[k]),
             orientation=float(heading[k]),
         )

@@ -65,6 +65,31 @@ def rear_axle_heading(xy: np.ndarray, yaw0_rad: float, lr_m: float) -> np.ndarra
     return out
 
 
+def path_steering(
+    xy: np.ndarray, heading_rad: np.ndarray, wheelbase_m: float, min_travel_m: float = 0.05
+) -> np.ndarray:
+    """(K,) steering angle [rad] of a kinematic bicycle whose rear axle turns with ``heading_rad``
+    (K,) along the positions ``xy`` (K, 2): ``atan(L dtheta / ds)``, the heading's change over
+    the distance travelled in the steps either side of each state (one step at the ends); NaN
+    where the car travels less than ``min_travel_m`` [m] in them (standing, the path says nothing
+    of the wheels)."""
+    p = np.asarray(xy, dtype=float)
+    th = np.asarray(heading_rad, dtype=float)
+    if p.ndim != 2 or p.shape[1] != 2 or th.shape != (len(p),) or len(p) < 2:
+        raise ValueError(f"positions must be (K >= 2, 2) and headings (K,), got {p.shape} and {th.shape}")
+    if not (np.isfinite(wheelbase_m) and wheelbase_m > 0):
+        raise ValueError(f"wheelbase_m must be a positive length in m, got {wheelbase_m!r}")
+    step = np.hypot(*np.diff(p, axis=0).T)
+    lo = np.maximum(np.arange(len(p)) - 1, 0)
+    hi = np.minimum(np.arange(len(p)) + 1, len(p) - 1)
+    travel = np.concatenate(([0.0], np.cumsum(step)))
+    ds = travel[hi] - travel[lo]
+    out = np.full(len(p), np.nan)
+    ok = ds >= min_travel_m
+    out[ok] = np.arctan(wheelbase_m * (th[hi] - th[lo])[ok] / ds[ok])
+    return out
+
+
 def steady_state_equations(kappa, lq, lr_m, ns):
     """Steady-state (steering [rad], slip angle beta [rad]) on curvature kappa [1/m] with math
     functions from ``ns`` (numpy, or numba when compiled): the single definition used by
