@@ -227,6 +227,24 @@ def test_the_road_end_is_a_stop_with_the_whole_body_inside():
         assert front[-1] + m.v_mps[-1] ** 2 / (2 * LIMITS.max_decel_mps2) <= 60.0
 
 
+def test_the_road_end_is_judged_for_the_car_when_it_runs_ahead_of_the_plan_it_goes_on_from():
+    """A replanning 0.1 s on finds the car 0.6 m ahead of the last maneuver, within the tolerance
+    it goes on from the maneuver: the road's end is judged for the car (0.6 m nearer in the plan's
+    frame), so the car's body stops inside it, as the plan's would; judged for the plan it stuck
+    out (on CommonRoad's MB plant a car 0.44 m ahead of its plan while braking for the end of
+    ZAM_RoadEnd-8 stopped 3 cm past it)."""
+    pl = planner(two_lanes(end_m=60.0))
+    free = table_of([car(-500.0)], None)
+    m0 = pl.plan(0.0, 40.0, 0.0, 6.0, 0.0, 0.0, free)
+    ahead = 0.6
+    m = pl.plan(0.1, float(np.interp(0.1, m0.t_s, m0.s_m)) + ahead, 0.0, 6.0, 0.0, 0.0, free)
+    assert m.s_m[0] == pytest.approx(float(np.interp(0.1, m0.t_s, m0.s_m)), abs=1e-9)  # went on from the plan
+    assert m.safe
+    front = m.s_m + ahead + 0.5 * LIMITS.length_m  # the car's front, ahead of the plan
+    assert np.all(front <= 60.0 - 0.1 + 1e-6)
+    assert front[-1] + m.v_mps[-1] ** 2 / (2 * LIMITS.max_decel_mps2) <= 60.0
+
+
 def test_a_car_drifting_into_the_road_margin_turns_back_inside_the_road():
     """The car 0.055 m inside the road's margin (0.25 m) at its right edge, heading out of the
     lane at 0.05 rad: a maneuver may use the margin for the first second (no plan can turn a car

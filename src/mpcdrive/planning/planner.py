@@ -359,8 +359,8 @@ class ManeuverPlanner:
         par[P_JERK_REF] = cfg.jerk_ref_mps3
         par[P_LAT_REF] = cfg.lat_accel_ref_mps2
         start, end = getattr(road, "start_m", None), getattr(road, "end_m", None)
-        par[P_ROAD_START] = -math.inf if start is None else float(start)
-        par[P_ROAD_END] = math.inf if end is None else float(end)
+        self._road_ends = (-math.inf if start is None else float(start), math.inf if end is None else float(end))
+        par[P_ROAD_START], par[P_ROAD_END] = self._road_ends
         par[P_BAND_K] = K if band_steps is None else int(band_steps)
         arrays["lat_lengths_s"] = np.asarray(cfg.lateral_s, float)
         arrays["speed_s"] = np.asarray(cfg.speed_s, float)
@@ -494,6 +494,10 @@ class ManeuverPlanner:
             # region is judged that much further along the plan's way
             w.goal[G_S_LO] = self.goal.arc_m[0] + lag
             w.goal[G_S_HI] = self.goal.arc_m[1] + lag
+        # so are the road's ends, where the car must stop with its body inside: a car ahead of
+        # the plan (lag < 0) meets the end that much sooner, one behind it leaves the start later
+        w.par[P_ROAD_START] = self._road_ends[0] + max(lag, 0.0)
+        w.par[P_ROAD_END] = self._road_ends[1] + min(lag, 0.0)
         # the lateral move starts at the car's curvature relative to the path's (as d''), within
         # what the vehicle can turn at its speed
         top = min(self.limits.max_curvature_1pm, self.limits.friction_mps2 / max(v_mps, 1.0) ** 2)
