@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..models.kinematic import path_steering, rear_axle_heading
+from ..models.kinematic import path_steering, rear_axle_heading, slip_terms
 from ..models.presets import PRESETS
 from ..scenarios.schema import ScenarioSpec
 from ..sim.metrics import CommonRoadCheck, WholeDriveCheck
@@ -468,13 +468,13 @@ def solution_trajectory(imp: CommonRoadImport, result, last_step: int | None = N
     X = np.asarray(result.x, float)
     steering = 0.5 * (np.concatenate((steer[:1], steer[: n - 1])) + steer[:n])
     if imp.spec.plant_model in _NO_SLIP_PLANTS:
-        heading = X[:n, 2].copy()
+        heading = X[:n, 2]
     else:
         heading = rear_axle_heading(X[:n, :2], float(X[0, 2]), lr)
         if n >= 2:
             from_path = path_steering(X[:n, :2], heading, wheelbase)
             steering = np.where(np.isnan(from_path), steering, from_path)
-    speed = X[:n, 3] * np.cos(np.arctan(lr / wheelbase * np.tan(steer[:n])))
+    speed = X[:n, 3] * slip_terms(steer[:n], lr / wheelbase, np)[2]  # v cos(beta)
     states = [
         KSState(
             time_step=int(round(result.t_s[k] / imp.spec.dt_s)),

@@ -624,7 +624,7 @@ def longitudinal_costs(w, s_stop):
     v_scale = max(0.5 * (w.ego[E_V] + lon_v[0, K]), 1.0)
     v_max, a_max, d_max, d_comf, j_ref = par[P_V_MAX], par[P_A_MAX], par[P_D_MAX], par[P_D_COMF], par[P_JERK_REF]
     a_comf = par[P_A_COMF]
-    g_bend, lon_bend = w.g_bend, w.lon_bend
+    grid, g_bend, lon_bend = w.grid, w.g_bend, w.lon_bend
     for n in range(w.lon_n[0]):
         ok = 1
         cost = 0.0
@@ -632,7 +632,7 @@ def longitudinal_costs(w, s_stop):
         for k in range(K + 1):
             v, a = lon_v[n, k], lon_a[n, k]
             if k > 0:
-                bend = max(bend, v * grid_at(w.grid, g_bend, lon_s[n, k]) / KAPPA_SLACK)
+                bend = max(bend, v * grid_at(grid, g_bend, lon_s[n, k]) / KAPPA_SLACK)
             if v < -0.05 or v > v_max + 0.05:
                 ok = 0
             if a > a_max + 1e-6 or a < -d_max - 1e-6:

@@ -104,9 +104,6 @@ def plan(w):
     prepaid = w.lon_goal
     goal_missed_by_profile(par, ego, goal_arr, lon_s, lon_v, nlon, dt, prepaid)
     c_rate = par[P_C_RATE]
-    bend_cost = np.empty(max(nlon, 1))
-    for j in range(nlon):
-        bend_cost[j] = c_rate * max(lon_bend[j] - 1.0, 0.0)
     m = 0
     now = int(ego[E_LANE])
     lon_kind, lon_target = w.lon_kind, w.lon_target
@@ -120,7 +117,7 @@ def plan(w):
                 continue
             if lon_kind[j] == LON_STOP and lat_lane[i] != now:
                 continue
-            keys[m] = lat_cost[i] + lon_cost[j] + prepaid[j] + bend_cost[j]
+            keys[m] = lat_cost[i] + lon_cost[j] + prepaid[j] + c_rate * max(lon_bend[j] - 1.0, 0.0)
             codes[m] = i * MAX_LON + j
             m += 1
     order = np.argsort(keys[:m])
@@ -149,7 +146,7 @@ def plan(w):
             break
         code = codes[order[q]]
         i, j = code // MAX_LON, code % MAX_LON
-        base = key - bend_cost[j]  # the rate's cost is the check's
+        base = key - c_rate * max(lon_bend[j] - 1.0, 0.0)  # the rate's cost is the check's
         n_rel = _near_obstacles(i, j, lat_rng, lon_rng, ob_rng, n_obs, rel_idx)
         safe, feasible, rate, ttc, pair, goal = check_pair(
             i, j, excess0, False, best_total - base, prepaid[j], par, grid, ego, goal_arr, g_kappa, g_heading, lon_bend[j],
