@@ -661,3 +661,4 @@ def longitudinal_costs(w, s_stop):
         lon_ok[n] = ok
         lon_cost[n] = cost
         lon_bend[n] = bend
+        w.lon_vend[n] = v_end

@@ -325,7 +325,7 @@ def _in_goal(goal_arr, grid, g_heading, par, s, tt, speed, d, d1, kappa):
 
 @subroutine
 def check_pair(
-    i, j, excess0, write, bound, prepaid, par, grid, ego, goal_arr, g_kappa, g_heading, rate0, lane_left, lane_right,
+    i, j, excess0, write, bound, prepaid, v_bound, par, grid, ego, goal_arr, g_kappa, g_heading, rate0, lane_left, lane_right,
     lane_line, lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v, lon_a, ob_s, ob_e,
     ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs, rel_idx, n_rel, scratch, path,
     edge_win,
@@ -346,7 +346,8 @@ def check_pair(
     after :func:`_first_hit` (an obstacle's contact ends the check there; the road's is the
     check's own, reached on the way :func:`_first_hit` left in ``path`` (K + 1, 4)).
     ``prepaid`` [s]: the goal's miss cost already counted in the pair's bound
-    (:func:`goal_missed_by_profile`), left out of the cost returned."""
+    (:func:`goal_missed_by_profile`), left out of the cost returned; ``v_bound`` [m/s]: the speed
+    the profile is bound for (0: it stops, within the horizon or after it)."""
     K = lon_s.shape[1] - 1
     horizon = K * dt
     hl, hw, co = par[P_HL], par[P_HW], par[P_CO]
@@ -397,6 +398,7 @@ def check_pair(
     else:
         first = -2
     hit = False
+    waits = False
     evasive = L < 0.0
     # the evasive move's state: offset, heading and curvature relative to the path
     ev_d, ev_th, ev_k = ego[E_D], math.atan(ego[E_SLOPE]), ego[E_CURV]
@@ -564,6 +566,7 @@ def check_pair(
                     if -rs - bx < v2 / (2.0 * par[P_D_COMF]) + room:
                         if _standing(ob_s, o, K, dt):
                             cost += par[P_C_GOAL]
+                            waits = True
         if k == K and not hit and math.isfinite(par[P_ROAD_END]):
             # beyond the horizon: braking still stops inside the road's end
             front = s + (hl + co) * cth + hw * abs(sth)
@@ -601,6 +604,15 @@ def check_pair(
             plan_v[k] = v
             plan_a[k] = a
             plan_d[k] = d
+    if not waits and not hit and v_bound < STOPPED_MPS:
+        # stopping further back behind an obstacle that stands for good in the way (one the
+        # search may not have looked at, as the car never comes near it): standing there only
+        # puts the wait off
+        for o in range(n_obs):
+            if math.isfinite(ob_s[o, K]) and sc < ob_s[o, K] and abs(dc - ob_e[o, K]) < hws + ob_hw[o, K]:
+                if _standing(ob_s, o, K, dt):
+                    cost += par[P_C_GOAL]
+                    break
     if has_goal and not goal and goal_arr[G_T_HI] >= ego[E_T]:
         # missed: the window closes within the horizon, or the maneuver drives through the region
         # (and past it) without being in it
@@ -608,6 +620,10 @@ def check_pair(
             cost += par[P_C_GOAL] - prepaid
     safe = not hit and ttc == math.inf  # nothing hit, and braking still works past the horizon
     return safe, feasible, rate, ttc, cost, goal
+
+
+#: a profile bound for a speed below this [m/s] stops (within the horizon or after it)
+STOPPED_MPS = 0.1
 
 
 #: slack [m] on the distance a profile drives when it is judged unable to reach the goal region

@@ -154,6 +154,7 @@ class PlannerWork:
     lon_cost: np.ndarray  # (MAX_LON,)
     lon_goal: np.ndarray  # (MAX_LON,) the goal's miss cost [s] each profile pays for sure
     lon_bend: np.ndarray  # (MAX_LON,) the steering rate the route's bends ask at each profile's speeds
+    lon_vend: np.ndarray  # (MAX_LON,) the speed [m/s] each profile is bound for (0: a stop)
     lon_n: np.ndarray  # (1,) int
     # the choice
     order: np.ndarray  # (MAX_LAT * MAX_LON,) int work space
@@ -220,6 +221,7 @@ def new_work(K: int, grid_s: np.ndarray, n_lanes: int) -> dict:
         lon_cost=f(MAX_LON),
         lon_goal=f(MAX_LON),
         lon_bend=f(MAX_LON),
+        lon_vend=f(MAX_LON),
         lon_n=np.zeros(1, np.int64),
         order=np.zeros(MAX_LAT * MAX_LON, np.int64),
         keys=f(MAX_LAT * MAX_LON),
