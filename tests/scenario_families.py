@@ -50,7 +50,10 @@ Families (:data:`FAMILIES`):
 checked against commonroad-io's XSD; the header's date fixed, so the bytes depend on the seed
 only)::
 
-    python tests/scenario_families.py OUT_DIR [FAMILY ...]
+    python tests/scenario_families.py OUT_DIR [FAMILY ...] [--seeds FIRST:STOP]
+
+The tests drive seeds 0-9 (:data:`TEST_SEEDS`); other seeds (``--seeds 10:20``) are variations
+the planner was not designed on: held-out checks of a change.
 """
 
 from __future__ import annotations
@@ -710,9 +713,28 @@ def write_scenario(family: str, seed: int, out_dir: str | Path) -> Path:
     return path
 
 
+#: the seeds the tests drive
+TEST_SEEDS = range(10)
+
+
 def main(argv: list[str]) -> list[Path]:
-    out_dir, families = Path(argv[0]), argv[1:] or list(FAMILIES)
-    return [write_scenario(f, seed, out_dir) for f in families for seed in range(10)]
+    """``OUT_DIR [FAMILY ...] [--seeds FIRST:STOP]``: the families' variations (all families,
+    :data:`TEST_SEEDS`, by default) written to ``OUT_DIR``."""
+    args, seeds = list(argv), TEST_SEEDS
+    if "--seeds" in args:
+        at = args.index("--seeds")
+        if at + 1 >= len(args) or not re.fullmatch(r"\d+:\d+", args[at + 1]):
+            raise SystemExit("--seeds takes FIRST:STOP, e.g. --seeds 10:20")
+        first, stop = (int(v) for v in args[at + 1].split(":"))
+        seeds = range(first, stop)
+        del args[at : at + 2]
+    if not args:
+        raise SystemExit("usage: scenario_families.py OUT_DIR [FAMILY ...] [--seeds FIRST:STOP]")
+    out_dir, families = Path(args[0]), args[1:] or list(FAMILIES)
+    unknown = [f for f in families if f not in FAMILIES]
+    if unknown:
+        raise SystemExit(f"unknown families {unknown}; known: {', '.join(FAMILIES)}")
+    return [write_scenario(f, seed, out_dir) for f in families for seed in seeds]
 
 
 if __name__ == "__main__":

@@ -27,7 +27,7 @@ if not available():
 
 import scenario_families as sf  # noqa: E402
 
-SEEDS = range(10)
+SEEDS = sf.TEST_SEEDS
 MIN_PASSED = 9  # of the 10 seeds of a family
 PLANT, VEHICLE = "st", "bmw_320i"
 
@@ -150,3 +150,14 @@ def test_family_passes_nine_of_ten(family, tmp_path, monkeypatch):
     passed = [s for s, o in outcomes.items() if o["passed"]]
     failed = "\n".join(f"  seed {s}: {o['line']}" for s, o in outcomes.items() if not o["passed"])
     assert len(passed) >= MIN_PASSED, f"{family}: {len(passed)}/10 passed; failed:\n{failed}"
+
+
+def test_the_generator_writes_held_out_seeds_and_refuses_bad_arguments(tmp_path):
+    """``--seeds 10:12`` writes seeds 10 and 11 (files -11 and -12), the same bytes as
+    :func:`write_scenario`; an unknown family or a malformed range is refused in one line."""
+    paths = sf.main([str(tmp_path / "a"), "road_end", "--seeds", "10:12"])
+    assert [p.name for p in paths] == ["ZAM_RoadEnd-11_1_T-1.xml", "ZAM_RoadEnd-12_1_T-1.xml"]
+    assert paths[0].read_bytes() == sf.write_scenario("road_end", 10, tmp_path / "b").read_bytes()
+    for bad in (["road_end", "--seeds", "10"], ["no_such_family"]):
+        with pytest.raises(SystemExit, match="seeds|unknown"):
+            sf.main([str(tmp_path / "c"), *bad])
