@@ -615,7 +615,9 @@ def longitudinal_costs(w, s_stop):
     lane: behind a blockage there is no speed to regain), its jerk and its braking beyond the
     comfortable; and (``lon_bend``) the steering rate the route's own bends ask at its speeds,
     relative to the vehicle's (the speed times ``g_bend`` along the distance it drives, > 1:
-    faster than the car steers), which every lateral move with it steers at least."""
+    faster than the car steers), which every lateral move with it steers at least; and
+    (``lon_vend``) the speed it is bound for (a stop's 0, a speed target's target, else its
+    speed at the horizon's end)."""
     par = w.par
     lon_s, lon_v, lon_a, lon_ok, lon_cost = w.lon_s, w.lon_v, w.lon_a, w.lon_ok, w.lon_cost
     K = lon_s.shape[1] - 1
@@ -624,7 +626,7 @@ def longitudinal_costs(w, s_stop):
     v_scale = max(0.5 * (w.ego[E_V] + lon_v[0, K]), 1.0)
     v_max, a_max, d_max, d_comf, j_ref = par[P_V_MAX], par[P_A_MAX], par[P_D_MAX], par[P_D_COMF], par[P_JERK_REF]
     a_comf = par[P_A_COMF]
-    grid, g_bend, lon_bend = w.grid, w.g_bend, w.lon_bend
+    grid, g_bend, lon_bend, lon_vend = w.grid, w.g_bend, w.lon_bend, w.lon_vend
     for n in range(w.lon_n[0]):
         ok = 1
         cost = 0.0
@@ -661,4 +663,4 @@ def longitudinal_costs(w, s_stop):
         lon_ok[n] = ok
         lon_cost[n] = cost
         lon_bend[n] = bend
-        w.lon_vend[n] = v_end
+        lon_vend[n] = v_end

@@ -607,7 +607,7 @@ def check_pair(
     if not waits and not hit and v_bound < STOPPED_MPS:
         # stopping further back behind an obstacle that stands for good in the way (one the
         # search may not have looked at, as the car never comes near it): standing there only
-        # puts the wait off
+        # puts the wait off (``sc``, ``dc``, ``hws``: the car at the horizon's end)
         for o in range(n_obs):
             if math.isfinite(ob_s[o, K]) and sc < ob_s[o, K] and abs(dc - ob_e[o, K]) < hws + ob_hw[o, K]:
                 if _standing(ob_s, o, K, dt):

@@ -85,7 +85,7 @@ def plan(w):
     longitudinal_costs(w, s_stop)
     # the struct's arrays read once (each read of a field costs a reference count)
     par, grid, ego, goal_arr = w.par, w.grid, w.ego, w.goal
-    g_kappa, g_heading, lon_bend = w.g_kappa, w.g_heading, w.lon_bend
+    g_kappa, g_heading, lon_bend, lon_vend = w.g_kappa, w.g_heading, w.lon_bend, w.lon_vend
     lane_left, lane_right, lane_line, lane_kind = w.lane_left, w.lane_right, w.lane_line, w.lane_kind
     same_left, same_right, all_left, all_right = w.same_left, w.same_right, w.all_left, w.all_right
     edge_win, path = w.edge_win, w.path
@@ -149,7 +149,7 @@ def plan(w):
         base = key - c_rate * max(lon_bend[j] - 1.0, 0.0)  # the rate's cost is the check's
         n_rel = _near_obstacles(i, j, lat_rng, lon_rng, ob_rng, n_obs, rel_idx)
         safe, feasible, rate, ttc, pair, goal = check_pair(
-            i, j, excess0, False, best_total - base, prepaid[j], w.lon_vend[j], par, grid, ego, goal_arr, g_kappa, g_heading, lon_bend[j],
+            i, j, excess0, False, best_total - base, prepaid[j], lon_vend[j], par, grid, ego, goal_arr, g_kappa, g_heading, lon_bend[j],
             lane_left, lane_right, lane_line, lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len,
             lat_lane, lat_off, lon_s, lon_v, lon_a, ob_s, ob_e, ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d,
             discs, rel_idx, n_rel, scratch, path, edge_win,
@@ -182,7 +182,7 @@ def plan(w):
         return
     i, j = best // MAX_LON, best % MAX_LON
     safe, feasible, rate, ttc, pair, goal = check_pair(
-        i, j, excess0, True, math.inf, prepaid[j], w.lon_vend[j], par, grid, ego, goal_arr, g_kappa, g_heading, lon_bend[j], lane_left,
+        i, j, excess0, True, math.inf, prepaid[j], lon_vend[j], par, grid, ego, goal_arr, g_kappa, g_heading, lon_bend[j], lane_left,
         lane_right, lane_line, lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v,
         lon_a, ob_s, ob_e, ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs, rel_idx, 0,
         scratch, path, edge_win,
