@@ -133,18 +133,43 @@ def test_obstacle_tracks_match_the_paths_projection():
     rec = Obstacle(rectangle(4.0, 2.0), (pts[0, 0], pts[0, 1], yaw[0]), motion)
     obs = [car(30.0, 3.0, 5.0), rec, car(1000.0)]
     tab = table_of(obs, None)
+    K = 18  # (the recorded track ends at 4 s: the planner's goes on at its last velocity)
+    out = [np.full((8, K + 1), np.nan) for _ in range(4)]
+    index = np.zeros(8, np.int64)
+    pa = path_arrays(path)
+    cache = np.full((len(obs), 2 * K + 8, 4), np.nan)
+    # without a cache; then replanning every 0.1 s with one: from the third call on, most boxes
+    # are an earlier call's and the last ones are projected on from where the cached ones were
+    for t0, c in [(0.0, None), (0.0, cache), (0.1, cache), (0.2, cache), (0.3, cache)]:
+        n = obstacle_tracks(tab, pa, t0, 0.2, 5.0, (5.0, 0.0), 200.0, 25.0, *out, index, c, 0.1)
+        assert n == 2 and set(index[:n]) == {0, 1}  # the far car is out of range
+        for r in range(n):
+            ob = obs[index[r]]
+            for k in range(K + 1):
+                x, y, _ = ob.pose_at(t0 + 0.2 * k)
+                s, e = path.project(np.array([x, y]))
+                assert out[0][r, k] == pytest.approx(float(s), abs=1e-6)
+                assert out[1][r, k] == pytest.approx(float(e), abs=1e-6)
+    assert np.isfinite(cache[:2, : 2 * K + 4, 0]).all()  # every box of the calls' times was kept
+
+
+@pytest.mark.parametrize("v", [20.0, 30.0, -30.0])
+def test_a_fast_cars_track_is_where_it_drives_from_its_second_sample_on(v):
+    # from its first sample, a car's next is searched within its whole way (30 m/s: 6 m per
+    # step; before, within a tenth of it and 2 m, and its box lagged 3.3 m at 0.2 s)
+    path = WaypointPath([(0.0, 0.0), (100.0, 0.0), (200.0, 20.0), (300.0, 30.0)], ds_m=0.2)
+    ob = car(60.0, 1.0, v)
     K = 20
     out = [np.full((8, K + 1), np.nan) for _ in range(4)]
     index = np.zeros(8, np.int64)
-    n = obstacle_tracks(tab, path_arrays(path), 0.0, 0.2, 5.0, (5.0, 0.0), 200.0, 25.0, *out, index)
-    assert n == 2 and set(index[:n]) == {0, 1}  # the far car is out of range
-    for r in range(n):
-        ob = obs[index[r]]
-        for k in range(K + 1):
-            x, y, _ = ob.pose_at(0.2 * k)
-            s, e = path.project(np.array([x, y]))
-            assert out[0][r, k] == pytest.approx(float(s), abs=1e-6)
-            assert out[1][r, k] == pytest.approx(float(e), abs=1e-6)
+    assert (
+        obstacle_tracks(table_of([ob], None), path_arrays(path), 0.0, 0.2, 5.0, (5.0, 0.0), 200.0, 25.0, *out, index)
+        == 1
+    )
+    for k in range(K + 1):
+        x, y, _ = ob.pose_at(0.2 * k)
+        s, e = path.project(np.array([x, y]))
+        assert (out[0][0, k], out[1][0, k]) == pytest.approx((float(s), float(e)), abs=1e-6), k
 
 
 # -- choices -------------------------------------------------------------------------------------------

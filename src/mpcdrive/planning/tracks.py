@@ -122,6 +122,10 @@ def _tracks_kernel(
         # with every row in use, the track replaces the farthest one if it is nearer
         r = used if used < rows else -1
         guess, window, px, py, first, prev_s = s_m, range_m, 0.0, 0.0, True, s_m
+        moved = False  # the guess goes on by the last step's way along the path
+        # the pose of the sample before, looked up only where a projection needs it (a cached
+        # box needs none: with a replanning every control step most are cached)
+        prev_t = math.nan
         near = math.inf
         keep = False
         for k in range(K1):
@@ -136,10 +140,11 @@ def _tracks_kernel(
             if 0 <= ci < cache.shape[1] and math.isfinite(cache[j, ci, 0]):
                 # the same obstacle at the same time, projected at an earlier replanning
                 s, e, hl, hw = cache[j, ci, 0], cache[j, ci, 1], cache[j, ci, 2], cache[j, ci, 3]
-                guess = s + (s - prev_s if not first else 0.0)
+                moved = not first
+                guess = s + (s - prev_s if moved else 0.0)
                 first = False
                 prev_s = s
-                px, py = pose_ahead(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d)[:2]
+                prev_t = t
                 s_row[k], e_row[k], hl_row[k], hw_row[k] = s, e, hl, hw
                 ds = abs(s - s_m) - hl
                 if ds <= range_m and abs(e) - hw <= lateral_m:
@@ -153,12 +158,17 @@ def _tracks_kernel(
                 window = min(range_m, 1.5 * math.hypot(x - x_m, y - y_m) + 2.0 * lateral_m)
             else:
                 # near where the last step's motion along the path takes it (a car driving along
-                # the road), within the margin and a tenth of its way (one crossing it)
-                window = 0.1 * math.hypot(x - px, y - py) + TRACK_MARGIN_M
+                # the road), within the margin and a tenth of its way (one crossing it); from
+                # the first sample, whose guess has no motion yet, within its whole way
+                if not math.isnan(prev_t):  # the sample before was cached
+                    px, py = pose_ahead(j, prev_t, pose, vel, tr_lo, tr_hi, tr_t, tr_d)[:2]
+                way = math.hypot(x - px, y - py)
+                window = (0.1 * way if moved else way) + TRACK_MARGIN_M
             s, e = path_project(kind, geo, tab_s, tab_xy, guess, window, x, y)
-            guess = s + (s - prev_s if not first else 0.0)
+            moved = not first
+            guess = s + (s - prev_s if moved else 0.0)
             first = False
-            prev_s, px, py = s, x, y
+            prev_s, px, py, prev_t = s, x, y, math.nan
             s_row[k] = s
             e_row[k] = e
             if shape[j] == SHAPE_CIRCLE:
