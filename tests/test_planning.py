@@ -172,6 +172,24 @@ def test_a_fast_cars_track_is_where_it_drives_from_its_second_sample_on(v):
         assert (out[0][0, k], out[1][0, k]) == pytest.approx((float(s), float(e)), abs=1e-6), k
 
 
+def test_the_lane_at_an_offset_is_the_one_holding_it_else_the_nearest():
+    pl = planner(two_lanes(oncoming=True))
+    assert [pl.lane_at(50.0, d) for d in (0.0, 1.7, 1.8, W, 1.5 * W - 0.01)] == [0, 0, 1, 1, 1]
+    # on the edge both share, the car's own lane (the oncoming one's line is as near); beyond
+    # every edge, the lane whose line is nearest; the same beyond the road's mapped ends
+    assert pl.lane_at(50.0, W / 2) == 0
+    assert [pl.lane_at(50.0, d) for d in (-4.0, 9.0)] == [0, 1]
+    assert [pl.lane_at(s, W) for s in (-30.0, 900.0)] == [1, 1]
+
+
+def test_a_moves_offset_at_one_arc_length_is_the_one_its_arrays_give():
+    m = plan(planner(), [car(60.0)])  # a parked car ahead, the left lane free: a lane change
+    lat = m.lateral
+    assert lat.samples_s is None and lat.length_m > 0.0 and m.lane == 1
+    s = np.linspace(lat.s0_m - 5.0, lat.s0_m + lat.length_m + 20.0, 97)
+    assert [lat.at(x) for x in s] == [float(v) for v in lat(s)]
+
+
 # -- choices -------------------------------------------------------------------------------------------
 def test_free_road_keeps_the_lane_at_the_wanted_speed():
     m = plan(planner(), [])

@@ -1,5 +1,5 @@
 """The planner's Frenet-frame primitives, compiled (numba subroutines): the road on its uniform
-grid (:func:`grid_at`), a heading in a range (:func:`heading_within`), quintic polynomials (:func:`quintic`, :func:`poly_eval`), a lateral move
+grid (:func:`grid_at`), the lane at an offset (:func:`lane_at`), a heading in a range (:func:`heading_within`), quintic polynomials (:func:`quintic`, :func:`poly_eval`), a lateral move
 at an arc length (:func:`lateral_at`) and the evasive move's step (:func:`evasive_step`): steering
 towards a line as fast as the vehicle can."""
 
@@ -13,6 +13,7 @@ from .work import (
     LAT_BACK,
     LAT_BACK_LANE,
     LAT_BACK_LEN,
+    LANE_ONCOMING,
     P_FRICTION,
     P_KAPPA_MAX,
     P_KAPPA_RATE,
@@ -57,6 +58,20 @@ def grid_row_at(grid, tab, r, s):
     i = int(x)
     f = x - i
     return tab[r, i] * (1.0 - f) + tab[r, i + 1] * f
+
+
+@subroutine
+def lane_at(grid, lane_left, lane_right, lane_line, lane_kind, s, d):
+    """The lane whose edges at arc length ``s`` hold offset ``d`` (of several, the one whose line is
+    nearest, a lane going the car's way before an oncoming one at the same distance; of none, the
+    lane whose line is nearest)."""
+    best, best_key, best_in = 0, math.inf, False
+    for r in range(lane_kind.shape[0]):
+        inside = grid_row_at(grid, lane_right, r, s) <= d <= grid_row_at(grid, lane_left, r, s)
+        key = abs(grid_row_at(grid, lane_line, r, s) - d) + (1e-3 if lane_kind[r] == LANE_ONCOMING else 0.0)
+        if (inside and not best_in) or (inside == best_in and key < best_key):
+            best, best_key, best_in = r, key, inside
+    return best
 
 
 @subroutine

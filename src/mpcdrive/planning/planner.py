@@ -21,7 +21,7 @@ from ..paths.compiled import PathArrays, path_arrays, path_eval
 from ..scene.road import Road
 from . import kernels
 from .config import PlannerConfig, VehicleLimits
-from .frenet import heading_within, is_pass
+from .frenet import heading_within, is_pass, lane_at
 from .tracks import obstacle_tracks
 from .work import (
     road_windows,
@@ -182,6 +182,18 @@ class LateralMove:
         poly = c[0] + u * (c[1] + u * (c[2] + u * (c[3] + u * (c[4] + u * c[5]))))
         line = np.interp(s, self.knots_m, self.line_m) + self.offset_m
         return np.where(s - self.s0_m < self.length_m, poly, line)
+
+    def at(self, s_m: float) -> float:
+        """The offset [m] at one arc length ``s_m`` [m]: ``self(s_m)`` without the arrays (the
+        same arithmetic, a replanning's few lookups)."""
+        s = float(s_m)
+        if self.samples_s is not None and self.samples_d is not None:
+            return float(self(s))
+        if s - self.s0_m < self.length_m:
+            u = min(max(s - self.s0_m, 0.0), self.length_m)
+            c = self.coef
+            return float(c[0] + u * (c[1] + u * (c[2] + u * (c[3] + u * (c[4] + u * c[5])))))
+        return float(np.interp(s, self.knots_m, self.line_m)) + self.offset_m
 
     def curvature(self, s_m: float) -> float:
         """d''(s) [1/m] of the move at ``s_m`` (0 on the line past it)."""
@@ -425,21 +437,7 @@ class ManeuverPlanner:
     def lane_at(self, s_m: float, d_m: float) -> int:
         """The lane holding offset ``d_m`` at ``s_m`` (else the one whose line is nearest)."""
         w = self.work
-        g = w.grid
-        x = min(max((s_m - g[0]) / g[1], 0.0), len(w.g_kappa) - 1.0)
-        i = int(min(x, len(w.g_kappa) - 2)) if len(w.g_kappa) > 1 else 0
-        f = x - i
-        j = min(i + 1, len(w.g_kappa) - 1)
-
-        def at(tab, r):
-            return tab[r, i] * (1 - f) + tab[r, j] * f
-
-        L = len(w.lane_kind)
-        inside = [r for r in range(L) if at(w.lane_right, r) <= d_m <= at(w.lane_left, r)]
-        pool = inside or list(range(L))
-        return min(
-            pool, key=lambda r: abs(at(w.lane_line, r) - d_m) + (0.0 if w.lane_kind[r] != LANE_ONCOMING else 1e-3)
-        )
+        return int(lane_at(w.grid, w.lane_left, w.lane_right, w.lane_line, w.lane_kind, float(s_m), float(d_m)))
 
     def _on_plan(self, t_s: float, s_m: float, e_y_m: float, v_mps: float):
         """(s, d, v, a, slope) where the last maneuver has the car at ``t_s``, when the
@@ -460,7 +458,7 @@ class ManeuverPlanner:
         if abs(s - s_m) > tol_s or abs(d - e_y_m) > tol_d or abs(v - v_mps) > tol_v:
             return None
         h = 0.25
-        d1 = (float(m.lateral(s + h)) - float(m.lateral(s - h))) / (2.0 * h)
+        d1 = (m.lateral.at(s + h) - m.lateral.at(s - h)) / (2.0 * h)
         return s, d, v, a, d1
 
     def plan(
