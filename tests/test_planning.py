@@ -270,6 +270,22 @@ def test_a_pass_through_the_oncoming_lane_returns_to_its_own_lane_past_the_obsta
     assert m.lane == 0 and abs(m.d_m[-1]) < 0.05 and m.v_mps.min() > 10.0
 
 
+def test_a_pass_begun_when_the_moves_out_are_too_long_still_returns_past_the_obstacle():
+    """The car 0.6 m out of its lane's line and swerving left at 19 m/s, 38 m behind a car standing
+    in its lane, a car coming the other way from 178 m ahead (as when the car leaves its plan
+    mid-swerve and replans from where it is). Every move sampled into the oncoming lane (2 s at
+    19 m/s: 38 m) gets there after the car's front reaches the obstacle, so none was a pass:
+    before, the car went on into the oncoming lane and slowed there (9.5 m/s at the horizon's
+    end, the oncoming car closing). The latest move out that is still on time makes the pass,
+    at speed and back in its own lane past the obstacle."""
+    road = two_lanes(oncoming=True)
+    pl = planner(road, oncoming=True, speed=19.0)
+    m = pl.plan(0.0, 22.0, 0.6, 19.0, 0.14, 0.0, table_of([car(60.0), car(200.0, W, -12.0)], None))
+    beside = np.abs(m.s_m - 60.0) < 0.5 * LIMITS.length_m + 2.25
+    assert m.safe and beside.any() and np.all(m.d_m[beside] > W / 2 + 0.9 - 1e-6)
+    assert m.lane == 0 and abs(m.d_m[-1]) < 0.05 and m.v_mps.min() > 15.0
+
+
 def test_the_road_end_is_a_stop_with_the_whole_body_inside():
     pl = planner(two_lanes(end_m=60.0))
     for s in (20.0, 30.0, 40.0):

@@ -291,13 +291,31 @@ def _passes(w, v_len):
     that is on the other lane's line by the time the car's front reaches the obstacle: a longer
     one would put the pass off from one replanning to the next until the swerve left is too sharp
     (measured: a bound of only the body clear of the obstacle's side passed 2 of the 10 generated
-    blocked-lane scenarios, this one 7)."""
+    blocked-lane scenarios, this one 7); where every move sampled into a lane is too late, the
+    latest that is on time is sampled too."""
     clear, rear, route = _route_blocker(w)
     if not math.isfinite(clear):
         return
     par = w.par
     s0 = w.ego[E_S]
     prev = int(w.ego[E_PREV_LANE])
+    # the latest move out, on another lane's line just as the car's front reaches the obstacle,
+    # where every move sampled into that lane gets there too late (a car already swerving when
+    # it has left its plan replans from where it is: the durations' moves from there are longer
+    # than the way left), and it is no sharper than the shortest move
+    n0 = w.lat_n[0]
+    for lane in range(w.lane_kind.shape[0]):
+        if lane == route or lane == int(w.ego[E_LANE]):
+            continue
+        first, late = -1, True
+        for i in range(n0):
+            if w.lat_lane[i] == lane and w.lat_len[i] > 0.0 and w.lat_off[i] == 0.0:
+                first = i if first < 0 else first
+                late = late and s0 + w.lat_len[i] > rear
+        L = rear - s0 - 1e-6  # (within the bound of the passes' test below)
+        dd = abs(grid_row_at(w.grid, w.lane_line, lane, rear) - w.ego[E_D])
+        if first >= 0 and late and L >= max(par[P_LAT_MIN], shortest_move_m(par, dd)):
+            _add_lateral(w, lane, 0.0, L, w.lat_cost[first])
     n0 = w.lat_n[0]
     for i in range(n0):
         lane = w.lat_lane[i]
