@@ -1,7 +1,8 @@
 """The planner's Frenet-frame primitives, compiled (numba subroutines): the road on its uniform
-grid (:func:`grid_at`), the lane at an offset (:func:`lane_at`), a heading in a range (:func:`heading_within`), quintic polynomials (:func:`quintic`, :func:`poly_eval`), a lateral move
-at an arc length (:func:`lateral_at`) and the evasive move's step (:func:`evasive_step`): steering
-towards a line as fast as the vehicle can."""
+grid (:func:`grid_at`), the lane at an offset (:func:`lane_at`), a heading in a range
+(:func:`heading_within`), quintic polynomials (:func:`quintic`, :func:`poly_eval`), a lateral
+move at an arc length (:func:`lateral_at`) and the evasive move's step (:func:`evasive_step`):
+steering towards a line as fast as the vehicle can."""
 
 from __future__ import annotations
 

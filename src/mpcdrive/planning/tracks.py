@@ -121,8 +121,9 @@ def _tracks_kernel(
             continue
         # with every row in use, the track replaces the farthest one if it is nearer
         r = used if used < rows else -1
-        guess, window, px, py, first, prev_s = s_m, range_m, 0.0, 0.0, True, s_m
-        moved = False  # the guess goes on by the last step's way along the path
+        # samples placed so far: from the second on, the guess goes on by the last step's way
+        seen = 0
+        guess, px, py, prev_s = s_m, 0.0, 0.0, s_m
         # the pose of the sample before, looked up only where a projection needs it (a cached
         # box needs none: with a replanning every control step most are cached)
         prev_t = math.nan
@@ -140,9 +141,8 @@ def _tracks_kernel(
             if 0 <= ci < cache.shape[1] and math.isfinite(cache[j, ci, 0]):
                 # the same obstacle at the same time, projected at an earlier replanning
                 s, e, hl, hw = cache[j, ci, 0], cache[j, ci, 1], cache[j, ci, 2], cache[j, ci, 3]
-                moved = not first
-                guess = s + (s - prev_s if moved else 0.0)
-                first = False
+                guess = s + (s - prev_s if seen > 0 else 0.0)
+                seen += 1
                 prev_s = s
                 prev_t = t
                 s_row[k], e_row[k], hl_row[k], hw_row[k] = s, e, hl, hw
@@ -152,7 +152,7 @@ def _tracks_kernel(
                     near = min(near, max(ds, 0.0) + max(abs(e) - hw, 0.0))
                 continue
             x, y, yaw = pose_ahead(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d)
-            if first:
+            if seen == 0:
                 # the path between the car and the obstacle is about as long as the way between
                 # them (a bend makes it longer: half as long again, and a lane's width)
                 window = min(range_m, 1.5 * math.hypot(x - x_m, y - y_m) + 2.0 * lateral_m)
@@ -163,11 +163,10 @@ def _tracks_kernel(
                 if not math.isnan(prev_t):  # the sample before was cached
                     px, py = pose_ahead(j, prev_t, pose, vel, tr_lo, tr_hi, tr_t, tr_d)[:2]
                 way = math.hypot(x - px, y - py)
-                window = (0.1 * way if moved else way) + TRACK_MARGIN_M
+                window = (0.1 * way if seen > 1 else way) + TRACK_MARGIN_M
             s, e = path_project(kind, geo, tab_s, tab_xy, guess, window, x, y)
-            moved = not first
-            guess = s + (s - prev_s if moved else 0.0)
-            first = False
+            guess = s + (s - prev_s if seen > 0 else 0.0)
+            seen += 1
             prev_s, px, py, prev_t = s, x, y, math.nan
             s_row[k] = s
             e_row[k] = e
