@@ -72,8 +72,17 @@ def test_import_maps_route_obstacles_and_initial_state(name):
     w = np.hypot(*(ll.left_vertices - ll.right_vertices).T)
     s0, left0, right0 = spec.road.widths[2]
     assert w.min() - 0.1 <= left0 + right0 <= w.max() + 0.1
-    # every lane beside the route on the road's knots
+    # every lane beside the route on the road's knots, none of them the route lane itself (the
+    # lane the path runs in was also given as a lane beside it: the planner sampled each move and
+    # follow profile twice, once as a lane change)
     assert all(len(ln.rows) == len(spec.road.widths) for ln in spec.road.lane_rows or [])
+    widths = np.asarray(spec.road.widths)
+    for ln in spec.road.lane_rows or []:
+        rows = np.asarray(ln.rows)
+        width = rows[:, 1] - rows[:, 2]
+        assert ln.oncoming or np.any(
+            (width > 0.0) & ((np.abs(rows[:, 1] - widths[:, 1]) > 0.3) | (np.abs(rows[:, 2] + widths[:, 2]) > 0.3))
+        ), ln.name
     # dynamic obstacles carry their recorded trajectories as known predictions
     for o, entry in zip(imp.scenario.obstacles, spec.obstacles):
         if o.obstacle_role.value == "dynamic":

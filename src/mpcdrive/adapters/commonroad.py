@@ -66,6 +66,10 @@ PRESET = "commonroad_ford_escort"
 NEIGHBOUR_LANES = True
 #: the most lanes beside the route lane given to the planner (the nearest)
 MAX_LANES_BESIDE = 10
+#: a lane whose edges lie within this [m] of the route lane's wherever it is found is the route
+#: lane itself (the lane the path runs in), not a lane beside it: the lanes' edges are found on a
+#: 0.1 m search across lanelets widened by 2 cm to close their seams, the route's edge by edge
+ROUTE_LANE_SAME_M = 0.3
 #: how far [m] behind the car's start (its reference point) the road reaches at least: the
 #: longest CommonRoad body's corner (half its length and width) and half a metre, so a car
 #: placed at the mapped road's start is not "behind the road" for standing where it was put
@@ -231,6 +235,12 @@ def _lane_rows(net, route, line: np.ndarray, left: np.ndarray, right: np.ndarray
         found = np.isfinite(lf)
         if found.sum() < 2:
             continue
+        if (
+            not oncoming
+            and np.all(np.abs(lf[found] - left[found]) <= ROUTE_LANE_SAME_M)
+            and np.all(np.abs(rt[found] + right[found]) <= ROUTE_LANE_SAME_M)
+        ):
+            continue  # the lane the path runs in, wherever it is: the route lane itself
         mid = 0.5 * (lf[found] + rt[found])
         edge = np.where(np.mean(mid) >= 0.0, left, -right)
         lf = np.where(found, lf, edge)
