@@ -469,6 +469,30 @@ def test_the_wanted_speed_is_followed_through_a_bend_it_slows_for_not_passed_fas
     assert float(np.min(m.v_mps[inside])) >= 6.0 - 0.5
 
 
+@pytest.mark.parametrize("s0", [40.0, 44.0, 48.0])
+def test_a_bend_ahead_is_slowed_for_to_its_speed_not_to_half_the_cars(s0):
+    """The wanted speed dips from 6.9 m/s to 4.3 m/s at 66 m (it brakes and picks up at
+    2.4 m/s^2, the profile of a roundabout's exit bend that the path bends as fast as the car
+    steers at). The car comes at 6.4 m/s, braking gently (0.7 m/s^2). Following the dip costs
+    jerk; before the slowing profiles, a quartic to half the car's speed (3.2 m/s) was cheaper,
+    and replanning chose it again and again (measured on a roundabout: 4.1 m/s for 2.5 s before
+    the exit). Now a profile that holds the speed, then slows to the bend's speed where it is
+    wanted, is chosen: never below the bend's speed, reaching it by the bend."""
+
+    def wanted(s):
+        s = np.asarray(s, float)
+        return np.minimum(6.9, np.sqrt(4.3**2 + 2.0 * 2.4 * np.abs(s - 66.0)))
+
+    def bend(s):  # the path bends as fast as the car steers at the wanted speed (5 % within)
+        return 0.95 / wanted(s)
+
+    pl = ManeuverPlanner(PATH, two_lanes(), LIMITS, PlannerConfig(), wanted_speed=wanted, bend=bend)
+    m = pl.plan(0.0, s0, 0.0, 6.4, 0.0, -0.7, table_of([car(-500.0)], None))
+    assert m.safe
+    assert float(np.min(m.v_mps)) >= 4.3 - 0.05
+    assert float(np.interp(66.0, m.s_m, m.v_mps)) <= 4.3 * 1.05
+
+
 def test_above_the_wanted_speed_the_profile_brakes_beyond_the_comfortable_to_get_under_it():
     """The car drives 12 m/s where the wanted speed is 7 m/s (it entered a bend's slower stretch
     too fast): the profile that follows the wanted speed brakes harder than the comfortable

@@ -501,6 +501,79 @@ def _stop_at(w, s_stop, c):
         _fill_quintic(w, n, c, T)
 
 
+#: a wanted speed this much [m/s] below the car's speed is a slowing worth its own profiles
+SLOWING_MPS = 0.5
+#: the shares of the way to a slower wanted speed ahead over which the slowing profiles slow
+#: (the rest of the way first at the car's speed): the whole way at a constant deceleration, the
+#: gentlest, and its last half, twice as firm and half as much time lost
+SLOWING_SHARES = (1.0, 0.5)
+
+
+@subroutine
+def _fill_hold_quintic(w, n, c, t_h, T):
+    """Samples of the car's speed held for ``t_h`` [s] (its acceleration now at the first
+    sample only), then of the quintic ``c`` (in the time after ``t_h``) up to ``T``, then its end
+    speed held."""
+    K = w.lon_s.shape[1] - 1
+    dt = w.dt[0]
+    s0, v0 = w.ego[E_S], w.ego[E_V]
+    pT, vT, _, _ = poly_eval(c, T)
+    for k in range(K + 1):
+        t = k * dt
+        if t <= t_h:
+            p, v, a = s0 + v0 * t, v0, (w.ego[E_A] if k == 0 else 0.0)
+        elif t - t_h <= T:
+            p, v, a, _ = poly_eval(c, t - t_h)
+        else:
+            p, v, a = pT + vT * (t - t_h - T), vT, 0.0
+        w.lon_s[n, k] = p
+        w.lon_v[n, k] = v
+        w.lon_a[n, k] = a
+
+
+@subroutine
+def _slow_for_bend(w, c):
+    """Profiles to the slowest wanted speed within the wanted-speed profile's reach over the
+    horizon (a bend the car steers through no faster, a lower limit), arriving where it is
+    wanted: the car's speed held over part of the way, then a quintic over the rest
+    (:data:`SLOWING_SHARES`), then held: the slowing a driver starts early. The wanted-speed
+    profile itself keeps its speed up to the bend's braking and brakes at the profile's
+    deceleration; where that costs more jerk than a half-speed target's lost time, without these
+    profiles the car chose the half-speed target at every replanning and drove the slow speed
+    long before the bend (measured: 4.1 m/s for 2.5 s before a roundabout's exit wanted at
+    4.3 m/s)."""
+    par = w.par
+    s0, v0 = w.ego[E_S], w.ego[E_V]
+    K = w.lon_s.shape[1] - 1
+    reach = w.lon_s[0, K]  # the wanted-speed profile's own end (the first profile)
+    h = w.grid[1]
+    v_b, s_b = math.inf, s0
+    s = s0 + h
+    while s <= reach:
+        v = min(grid_at(w.grid, w.g_vref, s), par[P_V_MAX])
+        if v < v_b:
+            v_b, s_b = v, s
+        s += h
+    if not (0.0 < v_b < v0 - SLOWING_MPS):
+        return
+    D = s_b - s0
+    for q in range(len(SLOWING_SHARES)):
+        # a constant deceleration from v0 to v_b covers its share of the way in
+        # 2 share D / (v0 + v_b); the rest of the way at v0 first
+        T = 2.0 * SLOWING_SHARES[q] * D / (v0 + v_b)
+        if (v0 - v_b) / T > par[P_D_COMF]:
+            return  # sharper than comfortable: the wanted-speed profile's own braking
+        t_h = (1.0 - SLOWING_SHARES[q]) * D / v0
+        n = _new_lon(w, LON_SPEED, v_b)
+        if n < 0:
+            return
+        if t_h > 0.0:
+            quintic(s0 + v0 * t_h, v0, 0.0, s_b, v_b, 0.0, T, c)
+        else:
+            quintic(s0, v0, w.ego[E_A], s_b, v_b, 0.0, T, c)
+        _fill_hold_quintic(w, n, c, t_h, T)
+
+
 @subroutine
 def longitudinal_candidates(w, c):
     """The longitudinal profiles (module docstring) into ``w.lon_*``; returns the nearest stop
@@ -546,6 +619,7 @@ def longitudinal_candidates(w, c):
                             w.lon_v[n, kk] = 0.0
                             w.lon_a[n, kk] = 0.0
                         break
+    _slow_for_bend(w, c)
     # the intelligent driver model behind each lane's leader, wanting the wanted speed or the
     # top speed (keeping up with traffic faster than the car wants to drive, a car behind)
     for lane in range(w.lane_kind.shape[0]):
