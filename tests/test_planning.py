@@ -493,6 +493,53 @@ def test_a_bend_ahead_is_slowed_for_to_its_speed_not_to_half_the_cars(s0):
     assert float(np.interp(66.0, m.s_m, m.v_mps)) <= 4.3 * 1.05
 
 
+def test_a_goal_window_closing_after_the_horizon_is_missed_by_a_profile_too_slow_to_make_it():
+    """A window closing after the horizon (6 s) is judged from each profile's end: the time the
+    wanted speed takes from there to the region, plus the time lost regaining it at the
+    comfortable acceleration. Wanted 10 m/s; the region from 130 m, the window closing at 12.5 s:
+    a profile at 10 m/s ends at 60 m and is there at 13 s (missed), one at 10 m/s from 70 m at
+    12 s (in time), one ending at 70 m at 6 m/s loses (10 - 6)^2 / (2 * 2 * 10) = 0.4 s (in time,
+    12.4 s) and at 4 m/s 0.9 s (missed, 12.9 s). A region reached within the horizon, or behind a
+    standstill of the wanted speed (no estimate), is not charged."""
+    from mpcdrive.planning import work as W
+    from mpcdrive.planning.checks import goal_missed_by_profile
+    from mpcdrive.planning.planner import wanted_times
+
+    dt, K = 0.2, 30
+    grid_s = np.arange(0.0, 300.0, 0.5)
+    par = np.zeros(W.N_PAR)
+    par[W.P_C_GOAL], par[W.P_V_MAX], par[W.P_A_COMF] = 20.0, 30.0, 2.0
+    ego = np.zeros(W.E_MOVE_END + 1)
+    ego[W.E_S], ego[W.E_T] = 0.0, 0.0
+    grid = np.array([grid_s[0], 0.5, len(grid_s), 2.0])
+    goal = np.zeros(12)
+    goal[W.G_HAS] = 1.0
+    goal[W.G_S_LO], goal[W.G_S_HI] = 130.0, 200.0
+    goal[W.G_T_LO], goal[W.G_T_HI] = 0.0, 12.5
+    goal[W.G_V_LO], goal[W.G_V_HI] = 0.0, 30.0
+
+    def charged(end_s, end_v, vref=None):
+        vref = np.full(len(grid_s), 10.0) if vref is None else vref
+        lon_s = np.linspace(0.0, end_s, K + 1)[None, :]
+        lon_v = np.full((1, K + 1), end_v)
+        out = np.empty(1)
+        tref = wanted_times(grid_s, vref, 30.0)
+        goal_missed_by_profile.py_func(par, ego, goal, lon_s, lon_v, 1, dt, grid, vref, tref, out)
+        return out[0]
+
+    assert charged(60.0, 10.0) == 20.0
+    assert charged(70.0, 10.0) == 0.0
+    assert charged(70.0, 6.0) == 0.0
+    assert charged(70.0, 4.0) == 20.0
+    assert charged(131.0, 10.0) == 0.0  # in the region by the horizon's end
+    stop = np.where(grid_s > 100.0, 0.0, 10.0)  # the wanted speed stands from 100 m on
+    assert charged(60.0, 10.0, stop) == 0.0
+    goal[W.G_S_LO] = 130.2  # (between two grid points: the time there is inf, not NaN)
+    assert charged(60.0, 10.0, stop) == 0.0 and charged(60.0, 10.0) == 20.0
+    t = wanted_times(grid_s, stop, 30.0)
+    assert t[grid_s <= 100.0][-1] == pytest.approx(10.0, abs=0.05) and np.isinf(t[-1])
+
+
 def test_above_the_wanted_speed_the_profile_brakes_beyond_the_comfortable_to_get_under_it():
     """The car drives 12 m/s where the wanted speed is 7 m/s (it entered a bend's slower stretch
     too fast): the profile that follows the wanted speed brakes harder than the comfortable
@@ -708,7 +755,8 @@ def test_a_profile_that_reaches_the_region_only_after_the_window_closes_is_a_sur
         goal[W.G_T_LO], goal[W.G_T_HI] = 0.0, 2.9
         goal[W.G_V_LO], goal[W.G_V_HI] = 0.0, 20.0
         out = np.empty(1)
-        goal_missed_by_profile.py_func(par, ego, goal, lon_s, lon_v, 1, dt, out)
+        grid, table = np.array([0.0, 1.0, 2.0, 1.0]), np.zeros(2)  # (the window closes within the horizon)
+        goal_missed_by_profile.py_func(par, ego, goal, lon_s, lon_v, 1, dt, grid, table, table, out)
         return out[0]
 
     assert REACH_SLACK_M == 0.5

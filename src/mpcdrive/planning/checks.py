@@ -31,6 +31,7 @@ from .work import (
     G_YAW_LO,
     LANE_ONCOMING,
     LANE_ROUTE,
+    P_A_COMF,
     P_C_GAP,
     P_C_GOAL,
     P_C_RATE,
@@ -632,7 +633,7 @@ REACH_SLACK_M = 0.5
 
 
 @subroutine
-def goal_missed_by_profile(par, ego, goal_arr, lon_s, lon_v, nlon, dt, out):
+def goal_missed_by_profile(par, ego, goal_arr, lon_s, lon_v, nlon, dt, grid, g_vref, g_tref, out):
     """Into ``out[j]``: the goal's miss cost [s] that every pair with profile ``j`` pays for
     sure (:func:`check_pair`'s last term), else 0. The window closes within the horizon, and at
     no step inside it (nor on the way to one from the step before, where the window and the speed
@@ -640,12 +641,25 @@ def goal_missed_by_profile(par, ego, goal_arr, lon_s, lon_v, nlon, dt, out):
     the distance it drives reaching the region's start (a move's path is never longer than the distance driven:
     it runs along the path at most; :data:`REACH_SLACK_M` covers the evasive move, which
     integrates the profile's speed by midpoints). The pairs' bound counts it, so that where no
-    profile reaches a closing window the search still stops early."""
+    profile reaches a closing window the search still stops early. A window closing after the
+    horizon is missed by a profile from whose end the wanted speed (its times ``g_tref`` on
+    ``grid``), plus the time lost regaining it from the profile's end speed at the comfortable
+    acceleration, gets to the region's start only after the window has closed."""
     K = lon_s.shape[1] - 1
     t0 = ego[E_T]
     for j in range(nlon):
         out[j] = 0.0
-    if goal_arr[G_HAS] == 0.0 or goal_arr[G_T_HI] < t0 or goal_arr[G_T_HI] > t0 + K * dt:
+    if goal_arr[G_HAS] == 0.0 or goal_arr[G_T_HI] < t0:
+        return
+    if goal_arr[G_T_HI] > t0 + K * dt:
+        t_lo = grid_at(grid, g_tref, goal_arr[G_S_LO])
+        for j in range(nlon):
+            s_end, v_w = lon_s[j, K], min(grid_at(grid, g_vref, lon_s[j, K]), par[P_V_MAX])
+            short = max(v_w - lon_v[j, K], 0.0)
+            rest = t_lo - grid_at(grid, g_tref, s_end) + short * short / (2.0 * par[P_A_COMF] * max(v_w, 1.0))
+            late = t0 + K * dt + rest > goal_arr[G_T_HI]  # (not finite past a standstill: no estimate)
+            if s_end + REACH_SLACK_M < goal_arr[G_S_LO] and math.isfinite(rest) and late:
+                out[j] = par[P_C_GOAL]
         return
     for j in range(nlon):
         reach = False

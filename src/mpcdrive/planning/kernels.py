@@ -102,7 +102,7 @@ def plan(w):
     # the cost of steering beyond the rate that the route's bends ask at its speeds (the choice
     # scores the rate's excess, and a pair steers at least at its profile's ``lon_bend``)
     prepaid = w.lon_goal
-    goal_missed_by_profile(par, ego, goal_arr, lon_s, lon_v, nlon, dt, prepaid)
+    goal_missed_by_profile(par, ego, goal_arr, lon_s, lon_v, nlon, dt, w.grid, w.g_vref, w.g_tref, prepaid)
     c_rate = par[P_C_RATE]
     m = 0
     now = int(ego[E_LANE])

@@ -124,6 +124,19 @@ PLAN_TOLERANCE = (1.0, 0.3, 1.0)
 NO_MOVE = (-1.0, 0.0, math.nan)
 
 
+def wanted_times(grid_s: np.ndarray, v_mps: np.ndarray, v_max_mps: float) -> np.ndarray:
+    """The time [s] the wanted speed ``v_mps`` (G,) [m/s], at most ``v_max_mps``, takes from the
+    grid's first point to each point of ``grid_s`` (G,) [m]: each step at constant acceleration
+    (2 ds over the two ends' speeds); every point past a step between two standstills is
+    ``inf``."""
+    v = np.minimum(np.asarray(v_mps, float), v_max_mps)
+    ds = np.diff(np.asarray(grid_s, float))
+    both = v[1:] + v[:-1]
+    with np.errstate(divide="ignore"):
+        step = np.where(both > 0.0, 2.0 * ds / np.maximum(both, 1e-300), np.inf)
+    return np.r_[0.0, np.cumsum(step)]
+
+
 @dataclass(frozen=True)
 class PlanningGoal:
     """Where and when the car should be, in the path's frame: its centre's arc length in
@@ -348,6 +361,7 @@ class ManeuverPlanner:
         par[P_A_MAX] = limits.max_accel_mps2
         par[P_D_MAX] = limits.max_decel_mps2
         par[P_V_MAX] = limits.max_speed_mps
+        arrays["g_tref"][:] = wanted_times(grid, arrays["g_vref"], limits.max_speed_mps)
         par[P_FRICTION] = limits.friction_mps2 if math.isfinite(limits.friction_mps2) else 1e9
         par[P_A_COMF] = min(cfg.comfort_accel_mps2, limits.max_accel_mps2)
         par[P_D_COMF] = min(cfg.comfort_decel_mps2, limits.max_decel_mps2)

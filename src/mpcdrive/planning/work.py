@@ -116,6 +116,7 @@ class PlannerWork:
     g_heading: np.ndarray  # (G,) path heading [rad] (unwrapped)
     g_vref: np.ndarray  # (G,) wanted speed along the path [m/s]
     g_bend: np.ndarray  # (G,) 1 / the speed [s/m] above which the path bends faster than the car steers
+    g_tref: np.ndarray  # (G,) time [s] the wanted speed takes from the grid's start (inf past a stop)
     lane_left: np.ndarray  # (L, G) lane edges [m] (offsets from the path, positive left)
     lane_right: np.ndarray  # (L, G)
     lane_line: np.ndarray  # (L, G) the line driven in each lane [m]
@@ -185,6 +186,7 @@ def new_work(K: int, grid_s: np.ndarray, n_lanes: int) -> dict:
         g_heading=f(G),
         g_vref=f(G),
         g_bend=f(G),
+        g_tref=f(G),
         lane_left=f((L, G)),
         lane_right=f((L, G)),
         lane_line=f((L, G)),
