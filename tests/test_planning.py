@@ -286,6 +286,23 @@ def test_a_pass_begun_when_the_moves_out_are_too_long_still_returns_past_the_obs
     assert m.lane == 0 and abs(m.d_m[-1]) < 0.05 and m.v_mps.min() > 15.0
 
 
+@pytest.mark.parametrize("s0, off, slope", [(30.0, 0.4, 0.05), (30.0, 0.2, 0.1), (25.0, 0.3, 0.05)])
+def test_a_pass_in_the_oncoming_lane_off_its_line_still_returns_past_the_obstacle(s0, off, slope):
+    """The car mid-pass in the oncoming lane, 0.2-0.4 m beyond that lane's line and still heading
+    out (a multi-body plant overshoots the line by 0.44 m), 30-35 m behind a car standing in its
+    own lane at 16 m/s, a car coming the other way from 220 m ahead. Off its line, the car had no
+    move in its lane short enough to be a pass (2 s at 16 m/s is 32 m), only passes through the
+    lane it had left: before, it stayed in the oncoming lane slowing to 9 m/s, the oncoming car
+    closing (and on a multi-body plant was hit head-on). The move back onto its line over the
+    way left makes the pass, at speed and back in its own lane past the obstacle."""
+    road = two_lanes(oncoming=True)
+    pl = planner(road, oncoming=True, speed=16.0)
+    m = pl.plan(0.0, s0, W + off, 16.0, slope, 0.0, table_of([car(60.0), car(220.0, W, -12.0)], None))
+    beside = np.abs(m.s_m - 60.0) < 0.5 * LIMITS.length_m + 2.25
+    assert m.safe and beside.any() and np.all(m.d_m[beside] > W / 2 + 0.9 - 1e-6)
+    assert m.lane == 0 and abs(m.d_m[-1]) < 0.05 and m.v_mps.min() > 15.0
+
+
 def test_the_road_end_is_a_stop_with_the_whole_body_inside():
     pl = planner(two_lanes(end_m=60.0))
     for s in (20.0, 30.0, 40.0):

@@ -292,7 +292,9 @@ def _passes(w, v_len):
     one would put the pass off from one replanning to the next until the swerve left is too sharp
     (measured: a bound of only the body clear of the obstacle's side passed 2 of the 10 generated
     blocked-lane scenarios, this one 7); where every move sampled into a lane is too late, the
-    latest that is on time is sampled too."""
+    latest that is on time is sampled too, and so in the lane the car is in when it is off that
+    lane's line (a car mid-pass in the oncoming lane, its plant overshooting the line by 0.4 m,
+    had no pass from there, only passes through the lane it had left, and turned back)."""
     clear, rear, route = _route_blocker(w)
     if not math.isfinite(clear):
         return
@@ -304,8 +306,9 @@ def _passes(w, v_len):
     # it has left its plan replans from where it is: the durations' moves from there are longer
     # than the way left), and it is no sharper than the shortest move
     n0 = w.lat_n[0]
+    now = int(w.ego[E_LANE])
     for lane in range(w.lane_kind.shape[0]):
-        if lane == route or lane == int(w.ego[E_LANE]):
+        if lane == route:
             continue
         first, late = -1, True
         for i in range(n0):
@@ -313,6 +316,11 @@ def _passes(w, v_len):
                 first = i if first < 0 else first
                 late = late and s0 + w.lat_len[i] > rear
         L = rear - s0 - 1e-6  # (within the bound of the passes' test below)
+        if lane == now:
+            # the lane the car passes in already, off its line (a plant that overshoots it, a
+            # car that has left its plan): back onto the line over the way left, or over the
+            # shortest move sampled (which counts as staying in the lane, below)
+            L = max(L, par[P_LAT_MIN])
         dd = abs(grid_row_at(w.grid, w.lane_line, lane, rear) - w.ego[E_D])
         if first >= 0 and late and L >= max(par[P_LAT_MIN], shortest_move_m(par, dd)):
             _add_lateral(w, lane, 0.0, L, w.lat_cost[first])
@@ -322,7 +330,7 @@ def _passes(w, v_len):
         if lane == route or w.lat_len[i] <= 0.0 or w.lat_off[i] != 0.0:
             continue
         L = w.lat_len[i]
-        if s0 + L > rear and not (lane == int(w.ego[E_LANE]) and L <= par[P_LAT_MIN] + 1e-9):
+        if s0 + L > rear and not (lane == now and L <= par[P_LAT_MIN] + 1e-9):
             continue  # out too late (staying on the lane the car is in is no move out)
         width = grid_row_at(w.grid, w.lane_line, lane, clear) - grid_row_at(w.grid, w.lane_line, route, clear)
         L_min = shortest_move_m(par, abs(width))
