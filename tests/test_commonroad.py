@@ -76,12 +76,14 @@ def test_import_maps_route_obstacles_and_initial_state(name):
     # lane the path runs in was also given as a lane beside it: the planner sampled each move and
     # follow profile twice, once as a lane change)
     assert all(len(ln.rows) == len(spec.road.widths) for ln in spec.road.lane_rows or [])
-    widths = np.asarray(spec.road.widths)
+    from mpcdrive.adapters.commonroad import ROUTE_LANE_SAME_M
+
+    widths, same = np.asarray(spec.road.widths), ROUTE_LANE_SAME_M
     for ln in spec.road.lane_rows or []:
         rows = np.asarray(ln.rows)
         width = rows[:, 1] - rows[:, 2]
         assert ln.oncoming or np.any(
-            (width > 0.0) & ((np.abs(rows[:, 1] - widths[:, 1]) > 0.3) | (np.abs(rows[:, 2] + widths[:, 2]) > 0.3))
+            (width > 0.0) & ((np.abs(rows[:, 1] - widths[:, 1]) > same) | (np.abs(rows[:, 2] + widths[:, 2]) > same))
         ), ln.name
     # dynamic obstacles carry their recorded trajectories as known predictions
     for o, entry in zip(imp.scenario.obstacles, spec.obstacles):

@@ -49,6 +49,14 @@ class ConstantSpeed:
         return s0_m + self.v_mps * np.asarray(t_s, float)
 
 
+def segment_times(ds_m, v_mps: np.ndarray) -> np.ndarray:
+    """The time [s] each step ``ds_m`` [m] (a scalar or one per step) between the speeds
+    ``v_mps`` (M,) [m/s] takes at constant acceleration (``v^2`` linear in s): ``2 ds / (v_i +
+    v_{i+1})``, (M - 1,); ``inf`` for a step between two standstills."""
+    vs = v_mps[1:] + v_mps[:-1]
+    return np.where(vs > 0, 2.0 * ds_m / np.maximum(vs, 1e-300), np.inf)
+
+
 #: the distance [m] over which the change of the path's curvature is measured for the steering
 #: rate's speed limit (either side of each point)
 CURVATURE_RATE_BASE_M = 2.0
@@ -168,8 +176,7 @@ class SpeedProfile:
         # time along the grid: v^2 is linear in s on each segment (constant acceleration), so a
         # segment takes exactly 2 ds / (v_i + v_{i+1}); a segment between two stops takes forever
         v = np.r_[self.v_mps, self.v_mps[0]] if self.closed else self.v_mps
-        vs = v[1:] + v[:-1]
-        seg_t = np.where(vs > 0, 2.0 * self.ds_m / np.maximum(vs, 1e-300), np.inf)
+        seg_t = segment_times(self.ds_m, v)
         if self.s_start_m > 0.0:  # open paths only: the clock starts at the start
             seg_t[s[1:] <= self.s_start_m + 1e-12] = 0.0
         self._t_grid = np.r_[0.0, np.cumsum(seg_t)]

@@ -370,17 +370,22 @@ def _new_lon(w, kind, target):
 
 
 @subroutine
-def _fill_quintic(w, n, c, T):
-    """Samples of the quintic ``c`` (in t) up to ``T``, then its end speed held."""
+def _fill_quintic(w, n, c, t_h, T):
+    """Samples of the car's speed held for ``t_h`` [s] (0: none; its acceleration now at the
+    first sample only), then of the quintic ``c`` (in the time after ``t_h``) up to ``T``, then
+    its end speed held."""
     K = w.lon_s.shape[1] - 1
     dt = w.dt[0]
+    s0, v0 = w.ego[E_S], w.ego[E_V]
     pT, vT, _, _ = poly_eval(c, T)
     for k in range(K + 1):
         t = k * dt
-        if t <= T:
-            p, v, a, _ = poly_eval(c, t)
+        if t_h > 0.0 and t <= t_h:
+            p, v, a = s0 + v0 * t, v0, (w.ego[E_A] if k == 0 else 0.0)
+        elif t - t_h <= T:
+            p, v, a, _ = poly_eval(c, t - t_h)
         else:
-            p, v, a = pT + vT * (t - T), vT, 0.0
+            p, v, a = pT + vT * (t - t_h - T), vT, 0.0
         w.lon_s[n, k] = p
         w.lon_v[n, k] = v
         w.lon_a[n, k] = a
@@ -506,7 +511,7 @@ def _stop_at(w, s_stop, c):
             return
         T = T0 * f
         quintic(s0, v0, w.ego[E_A], s0 + D, 0.0, 0.0, T, c)
-        _fill_quintic(w, n, c, T)
+        _fill_quintic(w, n, c, 0.0, T)
 
 
 #: a wanted speed this much [m/s] below the car's speed is a slowing worth its own profiles
@@ -515,28 +520,6 @@ SLOWING_MPS = 0.5
 #: (the rest of the way first at the car's speed): the whole way at a constant deceleration, the
 #: gentlest, and its last half, twice as firm and half as much time lost
 SLOWING_SHARES = (1.0, 0.5)
-
-
-@subroutine
-def _fill_hold_quintic(w, n, c, t_h, T):
-    """Samples of the car's speed held for ``t_h`` [s] (its acceleration now at the first
-    sample only), then of the quintic ``c`` (in the time after ``t_h``) up to ``T``, then its end
-    speed held."""
-    K = w.lon_s.shape[1] - 1
-    dt = w.dt[0]
-    s0, v0 = w.ego[E_S], w.ego[E_V]
-    pT, vT, _, _ = poly_eval(c, T)
-    for k in range(K + 1):
-        t = k * dt
-        if t <= t_h:
-            p, v, a = s0 + v0 * t, v0, (w.ego[E_A] if k == 0 else 0.0)
-        elif t - t_h <= T:
-            p, v, a, _ = poly_eval(c, t - t_h)
-        else:
-            p, v, a = pT + vT * (t - t_h - T), vT, 0.0
-        w.lon_s[n, k] = p
-        w.lon_v[n, k] = v
-        w.lon_a[n, k] = a
 
 
 @subroutine
@@ -579,7 +562,7 @@ def _slow_for_bend(w, c):
             quintic(s0 + v0 * t_h, v0, 0.0, s_b, v_b, 0.0, T, c)
         else:
             quintic(s0, v0, w.ego[E_A], s_b, v_b, 0.0, T, c)
-        _fill_hold_quintic(w, n, c, t_h, T)
+        _fill_quintic(w, n, c, t_h, T)
 
 
 @subroutine
@@ -616,7 +599,7 @@ def longitudinal_candidates(w, c):
             if n < 0:
                 return math.inf
             _speed_target(w, v1, T, c)
-            _fill_quintic(w, n, c, T)
+            _fill_quintic(w, n, c, 0.0, T)
             # a stop quartic that rolls back is no stop: hold at the first standstill
             if v1 == 0.0:
                 K = w.lon_s.shape[1] - 1
@@ -700,10 +683,10 @@ def longitudinal_candidates(w, c):
         if n >= 0:
             if T <= horizon:
                 quintic(s0, v0, w.ego[E_A], s_mid, v_goal, 0.0, T, c)
-                _fill_quintic(w, n, c, T)
+                _fill_quintic(w, n, c, 0.0, T)
             else:
                 _speed_target(w, min(max((s_mid - s0) / T, 0.0), par[P_V_MAX]), min(w.speed_s[0], T), c)
-                _fill_quintic(w, n, c, min(w.speed_s[0], T))
+                _fill_quintic(w, n, c, 0.0, min(w.speed_s[0], T))
     return nearest
 
 

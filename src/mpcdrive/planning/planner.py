@@ -18,6 +18,7 @@ import numpy as np
 
 from ..ocp.avoidance_compiled import ObstacleTable
 from ..paths.compiled import PathArrays, path_arrays, path_eval
+from ..paths.speed_profile import segment_times
 from ..scene.road import Road
 from . import kernels
 from .config import PlannerConfig, VehicleLimits
@@ -128,13 +129,10 @@ def wanted_times(grid_s: np.ndarray, v_mps: np.ndarray, v_max_mps: float) -> np.
     """The time [s] the wanted speed ``v_mps`` (G,) [m/s], at most ``v_max_mps``, takes from the
     grid's first point to each point of ``grid_s`` (G,) [m]: each step at constant acceleration
     (2 ds over the two ends' speeds); every point past a step between two standstills is
-    ``inf``."""
+    ``inf`` (:func:`~mpcdrive.paths.speed_profile.segment_times`, as the speed profile's own
+    times)."""
     v = np.minimum(np.asarray(v_mps, float), v_max_mps)
-    ds = np.diff(np.asarray(grid_s, float))
-    both = v[1:] + v[:-1]
-    with np.errstate(divide="ignore"):
-        step = np.where(both > 0.0, 2.0 * ds / np.maximum(both, 1e-300), np.inf)
-    return np.r_[0.0, np.cumsum(step)]
+    return np.r_[0.0, np.cumsum(segment_times(np.diff(np.asarray(grid_s, float)), v))]
 
 
 @dataclass(frozen=True)
