@@ -79,31 +79,6 @@ def test_the_step_time_includes_the_planning():
     assert out.status == "ok" and out.solve_time_s > 0.0
 
 
-def test_the_first_control_step_solves_warm_after_the_start_up_step():
-    """Both lanes blocked 20 m ahead of a car at 10 m/s: solved cold (no plan, no active set),
-    the first step's QP takes hundreds of active-set changes; the start-up step
-    (``PlannedMpc.initial_warm``) pays them before the drive, and the first control step,
-    linearized at its solution, solves in a few -- as every later step does. The start-up's
-    choice is forgotten and not logged as a replanning; its time is reported apart."""
-    from mpcdrive.ocp.assembly import INFO_ITER
-
-    spec = ScenarioSpec.model_validate(_spec([dict(PARKED, position=[20.0, 0.0]), dict(BESIDE, position=[20.0, 3.5])]))
-    x0 = np.asarray(build_experiment(spec).x0, float)
-    cold = build_experiment(spec).controller
-    cold.step(x0, cold.mpc.initial_warm(x0))
-    changes_cold = int(cold.mpc._info[INFO_ITER])
-    ctrl = build_experiment(spec).controller
-    warm = ctrl.initial_warm(x0)
-    assert int(ctrl.mpc._info[INFO_ITER]) == changes_cold > 100  # the start-up: the same cold solve
-    assert warm.X is not None and warm.U is not None and warm.t_s == 0.0
-    assert np.array_equal(warm.u_prev, np.zeros(2))  # the wheels and pedals as they are
-    assert ctrl.plans == 0 and ctrl.log == [] and ctrl.maneuver is None
-    out = ctrl.step(x0, warm)
-    assert out.status == "ok" and int(ctrl.mpc._info[INFO_ITER]) <= changes_cold // 20
-    stats = ctrl.planner_stats()
-    assert stats["replannings"] == 1 and stats["startup_us"] > 0.0
-
-
 def test_without_a_neighbour_lane_it_stops_behind_the_parked_car():
     res = run_experiment(build_experiment(ScenarioSpec.model_validate(_spec([PARKED], neighbours=False))))
     m = compute_metrics(res)

@@ -292,9 +292,7 @@ def _planner_cell(r: dict) -> str:
     if not p or not p.get("replannings"):
         return "-"
     t = p["plan_time_us"]
-    cell = f"{t['p50']:.0f} / {t['p99']:.0f} ({p['checked']['p50']:.0f} / {p['sampled']['p50']:.0f})"
-    start = p.get("startup_us")
-    return cell if start is None else f"{cell}; start-up {start:.0f}"
+    return f"{t['p50']:.0f} / {t['p99']:.0f} ({p['checked']['p50']:.0f} / {p['sampled']['p50']:.0f})"
 
 
 def summary_markdown(rows: dict, header: str = "") -> str:
@@ -316,8 +314,7 @@ def summary_markdown(rows: dict, header: str = "") -> str:
         "Min clearance: footprint to obstacle over the checked drive (whole run in brackets when smaller). "
         "Step: the controller's whole step (maneuver planner, obstacle terms, QP), wall time. "
         "Replanning: the maneuver planner's call, wall time, median / p99, and the candidate pairs it "
-        "checked of those it sampled (median); start-up: the wall time [us] of the one whole step before "
-        "the drive that warm-starts its first step (its cold QP solve; not among the steps).",
+        "checked of those it sampled (median).",
         "",
         "Traffic: recorded (replayed) or sumo (SUMO drives the vehicles, reacting to the ego); prediction: "
         "known (the recorded futures) or lane (constant speed along the lane, growing uncertainty).",

@@ -30,7 +30,6 @@ from ..control.base import projection_guess
 from ..ocp.avoidance_compiled import ObstacleTable, table_of
 from ..scene.road import Road
 from ..scene.world import Scene
-from ..types import STATUS_OK, WarmStart
 from ..units import wrap_angle
 from .config import PlannerConfig, VehicleLimits
 from .planner import Maneuver, ManeuverPlanner, PlanningGoal
@@ -139,58 +138,18 @@ class PlannedMpc:
         self._wheelbase = self.planner.limits.wheelbase_m
         self.plans = 0
         self.plan_time_s = 0.0
-        #: the wall time [s] of the start-up step (:meth:`initial_warm`; None before it)
-        self.startup_time_s: float | None = None
         #: one row per replanning: (t [s], kind, target, lane, offset [m], safe, ttc [s], pairs
         #: checked, pairs sampled, wall time [s])
         self.log: list[tuple] = []
         self._t_mpc = mpc.dt_s * np.arange(mpc.N + 1)
         road.bounds(0.0, 0.0, 0.0, mpc.footprint)  # load the road's kernel now: each band change uses it
 
-    def initial_warm(self, x0) -> WarmStart:
-        """The first step's warm start, found by the **start-up step**: one whole step (a
-        replanning and the MPC's solve) at ``x0`` before the drive, as a car's controller runs
-        before it is engaged. Its QP is solved cold (from no plan, with no active set: up to
-        hundreds of active-set changes where the first command is at a bound); its solution is
-        the first control step's linearization, so that step solves warm like every later one.
-        Its choice of maneuver is forgotten (the first control step replans afresh) and nothing
-        of it is logged as a replanning; its wall time is ``startup_time_s`` (in
-        :meth:`planner_stats`). A start-up step that does not solve (a fallback) leaves the cold
-        warm start."""
-        warm = self.mpc.initial_warm(x0)
-        t0 = time.perf_counter()
-        out = self.step(x0, warm)
-        self.maneuver = None
-        self._planned_at = -math.inf
-        self.plans = 0
-        self.plan_time_s = 0.0
-        self.log.clear()
-        self.goal_reached_s = None
-        self.planner.forget(self.goal)
-        self.startup_time_s = time.perf_counter() - t0
-        X, U = out.warm.X, out.warm.U
-        if out.status != STATUS_OK or X is None or U is None:
-            return warm
-        # the first step shifts its warm plan by a step (the last step's, a step later): the
-        # solution handed in a step back is linearized at as it is
-        return dataclasses.replace(
-            warm, X=np.vstack((X[:1], X[:-1])), U=np.vstack((U[:1], U[:-1])), sides=out.warm.sides
-        )
-
     def planner_stats(self) -> dict:
         """The replannings of the run so far (``metrics.json["planner"]``): their number, how
         many had no safe maneuver, the pairs each sampled and checked (median, largest) and its
-        wall time [us] (median, p99, largest); ``startup_us``: the start-up step's wall time
-        (:meth:`initial_warm`), apart from the drive's steps."""
+        wall time [us] (median, p99, largest)."""
         if not self.log:
-            return {
-                "replannings": 0,
-                "unsafe": 0,
-                "sampled": None,
-                "checked": None,
-                "plan_time_us": None,
-                "startup_us": self._startup_us(),
-            }
+            return {"replannings": 0, "unsafe": 0, "sampled": None, "checked": None, "plan_time_us": None}
         sampled = np.array([r[8] for r in self.log], float)
         checked = np.array([r[7] for r in self.log], float)
         us = 1e6 * np.array([r[9] for r in self.log], float)
@@ -204,11 +163,7 @@ class PlannedMpc:
                 "p99": float(np.percentile(us, 99)),
                 "max": float(us.max()),
             },
-            "startup_us": self._startup_us(),
         }
-
-    def _startup_us(self) -> float | None:
-        return None if self.startup_time_s is None else 1e6 * self.startup_time_s
 
     def __getattr__(self, name):  # the MPC's attributes (problem, N, nx, path, obstacles ...)
         if name == "mpc":

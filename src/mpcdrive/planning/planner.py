@@ -436,12 +436,6 @@ class ManeuverPlanner:
         goal = self.goal
         tab = table_of([Obstacle(Circle(1.0), (0.0, 50.0, 0.0))], None)
         self.plan(0.0, 0.0, 0.0, 1.0, 0.0, 0.0, tab)
-        self.forget(goal)
-
-    def forget(self, goal: PlanningGoal | None) -> None:
-        """Forget the choices made so far (the next replanning chooses afresh, as the first
-        one does) and plan for ``goal``; the obstacles' projected boxes are kept (they depend on
-        the obstacles and the clock only)."""
         self.previous = None
         self._move = NO_MOVE
         self.set_goal(goal)

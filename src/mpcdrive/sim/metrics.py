@@ -248,10 +248,9 @@ class Metrics(Mapping[str, Any]):
     Maneuver planner (a run on a road with lanes, docs/planning.md):
 
     planner : ``{replannings, unsafe, sampled: {p50, max}, checked: {p50, max}, plan_time_us:
-    {p50, p99, max}, startup_us}``: the replannings, those without a safe maneuver, the candidate
-    pairs each sampled and checked, and its wall time [µs], and the wall time [µs] of the
-    start-up step before the drive (``PlannedMpc.initial_warm``) (from ``meta["planner"]``); None
-    without a planner (then the key is absent from ``metrics.json``).
+    {p50, p99, max}}``: the replannings, those without a safe maneuver, the candidate pairs each
+    sampled and checked, and its wall time [µs] (from ``meta["planner"]``); None without a
+    planner (then the key is absent from ``metrics.json``).
 
     The JSON view: :meth:`as_dict` gives ``metrics.json``'s dict (nested records as dicts,
     ``collision_events`` a list, no ``commonroad`` / ``planner`` key when it is None). A Metrics is also a
