@@ -73,6 +73,24 @@ SPEED_TAU_S = 1.0
 
 
 @subroutine
+def wanted_at(grid, g_vref, par, s):
+    """The wanted speed [m/s] at arc length ``s`` [m] (``g_vref`` on ``grid``), at most the
+    vehicle's top speed."""
+    return min(grid_at(grid, g_vref, s), par[P_V_MAX])
+
+
+@subroutine
+def regain_time_s(v_wanted, v, a_comf):
+    """The time [s] a car at speed ``v`` [m/s] loses on one at the wanted speed ``v_wanted``
+    [m/s] getting back to it at the comfortable acceleration ``a_comf`` [m/s^2]:
+    ``(v_w - v)^2 / (2 a v_w)`` (``v_w`` taken at least 1 m/s); 0 at or above the wanted speed."""
+    short = v_wanted - v
+    if short <= 0.0:
+        return 0.0
+    return short * short / (2.0 * a_comf * max(v_wanted, 1.0))
+
+
+@subroutine
 def wanted_speed_ahead(w, s, v):
     """The wanted speed [m/s] the intelligent driver model behind a leader wants, at arc length
     ``s`` [m] and speed ``v`` [m/s]: looked up where the car will be in :data:`SPEED_TAU_S`, at
@@ -81,7 +99,7 @@ def wanted_speed_ahead(w, s, v):
     profile itself follows :func:`_wanted_accel`."""
     tau = SPEED_TAU_S
     ahead = max(v * tau, 0.5 * w.par[P_A_COMF] * tau * tau)
-    return min(grid_at(w.grid, w.g_vref, s + ahead), w.par[P_V_MAX])
+    return wanted_at(w.grid, w.g_vref, w.par, s + ahead)
 
 
 #: jerk [m/s^3] of the numeric profiles (reference, follow): a firm but comfortable onset
@@ -97,14 +115,13 @@ def _wanted_accel(w, s, v):
     bend that sets in faster than the car steers is then kept, not passed 1 m/s fast (a
     lookahead alone lags the profile's braking); from rest where the wanted speed starts at 0
     the profile's acceleration starts the car."""
-    grid, g_vref = w.grid, w.g_vref
-    v_max = w.par[P_V_MAX]
+    grid, g_vref, par = w.grid, w.g_vref, w.par
     h = grid[1]
-    ahead = s + v * (0.5 * w.par[P_D_COMF] / PROFILE_JERK_MPS3)
-    v_hi = min(grid_at(grid, g_vref, ahead + h), v_max)
-    v_lo = min(grid_at(grid, g_vref, ahead - h), v_max)
+    ahead = s + v * (0.5 * par[P_D_COMF] / PROFILE_JERK_MPS3)
+    v_hi = wanted_at(grid, g_vref, par, ahead + h)
+    v_lo = wanted_at(grid, g_vref, par, ahead - h)
     a_ff = (v_hi * v_hi - v_lo * v_lo) / (4.0 * h)
-    return a_ff + (min(grid_at(grid, g_vref, s), v_max) - v) / SPEED_TAU_S
+    return a_ff + (wanted_at(grid, g_vref, par, s) - v) / SPEED_TAU_S
 
 
 #: a pair whose curvature exceeds the vehicle's by this share is infeasible (the controller's
@@ -541,7 +558,7 @@ def _slow_for_bend(w, c):
     v_b, s_b = math.inf, s0
     s = s0 + h
     while s <= reach:
-        v = min(grid_at(w.grid, w.g_vref, s), par[P_V_MAX])
+        v = wanted_at(w.grid, w.g_vref, par, s)
         if v < v_b:
             v_b, s_b = v, s
         s += h
@@ -558,10 +575,8 @@ def _slow_for_bend(w, c):
         n = _new_lon(w, LON_SPEED, v_b)
         if n < 0:
             return
-        if t_h > 0.0:
-            quintic(s0 + v0 * t_h, v0, 0.0, s_b, v_b, 0.0, T, c)
-        else:
-            quintic(s0, v0, w.ego[E_A], s_b, v_b, 0.0, T, c)
+        # (the car's acceleration now where it slows from the start, none after a hold)
+        quintic(s0 + v0 * t_h, v0, w.ego[E_A] if t_h == 0.0 else 0.0, s_b, v_b, 0.0, T, c)
         _fill_quintic(w, n, c, t_h, T)
 
 
@@ -572,7 +587,7 @@ def longitudinal_candidates(w, c):
     par = w.par
     w.lon_n[0] = 0
     s0, v0 = w.ego[E_S], w.ego[E_V]
-    v_want = min(grid_at(w.grid, w.g_vref, s0), par[P_V_MAX])
+    v_want = wanted_at(w.grid, w.g_vref, par, s0)
     n = _new_lon(w, LON_REFERENCE, v_want)
     _numeric(w, n, -1, False)
     # speed targets: hold, the wanted speed, the top speed, half the speed, a stop
@@ -732,7 +747,7 @@ def longitudinal_costs(w, s_stop):
         # back to it at the comfort acceleration, (v_w - v)^2 / (2 a v_w), from the speed the
         # profile is bound for (a stop's 0 and a speed target's target, where it gets there only
         # after the horizon: a stop stretched past the horizon saves nothing)
-        v_w = min(grid_at(w.grid, w.g_vref, lon_s[n, K]), v_max)
+        v_w = wanted_at(w.grid, w.g_vref, par, lon_s[n, K])
         if math.isfinite(s_stop):
             v_w = min(v_w, math.sqrt(2.0 * d_comf * max(s_stop - lon_s[n, K], 0.0)))
         v_end = lon_v[n, K]
@@ -740,9 +755,7 @@ def longitudinal_costs(w, s_stop):
             v_end = 0.0
         elif w.lon_kind[n] == LON_SPEED:
             v_end = w.lon_target[n]
-        short = v_w - v_end
-        if short > 0.0:
-            cost += short * short / (2.0 * a_comf * max(v_w, 1.0))
+        cost += regain_time_s(v_w, v_end, a_comf)
         lon_ok[n] = ok
         lon_cost[n] = cost
         lon_bend[n] = bend

@@ -63,7 +63,7 @@ from .work import (
     REL_RIGHT,
 )
 
-from .candidates import KAPPA_SLACK, _standing, _turn_out_m
+from .candidates import KAPPA_SLACK, _standing, _turn_out_m, regain_time_s, wanted_at
 from .frenet import (
     EVASIVE_GENTLE,
     EVASIVE_HARD,
@@ -654,9 +654,9 @@ def goal_missed_by_profile(par, ego, goal_arr, lon_s, lon_v, nlon, dt, grid, g_v
     if goal_arr[G_T_HI] > t0 + K * dt:
         t_lo = grid_at(grid, g_tref, goal_arr[G_S_LO])
         for j in range(nlon):
-            s_end, v_w = lon_s[j, K], min(grid_at(grid, g_vref, lon_s[j, K]), par[P_V_MAX])
-            short = max(v_w - lon_v[j, K], 0.0)
-            rest = t_lo - grid_at(grid, g_tref, s_end) + short * short / (2.0 * par[P_A_COMF] * max(v_w, 1.0))
+            s_end = lon_s[j, K]
+            v_w = wanted_at(grid, g_vref, par, s_end)
+            rest = t_lo - grid_at(grid, g_tref, s_end) + regain_time_s(v_w, lon_v[j, K], par[P_A_COMF])
             late = t0 + K * dt + rest > goal_arr[G_T_HI]  # (not finite past a standstill: no estimate)
             if s_end + REACH_SLACK_M < goal_arr[G_S_LO] and math.isfinite(rest) and late:
                 out[j] = par[P_C_GOAL]
