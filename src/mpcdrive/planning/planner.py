@@ -135,6 +135,18 @@ def wanted_times(grid_s: np.ndarray, v_mps: np.ndarray, v_max_mps: float) -> np.
     return np.r_[0.0, np.cumsum(segment_times(np.diff(np.asarray(grid_s, float)), v))]
 
 
+def _interp_at(x: float, xp: np.ndarray, fps: tuple[np.ndarray, ...]) -> tuple[float, ...]:
+    """``np.interp(x, xp, fp)`` for each ``fp`` of ``fps`` at one point ``x`` inside ``xp``'s
+    range: the interval looked up once for all, numpy's arithmetic (``fp[j]`` at a node,
+    ``slope (x - xp[j]) + fp[j]`` between)."""
+    j = min(max(int(np.searchsorted(xp, x, side="right")) - 1, 0), len(xp) - 1)
+    x0 = float(xp[j])
+    if j == len(xp) - 1 or x == x0:
+        return tuple(float(fp[j]) for fp in fps)
+    h = float(xp[j + 1]) - x0
+    return tuple((float(fp[j + 1]) - float(fp[j])) / h * (x - x0) + float(fp[j]) for fp in fps)
+
+
 @dataclass(frozen=True)
 class PlanningGoal:
     """Where and when the car should be, in the path's frame: its centre's arc length in
@@ -440,12 +452,6 @@ class ManeuverPlanner:
         self._move = NO_MOVE
         self.set_goal(goal)
 
-    def _pose(self, s_m: float, d_m: float) -> tuple[float, float, float, float]:
-        """(x, y, heading, curvature) of the point ``d_m`` [m] left of the path at ``s_m`` [m]."""
-        pa = self._pa
-        x, y, h, k = path_eval(pa.kind, pa.geo, pa.tab_s, pa.tab_xy, pa.tab_h, pa.tab_k, float(s_m))
-        return x - math.sin(h) * d_m, y + math.cos(h) * d_m, h, k
-
     def lane_at(self, s_m: float, d_m: float) -> int:
         """The lane holding offset ``d_m`` at ``s_m`` (else the one whose line is nearest)."""
         w = self.work
@@ -462,10 +468,7 @@ class ManeuverPlanner:
         tau = t_s - self._planned_t
         if not (0.0 <= tau <= m.t_s[-1] - self.config.dt_s):
             return None
-        s = float(np.interp(tau, m.t_s, m.s_m))
-        v = float(np.interp(tau, m.t_s, m.v_mps))
-        a = float(np.interp(tau, m.t_s, m.a_mps2))
-        d = float(np.interp(tau, m.t_s, m.d_m))
+        s, v, a, d = _interp_at(tau, m.t_s, (m.s_m, m.v_mps, m.a_mps2, m.d_m))
         tol_s, tol_d, tol_v = PLAN_TOLERANCE
         if abs(s - s_m) > tol_s or abs(d - e_y_m) > tol_d or abs(v - v_mps) > tol_v:
             return None
@@ -511,7 +514,9 @@ class ManeuverPlanner:
         # the lateral move starts at the car's curvature relative to the path's (as d''), within
         # what the vehicle can turn at its speed
         top = min(self.limits.max_curvature_1pm, self.limits.friction_mps2 / max(v_mps, 1.0) ** 2)
-        kappa = min(max(curvature_1pm, -top), top) - self._pose(s_m, 0.0)[3]
+        pa = self._pa
+        px, py, ph, pk = path_eval(pa.kind, pa.geo, pa.tab_s, pa.tab_xy, pa.tab_h, pa.tab_k, float(s_m))
+        kappa = min(max(curvature_1pm, -top), top) - pk
         curv = kappa * (1.0 + min(slope * slope, 1.0)) ** 1.5
         e[E_S], e[E_D], e[E_V], e[E_T] = s_m, e_y_m, max(v_mps, 0.0), t_s
         e[E_SLOPE] = min(max(slope, -1.0), 1.0)
@@ -521,7 +526,7 @@ class ManeuverPlanner:
         e[E_PREV_LANE] = -1.0 if prev is None else prev.lane
         e[E_PREV_OFF] = 0.0 if prev is None else prev.offset_m
         e[E_MOVE_LANE], e[E_MOVE_OFF], e[E_MOVE_END] = self._move if on is not None else NO_MOVE
-        x, y, _, _ = self._pose(s_m, e_y_m)
+        x, y = px - math.sin(ph) * e_y_m, py + math.cos(ph) * e_y_m  # the car, e_y_m left of the path
         if obstacles is not self._cache_of:  # other obstacles (fresh predictions): a new cache
             self._cache = np.full((len(obstacles.obstacles), TRACK_CACHE_STEPS, 4), np.nan)
             self._cache_of = obstacles
@@ -531,23 +536,23 @@ class ManeuverPlanner:
         )  # fmt: skip
         w.ob_n[0] = n
         kernels.plan(self._struct)
-        r = w.result
+        r = w.result.tolist()  # the result's slots as Python numbers (each read once below)
         i = int(r[R_I])
         if i < 0:
             raise RuntimeError("the maneuver planner found no candidate (no lane and no speed profile to sample)")
         lane = int(r[R_LANE])
         # the move to go on with at the next replanning (a quintic's, or a pass's move out)
-        end = float(s_m + w.lat_len[i]) if w.lat_len[i] > 0.0 else math.nan
+        length = float(w.lat_len[i])
+        coef = w.lat_coef[i]
+        end = s_m + length if length > 0.0 else math.nan
         self._move = (float(w.lat_lane[i]), float(w.lat_off[i]), end)
-        if w.lat_len[i] > 0.0 and not is_pass(w.lat_coef[i], w.lat_len[i]):
-            lateral = LateralMove(
-                float(s_m), float(w.lat_len[i]), w.lat_coef[i].copy(), self._knots, self._lines[lane], float(r[R_OFF])
-            )
+        if length > 0.0 and not is_pass.py_func(coef, length):
+            lateral = LateralMove(float(s_m), length, coef.copy(), self._knots, self._lines[lane], r[R_OFF])
         else:  # an evasive move or a pass: its samples along the maneuver
             keep = np.r_[True, np.diff(w.plan_s) > 1e-3]
             lateral = LateralMove(
-                float(s_m), 0.0, np.zeros(6), self._knots, self._lines[lane], float(r[R_OFF]),
-                samples_s=w.plan_s[keep].copy(), samples_d=w.plan_d[keep].copy(),
+                float(s_m), 0.0, np.zeros(6), self._knots, self._lines[lane], r[R_OFF],
+                samples_s=w.plan_s[keep], samples_d=w.plan_d[keep],
             )  # fmt: skip
         m = Maneuver(
             t_s=self._t,
@@ -557,14 +562,14 @@ class ManeuverPlanner:
             d_m=w.plan_d.copy(),
             lateral=lateral,
             lane=lane,
-            offset_m=float(r[R_OFF]),
+            offset_m=r[R_OFF],
             kind=LON_NAMES[int(r[R_KIND])],
-            target=float(r[R_TARGET]),
+            target=r[R_TARGET],
             safe=bool(r[R_SAFE]),
-            ttc_s=float(r[R_TTC]),
-            cost_s=float(r[R_COST]),
+            ttc_s=r[R_TTC],
+            cost_s=r[R_COST],
             goal=bool(r[R_GOAL]),
-            lanes=tuple(int(q) for q in np.flatnonzero(w.plan_lanes)),
+            lanes=tuple(np.flatnonzero(w.plan_lanes).tolist()),
             candidates=int(r[R_COMBOS]),
             checked=int(r[R_CHECKED]),
             safe_count=int(r[R_SAFE_COUNT]),
