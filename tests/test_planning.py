@@ -190,19 +190,6 @@ def test_a_moves_offset_at_one_arc_length_is_the_one_its_arrays_give():
     assert [lat.at(x) for x in s] == [float(v) for v in lat(s)]
 
 
-
-def test_a_maneuvers_state_at_one_time_is_numpys_interpolation_bit_for_bit():
-    from mpcdrive.planning.planner import _interp_at
-
-    rng = np.random.default_rng(3)
-    t = 0.2 * np.arange(31)
-    fps = (np.cumsum(rng.uniform(0.0, 3.0, 31)), rng.normal(size=31), rng.normal(size=31))
-    # the nodes themselves, the last one, points between and points a rounding away from a node
-    xs = np.r_[t, rng.uniform(0.0, t[-1], 200), np.nextafter(t[1:-1], 0.0), np.nextafter(t[1:-1], 9.0)]
-    for x in xs.tolist():
-        assert _interp_at(x, t, fps) == tuple(float(np.interp(x, t, fp)) for fp in fps), x
-
-
 # -- choices -------------------------------------------------------------------------------------------
 def test_free_road_keeps_the_lane_at_the_wanted_speed():
     m = plan(planner(), [])

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mpcdrive.paths import CirclePath, ConstantSpeed, SpeedProfile, StraightPath, WaypointPath
-from mpcdrive.paths.profile_compiled import profile_arc_lengths, profile_array, profile_speed
+from mpcdrive.paths.profile_compiled import np_interp, profile_arc_lengths, profile_array, profile_speed
 
 TOL = 1e-9
 DT_S = 0.05
@@ -92,3 +92,14 @@ def test_profiles_without_a_compiled_form_are_none():
             return 1.0 + 0.1 * np.asarray(s_m)
 
     assert profile_array(Ramp()) is None
+
+
+def test_one_point_interpolation_is_numpys_bit_for_bit():
+    rng = np.random.default_rng(3)
+    t = 0.2 * np.arange(31)
+    fps = (np.cumsum(rng.uniform(0.0, 3.0, 31)), rng.normal(size=31), rng.normal(size=31))
+    # the nodes themselves, the last one, points between and points a rounding away from a node
+    xs = np.r_[t, rng.uniform(0.0, t[-1], 200), np.nextafter(t[1:-1], 0.0), np.nextafter(t[1:-1], 9.0)]
+    for x in xs.tolist():
+        for fp in fps:
+            assert float(np_interp(x, t, fp)) == float(np.interp(x, t, fp)), x

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..ocp.avoidance_compiled import ObstacleTable
 from ..paths.compiled import PathArrays, path_arrays, path_eval
+from ..paths.profile_compiled import np_interp
 from ..paths.speed_profile import segment_times
 from ..scene.road import Road
 from . import kernels
@@ -133,18 +134,6 @@ def wanted_times(grid_s: np.ndarray, v_mps: np.ndarray, v_max_mps: float) -> np.
     times)."""
     v = np.minimum(np.asarray(v_mps, float), v_max_mps)
     return np.r_[0.0, np.cumsum(segment_times(np.diff(np.asarray(grid_s, float)), v))]
-
-
-def _interp_at(x: float, xp: np.ndarray, fps: tuple[np.ndarray, ...]) -> tuple[float, ...]:
-    """``np.interp(x, xp, fp)`` for each ``fp`` of ``fps`` at one point ``x`` inside ``xp``'s
-    range: the interval looked up once for all, numpy's arithmetic (``fp[j]`` at a node,
-    ``slope (x - xp[j]) + fp[j]`` between)."""
-    j = min(max(int(np.searchsorted(xp, x, side="right")) - 1, 0), len(xp) - 1)
-    x0 = float(xp[j])
-    if j == len(xp) - 1 or x == x0:
-        return tuple(float(fp[j]) for fp in fps)
-    h = float(xp[j + 1]) - x0
-    return tuple((float(fp[j + 1]) - float(fp[j])) / h * (x - x0) + float(fp[j]) for fp in fps)
 
 
 @dataclass(frozen=True)
@@ -468,7 +457,7 @@ class ManeuverPlanner:
         tau = t_s - self._planned_t
         if not (0.0 <= tau <= m.t_s[-1] - self.config.dt_s):
             return None
-        s, v, a, d = _interp_at(tau, m.t_s, (m.s_m, m.v_mps, m.a_mps2, m.d_m))
+        s, v, a, d = (float(np_interp(tau, m.t_s, fp)) for fp in (m.s_m, m.v_mps, m.a_mps2, m.d_m))
         tol_s, tol_d, tol_v = PLAN_TOLERANCE
         if abs(s - s_m) > tol_s or abs(d - e_y_m) > tol_d or abs(v - v_mps) > tol_v:
             return None
