@@ -576,7 +576,7 @@ def _slow_for_bend(w, c):
         if n < 0:
             return
         # (the car's acceleration now where it slows from the start, none after a hold)
-        quintic(s0 + v0 * t_h, v0, w.ego[E_A] if t_h == 0.0 else 0.0, s_b, v_b, 0.0, T, c)
+        quintic(s0 + v0 * t_h, v0, 0.0 if t_h > 0.0 else w.ego[E_A], s_b, v_b, 0.0, T, c)
         _fill_quintic(w, n, c, t_h, T)
 
 
