@@ -366,6 +366,26 @@ def test_replanning_is_deterministic():
     assert (a.kind, a.lane, a.checked, a.candidates) == (b.kind, b.lane, b.checked, b.candidates)
 
 
+def test_the_warm_up_leaves_no_trace_in_the_replannings_after_it():
+    # the warm-up replans twice (the second goes on from the first and reuses its tracks): a
+    # planner warmed up again must plan the same two maneuvers as one warmed up once
+    obs = [car(50.0), car(2.0, 0.0, 10.0), car(90.0, W, 8.0)]
+    tab = table_of(obs, None)
+    runs = []
+    for extra in (0, 2):
+        pl = planner()
+        for _ in range(extra):
+            pl._warm_up()
+        a = pl.plan(0.0, 20.0, W, 12.0, 0.0, 0.0, tab)  # in the left lane (the warm-up's car: right)
+        s, v, d = (float(np.interp(0.1, a.t_s, f)) for f in (a.s_m, a.v_mps, a.d_m))
+        b = pl.plan(0.1, s, d, v, 0.0, 0.0, tab)
+        runs.append((a, b))
+    for m0, m1 in zip(*runs):
+        for f in ("s_m", "v_mps", "d_m"):
+            np.testing.assert_array_equal(getattr(m0, f), getattr(m1, f))
+        assert (m0.kind, m0.lane, m0.checked, m0.cost_s) == (m1.kind, m1.lane, m1.checked, m1.cost_s)
+
+
 @pytest.mark.parametrize(
     "field, value", [("horizon_s", 0.0), ("dt_s", 0.5), ("margin_m", -0.1), ("lateral_s", ()), ("time_gap_s", math.nan)]
 )

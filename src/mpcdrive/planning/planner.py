@@ -436,9 +436,16 @@ class ManeuverPlanner:
 
         goal = self.goal
         tab = table_of([Obstacle(Circle(1.0), (0.0, 50.0, 0.0))], None)
-        self.plan(0.0, 0.0, 0.0, 1.0, 0.0, 0.0, tab)
+        m = self.plan(0.0, 0.0, 0.0, 1.0, 0.0, 0.0, tab)
+        # and a second replanning, on that maneuver with the same obstacles: the code that goes
+        # on from the last maneuver and reuses the tracks' cache runs first there
+        t = self.cache_step_s
+        s, v, a, d = (float(np.interp(t, m.t_s, fp)) for fp in (m.s_m, m.v_mps, m.a_mps2, m.d_m))
+        self.plan(t, s, d, v, 0.0, a, tab)
         self.previous = None
         self._move = NO_MOVE
+        self._cache = np.zeros((0, 0, 4))
+        self._cache_of = None
         self.set_goal(goal)
 
     def lane_at(self, s_m: float, d_m: float) -> int:
