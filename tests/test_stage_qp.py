@@ -5,7 +5,8 @@ drives the closed loop the OSQP controller drives.
 The cases cover what the oracle test (``test_solver_oracle``, hard rows) does not: the cost
 formulations (their convex model enters the stage QP as the position cost ``H``, ``g``), the
 corridor, the friction circle's per-stage input bounds, the paper's frozen linearization, a
-lateral reference with a speed cap (the step in two stages), SQP iterates, prediction
+lateral reference with a speed cap (the step in two stages), a planner's longitudinal plan
+(the first step, with no plan of its own, linearized along the plan's rollout), SQP iterates, prediction
 substeps (each step of the model taken as three, their Jacobians chained), and the cost
 formulations on recorded trajectories (a turning box with a lifetime, a drifting disc).
 """
@@ -52,6 +53,7 @@ CASES = [
     "friction",
     "paper",
     "lateral-cap",
+    "plan",
     "sqp",
     "substeps",
     "recorded-potential",
@@ -104,6 +106,11 @@ def _controllers(case: str, curved: bool):
         for c in (ref, fo):
             c.set_lateral_reference(lambda s: 0.4 * np.sin(0.2 * np.asarray(s)))
             c.set_speed_cap(3.0, 2.0)
+    if case == "plan":  # a planner's: braking to a stop at 3 m/s^2 where the profile holds 5 m/s
+        v = np.maximum(5.0 - 3.0 * 0.1 * np.arange(pb.N + 1), 0.0)
+        s = np.r_[0.0, np.cumsum(0.05 * (v[1:] + v[:-1]))]
+        for c in (ref, fo):
+            c.set_longitudinal_plan(s, v)
     x0 = np.array([*path.position(0.0), float(path.heading(0.0)), 5.0])
     return model, ref, fo, x0
 

@@ -90,7 +90,7 @@ from .base import (
     resolve_scene,
 )
 
-from ..ocp.assembly import MODE_ITERATE, MODE_NO_PLAN, MODE_SHIFTED_PLAN, StepAssembly
+from ..ocp.assembly import MODE_ITERATE, MODE_NO_PLAN, MODE_ROLLOUT, MODE_SHIFTED_PLAN, StepAssembly
 from ..ocp.avoidance_compiled import SIDE_NONE
 from ..ocp.obstacle_cost_compiled import OBS_GAUSSIAN, OBS_NONE, OBS_POTENTIAL, cost_obstacle_arrays
 from ..ocp.stage_qp import new_stage_qp
@@ -520,6 +520,18 @@ class CompiledLtvMpc(LtvMpc):
         if code != 0:
             return code, warm_sides
         a, qp = self._asm, self._qp
+        if mode == MODE_NO_PLAN and plan is not None:
+            # no plan of its own to linearize along (a first step): roll out the inputs of the
+            # plan's references, as LtvMpc does, not those of the speed profile's (placed first:
+            # a car braking hard for a crossing was linearized running on at the profile's
+            # speed, and the rows made along that asked for slacks the solution did not need)
+            a.follow_s[:] = plan[0] - plan[0][0] + a.s_arr[0]
+            a.follow_v[:] = plan[1]
+            self._step_fn(step, x, s_guess, t_s, u_prev, X, U, mode, STAGE_FOLLOW, out)
+            U = qp.uref.copy()
+            code = self._step_fn(step, x, s_guess, t_s, u_prev, X, U, MODE_ROLLOUT, STAGE_LINEARIZE, out)
+            if code != 0:
+                return code, warm_sides
         a.e_ref[...] = 0.0
         if plan is not None:  # the plan's references, from the car's arc length
             a.s_arr[:] = plan[0] - plan[0][0] + a.s_arr[0]

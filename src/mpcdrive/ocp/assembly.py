@@ -43,8 +43,10 @@ from .obstacle_cost_compiled import detour, obstacle_cost, select_obstacles, shi
 _TWO_PI = 2.0 * math.pi
 
 #: linearization modes of a step: no plan (roll out the references), the previous step's plan
-#: shifted by one step (real-time iteration), the current SQP iterate as it is
-MODE_NO_PLAN, MODE_SHIFTED_PLAN, MODE_ITERATE = 0, 1, 2
+#: shifted by one step (real-time iteration), the current SQP iterate as it is, no plan but
+#: inputs to roll out (the references a longitudinal plan handed in gives: the step's own, from
+#: the profile, are placed before that plan is)
+MODE_NO_PLAN, MODE_SHIFTED_PLAN, MODE_ITERATE, MODE_ROLLOUT = 0, 1, 2, 3
 #: outputs of :func:`linearize` in ``info``: arc length [m], lateral and heading errors [m, rad]
 #: of the measured state, iterations of the solve
 INFO_S, INFO_EY, INFO_EPSI, INFO_ITER = range(4)
@@ -291,10 +293,10 @@ def linearize(kind, cost_obstacles, extras, asm, qp, x, s_guess, t_s, u_prev, Xw
         for k in range(N):
             for a in range(nu):
                 Ubar[k, a] = Uw[min(k + 1, N - 1), a]
-    else:
+    else:  # no plan: roll out the references' inputs (or those handed in, MODE_ROLLOUT)
         for k in range(N):
             for a in range(nu):
-                Ubar[k, a] = uref[k, a]
+                Ubar[k, a] = Uw[k, a] if mode == MODE_ROLLOUT else uref[k, a]
         for i in range(nx):
             Xbar[0, i] = x[i]
         if meth == METHOD_EXP:
