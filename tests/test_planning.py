@@ -172,6 +172,30 @@ def test_a_fast_cars_track_is_where_it_drives_from_its_second_sample_on(v):
         assert (out[0][0, k], out[1][0, k]) == pytest.approx((float(s), float(e)), abs=1e-6), k
 
 
+def test_a_car_that_turns_across_the_path_is_tracked_where_it_crosses_it():
+    # it drives towards the car 6 m left of the path at 14 m/s, then turns to cross it: the
+    # guess its motion along the path gave (on by 2.8 m a sample) left its true place behind the
+    # search window, and the track had it crossing up to 3 m nearer the car (DEU_Muc-3: a
+    # maneuver judged safe every other replanning, unsafe in between)
+    path = WaypointPath([(0.0, 0.0), (50.0, 0.0), (100.0, 0.0)], ds_m=0.2)
+    t = np.round(np.arange(0.0, 6.01, 0.1), 10)
+    x = np.where(t <= 2.0, 60.0 - 14.0 * t, 32.0)
+    y = np.where(t <= 2.0, 6.0, 6.0 - 14.0 * (t - 2.0))
+    yaw = np.where(t <= 2.0, math.pi, 1.5 * math.pi)
+    ob = Obstacle(rectangle(4.5, 1.8), (x[0], y[0], yaw[0]), TrajectoryMotion(t, x - x[0], y - y[0], yaw - yaw[0]))
+    tab = table_of([ob], None)
+    K = 20
+    out = [np.full((8, K + 1), np.nan) for _ in range(4)]
+    index = np.zeros(8, np.int64)
+    cache = np.full((1, 2 * K + 8, 4), np.nan)
+    for t0 in (0.0, 0.1, 0.2, 0.3):  # both phases of the cache, then boxes projected on from it
+        assert obstacle_tracks(tab, path_arrays(path), t0, 0.2, 5.0, (5.0, 0.0), 200.0, 25.0, *out, index, cache, 0.1)
+        for k in range(K + 1):
+            px, py, _ = ob.pose_at(t0 + 0.2 * k)
+            s, e = path.project(np.array([px, py]))
+            assert (out[0][0, k], out[1][0, k]) == pytest.approx((float(s), float(e)), abs=1e-6), (t0, k)
+
+
 def test_the_lane_at_an_offset_is_the_one_holding_it_else_the_nearest():
     pl = planner(two_lanes(oncoming=True))
     assert [pl.lane_at(50.0, d) for d in (0.0, 1.7, 1.8, W, 1.5 * W - 0.01)] == [0, 0, 1, 1, 1]

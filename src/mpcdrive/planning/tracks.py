@@ -24,6 +24,10 @@ from .._subroutine import subroutine
 
 #: the search margin [m] of each later pose of a track beyond the distance from the one before
 TRACK_MARGIN_M = 2.0
+#: a projection within this distance [m] of its search window's edge is searched again in a
+#: wider window (the window covers whole segments beyond its ends: a nearest point found inside
+#: it by more than this is a true local nearest point)
+EDGE_M = 1e-6
 _NO_CACHE = np.zeros((0, 0, 4))
 
 
@@ -152,6 +156,7 @@ def _tracks_kernel(
                     near = min(near, max(ds, 0.0) + max(abs(e) - hw, 0.0))
                 continue
             x, y, yaw = pose_ahead(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d)
+            way = 0.0
             if seen == 0:
                 # the path between the car and the obstacle is about as long as the way between
                 # them (a bend makes it longer: half as long again, and a lane's width)
@@ -165,6 +170,12 @@ def _tracks_kernel(
                 way = math.hypot(x - px, y - py)
                 window = (0.1 * way if seen > 1 else way) + TRACK_MARGIN_M
             s, e = path_project(kind, geo, tab_s, tab_xy, guess, window, x, y)
+            if seen > 0 and abs(s - guess) >= window - EDGE_M:
+                # at the window's edge: the nearest point may lie beyond it (a car that turns
+                # off the road it drove along, crossing the path, leaves the guess its motion
+                # along the path gave). Search again within its whole way from the last sample.
+                wide = window + abs(guess - prev_s) + way + TRACK_MARGIN_M
+                s, e = path_project(kind, geo, tab_s, tab_xy, guess, wide, x, y)
             guess = s + (s - prev_s if seen > 0 else 0.0)
             seen += 1
             prev_s, px, py, prev_t = s, x, y, math.nan
