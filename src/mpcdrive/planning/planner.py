@@ -126,6 +126,18 @@ PLAN_TOLERANCE = (1.0, 0.3, 1.0)
 NO_MOVE = (-1.0, 0.0, math.nan)
 
 
+def _state_at(m: Maneuver, tau: float) -> tuple[float, float, float, float]:
+    """(s [m], v [m/s], a [m/s^2], d [m]) where maneuver ``m`` has the car ``tau`` [s] after its
+    replanning (interpolated between its samples)."""
+    t = m.t_s
+    return (
+        float(np_interp(tau, t, m.s_m)),
+        float(np_interp(tau, t, m.v_mps)),
+        float(np_interp(tau, t, m.a_mps2)),
+        float(np_interp(tau, t, m.d_m)),
+    )
+
+
 def wanted_times(grid_s: np.ndarray, v_mps: np.ndarray, v_max_mps: float) -> np.ndarray:
     """The time [s] the wanted speed ``v_mps`` (G,) [m/s], at most ``v_max_mps``, takes from the
     grid's first point to each point of ``grid_s`` (G,) [m]: each step at constant acceleration
@@ -440,7 +452,7 @@ class ManeuverPlanner:
         # and a second replanning, on that maneuver with the same obstacles: the code that goes
         # on from the last maneuver and reuses the tracks' cache runs first there
         t = self.cache_step_s
-        s, v, a, d = (float(np.interp(t, m.t_s, fp)) for fp in (m.s_m, m.v_mps, m.a_mps2, m.d_m))
+        s, v, a, d = _state_at(m, t)
         self.plan(t, s, d, v, 0.0, a, tab)
         self.previous = None
         self._move = NO_MOVE
@@ -464,7 +476,7 @@ class ManeuverPlanner:
         tau = t_s - self._planned_t
         if not (0.0 <= tau <= m.t_s[-1] - self.config.dt_s):
             return None
-        s, v, a, d = (float(np_interp(tau, m.t_s, fp)) for fp in (m.s_m, m.v_mps, m.a_mps2, m.d_m))
+        s, v, a, d = _state_at(m, tau)
         tol_s, tol_d, tol_v = PLAN_TOLERANCE
         if abs(s - s_m) > tol_s or abs(d - e_y_m) > tol_d or abs(v - v_mps) > tol_v:
             return None
