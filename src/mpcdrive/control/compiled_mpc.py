@@ -330,6 +330,8 @@ class CompiledLtvMpc(LtvMpc):
         self._step_struct = self._step.struct()
         self._noX = np.zeros((N + 1, nx))
         self._noU = np.zeros((N, nu))
+        #: the inputs a first step with a plan rolls out (see _run)
+        self._rollout_U = np.zeros((N, nu))
         self._o_X = nu
         self._o_U = nu + (N + 1) * nx
         self._o_R = self._o_U + N * nu
@@ -520,21 +522,23 @@ class CompiledLtvMpc(LtvMpc):
         if code != 0:
             return code, warm_sides
         a, qp = self._asm, self._qp
+        s_plan = None if plan is None else plan[0] - plan[0][0] + a.s_arr[0]  # from the car's arc length
         if mode == MODE_NO_PLAN and plan is not None:
             # no plan of its own to linearize along (a first step): roll out the inputs of the
             # plan's references, as LtvMpc does, not those of the speed profile's (placed first:
             # a car braking hard for a crossing was linearized running on at the profile's
             # speed, and the rows made along that asked for slacks the solution did not need)
-            a.follow_s[:] = plan[0] - plan[0][0] + a.s_arr[0]
+            a.follow_s[:] = s_plan
             a.follow_v[:] = plan[1]
             self._step_fn(step, x, s_guess, t_s, u_prev, X, U, mode, STAGE_FOLLOW, out)
-            U = qp.uref.copy()
+            U = self._rollout_U
+            U[...] = qp.uref
             code = self._step_fn(step, x, s_guess, t_s, u_prev, X, U, MODE_ROLLOUT, STAGE_LINEARIZE, out)
             if code != 0:
                 return code, warm_sides
         a.e_ref[...] = 0.0
-        if plan is not None:  # the plan's references, from the car's arc length
-            a.s_arr[:] = plan[0] - plan[0][0] + a.s_arr[0]
+        if plan is not None:  # the plan's references
+            a.s_arr[:] = s_plan
             a.v_arr[:] = plan[1]
         new_sides = warm_sides
         s_max = None
