@@ -16,6 +16,7 @@ from mpcdrive.paths.straight import StraightPath
 from mpcdrive.paths.waypoints import WaypointPath
 from mpcdrive.planning import ManeuverPlanner, PlannerConfig, PlanningGoal, VehicleLimits
 from mpcdrive.planning import frenet
+from mpcdrive.planning.planner import NO_MOVE
 from mpcdrive.planning.tracks import obstacle_tracks
 from mpcdrive.scene.obstacles import ConstantVelocity, Obstacle, TrajectoryMotion, rectangle
 from mpcdrive.scene.road import Lane, Road
@@ -391,8 +392,9 @@ def test_replanning_is_deterministic():
 
 
 def test_the_warm_up_leaves_no_trace_in_the_replannings_after_it():
-    # the warm-up replans twice (the second goes on from the first and reuses its tracks): a
-    # planner warmed up again must plan the same two maneuvers as one warmed up once
+    # the warm-up replans twice (the second goes on from the first and reuses its tracks): it
+    # keeps nothing of them, and a planner warmed up again plans the same two maneuvers as one
+    # warmed up once
     obs = [car(50.0), car(2.0, 0.0, 10.0), car(90.0, W, 8.0)]
     tab = table_of(obs, None)
     runs = []
@@ -400,6 +402,9 @@ def test_the_warm_up_leaves_no_trace_in_the_replannings_after_it():
         pl = planner()
         for _ in range(extra):
             pl._warm_up()
+        # nothing of its two maneuvers is kept: no last maneuver to go on from, no move under
+        # way, no tracks cached (the real obstacles come in a table of their own)
+        assert pl.previous is None and pl._move is NO_MOVE and pl._cache.size == 0 and pl._cache_of is None
         a = pl.plan(0.0, 20.0, W, 12.0, 0.0, 0.0, tab)  # in the left lane (the warm-up's car: right)
         s, v, d = (float(np.interp(0.1, a.t_s, f)) for f in (a.s_m, a.v_mps, a.d_m))
         b = pl.plan(0.1, s, d, v, 0.0, 0.0, tab)
