@@ -712,15 +712,15 @@ def test_a_drive_on_the_mb_plant_is_a_ks_solution_that_moves_the_rear_axle_where
 @pytest.mark.slow
 def test_a_sharp_return_on_the_mb_plant_is_a_ks_drive_by_the_steering_that_turns_its_rear_axle(tmp_path):
     """The blocked_oncoming family's seed 17 (ZAM_BlockedOncoming-18) on the MB plant, out to the
-    oncoming lane and back at 15-20 m/s: written with the steering that turns a KS car's rear
+    oncoming lane and back at 12-16 m/s: written with the steering that turns a KS car's rear
     axle along the drive (not the commands'), the whole drive is KS-feasible. Where the pass
     begins (1.4 s) that steering is 0.019 rad and the commands' 0.071 rad: the solution's is its
     own. (Until 528af2e this drive yawed at 0.45 rad/s with its wheels at 0.036 rad at 14.5 m/s,
     MB oversteering, and written with the commands' steering it was not KS-feasible at 3.9-4.0 s;
     seed 7 had shown the same until dd4cc92. Since 528af2e changed the first step's
-    linearization, none of the passing MB drives tried, 13 blocked_oncoming and 7
-    parked_follower seeds and six development files, is infeasible with the commands'
-    steering.)"""
+    linearization, none of the passing MB drives tried, 14 blocked_oncoming seeds (this one
+    among them), 7 parked_follower seeds and six development files, is infeasible with the
+    commands' steering.)"""
     import scenario_families as sf
     from commonroad_dc.feasibility.feasibility_checker import trajectory_feasibility
     from commonroad_dc.feasibility.vehicle_dynamics import VehicleDynamics, VehicleType
