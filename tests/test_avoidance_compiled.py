@@ -3,6 +3,7 @@ ocp.avoidance: selection, tracks and hard rows on random instances, and the term
 P4 drive."""
 
 import copy
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -186,6 +187,27 @@ def test_compiled_pose_equals_the_obstacle_motion():
         times = list(rng.uniform(-2.0, 8.0, 20)) + (list(m.t_s) if isinstance(m, TrajectoryMotion) else [])
         for t in times:
             np.testing.assert_allclose(pose_at(j, float(t), *tab.motion), ob.pose_at(float(t)), rtol=0, atol=TOL)
+
+
+def test_a_recorded_pose_is_numpys_interpolation_to_the_bit():
+    """pose_at searches the three columns' common sample once: each column is np.interp's value
+    exactly, before, on, between and after the samples, with infinite offsets and a NaN time."""
+    rng = np.random.default_rng(5)
+    n = 9
+    tr_t = np.cumsum(rng.uniform(0.05, 0.3, n))
+    tr_d = rng.normal(0.0, 5.0, (n, 3))
+    tr_d[4, 1] = np.inf
+    tr_d[5, 1] = np.inf
+    tr_d[6, 2] = -np.inf
+    tr_d[7, 2] = np.inf
+    pose = np.array([[3.7, -1.2, 0.4]])
+    vel = np.zeros((1, 2))
+    lo, hi = np.array([0]), np.array([n])
+    times = [*rng.uniform(tr_t[0] - 1.0, tr_t[-1] + 1.0, 200), *tr_t, tr_t[0] - 1e-12, tr_t[-1] + 1e-12, math.nan]
+    for t in times:
+        got = pose_at(0, float(t), pose, vel, lo, hi, tr_t, tr_d)
+        want = [pose[0, c] + np.interp(t, tr_t, tr_d[:, c]) for c in range(3)]
+        np.testing.assert_array_equal(np.array(got), np.array(want))
 
 
 def test_recorded_trajectories_are_compiled_and_other_motions_keep_numpy():

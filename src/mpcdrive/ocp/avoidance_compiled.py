@@ -22,7 +22,6 @@ from numba import njit
 
 from .._subroutine import subroutine
 from ..paths.compiled import path_eval, path_project
-from ..paths.profile_compiled import np_interp
 from ..scene.road import _interp
 from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Static, TrajectoryMotion
 
@@ -149,11 +148,43 @@ def pose_at(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d):
     lo, hi = tr_lo[j], tr_hi[j]
     if hi == lo:
         return pose[j, 0] + vel[j, 0] * t, pose[j, 1] + vel[j, 1] * t, pose[j, 2] + 0.0
-    ts = tr_t[lo:hi]
-    dx = np_interp(t, ts, tr_d[lo:hi, 0])
-    dy = np_interp(t, ts, tr_d[lo:hi, 1])
-    dyaw = np_interp(t, ts, tr_d[lo:hi, 2])
-    return pose[j, 0] + dx, pose[j, 1] + dy, pose[j, 2] + dyaw
+    # np.interp of the three columns, their common sample searched once
+    if t != t:
+        return pose[j, 0] + t, pose[j, 1] + t, pose[j, 2] + t
+    if t < tr_t[lo]:
+        k = lo
+    elif t >= tr_t[hi - 1]:
+        k = hi - 1
+    else:
+        a, b = lo, hi - 1  # tr_t[a] <= t < tr_t[b]
+        while b - a > 1:
+            mid = (a + b) // 2
+            if tr_t[mid] <= t:
+                a = mid
+            else:
+                b = mid
+        k = a
+        if tr_t[k] != t:
+            t0, t1 = tr_t[k], tr_t[k + 1]
+            return (
+                pose[j, 0] + _lerp(t, t0, t1, tr_d[k, 0], tr_d[k + 1, 0]),
+                pose[j, 1] + _lerp(t, t0, t1, tr_d[k, 1], tr_d[k + 1, 1]),
+                pose[j, 2] + _lerp(t, t0, t1, tr_d[k, 2], tr_d[k + 1, 2]),
+            )
+    return pose[j, 0] + tr_d[k, 0], pose[j, 1] + tr_d[k, 1], pose[j, 2] + tr_d[k, 2]
+
+
+@subroutine
+def _lerp(x, x0, x1, f0, f1):
+    """np.interp between (x0, f0) and (x1, f1) at x0 < x < x1, with its handling of infinite
+    values (:func:`~mpcdrive.paths.profile_compiled.np_interp`)."""
+    slope = (f1 - f0) / (x1 - x0)
+    y = slope * (x - x0) + f0
+    if y != y:
+        y = slope * (x - x1) + f1
+        if y != y and f0 == f1:
+            y = f0
+    return y
 
 
 @njit(cache=True)
