@@ -22,6 +22,7 @@ from numba import njit
 
 from .._subroutine import subroutine
 from ..paths.compiled import path_eval, path_project
+from ..paths.profile_compiled import bracket
 from ..scene.road import _interp
 from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Static, TrajectoryMotion
 
@@ -156,14 +157,7 @@ def pose_at(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d):
     elif t >= tr_t[hi - 1]:
         k = hi - 1
     else:
-        a, b = lo, hi - 1  # tr_t[a] <= t < tr_t[b]
-        while b - a > 1:
-            mid = (a + b) // 2
-            if tr_t[mid] <= t:
-                a = mid
-            else:
-                b = mid
-        k = a
+        k = bracket(tr_t, lo, hi - 1, t)
         if tr_t[k] != t:
             t0, t1 = tr_t[k], tr_t[k + 1]
             return (

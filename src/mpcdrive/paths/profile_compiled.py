@@ -49,6 +49,19 @@ def _clip(x, lo, hi):
 
 
 @subroutine
+def bracket(xp, lo, hi, x):
+    """The index ``j`` in [lo, hi) with ``xp[j] <= x < xp[j + 1]``, by bisection (``xp``
+    increasing, ``xp[lo] <= x < xp[hi]``)."""
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if xp[mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@subroutine
 def np_interp(x, xp, fp):
     """np.interp(x, xp, fp) for one x, with numpy's handling of grid points and of infinite
     values in fp (xp increasing)."""
@@ -61,14 +74,7 @@ def np_interp(x, xp, fp):
         return fp[n - 1]
     if x == xp[n - 1]:
         return fp[n - 1]
-    lo, hi = 0, n - 1  # xp[lo] <= x < xp[hi]
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if xp[mid] <= x:
-            lo = mid
-        else:
-            hi = mid
-    j = lo
+    j = bracket(xp, 0, n - 1, x)
     if xp[j] == x:
         return fp[j]
     slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])

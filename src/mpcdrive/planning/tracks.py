@@ -224,9 +224,9 @@ def _tracks_kernel(
 def _refresh_cache() -> None:
     from .. import _jitcache
     from ..ocp import avoidance_compiled as _ac
-    from ..paths import compiled as _paths_compiled
+    from ..paths import compiled as _paths_compiled, profile_compiled as _profile_compiled
 
-    files = [m.__file__ for m in (_ac, _paths_compiled) if m.__file__ is not None]
+    files = [m.__file__ for m in (_ac, _paths_compiled, _profile_compiled) if m.__file__ is not None]
     _jitcache.refresh(_tracks_kernel, files)
 
 
