@@ -48,8 +48,6 @@ from .work import (
     P_KAPPA_MAX,
     P_KAPPA_RATE,
     P_LAT_MIN,
-    P_TURN_BACK,
-    TURN_BACK_S,
     P_LAT_REF,
     P_MARGIN,
     P_ROAD_END,
@@ -151,17 +149,12 @@ def _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth):
 
 
 @subroutine
-def _road_allowance(excess0, par, t, way):
+def _road_allowance(excess0, par, t):
     """How far [m] beyond the road's edges less its margin a maneuver's body may be at ``t`` [s]
-    after the replanning, ``way`` [m] along the path from where it starts: the road's margin is
-    room for the controller's tracking, and a maneuver may use it, and the ``excess0`` [m] the
-    car is out now, shrinking to nothing over the first second or over the way ``P_TURN_BACK``
-    (:func:`~.candidates.lateral_candidates`), whichever ends last. A car drifting towards the
-    edge needs that long to turn back; a car at rest or crawling turns only as it drives, and its
-    rear corner swings out until its move has straightened it (with a second alone, a car at
-    rest a few centimetres into the margin had no safe maneuver at all)."""
-    done = min(t / TURN_BACK_S, way / par[P_TURN_BACK])
-    return (excess0 + par[P_ROAD_MARGIN]) * max(0.0, 1.0 - done) + 1e-3
+    after the replanning: the road's margin is room for the controller's tracking, and over the
+    first second a maneuver may use it (a car drifting towards the edge needs that long to turn
+    back) and the ``excess0`` [m] the car is out now, shrinking to nothing by then."""
+    return (excess0 + par[P_ROAD_MARGIN]) * max(0.0, 1.0 - t) + 1e-3
 
 
 @subroutine
@@ -241,7 +234,7 @@ def _first_hit(
         cth, sth = 1.0 / nrm, d1 / nrm
         t = k * dt
         # the road first (its time is the step's; an obstacle's swept contact is the step before)
-        allow = _road_allowance(excess0, par, t, s - s0)
+        allow = _road_allowance(excess0, par, t)
         road_hit = not _clear_of_edges(grid, edge_win, win_row, par, s, d, cth, sth, allow) and (
             _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth) > allow
         )
@@ -345,8 +338,8 @@ def check_pair(
     (``lon_bend``, :func:`~.candidates.longitudinal_costs`), > 1 where the move steers faster than
     the vehicle can);
     ``excess0`` [m]: how far the car is outside the road now (a maneuver may not go further
-    out, and gets :func:`_road_allowance`'s time and way to come back in; -2: the car is in an
-    oncoming lane). With ``write``, the maneuver and its relations to the obstacles go into ``relation`` and ``plan_*``; else
+    out, and gets a second to come back in; -2: the car is in an oncoming lane). With ``write``,
+    the maneuver and its relations to the obstacles go into ``relation`` and ``plan_*``; else
     the check stops at the first contact (the time to collision is known) or once the cost
     and the rate's excess costed (``rate_excess_s``, as the choice scores it) pass ``bound``
     [s] (it cannot be chosen), returning it unsafe, and looks only at the
@@ -453,8 +446,7 @@ def check_pair(
         if not hit:
             # the road (in the search, :func:`_first_hit` has found the step that leaves it, if any)
             if write:
-                allow = _road_allowance(excess0, par, t, s - s0)
-                if _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth) > allow:
+                if _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth) > _road_allowance(excess0, par, t):
                     ttc = t
                     hit = True
             elif k == first:

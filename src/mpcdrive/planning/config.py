@@ -102,9 +102,8 @@ class PlannerConfig:
     road_margin_m : the room [m] a maneuver keeps between the body and the road's edges and ends
         (at least the road's own margin): what the controller's tracking of a lane change leaves
         on a plant with tyres (ST, multi-body), about 0.2 m; a maneuver may use it over its first
-        second, shrinking to nothing by then (a car drifting towards the edge turns back; a slow
-        car, until it has driven the way its shortest lateral move needs beyond a second's),
-        never the road beyond the edge;
+        second, shrinking to nothing by then (a car drifting towards the edge turns back), never
+        the road beyond the edge;
     time_gap_s : the time gap [s] to a car ahead or behind in the same lane below which a
         maneuver pays (``gap_cost_s_per_s``) -- two seconds is the rule of thumb, one the legal
         minimum in many countries;
