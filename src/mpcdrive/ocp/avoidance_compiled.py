@@ -22,7 +22,7 @@ from numba import njit
 
 from .._subroutine import subroutine
 from ..paths.compiled import path_eval, path_project
-from ..paths.profile_compiled import bracket
+from ..paths.profile_compiled import bracket, lerp
 from ..scene.road import _interp
 from ..scene.obstacles import Circle, ConstantVelocity, Obstacle, Static, TrajectoryMotion
 
@@ -161,24 +161,11 @@ def pose_at(j, t, pose, vel, tr_lo, tr_hi, tr_t, tr_d):
         if tr_t[k] != t:
             t0, t1 = tr_t[k], tr_t[k + 1]
             return (
-                pose[j, 0] + _lerp(t, t0, t1, tr_d[k, 0], tr_d[k + 1, 0]),
-                pose[j, 1] + _lerp(t, t0, t1, tr_d[k, 1], tr_d[k + 1, 1]),
-                pose[j, 2] + _lerp(t, t0, t1, tr_d[k, 2], tr_d[k + 1, 2]),
+                pose[j, 0] + lerp(t, t0, t1, tr_d[k, 0], tr_d[k + 1, 0]),
+                pose[j, 1] + lerp(t, t0, t1, tr_d[k, 1], tr_d[k + 1, 1]),
+                pose[j, 2] + lerp(t, t0, t1, tr_d[k, 2], tr_d[k + 1, 2]),
             )
     return pose[j, 0] + tr_d[k, 0], pose[j, 1] + tr_d[k, 1], pose[j, 2] + tr_d[k, 2]
-
-
-@subroutine
-def _lerp(x, x0, x1, f0, f1):
-    """np.interp between (x0, f0) and (x1, f1) at x0 < x < x1, with its handling of infinite
-    values (:func:`~mpcdrive.paths.profile_compiled.np_interp`)."""
-    slope = (f1 - f0) / (x1 - x0)
-    y = slope * (x - x0) + f0
-    if y != y:
-        y = slope * (x - x1) + f1
-        if y != y and f0 == f1:
-            y = f0
-    return y
 
 
 @njit(cache=True)

@@ -77,12 +77,19 @@ def np_interp(x, xp, fp):
     j = bracket(xp, 0, n - 1, x)
     if xp[j] == x:
         return fp[j]
-    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
-    y = slope * (x - xp[j]) + fp[j]
+    return lerp(x, xp[j], xp[j + 1], fp[j], fp[j + 1])
+
+
+@subroutine
+def lerp(x, x0, x1, f0, f1):
+    """np.interp between (x0, f0) and (x1, f1) at x0 < x < x1, with its handling of infinite
+    values (the value from the far end where the near end's is NaN; f0 where both are)."""
+    slope = (f1 - f0) / (x1 - x0)
+    y = slope * (x - x0) + f0
     if y != y:
-        y = slope * (x - xp[j + 1]) + fp[j + 1]
-        if y != y and fp[j] == fp[j + 1]:
-            y = fp[j]
+        y = slope * (x - x1) + f1
+        if y != y and f0 == f1:
+            y = f0
     return y
 
 
