@@ -157,6 +157,15 @@ def checked_plan(s_m, v_mps, N: int) -> tuple[np.ndarray, np.ndarray] | None:
     return s, np.maximum(v, 0.0)
 
 
+def plan_arc_lengths(plan_s: np.ndarray, s0_m: float, out: np.ndarray | None = None) -> np.ndarray:
+    """The arc lengths [m] of a checked plan's ``plan_s`` (N+1,), moved to start at the car's arc
+    length ``s0_m`` [m] (the plan keeps its distances, the path's projection of the car its
+    start), into ``out`` (N+1,) if given."""
+    out = np.subtract(plan_s, plan_s[0], out=out)
+    out += s0_m
+    return out
+
+
 def checked_obstacles(avoidance: A | None, obstacles) -> tuple[A, tuple[Obstacle, ...]]:
     """``(avoidance, obstacles)`` of a ``set_obstacles`` call, the obstacles as a tuple of
     :class:`Obstacle`; a ValueError for a controller built without obstacles (``avoidance`` None:

@@ -86,6 +86,7 @@ from .base import (
     checked_plan,
     checked_road,
     checked_speed_cap,
+    plan_arc_lengths,
     projection_guess,
     resolve_scene,
 )
@@ -330,8 +331,9 @@ class CompiledLtvMpc(LtvMpc):
         self._step_struct = self._step.struct()
         self._noX = np.zeros((N + 1, nx))
         self._noU = np.zeros((N, nu))
-        #: the inputs a first step with a plan rolls out (see _run)
+        #: the inputs a first step with a plan rolls out, and the plan's arc lengths (see _run)
         self._rollout_U = np.zeros((N, nu))
+        self._plan_s = np.zeros(N + 1)
         self._o_X = nu
         self._o_U = nu + (N + 1) * nx
         self._o_R = self._o_U + N * nu
@@ -522,7 +524,7 @@ class CompiledLtvMpc(LtvMpc):
         if code != 0:
             return code, warm_sides
         a, qp = self._asm, self._qp
-        s_plan = None if plan is None else plan[0] - plan[0][0] + a.s_arr[0]  # from the car's arc length
+        s_plan = None if plan is None else plan_arc_lengths(plan[0], a.s_arr[0], self._plan_s)
         if mode == MODE_NO_PLAN and plan is not None:
             # no plan of its own to linearize along (a first step): roll out the inputs of the
             # plan's references, as LtvMpc does, not those of the speed profile's (placed first:

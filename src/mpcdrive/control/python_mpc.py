@@ -36,6 +36,7 @@ from .base import (
     checked_plan,
     checked_road,
     checked_speed_cap,
+    plan_arc_lengths,
     projection_guess,
     resolve_scene,
 )
@@ -228,7 +229,7 @@ class PythonLtvMpc(LtvMpc):
 
         # references over the horizon: a plan's (from the car's arc length), else the profile's
         if self._plan is not None:
-            s_arr = self._plan[0] - self._plan[0][0] + s0
+            s_arr = plan_arc_lengths(self._plan[0], s0)
             v_arr = self._plan[1]
         else:
             s_arr, v_arr = self._horizon(s0)
