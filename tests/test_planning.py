@@ -374,6 +374,7 @@ def test_a_car_drifting_into_the_road_margin_turns_back_inside_the_road():
 
 @pytest.mark.xfail(
     strict=True,
+    raises=AssertionError,
     reason="known limitation: the road margin's allowance ends after a second whatever the car drove; "
     "extending it over the way a slow car needs to turn back made a yielding car leave the road in a "
     "left turn (test_commonroad_cases case 4 on ST), so it was reverted",
