@@ -17,7 +17,7 @@ from mpcdrive.paths.waypoints import WaypointPath
 from mpcdrive.planning import ManeuverPlanner, PlannerConfig, PlanningGoal, VehicleLimits
 from mpcdrive.planning import frenet
 from mpcdrive.planning.planner import NO_MOVE
-from mpcdrive.planning.tracks import obstacle_tracks
+from mpcdrive.planning.tracks import CACHE_COLS, obstacle_tracks
 from mpcdrive.scene.obstacles import ConstantVelocity, Obstacle, TrajectoryMotion, rectangle
 from mpcdrive.scene.road import Lane, Road
 
@@ -138,7 +138,7 @@ def test_obstacle_tracks_match_the_paths_projection():
     out = [np.full((8, K + 1), np.nan) for _ in range(4)]
     index = np.zeros(8, np.int64)
     pa = path_arrays(path)
-    cache = np.full((len(obs), 2 * K + 8, 4), np.nan)
+    cache = np.full((len(obs), 2 * K + 8, CACHE_COLS), np.nan)
     # without a cache; then replanning every 0.1 s with one: from the third call on, most boxes
     # are an earlier call's and the last ones are projected on from where the cached ones were
     for t0, c in [(0.0, None), (0.0, cache), (0.1, cache), (0.2, cache), (0.3, cache)]:
@@ -188,7 +188,7 @@ def test_a_car_that_turns_across_the_path_is_tracked_where_it_crosses_it():
     K = 20
     out = [np.full((8, K + 1), np.nan) for _ in range(4)]
     index = np.zeros(8, np.int64)
-    cache = np.full((1, 2 * K + 8, 4), np.nan)
+    cache = np.full((1, 2 * K + 8, CACHE_COLS), np.nan)
     for t0 in (0.0, 0.1, 0.2, 0.3):  # both phases of the cache, then boxes projected on from it
         assert obstacle_tracks(tab, path_arrays(path), t0, 0.2, 5.0, (5.0, 0.0), 200.0, 25.0, *out, index, cache, 0.1)
         for k in range(K + 1):
@@ -750,7 +750,7 @@ def test_the_search_skips_an_obstacle_only_when_no_disc_can_reach_it():
     the exact swept test of every disc (any offset within the reach, any heading at either end):
     whenever it skips, no disc's segment meets the box; and it skips most far-off cases (the test
     would catch a prune that never fires as well as one that skips a contact)."""
-    from mpcdrive.planning.checks import _beyond_box, _segment_hits_box
+    from mpcdrive.planning.contact import _beyond_box, _segment_hits_box
 
     beyond, hits = _beyond_box.py_func, _segment_hits_box.py_func
     rng = np.random.default_rng(7)

@@ -40,6 +40,7 @@ from .work import (
     P_CO,
     P_R_DISC,
     P_REAR,
+    P_ROWS_EXCESS,
     P_D_COMF,
     P_D_MAX,
     P_FRICTION,
@@ -63,6 +64,7 @@ from .work import (
     REL_RIGHT,
 )
 
+from .contact import _beyond_box, _disc_meets
 from .candidates import KAPPA_SLACK, _standing, _turn_out_m, regain_time_s, wanted_at
 from .frenet import (
     EVASIVE_GENTLE,
@@ -78,53 +80,6 @@ from .frenet import (
 
 
 # -- checking a pair ---------------------------------------------------------------------------------
-@subroutine
-def _segment_hits_box(x0, y0, x1, y1, bx, by):
-    """Whether the segment (x0, y0)-(x1, y1) meets the box |x| < bx, |y| < by (slabs)."""
-    t0, t1 = 0.0, 1.0
-    dx, dy = x1 - x0, y1 - y0
-    if abs(dx) < 1e-12:
-        if abs(x0) >= bx:
-            return False
-    else:
-        ta, tb = (-bx - x0) / dx, (bx - x0) / dx
-        if ta > tb:
-            ta, tb = tb, ta
-        t0, t1 = max(t0, ta), min(t1, tb)
-        if t0 > t1:
-            return False
-    if abs(dy) < 1e-12:
-        if abs(y0) >= by:
-            return False
-    else:
-        ta, tb = (-by - y0) / dy, (by - y0) / dy
-        if ta > tb:
-            ta, tb = tb, ta
-        t0, t1 = max(t0, ta), min(t1, tb)
-        if t0 > t1:
-            return False
-    return True
-
-
-@subroutine
-def _box_distance(x, y, bx, by):
-    """Distance from the point (x, y) to the box |x| <= bx, |y| <= by (0 inside)."""
-    dx = max(abs(x) - bx, 0.0)
-    dy = max(abs(y) - by, 0.0)
-    return math.sqrt(dx * dx + dy * dy)
-
-
-@subroutine
-def _beyond_box(s0, d0, s1, d1, reach, bl, bw):
-    """Whether every point within ``reach`` of the segment (s0, d0)-(s1, d1) lies outside the box
-    |s| < bl, |d| < bw, both ends being beyond the same one of its sides (each disc of the body
-    lies within ``reach`` of its reference point: when this holds, no disc's swept segment meets
-    the box)."""
-    bl += reach + 1e-9
-    bw += reach + 1e-9
-    return (s0 > bl and s1 > bl) or (s0 < -bl and s1 < -bl) or (d0 > bw and d1 > bw) or (d0 < -bw and d1 < -bw)
-
-
 @subroutine
 def _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth):
     """How far [m] the body's corners at (s, d), yawed (cos, sin) from the path, are outside the
@@ -182,8 +137,8 @@ def _clear_of_edges(grid, edge_win, row, par, s, d, cth, sth, allow):
 
 @subroutine
 def _first_hit(
-    i, j, par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v, ob_s, ob_e, ob_hl, ob_hw, dt,
-    discs, rel_idx, n_rel, p_disc_s, p_disc_d, excess0, left_tab, right_tab, edge_win, win_row, path,
+    i, j, par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v, ob_s, ob_e, ob_hl, ob_hw, ob_or,
+    dt, discs, rel_idx, n_rel, p_disc_s, p_disc_d, excess0, left_tab, right_tab, edge_win, win_row, path,
 ):  # fmt: skip
     """The part of a pair's check that rejects most pairs, run before the rest (costs, lanes,
     vehicle): the step at which pair (``i``, ``j``) first leaves the road (its body's corners
@@ -261,19 +216,9 @@ def _first_hit(
                 if prev:
                     q0s = p_disc_s[q] - ob_s[o, k - 1]
                     q0d = p_disc_d[q] - ob_e[o, k - 1]
-                    if _segment_hits_box(q0s, q0d, qs, qd, bl, bw):
-                        seg = math.hypot(qs - q0s, qd - q0d)
-                        if (
-                            seg > rn
-                            or min(
-                                _box_distance(q0s, q0d, bl - rn, bw - rn),
-                                _box_distance(0.5 * (qs + q0s), 0.5 * (qd + q0d), bl - rn, bw - rn),
-                                _box_distance(qs, qd, bl - rn, bw - rn),
-                            )
-                            < rn
-                        ):
-                            return -1, t - dt
-                elif k == 0 and _box_distance(qs, qd, HL, HW) < rn:
+                    if _disc_meets(q0s, q0d, qs, qd, bl - rn, bw - rn, ob_or, o, k - 1, k, rn):
+                        return -1, t - dt
+                elif _disc_meets(qs, qd, qs, qd, HL, HW, ob_or, o, k, k, rn):
                     return -1, 0.0
         if road_hit:
             return k, t
@@ -328,7 +273,7 @@ def _in_goal(goal_arr, grid, g_heading, par, s, tt, speed, d, d1, kappa):
 def check_pair(
     i, j, excess0, write, bound, prepaid, v_bound, par, grid, ego, goal_arr, g_kappa, g_heading, rate0, lane_left, lane_right,
     lane_line, lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v, lon_a, ob_s, ob_e,
-    ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs, rel_idx, n_rel, scratch, path,
+    ob_hl, ob_hw, ob_or, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs, rel_idx, n_rel, scratch, path,
     edge_win,
 ):  # fmt: skip
     """(safe, feasible, rate, ttc [s], cost [s], goal) of lateral move ``i`` with profile ``j``
@@ -391,7 +336,7 @@ def check_pair(
     if not write:
         first, t_first = _first_hit(
             i, j, par, grid, ego, lane_line, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v, ob_s, ob_e, ob_hl,
-            ob_hw, dt, discs, rel_idx, n_rel, p_disc_s, p_disc_d, excess0, left_tab, right_tab, edge_win,
+            ob_hw, ob_or, dt, discs, rel_idx, n_rel, p_disc_s, p_disc_d, excess0, left_tab, right_tab, edge_win,
             2 if use_all else 0, path,
         )  # fmt: skip
         if first == -1:
@@ -511,28 +456,20 @@ def check_pair(
                     if k > 0 and math.isfinite(ob_s[o, k - 1]):
                         q0s = p_disc_s[q] - ob_s[o, k - 1]
                         q0d = p_disc_d[q] - ob_e[o, k - 1]
-                        bl = max(HL, ob_hl[o, k - 1]) + rn
-                        bw = max(HW, ob_hw[o, k - 1]) + rn
-                        if _segment_hits_box(q0s, q0d, qs, qd, bl, bw):
-                            # the rounded box: the disc's nearest approach (a segment no longer
-                            # than the radius: its ends and middle; else the square box)
-                            seg = math.hypot(qs - q0s, qd - q0d)
-                            if (
-                                seg > rn
-                                or min(
-                                    _box_distance(q0s, q0d, bl - rn, bw - rn),
-                                    _box_distance(0.5 * (qs + q0s), 0.5 * (qd + q0d), bl - rn, bw - rn),
-                                    _box_distance(qs, qd, bl - rn, bw - rn),
-                                )
-                                < rn
-                            ):
-                                ttc = t - dt
-                                hit = True
-                    elif k == 0 and _box_distance(qs, qd, HL, HW) < rn:
+                        bl = max(HL, ob_hl[o, k - 1])
+                        bw = max(HW, ob_hw[o, k - 1])
+                        if _disc_meets(q0s, q0d, qs, qd, bl, bw, ob_or, o, k - 1, k, rn):
+                            ttc = t - dt
+                            hit = True
+                    elif k == 0 and _disc_meets(qs, qd, qs, qd, HL, HW, ob_or, o, k, k, rn):
                         ttc = 0.0
                         hit = True
             if write:
-                if blocked:
+                if max(HL - ob_or[o, k, 2], HW - ob_or[o, k, 3]) > par[P_ROWS_EXCESS]:
+                    # its Frenet box exceeds its outline (yawed to the path) by more than the
+                    # maneuver may keep off it: the outline's own nearest-point half-plane
+                    relation[o, k] = REL_CLEAR
+                elif blocked:
                     relation[o, k] = REL_AHEAD if rs > 0.0 else REL_BEHIND
                 elif near:
                     relation[o, k] = REL_LEFT if rd > 0.0 else REL_RIGHT

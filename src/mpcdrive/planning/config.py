@@ -26,6 +26,8 @@ class VehicleLimits:
     disc_offsets_m / disc_radius_m : the discs that cover the body for the controller's obstacle
     rows (centres along the body from the reference point, radius) [m]: a maneuver keeps them
     clear of every obstacle, as the rows will (0 radius: the rectangle's half diagonal);
+    disc_margin_m : the clearance [m] those rows keep beyond the discs (at most the planner's
+    ``margin_m``);
     rear_axle_m : the rear axle behind the reference point [m]: a reference point ahead of it
     (the centre of gravity) moves at the slip angle ``asin(rear_axle_m kappa)`` to the body on a
     path of curvature kappa, so the body's heading is the path's less that (0: the rear axle)."""
@@ -42,6 +44,7 @@ class VehicleLimits:
     center_offset_m: float = 0.0
     disc_offsets_m: tuple[float, ...] = (0.0,)
     disc_radius_m: float = 0.0
+    disc_margin_m: float = 0.0
     rear_axle_m: float = 0.0
 
     def __post_init__(self):
@@ -51,6 +54,8 @@ class VehicleLimits:
                 raise ValueError(f"{name} must be positive, got {v!r}")
         if not (math.isfinite(self.rear_axle_m) and 0.0 <= self.rear_axle_m <= self.wheelbase_m):
             raise ValueError(f"rear_axle_m must lie in [0, wheelbase_m], got {self.rear_axle_m!r}")
+        if not (math.isfinite(self.disc_margin_m) and self.disc_margin_m >= 0.0):
+            raise ValueError(f"disc_margin_m must be a non-negative finite number, got {self.disc_margin_m!r}")
         for name in ("max_accel_mps2", "max_decel_mps2", "max_speed_mps"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
@@ -104,6 +109,12 @@ class PlannerConfig:
         on a plant with tyres (ST, multi-body), about 0.2 m; a maneuver may use it over its first
         second, shrinking to nothing by then (a car drifting towards the edge turns back), never
         the road beyond the edge;
+    rows_tolerance_m : how far [m] the controller's obstacle rows along and across the path may
+        hold the car off a maneuver (what its tracking leaves anyway, about 0.2 m). Those rows
+        keep an obstacle's Frenet box; a maneuver is checked against its oriented box. Where the
+        Frenet box exceeds the outline (an obstacle yawed to the path) by more than this and the
+        margin the planner keeps beyond the rows' own, the maneuver hands the controller the
+        outline's nearest-point half-plane for that obstacle instead;
     time_gap_s : the time gap [s] to a car ahead or behind in the same lane below which a
         maneuver pays (``gap_cost_s_per_s``) -- two seconds is the rule of thumb, one the legal
         minimum in many countries;
@@ -141,6 +152,7 @@ class PlannerConfig:
     oncoming: bool = False
     margin_m: float = 0.3
     road_margin_m: float = 0.25
+    rows_tolerance_m: float = 0.2
     time_gap_s: float = 1.0
     standstill_m: float = 2.0
     stop_speed_mps: float = 0.3
@@ -173,6 +185,7 @@ class PlannerConfig:
             "lane_shift_m",
             "margin_m",
             "road_margin_m",
+            "rows_tolerance_m",
             "time_gap_s",
             "standstill_m",
             "lane_change_s",

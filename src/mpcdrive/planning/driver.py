@@ -43,8 +43,8 @@ KEEP_LINE_M = 0.5
 
 def vehicle_limits(mpc) -> VehicleLimits:
     """The :class:`VehicleLimits` of an MPC: its footprint, its model's wheelbase (and where its
-    rear axle is behind the centre of gravity), its input, rate and speed bounds and its friction
-    circle."""
+    rear axle is behind the centre of gravity), its input, rate and speed bounds, its friction
+    circle and the margin its obstacle rows keep."""
     pb = mpc.problem
     fp = mpc.footprint
     names = list(mpc.model.input_names)
@@ -60,6 +60,7 @@ def vehicle_limits(mpc) -> VehicleLimits:
     if not math.isfinite(v_max):
         v_max = 70.0  # no bound: the planner samples up to 250 km/h
     rate = float(pb.du_max_per_s[0])
+    av = getattr(mpc, "avoidance", None)  # its obstacle rows, and the margin they keep
     return VehicleLimits(
         length_m=fp.length_m,
         width_m=fp.width_m,
@@ -73,6 +74,7 @@ def vehicle_limits(mpc) -> VehicleLimits:
         center_offset_m=fp.center_offset_m,
         disc_offsets_m=tuple(float(o) for o in fp.disc_offsets_m),
         disc_radius_m=fp.disc_radius_m,
+        disc_margin_m=float(av.config.margin_m) if av is not None else 0.0,
         rear_axle_m=float(getattr(params, "lr_m", 0.0) or 0.0),
     )
 

@@ -91,7 +91,7 @@ def plan(w):
     edge_win, path = w.edge_win, w.path
     lat_coef, lat_len, lat_lane, lat_off, lat_cost = w.lat_coef, w.lat_len, w.lat_lane, w.lat_off, w.lat_cost
     lon_s, lon_v, lon_a, lon_ok, lon_cost = w.lon_s, w.lon_v, w.lon_a, w.lon_ok, w.lon_cost
-    ob_s, ob_e, ob_hl, ob_hw = w.ob_s, w.ob_e, w.ob_hl, w.ob_hw
+    ob_s, ob_e, ob_hl, ob_hw, ob_or = w.ob_s, w.ob_e, w.ob_hl, w.ob_hw, w.ob_or
     n_obs = w.ob_n[0]
     dt = w.dt[0]
     relation, plan_s, plan_v, plan_a, plan_d = w.relation, w.plan_s, w.plan_v, w.plan_a, w.plan_d
@@ -151,7 +151,7 @@ def plan(w):
         safe, feasible, rate, ttc, pair, goal = check_pair(
             i, j, excess0, False, best_total - base, prepaid[j], lon_vend[j], par, grid, ego, goal_arr, g_kappa, g_heading, lon_bend[j],
             lane_left, lane_right, lane_line, lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len,
-            lat_lane, lat_off, lon_s, lon_v, lon_a, ob_s, ob_e, ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d,
+            lat_lane, lat_off, lon_s, lon_v, lon_a, ob_s, ob_e, ob_hl, ob_hw, ob_or, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d,
             discs, rel_idx, n_rel, scratch, path, edge_win,
         )  # fmt: skip
         checked += 1
@@ -184,7 +184,7 @@ def plan(w):
     safe, feasible, rate, ttc, pair, goal = check_pair(
         i, j, excess0, True, math.inf, prepaid[j], lon_vend[j], par, grid, ego, goal_arr, g_kappa, g_heading, lon_bend[j], lane_left,
         lane_right, lane_line, lane_kind, same_left, same_right, all_left, all_right, lat_coef, lat_len, lat_lane, lat_off, lon_s, lon_v,
-        lon_a, ob_s, ob_e, ob_hl, ob_hw, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs, rel_idx, 0,
+        lon_a, ob_s, ob_e, ob_hl, ob_hw, ob_or, n_obs, dt, relation, plan_s, plan_v, plan_a, plan_d, discs, rel_idx, 0,
         scratch, path, edge_win,
     )  # fmt: skip
     r[R_I] = i
@@ -242,9 +242,9 @@ def plan(w):
 def _refresh_cache() -> None:
     """numba keys this module's cache to this file only: the plan links in code from these."""
     from .. import _jitcache
-    from . import candidates, checks, frenet, work
+    from . import candidates, checks, contact, frenet, work
 
-    files = [m.__file__ for m in (work, frenet, candidates, checks) if m.__file__ is not None]
+    files = [m.__file__ for m in (work, frenet, candidates, contact, checks) if m.__file__ is not None]
     _jitcache.refresh(plan, files)
 
 

@@ -24,7 +24,7 @@ from ..scene.road import Road
 from . import kernels
 from .config import PlannerConfig, VehicleLimits
 from .frenet import heading_within, is_pass, lane_at
-from .tracks import obstacle_tracks
+from .tracks import CACHE_COLS, obstacle_tracks
 from .work import (
     road_windows,
     E_A,
@@ -66,6 +66,7 @@ from .work import (
     P_C_GOAL,
     P_C_RATE,
     P_REAR,
+    P_ROWS_EXCESS,
     P_C_OFFROUTE,
     P_C_ONCOMING,
     P_C_SWITCH,
@@ -393,6 +394,11 @@ class ManeuverPlanner:
         par[P_C_GOAL] = cfg.goal_miss_s
         par[P_C_RATE] = cfg.rate_excess_s
         par[P_REAR] = limits.rear_axle_m
+        # the controller's Frenet rows about an obstacle keep its Frenet box; a maneuver keeps the
+        # planner's margin off its oriented box: those rows hold the maneuver (within the
+        # tracking's tolerance) where the box exceeds the outline by less than that tolerance and
+        # what the planner keeps beyond the rows' own margin
+        par[P_ROWS_EXCESS] = max(cfg.margin_m - limits.disc_margin_m, 0.0) + cfg.rows_tolerance_m
         par[P_JERK_REF] = cfg.jerk_ref_mps3
         par[P_LAT_REF] = cfg.lat_accel_ref_mps2
         start, end = getattr(road, "start_m", None), getattr(road, "end_m", None)
@@ -536,11 +542,11 @@ class ManeuverPlanner:
         e[E_MOVE_LANE], e[E_MOVE_OFF], e[E_MOVE_END] = self._move if on is not None else NO_MOVE
         x, y = px - math.sin(ph) * e_y_m, py + math.cos(ph) * e_y_m  # the car, e_y_m left of the path
         if obstacles is not self._cache_of:  # other obstacles (fresh predictions): a new cache
-            self._cache = np.full((len(obstacles.obstacles), TRACK_CACHE_STEPS, 4), np.nan)
+            self._cache = np.full((len(obstacles.obstacles), TRACK_CACHE_STEPS, CACHE_COLS), np.nan)
             self._cache_of = obstacles
         n = obstacle_tracks(
             obstacles, self._pa, t_s, cfg.dt_s, s_m, (x, y), self._range_m, LATERAL_RANGE_M, w.ob_s, w.ob_e, w.ob_hl,
-            w.ob_hw, self._index, self._cache, self.cache_step_s,
+            w.ob_hw, self._index, self._cache, self.cache_step_s, w.ob_or,
         )  # fmt: skip
         w.ob_n[0] = n
         kernels.plan(self._struct)

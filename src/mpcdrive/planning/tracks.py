@@ -6,7 +6,8 @@ constant velocity or a recorded trajectory, going on at its last velocity past t
 end where the obstacle's life does not end there), projected onto the reference path (the first pose
 searched within range of the car, each later one near the one before) and given its box along
 the path: centre (s, e) and half extents along and across the path at its yaw relative to the
-path's heading. An obstacle is kept when it comes within ``range_m`` along the path and
+path's heading, and that yaw with the obstacle's own half extents (its oriented box, which the
+contact checks use inside the Frenet box). An obstacle is kept when it comes within ``range_m`` along the path and
 ``lateral_m`` across it at some sample; the nearest rows are kept when more than the work's
 slots are in range.
 """
@@ -28,7 +29,11 @@ TRACK_MARGIN_M = 2.0
 #: wider window (the window covers whole segments beyond its ends: a nearest point found inside
 #: it by more than this is a true local nearest point)
 EDGE_M = 1e-6
-_NO_CACHE = np.zeros((0, 0, 4))
+#: the columns of a track's cache: arc length, offset, half extents along and across the path,
+#: cosine and sine of the obstacle's yaw relative to the path
+CACHE_COLS = 6
+_NO_CACHE = np.zeros((0, 0, CACHE_COLS))
+_NO_ORIENT = np.zeros((0, 0, 4))
 
 
 @subroutine
@@ -65,12 +70,16 @@ def obstacle_tracks(
     index: np.ndarray,
     cache: np.ndarray | None = None,
     cache_step_s: float = 0.0,
+    out_or: np.ndarray | None = None,
 ) -> int:
     """Fill rows of ``out_*`` (O, K+1) with the tracks of the obstacles of ``tab`` in range of
     arc length ``s_m`` [m] (the car at ``xy_m`` [m]) at times ``t0_s + k dt_s`` [s] (NaN where
     absent); ``index`` (O,) gets each row's obstacle index. Returns the number of rows.
+    ``out_or`` (O, K+1, 4), where given, gets each sample's oriented box: the cosine and sine
+    of the obstacle's yaw relative to the path's heading, and its own half length and half width
+    [m] (a disc: its radius, at yaw 0).
 
-    ``cache`` (n, C, 4) (NaN: empty) keeps each obstacle's box at the times ``i cache_step_s`` [s]
+    ``cache`` (n, C, ``CACHE_COLS``) (NaN: empty) keeps each obstacle's box at the times ``i cache_step_s`` [s]
     (i < C) for the next calls (the same obstacles: a new table needs a new cache): when the
     times of the call lie on that grid, a box already computed is taken from it (a replanning
     every control step shares all but its last samples with the one before)."""
@@ -88,7 +97,8 @@ def obstacle_tracks(
         _tracks_kernel(
             pa.kind, pa.geo, pa.tab_s, pa.tab_xy, pa.tab_h, pa.tab_k, float(t0_s), float(dt_s), float(s_m),
             float(xy_m[0]), float(xy_m[1]), float(range_m), float(lateral_m), *tab.motion, tab.life, tab.has_life, tab.shape, tab.radius, tab.verts,
-            tab.nverts, out_s, out_e, out_hl, out_hw, index, cache, c0, c_step,
+            tab.nverts, out_s, out_e, out_hl, out_hw, _NO_ORIENT if out_or is None else out_or, index, cache, c0,
+            c_step,
         )
     )  # fmt: skip
 
@@ -96,7 +106,7 @@ def obstacle_tracks(
 @njit(cache=True)
 def _tracks_kernel(
     kind, geo, tab_s, tab_xy, tab_h, tab_k, t0, dt, s_m, x_m, y_m, range_m, lateral_m, pose, vel, tr_lo, tr_hi, tr_t,
-    tr_d, life, has_life, shape, radius, verts, nverts, out_s, out_e, out_hl, out_hw, index, cache, c0, c_step,
+    tr_d, life, has_life, shape, radius, verts, nverts, out_s, out_e, out_hl, out_hw, out_or, index, cache, c0, c_step,
 ):  # fmt: skip
     rows, K1 = out_s.shape
     n_obs = pose.shape[0]
@@ -105,6 +115,9 @@ def _tracks_kernel(
     e_row = np.empty(K1)
     hl_row = np.empty(K1)
     hw_row = np.empty(K1)
+    cos_row = np.empty(K1)
+    sin_row = np.empty(K1)
+    orient = out_or.shape[0] > 0
     t_end = t0 + (K1 - 1) * dt
     used = 0
     for j in range(n_obs):
@@ -123,6 +136,13 @@ def _tracks_kernel(
                 break
         if far:
             continue
+        # its own half extents (a polygon's about its pose, in its frame)
+        own_l, own_w = radius[j], radius[j]
+        if shape[j] != SHAPE_CIRCLE:
+            own_l, own_w = 0.0, 0.0
+            for m in range(nverts[j]):
+                own_l = max(own_l, abs(verts[j, m, 0]))
+                own_w = max(own_w, abs(verts[j, m, 1]))
         # with every row in use, the track replaces the farthest one if it is nearer
         r = used if used < rows else -1
         # samples placed so far: from the second on, the guess goes on by the last step's way
@@ -139,12 +159,15 @@ def _tracks_kernel(
             e_row[k] = math.nan
             hl_row[k] = math.nan
             hw_row[k] = math.nan
+            cos_row[k] = 1.0
+            sin_row[k] = 0.0
             if has_life[j] and not (life[j, 0] <= t and t <= life[j, 1]):
                 continue
             ci = c0 + k * c_step if c0 >= 0 else -1
             if 0 <= ci < cache.shape[1] and math.isfinite(cache[j, ci, 0]):
                 # the same obstacle at the same time, projected at an earlier replanning
                 s, e, hl, hw = cache[j, ci, 0], cache[j, ci, 1], cache[j, ci, 2], cache[j, ci, 3]
+                cos_row[k], sin_row[k] = cache[j, ci, 4], cache[j, ci, 5]
                 guess = s + (s - prev_s if seen > 0 else 0.0)
                 seen += 1
                 prev_s = s
@@ -186,6 +209,7 @@ def _tracks_kernel(
             else:
                 dyaw = yaw - path_eval(kind, geo, tab_s, tab_xy, tab_h, tab_k, s)[2]
                 c, sn = math.cos(dyaw), math.sin(dyaw)
+                cos_row[k], sin_row[k] = c, sn
                 hl, hw = 0.0, 0.0
                 for m in range(nverts[j]):
                     vx, vy = verts[j, m, 0], verts[j, m, 1]
@@ -195,6 +219,7 @@ def _tracks_kernel(
             hw_row[k] = hw
             if 0 <= ci < cache.shape[1]:
                 cache[j, ci, 0], cache[j, ci, 1], cache[j, ci, 2], cache[j, ci, 3] = s, e, hl, hw
+                cache[j, ci, 4], cache[j, ci, 5] = cos_row[k], sin_row[k]
             ds = abs(s - s_m) - hl
             if ds <= range_m and abs(e) - hw <= lateral_m:
                 keep = True
@@ -218,6 +243,11 @@ def _tracks_kernel(
             out_e[r, k] = e_row[k]
             out_hl[r, k] = hl_row[k]
             out_hw[r, k] = hw_row[k]
+            if orient:
+                out_or[r, k, 0] = cos_row[k]
+                out_or[r, k, 1] = sin_row[k]
+                out_or[r, k, 2] = own_l
+                out_or[r, k, 3] = own_w
     return min(used, rows)
 
 

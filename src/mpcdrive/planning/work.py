@@ -75,8 +75,9 @@ G_HAS, G_S_LO, G_S_HI, G_D_LO, G_D_HI, G_T_LO, G_T_HI, G_V_LO, G_V_HI, G_HAS_YAW
     P_R_DISC,
     P_C_RATE,
     P_REAR,
-) = range(34)
-N_PAR = 34
+    P_ROWS_EXCESS,
+) = range(35)
+N_PAR = 35
 # slots of ``result``
 (
     R_I,
@@ -138,6 +139,7 @@ class PlannerWork:
     ob_e: np.ndarray  # (O, K+1) lateral offset [m]
     ob_hl: np.ndarray  # (O, K+1) half extent along the path [m]
     ob_hw: np.ndarray  # (O, K+1) half extent across [m]
+    ob_or: np.ndarray  # (O, K+1, 4) cos, sin of the yaw to the path, own half length, half width [m]
     ob_n: np.ndarray  # (1,) int: obstacle rows in use
     # candidates
     lat_lane: np.ndarray  # (MAX_LAT,) int
@@ -207,6 +209,7 @@ def new_work(K: int, grid_s: np.ndarray, n_lanes: int) -> dict:
         ob_e=f((MAX_OBS, K + 1)),
         ob_hl=f((MAX_OBS, K + 1)),
         ob_hw=f((MAX_OBS, K + 1)),
+        ob_or=f((MAX_OBS, K + 1, 4)),
         ob_n=np.zeros(1, np.int64),
         lat_lane=np.zeros(MAX_LAT, np.int64),
         lat_off=f(MAX_LAT),
