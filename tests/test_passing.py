@@ -51,6 +51,9 @@ BESIDE = {"shape": "rectangle", "position": [50.0, 3.5], "length_m": 4.5, "width
 def test_parked_car_with_a_free_neighbour_lane_is_passed(backend):
     exp = build_experiment(ScenarioSpec.model_validate(_spec([PARKED], backend)))
     assert isinstance(exp.controller, PlannedMpc)
+    # the planner knows the margin the controller's obstacle rows keep (its relations use it)
+    limits = exp.controller.planner.limits
+    assert limits.disc_margin_m == exp.controller.mpc.avoidance.config.margin_m
     res = run_experiment(exp)
     m = compute_metrics(res)
     assert m["collisions"] == 0 and m["min_obstacle_clearance_m"] > 0.2

@@ -435,7 +435,15 @@ def test_the_warm_up_leaves_no_trace_in_the_replannings_after_it():
 
 
 @pytest.mark.parametrize(
-    "field, value", [("horizon_s", 0.0), ("dt_s", 0.5), ("margin_m", -0.1), ("lateral_s", ()), ("time_gap_s", math.nan)]
+    "field, value",
+    [
+        ("horizon_s", 0.0),
+        ("dt_s", 0.5),
+        ("margin_m", -0.1),
+        ("rows_tolerance_m", -0.1),
+        ("lateral_s", ()),
+        ("time_gap_s", math.nan),
+    ],
 )
 def test_bad_settings_are_refused_naming_them(field, value):
     with pytest.raises(ValueError, match=field):

@@ -16,6 +16,7 @@ from mpcdrive.ocp.avoidance_compiled import table_of
 from mpcdrive.ocp.relations import REL_CLEAR, REL_RIGHT
 from mpcdrive.paths.compiled import path_arrays
 from mpcdrive.paths.waypoints import WaypointPath
+from mpcdrive.planning import VehicleLimits
 from mpcdrive.planning.contact import _disc_meets
 from mpcdrive.planning.tracks import obstacle_tracks
 from mpcdrive.scene.obstacles import ConstantVelocity, Obstacle, rectangle
@@ -139,3 +140,8 @@ def test_a_car_beside_keeps_the_lateral_row_unless_its_frenet_box_exceeds_its_ou
     assert m.safe
     near = {int(r) for r in m.relations[0, :6]}
     assert near == rows
+
+
+def test_a_negative_row_margin_of_the_controller_is_refused():
+    with pytest.raises(ValueError, match="disc_margin_m"):
+        VehicleLimits(**{**LIMITS.__dict__, "disc_margin_m": -0.1})
