@@ -372,23 +372,23 @@ def test_a_car_drifting_into_the_road_margin_turns_back_inside_the_road():
     assert np.all(m.d_m[t >= 1.0] - half >= -W / 2 + 0.25 - 0.02)  # out of the margin after 1 s
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=AssertionError,
-    reason="known limitation: the road margin's allowance ends after a second whatever the car drove; "
-    "extending it over the way a slow car needs to turn back made a yielding car leave the road in a "
-    "left turn (test_commonroad_cases case 4 on ST), so it was reverted",
-)
-def test_a_car_at_rest_in_the_road_margin_has_a_safe_maneuver():
-    """The car at rest, 0.07 m into the road's margin at its right edge (USA_Peach-4 starts so):
-    it turns only as it drives, and turning back swings its rear corner out, so no maneuver
-    leaves the margin within the first second; every one is unsafe, and the choice among unsafe
-    maneuvers flips between driving off and standing."""
+def test_a_car_at_rest_in_the_road_margin_is_given_the_way_to_turn_back_not_a_second():
+    """The car at rest, 0.07 m into the road's margin at its right edge (as a recorded start may
+    place it): it turns back only as it drives, and its rear corner swings out until the move
+    has straightened it, so the margin is its own until it has driven its shortest lateral move
+    (2 s at 6 m/s, half-way to the wanted 12 m/s: 12 m, less the none it drives in a second at
+    rest) as well as had a second. Every maneuver
+    was unsafe when the margin was gone after a second whatever the car drove (the choice among
+    unsafe maneuvers then flips between driving off and standing)."""
     pl = planner()
     half = 0.5 * LIMITS.width_m
     d0 = -W / 2 + 0.25 + half - 0.07
     m = pl.plan(0.0, 20.0, d0, 0.0, 0.0, 0.0, table_of([car(-500.0)], None))
-    assert m.safe and m.s_m[-1] > 40.0
+    assert m.safe and m.ttc_s == math.inf
+    assert m.s_m[-1] > 40.0  # it drives off
+    assert np.min(m.d_m) - half >= -W / 2 - 1e-6  # never beyond the lane's edge
+    way = m.s_m - m.s_m[0]
+    assert np.all(m.d_m[(way >= 12.0) & (m.t_s >= 1.0)] - half >= -W / 2 + 0.25 - 0.02)
 
 
 def test_goal_window_is_met_when_the_car_would_otherwise_be_early():
@@ -856,3 +856,20 @@ def test_a_profile_that_reaches_the_region_only_after_the_window_closes_is_a_sur
     assert missed(29.7) == 20.0  # 29 m + 0.5 m by 2.9 s: short of it
     assert missed(29.3) == 0.0  # within the slack of 29 m: perhaps reached
     assert missed(10.0) == 0.0  # reached well inside the window
+
+
+def test_only_a_car_already_in_the_margin_keeps_it_over_the_way_it_needs_to_turn_back():
+    """The margin's allowance at 2 s, the car having driven 3 m: gone for a car that started clear
+    of it (a turn from rest that leaned on the margin left the controller no room: the generated
+    left turn of test_commonroad_cases case 4 left the road on ST), still most of it for a car
+    that started 0.07 m into it (it turns back only as it drives)."""
+    from mpcdrive.planning.checks import _road_allowance
+    from mpcdrive.planning.work import P_ROAD_MARGIN, P_TURN_BACK
+
+    par = planner().work.par.copy()
+    par[P_TURN_BACK] = 12.0
+    allow = _road_allowance.py_func
+    assert allow(0.0, par, 2.0, 3.0) == pytest.approx(1e-3)
+    assert allow(0.0, par, 0.5, 3.0) == pytest.approx(0.5 * par[P_ROAD_MARGIN] + 1e-3)
+    assert allow(0.07, par, 2.0, 3.0) == pytest.approx(0.75 * (0.07 + par[P_ROAD_MARGIN]) + 1e-3)
+    assert allow(0.07, par, 2.0, 12.0) == pytest.approx(1e-3)

@@ -56,6 +56,8 @@ from .work import (
     P_JERK_REF,
     P_KAPPA_MAX,
     P_LAT_MIN,
+    P_TURN_BACK,
+    TURN_BACK_S,
     P_MARGIN,
     P_ONCOMING,
     P_ROAD_END,
@@ -194,6 +196,10 @@ def lateral_candidates(w):
     prev = int(w.ego[E_PREV_LANE])
     v_want = grid_at(w.grid, w.g_vref, s0)
     v_len = 0.5 * (v0 + max(v0, v_want))
+    # the way a car out in the road's margin may drive to turn back (checks._road_allowance):
+    # the shortest move's, less what the car drives in a second at its speed (a car at speed
+    # has that second; a car at rest turns only as it drives off), at least the shortest move
+    par[P_TURN_BACK] = max(par[P_LAT_MIN], v_len * np.min(w.lat_lengths_s) - v0 * TURN_BACK_S)
     for lane in range(w.lane_kind.shape[0]):
         kind = w.lane_kind[lane]
         if kind == LANE_ONCOMING and par[P_ONCOMING] == 0.0:

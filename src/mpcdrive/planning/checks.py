@@ -49,6 +49,8 @@ from .work import (
     P_KAPPA_MAX,
     P_KAPPA_RATE,
     P_LAT_MIN,
+    P_TURN_BACK,
+    TURN_BACK_S,
     P_LAT_REF,
     P_MARGIN,
     P_ROAD_END,
@@ -104,12 +106,21 @@ def _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth):
 
 
 @subroutine
-def _road_allowance(excess0, par, t):
+def _road_allowance(excess0, par, t, way):
     """How far [m] beyond the road's edges less its margin a maneuver's body may be at ``t`` [s]
-    after the replanning: the road's margin is room for the controller's tracking, and over the
-    first second a maneuver may use it (a car drifting towards the edge needs that long to turn
-    back) and the ``excess0`` [m] the car is out now, shrinking to nothing by then."""
-    return (excess0 + par[P_ROAD_MARGIN]) * max(0.0, 1.0 - t) + 1e-3
+    after the replanning, ``way`` [m] along the path from where it starts: the road's margin is
+    room for the controller's tracking, and a maneuver may use it, and the ``excess0`` [m] the
+    car is out now, shrinking to nothing over the first second (a car drifting towards the edge
+    needs that long to turn back). A car already in the margin keeps it until it has also driven
+    the way ``P_TURN_BACK`` (:func:`~.candidates.lateral_candidates`): at rest or crawling it
+    turns back only as it drives, and its rear corner swings out until its move has straightened
+    it (with a second alone, a car at rest a few centimetres into the margin had no safe
+    maneuver at all). A car inside gets the second only: a turn from rest may not lean on the
+    margin over its first metres, which the controller's tracking needs."""
+    done = t / TURN_BACK_S
+    if excess0 > 0.0:
+        done = min(done, way / par[P_TURN_BACK])
+    return (excess0 + par[P_ROAD_MARGIN]) * max(0.0, 1.0 - done) + 1e-3
 
 
 @subroutine
@@ -189,7 +200,7 @@ def _first_hit(
         cth, sth = 1.0 / nrm, d1 / nrm
         t = k * dt
         # the road first (its time is the step's; an obstacle's swept contact is the step before)
-        allow = _road_allowance(excess0, par, t)
+        allow = _road_allowance(excess0, par, t, s - s0)
         road_hit = not _clear_of_edges(grid, edge_win, win_row, par, s, d, cth, sth, allow) and (
             _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth) > allow
         )
@@ -283,8 +294,8 @@ def check_pair(
     (``lon_bend``, :func:`~.candidates.longitudinal_costs`), > 1 where the move steers faster than
     the vehicle can);
     ``excess0`` [m]: how far the car is outside the road now (a maneuver may not go further
-    out, and gets a second to come back in; -2: the car is in an oncoming lane). With ``write``,
-    the maneuver and its relations to the obstacles go into ``relation`` and ``plan_*``; else
+    out, and gets :func:`_road_allowance`'s time and way to come back in; -2: the car is in an
+    oncoming lane). With ``write``, the maneuver and its relations to the obstacles go into ``relation`` and ``plan_*``; else
     the check stops at the first contact (the time to collision is known) or once the cost
     and the rate's excess costed (``rate_excess_s``, as the choice scores it) pass ``bound``
     [s] (it cannot be chosen), returning it unsafe, and looks only at the
@@ -391,7 +402,8 @@ def check_pair(
         if not hit:
             # the road (in the search, :func:`_first_hit` has found the step that leaves it, if any)
             if write:
-                if _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth) > _road_allowance(excess0, par, t):
+                allow = _road_allowance(excess0, par, t, s - s0)
+                if _road_excess(grid, left_tab, right_tab, par, s, d, cth, sth) > allow:
                     ttc = t
                     hit = True
             elif k == first:

@@ -108,7 +108,9 @@ class PlannerConfig:
         (at least the road's own margin): what the controller's tracking of a lane change leaves
         on a plant with tyres (ST, multi-body), about 0.2 m; a maneuver may use it over its first
         second, shrinking to nothing by then (a car drifting towards the edge turns back), never
-        the road beyond the edge;
+        the road beyond the edge; a car already in the margin keeps it until it has also driven
+        the way its shortest lateral move needs beyond a second's (a slow car turns back only as
+        it drives);
     rows_tolerance_m : how far [m] the controller's obstacle rows along and across the path may
         hold the car off a maneuver (what its tracking leaves anyway, about 0.2 m). Those rows
         keep an obstacle's Frenet box; a maneuver is checked against its oriented box. Where the

@@ -39,6 +39,9 @@ E_S, E_D, E_SLOPE, E_CURV, E_V, E_A, E_T, E_LANE, E_PREV_LANE, E_PREV_OFF, E_MOV
 )
 # slots of ``goal``
 G_HAS, G_S_LO, G_S_HI, G_D_LO, G_D_HI, G_T_LO, G_T_HI, G_V_LO, G_V_HI, G_HAS_YAW, G_YAW_LO, G_YAW_HI = range(12)
+#: the time [s] a car drifting towards the road's edge has to turn back: over it a maneuver may
+#: use the road's margin (``checks._road_allowance``)
+TURN_BACK_S = 1.0
 # slots of ``par`` (vehicle and settings)
 (
     P_HL,
@@ -76,8 +79,9 @@ G_HAS, G_S_LO, G_S_HI, G_D_LO, G_D_HI, G_T_LO, G_T_HI, G_V_LO, G_V_HI, G_HAS_YAW
     P_C_RATE,
     P_REAR,
     P_ROWS_EXCESS,
-) = range(35)
-N_PAR = 35
+    P_TURN_BACK,
+) = range(36)
+N_PAR = 36
 # slots of ``result``
 (
     R_I,
