@@ -18,31 +18,24 @@ from .._subroutine import subroutine
 
 
 @subroutine
+def _slab(t0, t1, p0, dp, b):
+    """The part of the parameter interval [t0, t1] where ``|p0 + t dp| < b`` (empty: t0 > t1)."""
+    if abs(dp) < 1e-12:
+        return (t0, t1) if abs(p0) < b else (1.0, 0.0)
+    ta, tb = (-b - p0) / dp, (b - p0) / dp
+    if ta > tb:
+        ta, tb = tb, ta
+    return max(t0, ta), min(t1, tb)
+
+
+@subroutine
 def _segment_hits_box(x0, y0, x1, y1, bx, by):
     """Whether the segment (x0, y0)-(x1, y1) meets the box |x| < bx, |y| < by (slabs)."""
-    t0, t1 = 0.0, 1.0
-    dx, dy = x1 - x0, y1 - y0
-    if abs(dx) < 1e-12:
-        if abs(x0) >= bx:
-            return False
-    else:
-        ta, tb = (-bx - x0) / dx, (bx - x0) / dx
-        if ta > tb:
-            ta, tb = tb, ta
-        t0, t1 = max(t0, ta), min(t1, tb)
-        if t0 > t1:
-            return False
-    if abs(dy) < 1e-12:
-        if abs(y0) >= by:
-            return False
-    else:
-        ta, tb = (-by - y0) / dy, (by - y0) / dy
-        if ta > tb:
-            ta, tb = tb, ta
-        t0, t1 = max(t0, ta), min(t1, tb)
-        if t0 > t1:
-            return False
-    return True
+    t0, t1 = _slab(0.0, 1.0, x0, x1 - x0, bx)
+    if t0 > t1:
+        return False
+    t0, t1 = _slab(t0, t1, y0, y1 - y0, by)
+    return not t0 > t1
 
 
 @subroutine
