@@ -425,6 +425,41 @@ def _two_lane_network_with_exit():
     return LaneletNetwork.create_from_lanelet_list([l1, l2, l21, l22, l23])
 
 
+def _zipper_network(rejoin: bool = True):
+    """Lanes 1 and 2 (2 right of 1) heading east for 50 m, going on as 11 and 12 with no
+    neighbours in the map for 30 m while 12 converges onto 11's line; 11 goes on into 20. With
+    ``rejoin`` 12 goes on into 20 too (a zipper merge); without, into a lanelet 30 of its own."""
+    from commonroad.scenario.lanelet import LaneletNetwork
+
+    x = np.linspace(0, 50, 26)
+    xm = np.linspace(50, 80, 16)
+    xe = np.linspace(80, 130, 26)
+    l1 = _lanelet(1, np.column_stack([x, np.zeros_like(x)]), successor=[11], adjacent_right=2,
+                  adjacent_right_same_direction=True)  # fmt: skip
+    l2 = _lanelet(2, np.column_stack([x, np.full_like(x, -3.5)]), successor=[12], adjacent_left=1,
+                  adjacent_left_same_direction=True)  # fmt: skip
+    l11 = _lanelet(11, np.column_stack([xm, np.zeros_like(xm)]), predecessor=[1], successor=[20])
+    l12 = _lanelet(12, np.column_stack([xm, -3.5 * (80 - xm) / 30]), predecessor=[2], successor=[20 if rejoin else 30])
+    l20 = _lanelet(20, np.column_stack([xe, np.zeros_like(xe)]), predecessor=[11, 12] if rejoin else [11])
+    ls = [l1, l2, l11, l12, l20]
+    if not rejoin:
+        ls.append(_lanelet(30, np.column_stack([xe, np.full_like(xe, -8.0)]), predecessor=[12]))
+    return LaneletNetwork.create_from_lanelet_list(ls)
+
+
+def test_the_lane_beside_is_road_up_to_where_it_merges_into_the_route():
+    """A zipper merge: the lane beside the route runs on, with no neighbour in the map, into the
+    route's lanelet; it is road to drive on (the car may keep to it up to the merge). A lane
+    beside that leads elsewhere is not."""
+    from mpcdrive.adapters.commonroad_route import drivable_lanelets, lane_candidates
+
+    net = _zipper_network()
+    assert drivable_lanelets(net, [1, 11, 20]) == {1, 2, 11, 12, 20}
+    assert drivable_lanelets(net, [1, 11, 20], neighbours=False) == {1, 11, 20}
+    assert lane_candidates(net, [1, 11, 20]) == {i: False for i in (1, 2, 11, 12, 20)}
+    assert drivable_lanelets(_zipper_network(rejoin=False), [1, 11, 20]) == {1, 2, 11, 20}
+
+
 def test_time_only_goal_follows_the_lane_not_the_straightest_branch():
     """Lane 1 goes on as 21, curving left beside 22 (the successor of its neighbour 2); the exit
     23 goes straight on. A time-only goal follows the lane (21), where the straightest successor

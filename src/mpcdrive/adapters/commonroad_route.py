@@ -15,6 +15,9 @@
   it, the route follows the lane: a lanelet's only successor, else the intersection's straight
   successor, else the successor whose neighbours continue the lanelet's neighbours; it stops at a
   dead end or where the network leaves the choice open (no invented turns).
+* **Lanes beside.** The same-direction lanelets beside the route (repeatedly), and those through
+  which such a lane runs on into the route's lanes where the map gives it no neighbour (a zipper
+  merge, :data:`REJOIN_LANELETS`).
 * **Road ends.** The mapped road begins at the route's first lanelet when neither it nor a
   same-direction lanelet beside it has a predecessor, and ends at its last likewise without
   successors (:func:`mapped_road_ends`): a body beyond them is off the road.
@@ -362,17 +365,46 @@ EDGE_SEARCH_M = 15.0
 EDGE_STEP_M = 0.05
 
 
+#: how many lanelets a lane beside the route may run through, with no neighbour in the map,
+#: before it joins the route's lanes again (a zipper merge: two lanes converging into one)
+REJOIN_LANELETS = 2
+
+
+def _rejoining(net, ids: set[int]) -> set[int]:
+    """The lanelets of successor chains, at most :data:`REJOIN_LANELETS` long, that leave a
+    lanelet of ``ids`` and lead into one of ``ids`` again."""
+    found: set[int] = set()
+    for lid in ids:
+        stack: list[tuple[int, tuple[int, ...]]] = [(lid, ())]
+        while stack:
+            cur, chain = stack.pop()
+            for nxt in net.find_lanelet_by_id(cur).successor:
+                nxt = int(nxt)
+                if nxt in ids:
+                    found.update(chain)
+                elif len(chain) < REJOIN_LANELETS and nxt not in chain:
+                    stack.append((nxt, (*chain, nxt)))
+    return found - ids
+
+
 def drivable_lanelets(net, route, neighbours: bool = True) -> set[int]:
     """The route's lanelets and, with ``neighbours``, every lanelet beside them in the same
-    direction (adjacent left / right, repeatedly: all lanes of a motorway's carriageway)."""
+    direction (adjacent left / right, repeatedly: all lanes of a motorway's carriageway) and the
+    lanelets through which such a lane runs on into the route's lanes where the map gives them
+    no neighbour (:func:`_rejoining`: the two lanes of a zipper merge converge, each its own
+    lanelet, into one)."""
     ids = set(int(i) for i in route)
     frontier = list(ids) if neighbours else []
     while frontier:
-        ll = net.find_lanelet_by_id(frontier.pop())
-        for adj, same in ((ll.adj_left, ll.adj_left_same_direction), (ll.adj_right, ll.adj_right_same_direction)):
-            if adj is not None and same and adj not in ids:
-                ids.add(int(adj))
-                frontier.append(int(adj))
+        while frontier:
+            ll = net.find_lanelet_by_id(frontier.pop())
+            for adj, same in ((ll.adj_left, ll.adj_left_same_direction), (ll.adj_right, ll.adj_right_same_direction)):
+                if adj is not None and same and adj not in ids:
+                    ids.add(int(adj))
+                    frontier.append(int(adj))
+        more = _rejoining(net, ids)
+        ids |= more
+        frontier = list(more)
     return ids
 
 
