@@ -777,6 +777,30 @@ def test_a_sharp_return_on_the_mb_plant_is_a_ks_drive_by_the_steering_that_turns
     assert np.abs(written - commands).max() > 0.02
 
 
+@pytest.mark.slow
+def test_a_pass_with_an_oncoming_car_close_behind_it_returns_briskly(tmp_path):
+    """The blocked_oncoming family's seed 11 (ZAM_BlockedOncoming-12) on the ST plant, at
+    17.5 m/s: the oncoming car (12.3 m/s) reaches the broken-down car 2.7 s after the car would
+    be back in its lane 12 m past it at its speed. A return over 2 s or 3 s at the car's pace
+    still has it in the oncoming lane when the oncoming car arrives, and every such pass is
+    unsafe: with only those the car stopped behind the broken-down car and missed the goal by
+    41 m. With a return over 1.5 s sampled too (a 3.1 m lane change peaking at
+    5.77 * 3.1 / 1.5^2 = 8 m/s^2, inside the friction circle the planner checks) it passes, no
+    slower than 11 m/s, and the whole drive is clean (measured: the lateral acceleration, speed
+    times yaw rate, peaks at 8.4 m/s^2 at 1.5 s, on the way out)."""
+    import scenario_families as sf
+
+    from mpcdrive.adapters.commonroad import check_drives, with_vehicle
+    from mpcdrive.adapters.commonroad_vehicles import commonroad_plant
+
+    imp = with_vehicle(load_commonroad(sf.write_scenario("blocked_oncoming", 11, tmp_path)), "bmw_320i", "st")
+    res = run_experiment(imp.prepare_experiment(build_experiment(imp.spec, plant_factory=commonroad_plant)))
+    goal, whole = check_drives(imp, res)
+    assert whole.passed and goal.passed, whole.line()
+    # the car passed: it never came to rest behind the broken-down car
+    assert float(np.min(res.x[:, 3])) > 5.0
+
+
 # -- the batch command ------------------------------------------------------------------------------
 @pytest.mark.slow
 def test_batch_writes_a_row_per_file_and_survives_a_broken_one(tmp_path):
