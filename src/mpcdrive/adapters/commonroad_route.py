@@ -381,10 +381,10 @@ def _rejoining(net, ids: set[int]) -> set[int]:
             for nxt in net.find_lanelet_by_id(cur).successor:
                 nxt = int(nxt)
                 if nxt in ids:
-                    found.update(chain)
+                    found.update(chain)  # (a chain holds no lanelet of ids)
                 elif len(chain) < REJOIN_LANELETS and nxt not in chain:
                     stack.append((nxt, (*chain, nxt)))
-    return found - ids
+    return found
 
 
 def drivable_lanelets(net, route, neighbours: bool = True) -> set[int]:
@@ -396,15 +396,14 @@ def drivable_lanelets(net, route, neighbours: bool = True) -> set[int]:
     ids = set(int(i) for i in route)
     frontier = list(ids) if neighbours else []
     while frontier:
-        while frontier:
-            ll = net.find_lanelet_by_id(frontier.pop())
-            for adj, same in ((ll.adj_left, ll.adj_left_same_direction), (ll.adj_right, ll.adj_right_same_direction)):
-                if adj is not None and same and adj not in ids:
-                    ids.add(int(adj))
-                    frontier.append(int(adj))
-        more = _rejoining(net, ids)
-        ids |= more
-        frontier = list(more)
+        ll = net.find_lanelet_by_id(frontier.pop())
+        for adj, same in ((ll.adj_left, ll.adj_left_same_direction), (ll.adj_right, ll.adj_right_same_direction)):
+            if adj is not None and same and adj not in ids:
+                ids.add(int(adj))
+                frontier.append(int(adj))
+        if not frontier:  # every lane beside found: on through the merges, and beside those
+            frontier = sorted(_rejoining(net, ids))
+            ids.update(frontier)
     return ids
 
 

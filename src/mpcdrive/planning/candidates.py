@@ -56,8 +56,6 @@ from .work import (
     P_JERK_REF,
     P_KAPPA_MAX,
     P_LAT_MIN,
-    P_TURN_BACK,
-    TURN_BACK_S,
     P_MARGIN,
     P_ONCOMING,
     P_ROAD_END,
@@ -65,7 +63,9 @@ from .work import (
     P_SHIFT,
     P_STANDSTILL,
     P_TIME_GAP,
+    P_TURN_BACK,
     P_V_MAX,
+    TURN_BACK_S,
 )
 
 from .frenet import grid_at, grid_row_at, poly_eval, quintic

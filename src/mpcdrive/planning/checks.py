@@ -49,8 +49,6 @@ from .work import (
     P_KAPPA_MAX,
     P_KAPPA_RATE,
     P_LAT_MIN,
-    P_TURN_BACK,
-    TURN_BACK_S,
     P_LAT_REF,
     P_MARGIN,
     P_ROAD_END,
@@ -58,12 +56,14 @@ from .work import (
     P_ROAD_START,
     P_STANDSTILL,
     P_TIME_GAP,
+    P_TURN_BACK,
     P_V_MAX,
     REL_AHEAD,
     REL_BEHIND,
     REL_CLEAR,
     REL_LEFT,
     REL_RIGHT,
+    TURN_BACK_S,
 )
 
 from .contact import _beyond_box, _disc_meets
@@ -295,8 +295,8 @@ def check_pair(
     the vehicle can);
     ``excess0`` [m]: how far the car is outside the road now (a maneuver may not go further
     out, and gets :func:`_road_allowance`'s time and way to come back in; -2: the car is in an
-    oncoming lane). With ``write``, the maneuver and its relations to the obstacles go into ``relation`` and ``plan_*``; else
-    the check stops at the first contact (the time to collision is known) or once the cost
+    oncoming lane). With ``write``, the maneuver and its relations to the obstacles go into
+    ``relation`` and ``plan_*``; else the check stops at the first contact (the time to collision is known) or once the cost
     and the rate's excess costed (``rate_excess_s``, as the choice scores it) pass ``bound``
     [s] (it cannot be chosen), returning it unsafe, and looks only at the
     obstacles ``rel_idx[:n_rel]`` (those that may come near the pair: :func:`_near_obstacles`),
