@@ -13,6 +13,7 @@ formulations on recorded trajectories (a turning box with a lifetime, a drifting
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 
@@ -25,6 +26,7 @@ from mpcdrive.models import KinematicBicycle3, KinematicBicycle4
 from mpcdrive.models.discretize import discrete_step
 from mpcdrive.ocp import MpcProblem
 from mpcdrive.ocp.avoidance import AvoidanceConfig
+from mpcdrive.ocp.stage_qp import new_stage_qp, steering_weight_factor, weigh_steering
 from mpcdrive.paths import CirclePath, StraightPath
 from mpcdrive.scene import Circle, Obstacle, Polygon, TrajectoryMotion
 from mpcdrive.scene.road import Road
@@ -58,6 +60,7 @@ CASES = [
     "substeps",
     "recorded-potential",
     "recorded-gaussian",
+    "steer-speed",
 ]
 
 
@@ -82,6 +85,9 @@ def _controllers(case: str, curved: bool):
         sqp_max_iterations=3 if case == "sqp" else 1,
         sqp_tol=1e-9,
         prediction_substeps=3 if case == "substeps" else 1,
+        # the steering's weights grow as (v / 2.5)^4 while the plan brakes from 5 m/s: 16 times,
+        # then a different factor each step (the sparse layout rewrites its entries)
+        steer_weight_speed_mps=2.5 if case == "steer-speed" else None,
     )
     obstacles, av = (), None
     form = {
@@ -106,7 +112,7 @@ def _controllers(case: str, curved: bool):
         for c in (ref, fo):
             c.set_lateral_reference(lambda s: 0.4 * np.sin(0.2 * np.asarray(s)))
             c.set_speed_cap(3.0, 2.0)
-    if case == "plan":  # a planner's: braking to a stop at 3 m/s^2 where the profile holds 5 m/s
+    if case in ("plan", "steer-speed"):  # a planner's: braking to a stop at 3 m/s^2 where the profile holds 5 m/s
         v = np.maximum(5.0 - 3.0 * 0.1 * np.arange(pb.N + 1), 0.0)
         s = np.r_[0.0, np.cumsum(0.05 * (v[1:] + v[:-1]))]
         for c in (ref, fo):
@@ -141,11 +147,13 @@ def test_compiled_assembly_is_the_osqp_controllers_stage_qp_and_drives_the_same_
     warm = ref.initial_warm(x)
     wo = fo.initial_warm(x)
     cost_terms = False
+    factors = set()
     for k in range(40):
         d = ref.prepare(x, warm)
         rows = case in ("hard", "corridor")
         same_step_data(fo.prepare(x, warm), d, atol=ASSEMBLY_TOL, sides=rows)
         cost_terms |= bool(np.abs(d.qp.We - ref.problem.stage_weights()).max() > 1e-6)
+        factors.add(round(float(d.qp.R[0, 0] / ref.problem.R[0, 0]), 9))
         if case == "sqp" and k == 3:  # an SQP iterate: re-linearized at a plan of its own
             res = ref._solve(d, warm)
             around = (res.X.copy(), res.U.copy())
@@ -161,6 +169,57 @@ def test_compiled_assembly_is_the_osqp_controllers_stage_qp_and_drives_the_same_
         warm, wo = a.warm, b.warm
     if case in ("potential", "gaussian", "sqp") or case.startswith("recorded-"):
         assert cost_terms, "the obstacle cost never entered the stage QP: the case tests nothing"
+    if case == "steer-speed":
+        assert len(factors) > 10 and max(factors) == 16.0, factors
+        assert ref.problem.R[0, 0] == 1.0  # the problem's own weights untouched
+    else:
+        assert factors == {1.0}
+
+
+def test_steering_weight_factor_holds_the_lateral_bandwidth_and_scales_only_the_steering():
+    assert steering_weight_factor(5.0, None) == 1.0
+    assert steering_weight_factor(10.0, 13.9) == steering_weight_factor(13.9, 13.9) == 1.0
+    assert steering_weight_factor(27.8, 13.9) == pytest.approx(16.0)  # twice the speed: 2^4
+    assert steering_weight_factor(math.nan, 13.9) == 1.0
+    # the double integrator e'' = (v^2 / L) delta under LQR q e^2 + r delta^2 has the natural
+    # frequency (q / r)^(1/4) sqrt(v^2 / L): with r grown by the factor it is that of 13.9 m/s
+    L, v0, v = 2.6, 13.9, 33.0
+    w0 = (1.0 / 1.0) ** 0.25 * math.sqrt(v0**2 / L)
+    w = (1.0 / steering_weight_factor(v, v0)) ** 0.25 * math.sqrt(v**2 / L)
+    assert w == pytest.approx(w0)
+    pb = MpcProblem(4, 2, 5, 0.1, Q=np.eye(4), R=[[2.0, 0.5], [0.5, 1.0]], Rc=np.diag([3.0, 0.0]))
+    qp = new_stage_qp(pb)
+    weigh_steering(qp, pb, 0, 9.0)
+    np.testing.assert_array_equal(qp.R, [[18.0, 1.5], [1.5, 1.0]])  # the cross term sqrt(9) times
+    np.testing.assert_array_equal(qp.Rc, [[27.0, 0.0], [0.0, 0.0]])
+    np.testing.assert_array_equal(pb.R, [[2.0, 0.5], [0.5, 1.0]])  # the problem's untouched
+    weigh_steering(qp, pb, 0, 1.0)
+    np.testing.assert_array_equal(qp.R, pb.R)
+    with pytest.raises(ValueError, match="steer_weight_speed_mps"):
+        MpcConfig(steer_weight_speed_mps=-1.0)
+
+
+def test_steering_weights_grown_with_speed_reach_osqp_and_the_condensed_solver_alike():
+    """``steer_weight_speed_mps``: the step's steering weights (16 times the problem's at 5 m/s
+    above 2.5 m/s, less as the plan brakes) are what OSQP on the sparse layout and the condensed
+    solver both minimize: the same loop from 0.5 m off the line, which the constant weights drive
+    differently (the grown ones steer back more gently)."""
+    model, ref, _, x = _controllers("steer-speed", False)
+    fc = CompiledLtvMpc(model, ref.path, ref.problem, ref.config)
+    plain = CompiledLtvMpc(model, ref.path, ref.problem, dataclasses.replace(ref.config, steer_weight_speed_mps=None))
+    for c in (fc, plain):
+        c.set_longitudinal_plan(*ref._plan)
+    x = x + np.array([0.0, 0.5, 0.0, 0.0])
+    w1, w2, w3 = ref.initial_warm(x), fc.initial_warm(x), plain.initial_warm(x)
+    apart = 0.0
+    for _ in range(30):
+        a, b, c = ref.step(x, w1), fc.step(x, w2), plain.step(x, w3)
+        assert (a.status, b.status) == ("ok", "ok")
+        np.testing.assert_allclose(b.u, a.u, rtol=0, atol=LOOP_TOL)
+        apart = max(apart, abs(float(c.u[0] - a.u[0])))
+        x = discrete_step(model, x, a.u, 0.1, "rk4")
+        w1, w2, w3 = a.warm, b.warm, c.warm
+    assert apart > 0.01  # rad: the weights changed the steering
 
 
 def test_condensed_solver_keeps_the_obstacle_cost_when_the_step_runs_in_two_stages():

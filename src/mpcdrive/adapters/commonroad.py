@@ -77,6 +77,12 @@ START_CLEAR_M = math.hypot(FRONT_REACH_M, 0.5 * WIDEST_M) + 0.5
 #: a route lane narrower than this [m] (the widest CommonRoad vehicle and the road margin on both
 #: sides) takes in the same-direction lanes beside it (:func:`_road`)
 TAPER_WIDTH_M = WIDEST_M + 2 * ROAD_MARGIN_M
+#: above this speed [m/s] (the urban limit, 50 km/h) the controller's steering weights grow as
+#: v^4 and hold its lateral bandwidth at that speed's (MpcConfig.steer_weight_speed_mps): the
+#: weights are the ones of the urban drives; on CommonRoad's ST and MB a braking car at 30 m/s
+#: oversteers (its yaw gain up to 2.6 times the kinematic model's) and weaved with the
+#: constant weights, growing on MB until it left its goal (DEU_A9-2)
+STEER_WEIGHT_SPEED_MPS = 50.0 / 3.6
 
 
 def available() -> bool:
@@ -364,6 +370,7 @@ def load_commonroad(file: str | Path) -> CommonRoadImport:
                 "Q": [1.0, 1.0, 2.0, 1.0],
                 "R": [10.0, 0.1],
                 "Rc": [100.0, 1.0],
+                "steer_weight_speed_mps": STEER_WEIGHT_SPEED_MPS,
                 "max_steer_deg": math.degrees(pre.max_steer_rad),
                 "max_steer_rate_deg_s": math.degrees(pre.max_steer_rate_rad_s) * 0.95,
                 "accel_limits_mps2": (-a_lim, a_lim),

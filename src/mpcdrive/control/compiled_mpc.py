@@ -593,6 +593,7 @@ class CompiledLtvMpc(LtvMpc):
         U = np.ascontiguousarray(U, dtype=float)
         if X.shape != (N + 1, nx) or U.shape != (N, nu):
             raise ValueError(f"warm plan must be X ({N + 1}, {nx}) and U ({N}, {nu}), got {X.shape} and {U.shape}")
+        self._weigh_steering(self._qp, x)
         code, sides = self._run(
             x, s_guess, float(warm.t_s), u_prev, X, U, mode, warm.sides, np.empty(self._out_size), last=STAGE_COST
         )
@@ -631,6 +632,7 @@ class CompiledLtvMpc(LtvMpc):
         out = np.empty(self._out_size)
         t_s = float(warm.t_s)
         info = self._info
+        self._weigh_steering(self._qp, x)
         code, new_sides = self._run(
             x,
             projection_guess(warm),

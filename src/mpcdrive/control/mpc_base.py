@@ -28,7 +28,7 @@ import numpy as np
 from ..models.base import VehicleModel
 from ..ocp.avoidance import Avoidance, AvoidanceConfig
 from ..ocp.problem import MpcProblem
-from ..ocp.stage_qp import StageQp
+from ..ocp.stage_qp import StageQp, steering_weight_factor, weigh_steering
 from ..paths.base import ReferencePath
 from ..scene.footprint import Footprint
 from ..scene.obstacles import Obstacle
@@ -248,6 +248,21 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
                 assembly=assembly,
             )
         )
+
+    #: the factor the stage QP's steering weights carry now (:meth:`_weigh_steering`)
+    _steer_factor = 1.0
+
+    def _weigh_steering(self, qp: StageQp, x: np.ndarray) -> None:
+        """The steering's weights of this step in ``qp`` (``R``, ``Rc``), for the measured state
+        ``x``: the problem's, grown above ``config.steer_weight_speed_mps``
+        (:func:`~mpcdrive.ocp.stage_qp.steering_weight_factor`); written only when they change."""
+        speed = self.config.steer_weight_speed_mps
+        if speed is None:
+            return
+        f = steering_weight_factor(float(self.model.speed(x)), speed)
+        if f != self._steer_factor:
+            weigh_steering(qp, self.problem, list(self.model.input_names).index("steer"), f)
+            self._steer_factor = f
 
     # -- obstacles and road ---------------------------------------------------------------------
     @property

@@ -49,6 +49,14 @@ class MpcConfig:
         setting for a car with a deadline, never for tests, reproductions or sweeps.
     prediction_substeps : integration substeps per control step in the prediction model (stiff
         models such as the dynamic bicycle need them at long steps).
+    steer_weight_speed_mps : above this speed [m/s] the weights on the steering angle and on its
+        change (its entries of ``R`` and ``Rc``) grow as ``(v / steer_weight_speed_mps)^4`` with the
+        measured speed ``v``. A steering angle turns the car's heading ``v / L`` times as fast and
+        moves it sideways with ``v^2 / L`` times its angle; on a lateral error that is a double
+        integrator with gain ``v^2 / L``, whose optimal loop has the natural frequency
+        ``(q / r)^(1/4) sqrt(v^2 / L)``, growing with ``v``: with ``r`` grown as ``v^4`` the lateral
+        loop keeps the bandwidth it has at this speed. A plant whose yaw lags the kinematic
+        model (tyres) then keeps its margin at speed. None (default): constant weights.
     fallback : what to do, in order, when a solve fails (:class:`~mpcdrive.control.fallback.FallbackConfig`).
     """
 
@@ -64,6 +72,7 @@ class MpcConfig:
     sqp_max_time_s: float | None = None
     speed_profile: SpeedReference | None = None
     prediction_substeps: int = 1
+    steer_weight_speed_mps: float | None = None
     fallback: FallbackConfig = FallbackConfig()
 
     def __post_init__(self):
@@ -98,5 +107,12 @@ class MpcConfig:
             isinstance(self.v_ref_mps, (int, float)) and math.isfinite(self.v_ref_mps)
         ):
             raise ValueError(f"v_ref_mps must be a finite number, got {self.v_ref_mps!r}")
+        w = self.steer_weight_speed_mps
+        if w is not None and not (
+            isinstance(w, (int, float)) and not isinstance(w, bool) and math.isfinite(w) and w > 0
+        ):
+            raise ValueError(
+                f"steer_weight_speed_mps must be None (constant weights) or a positive speed [m/s], got {w!r}"
+            )
         if not isinstance(self.fallback, FallbackConfig):
             raise ValueError(f"fallback must be a FallbackConfig, got {type(self.fallback).__name__}")

@@ -226,6 +226,7 @@ class PythonLtvMpc(LtvMpc):
         else:
             s0, e_y = self.path.project(x[:2], s_m, cfg.projection_window_m)
         e_psi = wrap_angle(x[2] - float(self.path.heading(s0)))
+        self._weigh_steering(self._stage, x)
 
         # references over the horizon: a plan's (from the car's arc length), else the profile's
         if self._plan is not None:

@@ -105,11 +105,14 @@ class LtvQp:
         for k in range(1, N + 1):
             W = pb.QN if k == N else pb.Q
             self._slot_Px[k - 1] = pat.add(self.ix(k) + iu_, self.ix(k) + ju_, 2.0 * W[iu_, ju_])
-        # inputs: R on each u_k, Rc on differences (u_0 - u_prev is handled in q)
-        D = sp.eye(N, format="csc") - sp.eye(N, k=-1, format="csc")
-        Puu = sp.triu(sp.kron(sp.eye(N), pb.R) + sp.kron(D.T @ D, pb.Rc), format="coo")
-        keep = Puu.data != 0
-        pat.add(self.n_x + Puu.row[keep], self.n_x + Puu.col[keep], 2.0 * Puu.data[keep])
+        # inputs: R on each u_k, Rc on differences (u_0 - u_prev is handled in q); the entries
+        # where R or Rc have one (a step may scale them: StageQp.R, StageQp.Rc)
+        D = np.eye(N) - np.eye(N, k=-1)
+        self._DtD = D.T @ D
+        nz = np.kron(np.eye(N), pb.R != 0) + np.kron(self._DtD != 0, pb.Rc != 0)
+        self._uu = iu, ju = np.nonzero(np.triu(nz))
+        self._R, self._Rc = pb.R.copy(), pb.Rc.copy()
+        self._slot_Pu = pat.add(self.n_x + iu, self.n_x + ju, 2.0 * self._input_block(pb.R, pb.Rc))
         if self.lane:
             j = self.ie(1) + np.arange(N)
             pat.add(j, j, 2.0 * pb.lane_slack_weight)
@@ -129,6 +132,11 @@ class LtvQp:
         self._We = pb.stage_weights()  # (N, nx, nx) the state weights of x_1..x_N in P
 
     # -- constraints --------------------------------------------------------------------
+    def _input_block(self, R: np.ndarray, Rc: np.ndarray) -> np.ndarray:
+        """The input cost's Hessian entries (halved) at the pattern's input slots for weights R, Rc."""
+        M = np.kron(np.eye(self.N), R) + np.kron(self._DtD, Rc)
+        return M[self._uu]
+
     def _build_constraints(self):
         pb, N, nx, nu = self.problem, self.N, self.nx, self.nu
         pat = _Pattern()
@@ -238,7 +246,9 @@ class LtvQp:
         applied before it.
 
         From ``st`` this reads what changes per step: the affine model, the state weights ``We``
-        and their linear terms ``qt`` (the cost ``x' We x - 2 qt' x``), the input references, the
+        and their linear terms ``qt`` (the cost ``x' We x - 2 qt' x``), the input weights ``R``,
+        ``Rc`` (a step may scale the steering's, ``MpcConfig.steer_weight_speed_mps``; the
+        entries where the problem's are zero stay zero), the input references, the
         per-stage input bounds, the road rows (linearized in the yaw at ``Xlin``, when the model
         has one) and the obstacle rows. The slack weights, rate limits and state bounds are this
         QP's problem's (the relaxed problem of the fallback reads the same stage data). Raises
@@ -250,7 +260,6 @@ class LtvQp:
                 f"{st.lane}) does not fit this QP (N={N}, nx={nx}, nu={nu}, {self.n_obs_rows} obstacle "
                 f"rows, road rows {self.lane})"
             )
-        pb = self.problem
         self.l[self.r_init : self.r_init + nx] = x0
         self.u[self.r_init : self.r_init + nx] = x0
         cflat = st.c.reshape(-1)
@@ -264,12 +273,16 @@ class LtvQp:
             iu_, ju_ = self._triu
             self._P_vals[self._slot_Px] = 2.0 * st.We[:, iu_, ju_]
             self._P_dirty = True
+        if not (np.array_equal(st.R, self._R) and np.array_equal(st.Rc, self._Rc)):
+            self._R[...], self._Rc[...] = st.R, st.Rc
+            self._P_vals[self._slot_Pu] = 2.0 * self._input_block(st.R, st.Rc)
+            self._P_dirty = True
         self.q[:] = self._q_const
         np.multiply(st.qt, -2.0, out=self.q[nx : self.n_x].reshape(N, nx))
         qu = self.q[self.n_x : self.n_x + self.n_u].reshape(N, nu)
-        np.matmul(st.uref, pb.R.T, out=qu)
+        np.matmul(st.uref, st.R.T, out=qu)
         qu *= -2.0
-        qu[0] -= 2.0 * (pb.Rc @ u_prev)
+        qu[0] -= 2.0 * (st.Rc @ u_prev)
         if self.r_rate is not None:
             self.l[self.r_rate : self.r_rate + nu] = self._rate_base_lo + u_prev
             self.u[self.r_rate : self.r_rate + nu] = self._rate_base_hi + u_prev

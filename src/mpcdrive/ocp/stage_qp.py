@@ -96,8 +96,32 @@ class StageQp:
         return replace(self, **{f: getattr(other, f) for f in CONSTANT_FIELDS})
 
 
-#: the fields of a :class:`StageQp` that its problem sets once (the rest are written each step)
-CONSTANT_FIELDS = ("R", "Rc", "u_min", "u_max", "dmax", "x_min", "x_max", "w2_lane", "w1_lane", "w2_obs", "w1_obs")
+#: the fields of a :class:`StageQp` that its problem sets once (the rest are written each step;
+#: ``R`` and ``Rc`` are the problem's unless a step scales its steering's, :func:`weigh_steering`)
+CONSTANT_FIELDS = ("u_min", "u_max", "dmax", "x_min", "x_max", "w2_lane", "w1_lane", "w2_obs", "w1_obs")
+
+
+def steering_weight_factor(v_mps: float, speed_mps: float | None) -> float:
+    """How many times the problem's its steering's weights are at the speed ``v_mps`` [m/s]:
+    ``(v / speed_mps)^4`` above ``speed_mps``, else 1 (and 1 for None, or a speed that is not a
+    number): the weights that hold the lateral loop's bandwidth at that of ``speed_mps``
+    (:class:`~mpcdrive.control.MpcConfig`, ``steer_weight_speed_mps``)."""
+    if speed_mps is None or not v_mps > speed_mps:
+        return 1.0
+    return float((v_mps / speed_mps) ** 4)
+
+
+def weigh_steering(qp: StageQp, problem: MpcProblem, i_steer: int, factor: float) -> None:
+    """Write ``problem``'s input weights into ``qp.R``, ``qp.Rc`` with the steering input's
+    (index ``i_steer``) scaled by ``factor`` (>= 1): ``S R S`` with ``S`` the identity but
+    ``sqrt(factor)`` at the steering, as if the steering were measured in a unit ``sqrt(factor)``
+    times larger (the diagonal entry ``factor`` times, the cross terms ``sqrt(factor)`` times; the
+    weights stay positive definite)."""
+    r = float(np.sqrt(factor))
+    for mine, base in ((qp.R, problem.R), (qp.Rc, problem.Rc)):
+        mine[...] = base
+        mine[i_steer, :] *= r
+        mine[:, i_steer] *= r
 
 
 def new_stage_qp(problem: MpcProblem, obstacle_rows: int = 0) -> StageQp:
@@ -117,8 +141,8 @@ def new_stage_qp(problem: MpcProblem, obstacle_rows: int = 0) -> StageQp:
         We=problem.stage_weights(),
         qt=z((N, nx)),
         xref=z((N + 1, nx)),
-        R=f(problem.R, dtype=float),
-        Rc=f(problem.Rc, dtype=float),
+        R=np.array(problem.R, dtype=float),  # copies: a step may scale them (weigh_steering)
+        Rc=np.array(problem.Rc, dtype=float),
         uref=z((N, nu)),
         u_min=f(problem.u_min, dtype=float),
         u_max=f(problem.u_max, dtype=float),

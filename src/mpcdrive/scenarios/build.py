@@ -525,6 +525,7 @@ def build_experiment(spec: ScenarioSpec, *, plant_factory: PlantFactory | None =
         feedforward=c.feedforward,
         speed_profile=profile,
         prediction_substeps=c.prediction_substeps,
+        steer_weight_speed_mps=c.steer_weight_speed_mps,
         projection_window_m=c.projection_window_m,
         fallback=FallbackConfig(
             ladder=tuple(c.fallback),

@@ -427,6 +427,9 @@ class ControllerSpec(_Strict):
     horizon_reference: Literal["arc_length", "paper"] = "arc_length"
     horizon_step_m: Positive = 0.025
     feedforward: Literal["curvature", "none"] = "curvature"
+    # above this speed [m/s] the steering's weights in R and Rc grow as (v / it)^4, holding the
+    # lateral loop's bandwidth at that of this speed (mpcdrive.control.MpcConfig); None: constant
+    steer_weight_speed_mps: Positive | None = None
     lane_slack_weight: NonNeg = 1e4
     lane_slack_weight_l1: NonNeg = 1e3
     # the tyres' friction circle [m/s^2] as per-stage steering and acceleration bounds at the
