@@ -797,6 +797,24 @@ def test_a_braking_car_at_motorway_speed_on_the_mb_plant_holds_its_line():
 
 
 @pytest.mark.slow
+def test_a_pass_through_the_oncoming_lane_at_17_mps_on_the_mb_plant_stays_on_the_road(tmp_path):
+    """The blocked_oncoming family's seed 24 (ZAM_BlockedOncoming-25) on the MB plant, 17 m/s
+    towards a broken-down car with the oncoming lane free for a while. With the urban steering
+    weights the 2 s move out overshot the oncoming lane's line by 0.8 m and the car, off the road
+    and with no safe maneuver, hit the broken-down car; with the steering weights grown above
+    50 km/h ((v / 13.9 m/s)^4, 2.2 times at 17 m/s) the whole drive passes."""
+    import scenario_families as sf
+
+    from mpcdrive.adapters.commonroad import check_drives, with_vehicle
+    from mpcdrive.adapters.commonroad_vehicles import commonroad_plant
+
+    imp = with_vehicle(load_commonroad(sf.write_scenario("blocked_oncoming", 24, tmp_path)), "bmw_320i", "mb")
+    res = run_experiment(imp.prepare_experiment(build_experiment(imp.spec, plant_factory=commonroad_plant)))
+    goal, whole = check_drives(imp, res)
+    assert whole.passed and goal.passed, whole.line()
+
+
+@pytest.mark.slow
 def test_a_pass_with_an_oncoming_car_close_behind_it_returns_briskly(tmp_path):
     """The blocked_oncoming family's seed 11 (ZAM_BlockedOncoming-12) on the ST plant, at
     17.5 m/s: the oncoming car (12.3 m/s) reaches the broken-down car 2.7 s after the car would

@@ -27,6 +27,7 @@ REACH = {
     (MpcConfig, "sqp_max_time_s"): ("avoidance", "sqp_max_time_s", 0.2),
     (MpcConfig, "speed_profile"): ("controller", "speed_profile", {"v_max_mps": 1.5}),
     (MpcConfig, "prediction_substeps"): ("controller", "prediction_substeps", 2),
+    (MpcConfig, "steer_weight_speed_mps"): ("controller", "steer_weight_speed_mps", 8.0),
     (MpcConfig, "fallback"): ("controller", "fallback", ["brake"]),
     (FallbackConfig, "ladder"): ("controller", "fallback", ["shifted_plan", "brake"]),
     (FallbackConfig, "brake_decel_mps2"): ("controller", "brake_decel_mps2", 0.7),

@@ -131,12 +131,12 @@ class LtvQp:
         self.q[:] = self._q_const
         self._We = pb.stage_weights()  # (N, nx, nx) the state weights of x_1..x_N in P
 
-    # -- constraints --------------------------------------------------------------------
     def _input_block(self, R: np.ndarray, Rc: np.ndarray) -> np.ndarray:
         """The input cost's Hessian entries (halved) at the pattern's input slots for weights R, Rc."""
         M = np.kron(np.eye(self.N), R) + np.kron(self._DtD, Rc)
         return M[self._uu]
 
+    # -- constraints --------------------------------------------------------------------
     def _build_constraints(self):
         pb, N, nx, nu = self.problem, self.N, self.nx, self.nu
         pat = _Pattern()

@@ -102,7 +102,7 @@ CONSTANT_FIELDS = ("u_min", "u_max", "dmax", "x_min", "x_max", "w2_lane", "w1_la
 
 
 def steering_weight_factor(v_mps: float, speed_mps: float | None) -> float:
-    """How many times the problem's its steering's weights are at the speed ``v_mps`` [m/s]:
+    """The factor on the problem's steering weights at the speed ``v_mps`` [m/s]:
     ``(v / speed_mps)^4`` above ``speed_mps``, else 1 (and 1 for None, or a speed that is not a
     number): the weights that hold the lateral loop's bandwidth at that of ``speed_mps``
     (:class:`~mpcdrive.control.MpcConfig`, ``steer_weight_speed_mps``)."""
