@@ -183,9 +183,9 @@ def test_steering_weight_factor_holds_the_lateral_bandwidth_and_scales_only_the_
     assert steering_weight_factor(math.nan, 13.9) == 1.0
     # the double integrator e'' = (v^2 / L) delta under LQR q e^2 + r delta^2 has the natural
     # frequency (q / r)^(1/4) sqrt(v^2 / L): with r grown by the factor it is that of 13.9 m/s
-    L, v0, v = 2.6, 13.9, 33.0
-    w0 = (1.0 / 1.0) ** 0.25 * math.sqrt(v0**2 / L)
-    w = (1.0 / steering_weight_factor(v, v0)) ** 0.25 * math.sqrt(v**2 / L)
+    L, v0, v, q_over_r = 2.6, 13.9, 33.0, 0.1
+    w0 = q_over_r**0.25 * math.sqrt(v0**2 / L)
+    w = (q_over_r / steering_weight_factor(v, v0)) ** 0.25 * math.sqrt(v**2 / L)
     assert w == pytest.approx(w0)
     pb = MpcProblem(4, 2, 5, 0.1, Q=np.eye(4), R=[[2.0, 0.5], [0.5, 1.0]], Rc=np.diag([3.0, 0.0]))
     qp = new_stage_qp(pb)
@@ -203,7 +203,8 @@ def test_steering_weights_grown_with_speed_reach_osqp_and_the_condensed_solver_a
     """``steer_weight_speed_mps``: the step's steering weights (16 times the problem's at 5 m/s
     above 2.5 m/s, less as the plan brakes) are what OSQP on the sparse layout and the condensed
     solver both minimize: the same loop from 0.5 m off the line, which the constant weights drive
-    differently (the grown ones steer back more gently)."""
+    differently (the grown ones steer back more gently: measured, at most 0.10 rad against
+    0.17 rad with constant weights)."""
     model, ref, _, x = _controllers("steer-speed", False)
     fc = CompiledLtvMpc(model, ref.path, ref.problem, ref.config)
     plain = CompiledLtvMpc(model, ref.path, ref.problem, dataclasses.replace(ref.config, steer_weight_speed_mps=None))

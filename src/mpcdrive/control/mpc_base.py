@@ -261,7 +261,7 @@ class LtvMpc(StageQpSolve, TrackingWarmStart):
             return
         f = steering_weight_factor(float(self.model.speed(x)), speed)
         if f != self._steer_factor:
-            weigh_steering(qp, self.problem, list(self.model.input_names).index("steer"), f)
+            weigh_steering(qp, self.problem, self.model.input_names.index("steer"), f)
             self._steer_factor = f
 
     # -- obstacles and road ---------------------------------------------------------------------

@@ -10,6 +10,7 @@ place; :meth:`StageQp.struct` is the same memory as one numba struct (see
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -117,7 +118,7 @@ def weigh_steering(qp: StageQp, problem: MpcProblem, i_steer: int, factor: float
     ``sqrt(factor)`` at the steering, as if the steering were measured in a unit ``sqrt(factor)``
     times larger (the diagonal entry ``factor`` times, the cross terms ``sqrt(factor)`` times; the
     weights stay positive definite)."""
-    r = float(np.sqrt(factor))
+    r = math.sqrt(factor)
     for mine, base in ((qp.R, problem.R), (qp.Rc, problem.Rc)):
         mine[...] = base
         mine[i_steer, :] *= r

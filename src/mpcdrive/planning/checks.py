@@ -296,10 +296,10 @@ def check_pair(
     ``excess0`` [m]: how far the car is outside the road now (a maneuver may not go further
     out, and gets :func:`_road_allowance`'s time and way to come back in; -2: the car is in an
     oncoming lane). With ``write``, the maneuver and its relations to the obstacles go into
-    ``relation`` and ``plan_*``; else the check stops at the first contact (the time to collision is known) or once the cost
-    and the rate's excess costed (``rate_excess_s``, as the choice scores it) pass ``bound``
-    [s] (it cannot be chosen), returning it unsafe, and looks only at the
-    obstacles ``rel_idx[:n_rel]`` (those that may come near the pair: :func:`_near_obstacles`),
+    ``relation`` and ``plan_*``; else the check stops at the first contact (the time to
+    collision is known) or once the cost and the rate's excess costed (``rate_excess_s``, as the
+    choice scores it) pass ``bound`` [s] (it cannot be chosen), returning it unsafe, and looks
+    only at the obstacles ``rel_idx[:n_rel]`` (those that may come near the pair: :func:`_near_obstacles`),
     after :func:`_first_hit` (an obstacle's contact ends the check there; the road's is the
     check's own, reached on the way :func:`_first_hit` left in ``path`` (K + 1, 4)).
     ``prepaid`` [s]: the goal's miss cost already counted in the pair's bound
