@@ -838,6 +838,24 @@ def test_a_pass_with_an_oncoming_car_close_behind_it_returns_briskly(tmp_path):
     assert float(np.min(res.x[:, 3])) > 5.0
 
 
+@pytest.mark.slow
+def test_a_left_turn_late_for_its_goal_window_hurries_into_it(tmp_path):
+    """The left_turn family's seed 30 (ZAM_LeftTurnStream-31) on the ST plant: the car yields to
+    the stream, and the wanted speed through the turn then gets it to the goal region after the
+    window (a second wide) has closed. With the goal's latest arrival sampled (just inside the
+    region by the window's last check step) the car speeds up for it and reaches the goal; the
+    whole drive is clean."""
+    import scenario_families as sf
+
+    from mpcdrive.adapters.commonroad import check_drives, with_vehicle
+    from mpcdrive.adapters.commonroad_vehicles import commonroad_plant
+
+    imp = with_vehicle(load_commonroad(sf.write_scenario("left_turn", 30, tmp_path)), "bmw_320i", "st")
+    res = run_experiment(imp.prepare_experiment(build_experiment(imp.spec, plant_factory=commonroad_plant)))
+    goal, whole = check_drives(imp, res)
+    assert whole.passed and goal.passed, goal.line()
+
+
 # -- the batch command ------------------------------------------------------------------------------
 @pytest.mark.slow
 def test_batch_writes_a_row_per_file_and_survives_a_broken_one(tmp_path):

@@ -401,6 +401,48 @@ def test_goal_window_is_met_when_the_car_would_otherwise_be_early():
     assert inside.any()
 
 
+def _goal_profiles(pl: ManeuverPlanner) -> list[tuple[float, np.ndarray, np.ndarray]]:
+    """(target [m], way [m], speed [m/s]) of the goal's profiles the last replanning sampled."""
+    from mpcdrive.planning.work import LON_GOAL
+
+    w = pl.work
+    n = int(w.lon_n[0])
+    return [
+        (float(w.lon_target[j]), w.lon_s[j].copy(), w.lon_v[j].copy()) for j in range(n) if w.lon_kind[j] == LON_GOAL
+    ]
+
+
+def test_a_car_late_for_the_goals_window_gets_the_latest_arrival_too():
+    """The wanted 5 m/s gets the car from 20 m to 39 m by 3.8 s; the goal is at 50-60 m between
+    3.0 and 4.0 s. Besides the middle of both (55 m at 3.5 s: 35 m from 5 m/s to 10 m/s, more
+    than the car needs), the car gets the latest arrival: GOAL_INSIDE_M into the region by the
+    window's last check step, at the speed a constant acceleration from 5 m/s gives (11.3 m/s,
+    1.7 m/s^2 on average); the maneuver reaches the goal."""
+    from mpcdrive.planning.candidates import GOAL_INSIDE_M
+
+    goal = PlanningGoal(arc_m=(50.0, 60.0), time_s=(3.0, 4.0))
+    pl = planner(speed=5.0, goal=goal)
+    m = plan(pl, [], s=20.0, v=5.0)
+    dt = PlannerConfig().dt_s
+    profiles = _goal_profiles(pl)
+    assert [round(t, 6) for t, _, _ in profiles] == [55.0, 50.0 + GOAL_INSIDE_M]
+    _, way, speed = profiles[1]
+    k = int(round((4.0 - dt) / dt))
+    assert way[k] == pytest.approx(50.0 + GOAL_INSIDE_M, abs=1e-9)
+    assert speed[k] == pytest.approx(2.0 * (50.0 + GOAL_INSIDE_M - 20.0) / (4.0 - dt) - 5.0, abs=1e-9)
+    assert m.goal and m.safe
+
+
+def test_a_car_the_wanted_speed_gets_to_the_goal_in_time_does_not_get_the_latest_arrival():
+    """At the wanted 12 m/s the car is in the region (50-60 m, 3.0-4.0 s) from 2.5 s: aiming for
+    the window's last step would have it dawdle there, with no time left for what may hold it up
+    on the way; only the middle of both is sampled."""
+    goal = PlanningGoal(arc_m=(50.0, 60.0), time_s=(3.0, 4.0))
+    pl = planner(speed=12.0, goal=goal)
+    plan(pl, [], s=20.0, v=12.0)
+    assert [round(t, 6) for t, _, _ in _goal_profiles(pl)] == [55.0]
+
+
 def test_replanning_is_deterministic():
     obs = [car(50.0), car(2.0, 0.0, 10.0), car(90.0, W, 8.0)]
     a = plan(planner(), obs)

@@ -1,7 +1,7 @@
 """The planner's candidates, compiled (numba subroutines; the method is :mod:`.kernels`'s):
 lateral moves to every lane's line (and offsets inside the car's lane, and evasive moves),
 longitudinal profiles (speed targets, stops at points, the wanted-speed profile, the intelligent
-driver model behind each lane's leader, the goal's arrival), and each profile's own cost."""
+driver model behind each lane's leader, the goal's arrivals), and each profile's own cost."""
 
 from __future__ import annotations
 
@@ -589,6 +589,12 @@ def _slow_for_bend(w, c):
         _fill_quintic(w, n, c, t_h, T)
 
 
+#: how far [m] inside the goal region's start the latest arrival aims (at most half the
+#: region): about the controller's tracking error along the path
+#: (:data:`~.planner.PLAN_TOLERANCE`)
+GOAL_INSIDE_M = 1.0
+
+
 @subroutine
 def longitudinal_candidates(w, c):
     """The longitudinal profiles (module docstring) into ``w.lon_*``; returns the nearest stop
@@ -711,6 +717,22 @@ def longitudinal_candidates(w, c):
             else:
                 _speed_target(w, min(max((s_mid - s0) / T, 0.0), par[P_V_MAX]), min(w.speed_s[0], T), c)
                 _fill_quintic(w, n, c, 0.0, min(w.speed_s[0], T))
+        # a car that the wanted speed (the first profile) gets there too late hurries: the latest
+        # arrival, just inside the region's start by the window's last step, at the speed a
+        # constant acceleration from the car's gives (the middle of both asks more than it needs)
+        dt = w.dt[0]
+        t_late = g[G_T_HI] - dt
+        s_late = max(g[G_S_LO], s0) + min(GOAL_INSIDE_M, 0.5 * (g[G_S_HI] - max(g[G_S_LO], s0)))
+        T = t_late - w.ego[E_T]
+        if t_late > t_lo and dt <= T <= horizon and s_late > s0 and w.lon_s[0, int(T / dt)] < s_late:
+            v_late = 2.0 * (s_late - s0) / T - v0
+            if math.isfinite(g[G_V_LO]):
+                v_late = min(max(v_late, g[G_V_LO]), g[G_V_HI])
+            v_late = min(max(v_late, 0.0), par[P_V_MAX])
+            n = _new_lon(w, LON_GOAL, s_late)
+            if n >= 0:
+                quintic(s0, v0, w.ego[E_A], s_late, v_late, 0.0, T, c)
+                _fill_quintic(w, n, c, 0.0, T)
     return nearest
 
 

@@ -13,7 +13,8 @@ dynamic street scenarios in a Frenet frame" (ICRA 2010):
   top speed, a stop), quintics to a stop at a point (behind the first obstacle in the car's lane,
   before a crossing car's way, inside the road's end), the wanted-speed profile driven with a
   speed time constant, the intelligent driver model behind each lane's leader (Treiber et al.
-  2000), and a quintic arriving in the goal region inside its time window.
+  2000), and quintics arriving in the goal region inside its time window (in the middle of
+  both; and at the latest, for a car the wanted speed gets there too late).
 
 Every pair (lateral, longitudinal) is a maneuver. A maneuver is checked on the grid ``t_k = k
 dt`` against every obstacle's predicted Frenet box (swept: the segment of the two boxes'
