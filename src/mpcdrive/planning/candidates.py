@@ -65,6 +65,7 @@ from .work import (
     P_TIME_GAP,
     P_TURN_BACK,
     P_V_MAX,
+    PLAN_TOLERANCE,
     TURN_BACK_S,
 )
 
@@ -590,9 +591,17 @@ def _slow_for_bend(w, c):
 
 
 #: how far [m] inside the goal region's start the latest arrival aims (at most half the
-#: region): about the controller's tracking error along the path
-#: (:data:`~.planner.PLAN_TOLERANCE`)
-GOAL_INSIDE_M = 1.0
+#: region): the controller's tracking error along the path that a replanning goes on from
+#: (:data:`~.work.PLAN_TOLERANCE`)
+GOAL_INSIDE_M = PLAN_TOLERANCE[0]
+
+
+@subroutine
+def _goal_speed(g, par, v):
+    """``v`` [m/s] inside the goal's speed range ``g`` and within the top speed (not below 0)."""
+    if math.isfinite(g[G_V_LO]):
+        v = min(max(v, g[G_V_LO]), g[G_V_HI])
+    return min(max(v, 0.0), par[P_V_MAX])
 
 
 @subroutine
@@ -702,17 +711,15 @@ def longitudinal_candidates(w, c):
     if g[G_HAS] != 0.0 and math.isfinite(g[G_T_HI]) and g[G_T_HI] > w.ego[E_T] and g[G_S_HI] > s0:
         t_lo = max(g[G_T_LO], w.ego[E_T] + 0.2)
         t_mid = 0.5 * (t_lo + g[G_T_HI])
-        s_mid = 0.5 * (max(g[G_S_LO], s0) + g[G_S_HI])
+        s_in = max(g[G_S_LO], s0)  # the region's part ahead of the car
+        s_mid = 0.5 * (s_in + g[G_S_HI])
         T = t_mid - w.ego[E_T]
-        v_goal = (s_mid - s0) / T
-        if math.isfinite(g[G_V_LO]):
-            v_goal = min(max(v_goal, g[G_V_LO]), g[G_V_HI])
-        v_goal = min(max(v_goal, 0.0), par[P_V_MAX])
-        horizon = w.dt[0] * (w.lon_s.shape[1] - 1)
+        dt = w.dt[0]
+        horizon = dt * (w.lon_s.shape[1] - 1)
         n = _new_lon(w, LON_GOAL, s_mid)
         if n >= 0:
             if T <= horizon:
-                quintic(s0, v0, w.ego[E_A], s_mid, v_goal, 0.0, T, c)
+                quintic(s0, v0, w.ego[E_A], s_mid, _goal_speed(g, par, (s_mid - s0) / T), 0.0, T, c)
                 _fill_quintic(w, n, c, 0.0, T)
             else:
                 _speed_target(w, min(max((s_mid - s0) / T, 0.0), par[P_V_MAX]), min(w.speed_s[0], T), c)
@@ -720,18 +727,13 @@ def longitudinal_candidates(w, c):
         # a car that the wanted speed (the first profile) gets there too late hurries: the latest
         # arrival, just inside the region's start by the window's last step, at the speed a
         # constant acceleration from the car's gives (the middle of both asks more than it needs)
-        dt = w.dt[0]
         t_late = g[G_T_HI] - dt
-        s_late = max(g[G_S_LO], s0) + min(GOAL_INSIDE_M, 0.5 * (g[G_S_HI] - max(g[G_S_LO], s0)))
+        s_late = s_in + min(GOAL_INSIDE_M, 0.5 * (g[G_S_HI] - s_in))
         T = t_late - w.ego[E_T]
         if t_late > t_lo and dt <= T <= horizon and s_late > s0 and w.lon_s[0, int(T / dt)] < s_late:
-            v_late = 2.0 * (s_late - s0) / T - v0
-            if math.isfinite(g[G_V_LO]):
-                v_late = min(max(v_late, g[G_V_LO]), g[G_V_HI])
-            v_late = min(max(v_late, 0.0), par[P_V_MAX])
             n = _new_lon(w, LON_GOAL, s_late)
             if n >= 0:
-                quintic(s0, v0, w.ego[E_A], s_late, v_late, 0.0, T, c)
+                quintic(s0, v0, w.ego[E_A], s_late, _goal_speed(g, par, 2.0 * (s_late - s0) / T - v0), 0.0, T, c)
                 _fill_quintic(w, n, c, 0.0, T)
     return nearest
 

@@ -58,6 +58,7 @@ from .work import (
     LON_NAMES,
     MAX_LANES,
     MAX_OBS,
+    PLAN_TOLERANCE,
     P_A_COMF,
     P_A_MAX,
     P_BAND_K,
@@ -119,10 +120,6 @@ GRID_PAST_M = 20.0
 TRACK_CACHE_STEPS = 600
 #: obstacles farther across the path than this [m] at every sample are not checked
 LATERAL_RANGE_M = 25.0
-#: how close [m, m, m/s] (along, across, speed) the car must be to the last maneuver for a
-#: replanning to go on from it rather than from the car: about what the controller's tracking
-#: leaves (a lateral error above the road's margin starts afresh from the car)
-PLAN_TOLERANCE = (1.0, 0.3, 1.0)
 #: no last move to go on with (lane, offset, end [m] of the ego's E_MOVE_* slots)
 NO_MOVE = (-1.0, 0.0, math.nan)
 

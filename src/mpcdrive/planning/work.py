@@ -108,6 +108,10 @@ MAX_OBS = 64
 PARALLEL_M = 0.5
 """How far [m] an obstacle may drift sideways over the horizon and still count as keeping to its
 line (a parked car, a car in its lane): a tenth of a lane width, well inside a car's lane keeping."""
+#: how close [m, m, m/s] (along, across, speed) the car must be to the last maneuver for a
+#: replanning to go on from it rather than from the car: about what the controller's tracking
+#: leaves (a lateral error above the road's margin starts afresh from the car)
+PLAN_TOLERANCE = (1.0, 0.3, 1.0)
 
 
 @dataclass(frozen=True, eq=False)
