@@ -67,7 +67,8 @@ from .work import (
 )
 
 from .contact import _beyond_box, _disc_meets
-from .candidates import KAPPA_SLACK, _standing, _turn_out_m, regain_time_s, wanted_at
+from .candidates import KAPPA_SLACK, _turn_out_m, regain_time_s, wanted_at
+from .lateral import _standing
 from .frenet import (
     EVASIVE_GENTLE,
     EVASIVE_HARD,
@@ -112,7 +113,7 @@ def _road_allowance(excess0, par, t, way):
     room for the controller's tracking, and a maneuver may use it, and the ``excess0`` [m] the
     car is out now, shrinking to nothing over the first second (a car drifting towards the edge
     needs that long to turn back). A car already in the margin keeps it until it has also driven
-    the way ``P_TURN_BACK`` (:func:`~.candidates.lateral_candidates`): at rest or crawling it
+    the way ``P_TURN_BACK`` (:func:`~.lateral.lateral_candidates`): at rest or crawling it
     turns back only as it drives, and its rear corner swings out until its move has straightened
     it (with a second alone, a car at rest a few centimetres into the margin had no safe
     maneuver at all). A car inside gets the second only: a turn from rest may not lean on the

@@ -70,7 +70,8 @@ from .work import (
     R_TTC,
 )
 
-from .candidates import lateral_candidates, longitudinal_candidates, longitudinal_costs
+from .candidates import longitudinal_candidates, longitudinal_costs
+from .lateral import lateral_candidates
 from .checks import _excess_now, _near_obstacles, _ranges, check_pair, goal_missed_by_profile
 from .frenet import grid_row_at, is_pass
 
