@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from mpcdrive.ocp.friction import friction_input_bounds
+from mpcdrive.ocp.friction import BRAKE_SHARE, friction_input_bounds
 from mpcdrive.ocp.problem import MpcProblem
 from mpcdrive.scenarios import build_experiment, load_scenario, run_experiment
 from mpcdrive.scenarios.schema import ScenarioSpec
@@ -82,6 +82,21 @@ def test_a_plan_that_steers_moves_the_split_towards_steering():
     lo, hi = bounds([v, v], [[math.atan(12.0 * L / v**2), -9.0]], u_prev=(0.0, 0.0))
     assert lateral(v, hi[0, STEER]) == pytest.approx(12.0 * A / 15.0)
     assert lo[0, ACCEL] == pytest.approx(-9.0 * A / 15.0)
+
+
+@pytest.mark.parametrize("lat", [A * math.sqrt(1.0 - 0.01**2), A, 12.0])
+def test_a_plan_at_the_lateral_limit_at_a_steady_speed_can_still_brake(lat):
+    """A plan that steers at (or beyond) the limit at a steady speed: split at its direction the
+    circle left it no braking (its acceleration bound 0 both ways, or 0.06 m/s^2 at 99.995 % of the
+    limit), the QP's solution kept the speed and the next step's split was the same. Braking
+    keeps a quarter of the circle; the steering gives up what that takes, so every input in both
+    boxes is still inside the circle; speeding up gets nothing more."""
+    v = 20.0
+    lo, hi = bounds([v, v], [[math.atan(lat * L / v**2), 0.0]], u_prev=(0.0, 0.0))
+    assert lo[0, ACCEL] == pytest.approx(-BRAKE_SHARE * A)
+    assert hi[0, ACCEL] < 0.1
+    assert lateral(v, hi[0, STEER]) == pytest.approx(A * math.sqrt(1.0 - BRAKE_SHARE**2))
+    assert lo[0, ACCEL] ** 2 + lateral(v, hi[0, STEER]) ** 2 <= A * A * (1 + 1e-9)
 
 
 def test_bounds_stay_reachable_under_the_rate_limit():
