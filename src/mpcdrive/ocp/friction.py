@@ -15,9 +15,9 @@ that per horizon stage as two box bounds, so both solvers take it as they take i
   brakes) harder moves the split its way from step to step;
 * braking keeps at least ``BRAKE_SHARE`` of the circle (the lateral bound then keeps
   ``sqrt(1 - BRAKE_SHARE^2)`` = 97 % of it): slowing is what brings a plan at or beyond the
-  circle back inside it. Split at the plan's direction alone, a plan at the lateral limit at a
-  steady speed left no braking at all, the QP's solution then kept its speed, and the next
-  step's split was the same: a car that entered a bend too fast could not brake in it;
+  circle back inside it. Split at the plan's direction alone, a stage planned at the lateral
+  limit at a steady speed had no braking at all, and the QP's solution there, the next step's
+  linearization, was split the same way;
 * the steering bound is ``|delta_k| <= atan(a_lat_max L / v_k^2)``, the acceleration bound
   ``|a_k| <= a_long_max``, both intersected with the problem's input bounds;
 * the boxes stay reachable from the input applied last under the rate limit (a stage whose box
