@@ -88,9 +88,8 @@ def test_a_plan_that_steers_moves_the_split_towards_steering():
 def test_a_plan_at_the_lateral_limit_at_a_steady_speed_can_still_brake(lat):
     """A plan that steers at (or beyond) the limit at a steady speed: split at its direction the
     circle left it no braking (its acceleration bound 0 both ways, or 0.06 m/s^2 at 99.995 % of the
-    limit), the QP's solution kept the speed and the next step's split was the same. Braking
-    keeps a quarter of the circle; the steering gives up what that takes, so every input in both
-    boxes is still inside the circle; speeding up gets nothing more."""
+    limit). Braking keeps a quarter of the circle; the steering gives up what that takes, so
+    every input in both boxes is still inside the circle; speeding up gets nothing more."""
     v = 20.0
     lo, hi = bounds([v, v], [[math.atan(lat * L / v**2), 0.0]], u_prev=(0.0, 0.0))
     assert lo[0, ACCEL] == pytest.approx(-BRAKE_SHARE * A)

@@ -51,7 +51,8 @@ from .work import (
 )
 
 from .frenet import grid_at, grid_row_at, poly_eval, quintic
-from .lateral import _lane_open, _standing, shortest_move_m
+from .lateral import _lane_open, shortest_move_m
+from .tracks import _standing
 
 #: the wanted-speed profile's time constant [s]: how fast the speed follows the wanted one
 SPEED_TAU_S = 1.0

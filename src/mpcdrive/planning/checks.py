@@ -68,7 +68,7 @@ from .work import (
 
 from .contact import _beyond_box, _disc_meets
 from .candidates import KAPPA_SLACK, _turn_out_m, regain_time_s, wanted_at
-from .lateral import _standing
+from .tracks import _standing
 from .frenet import (
     EVASIVE_GENTLE,
     EVASIVE_HARD,

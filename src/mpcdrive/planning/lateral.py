@@ -44,6 +44,7 @@ from .work import (
 )
 
 from .frenet import grid_at, grid_row_at, quintic
+from .tracks import _standing
 
 
 #: a car farther than this [m] from its lane's line, or heading away from it more steeply than
@@ -58,17 +59,6 @@ def shortest_move_m(par, dd):
     """The shortest quintic move [m] across ``dd`` [m] (>= 0): its peak curvature 5.77 dd / L^2 half
     the vehicle's tightest."""
     return math.sqrt(5.77 * dd / (0.5 * par[P_KAPPA_MAX]))
-
-
-@subroutine
-def _standing(ob_s, o, K, dt):
-    """Whether obstacle row ``o`` stands (moves less than 0.5 m over the horizon)."""
-    lo, hi = math.inf, -math.inf
-    for k in range(K + 1):
-        if math.isfinite(ob_s[o, k]):
-            lo = min(lo, ob_s[o, k])
-            hi = max(hi, ob_s[o, k])
-    return hi - lo < 0.5
 
 
 @subroutine

@@ -9,7 +9,8 @@ the path: centre (s, e) and half extents along and across the path at its yaw re
 path's heading, and that yaw with the obstacle's own half extents (its oriented box, which the
 contact checks use inside the Frenet box). An obstacle is kept when it comes within ``range_m`` along the path and
 ``lateral_m`` across it at some sample; the nearest rows are kept when more than the work's
-slots are in range.
+slots are in range. Whether a track stands over the horizon (:func:`_standing`) is read by the
+passes, the stops and the checks alike.
 """
 
 from __future__ import annotations
@@ -34,6 +35,17 @@ EDGE_M = 1e-6
 CACHE_COLS = 6
 _NO_CACHE = np.zeros((0, 0, CACHE_COLS))
 _NO_ORIENT = np.zeros((0, 0, 4))
+
+
+@subroutine
+def _standing(ob_s, o, K, dt):
+    """Whether obstacle row ``o`` stands (moves less than 0.5 m over the horizon)."""
+    lo, hi = math.inf, -math.inf
+    for k in range(K + 1):
+        if math.isfinite(ob_s[o, k]):
+            lo = min(lo, ob_s[o, k])
+            hi = max(hi, ob_s[o, k])
+    return hi - lo < 0.5
 
 
 @subroutine
