@@ -128,3 +128,150 @@ def test_constant_argument_prunes_the_branch_not_taken():
     # the kind-6 branch would not type; with the constant 3 it is dropped before typing
     assert _by_kind_caller(np.array([4.0, 5.0])) == 4.0
     assert not _expensive_branch._compiled
+
+
+# -- borrowed arguments: no reference counting where nothing counted is made or handed back --
+
+
+@subroutine
+def _tail_element(a, i):
+    tail = a[1:]  # a view of an argument: borrowed
+    return tail[i] * 2.0
+
+
+@subroutine
+def _fresh(n):
+    return np.zeros(n)  # allocates and hands the array back: keeps the counts
+
+
+@subroutine
+def _sum_of_fresh(n):
+    x = _fresh(n)  # receives a counted value from a call: keeps the counts (else it leaks)
+    return x.sum() + n
+
+
+@subroutine
+def _iterated(a):
+    s = 0.0
+    for v in a:  # an iterator over an array holds a reference: keeps the counts
+        s += v
+    return s
+
+
+@subroutine
+def _same(a):
+    return a  # hands an argument back: keeps the counts
+
+
+@subroutine
+def _store_first(box, a):
+    box[0] = a  # stores a counted value where it outlives the call: keeps the counts
+    return 0.0
+
+
+@njit
+def _store_caller(a):
+    box = [np.zeros(1)]
+    _store_first(box, a)
+    return box[0][0]
+
+
+@njit
+def _borrow_caller(a, n):
+    return _tail_element(a, 1) + _sum_of_fresh(n) + _iterated(a) + _same(a)[0]
+
+
+def _only(sub):
+    (flag,) = sub.borrows.values()
+    return flag
+
+
+def test_borrowing_where_safe_and_counting_elsewhere():
+    a = np.arange(3.0)
+    assert _borrow_caller(a, 3) == pytest.approx(2.0 * 2.0 + 3.0 + 3.0 + 0.0, rel=0, abs=1e-12)
+    assert _only(_tail_element) is True
+    assert _only(_fresh) is False
+    assert _only(_sum_of_fresh) is False
+    assert _only(_iterated) is False
+    assert _only(_same) is False
+    assert _store_caller(np.array([7.0])) == 7.0
+    assert _only(_store_first) is False
+    # a subroutine that reads arrays and returns a number, as most of the planner's do
+    _caller(np.arange(5.0))
+    assert all(_weighted_sum.borrows.values())
+
+
+def test_borrowing_loses_no_allocation():
+    """Every array the borrowing tree allocates is freed again: a caller that took a fresh array
+    from a call without counting it down would leak one per call."""
+    from numba.core.runtime import _nrt_python, rtsys
+
+    a = np.arange(3.0)
+    _borrow_caller(a, 3)
+    was_on = _nrt_python.memsys_stats_enabled()
+    _nrt_python.memsys_enable_stats()
+    try:
+        before = rtsys.get_allocation_stats()
+        for _ in range(50):
+            _borrow_caller(a, 3)
+        after = rtsys.get_allocation_stats()
+    finally:
+        if not was_on:
+            _nrt_python.memsys_disable_stats()
+    allocated = after.alloc - before.alloc
+    assert allocated >= 50  # _fresh allocates at every call
+    assert after.free - before.free == allocated
+    assert after.mi_alloc - before.mi_alloc == after.mi_free - before.mi_free
+
+
+def test_explicit_counting_option_is_kept():
+    """``_nrt`` given by the caller of the decorator decides (no second lowering)."""
+
+    @subroutine(_nrt=True)
+    def counted(a):
+        return a[0]
+
+    @njit
+    def call(a):
+        return counted(a)
+
+    assert call(np.ones(2)) == 1.0
+    assert _only(counted) is False
+
+
+@subroutine
+def _interpolate(grid, tab, s):
+    # (the planner's grid lookup: several returns, where numba's lowering keeps its counts)
+    x = (s - grid[0]) * grid[1]
+    n = tab.shape[0]
+    if x <= 0.0:
+        return tab[0]
+    if x >= n - 1:
+        return tab[n - 1]
+    i = int(x)
+    f = x - i
+    return tab[i] * (1.0 - f) + tab[i + 1] * f
+
+
+_interpolate_counted = subroutine(_nrt=True)(_interpolate.py_func)  # numba's own lowering
+
+
+@njit
+def _interpolate_caller(grid, tab, s):
+    return _interpolate(grid, tab, s) - _interpolate_counted(grid, tab, s)
+
+
+def test_borrowing_code_has_no_counting_calls():
+    """The code of a borrowing subroutine counts nothing (no NRT_incref / NRT_decref, no
+    destructor call when a count reaches zero), where numba's own lowering of the same function
+    counts its array arguments in and out; both compute the same."""
+    grid, tab = np.array([0.0, 2.0]), np.array([0.0, 10.0, 20.0, 30.0])
+    for s in (-1.0, 0.75, 9.0):
+        assert _interpolate_caller(grid, tab, s) == 0.0
+    assert _interpolate.py_func(grid, tab, 0.75) == pytest.approx(15.0, rel=0, abs=1e-12)
+    for args, link in _interpolate._links.items():
+        assert _interpolate.borrows[args]
+        assert "@NRT_" not in str(link._library._final_module).split("declare")[0]
+    for args, link in _interpolate_counted._links.items():
+        assert not _interpolate_counted.borrows[args]
+        assert "call void @NRT_incref" in str(link._library._final_module)
