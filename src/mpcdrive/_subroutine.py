@@ -88,7 +88,7 @@ class _Borrow(LoweringPass):
         LoweringPass.__init__(self)
 
     def run_pass(self, state: Any) -> bool:
-        if state.flags.nrt and _borrows_safely(state.return_type, state.typemap, state.func_ir.blocks):
+        if _borrows_safely(state.return_type, state.typemap, state.func_ir.blocks):
             context = state.targetctx.subtarget(enable_nrt=False)
             context.__dict__.pop("nrt", None)  # its NRT context is made anew, disabled
             state.targetctx = context
@@ -97,25 +97,25 @@ class _Borrow(LoweringPass):
         return False
 
 
-class _CountingPipeline(compiler.CompilerBase):
-    """numba's nopython pipeline with :class:`_ConstantArguments` after the IR is built."""
-
-    def define_pipelines(self) -> list:
-        pm = compiler.DefaultPassBuilder.define_nopython_pipeline(self.state)
-        pm.add_pass_after(_ConstantArguments, IRProcessing)
-        pm.finalize()
-        return [pm]
-
-
 class _Pipeline(compiler.CompilerBase):
-    """:class:`_CountingPipeline` with :class:`_Borrow` before lowering."""
+    """numba's nopython pipeline with :class:`_ConstantArguments` after the IR is built and, where
+    ``borrow``, :class:`_Borrow` before lowering."""
+
+    borrow = True
 
     def define_pipelines(self) -> list:
         pm = compiler.DefaultPassBuilder.define_nopython_pipeline(self.state)
         pm.add_pass_after(_ConstantArguments, IRProcessing)
-        pm.add_pass_after(_Borrow, AnnotateTypes)
+        if self.borrow:
+            pm.add_pass_after(_Borrow, AnnotateTypes)
         pm.finalize()
         return [pm]
+
+
+class _CountingPipeline(_Pipeline):
+    """:class:`_Pipeline` lowering with the counts, as numba does."""
+
+    borrow = False
 
 
 class _Unfinalized:
@@ -165,8 +165,6 @@ class Subroutine:
         self._options = options
         self._compiled: dict[tuple, Any] = {}
         self._links: dict[tuple, _Unfinalized] = {}
-        #: per argument types: whether the function was lowered borrowing its arguments
-        self.borrows: dict[tuple, bool] = {}
         self._python_entry: Any = None
         sub = self
 
@@ -198,17 +196,20 @@ class Subroutine:
             cres = self._compiled.get(args)
             if cres is None:
                 cres, library = self._lower(args)
-                self.borrows[args] = bool(cres.metadata.get(_BORROWS, False))
                 self._compiled[args] = cres
                 self._links[args] = _Unfinalized(library)
         return cres
+
+    @property
+    def borrows(self) -> dict[tuple, bool]:
+        """Per argument types compiled: whether the function was lowered borrowing its arguments."""
+        return {args: bool(cres.metadata.get(_BORROWS, False)) for args, cres in self._compiled.items()}
 
     def _lower(self, args: tuple) -> tuple[Any, Any]:
         """Type and lower for ``args`` (numba's pipeline, with :class:`_ConstantArguments`),
         borrowing where :class:`_Borrow` finds it safe; where numba's lowering finds it needs
         the counts after all, again with them."""
-        counting = "_nrt" in self._options
-        if not counting:
+        if "_nrt" not in self._options:  # the caller's choice, else borrowing where safe
             try:
                 return self._lower_with(args, _Pipeline)
             except NumbaError:
