@@ -537,6 +537,33 @@ def test_a_parked_car_too_close_to_swerve_round_at_speed_is_passed_slowly(plant)
     assert np.min(res.clearance_m) > 0.3 and compute_metrics(res).solver_failures == 0
 
 
+@pytest.mark.slow
+def test_a_car_turned_across_its_lanes_stops_without_a_braking_limit_cycle():
+    """DEU_Backnang-9_1 on CommonRoad's ST model of the BMW 320i: turning right across a lane
+    with cars crossing ahead, the car stops hard (up to 10 m/s^2) with its body turned 0.5 rad
+    to the path. Its front corner then reached into a lane the MPC was not given (the lanes it
+    overlapped were judged by its half width), and the MPC, its plan stopping, accelerated at
+    7.2 m/s^2 to pull the corner in, braked again at 6.7 and stopped at 2.4 s, a step CommonRoad's
+    ST feasibility check could not reconstruct. Judged over the whole drive: it passes, and once
+    braking harder than 2 m/s^2 the car does not accelerate at more than 2 m/s^2 in the next step."""
+    from pathlib import Path
+
+    from mpcdrive.adapters import commonroad as cr
+
+    if not cr.available():
+        pytest.skip("commonroad-io / drivability checker not installed")
+    imp = cr.with_vehicle(
+        cr.load_commonroad(Path(__file__).resolve().parent / "data" / "commonroad" / "DEU_Backnang-9_1_T-1.xml"),
+        "bmw_320i",
+        "st",
+    )
+    res = run_experiment(build_experiment(imp.spec, plant_factory=commonroad_plant))
+    rep = cr.check_drive(imp, res, whole_drive=True)
+    assert rep.passed and rep.model == "ST", rep.line()
+    a = np.asarray(res.accel_mps2)
+    assert not np.any((a[:-1] < -2.0) & (a[1:] > 2.0)), np.round(a, 1)
+
+
 def test_st_plant_settles_onto_the_lane_without_a_limit_cycle():
     """The BMW on CommonRoad's ST model, 1 m right of the lane centre with 25 deg of yaw at 9 m/s
     (ZAM_Tutorial_Urban-3_2's road, its own lane only, its parked car left out). The ST model lags the kinematic

@@ -157,6 +157,35 @@ def test_the_planned_mpc_is_judged_on_the_whole_road():
     assert Road.constant(1.0).whole().left_m[0] == 0.5  # no lanes: the road itself
 
 
+def test_the_lanes_the_body_overlaps_now_are_those_its_corners_reach():
+    """The planned MPC's road always holds the lanes the body overlaps now. A car turned across
+    its lanes reaches further to its side than its half width: a 4.5 m x 1.8 m body 0.5 m left
+    of a 3.5 m lane's line reaches 1.4 m left of it heading along the path, inside its lane, and
+    1.0 + 2.25 sin(0.5) + 0.9 cos(0.5) = 2.87 m turned 0.5 rad left, 1.12 m into the lane
+    beside. Judged by its half width alone, that lane was left out of the MPC's road, and on
+    DEU_Backnang-9 (ST) the MPC accelerated at 7.2 m/s^2 against a plan stopping, to pull the
+    corner back in, then braked again: a limit cycle CommonRoad's ST feasibility check rejected."""
+    from mpcdrive.control import MpcConfig
+    from mpcdrive.models import KinematicBicycle4
+    from mpcdrive.planning.driver import PlannedMpc
+
+    s = np.array([0.0, 60.0])
+    lanes = (
+        Lane("route", np.zeros(2), np.full(2, 1.75), np.full(2, -1.75)),
+        Lane("left", np.full(2, 3.5), np.full(2, 5.25), np.full(2, 1.75)),
+    )
+    road = Road(s, 5.25, -1.75, 0.1, lanes, 0)
+    body = Footprint(4.5, 1.8)
+    path = StraightPath([0.0, 0.0], [60.0, 0.0])
+    problem = MpcProblem(4, 2, 10, 0.1, Q=[1, 1, 1, 1], R=[1.0, 0.1], u_min=[-0.5, -3.0], u_max=[0.5, 3.0])
+    mpc = LtvMpc(KinematicBicycle4(), path, problem, MpcConfig(v_ref_mps=5.0), scene=Scene(road.band((0,)), (), body))
+    planned = PlannedMpc(mpc, road)
+    assert planned._lanes_now(20.0, 0.5, 0.0) == {0}
+    assert planned._lanes_now(20.0, 0.5, 0.5) == {0, 1}
+    assert planned._lanes_now(20.0, -0.5, -0.5) == {0}  # turned the other way: towards the road's edge
+    assert planned._lanes_now(20.0, 3.5, 0.0) == {1}
+
+
 def test_what_the_readme_shows_is_exported():
     import mpcdrive.ocp
     import mpcdrive.scene

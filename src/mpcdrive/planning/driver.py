@@ -25,6 +25,7 @@ import math
 import time
 
 import numpy as np
+from numba import njit
 
 from ..control.base import projection_guess
 from ..ocp.avoidance_compiled import ObstacleTable, table_of
@@ -77,6 +78,32 @@ def vehicle_limits(mpc) -> VehicleLimits:
         disc_margin_m=float(av.config.margin_m) if av is not None else 0.0,
         rear_axle_m=float(getattr(params, "lr_m", 0.0) or 0.0),
     )
+
+
+@njit(cache=True)
+def lanes_overlapped(knots, left, right, corners, s_m, e_y_m, e_psi_rad):
+    """(L,) whether the body overlaps each lane: its ``corners`` (4, 2) [m, body frame] at arc
+    length ``s_m``, offset ``e_y_m`` [m] and heading ``e_psi_rad`` to the path (a body turned
+    across the path reaches further to its sides than its half width), against the lanes' edges
+    ``left`` / ``right`` (L, K) [m] on the road's ``knots`` (K,) [m], read at the corners' arc
+    lengths (constant beyond the ends): the body's offsets span into the lane's."""
+    c, sn = math.cos(e_psi_rad), math.sin(e_psi_rad)
+    K = knots.shape[0]
+    L = left.shape[0]
+    lft = np.full(L, -math.inf)  # each lane's left edge, the largest at the corners' arc lengths
+    rgt = np.full(L, math.inf)  # its right edge, the smallest
+    d_lo, d_hi = math.inf, -math.inf
+    for q in range(corners.shape[0]):
+        d = e_y_m + sn * corners[q, 0] + c * corners[q, 1]
+        d_lo, d_hi = min(d_lo, d), max(d_hi, d)
+        s = min(max(s_m + c * corners[q, 0] - sn * corners[q, 1], knots[0]), knots[K - 1])
+        i = min(max(np.searchsorted(knots, s, side="right") - 1, 0), max(K - 2, 0))
+        w = (s - knots[i]) / (knots[i + 1] - knots[i]) if K > 1 else 0.0
+        k = min(i + 1, K - 1)
+        for j in range(L):
+            lft[j] = max(lft[j], left[j, i] * (1.0 - w) + left[j, k] * w)
+            rgt[j] = min(rgt[j], right[j, i] * (1.0 - w) + right[j, k] * w)
+    return (d_lo < lft) & (d_hi > rgt)
 
 
 class PlannedMpc:
@@ -144,6 +171,12 @@ class PlannedMpc:
         #: checked, pairs sampled, wall time [s])
         self.log: list[tuple] = []
         self._t_mpc = mpc.dt_s * np.arange(mpc.N + 1)
+        # the body's corners and every lane's edges on the road's knots (rows), for _lanes_now
+        self._corners = mpc.footprint.corners()
+        edges = np.zeros((2, len(road.lanes), len(road.s_m)))
+        for i, ln in enumerate(road.lanes):
+            edges[0, i], edges[1, i] = ln.left_m, ln.right_m
+        self._lane_left, self._lane_right = edges[0], edges[1]
         road.bounds(0.0, 0.0, 0.0, mpc.footprint)  # load the road's kernel now: each band change uses it
 
     def planner_stats(self) -> dict:
@@ -204,16 +237,11 @@ class PlannedMpc:
             self._line_key = key
         return self._line_ref
 
-    def _lanes_now(self, s_m: float, e_y_m: float) -> set[int]:
-        """The lanes the body overlaps at (s, e_y) [m] (its half width around the offset)."""
-        hw = 0.5 * self.mpc.footprint.width_m
-        out = set()
-        for i, ln in enumerate(self.road.lanes):
-            lo = float(np.interp(s_m, self.road.s_m, ln.right_m))
-            hi = float(np.interp(s_m, self.road.s_m, ln.left_m))
-            if e_y_m - hw < hi and e_y_m + hw > lo:
-                out.add(i)
-        return out
+    def _lanes_now(self, s_m: float, e_y_m: float, e_psi_rad: float) -> set[int]:
+        """The lanes the body overlaps at (s, e_y) [m] and heading ``e_psi_rad`` to the path
+        (:func:`lanes_overlapped`)."""
+        hit = lanes_overlapped(self.road.s_m, self._lane_left, self._lane_right, self._corners, s_m, e_y_m, e_psi_rad)
+        return set(np.flatnonzero(hit).tolist())
 
     def step(self, x, warm):
         t0 = time.perf_counter()
@@ -265,7 +293,7 @@ class PlannedMpc:
                 # the obstacle rows keep the maneuver's side of each obstacle it checked
                 idx = np.clip(np.rint(tau[1:] / self.config.dt_s).astype(np.int64), 0, len(m.t_s) - 1)
                 mpc.set_obstacle_relations(dict(zip(m.obstacle_index.tolist(), m.relations[:, idx])))
-            band = tuple(sorted(set(m.lanes) | self._lanes_now(s_m, e_y))) if self.road.lanes else ()
+            band = tuple(sorted(set(m.lanes) | self._lanes_now(s_m, e_y, e_psi))) if self.road.lanes else ()
             if band and band != self._band:
                 mpc.set_road(self.road.band(band))
                 self._band = band
