@@ -161,7 +161,7 @@ def test_the_lanes_the_body_overlaps_now_are_those_its_corners_reach():
     """The planned MPC's road always holds the lanes the body overlaps now. A car turned across
     its lanes reaches further to its side than its half width: a 4.5 m x 1.8 m body 0.5 m left
     of a 3.5 m lane's line reaches 1.4 m left of it heading along the path, inside its lane, and
-    1.0 + 2.25 sin(0.5) + 0.9 cos(0.5) = 2.87 m turned 0.5 rad left, 1.12 m into the lane
+    0.5 + 2.25 sin(0.5) + 0.9 cos(0.5) = 2.37 m turned 0.5 rad left, 0.62 m into the lane
     beside. Judged by its half width alone, that lane was left out of the MPC's road, and on
     DEU_Backnang-9 (ST) the MPC accelerated at 7.2 m/s^2 against a plan stopping, to pull the
     corner back in, then braked again: a limit cycle CommonRoad's ST feasibility check rejected."""
