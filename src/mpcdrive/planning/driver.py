@@ -81,29 +81,29 @@ def vehicle_limits(mpc) -> VehicleLimits:
 
 
 @njit(cache=True)
-def lanes_overlapped(knots, left, right, corners, s_m, e_y_m, e_psi_rad):
-    """(L,) whether the body overlaps each lane: its ``corners`` (4, 2) [m, body frame] at arc
-    length ``s_m``, offset ``e_y_m`` [m] and heading ``e_psi_rad`` to the path (a body turned
-    across the path reaches further to its sides than its half width), against the lanes' edges
-    ``left`` / ``right`` (L, K) [m] on the road's ``knots`` (K,) [m], read at the corners' arc
-    lengths (constant beyond the ends): the body's offsets span into the lane's."""
+def lanes_overlapped(knots, left, right, corners, s_m, e_y_m, e_psi_rad, hit):
+    """Write into ``hit`` (L,) whether the body overlaps each lane: its ``corners`` (n, 2) [m,
+    body frame] at arc length ``s_m``, offset ``e_y_m`` [m] and heading ``e_psi_rad`` to the path
+    (a body turned across the path reaches further to its sides than its half width), against
+    the lanes' edges ``left`` / ``right`` (L, K) [m] on the road's ``knots`` (K,) [m], read at
+    the corners' arc lengths (constant beyond the ends): the body's offsets span into the lane's
+    (its left edge the largest, its right edge the smallest at those arc lengths)."""
     c, sn = math.cos(e_psi_rad), math.sin(e_psi_rad)
     K = knots.shape[0]
-    L = left.shape[0]
-    lft = np.full(L, -math.inf)  # each lane's left edge, the largest at the corners' arc lengths
-    rgt = np.full(L, math.inf)  # its right edge, the smallest
     d_lo, d_hi = math.inf, -math.inf
     for q in range(corners.shape[0]):
         d = e_y_m + sn * corners[q, 0] + c * corners[q, 1]
         d_lo, d_hi = min(d_lo, d), max(d_hi, d)
-        s = min(max(s_m + c * corners[q, 0] - sn * corners[q, 1], knots[0]), knots[K - 1])
-        i = min(max(np.searchsorted(knots, s, side="right") - 1, 0), max(K - 2, 0))
-        w = (s - knots[i]) / (knots[i + 1] - knots[i]) if K > 1 else 0.0
-        k = min(i + 1, K - 1)
-        for j in range(L):
-            lft[j] = max(lft[j], left[j, i] * (1.0 - w) + left[j, k] * w)
-            rgt[j] = min(rgt[j], right[j, i] * (1.0 - w) + right[j, k] * w)
-    return (d_lo < lft) & (d_hi > rgt)
+    for j in range(left.shape[0]):
+        lft, rgt = -math.inf, math.inf
+        for q in range(corners.shape[0]):
+            s = min(max(s_m + c * corners[q, 0] - sn * corners[q, 1], knots[0]), knots[K - 1])
+            i = min(max(np.searchsorted(knots, s, side="right") - 1, 0), max(K - 2, 0))
+            k = min(i + 1, K - 1)
+            w = (s - knots[i]) / (knots[k] - knots[i]) if k > i else 0.0
+            lft = max(lft, left[j, i] * (1.0 - w) + left[j, k] * w)
+            rgt = min(rgt, right[j, i] * (1.0 - w) + right[j, k] * w)
+        hit[j] = d_lo < lft and d_hi > rgt
 
 
 class PlannedMpc:
@@ -177,6 +177,7 @@ class PlannedMpc:
         for i, ln in enumerate(road.lanes):
             edges[0, i], edges[1, i] = ln.left_m, ln.right_m
         self._lane_left, self._lane_right = edges[0], edges[1]
+        self._overlaps = np.zeros(len(road.lanes), np.bool_)  # lanes_overlapped's output, in place
         road.bounds(0.0, 0.0, 0.0, mpc.footprint)  # load the road's kernel now: each band change uses it
 
     def planner_stats(self) -> dict:
@@ -240,7 +241,8 @@ class PlannedMpc:
     def _lanes_now(self, s_m: float, e_y_m: float, e_psi_rad: float) -> set[int]:
         """The lanes the body overlaps at (s, e_y) [m] and heading ``e_psi_rad`` to the path
         (:func:`lanes_overlapped`)."""
-        hit = lanes_overlapped(self.road.s_m, self._lane_left, self._lane_right, self._corners, s_m, e_y_m, e_psi_rad)
+        hit = self._overlaps
+        lanes_overlapped(self.road.s_m, self._lane_left, self._lane_right, self._corners, s_m, e_y_m, e_psi_rad, hit)
         return set(np.flatnonzero(hit).tolist())
 
     def step(self, x, warm):
